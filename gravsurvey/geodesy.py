@@ -1,0 +1,382 @@
+"""Ellipsoid geometry and the normal gravity field of the reference ellipsoid.
+
+This is the only module the simulator and the estimator share; it is checked
+against :mod:`boule` and published values in ``tests/test_geodesy.py``.
+
+Conventions
+-----------
+* Angles in radians, lengths in metres, accelerations in m/s^2 (SI inside).
+* ``e`` frame: Earth-centred Earth-fixed (ECEF), z to the north pole, x to
+  (lat 0, lon 0).
+* ``i`` frame: inertial, coincident with ``e`` at the reference epoch
+  ``t = 0`` of a flight; ``e`` rotates about z by ``OMEGA_E * t``.
+* ``n`` frame: local geodetic East-North-Up (ENU).
+* Normal gravity **vector** is the gradient of the closed-form ellipsoidal
+  harmonic potential ``U = V + Phi`` of a level ellipsoid (Heiskanen-Moritz
+  2-5, Hofmann-Wellenhof & Moritz 2006 eq. 2-124, 2-126); its magnitude is
+  the Li & Goetze (2001) closed form that boule uses.  Gravitation ``V`` (the
+  attraction only) is what the navigation equations need: ``grad V = grad U -
+  grad Phi`` with the centrifugal potential ``Phi = OMEGA^2 (x^2 + y^2) / 2``.
+
+All scalar kernels are numba-compiled (``cache=True``) so the mechanization
+loop can call them; the array wrappers are plain numpy.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+
+@dataclass(frozen=True)
+class Ellipsoid:
+    """A level reference ellipsoid.
+
+    Attributes
+    ----------
+    name : str
+    a : float
+        Semi-major axis, m.
+    f : float
+        Flattening.
+    gm : float
+        Geocentric gravitational constant, m^3/s^2.
+    omega : float
+        Angular velocity, rad/s.
+    """
+
+    name: str
+    a: float
+    f: float
+    gm: float
+    omega: float
+
+    @property
+    def b(self) -> float:
+        """Semi-minor axis, m."""
+        return self.a * (1.0 - self.f)
+
+    @property
+    def e2(self) -> float:
+        """First eccentricity squared."""
+        return self.f * (2.0 - self.f)
+
+    @property
+    def linear_eccentricity(self) -> float:
+        """E = sqrt(a^2 - b^2), m."""
+        return math.sqrt(self.a**2 - self.b**2)
+
+    def params(self):
+        """Tuple (a, f, gm, omega) for the compiled kernels."""
+        return (self.a, self.f, self.gm, self.omega)
+
+
+WGS84 = Ellipsoid("WGS84", 6378137.0, 1.0 / 298.257223563, 3.986004418e14, 7.292115e-5)
+GRS80 = Ellipsoid("GRS80", 6378137.0, 1.0 / 298.257222101, 3.986005e14, 7.292115e-5)
+ELLIPSOIDS = {"WGS84": WGS84, "GRS80": GRS80}
+
+#: Earth rotation rate (WGS84 = GRS80), rad/s.
+OMEGA_E = WGS84.omega
+#: 1 mGal in m/s^2.
+MGAL = 1e-5
+
+
+def get_ellipsoid(name: str) -> Ellipsoid:
+    """Return the named ellipsoid ("WGS84" or "GRS80")."""
+    try:
+        return ELLIPSOIDS[name.upper()]
+    except KeyError:
+        raise ValueError(f"unknown ellipsoid {name!r}; expected one of {sorted(ELLIPSOIDS)}") from None
+
+
+# --------------------------------------------------------------------------
+# Compiled scalar kernels
+# --------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def geodetic_to_ecef_scalar(lat, lon, h, a, f):
+    """Geodetic (rad, rad, m) -> ECEF (m)."""
+    e2 = f * (2.0 - f)
+    slat = math.sin(lat)
+    clat = math.cos(lat)
+    n = a / math.sqrt(1.0 - e2 * slat * slat)
+    x = (n + h) * clat * math.cos(lon)
+    y = (n + h) * clat * math.sin(lon)
+    z = (n * (1.0 - e2) + h) * slat
+    return x, y, z
+
+
+@njit(cache=True)
+def ecef_to_geodetic_scalar(x, y, z, a, f):
+    """ECEF (m) -> geodetic (rad, rad, m).
+
+    Bowring's initial value refined by Newton-like iteration on the latitude;
+    four iterations give < 1e-12 rad and < 1e-6 m for |h| < 1e6 m.
+    """
+    e2 = f * (2.0 - f)
+    b = a * (1.0 - f)
+    ep2 = (a * a - b * b) / (b * b)
+    p = math.hypot(x, y)
+    lon = math.atan2(y, x)
+    if p < 1e-9:
+        lat = math.copysign(0.5 * math.pi, z)
+        return lat, lon, abs(z) - b
+    theta = math.atan2(z * a, p * b)
+    st = math.sin(theta)
+    ct = math.cos(theta)
+    lat = math.atan2(z + ep2 * b * st * st * st, p - e2 * a * ct * ct * ct)
+    for _ in range(4):
+        slat = math.sin(lat)
+        n = a / math.sqrt(1.0 - e2 * slat * slat)
+        h = p / math.cos(lat) - n if abs(lat) < 0.78 else z / slat - n * (1.0 - e2)
+        lat = math.atan2(z, p * (1.0 - e2 * n / (n + h)))
+    slat = math.sin(lat)
+    clat = math.cos(lat)
+    n = a / math.sqrt(1.0 - e2 * slat * slat)
+    # height from the projection that is well conditioned at any latitude
+    h = p * clat + z * slat - a * a / n
+    return lat, lon, h
+
+
+@njit(cache=True)
+def _ellipsoidal_harmonic(x, y, z, a, f):
+    """ECEF -> (u, beta, p, E): ellipsoidal harmonic coordinates."""
+    b = a * (1.0 - f)
+    big_e2 = a * a - b * b
+    p2 = x * x + y * y
+    r2 = p2 + z * z
+    d = r2 - big_e2
+    u2 = 0.5 * d + 0.5 * math.sqrt(d * d + 4.0 * big_e2 * z * z)
+    u = math.sqrt(u2)
+    p = math.sqrt(p2)
+    beta = math.atan2(z * math.sqrt(u2 + big_e2), u * p)
+    return u, beta, p, math.sqrt(big_e2)
+
+
+@njit(cache=True)
+def _q(u, big_e):
+    """Heiskanen-Moritz q(u) = ((1 + 3 u^2/E^2) atan(E/u) - 3 u/E) / 2."""
+    t = math.atan(big_e / u)
+    return 0.5 * ((1.0 + 3.0 * u * u / (big_e * big_e)) * t - 3.0 * u / big_e)
+
+
+@njit(cache=True)
+def _dq_du(u, big_e):
+    t = math.atan(big_e / u)
+    e2 = big_e * big_e
+    return 0.5 * (6.0 * u / e2 * t - (1.0 + 3.0 * u * u / e2) * big_e / (u * u + e2) - 3.0 / big_e)
+
+
+@njit(cache=True)
+def normal_gravitational_potential_scalar(x, y, z, a, f, gm, omega):
+    """Gravitational potential V (attraction only) of the level ellipsoid, m^2/s^2."""
+    u, beta, p, big_e = _ellipsoidal_harmonic(x, y, z, a, f)
+    b = a * (1.0 - f)
+    q0 = _q(b, big_e)
+    sb = math.sin(beta)
+    return gm / big_e * math.atan(big_e / u) + 0.5 * omega * omega * a * a * _q(u, big_e) / q0 * (
+        sb * sb - 1.0 / 3.0
+    )
+
+
+@njit(cache=True)
+def normal_gravitation_ecef_scalar(x, y, z, a, f, gm, omega):
+    """Gradient of the normal gravitational potential V at an ECEF point, m/s^2.
+
+    Attraction only: add ``omega^2 (x, y, 0)`` for normal gravity.
+    Valid outside the ellipsoid and down to its surface (any flight height).
+    """
+    u, beta, p, big_e = _ellipsoidal_harmonic(x, y, z, a, f)
+    b = a * (1.0 - f)
+    e2 = big_e * big_e
+    q0 = _q(b, big_e)
+    sb = math.sin(beta)
+    cb = math.cos(beta)
+    w2a2 = omega * omega * a * a
+    dv_du = -gm / (u * u + e2) + 0.5 * w2a2 * _dq_du(u, big_e) / q0 * (sb * sb - 1.0 / 3.0)
+    dv_db = w2a2 * _q(u, big_e) / q0 * sb * cb
+    sq = math.sqrt(u * u + e2)
+    # tangent vectors dr/du and dr/dbeta; grad = dV/du * dr/du / |dr/du|^2 + ...
+    if p > 0.0:
+        cl = x / p
+        sl = y / p
+    else:
+        cl = 1.0
+        sl = 0.0
+    ru_x = u / sq * cb * cl
+    ru_y = u / sq * cb * sl
+    ru_z = sb
+    rb_x = -sq * sb * cl
+    rb_y = -sq * sb * sl
+    rb_z = u * cb
+    nu2 = u * u + e2 * sb * sb  # |dr/dbeta|^2 ; |dr/du|^2 = nu2 / (u^2 + E^2)
+    cu = dv_du * (u * u + e2) / nu2
+    cbeta = dv_db / nu2
+    return (cu * ru_x + cbeta * rb_x, cu * ru_y + cbeta * rb_y, cu * ru_z + cbeta * rb_z)
+
+
+@njit(cache=True)
+def mat_en_scalar(lat, lon):
+    """3x3 matrix mapping local ENU (n) vectors to ECEF (e)."""
+    sl = math.sin(lat)
+    cl = math.cos(lat)
+    so = math.sin(lon)
+    co = math.cos(lon)
+    m = np.empty((3, 3))
+    m[0, 0] = -so
+    m[0, 1] = -sl * co
+    m[0, 2] = cl * co
+    m[1, 0] = co
+    m[1, 1] = -sl * so
+    m[1, 2] = cl * so
+    m[2, 0] = 0.0
+    m[2, 1] = cl
+    m[2, 2] = sl
+    return m
+
+
+# --------------------------------------------------------------------------
+# Array wrappers
+# --------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _geodetic_to_ecef_arr(lat, lon, h, a, f, out):
+    for k in range(lat.shape[0]):
+        out[k, 0], out[k, 1], out[k, 2] = geodetic_to_ecef_scalar(lat[k], lon[k], h[k], a, f)
+
+
+@njit(cache=True)
+def _ecef_to_geodetic_arr(r, a, f, out):
+    for k in range(r.shape[0]):
+        out[k, 0], out[k, 1], out[k, 2] = ecef_to_geodetic_scalar(r[k, 0], r[k, 1], r[k, 2], a, f)
+
+
+@njit(cache=True)
+def _gravitation_arr(r, a, f, gm, omega, out):
+    for k in range(r.shape[0]):
+        out[k, 0], out[k, 1], out[k, 2] = normal_gravitation_ecef_scalar(
+            r[k, 0], r[k, 1], r[k, 2], a, f, gm, omega
+        )
+
+
+def _broadcast(*arrays):
+    arrs = np.broadcast_arrays(*[np.asarray(x, dtype=float) for x in arrays])
+    shape = arrs[0].shape
+    return shape, [np.ascontiguousarray(x.ravel()) for x in arrs]
+
+
+def geodetic_to_ecef(lat, lon, h, ellipsoid: Ellipsoid = WGS84):
+    """Geodetic latitude, longitude (rad) and ellipsoidal height (m) to ECEF.
+
+    Returns
+    -------
+    r_e : ndarray, shape (..., 3)
+        ECEF position, m.
+    """
+    shape, (la, lo, hh) = _broadcast(lat, lon, h)
+    out = np.empty((la.size, 3))
+    _geodetic_to_ecef_arr(la, lo, hh, ellipsoid.a, ellipsoid.f, out)
+    return out.reshape(shape + (3,))
+
+
+def ecef_to_geodetic(r_e, ellipsoid: Ellipsoid = WGS84):
+    """ECEF position ``(..., 3)`` in m to (lat rad, lon rad, h m) arrays."""
+    r = np.asarray(r_e, dtype=float)
+    shape = r.shape[:-1]
+    rr = np.ascontiguousarray(r.reshape(-1, 3))
+    out = np.empty_like(rr)
+    _ecef_to_geodetic_arr(rr, ellipsoid.a, ellipsoid.f, out)
+    out = out.reshape(shape + (3,))
+    return out[..., 0], out[..., 1], out[..., 2]
+
+
+def normal_gravitation_ecef(r_e, ellipsoid: Ellipsoid = WGS84):
+    """Normal gravitation (attraction, no centrifugal term) at ECEF points.
+
+    Parameters
+    ----------
+    r_e : array_like, shape (..., 3)
+        ECEF positions, m, on or outside the ellipsoid.
+
+    Returns
+    -------
+    g_e : ndarray, shape (..., 3)
+        Gravitation vector resolved on ECEF axes, m/s^2.
+    """
+    r = np.asarray(r_e, dtype=float)
+    shape = r.shape
+    rr = np.ascontiguousarray(r.reshape(-1, 3))
+    out = np.empty_like(rr)
+    _gravitation_arr(rr, *ellipsoid.params(), out)
+    return out.reshape(shape)
+
+
+def normal_gravity_ecef(r_e, ellipsoid: Ellipsoid = WGS84):
+    """Normal gravity vector (gravitation + centrifugal) at ECEF points, m/s^2, ``(..., 3)``."""
+    r = np.asarray(r_e, dtype=float)
+    g = normal_gravitation_ecef(r, ellipsoid)
+    g[..., 0] += ellipsoid.omega**2 * r[..., 0]
+    g[..., 1] += ellipsoid.omega**2 * r[..., 1]
+    return g
+
+
+def normal_gravity(lat, h, ellipsoid: Ellipsoid = WGS84):
+    """Magnitude of normal gravity at geodetic latitude ``lat`` (rad), height ``h`` (m); m/s^2.
+
+    Closed form (Li & Goetze 2001) through the gradient of the ellipsoidal
+    harmonic potential; equals ``boule.Ellipsoid.normal_gravity`` (tested).
+    """
+    lat = np.asarray(lat, dtype=float)
+    r = geodetic_to_ecef(lat, np.zeros_like(lat), h, ellipsoid)
+    return np.linalg.norm(normal_gravity_ecef(r, ellipsoid), axis=-1)
+
+
+def normal_gravitational_potential(r_e, ellipsoid: Ellipsoid = WGS84):
+    """Gravitational potential V (m^2/s^2) at ECEF points ``(..., 3)``."""
+    r = np.asarray(r_e, dtype=float).reshape(-1, 3)
+    v = np.array([normal_gravitational_potential_scalar(*p, *ellipsoid.params()) for p in r])
+    return v.reshape(np.asarray(r_e).shape[:-1])
+
+
+def mat_en(lat, lon):
+    """Rotation matrices ENU -> ECEF, shape ``(..., 3, 3)``; columns are E, N, U in ECEF."""
+    lat = np.asarray(lat, dtype=float)
+    lon = np.asarray(lon, dtype=float)
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    m = np.empty(np.broadcast(lat, lon).shape + (3, 3))
+    m[..., 0, 0] = -so
+    m[..., 0, 1] = -sl * co
+    m[..., 0, 2] = cl * co
+    m[..., 1, 0] = co
+    m[..., 1, 1] = -sl * so
+    m[..., 1, 2] = cl * so
+    m[..., 2, 0] = 0.0
+    m[..., 2, 1] = cl
+    m[..., 2, 2] = sl
+    return m
+
+
+def radii_of_curvature(lat, ellipsoid: Ellipsoid = WGS84):
+    """Meridian (M) and prime-vertical (N) radii of curvature, m."""
+    s2 = np.sin(lat) ** 2
+    e2 = ellipsoid.e2
+    w = np.sqrt(1.0 - e2 * s2)
+    return ellipsoid.a * (1 - e2) / w**3, ellipsoid.a / w
+
+
+def mat_ie(t, omega: float = OMEGA_E):
+    """Rotation matrices ECEF -> inertial at times ``t`` (s after the reference epoch), ``(..., 3, 3)``."""
+    t = np.asarray(t, dtype=float)
+    c, s = np.cos(omega * t), np.sin(omega * t)
+    m = np.zeros(t.shape + (3, 3))
+    m[..., 0, 0] = c
+    m[..., 0, 1] = -s
+    m[..., 1, 0] = s
+    m[..., 1, 1] = c
+    m[..., 2, 2] = 1.0
+    return m

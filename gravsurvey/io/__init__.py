@@ -1,0 +1,1 @@
+"""Input and output: log readers (MCAP, CSV) -> FlightRecord; deliverable writers."""

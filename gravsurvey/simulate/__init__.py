@@ -1,0 +1,1 @@
+"""Physics-exact flight simulator: trajectory, anomalous field, sensors, log writers."""
