@@ -1,0 +1,216 @@
+"""Ideal sensor outputs from the exact kinematics, and the sensor error models.
+
+Ideal outputs (no errors):
+
+* specific force ``F = a_i - G`` resolved on the triad, with (ENU components)
+  ``F_n = a_n + 2 w_ie x v_n + C_ne (W x (W x r_e)) - C_ne G_e - G_anom_n``
+  where ``a_n`` is the acceleration relative to the Earth (``d^2 r_e/dt^2``
+  on ENU), ``w_ie`` the Earth rate, ``G_e`` the normal gravitation of the
+  ellipsoid (:func:`gravsurvey.geodesy.normal_gravitation_ecef`) and
+  ``G_anom`` the anomalous gravitation.  This is ``C_ni (d^2 r_i/dt^2 - G_i)``
+  written out with ``r_i = C_ie(t) r_e``.
+* gyros: the triad's absolute angular rate on the triad, ``w_it^t``.  Platform
+  (ENU triad): ``w_ie + w_en``.  Strapdown: ``C_bn (w_ie + w_en) + w_nb^b``.
+
+Error models (all off by default; docs/simulate.md).  White noises are given by
+their **one-second standard deviation** ``sigma_1s`` (the standard deviation of
+the noise averaged over 1 s, i.e. a white noise of two-sided spectral density
+``sigma_1s^2 * 1 s``); a sample at rate ``R`` Hz then has standard deviation
+``sigma_1s sqrt(R)``, and a filter that averages to 1 Hz epochs sees
+``sigma_1s``.  Altimeter and GNSS noises are per sample.
+
+* accelerometers x, y: constant bias + white noise;
+* gravimeter (triad z axis, the seed's third accelerometer): constant bias +
+  stationary first-order Gauss-Markov ``df3/dt = -lambda f3 + sqrt(2 lambda)
+  sigma u`` (exact discretisation) + optional white noise;
+* gyros: constant bias + white drift (deg/h);
+* altimeter: ``h + A + sigma w`` (mean ``A``);
+* GNSS: independent white noise in east, north (m, converted to angles through
+  the radii of curvature) and height.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from gravsurvey.geodesy import OMEGA_E, WGS84, Ellipsoid, normal_gravitation_ecef, radii_of_curvature
+
+from .trajectory import Kinematics, earth_rate_n, mat_ne
+
+#: deg/h in rad/s.
+DEGPH = math.pi / 180.0 / 3600.0
+
+
+def total_gravitation_n(kin: Kinematics, anomaly_n, ellipsoid: Ellipsoid = WGS84):
+    """Normal plus anomalous gravitation on ENU, ``(n, 3)`` m/s^2."""
+    g_e = normal_gravitation_ecef(kin.r_e, ellipsoid)
+    return np.einsum("nij,nj->ni", mat_ne(kin.lat, kin.lon), g_e) + anomaly_n
+
+
+def specific_force_n(kin: Kinematics, gravitation_n, omega: float = OMEGA_E):
+    """Exact specific force on ENU axes, ``(n, 3)`` m/s^2.
+
+    Parameters
+    ----------
+    kin : Kinematics
+    gravitation_n : ndarray (n, 3)
+        Total gravitation (attraction only) on ENU, m/s^2.
+    """
+    w_ie = earth_rate_n(kin.lat, omega)
+    cen_e = np.zeros_like(kin.r_e)
+    cen_e[:, 0] = -(omega**2) * kin.r_e[:, 0]
+    cen_e[:, 1] = -(omega**2) * kin.r_e[:, 1]
+    cen_n = np.einsum("nij,nj->ni", mat_ne(kin.lat, kin.lon), cen_e)
+    return kin.acc_n + 2.0 * np.cross(w_ie, kin.vel_n) + cen_n - gravitation_n
+
+
+def triad_outputs(f_n, w_in_n, mat_nb, w_nb_b, triad: str):
+    """Ideal accelerometer and gyro outputs on the triad.
+
+    Parameters
+    ----------
+    f_n : ndarray (n, 3)
+        Specific force on ENU, m/s^2.
+    w_in_n : ndarray (n, 3)
+        Absolute angular rate of the ENU frame on ENU (``w_ie + w_en``), rad/s.
+    mat_nb : ndarray (n, 3, 3)
+        Body -> ENU.
+    w_nb_b : ndarray (n, 3)
+        Body rate w.r.t. ENU on the body, rad/s.
+    triad : {"platform", "strapdown"}
+
+    Returns
+    -------
+    f_t : ndarray (n, 3)
+        Specific force on the triad, m/s^2.
+    w_t : ndarray (n, 3)
+        Absolute angular rate of the triad on the triad, rad/s.
+    mat_nt : ndarray (n, 3, 3)
+        Triad -> ENU (platform: a read-only broadcast identity).
+    """
+    n = f_n.shape[0]
+    if triad == "platform":
+        return f_n.copy(), w_in_n.copy(), np.broadcast_to(np.eye(3), (n, 3, 3))
+    if triad == "strapdown":
+        f_t = np.einsum("nji,nj->ni", mat_nb, f_n)
+        w_t = np.einsum("nji,nj->ni", mat_nb, w_in_n) + w_nb_b
+        return f_t, w_t, mat_nb
+    raise ValueError(f"triad: expected 'platform' or 'strapdown', got {triad!r}")
+
+
+# --------------------------------------------------------------------------
+# Error models
+# --------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _markov_kernel(phi, q, x0, w, out):
+    out[0] = x0
+    for k in range(1, out.shape[0]):
+        out[k] = phi * out[k - 1] + q * w[k - 1]
+
+
+def markov_reference(phi, q, x0, w):
+    """Pure-numpy reference of the Gauss-Markov recursion (tests)."""
+    n = w.shape[0] + 1
+    out = np.empty(n)
+    out[0] = x0
+    for k in range(1, n):
+        out[k] = phi * out[k - 1] + q * w[k - 1]
+    return out
+
+
+def gauss_markov(n, dt, lam, sigma, rng):
+    """Stationary first-order Gauss-Markov sequence at a constant step.
+
+    ``x_k = phi x_{k-1} + sigma sqrt(1 - phi^2) w_k``, ``phi = exp(-lam dt)``,
+    ``x_0 ~ N(0, sigma^2)``: the exact discretisation of
+    ``dx/dt = -lam x + sqrt(2 lam) sigma u``.
+
+    Parameters
+    ----------
+    n : int
+    dt : float
+        Step, s.
+    lam : float
+        Inverse correlation time, 1/s (> 0).
+    sigma : float
+        Stationary standard deviation.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray (n,)
+    """
+    w = rng.standard_normal(n)
+    if sigma == 0.0:
+        return np.zeros(n)
+    phi = math.exp(-lam * dt)
+    q = sigma * math.sqrt(max(0.0, 1.0 - phi * phi))
+    out = np.empty(n)
+    _markov_kernel(phi, q, sigma * w[0], np.ascontiguousarray(w[1:]), out)
+    return out
+
+
+@dataclass
+class ImuErrors:
+    """Truth of the IMU errors added to the ideal outputs, ``(n, 3)`` each.
+
+    ``accel_t``: total accelerometer error (x, y: bias + white; z = gravimeter:
+    bias + Markov + white), m/s^2; ``gravimeter_markov`` (n,) the Markov part
+    of the z error, m/s^2; ``gyro_t`` total gyro error, rad/s.
+    """
+
+    accel_t: np.ndarray
+    gravimeter_markov: np.ndarray
+    gyro_t: np.ndarray
+
+
+def imu_errors(n, rate_hz, cfg, rng) -> ImuErrors:
+    """Draw the IMU errors for ``n`` samples at ``rate_hz``.
+
+    Parameters
+    ----------
+    cfg : dict
+        The validated ``sensors`` mapping (docs/simulate.md).
+    rng : numpy.random.Generator
+        Draws happen in a fixed order (accelerometer white, gravimeter Markov,
+        gravimeter white, gyro white) whatever the settings, so switching one
+        error on does not change the others' realisations.
+    """
+    acc, grv, gyr = cfg["accelerometer"], cfg["gravimeter"], cfg["gyro"]
+    sq = math.sqrt(rate_hz)
+    w_acc = rng.standard_normal((n, 2))
+    markov = gauss_markov(n, 1.0 / rate_hz, grv["markov_lambda_per_s"], grv["markov_sigma_mps2"], rng)
+    w_grv = rng.standard_normal(n)
+    w_gyr = rng.standard_normal((n, 3))
+    a = np.zeros((n, 3))
+    a[:, :2] = np.asarray(acc["bias_mps2"], dtype=float) + acc["white_sigma_mps2"] * sq * w_acc
+    a[:, 2] = grv["bias_mps2"] + markov + grv["white_sigma_mps2"] * sq * w_grv
+    g = np.asarray(gyr["bias_degph"], dtype=float) * DEGPH + gyr["white_drift_degph"] * DEGPH * sq * w_gyr
+    return ImuErrors(accel_t=a, gravimeter_markov=markov, gyro_t=g)
+
+
+def altimeter_errors(n, cfg, rng):
+    """Altimeter error ``A + sigma w`` (m), ``(n,)``."""
+    alt = cfg["altimeter"]
+    return alt["mean_m"] + alt["sigma_m"] * rng.standard_normal(n)
+
+
+def gnss_errors(lat, height, cfg, rng, ellipsoid: Ellipsoid = WGS84):
+    """GNSS errors (dlat rad, dlon rad, dh m), each ``(n,)``.
+
+    East/north errors in metres are converted through the radii of curvature.
+    """
+    g = cfg["gnss"]
+    n = lat.shape[0]
+    w = rng.standard_normal((n, 3))
+    m, nn = radii_of_curvature(lat, ellipsoid)
+    de = g["horizontal_sigma_m"] * w[:, 0]
+    dn = g["horizontal_sigma_m"] * w[:, 1]
+    dh = g["vertical_sigma_m"] * w[:, 2]
+    return dn / (m + height), de / ((nn + height) * np.cos(lat)), dh
