@@ -64,3 +64,80 @@ class FlightRecord:
     gnss: GnssChannel | None = None
     source: str = ""
     notes: list[str] = field(default_factory=list)
+
+    def epochs(self, rate_hz):
+        """Filter epochs (s) at ``rate_hz`` from the first IMU sample through the last one.
+
+        Returns
+        -------
+        ndarray, shape (m,)
+            ``t_imu[0] + k / rate_hz`` for every k with the epoch <= ``t_imu[-1]``.
+        """
+        t = self.imu.time
+        if len(t) == 0:
+            return np.zeros(0)
+        n = int(np.floor((t[-1] - t[0]) * rate_hz + 1e-9)) + 1
+        return t[0] + np.arange(n) / rate_hz
+
+    def altimeter_on(self, epochs, max_gap_s=None):
+        """Altimeter height (m) linearly interpolated at ``epochs`` (s); NaN where unavailable.
+
+        See :func:`interp_on_epochs`.
+        """
+        return interp_on_epochs(self.altimeter.time, self.altimeter.height, epochs, max_gap_s)
+
+    def gnss_on(self, epochs, max_gap_s=None):
+        """GNSS latitude, longitude (rad) and height (m) at ``epochs`` (s), NaN where unavailable.
+
+        Longitude is unwrapped before interpolation and wrapped back to (-pi, pi].
+
+        Returns
+        -------
+        lat, lon, height : ndarray, shape (m,)
+        """
+        g = self.gnss
+        if g is None:
+            nan = np.full(len(np.atleast_1d(epochs)), np.nan)
+            return nan, nan.copy(), nan.copy()
+        vals = np.stack([g.lat, np.unwrap(g.lon), g.height], axis=1)
+        out = interp_on_epochs(g.time, vals, epochs, max_gap_s)
+        lon = np.angle(np.exp(1j * out[:, 1]))
+        lon = np.where(np.isnan(out[:, 1]), np.nan, lon)
+        return out[:, 0], lon, out[:, 2]
+
+
+def interp_on_epochs(time, values, epochs, max_gap_s=None):
+    """Linear interpolation of a channel onto other epochs, NaN where it has no data.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Channel times, s, strictly increasing.
+    values : ndarray, shape (n,) or (n, k)
+        Channel values.
+    epochs : ndarray, shape (m,)
+        Target times, s (same origin as ``time``).
+    max_gap_s : float, optional
+        Epochs that fall inside a step of the channel longer than this get NaN (a gap is not
+        bridged).  None: bridge every step.
+
+    Returns
+    -------
+    ndarray, shape (m,) or (m, k)
+        NaN before the first and after the last sample (no extrapolation).
+    """
+    time = np.asarray(time, dtype=np.float64)
+    epochs = np.asarray(epochs, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    flat = values.reshape(len(time), int(np.prod(values.shape[1:])))
+    out = np.full((len(epochs), flat.shape[1]), np.nan)
+    if len(time) == 0:
+        return out.reshape((len(epochs),) + values.shape[1:])
+    inside = (epochs >= time[0]) & (epochs <= time[-1])
+    if max_gap_s is not None and len(time) > 1:
+        j = np.clip(np.searchsorted(time, epochs, side="right"), 1, len(time) - 1)
+        exact = np.isin(epochs, time)
+        inside &= exact | (time[j] - time[j - 1] <= max_gap_s)
+    for c in range(flat.shape[1]):
+        out[inside, c] = np.interp(epochs[inside], time, flat[:, c])
+    return out.reshape((len(epochs),) + values.shape[1:])

@@ -1,0 +1,5 @@
+"""``python -m gravsurvey`` = the ``gravsurvey`` console script."""
+
+from .cli import main
+
+main()

@@ -1,0 +1,331 @@
+"""Time-base repair and plausibility checks for ingested channels.
+
+Everything here works on integer-nanosecond time stamps and SI values and returns
+:class:`Finding` lists; :mod:`gravsurvey.io.ingest` turns findings into warnings, notes and
+errors.  Thresholds are module constants so docs/input-formats.md can quote them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gravsurvey.geodesy import OMEGA_E
+
+G_STD = 9.80665  # m/s^2, the unit "g"
+DEG = np.pi / 180.0
+
+# accelerometer: median |F| over the record (aircraft: ~g in level flight)
+ACCEL_OK = (8.8, 10.8)  # m/s^2
+# altimeter / GNSS ellipsoidal height range (Dead Sea shore to airliner ceiling + margin)
+HEIGHT_OK = (-600.0, 15000.0)  # m
+# gyro: any |w| above this is not an aircraft or a vehicle (deg/s declared as rad/s?)
+GYRO_MAX_OK = 3.5  # rad/s (200 deg/s)
+# rest detection: windows where |F| scatters less than this and sits within ACCEL_OK
+REST_WINDOW_S = 2.0
+REST_ACCEL_STD = 0.05  # m/s^2
+# sample-rate stability: steps off nominal by more than this fraction count as irregular
+RATE_TOL = 0.2
+RATE_IRREGULAR_WARN = 0.01  # warn when more than 1 % of steps are irregular
+MAX_LISTED = 10  # gaps/backward steps listed individually
+
+
+@dataclass
+class Finding:
+    """One check result for one channel.
+
+    ``level``: "ok", "info", "warning" (repaired or suspicious) or "error" (refuse to process).
+    """
+
+    channel: str
+    check: str
+    level: str
+    message: str
+    value: float | None = None
+
+
+@dataclass
+class TimeReport:
+    """What :func:`repair_time` found and did (times in ns since the Unix epoch)."""
+
+    n_in: int = 0
+    n_out: int = 0
+    nominal_step_ns: float = float("nan")
+    duplicates: int = 0  # same stamp, same values: dropped
+    conflicting_duplicates: int = 0  # same stamp, different values: first kept
+    backward: list = field(default_factory=list)  # (index, t_prev_ns, t_ns) of backward steps
+    n_backward: int = 0
+    gaps: list = field(default_factory=list)  # (t_before_ns, t_after_ns) after repair
+    n_gaps: int = 0
+    irregular_fraction: float = 0.0
+    jitter: float = 0.0  # std(dt)/nominal over regular steps
+
+
+def repair_time(time_ns, values, gap_factor=5.0):
+    """Make a channel's time strictly increasing and describe its time base.
+
+    Samples are put in time order (stable sort, so equal stamps keep file order); samples with
+    a stamp equal to the previous one are dropped (counted as duplicates, or conflicting
+    duplicates when their values differ: the first is kept).  Backward steps in the input
+    order are listed with their times.  Gaps are steps longer than ``gap_factor`` times the
+    nominal step (the median step).
+
+    Parameters
+    ----------
+    time_ns : ndarray of int64, shape (n,)
+        Measurement times, ns since the Unix epoch.
+    values : list of ndarray, each shape (n,) or (n, k)
+        Sample values, reordered/filtered along with time.
+    gap_factor : float
+        Gap threshold as a multiple of the nominal step.
+
+    Returns
+    -------
+    time_ns : ndarray of int64, shape (m,)
+    values : list of ndarray
+    report : TimeReport
+    """
+    t = np.asarray(time_ns, dtype=np.int64)
+    rep = TimeReport(n_in=len(t))
+    if len(t) > 1:
+        d = np.diff(t)
+        back = np.flatnonzero(d < 0)
+        rep.n_backward = len(back)
+        rep.backward = [(int(i + 1), int(t[i]), int(t[i + 1])) for i in back[:MAX_LISTED]]
+        if len(back):
+            order = np.argsort(t, kind="stable")
+            t = t[order]
+            values = [v[order] for v in values]
+        dup = np.flatnonzero(np.diff(t) == 0) + 1
+        if len(dup):
+            same = np.ones(len(dup), bool)
+            for v in values:
+                a, b = v[dup], v[dup - 1]
+                eq = (a == b) | (np.isnan(a) & np.isnan(b))
+                same &= eq.reshape(len(dup), -1).all(axis=1)
+            rep.duplicates = int(same.sum())
+            rep.conflicting_duplicates = int((~same).sum())
+            keep = np.ones(len(t), bool)
+            keep[dup] = False
+            t = t[keep]
+            values = [v[keep] for v in values]
+    rep.n_out = len(t)
+    if len(t) > 1:
+        d = np.diff(t).astype(np.float64)
+        nom = float(np.median(d))
+        rep.nominal_step_ns = nom
+        gi = np.flatnonzero(d > gap_factor * nom)
+        rep.n_gaps = len(gi)
+        rep.gaps = [(int(t[i]), int(t[i + 1])) for i in gi[:MAX_LISTED]]
+        regular = d <= gap_factor * nom
+        irr = np.abs(d - nom) > RATE_TOL * nom
+        rep.irregular_fraction = float(np.mean(irr & regular)) if len(d) else 0.0
+        dr = d[regular & ~irr]
+        rep.jitter = float(np.std(dr) / nom) if len(dr) > 1 else 0.0
+    return t, values, rep
+
+
+def time_findings(channel, rep: TimeReport, t0_ns=0):
+    """Findings (notes/warnings) describing a :class:`TimeReport`; times as s after t0."""
+    out = []
+
+    def s(tns):
+        return (tns - t0_ns) * 1e-9
+
+    if rep.duplicates:
+        out.append(Finding(channel, "duplicates", "warning",
+                           f"{channel}: dropped {rep.duplicates} duplicate samples"))
+    if rep.conflicting_duplicates:
+        out.append(Finding(channel, "duplicates", "warning",
+                           f"{channel}: {rep.conflicting_duplicates} samples share a time stamp "
+                           "with different values; kept the first of each"))
+    if rep.n_backward:
+        lst = ", ".join(f"{s(a):.6f}->{s(b):.6f} s" for _, a, b in rep.backward)
+        out.append(Finding(channel, "backward", "warning",
+                           f"{channel}: {rep.n_backward} backward time steps (re-sorted): {lst}"
+                           + (" ..." if rep.n_backward > len(rep.backward) else "")))
+    if rep.n_gaps:
+        lst = ", ".join(f"{s(a):.3f}-{s(b):.3f} s" for a, b in rep.gaps)
+        out.append(Finding(channel, "gaps", "warning",
+                           f"{channel}: {rep.n_gaps} gaps longer than the threshold: {lst}"
+                           + (" ..." if rep.n_gaps > len(rep.gaps) else ""), rep.n_gaps))
+    if rep.n_out > 1:
+        rate = 1e9 / rep.nominal_step_ns
+        lvl = "warning" if rep.irregular_fraction > RATE_IRREGULAR_WARN else "ok"
+        out.append(Finding(channel, "rate", lvl,
+                           f"{channel}: nominal rate {rate:.6g} Hz, "
+                           f"{100 * rep.irregular_fraction:.2f} % of steps off by > "
+                           f"{100 * RATE_TOL:.0f} %, jitter {100 * rep.jitter:.2f} %", rate))
+    return out
+
+
+def _rest_mask(f_norm, time_ns, nominal_step_ns):
+    """Samples of the longest run of REST_WINDOW_S windows where |F| is steady near g.
+
+    The longest contiguous run (not all rest windows) so that a strapdown triad keeps one
+    orientation: the mean rate vector is then Earth rate resolved on a fixed triad.
+    """
+    n = len(f_norm)
+    if n < 4 or not np.isfinite(nominal_step_ns) or nominal_step_ns <= 0:
+        return np.zeros(n, bool)
+    w = max(4, int(round(REST_WINDOW_S * 1e9 / nominal_step_ns)))
+    nw = n // w
+    if nw == 0:
+        return np.zeros(n, bool)
+    blocks = f_norm[:nw * w].reshape(nw, w)
+    rest = (blocks.std(axis=1) < REST_ACCEL_STD) & (np.abs(blocks.mean(axis=1) - G_STD) < 0.3)
+    # windows must also be contiguous in time (no gap inside the run)
+    tb = time_ns[:nw * w].reshape(nw, w)
+    contiguous = np.ones(nw, bool)
+    contiguous[1:] = (tb[1:, 0] - tb[:-1, -1]) < 3 * nominal_step_ns
+    best, best_len, start = None, 0, None
+    for i in range(nw + 1):
+        on = i < nw and rest[i] and (start is None or contiguous[i])
+        if on and start is None:
+            start = i
+        elif not on and start is not None:
+            if i - start > best_len:
+                best, best_len = start, i - start
+            start = i if i < nw and rest[i] else None
+    mask = np.zeros(n, bool)
+    if best is not None:
+        mask[best * w:(best + best_len) * w] = True
+    return mask
+
+
+def _ratio_name(r, candidates):
+    for name, k in candidates:
+        if abs(r / k - 1.0) < 0.15:
+            return name
+    return None
+
+
+def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad/s"):
+    """Plausibility of IMU values (SI after unit conversion).
+
+    Accelerometer: the median of |F| over the record must lie in ``ACCEL_OK`` (an aircraft's
+    specific force averages ~g); ~1 means g declared as m/s^2, ~1e6 mGal declared as m/s^2.
+    Gyro: any |w| above ``GYRO_MAX_OK`` is implausible; at rest (the longest run of
+    ``REST_WINDOW_S`` windows where |F| is steady near g) the mean rate vector must be Earth rate (within a factor of 2)
+    when it is measured well (|mean| > 10 standard errors): 57.3x, 1/57.3x, 206265x, 1/206265x
+    Earth rate (within a factor of 2) is an error naming the unit mix-up; anything else a
+    warning.
+
+    Returns
+    -------
+    list of Finding
+    """
+    out = []
+    fn = np.linalg.norm(f, axis=1)
+    wn = np.linalg.norm(w, axis=1)
+    if len(fn) == 0:
+        return out
+    med = float(np.median(fn))
+    if ACCEL_OK[0] <= med <= ACCEL_OK[1]:
+        out.append(Finding("imu", "accel magnitude", "ok",
+                           f"imu: median |specific force| {med:.4f} m/s^2 (expected ~9.8)", med))
+    else:
+        hint = _ratio_name(med, [("values are in g but declared as m/s^2", 1.0),
+                                 ("values are in mGal but declared as m/s^2", 9.80665e5),
+                                 ("values are in m/s^2 but declared as g", G_STD ** 2),
+                                 ("values are in m/s^2 but declared as mGal", 9.80665e-5)])
+        out.append(Finding("imu", "accel magnitude", "error",
+                           f"imu: median |specific force| is {med:.6g} m/s^2 after converting "
+                           f"from {accel_unit}, expected ~9.8"
+                           + (f": {hint}?" if hint else ": wrong unit or axis scaling?"), med))
+    wmax = float(np.percentile(wn, 99.9))
+    if wmax > GYRO_MAX_OK:
+        out.append(Finding("imu", "gyro magnitude", "error",
+                           f"imu: angular rate reaches {wmax:.4g} rad/s (99.9th percentile) after "
+                           f"converting from {gyro_unit}; more than {GYRO_MAX_OK} rad/s is not a "
+                           "vehicle: deg/s or deg/h declared as rad/s?", wmax))
+    rest = _rest_mask(fn, time_ns, nominal_step_ns)
+    if rest.sum() >= 8:
+        wr = w[rest]
+        wmean = float(np.linalg.norm(wr.mean(axis=0)))
+        # standard error of the mean rate vector: is the rest rate measured well enough?
+        se = float(np.linalg.norm(wr.std(axis=0)) / np.sqrt(len(wr)))
+        ratio = wmean / OMEGA_E
+        msg = (f"imu: at rest ({int(rest.sum())} samples) mean angular rate {wmean:.4g} rad/s "
+               f"= {ratio:.4g} x Earth rate")
+        # candidates are >= 57x apart, so "within a factor of 2" is unambiguous and tolerates
+        # transport rate and slow heading changes in steady level flight
+        name = None
+        for label, k in (("deg/s declared as rad/s", 1 / DEG),
+                         ("rad/s declared as deg/s", DEG),
+                         ("deg/h declared as rad/s", 3600 / DEG),
+                         ("rad/s declared as deg/h", DEG / 3600)):
+            if 0.5 < ratio / k < 2.0:
+                name = label
+        if wmean < 10 * se:
+            out.append(Finding("imu", "gyro at rest", "info",
+                               msg + f"; gyro noise (standard error {se:.2g} rad/s) too large to "
+                               "check the unit against Earth rate", ratio))
+        elif 0.5 < ratio < 2.0:
+            out.append(Finding("imu", "gyro at rest", "ok", msg + " (expected ~1)", ratio))
+        elif name:
+            out.append(Finding("imu", "gyro at rest", "error",
+                               msg + f" after converting from {gyro_unit}: {name}?", ratio))
+        else:
+            out.append(Finding("imu", "gyro at rest", "warning",
+                               msg + f", expected ~1: gyro bias, low-grade gyro or wrong unit "
+                               f"({gyro_unit})?", ratio))
+    else:
+        out.append(Finding("imu", "gyro at rest", "info",
+                           "imu: no rest period found; gyro unit checked by range only"))
+    return out
+
+
+def check_height(channel, h, unit="m", ref=None):
+    """Altimeter/GNSS height inside ``HEIGHT_OK``; with ``ref`` (GNSS heights on the same
+    times) a ratio of ~3.28 means feet declared as metres."""
+    out = []
+    if len(h) == 0:
+        return out
+    lo, hi = float(np.min(h)), float(np.max(h))
+    if lo < HEIGHT_OK[0] or hi > HEIGHT_OK[1]:
+        out.append(Finding(channel, "height range", "error",
+                           f"{channel}: heights {lo:.6g}..{hi:.6g} m (after converting from "
+                           f"{unit}) outside {HEIGHT_OK[0]:g}..{HEIGHT_OK[1]:g} m: wrong unit "
+                           "or not an ellipsoidal height?", hi))
+    else:
+        out.append(Finding(channel, "height range", "ok",
+                           f"{channel}: heights {lo:.6g}..{hi:.6g} m", hi))
+    if ref is not None and len(ref) == len(h) and len(h) > 0:
+        sel = np.abs(ref) > 100.0
+        if sel.sum() > 10:
+            r = float(np.median(h[sel] / ref[sel]))
+            name = _ratio_name(r, [("feet declared as metres", 1 / 0.3048),
+                                   ("metres declared as feet", 0.3048)])
+            if name:
+                out.append(Finding(channel, "height vs GNSS", "error",
+                                   f"{channel}: heights are {r:.4g} x the GNSS heights: {name}?",
+                                   r))
+            else:
+                d = float(np.median(np.abs(h - ref)))
+                lvl = "ok" if d < 100.0 else "warning"
+                out.append(Finding(channel, "height vs GNSS", lvl,
+                                   f"{channel}: median |height - GNSS height| {d:.3g} m", d))
+    return out
+
+
+def check_gnss(lat_deg, lon_deg):
+    """Latitude in [-90, 90] deg, longitude in [-180, 360] deg."""
+    if len(lat_deg) == 0:
+        return []
+    if np.any(np.abs(lat_deg) > 90) or np.any(lon_deg < -180) or np.any(lon_deg > 360):
+        return [Finding("gnss", "lat/lon range", "error",
+                        f"gnss: latitude {np.min(lat_deg):.6g}..{np.max(lat_deg):.6g}, longitude "
+                        f"{np.min(lon_deg):.6g}..{np.max(lon_deg):.6g}: expected degrees in "
+                        "[-90, 90] and [-180, 360]")]
+    return [Finding("gnss", "lat/lon range", "ok", "gnss: latitude/longitude in range")]
+
+
+def check_epoch(channel, time_ns):
+    """Warn when stamps are before 2000 (simulation clock or unset time?)."""
+    if len(time_ns) and time_ns[0] < 946684800 * 10**9:
+        return [Finding(channel, "epoch", "warning",
+                        f"{channel}: time stamps start at {time_ns[0] * 1e-9:.3f} s after "
+                        "1970-01-01, before 2000: simulation clock or unset time?")]
+    return []

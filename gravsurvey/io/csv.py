@@ -1,0 +1,250 @@
+"""CSV channel reader: header row, named columns, several time formats, declared units.
+
+Lines are split in Python (line numbers kept), each column is converted by numpy in one call
+(shortest-repr floats come back exactly; integer-ns and decimal-second times are parsed as
+integers, never through float64).  If a column fails to convert, a pass over that column finds
+the first bad value and raises a one-line :class:`~gravsurvey.errors.DataError` naming file,
+line and column.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from gravsurvey.errors import DataError
+
+GPS_EPOCH_UNIX_S = 315964800  # 1980-01-06T00:00:00 UTC
+WEEK_NS = 604800 * 10**9
+TIME_FORMATS = ("ns", "s", "gps_week_sow", "iso")
+
+UNITS = {
+    "accel": {"m/s^2": 1.0, "g": 9.80665, "mGal": 1e-5},
+    "gyro": {"rad/s": 1.0, "deg/s": np.pi / 180.0, "deg/h": np.pi / 180.0 / 3600.0},
+    "height": {"m": 1.0, "ft": 0.3048},
+}
+
+# quantities per channel: name -> (unit kind or None, width)
+QUANTITIES = {
+    "imu": (("fx", "accel"), ("fy", "accel"), ("fz", "accel"),
+            ("wx", "gyro"), ("wy", "gyro"), ("wz", "gyro")),
+    "altimeter": (("height", "height"),),
+    "gnss": (("lat", None), ("lon", None), ("height", "height")),
+}
+
+DEFAULT_COLUMNS = {
+    "imu": {"time": "time_ns", "fx": "fx_mps2", "fy": "fy_mps2", "fz": "fz_mps2",
+            "wx": "wx_radps", "wy": "wy_radps", "wz": "wz_radps"},
+    "altimeter": {"time": "time_ns", "height": "height_m"},
+    "gnss": {"time": "time_ns", "lat": "lat_deg", "lon": "lon_deg", "height": "height_m"},
+}
+DEFAULT_GPS_TIME_COLUMNS = ["gps_week", "gps_sow"]
+
+
+def _seconds_to_ns(strs, path, lines, col):
+    """Decimal-second strings -> int64 ns, exactly (no float rounding)."""
+    out = np.empty(len(strs), np.int64)
+    for k, s in enumerate(strs):
+        s = s.strip()
+        neg = s.startswith("-")
+        body = s[1:] if neg or s.startswith("+") else s
+        ip, dot, fp = body.partition(".")
+        if not (ip.isdigit() or (ip == "" and fp.isdigit())) or (fp and not fp.isdigit()) \
+                or len(fp) > 9 or (not ip and not fp):
+            raise DataError(f"{path}: line {lines[k]}, column {col!r}: expected seconds "
+                            f"(decimal, at most 9 fractional digits), got {s!r}")
+        v = int(ip or "0") * 10**9 + int((fp + "000000000")[:9])
+        out[k] = -v if neg else v
+    return out
+
+
+def _ns(strs, path, lines, col):
+    try:
+        return np.array(strs).astype(np.int64)
+    except (ValueError, OverflowError):
+        for k, s in enumerate(strs):
+            try:
+                v = int(s.strip())
+                if not -2**63 <= v < 2**63:
+                    raise ValueError
+            except ValueError:
+                raise DataError(f"{path}: line {lines[k]}, column {col!r}: expected integer "
+                                f"nanoseconds, got {s.strip()!r}") from None
+        raise
+
+
+def _iso(strs, path, lines, col):
+    clean = []
+    for k, s in enumerate(strs):
+        s = s.strip()
+        if s.endswith("Z"):
+            s = s[:-1]
+        elif s.endswith("+00:00"):
+            s = s[:-6]
+        if "+" in s[10:] or "-" in s[10:]:
+            raise DataError(f"{path}: line {lines[k]}, column {col!r}: expected ISO 8601 UTC "
+                            f"time (ending in Z or +00:00 or no offset), got {strs[k].strip()!r}")
+        clean.append(s)
+    try:
+        return np.array(clean, dtype="datetime64[ns]").astype(np.int64)
+    except ValueError:
+        for k, s in enumerate(clean):
+            try:
+                np.datetime64(s, "ns")
+            except ValueError:
+                raise DataError(f"{path}: line {lines[k]}, column {col!r}: expected ISO 8601 "
+                                f"UTC time like 2024-05-01T10:00:00.123456789Z, got "
+                                f"{strs[k].strip()!r}") from None
+        raise
+
+
+def read_csv_channel(path, role, columns=None, time_format="ns", units=None, delimiter=",",
+                     gps_leap_seconds=18):
+    """Read one channel's CSV file.
+
+    Parameters
+    ----------
+    path : str or Path
+    role : {"imu", "altimeter", "gnss"}
+    columns : dict, optional
+        quantity -> column name (``DEFAULT_COLUMNS[role]`` completed by these).  ``time`` is
+        one column, or two ``[week, seconds_of_week]`` for ``gps_week_sow``.
+    time_format : {"ns", "s", "gps_week_sow", "iso"}
+        Integer ns since the Unix epoch; decimal seconds since the Unix epoch; GPS week and
+        seconds of week (GPS time, converted to UTC by ``gps_leap_seconds``); ISO 8601 UTC.
+    units : dict, optional
+        ``accel``, ``gyro``, ``height`` -> unit name (``UNITS``); SI when omitted.
+    delimiter : str
+    gps_leap_seconds : int
+        GPS - UTC in s (18 since 2017-01-01).
+
+    Returns
+    -------
+    time_ns : ndarray of int64, shape (n,)
+    values : dict
+        IMU: ``specific_force`` (n, 3) m/s^2, ``angular_rate`` (n, 3) rad/s; altimeter:
+        ``height`` (n,) m; GNSS: ``lat_deg``, ``lon_deg`` (n,) deg, ``height`` (n,) m.
+        Values already in SI are returned bit-exactly as written.
+
+    Raises
+    ------
+    DataError
+        Missing file or column, unparsable value (names file, line, column).
+    """
+    path = os.fspath(path)
+    cols = dict(DEFAULT_COLUMNS[role])
+    if time_format == "gps_week_sow":
+        cols["time"] = list(DEFAULT_GPS_TIME_COLUMNS)
+    cols.update(columns or {})
+    units = dict(units or {})
+    try:
+        with open(path, encoding="utf-8", newline="") as fh:
+            text = fh.read()
+    except OSError as exc:
+        raise DataError(f"{path}: cannot open ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not UTF-8 text (byte {exc.start}); expected a CSV file") from None
+    all_lines = text.splitlines()
+    header = None
+    data_lines, line_no = [], []
+    for i, ln in enumerate(all_lines, start=1):
+        s = ln.strip()
+        if not s or s.startswith("#"):
+            continue
+        if header is None:
+            header = [h.strip() for h in s.split(delimiter)]
+            header_line = i
+            continue
+        data_lines.append(ln)
+        line_no.append(i)
+    if header is None:
+        raise DataError(f"{path}: no header row (expected columns "
+                        f"{', '.join(_flat(cols.values()))})")
+    index = {}
+    for name in _flat(cols.values()):
+        if name not in header:
+            raise DataError(f"{path}: line {header_line}: column {name!r} missing from the "
+                            f"header (has {', '.join(header)}); set csv.columns.{role}")
+        index[name] = header.index(name)
+    ncol = len(header)
+    n = len(data_lines)
+    # split; count fields per line first so a short/long line is reported exactly
+    rows = [ln.split(delimiter) for ln in data_lines]
+    for k, r in enumerate(rows):
+        if len(r) != ncol:
+            raise DataError(f"{path}: line {line_no[k]}: {len(r)} fields, header has {ncol}")
+    tcols = cols["time"] if isinstance(cols["time"], list) else [cols["time"]]
+    if time_format == "gps_week_sow" and len(tcols) != 2:
+        raise DataError(f"{path}: time format gps_week_sow needs two time columns "
+                        "[week, seconds_of_week]")
+    if time_format != "gps_week_sow" and len(tcols) != 1:
+        raise DataError(f"{path}: time format {time_format} needs one time column")
+    tstr = [[r[index[c]] for r in rows] for c in tcols]
+    if time_format == "ns":
+        t = _ns(tstr[0], path, line_no, tcols[0])
+    elif time_format == "s":
+        t = _seconds_to_ns(tstr[0], path, line_no, tcols[0])
+    elif time_format == "iso":
+        t = _iso(tstr[0], path, line_no, tcols[0])
+    else:
+        week = _ns(tstr[0], path, line_no, tcols[0])
+        sow = _seconds_to_ns(tstr[1], path, line_no, tcols[1])
+        t = (GPS_EPOCH_UNIX_S - gps_leap_seconds) * 10**9 + week * WEEK_NS + sow
+    vals = {}
+    for q, kind in QUANTITIES[role]:
+        c = cols[q]
+        strs = [r[index[c]] for r in rows]
+        try:
+            v = np.array(strs, dtype=np.float64) if n else np.zeros(0)
+        except ValueError:
+            for k, s in enumerate(strs):
+                try:
+                    float(s)
+                except ValueError:
+                    raise DataError(f"{path}: line {line_no[k]}, column {c!r}: expected a "
+                                    f"number, got {s.strip()!r}") from None
+            raise
+        if kind is not None:
+            unit = units.get(kind, next(iter(UNITS[kind])))
+            factor = UNITS[kind][unit]
+            if factor != 1.0:
+                v = v * factor
+        vals[q] = v
+    if role == "imu":
+        values = {"specific_force": np.stack([vals["fx"], vals["fy"], vals["fz"]], axis=1),
+                  "angular_rate": np.stack([vals["wx"], vals["wy"], vals["wz"]], axis=1)}
+    elif role == "altimeter":
+        values = {"height": vals["height"]}
+    else:
+        values = {"lat_deg": vals["lat"], "lon_deg": vals["lon"], "height": vals["height"]}
+    return t, values
+
+
+def _flat(items):
+    out = []
+    for v in items:
+        out.extend(v if isinstance(v, list) else [v])
+    return out
+
+
+def sniff_csv_role(path):
+    """Guess a CSV file's channel from its header (for ``inspect``): role, "truth" (the
+    simulator's truth.csv) or None."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            for ln in fh:
+                s = ln.strip()
+                if s and not s.startswith("#"):
+                    header = {h.strip() for h in s.split(",")}
+                    break
+            else:
+                return None
+    except OSError:
+        return None
+    if {"time_ns", "line", "disturbance_mgal"} <= header:
+        return "truth"
+    for role in ("imu", "gnss", "altimeter"):
+        if set(_flat(DEFAULT_COLUMNS[role].values())) <= header:
+            return role
+    return None

@@ -1,0 +1,528 @@
+"""Ingestion: per-flight input options -> checked :class:`~gravsurvey.io.record.FlightRecord`.
+
+``ingest_options_from_dict`` validates the ingestion keys of one flight of the processing
+config (``inputs``, ``topics``, ``mcap``, ``csv``, ``checks``; see docs/input-formats.md);
+``load_flight`` reads the files, repairs the time bases, runs the plausibility checks and
+returns the record.  Problems are reported once: a :class:`~gravsurvey.errors.DataWarning`
+per finding, the same line in ``record.notes``.
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gravsurvey.errors import ConfigError, DataError, DataWarning
+from gravsurvey.io import checks as ck
+from gravsurvey.io.csv import (DEFAULT_COLUMNS, TIME_FORMATS, UNITS,
+                               read_csv_channel)
+from gravsurvey.io.mcap import (DEFAULT_JSON_FIELDS, DEFAULT_MAX_RECORD_BYTES, ROLE_SCHEMAS,
+                                McapContent, read_mcap)
+from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
+
+ROLES = ("imu", "altimeter", "gnss")
+DEFAULT_TOPICS = {"imu": "/imu", "altimeter": "/altimeter", "gnss": "/gnss"}
+#: Flight-level keys this module owns (config.py should hand them over / not reject them).
+INGEST_KEYS = ("inputs", "topics", "mcap", "csv", "checks")
+
+
+@dataclass
+class IngestOptions:
+    """Validated ingestion settings of one flight (see docs/input-formats.md).
+
+    Paths are as written in the config; :func:`load_flight` resolves them against ``base_dir``.
+    """
+
+    kind: str = "mcap"  # "mcap" | "csv"
+    mcap_path: str | None = None
+    csv_paths: dict = field(default_factory=dict)  # role -> path
+    topics: dict = field(default_factory=lambda: dict(DEFAULT_TOPICS))
+    topics_explicit: tuple = ()
+    json_fields: dict = field(default_factory=lambda: {r: dict(m) for r, m in
+                                                       DEFAULT_JSON_FIELDS.items()})
+    mcap_units: dict = field(default_factory=lambda: {"accel": "m/s^2", "gyro": "rad/s",
+                                                      "height": "m"})
+    time_source: str = "auto"  # "auto" (header.stamp / JSON time, else log_time) | "log_time"
+    check_crc: bool = True
+    max_record_bytes: int = DEFAULT_MAX_RECORD_BYTES
+    csv_columns: dict = field(default_factory=dict)  # role -> {quantity: column}
+    csv_time_format: str = "ns"
+    csv_units: dict = field(default_factory=lambda: {"accel": "m/s^2", "gyro": "rad/s",
+                                                     "height": "m"})
+    csv_delimiter: str = ","
+    gps_leap_seconds: int = 18
+    gap_factor: float = 5.0
+    plausibility: str = "error"  # "error" | "warn"
+    key_path: str = "flight"
+    base_dir: str | None = None  # relative input paths refer to it
+
+    def _resolve(self, p, base_dir=None):
+        base = base_dir if base_dir is not None else self.base_dir
+        return Path(base) / p if base is not None else Path(p)
+
+    def input_paths(self, base_dir=None) -> list:
+        """The input files (MCAP, or the CSVs in imu, altimeter, gnss order), resolved against
+        ``base_dir`` (default: the one given to :func:`ingest_options_from_dict`)."""
+        if self.kind == "mcap":
+            return [self._resolve(self.mcap_path, base_dir)]
+        return [self._resolve(self.csv_paths[r], base_dir) for r in ROLES if r in self.csv_paths]
+
+
+# ----------------------------------------------------------------------------- config parsing
+def _suggest(key, allowed):
+    same = [a for a in allowed if str(a).lower() == str(key).lower()]
+    m = same or difflib.get_close_matches(str(key), list(map(str, allowed)), n=1, cutoff=0.5)
+    return f" (did you mean {m[0]!r}?)" if m else ""
+
+
+def _mapping(value, path):
+    if not isinstance(value, dict):
+        raise ConfigError(f"{path}: expected a mapping, got {type(value).__name__}")
+    return value
+
+
+def _keys(d, allowed, path):
+    for k in d:
+        if k not in allowed:
+            raise ConfigError(f"{path}.{k}: unknown key{_suggest(k, allowed)}; allowed: "
+                              f"{', '.join(allowed)}")
+
+
+def _str_value(v, path):
+    if not isinstance(v, str) or not v:
+        raise ConfigError(f"{path}: expected a non-empty string, got {v!r}")
+    return v
+
+
+def _choice(v, allowed, path):
+    if v not in allowed:
+        raise ConfigError(f"{path}: expected one of {', '.join(map(str, allowed))}, got {v!r}"
+                          f"{_suggest(v, allowed)}")
+    return v
+
+
+def _number(v, path, lo=None, hi=None, integer=False):
+    ok = isinstance(v, int) if integer else isinstance(v, (int, float))
+    if isinstance(v, bool) or not ok or (lo is not None and v < lo) or (hi is not None and v > hi):
+        rng = f" in [{lo}, {hi}]" if lo is not None or hi is not None else ""
+        kind = "an integer" if integer else "a number"
+        raise ConfigError(f"{path}: expected {kind}{rng}, got {v!r}")
+    return v
+
+
+def _units(d, path):
+    d = _mapping(d, path)
+    _keys(d, tuple(UNITS), path)
+    out = {k: next(iter(UNITS[k])) for k in UNITS}
+    for k, v in d.items():
+        out[k] = _choice(v, tuple(UNITS[k]), f"{path}.{k}")
+    return out
+
+
+def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
+                             base_dir=None) -> IngestOptions:
+    """Validate the ingestion keys of one flight and return :class:`IngestOptions`.
+
+    Parameters
+    ----------
+    flight_cfg : dict
+        The ingestion keys of one entry of ``flights`` (``INGEST_KEYS``; any other key is
+        rejected, so the caller passes only these).
+    key_path : str
+        Where this dict sits in the config, for messages (e.g. ``"flights[0]"``).
+    base_dir : path, optional
+        Directory relative input paths refer to (the config file's); :func:`load_flight`'s
+        ``base_dir`` argument overrides it.
+
+    Raises
+    ------
+    ConfigError
+        Unknown key (nearest valid key suggested), wrong type or value; the message names the
+        full key path.
+    """
+    cfg = _mapping(flight_cfg, key_path)
+    _keys(cfg, INGEST_KEYS, key_path)
+    o = IngestOptions(key_path=key_path,
+                      base_dir=os.fspath(base_dir) if base_dir is not None else None)
+    if "inputs" not in cfg:
+        raise ConfigError(f"{key_path}.inputs: missing; expected {{mcap: FILE}} or "
+                          "{csv: {imu: FILE, altimeter: FILE, gnss: FILE}}")
+    p = f"{key_path}.inputs"
+    inputs = _mapping(cfg["inputs"], p)
+    _keys(inputs, ("mcap", "csv"), p)
+    if len(inputs) != 1:
+        raise ConfigError(f"{p}: expected exactly one of mcap, csv, got "
+                          f"{', '.join(inputs) or 'none'}")
+    if "mcap" in inputs:
+        o.kind, o.mcap_path = "mcap", _str_value(inputs["mcap"], f"{p}.mcap")
+    else:
+        o.kind = "csv"
+        c = _mapping(inputs["csv"], f"{p}.csv")
+        _keys(c, ROLES, f"{p}.csv")
+        for r in ("imu", "altimeter"):
+            if r not in c:
+                raise ConfigError(f"{p}.csv.{r}: missing; expected a CSV file path")
+        o.csv_paths = {r: _str_value(v, f"{p}.csv.{r}") for r, v in c.items()}
+    if "topics" in cfg:
+        p = f"{key_path}.topics"
+        t = _mapping(cfg["topics"], p)
+        _keys(t, ROLES, p)
+        for r, v in t.items():
+            o.topics[r] = _str_value(v, f"{p}.{r}")
+        o.topics_explicit = tuple(t)
+    if "mcap" in cfg:
+        p = f"{key_path}.mcap"
+        m = _mapping(cfg["mcap"], p)
+        _keys(m, ("json_fields", "units", "time_source", "check_crc", "max_record_mib"), p)
+        if "json_fields" in m:
+            jf = _mapping(m["json_fields"], f"{p}.json_fields")
+            _keys(jf, ROLES, f"{p}.json_fields")
+            for r, fm in jf.items():
+                q = f"{p}.json_fields.{r}"
+                fm = _mapping(fm, q)
+                _keys(fm, tuple(DEFAULT_JSON_FIELDS[r]), q)
+                for k, v in fm.items():
+                    vec = k in ("specific_force", "angular_rate")
+                    if vec and isinstance(v, list):
+                        if len(v) != 3:
+                            raise ConfigError(f"{q}.{k}: expected a field name or a list of "
+                                              f"3 field names, got {v!r}")
+                        o.json_fields[r][k] = [_str_value(x, f"{q}.{k}") for x in v]
+                    else:
+                        o.json_fields[r][k] = _str_value(v, f"{q}.{k}")
+        if "units" in m:
+            o.mcap_units = _units(m["units"], f"{p}.units")
+        if "time_source" in m:
+            o.time_source = _choice(m["time_source"], ("auto", "log_time"), f"{p}.time_source")
+        if "check_crc" in m:
+            if not isinstance(m["check_crc"], bool):
+                raise ConfigError(f"{p}.check_crc: expected true or false, got "
+                                  f"{m['check_crc']!r}")
+            o.check_crc = m["check_crc"]
+        if "max_record_mib" in m:
+            o.max_record_bytes = int(_number(m["max_record_mib"], f"{p}.max_record_mib",
+                                             1, 65536) * 2**20)
+    if "csv" in cfg:
+        p = f"{key_path}.csv"
+        c = _mapping(cfg["csv"], p)
+        _keys(c, ("columns", "time_format", "units", "delimiter", "gps_leap_seconds"), p)
+        if "time_format" in c:
+            o.csv_time_format = _choice(c["time_format"], TIME_FORMATS, f"{p}.time_format")
+        if "columns" in c:
+            cols = _mapping(c["columns"], f"{p}.columns")
+            _keys(cols, ROLES, f"{p}.columns")
+            for r, cm in cols.items():
+                q = f"{p}.columns.{r}"
+                cm = _mapping(cm, q)
+                _keys(cm, tuple(DEFAULT_COLUMNS[r]), q)
+                out = {}
+                for k, v in cm.items():
+                    if k == "time" and isinstance(v, list):
+                        if len(v) != 2:
+                            raise ConfigError(f"{q}.time: expected a column name, or "
+                                              f"[week, seconds_of_week] columns, got {v!r}")
+                        out[k] = [_str_value(x, f"{q}.time") for x in v]
+                    else:
+                        out[k] = _str_value(v, f"{q}.{k}")
+                o.csv_columns[r] = out
+        for r, cm in o.csv_columns.items():
+            t = cm.get("time")
+            if t is not None and isinstance(t, list) != (o.csv_time_format == "gps_week_sow"):
+                raise ConfigError(f"{p}.columns.{r}.time: time_format {o.csv_time_format} "
+                                  f"needs {'two columns' if isinstance(t, str) else 'one column'}"
+                                  f", got {t!r}")
+        if "units" in c:
+            o.csv_units = _units(c["units"], f"{p}.units")
+        if "delimiter" in c:
+            d = c["delimiter"]
+            if not isinstance(d, str) or len(d) != 1 or d in "#\"\r\n0123456789.-+eE":
+                raise ConfigError(f"{p}.delimiter: expected one character such as ',' ';' "
+                                  f"or a tab, got {d!r}")
+            o.csv_delimiter = d
+        if "gps_leap_seconds" in c:
+            o.gps_leap_seconds = _number(c["gps_leap_seconds"], f"{p}.gps_leap_seconds", 0, 100,
+                                         integer=True)
+    if "checks" in cfg:
+        p = f"{key_path}.checks"
+        c = _mapping(cfg["checks"], p)
+        _keys(c, ("gap_factor", "plausibility"), p)
+        if "gap_factor" in c:
+            o.gap_factor = float(_number(c["gap_factor"], f"{p}.gap_factor", 1.5, 1e6))
+        if "plausibility" in c:
+            o.plausibility = _choice(c["plausibility"], ("error", "warn"), f"{p}.plausibility")
+    return o
+
+
+# ----------------------------------------------------------------------------- loading
+@dataclass
+class RawChannel:
+    """One role's samples before time repair: int64 ns stamps and SI values."""
+
+    role: str
+    time_ns: np.ndarray
+    values: dict
+    source: str  # file (and topic) it came from
+    schema: str = ""
+    encoding: str = ""
+    time_source: str = ""
+
+
+def _unit_factors(units):
+    return {k: UNITS[k][units.get(k, next(iter(UNITS[k])))] for k in UNITS}
+
+
+def _apply_units(role, values, units):
+    f = _unit_factors(units)
+    out = dict(values)
+    if role == "imu":
+        if f["accel"] != 1.0:
+            out["specific_force"] = values["specific_force"] * f["accel"]
+        if f["gyro"] != 1.0:
+            out["angular_rate"] = values["angular_rate"] * f["gyro"]
+    elif f["height"] != 1.0:
+        out["height"] = values["height"] * f["height"]
+    return out
+
+
+def select_channels(content: McapContent, options: IngestOptions, notes: list):
+    """Pick the MCAP channel(s) for each role: configured topic, else schema auto-detection.
+
+    Returns
+    -------
+    dict
+        role -> list of channel ids (possibly empty for GNSS).
+
+    Raises
+    ------
+    DataError
+        An explicitly configured topic is absent or undecodable; a required role has no
+        channel; auto-detection is ambiguous.
+    """
+    path = content.path
+    by_topic = {}
+    for cid, ch in content.channels.items():
+        by_topic.setdefault(ch.topic, []).append(cid)
+    avail = ", ".join(f"{t} ({content.schema_name(ids[0]) or 'schemaless'})"
+                      for t, ids in sorted(by_topic.items())) or "none"
+    out = {}
+    for role in ROLES:
+        topic = options.topics[role]
+        ids = by_topic.get(topic, [])
+        if ids:
+            dec = [c for c in ids if c in content.decoded]
+            if not dec:
+                ch = content.channels[ids[0]]
+                raise DataError(
+                    f"{path}: topic {topic} ({role}) has schema "
+                    f"{content.schema_name(ids[0]) or 'none'!r}, encoding "
+                    f"{ch.message_encoding!r}; expected one of "
+                    f"{', '.join(ROLE_SCHEMAS[role])} (cdr) or JSON")
+            out[role] = dec
+            continue
+        if role in options.topics_explicit:
+            raise DataError(f"{path}: configured topic {topic} for {role} not in the file; "
+                            f"topics: {avail}")
+        cands = sorted({content.channels[c].topic for c in content.decoded
+                        if content.role_of_schema(c) == role})
+        if len(cands) == 1:
+            out[role] = [c for c in by_topic[cands[0]] if c in content.decoded]
+            notes.append(f"{role}: topic {topic} absent; using {cands[0]} (schema "
+                         f"{content.schema_name(out[role][0])})")
+        elif len(cands) > 1:
+            raise DataError(f"{path}: topic {topic} absent and several {role} topics found "
+                            f"({', '.join(cands)}); set topics.{role}")
+        elif role == "gnss":
+            out[role] = []
+        else:
+            raise DataError(f"{path}: no {role} channel: topic {topic} absent and no channel "
+                            f"with schema {' / '.join(ROLE_SCHEMAS[role])}; topics: {avail}"
+                            + ("; set topics.altimeter to a NavSatFix topic to use GNSS "
+                               "heights" if role == "altimeter" else ""))
+    return out
+
+
+def read_raw_channels(options: IngestOptions, base_dir, notes: list):
+    """Read the files named by ``options``: role -> :class:`RawChannel` (GNSS may be absent).
+
+    Also returns the MCAP content (or None for CSV) for ``inspect``.
+    """
+    raw = {}
+    if options.kind == "mcap":
+        path = options._resolve(options.mcap_path, base_dir)
+        content = read_mcap(path, topics=options.topics, json_fields=options.json_fields,
+                            check_crc=options.check_crc,
+                            max_record_bytes=options.max_record_bytes)
+        notes.extend(content.notes)
+        if content.salvage is not None:
+            notes.append(content.salvage.describe(path))
+        if content.orphan_messages:
+            notes.append(f"{path}: {content.orphan_messages} messages on undefined channels "
+                         "ignored")
+        try:
+            chosen = select_channels(content, options, notes)
+        except DataError as exc:
+            if content.salvage is None:
+                raise
+            raise DataError(f"{exc} ({content.salvage.describe(path)})") from None
+        for role, ids in chosen.items():
+            if not ids:
+                continue
+            blocks = [content.decoded[c] for c in ids]
+            src = f"{path} topic {content.channels[ids[0]].topic}"
+            t = np.concatenate([b.time_ns for b in blocks])
+            lt = np.concatenate([b.log_time_ns for b in blocks])
+            vals = {k: np.concatenate([b.values[k] for b in blocks]) for k in blocks[0].values}
+            if role == "altimeter":
+                vals = {"height": vals["height"]}
+            enc = content.channels[ids[0]].message_encoding
+            used = sum(b.log_time_used for b in blocks)
+            tsrc = "header.stamp" if enc == "cdr" else "JSON " + str(
+                options.json_fields[role].get("time"))
+            if options.time_source == "log_time":
+                t, tsrc = lt, "log_time (configured)"
+            elif used:
+                tsrc += f" ({used} messages fell back to log_time)"
+                notes.append(f"{role}: {used} of {len(t)} messages from {src} carry no "
+                             f"measurement time ({tsrc.split(' (')[0]}); used the MCAP log_time")
+            bad = sum(b.undecodable for b in blocks)
+            if bad:
+                probs = "; ".join(p for b in blocks for p in b.problems[:1])
+                notes.append(f"{role}: {bad} messages of {src} could not be decoded and were "
+                             f"dropped" + (f" ({probs})" if probs else ""))
+            vals = _apply_units(role, vals, options.mcap_units)
+            raw[role] = RawChannel(role, t, vals, src, content.schema_name(ids[0]), enc, tsrc)
+        return raw, content
+    for role, rel in options.csv_paths.items():
+        path = options._resolve(rel, base_dir)
+        t, vals = read_csv_channel(path, role, options.csv_columns.get(role),
+                                   options.csv_time_format, options.csv_units,
+                                   options.csv_delimiter, options.gps_leap_seconds)
+        raw[role] = RawChannel(role, t, vals, str(path), "csv", "csv", options.csv_time_format)
+    return raw, None
+
+
+def _drop_nonfinite(ch: RawChannel, notes):
+    ok = np.ones(len(ch.time_ns), bool)
+    for v in ch.values.values():
+        ok &= np.isfinite(v).reshape(len(ok), -1).all(axis=1) if len(ok) else ok
+    if not ok.all():
+        notes.append(f"{ch.role}: dropped {int((~ok).sum())} samples with NaN/inf values "
+                     f"({ch.source})")
+        ch.time_ns = ch.time_ns[ok]
+        ch.values = {k: v[ok] for k, v in ch.values.items()}
+
+
+def repair_and_check(raw: dict, options: IngestOptions):
+    """Time repair and plausibility findings for every channel.
+
+    Returns
+    -------
+    raw : dict
+        Same roles, times strictly increasing.
+    findings : list of checks.Finding
+    reports : dict
+        role -> checks.TimeReport
+    """
+    findings, reports = [], {}
+    t0 = min((int(ch.time_ns[0]) for ch in raw.values() if len(ch.time_ns)), default=0)
+    for role, ch in raw.items():
+        keys = list(ch.values)
+        t, vals, rep = ck.repair_time(ch.time_ns, [ch.values[k] for k in keys],
+                                      options.gap_factor)
+        ch.time_ns, ch.values = t, dict(zip(keys, vals))
+        reports[role] = rep
+        findings += ck.time_findings(role, rep, t0)
+        findings += ck.check_epoch(role, t)
+    if "imu" in raw:
+        ch = raw["imu"]
+        findings += ck.check_imu(ch.time_ns, ch.values["specific_force"],
+                                 ch.values["angular_rate"], reports["imu"].nominal_step_ns,
+                                 options.csv_units["accel"] if options.kind == "csv"
+                                 else options.mcap_units["accel"],
+                                 options.csv_units["gyro"] if options.kind == "csv"
+                                 else options.mcap_units["gyro"])
+    hunit = options.csv_units["height"] if options.kind == "csv" else options.mcap_units["height"]
+    g = raw.get("gnss")
+    if g is not None:
+        findings += ck.check_gnss(g.values["lat_deg"], g.values["lon_deg"])
+        findings += ck.check_height("gnss", g.values["height"], hunit)
+    if "altimeter" in raw:
+        a = raw["altimeter"]
+        findings += ck.check_height("altimeter", a.values["height"], hunit)
+        if g is not None and len(g.time_ns) > 1 and a.source != g.source:
+            # GNSS height at the altimeter times; relative ns keep float64 exact
+            tg = (g.time_ns - g.time_ns[0]).astype(np.float64)
+            ta = (a.time_ns - g.time_ns[0]).astype(np.float64)
+            ref = np.interp(ta, tg, g.values["height"], left=np.nan, right=np.nan)
+            sel = np.isfinite(ref)
+            ref, h = ref[sel], a.values["height"][sel]
+            findings += [f for f in ck.check_height("altimeter", h, hunit, ref)
+                         if f.check == "height vs GNSS"]
+    return raw, findings, reports
+
+
+def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
+    """Read one flight's logs into a checked :class:`FlightRecord`.
+
+    Parameters
+    ----------
+    options : IngestOptions
+    base_dir : path, optional
+        Directory that relative input paths refer to (the config file's directory); default:
+        ``options.base_dir``.
+
+    Returns
+    -------
+    FlightRecord
+        Times strictly increasing, SI units, latitude/longitude in rad.  ``notes`` holds one
+        line per repair/suspicion (each also issued as a DataWarning).
+
+    Raises
+    ------
+    DataError
+        Missing/unreadable/undecodable input, no IMU or altimeter samples, or a plausibility
+        error (unless ``checks.plausibility: warn``); the message names file/channel.
+    """
+    notes = []
+    raw, content = read_raw_channels(options, base_dir, notes)
+    for ch in raw.values():
+        _drop_nonfinite(ch, notes)
+    for role in ("imu", "altimeter"):
+        if role not in raw or len(raw[role].time_ns) == 0:
+            src = raw[role].source if role in raw else (options.mcap_path or "")
+            why = [n for n in notes if n.startswith(f"{role}: ")]
+            raise DataError(f"{src}: no usable {role} samples" + (f" ({'; '.join(why)})"
+                                                                   if why else ""))
+    raw, findings, _ = repair_and_check(raw, options)
+    errors = [f.message for f in findings if f.level == "error"]
+    if errors and options.plausibility == "error":
+        src = options.mcap_path if options.kind == "mcap" else raw["imu"].source
+        raise DataError(f"{src}: implausible data: " + "; ".join(errors)
+                        + " (set checks.plausibility: warn to process anyway)")
+    notes += [f.message for f in findings if f.level in ("warning", "error")]
+    for n in notes:
+        warnings.warn(n, DataWarning, stacklevel=2)
+    t0 = min(int(ch.time_ns[0]) for ch in raw.values() if len(ch.time_ns))
+
+    def rel(t):
+        return (t - t0) / 1e9
+
+    imu = raw["imu"]
+    alt = raw["altimeter"]
+    gnss = None
+    if "gnss" in raw and len(raw["gnss"].time_ns):
+        g = raw["gnss"]
+        gnss = GnssChannel(rel(g.time_ns), np.radians(g.values["lat_deg"]),
+                           np.radians(g.values["lon_deg"]), g.values["height"])
+    src = ", ".join(os.fspath(p) for p in options.input_paths(base_dir))
+    return FlightRecord(
+        t0_unix_ns=t0,
+        imu=ImuChannel(rel(imu.time_ns), imu.values["specific_force"],
+                       imu.values["angular_rate"]),
+        altimeter=AltimeterChannel(rel(alt.time_ns), alt.values["height"]),
+        gnss=gnss, source=src, notes=notes)

@@ -1,0 +1,204 @@
+"""``gravsurvey inspect FILE...``: what is in a log file, per channel, and does it look sane.
+
+:func:`inspect_files` returns JSON-serialisable dicts (``--json``); :func:`format_inspect`
+renders them as text.  A file that cannot be read gives a report with an ``error`` entry
+instead of an exception, so one bad file does not hide the others.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+from pathlib import Path
+
+import numpy as np
+
+from gravsurvey.errors import GravsurveyError
+from gravsurvey.io import checks as ck
+from gravsurvey.io.csv import read_csv_channel, sniff_csv_role
+from gravsurvey.io.ingest import IngestOptions, _apply_units
+from gravsurvey.io.mcap import read_mcap
+
+
+def _iso(ns):
+    s, r = divmod(int(ns), 10**9)
+    try:
+        d = _dt.datetime.fromtimestamp(s, _dt.timezone.utc)
+    except (OverflowError, OSError, ValueError):
+        return f"{ns} ns"
+    return d.strftime("%Y-%m-%dT%H:%M:%S") + f".{r:09d}Z"
+
+
+def _span(t):
+    if len(t) == 0:
+        return {"start_utc": None, "end_utc": None, "duration_s": 0.0}
+    return {"start_utc": _iso(t.min()), "end_utc": _iso(t.max()),
+            "duration_s": float((int(t.max()) - int(t.min())) * 1e-9)}
+
+
+def _channel_report(role, time_ns, values, units):
+    """Time-base and plausibility report of one decoded channel (values in SI)."""
+    keys = list(values)
+    t, vals, rep = ck.repair_time(time_ns, [values[k] for k in keys])
+    values = dict(zip(keys, vals))
+    f = ck.time_findings(role, rep, int(t[0]) if len(t) else 0) + ck.check_epoch(role, t)
+    if role == "imu":
+        f += ck.check_imu(t, values["specific_force"], values["angular_rate"],
+                          rep.nominal_step_ns, units["accel"], units["gyro"])
+    elif role == "gnss":
+        f += ck.check_gnss(values["lat_deg"], values["lon_deg"])
+        f += ck.check_height(role, values["height"], units["height"])
+    else:
+        f += ck.check_height(role, values["height"], units["height"])
+    rate = 1e9 / rep.nominal_step_ns if np.isfinite(rep.nominal_step_ns) else None
+    t0 = int(t[0]) if len(t) else 0
+    return {
+        "role": role,
+        "samples": rep.n_out,
+        "measurement_time": _span(t),
+        "nominal_rate_hz": rate,
+        "duplicates_dropped": rep.duplicates + rep.conflicting_duplicates,
+        "backward_steps": rep.n_backward,
+        "gaps": rep.n_gaps,
+        "gap_list_s": [[(a - t0) * 1e-9, (b - t0) * 1e-9] for a, b in rep.gaps],
+        "irregular_step_fraction": rep.irregular_fraction,
+        "checks": [{"check": x.check, "level": x.level, "message": x.message} for x in f],
+    }
+
+
+def inspect_files(paths, options: IngestOptions | None = None) -> list[dict]:
+    """Inspect MCAP and CSV log files.
+
+    Parameters
+    ----------
+    paths : iterable of path
+        ``*.mcap`` files (any topics), or channel CSV files (channel guessed from the header
+        columns, or from ``options.csv_paths`` when the file is named there).
+    options : IngestOptions, optional
+        Topics, JSON fields, CSV columns/time format/units; defaults when None.
+
+    Returns
+    -------
+    list of dict
+        One JSON-serialisable report per file: ``file``, ``format``, ``size_bytes``, and for
+        MCAP ``profile``, ``library``, ``chunks``, ``compression``, ``salvage``, ``notes``,
+        ``channels`` (per channel: ``topic``, ``schema``, ``encoding``, ``messages``,
+        ``log_time`` span, and for sensor channels the :func:`_channel_report` entries);
+        ``error`` instead when the file could not be read.
+    """
+    o = options or IngestOptions()
+    out = []
+    for p in paths:
+        p = os.fspath(p)
+        rep = {"file": p}
+        try:
+            rep["size_bytes"] = os.path.getsize(p)
+            if p.lower().endswith(".mcap"):
+                rep.update(_inspect_mcap(p, o))
+            else:
+                rep.update(_inspect_csv(p, o))
+        except GravsurveyError as exc:
+            rep["error"] = str(exc)
+        except OSError as exc:
+            rep["error"] = f"{p}: cannot read ({exc.strerror})"
+        out.append(rep)
+    return out
+
+
+def _inspect_mcap(path, o):
+    c = read_mcap(path, topics=o.topics, json_fields=o.json_fields, check_crc=o.check_crc,
+                  max_record_bytes=o.max_record_bytes)
+    rep = {"format": "mcap", "profile": c.profile, "library": c.library, "chunks": c.chunks,
+           "compression": sorted(c.compressions), "notes": list(c.notes),
+           "salvage": None, "channels": []}
+    if c.salvage:
+        s = c.salvage
+        rep["salvage"] = {"damaged_at_byte": s.offset, "reason": s.reason,
+                          "recovered_messages": s.recovered,
+                          "lost_messages": s.lost_messages, "summary": s.describe(path)}
+    if c.orphan_messages:
+        rep["notes"].append(f"{c.orphan_messages} messages on undefined channels")
+    for cid in sorted(c.channels):
+        ch = c.channels[cid]
+        lt = c.log_times.get(cid, np.zeros(0, np.int64))
+        entry = {"topic": ch.topic, "channel_id": cid, "schema": c.schema_name(cid),
+                 "encoding": ch.message_encoding, "messages": c.counts.get(cid, 0),
+                 "log_time": _span(lt), "role": None}
+        blk = c.decoded.get(cid)
+        if blk is not None and len(blk.time_ns):
+            role = next((r for r, t in o.topics.items() if t == ch.topic), None) \
+                or c.role_of_schema(cid)
+            vals = dict(blk.values)
+            if role == "altimeter":
+                vals = {"height": vals["height"]}
+            vals = _apply_units(role, vals, o.mcap_units)
+            entry.update(_channel_report(role, blk.time_ns, vals, o.mcap_units))
+            entry["time_source"] = ("header.stamp" if ch.message_encoding == "cdr"
+                                    else "JSON field")
+            if blk.log_time_used:
+                entry["time_source"] += f" ({blk.log_time_used} fell back to log_time)"
+            entry["undecodable"] = blk.undecodable
+        rep["channels"].append(entry)
+    return rep
+
+
+def _inspect_csv(path, o):
+    role = None
+    for r, q in o.csv_paths.items():
+        if Path(q).name == Path(path).name:
+            role = r
+    role = role or sniff_csv_role(path)
+    if role == "truth":
+        return {"format": "csv", "channels": [],
+                "notes": ["simulator truth file (docs/formats.md, truth.csv), not a sensor log"]}
+    if role is None:
+        return {"format": "csv", "error": f"{path}: header matches no channel (imu, altimeter, "
+                                          "gnss columns of docs/input-formats.md)"}
+    t, vals = read_csv_channel(path, role, o.csv_columns.get(role), o.csv_time_format,
+                               o.csv_units, o.csv_delimiter, o.gps_leap_seconds)
+    entry = {"topic": None, "schema": "csv", "encoding": "csv", "messages": len(t),
+             "time_source": f"column ({o.csv_time_format})"}
+    entry.update(_channel_report(role, t, vals, o.csv_units))
+    return {"format": "csv", "channels": [entry]}
+
+
+def format_inspect(reports) -> str:
+    """Human-readable text of :func:`inspect_files` reports."""
+    lines = []
+    for rep in reports:
+        head = f"{rep['file']}"
+        if "format" in rep:
+            head += f"  [{rep['format']}"
+            if rep.get("profile") is not None and rep["format"] == "mcap":
+                head += (f", profile {rep['profile'] or '-'}, {rep.get('chunks', 0)} chunks "
+                         f"({', '.join(rep.get('compression', [])) or 'unchunked'})")
+            head += f", {rep.get('size_bytes', 0)} bytes]"
+        lines.append(head)
+        if "error" in rep:
+            lines.append(f"  ERROR: {rep['error']}")
+            continue
+        if rep.get("salvage"):
+            lines.append(f"  DAMAGED: {rep['salvage']['summary']}")
+        for n in rep.get("notes", []):
+            lines.append(f"  note: {n}")
+        if not rep.get("channels"):
+            lines.append("  (no channels)")
+            continue
+        lines.append(f"  {'topic':<34} {'schema':<30} {'enc':<5} {'msgs':>8} {'span_s':>10} "
+                     f"{'rate_hz':>9} {'gaps':>5}  start (UTC)")
+        for ch in rep.get("channels", []):
+            span = ch.get("measurement_time") or ch.get("log_time") or {}
+            rate = ch.get("nominal_rate_hz")
+            lines.append(
+                f"  {str(ch.get('topic') or '-'):<34} {str(ch.get('schema') or '-'):<30} "
+                f"{str(ch.get('encoding')):<5} {ch.get('messages', 0):>8} "
+                f"{span.get('duration_s', 0.0):>10.3f} "
+                f"{(f'{rate:.4g}' if rate else '-'):>9} {str(ch.get('gaps', '-')):>5}  "
+                f"{span.get('start_utc') or '-'}")
+        for ch in rep.get("channels", []):
+            if ch.get("role"):
+                lines.append(f"  {ch['role']} ({ch.get('topic') or 'csv'}, time from "
+                             f"{ch.get('time_source')}):")
+                for x in ch.get("checks", []):
+                    lines.append(f"    [{x['level']}] {x['message']}")
+    return "\n".join(lines)

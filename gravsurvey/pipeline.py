@@ -1,0 +1,566 @@
+"""One flight, then a survey of flights.
+
+``process_flight`` runs one flight through ingest -> 3D-INM Kalman/RTS (or the classic
+reduction) -> line segmentation -> post-processing per line, and returns plain arrays.
+``run_survey`` runs every flight (in parallel with ``jobs > 1``), projects, finds crossovers
+and writes the deliverables atomically into the output directory under a lock.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import pickle
+import platform
+import time
+import traceback
+import warnings
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .config import FlightConfig, SurveyConfig, load_config
+from .errors import ConfigError, DataError, DataWarning, GravsurveyError
+from .geodesy import MGAL
+
+log = logging.getLogger("gravsurvey")
+
+CACHE_VERSION = 1
+
+
+# --------------------------------------------------------------------------
+# truth files written by the simulator (docs/formats.md); read here as any
+# user-supplied truth would be: a documented CSV, no simulator code involved
+# --------------------------------------------------------------------------
+
+
+def read_truth_csv(path: Path) -> dict:
+    """Read a truth.csv (docs/formats.md): ``time_ns`` (int64) and float columns."""
+    import csv
+
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: truth file not found")
+    with open(path, newline="") as fh:
+        rows = [r for r in csv.reader(line for line in fh if not line.startswith("#"))]
+    if len(rows) < 2:
+        raise DataError(f"{path}: truth file has no data rows")
+    head = [h.strip() for h in rows[0]]
+    for need in ("time_ns", "disturbance_mgal"):
+        if need not in head:
+            raise DataError(f"{path}: truth file lacks column {need!r}; has {', '.join(head)}")
+    cols: dict = {h: [] for h in head}
+    for ln, r in enumerate(rows[1:], start=2):
+        if len(r) != len(head):
+            raise DataError(f"{path}: data row {ln} has {len(r)} fields, header has {len(head)}")
+        for h, v in zip(head, r):
+            cols[h].append(v)
+    out = {}
+    for h, v in cols.items():
+        try:
+            out[h] = np.array(v, dtype=np.int64) if h == "time_ns" else np.array(v, dtype=float)
+        except ValueError:
+            out[h] = np.array(v, dtype=object)
+    return out
+
+
+def _truth_at(truth: dict, unix_ns: np.ndarray) -> np.ndarray:
+    """Truth disturbance (mGal) interpolated to the given Unix ns; NaN outside the truth span."""
+    t_ref = truth["time_ns"][0]
+    tt = (truth["time_ns"] - t_ref).astype(float)
+    x = (unix_ns - t_ref).astype(float)
+    return np.interp(x, tt, truth["disturbance_mgal"], left=np.nan, right=np.nan)
+
+
+# --------------------------------------------------------------------------
+# one flight
+# --------------------------------------------------------------------------
+
+
+@dataclass
+class FlightResult:
+    """Arrays and facts about one processed flight (picklable; cached between runs)."""
+
+    name: str
+    t0_unix_ns: int
+    time: np.ndarray  # s after t0, filter epochs
+    lat: np.ndarray  # rad
+    lon: np.ndarray  # rad
+    height: np.ndarray  # m
+    speed: np.ndarray  # m/s
+    kalman: np.ndarray  # m/s^2 smoothed estimate (before post-processing)
+    forward: np.ndarray  # m/s^2 forward filter
+    sigma: np.ndarray  # m/s^2 1-sigma of the smoothed estimate
+    final: np.ndarray  # m/s^2 after post-processing, NaN outside lines
+    line: np.ndarray  # object array of line names ('' outside lines)
+    segments: list  # dicts: name, kind, start_s, stop_s, n
+    line_info: dict  # line -> post-processor info
+    truth: np.ndarray | None  # mGal at epochs, or None
+    notes: list[str] = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+    input_hashes: dict = field(default_factory=dict)
+
+
+def _segments(cfg: SurveyConfig, fl: FlightConfig, sol) -> list:
+    from .survey import segment_lines, segments_from_windows
+
+    mode = getattr(cfg.lines, "mode", "auto")
+    if fl.lines_windows is not None:
+        return segments_from_windows(sol.time, fl.lines_windows, key_path=f"flights[{fl.index}].lines")
+    if mode == "windows":
+        return segments_from_windows(sol.time, cfg.lines.windows, key_path="lines.windows")
+    if mode == "whole":
+        from .survey import Segment
+
+        return [Segment("L01", "line", 0, len(sol.time))]
+    return segment_lines(sol.time, sol.lat, sol.lon, sol.vel_n, options=cfg.lines)
+
+
+def process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
+    """Process one flight. Raises GravsurveyError subclasses for data/config problems."""
+    from .io.ingest import load_flight
+    from .wavelet import postprocess
+
+    timings = {}
+    notes: list[str] = []
+    t = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DataWarning)
+        record = load_flight(fl.ingest, cfg.base_dir)
+    notes += [f"{fl.name}: {n}" for n in record.notes]
+    notes += [f"{fl.name}: {w.message}" for w in caught if str(w.message) not in record.notes]
+    timings["ingest_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    if cfg.processing_method == "classic":
+        sol = _classic_solution(cfg, fl, record)
+    else:
+        from .inm.params import initial_state_from_gnss
+        from .inm.params import solvability_warnings
+        from .inm.solve import estimate_anomaly
+
+        initial = fl.initial if fl.initial is not None else initial_state_from_gnss(record, fl.triad)
+        sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid)
+    timings["estimate_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    segs = _segments(cfg, fl, sol)
+    n = len(sol.time)
+    final = np.full(n, np.nan)
+    line = np.full(n, "", dtype=object)
+    seg_out, line_info = [], {}
+    dt = float(np.median(np.diff(sol.time))) if n > 1 else 1.0
+    for s in segs:
+        a, b = int(s.start_index), int(s.stop_index)
+        seg_out.append(
+            {"name": s.name, "kind": s.kind, "start_s": float(sol.time[a]), "stop_s": float(sol.time[b - 1]), "n": b - a}
+        )
+        if s.kind not in ("line", "tie") or b - a < 8:
+            continue
+        speed = float(np.nanmean(sol.speed[a:b]))
+        if cfg.processing_method == "classic":
+            z, info = sol.final[a:b], dict(sol.info)
+        else:
+            if cfg.processing_method == "inm":
+                for w in solvability_warnings(cfg.model, speed):
+                    notes.append(f"{fl.name} {s.name}: {w}")
+            z, info = postprocess(sol.g_smooth[a:b], dt, speed, options=cfg.postprocess)
+        final[a:b] = z
+        line[a:b] = s.name
+        line_info[s.name] = {**_jsonable(info), "kind": s.kind, "speed_mps": speed, "n": b - a}
+    timings["postprocess_s"] = time.perf_counter() - t
+
+    truth = None
+    if fl.truth is not None:
+        tr = read_truth_csv(fl.truth)
+        unix = record.t0_unix_ns + np.round(sol.time * 1e9).astype(np.int64)
+        truth = _truth_at(tr, unix)
+
+    return FlightResult(
+        name=fl.name,
+        t0_unix_ns=int(record.t0_unix_ns),
+        time=np.asarray(sol.time, float),
+        lat=np.asarray(sol.lat, float),
+        lon=np.asarray(sol.lon, float),
+        height=np.asarray(sol.height, float),
+        speed=np.asarray(sol.speed, float),
+        kalman=np.asarray(sol.g_smooth, float),
+        forward=np.asarray(sol.g_forward, float),
+        sigma=np.asarray(sol.sigma_smooth, float),
+        final=final,
+        line=line,
+        segments=seg_out,
+        line_info=line_info,
+        truth=truth,
+        notes=notes,
+        timings=timings,
+    )
+
+
+class _ClassicSolution:
+    """Adapter giving the classic reduction the fields the pipeline reads."""
+
+    def __init__(self, res, record):
+        self.time = res.time
+        self.lat, self.lon, self.height = res.lat, res.lon, res.height
+        self.vel_n = res.vel_n
+        self.speed = np.linalg.norm(res.vel_n[:, :2], axis=1)
+        self.g_smooth = res.raw
+        self.g_forward = res.raw
+        self.sigma_smooth = np.full(len(res.time), np.nan)
+        self.final = res.disturbance
+        self.info = res.info
+
+
+def _classic_solution(cfg, fl, record):
+    from .classic import classic_reduction
+
+    res = classic_reduction(record, ellipsoid=cfg.ellipsoid, resolution_m=cfg.classic_resolution_m)
+    return _ClassicSolution(res, record)
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return [_jsonable(v) for v in obj.tolist()]
+    if isinstance(obj, (np.floating, float)):
+        v = float(obj)
+        return v if np.isfinite(v) else None
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    return obj
+
+
+# --------------------------------------------------------------------------
+# survey
+# --------------------------------------------------------------------------
+
+
+def _file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _flight_key(cfg: SurveyConfig, fl: FlightConfig) -> tuple[str, dict]:
+    hashes = {}
+    for p in fl.ingest.input_paths():
+        p = Path(p)
+        hashes[str(p)] = _file_sha256(p) if p.is_file() else "missing"
+    if fl.truth is not None and Path(fl.truth).is_file():
+        hashes[str(fl.truth)] = _file_sha256(fl.truth)
+    h = hashlib.sha256()
+    h.update(cfg.section_hash(fl).encode())
+    h.update(json.dumps(hashes, sort_keys=True).encode())
+    h.update(f"{__version__}/{CACHE_VERSION}".encode())
+    return h.hexdigest(), hashes
+
+
+def _worker(config_path: str, output_dir: str, index: int):
+    """Process pool entry: reload the config (cheap) and process one flight."""
+    cfg = load_config(config_path, output_dir=output_dir)
+    fl = cfg.flights[index]
+    try:
+        return ("ok", process_flight(cfg, fl))
+    except GravsurveyError as exc:
+        return ("error", f"{fl.name}: {exc}")
+    except Exception as exc:  # a bug in one flight must not stop the others
+        return ("bug", f"{fl.name}: internal error {type(exc).__name__}: {exc}\n{traceback.format_exc()}")
+
+
+@dataclass
+class RunResult:
+    """What a survey run did, for the CLI's report."""
+
+    out_dir: Path
+    processed: list[str]
+    skipped: list[str]
+    failed: list[str]
+    notes: list[str]
+    summary: dict
+
+    def report_lines(self, verbose: bool = True):
+        for f in self.failed:
+            yield f"gravsurvey: flight failed: {f.splitlines()[0]}"
+        if verbose:
+            for n in self.notes:
+                yield f"note: {n}"
+            yield (
+                f"{self.summary.get('survey')}: {len(self.processed)} flight(s) processed, "
+                f"{len(self.skipped)} unchanged (skipped), {len(self.failed)} failed -> {self.out_dir}"
+            )
+            xo = self.summary.get("crossovers", {})
+            if xo.get("count"):
+                yield f"crossovers: {xo['count']}, RMS {xo['rms_mgal']:.3f} mGal (RMS/sqrt2 {xo['rms_over_sqrt2_mgal']:.3f})"
+            for fname, fs in self.summary.get("flights", {}).items():
+                if fs.get("rms_vs_truth_mgal") is not None:
+                    yield f"{fname}: RMS vs truth {fs['rms_vs_truth_mgal']:.3f} mGal over lines"
+
+
+def _setup_log(out_dir: Path) -> logging.Handler:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    h = logging.FileHandler(out_dir / "gravsurvey.log", encoding="utf-8")
+    h.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+    log.addHandler(h)
+    log.setLevel(logging.INFO)
+    return h
+
+
+def run_survey(config_path, *, output_dir=None, jobs: int = 1, force: bool = False,
+               wait_s: float = 0.0, progress: bool = False) -> RunResult:
+    """Run a whole survey and write the deliverables (docs/outputs.md).
+
+    Returns a RunResult; raises ConfigError for config problems (exit 2). Data problems of a
+    flight are recorded in ``RunResult.failed`` and the other flights still run.
+    """
+    from .io.writers import OutputLock, OutputTransaction
+
+    t_start = time.perf_counter()
+    cfg = load_config(config_path, output_dir=output_dir)
+    out_dir = Path(cfg.output_dir)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"output.dir: cannot create {out_dir}: {exc.strerror}") from None
+    with OutputLock(out_dir, wait_s=wait_s):
+        handler = _setup_log(out_dir)
+        try:
+            return _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
+        finally:
+            log.removeHandler(handler)
+            handler.close()
+
+
+def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction) -> RunResult:
+    log.info("run %s (%d flights), gravsurvey %s", cfg.path, len(cfg.flights), __version__)
+    cache_dir = out_dir / ".cache"
+    cache_dir.mkdir(exist_ok=True)
+    results: dict[str, FlightResult] = {}
+    failed, skipped, processed, notes = [], [], [], []
+    keys = {}
+    todo = []
+    for fl in cfg.flights:
+        key, hashes = _flight_key(cfg, fl)
+        keys[fl.name] = (key, hashes)
+        cpath = cache_dir / f"{fl.name}.pkl"
+        if not force and cpath.is_file():
+            try:
+                with open(cpath, "rb") as fh:
+                    cached = pickle.load(fh)
+                if cached.get("key") == key:
+                    results[fl.name] = cached["result"]
+                    skipped.append(fl.name)
+                    log.info("%s: inputs and config unchanged, reusing the previous result", fl.name)
+                    continue
+            except Exception:  # unreadable cache: recompute
+                log.info("%s: cache unreadable, reprocessing", fl.name)
+        todo.append(fl)
+
+    def _collect(fl, status, payload):
+        if status == "ok":
+            payload.input_hashes = keys[fl.name][1]
+            results[fl.name] = payload
+            processed.append(fl.name)
+            tmp = cache_dir / f".{fl.name}.pkl.tmp"
+            with open(tmp, "wb") as fh:
+                pickle.dump({"key": keys[fl.name][0], "result": payload}, fh)
+            os.replace(tmp, cache_dir / f"{fl.name}.pkl")
+            log.info("%s: processed in %.1f s", fl.name, sum(payload.timings.values()))
+        else:
+            failed.append(payload)
+            log.error("%s", payload)
+
+    bar = None
+    if progress and todo:
+        import click
+
+        bar = click.progressbar(length=len(todo), label="flights", file=None)
+        bar.__enter__()
+    try:
+        if jobs > 1 and len(todo) > 1:
+            import multiprocessing as mp
+
+            ctx = mp.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=min(jobs, len(todo)), mp_context=ctx) as pool:
+                futs = {pool.submit(_worker, str(cfg.path), str(out_dir), fl.index): fl for fl in todo}
+                for fut in as_completed(futs):
+                    fl = futs[fut]
+                    try:
+                        status, payload = fut.result()
+                    except Exception as exc:  # worker died (e.g. killed, out of memory)
+                        status, payload = "bug", f"{fl.name}: worker process failed: {exc}"
+                    _collect(fl, status, payload)
+                    if bar:
+                        bar.update(1)
+        else:
+            for fl in todo:
+                try:
+                    status, payload = "ok", process_flight(cfg, fl)
+                except GravsurveyError as exc:
+                    status, payload = "error", f"{fl.name}: {exc}"
+                except Exception as exc:
+                    status, payload = "bug", f"{fl.name}: internal error {type(exc).__name__}: {exc}\n{traceback.format_exc()}"
+                _collect(fl, status, payload)
+                if bar:
+                    bar.update(1)
+    finally:
+        if bar:
+            bar.__exit__(None, None, None)
+
+    for r in results.values():
+        notes.extend(r.notes)
+    ordered = [results[f.name] for f in cfg.flights if f.name in results]
+    t_out = time.perf_counter()
+    summary = {}
+    if ordered:
+        summary = _write_outputs(cfg, out_dir, ordered, failed, OutputTransaction)
+    summary_timing = time.perf_counter() - t_out
+    log.info("outputs written in %.1f s; total %.1f s", summary_timing, time.perf_counter() - t_start)
+    if not ordered:
+        summary = {"survey": cfg.name}
+    return RunResult(out_dir, processed, skipped, failed, notes, summary)
+
+
+def _profile_table(cfg: SurveyConfig, results: list[FlightResult]):
+    from .georef import project
+
+    lat = np.concatenate([r.lat for r in results])
+    lon = np.concatenate([r.lon for r in results])
+    east, north, epsg = project(lat, lon, cfg.epsg)
+    unix = np.concatenate([r.t0_unix_ns + np.round(r.time * 1e9).astype(np.int64) for r in results])
+    table = {
+        "flight": np.concatenate([np.full(len(r.time), r.name, dtype=object) for r in results]),
+        "line": np.concatenate([r.line for r in results]),
+        "time_unix_ns": unix,
+        "lat_deg": np.degrees(lat),
+        "lon_deg": np.degrees(lon),
+        "height_m": np.concatenate([r.height for r in results]),
+        "easting_m": east,
+        "northing_m": north,
+        "disturbance_mgal": np.concatenate([r.final for r in results]) / MGAL,
+        "kalman_mgal": np.concatenate([r.kalman for r in results]) / MGAL,
+        "sigma_mgal": np.concatenate([r.sigma for r in results]) / MGAL,
+    }
+    if all(r.truth is not None for r in results):
+        table["truth_mgal"] = np.concatenate([r.truth for r in results])
+        table["error_mgal"] = table["disturbance_mgal"] - table["truth_mgal"]
+    return table, epsg
+
+
+def _rms(x):
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x**2))) if x.size else None
+
+
+def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
+    from . import report
+    from .io import writers
+    from .survey import find_crossovers
+
+    table, epsg = _profile_table(cfg, results)
+    in_line = table["line"] != ""
+    lines = []
+    keys = list(zip(table["flight"], table["line"]))
+    order = {}
+    for i, k in enumerate(keys):
+        if k[1]:
+            order.setdefault(k, []).append(i)
+    for (fname, lname), idx in order.items():
+        idx = np.asarray(idx)
+        lines.append(
+            {
+                "flight": fname,
+                "line": lname,
+                "easting_m": table["easting_m"][idx],
+                "northing_m": table["northing_m"][idx],
+                "value_mgal": table["disturbance_mgal"][idx],
+                "time_s": (table["time_unix_ns"][idx] - table["time_unix_ns"][idx][0]) / 1e9,
+                "index": idx,
+            }
+        )
+    xo = find_crossovers([{k: v for k, v in ln.items() if k != "index"} for ln in lines])
+    xo_stats = xo.statistics()
+
+    line_stats = []
+    flights_summary = {}
+    for r in results:
+        fl_err = []
+        for name, info in r.line_info.items():
+            m = (table["flight"] == r.name) & (table["line"] == name)
+            st = {"flight": r.name, "line": name, **info}
+            st["mean_mgal"] = float(np.nanmean(table["disturbance_mgal"][m]))
+            st["std_mgal"] = float(np.nanstd(table["disturbance_mgal"][m]))
+            st["crossover"] = xo_stats.get("per_line", {}).get(f"{r.name}/{name}")
+            if "error_mgal" in table:
+                e = table["error_mgal"][m]
+                st["rms_vs_truth_mgal"] = _rms(e)
+                st["kalman_rms_vs_truth_mgal"] = _rms(table["kalman_mgal"][m] - table["truth_mgal"][m])
+                fl_err.append(e)
+            line_stats.append(st)
+        flights_summary[r.name] = {
+            "segments": r.segments,
+            "lines": {s["line"]: s for s in line_stats if s["flight"] == r.name},
+            "notes": r.notes,
+            "timings_s": r.timings,
+            "input_sha256": r.input_hashes,
+            "rms_vs_truth_mgal": _rms(np.concatenate(fl_err)) if fl_err else None,
+        }
+
+    summary = {
+        "survey": cfg.name,
+        "software": {"name": "gravsurvey", "version": __version__, "python": platform.python_version()},
+        "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "config": {"path": str(cfg.path), "sha256": _file_sha256(cfg.path), "settings": cfg.raw},
+        "processing_method": cfg.processing_method,
+        "crs_epsg": epsg,
+        "flights": flights_summary,
+        "failed_flights": [f.splitlines()[0] for f in failed],
+        "crossovers": xo_stats,
+        "rms_vs_truth_mgal": _rms(table["error_mgal"][in_line]) if "error_mgal" in table else None,
+    }
+    summary = _jsonable(summary)
+
+    with OutputTransaction(out_dir) as tx:
+        writers.write_profiles_csv(tx.path("profiles.csv"), table)
+        if cfg.xyz:
+            writers.write_xyz(tx.path("profiles.xyz"), table)
+        if cfg.geojson:
+            writers.write_geojson(tx.path("lines.geojson"), table, line_stats, epsg)
+        writers.write_crossovers_csv(tx.path("crossovers.csv"), xo)
+        if cfg.plots:
+            for ln in lines:
+                idx = ln["index"]
+                report.plot_line_profile(
+                    tx.path(f"profile_{ln['flight']}_{ln['line']}.png"),
+                    (table["time_unix_ns"][idx] - table["time_unix_ns"][idx][0]) / 1e9,
+                    table["kalman_mgal"][idx],
+                    table["disturbance_mgal"][idx],
+                    table["sigma_mgal"][idx],
+                    truth_mgal=table["truth_mgal"][idx] if "truth_mgal" in table else None,
+                    title=f"{cfg.name} {ln['flight']} {ln['line']}",
+                )
+            report.plot_survey_map(
+                tx.path("survey_map.png"),
+                table["easting_m"][in_line],
+                table["northing_m"][in_line],
+                table["disturbance_mgal"][in_line],
+                np.array([f"{a}/{b}" for a, b in zip(table["flight"][in_line], table["line"][in_line])]),
+                crossovers=xo,
+            )
+            if xo_stats.get("count"):
+                report.plot_crossover_histogram(tx.path("crossovers.png"), xo)
+        summary["output_sha256"] = tx.file_hashes()
+        writers.write_json(tx.path("summary.json"), summary)
+    return summary

@@ -1,0 +1,145 @@
+"""Plausibility checks against physics: a simulated flight passes, unit mistakes are caught."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+from test_io_csv import CSV_IN, _write_flight_csv
+from test_io_support import static_flight
+
+from gravsurvey.errors import DataError, DataWarning
+from gravsurvey.io import checks as ck
+from gravsurvey.io.ingest import ingest_options_from_dict, load_flight
+from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
+
+
+@functools.lru_cache(maxsize=None)
+def simulated(triad):
+    """A 400 s simulated flight (60 s static, then level flight with turbulence), noisy."""
+    from gravsurvey.simulate.run import quick_sim, simulate_flight
+
+    sim = quick_sim(duration_s=400, imu_hz=50, noise=True, triad=triad, static_start_s=60,
+                    turbulence={"vertical_sigma_m": 1.5, "horizontal_sigma_m": 2.0,
+                                "attitude_sigma_deg": 1.0, "corner_period_s": 20.0,
+                                "min_period_s": 2.0, "max_period_s": 600.0})
+    return simulate_flight(sim)
+
+
+def _levels(findings, check):
+    return [f.level for f in findings if f.check == check]
+
+
+@pytest.mark.parametrize("triad", ["platform", "strapdown"])
+def test_simulated_flight_passes_and_unit_mistakes_fail(triad):
+    s = simulated(triad)
+    t, f, w = s.imu_time_ns, s.specific_force_t, s.angular_rate_t
+    step = float(np.median(np.diff(t)))
+    good = ck.check_imu(t, f, w, step)
+    assert _levels(good, "accel magnitude") == ["ok"]
+    assert _levels(good, "gyro at rest") == ["ok"]
+    rest = next(x for x in good if x.check == "gyro at rest")
+    assert 0.9 < rest.value < 1.3  # Earth rate (+ transport rate of level-flight windows)
+    assert not [x for x in good if x.level in ("error", "warning")]
+    bad = {
+        "deg/s declared as rad/s": ck.check_imu(t, f, np.degrees(w), step),
+        "rad/s declared as deg/s": ck.check_imu(t, f, np.radians(w), step),
+        "deg/h declared as rad/s": ck.check_imu(t, f, np.degrees(w) * 3600, step),
+        "values are in g but declared as m/s^2": ck.check_imu(t, f / 9.80665, w, step),
+        "values are in mGal but declared as m/s^2": ck.check_imu(t, f * 1e5, w, step),
+    }
+    for name, fs in bad.items():
+        errs = [x.message for x in fs if x.level == "error"]
+        assert any(name in m for m in errs), (name, [x.message for x in fs])
+        assert all(m.startswith("imu: ") for m in errs)
+    h = ck.check_height("altimeter", s.alt_height)
+    assert _levels(h, "height range") == ["ok"]
+    gh = np.interp(s.alt_time_ns, s.gnss_time_ns, s.gnss_height)
+    assert _levels(ck.check_height("altimeter", s.alt_height, ref=gh), "height vs GNSS") == ["ok"]
+    ft = ck.check_height("altimeter", s.alt_height / 0.3048, ref=gh)
+    assert any("feet declared as metres" in x.message for x in ft if x.level == "error")
+
+
+def test_unit_mistakes_stop_load_flight_with_channel_named(tmp_path):
+    d = static_flight(seconds=10.0)
+    _write_flight_csv(tmp_path, d, gyro_scale=180 / np.pi)  # deg/s in a rad/s column
+    opts = ingest_options_from_dict({"inputs": CSV_IN}, "flights[0]")
+    with pytest.raises(DataError, match=r"imu.csv: implausible data: imu: at rest .* "
+                                        r"deg/s declared as rad/s\?"):
+        load_flight(opts, tmp_path)
+    # declaring the unit fixes it
+    ok = ingest_options_from_dict({"inputs": CSV_IN, "csv": {"units": {"gyro": "deg/s"}}}, "f")
+    rec = load_flight(ok, tmp_path)
+    np.testing.assert_allclose(rec.imu.angular_rate_t, d["w"], rtol=1e-15)
+    _write_flight_csv(tmp_path, d, acc_scale=1 / 9.80665)  # g in an m/s^2 column
+    with pytest.raises(DataError, match=r"imu: median \|specific force\| is 0.99\d+ m/s\^2 after "
+                                        r"converting from m/s\^2, expected ~9.8: values are in "
+                                        r"g but declared as m/s\^2\?"):
+        load_flight(opts, tmp_path)
+    # plausibility: warn -> processed, the finding is a warning and a note
+    warn = ingest_options_from_dict({"inputs": CSV_IN, "checks": {"plausibility": "warn"}}, "f")
+    with pytest.warns(DataWarning, match="values are in g"):
+        rec = load_flight(warn, tmp_path)
+    assert any("values are in g" in n for n in rec.notes)
+
+
+def test_rest_rate_consistent_with_earth_rate_in_static_data():
+    d = static_flight(seconds=20.0, lat_deg=60.0)
+    fs = ck.check_imu(d["imu_t"], d["f"], d["w"], 1e7)
+    r = next(x for x in fs if x.check == "gyro at rest")
+    assert r.level == "ok" and abs(r.value - 1.0) < 1e-3
+
+
+def test_height_and_latlon_ranges():
+    assert _levels(ck.check_height("altimeter", np.array([100.0, 40000.0])),
+                   "height range") == ["error"]
+    assert ck.check_gnss(np.array([91.0]), np.array([0.0]))[0].level == "error"
+    assert ck.check_gnss(np.array([45.0]), np.array([-179.0]))[0].level == "ok"
+
+
+def test_rate_stability_and_gap_threshold():
+    rng = np.random.default_rng(3)
+    t = np.cumsum(np.full(2000, 10_000_000)).astype(np.int64)
+    jit = t + (rng.random(2000) < 0.05) * 4_000_000  # 5 % of samples 4 ms late (40 % of step)
+    _, _, rep = ck.repair_time(jit, [])
+    rate = next(x for x in ck.time_findings("imu", rep) if x.check == "rate")
+    assert rate.level == "warning" and abs(rate.value - 100.0) < 1e-9
+    _, _, rep = ck.repair_time(t, [])
+    assert next(x for x in ck.time_findings("imu", rep) if x.check == "rate").level == "ok"
+    gap = np.concatenate([t[:100], t[100:] + 45_000_000])  # one 55 ms step
+    assert ck.repair_time(gap, [], gap_factor=5.0)[2].n_gaps == 1
+    assert ck.repair_time(gap, [], gap_factor=6.0)[2].n_gaps == 0
+
+
+def test_conflicting_duplicates_keep_first():
+    t = np.array([1, 2, 2, 3], dtype=np.int64)
+    v = np.array([10.0, 20.0, 21.0, 30.0])
+    t2, (v2,), rep = ck.repair_time(t, [v])
+    assert rep.conflicting_duplicates == 1 and rep.duplicates == 0
+    np.testing.assert_array_equal(v2, [10.0, 20.0, 30.0])
+    np.testing.assert_array_equal(t2, [1, 2, 3])
+
+
+def _record():
+    t = np.arange(0.0, 10.0, 0.5)
+    alt_t = np.array([0.0, 1.0, 2.0, 6.0, 7.0])
+    return FlightRecord(
+        0, ImuChannel(t, np.zeros((len(t), 3)), np.zeros((len(t), 3))),
+        AltimeterChannel(alt_t, 100.0 + 10.0 * alt_t),
+        GnssChannel(np.array([0.0, 2.0]), np.radians([10.0, 10.2]),
+                    np.radians([179.9, -179.9]), np.array([5.0, 7.0])))
+
+
+def test_epoch_helpers_interpolate_and_respect_gaps():
+    rec = _record()
+    ep = rec.epochs(1.0)
+    np.testing.assert_array_equal(ep, np.arange(10.0))
+    h = rec.altimeter_on(ep, max_gap_s=2.0)
+    np.testing.assert_allclose(h[[0, 1, 2, 6, 7]], [100.0, 110.0, 120.0, 160.0, 170.0])
+    assert np.isnan(h[[3, 4, 5, 8, 9]]).all()  # inside the 4 s gap, after the end
+    assert np.isfinite(rec.altimeter_on(ep)[3])  # gap bridged when allowed
+    lat, lon, hh = rec.gnss_on(np.array([1.0, 3.0]))
+    # across the antimeridian: midpoint is 180 deg, not 0
+    assert abs(abs(np.degrees(lon[0])) - 180.0) < 1e-9 and np.isnan(lon[1])
+    np.testing.assert_allclose([np.degrees(lat[0]), hh[0]], [10.1, 6.0])
