@@ -26,7 +26,7 @@ import numpy as np
 
 from . import __version__
 from .config import FlightConfig, SurveyConfig, load_config
-from .errors import ConfigError, DataError, DataWarning, GravsurveyError
+from .errors import ConfigError, DataError, GravsurveyError
 from .geodesy import MGAL
 
 log = logging.getLogger("gravsurvey")
@@ -123,18 +123,32 @@ def _segments(cfg: SurveyConfig, fl: FlightConfig, sol) -> list:
 
 
 def process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
-    """Process one flight. Raises GravsurveyError subclasses for data/config problems."""
+    """Process one flight. Raises GravsurveyError subclasses for data/config problems.
+
+    Warnings raised by any stage become lines of ``FlightResult.notes`` (and of the log and
+    summary.json) instead of being printed: a cron run that succeeds prints nothing.
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = _process_flight(cfg, fl)
+    seen = set(result.notes)
+    for w in caught:
+        line = f"{fl.name}: {w.message}"
+        if line not in seen:
+            result.notes.append(line)
+            seen.add(line)
+    return result
+
+
+def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
     from .io.ingest import load_flight
     from .wavelet import postprocess
 
     timings = {}
     notes: list[str] = []
     t = time.perf_counter()
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", DataWarning)
-        record = load_flight(fl.ingest, cfg.base_dir)
+    record = load_flight(fl.ingest, cfg.base_dir)
     notes += [f"{fl.name}: {n}" for n in record.notes]
-    notes += [f"{fl.name}: {w.message}" for w in caught if str(w.message) not in record.notes]
     timings["ingest_s"] = time.perf_counter() - t
 
     t = time.perf_counter()

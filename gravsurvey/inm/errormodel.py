@@ -1,0 +1,361 @@
+"""The seed's 8-state error model for a general triad, its exact discretisation,
+and the (pluggable) measurement models.
+
+State (seed 004 order), errors = computed minus true, on the triad axes::
+
+    x = (dq1, dp1, dq2, dp2, dq3, dp3, g, f3)
+
+``dq``, ``dp``: errors of the triad-resolved position ``q`` (m) and inertial
+velocity ``p`` (m/s); ``g``: the gravity disturbance along the ellipsoid
+normal (m/s^2, positive = stronger gravity, i.e. anomalous gravitation
+``-g * Up``); ``f3``: the gravimeter (third accelerometer) error (m/s^2).
+
+Continuous model (general triad, ``q0 = q/|q|``, ``n`` the ellipsoid normal
+and ``e3`` the third triad axis, all on the triad)::
+
+    d(dq)/dt = dp - w x dq + q x nu
+    d(dp)/dt = dG + (f1, f2, f3) - w x dp + p x nu + g n
+    dG       = -w0^2 dq + 3 w0^2 q0 ((q0 - cos(a) n).dq + eps)  (radius from the altimeter)
+             = -w0^2 (dq - 3 q0 q0.dq)                      (radius computed)
+    dg/dt    = -lambda_g g + sqrt(2 lambda_g) sigma_s u_g,   lambda_g = lambda_s v(t)
+    df3/dt   = -lambda_f3 f3 + sqrt(2 lambda_f3) sigma_f3 u_f3
+    z        = |q|_computed - R_external = cos(a) n.dq - eps   (cos a = n.q0)
+
+Sign of ``g``: the mechanization uses normal gravitation only; the true
+gravitation has the extra ``-g Up``, so the computed inertial velocity gains
+``+g Up`` relative to the truth: ``+g n`` in ``d(dp)/dt``.
+
+Exact discretisation: with ``y = (C dq, C dp, g, f3)`` (``C`` the computed
+triad->inertial matrix) the ``w x`` terms cancel, and the model becomes
+``dy/dt = A_y y + noise`` with ``A_y`` varying only at the Earth/transport
+rate (and with the triad's third axis).  Per epoch ``A_y`` and its noise
+density are evaluated at the IMU sample nearest the interval midpoint and
+discretised exactly with Van Loan's method; the triad rotation over the
+interval is exact: ``Phi_x = T_k^T Phi_y T_k-1``, ``T = diag(C, C, 1, 1)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from numba import njit
+
+from ..geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef, mat_en, mat_ie, normal_gravitation_ecef
+from .kalman import van_loan
+
+#: State indices (seed 004 order).
+DQ1, DP1, DQ2, DP2, DQ3, DP3, G, F3 = range(8)
+N_STATE = 8
+DQ = np.array([DQ1, DQ2, DQ3])
+DP = np.array([DP1, DP2, DP3])
+#: Position in the block order (dq1..3, dp1..3, g, f3) of each seed index.
+_PERM = np.array([0, 3, 1, 4, 2, 5, 6, 7])
+
+
+@dataclass
+class EpochGeometry:
+    """Per-interval quantities of the error model (interval ``k`` ends at epoch ``k``).
+
+    All vectors on inertial axes, shape (N, 3) unless stated; index 0 unused.
+    """
+
+    dt: np.ndarray  # (N,) s
+    r_i: np.ndarray  # position at the interval midpoint, m
+    v_i: np.ndarray  # inertial velocity at the midpoint, m/s
+    up_i: np.ndarray  # ellipsoid normal
+    e3_i: np.ndarray  # third triad axis
+    e1_i: np.ndarray  # first triad axis
+    e2_i: np.ndarray  # second triad axis
+    w02: np.ndarray  # (N,) Schuler frequency squared |G|/|r|, 1/s^2
+    speed: np.ndarray  # (N,) ground speed, m/s
+    mat_it: np.ndarray  # (N, 3, 3) triad->inertial at the epochs
+
+
+def epoch_geometry(nav, idx, use_ext: bool = True, ellipsoid: Ellipsoid = WGS84) -> EpochGeometry:
+    """Evaluate the error-model coefficients for filter epochs at IMU indices ``idx``.
+
+    ``use_ext``: the gravity model takes its radius from the altimeter (see mechanization).
+    """
+    idx = np.asarray(idx)
+    t = nav.time
+    mid = np.empty_like(idx)
+    mid[0] = idx[0]
+    mid[1:] = (idx[1:] + idx[:-1]) // 2
+    dt = np.zeros(idx.size)
+    dt[1:] = np.diff(t[idx])
+    r = nav.r_i[mid]
+    v = nav.v_i[mid]
+    tm = t[mid]
+    m_ie = mat_ie(tm, ellipsoid.omega)
+    r_e = np.einsum("nji,nj->ni", m_ie, r)
+    lat, lon, _ = ecef_to_geodetic(r_e, ellipsoid)
+    m_in = np.einsum("nij,njk->nik", m_ie, mat_en(lat, lon))
+    up_i = m_in[:, :, 2]
+    if use_ext:
+        # the model G(r) = (|r|/R) G_n(r R/|r|) is ~ -mu r / R^3 with R the EXTERNAL radius: its
+        # error is linear in dr with w0^2 = |G_n|/R at the altimeter point, not at the computed
+        # one (which may be km off while the anomaly is still unestimated)
+        p_e = geodetic_to_ecef(lat, lon, nav.h_ext[mid], ellipsoid)
+    else:
+        p_e = r_e
+    w02 = np.linalg.norm(normal_gravitation_ecef(p_e, ellipsoid), axis=1) / np.linalg.norm(p_e, axis=1)
+    v_e = np.einsum("nji,nj->ni", m_ie, v) - np.cross([0.0, 0.0, ellipsoid.omega], r_e)
+    v_n = np.einsum("nji,nj->ni", m_in, np.einsum("nij,nj->ni", m_ie, v_e))
+    speed = np.hypot(v_n[:, 0], v_n[:, 1])
+    c_mid = nav.mat_it[mid]
+    return EpochGeometry(dt, r, v, up_i, np.ascontiguousarray(c_mid[:, :, 2]),
+                         np.ascontiguousarray(c_mid[:, :, 0]), np.ascontiguousarray(c_mid[:, :, 1]),
+                         w02, speed, np.ascontiguousarray(nav.mat_it[idx]))
+
+
+def _noise_params(params, alt_dt):
+    """Vector of the scalar coefficients passed to the kernels."""
+    return np.array([
+        params.gyro_drift_radps**2,  # gyro PSD, rad^2/s
+        params.accel_noise_mps2**2,  # accel PSD, (m/s^2)^2 s
+        params.gravimeter_white_mps2**2,
+        params.gravimeter_lambda_per_s,
+        params.gravimeter_sigma_mps2,
+        params.anomaly_lambda_per_m,
+        params.anomaly_sigma_mps2,
+        params.altimeter_sigma_m**2 * alt_dt,  # altimeter error as a white noise in the dynamics
+        1.0 if params.radius_source == "altimeter" else 0.0,
+    ])
+
+
+@njit(cache=True)
+def _skew(v):
+    m = np.zeros((3, 3))
+    m[0, 1] = -v[2]
+    m[0, 2] = v[1]
+    m[1, 0] = v[2]
+    m[1, 2] = -v[0]
+    m[2, 0] = -v[1]
+    m[2, 1] = v[0]
+    return m
+
+
+@njit(cache=True)
+def continuous_model(r, v, up, e1, e2, e3, w02, speed, c):
+    """``A_y`` (8, 8) and noise density ``Qc_y`` (8, 8) in block order (dr, dv, g, f3).
+
+    ``c`` = noise parameter vector from :func:`_noise_params`.
+    """
+    s_nu, s_f, s_w, lam_f3, sig_f3, lam_s, sig_s, s_eps, ext = c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8]
+    a = np.zeros((8, 8))
+    qc = np.zeros((8, 8))
+    rn = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    r0 = r / rn
+    for i in range(3):
+        a[i, 3 + i] = 1.0
+        a[3 + i, i] = -w02
+        a[3 + i, 6] = up[i]
+        a[3 + i, 7] = e3[i]
+    if ext == 0.0:
+        for i in range(3):
+            for j in range(3):
+                a[3 + i, j] += 3.0 * w02 * r0[i] * r0[j]
+    else:
+        # R_ext is taken at the computed latitude: a horizontal error dr changes it by
+        # (r0 - n cos a) . dr (a = angle between radial and normal), entering as 3 w0^2 r0 dR
+        cosa = r0[0] * up[0] + r0[1] * up[1] + r0[2] * up[2]
+        for i in range(3):
+            for j in range(3):
+                a[3 + i, j] += 3.0 * w02 * r0[i] * (r0[j] - cosa * up[j])
+    lam_g = lam_s * speed
+    a[6, 6] = -lam_g
+    a[7, 7] = -lam_f3
+    # gyro drift: d(dr) += [r x] C nu, d(dv) += [v x] C nu, C nu isotropic white
+    lg = np.zeros((6, 3))
+    lg[0:3, :] = _skew(r)
+    lg[3:6, :] = _skew(v)
+    qg = s_nu * (lg @ lg.T)
+    for i in range(6):
+        for j in range(6):
+            qc[i, j] += qg[i, j]
+    for i in range(3):
+        for j in range(3):
+            qc[3 + i, 3 + j] += s_f * (e1[i] * e1[j] + e2[i] * e2[j]) + s_w * e3[i] * e3[j]
+            if ext != 0.0:
+                qc[3 + i, 3 + j] += 9.0 * w02 * w02 * s_eps * r0[i] * r0[j]
+    qc[6, 6] = 2.0 * lam_g * sig_s * sig_s
+    qc[7, 7] = 2.0 * lam_f3 * sig_f3 * sig_f3
+    return a, qc
+
+
+@njit(cache=True)
+def _to_seed(m_blk, perm):
+    out = np.empty((8, 8))
+    for i in range(8):
+        for j in range(8):
+            out[i, j] = m_blk[perm[i], perm[j]]
+    return out
+
+
+@njit(cache=True)
+def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
+    """Transition and process noise of every epoch, seed order (see module docstring).
+
+    Returns
+    -------
+    phi, q : ndarray (N, 8, 8)
+        Index 0 is identity / zero.
+    """
+    nep = dt.shape[0]
+    phi = np.zeros((nep, 8, 8))
+    q = np.zeros((nep, 8, 8))
+    phi[0] = np.eye(8)
+    t_prev = np.eye(8)
+    t_cur = np.eye(8)
+    for k in range(1, nep):
+        a, qc = continuous_model(r[k], v[k], up[k], e1[k], e2[k], e3[k], w02[k], speed[k], c)
+        phy, qy = van_loan(a, qc, dt[k])
+        for blk in range(2):
+            for i in range(3):
+                for j in range(3):
+                    t_prev[3 * blk + i, 3 * blk + j] = mat_it[k - 1, i, j]
+                    t_cur[3 * blk + i, 3 * blk + j] = mat_it[k, i, j]
+        phx = t_cur.T @ phy @ t_prev
+        qx = t_cur.T @ qy @ t_cur
+        phi[k] = _to_seed(phx, perm)
+        qs = _to_seed(qx, perm)
+        q[k] = 0.5 * (qs + qs.T)
+    return phi, q
+
+
+def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = False):
+    """Phi, Q sequences ``(N, 8, 8)`` for the filter (seed state order).
+
+    Parameters
+    ----------
+    geom : EpochGeometry
+    params : InmParams
+    alt_dt : float
+        Altimeter sampling interval, s (density of its error in the dynamics).
+    reference : bool
+        Pure-numpy/scipy path (for tests).
+    """
+    c = _noise_params(params, alt_dt)
+    args = (geom.dt, geom.r_i, geom.v_i, geom.up_i, geom.e1_i, geom.e2_i, geom.e3_i, geom.w02,
+            geom.speed, geom.mat_it)
+    if not reference:
+        return discretise_kernel(*[np.ascontiguousarray(x) for x in args], c, _PERM)
+    nep = geom.dt.size
+    phi = np.zeros((nep, 8, 8))
+    q = np.zeros((nep, 8, 8))
+    phi[0] = np.eye(8)
+    for k in range(1, nep):
+        a, qc = continuous_model.py_func(geom.r_i[k], geom.v_i[k], geom.up_i[k], geom.e1_i[k], geom.e2_i[k],
+                                         geom.e3_i[k], geom.w02[k], geom.speed[k], c)
+        m = np.zeros((16, 16))
+        dt = geom.dt[k]
+        m[:8, :8], m[:8, 8:], m[8:, 8:] = -a * dt, qc * dt, a.T * dt
+        e = scipy.linalg.expm(m)
+        phy = e[8:, 8:].T
+        qy = phy @ e[:8, 8:]
+        tp = scipy.linalg.block_diag(geom.mat_it[k - 1], geom.mat_it[k - 1], 1.0, 1.0)
+        tc = scipy.linalg.block_diag(geom.mat_it[k], geom.mat_it[k], 1.0, 1.0)
+        phi[k] = (tc.T @ phy @ tp)[np.ix_(_PERM, _PERM)]
+        qs = (tc.T @ qy @ tc)[np.ix_(_PERM, _PERM)]
+        q[k] = 0.5 * (qs + qs.T)
+    return phi, q
+
+
+def initial_covariance(params) -> np.ndarray:
+    """Prior covariance (8, 8) at the first epoch (zero prior mean)."""
+    d = np.empty(8)
+    d[DQ] = params.initial_position_sigma_m**2
+    d[DP] = params.initial_velocity_sigma_mps**2
+    d[G] = params.initial_anomaly_sigma_mps2**2
+    d[F3] = params.initial_gravimeter_sigma_mps2**2
+    return np.diag(d)
+
+
+# --------------------------------------------------------------------------
+# Measurement models: objects with .build(nav, idx, epoch_time) -> (z, H, R)
+# --------------------------------------------------------------------------
+
+
+def _hermite(nav, tq):
+    """Mechanized inertial position at times tq (cubic Hermite with the velocities)."""
+    t = nav.time
+    j = np.clip(np.searchsorted(t, tq, side="right") - 1, 0, t.size - 2)
+    h = t[j + 1] - t[j]
+    s = ((tq - t[j]) / h)[:, None]
+    p0, p1 = nav.r_i[j], nav.r_i[j + 1]
+    m0, m1 = nav.v_i[j] * h[:, None], nav.v_i[j + 1] * h[:, None]
+    return ((2 * s**3 - 3 * s**2 + 1) * p0 + (s**3 - 2 * s**2 + s) * m0 + (-2 * s**3 + 3 * s**2) * p1
+            + (s**3 - s**2) * m1)
+
+
+class AltimeterMeasurement:
+    """Radial measurement ``z = |q|_computed - R(lat_c, lon_c, h_alt) = cos(a) n.dq - eps``.
+
+    ``R(lat, lon, h)`` is the geocentric radius of the point at the altimeter's
+    height and the computed latitude/longitude; a horizontal error moves both
+    terms, so the sensitivity is along the ellipsoid normal ``n`` (not the
+    radial ``q0``), scaled by ``cos(a) = n.q0`` (a ~ 0.19 deg at 45 deg).
+
+    Each altimeter sample is assigned to the nearest filter epoch (within half
+    an epoch); the time offset ``d`` to the epoch is carried in ``H`` as
+    ``q0.dq + d q0.dp``.  Several samples per epoch become several components.
+
+    Parameters
+    ----------
+    time, height : ndarray (m,)
+        Altimeter times (s, record base) and ellipsoidal heights (m).
+    sigma_m : float
+        Altimeter noise, m.
+    """
+
+    def __init__(self, time, height, sigma_m, ellipsoid: Ellipsoid = WGS84):
+        self.time = np.asarray(time, float)
+        self.height = np.asarray(height, float)
+        self.sigma_m = float(sigma_m)
+        self.ellipsoid = ellipsoid
+
+    def build(self, nav, idx, half_window):
+        """Return ``z (N, m)``, ``H (N, m, 8)``, ``R (N, m, m)`` with NaN for missing."""
+        t_ep = nav.time[idx]
+        ok = (self.time >= nav.time[0]) & (self.time <= nav.time[-1]) & np.isfinite(self.height)
+        ta, ha = self.time[ok], self.height[ok]
+        nep = t_ep.size
+        if ta.size == 0:
+            return np.full((nep, 1), np.nan), np.zeros((nep, 1, 8)), np.ones((nep, 1, 1))
+        pos = np.clip(np.searchsorted(t_ep, ta), 0, nep - 1)
+        prev = np.clip(pos - 1, 0, nep - 1)
+        k = np.where(np.abs(ta - t_ep[prev]) <= np.abs(ta - t_ep[pos]), prev, pos)
+        d = ta - t_ep[k]
+        use = np.abs(d) <= half_window + 1e-9
+        ta, ha, k, d = ta[use], ha[use], k[use], d[use]
+        r_c = _hermite(nav, ta)
+        r_e = np.einsum("nji,nj->ni", mat_ie(ta, self.ellipsoid.omega), r_c)
+        lat, lon, _ = ecef_to_geodetic(r_e, self.ellipsoid)
+        r_ext = np.linalg.norm(geodetic_to_ecef(lat, lon, ha, self.ellipsoid), axis=1)
+        zval = np.linalg.norm(r_c, axis=1) - r_ext
+        counts = np.bincount(k, minlength=nep)
+        m = max(int(counts.max()), 1)
+        z = np.full((nep, m), np.nan)
+        h = np.zeros((nep, m, 8))
+        r = np.broadcast_to(np.eye(m) * self.sigma_m**2, (nep, m, m)).copy()
+        slot = np.zeros(nep, dtype=int)
+        # z = |r_c| - R(lat_c, lon_c, h_alt): a horizontal error moves both terms, so that
+        # dz = (n . r0) n . dr - eps: the height error along the ellipsoid normal n
+        r_ep = nav.r_i[idx]
+        r_e = np.einsum("nji,nj->ni", mat_ie(nav.time[idx], self.ellipsoid.omega), r_ep)
+        lat_ep, lon_ep, _ = ecef_to_geodetic(r_e, self.ellipsoid)
+        n_e = mat_en(lat_ep, lon_ep)[:, :, 2]
+        cosa = np.einsum("ni,ni->n", n_e, r_e / np.linalg.norm(r_e, axis=1)[:, None])
+        n_i = np.einsum("nij,nj->ni", mat_ie(nav.time[idx], self.ellipsoid.omega), n_e)
+        q0_t = np.einsum("nji,nj->ni", nav.mat_it[idx], n_i) * cosa[:, None]
+        for j in range(k.size):
+            kk = k[j]
+            s = slot[kk]
+            slot[kk] += 1
+            z[kk, s] = zval[j]
+            h[kk, s, DQ] = q0_t[kk]
+            h[kk, s, DP] = d[j] * q0_t[kk]
+        return z, h, r

@@ -1,0 +1,470 @@
+"""3D-INM mechanization for an arbitrarily oriented instrument triad.
+
+The seed equations (004 eq. 1, Andreev 002 eq. 2.1-2.4), on the triad axes::
+
+    dq/dt = p - w x q
+    dp/dt = G + F - w x p
+    dC/dt = C [w x]             C = mat_it, triad -> inertial
+
+with ``q`` the geocentric position and ``p`` the inertial velocity resolved on
+the triad, ``w`` the gyro rates and ``F`` the specific force.  Writing
+``r_i = C q`` and ``v_i = C p`` turns the first two into ``dr_i/dt = v_i``,
+``dv_i/dt = G_i + C F`` exactly (``dC/dt q = C (w x q)`` cancels the
+transport terms).  We integrate that inertial form, which has no fast
+rotation terms even for a strapdown triad in a turn, and recover
+``q = C^T r_i``, ``p = C^T v_i`` on output: the solution is the seed's, with
+less integration error.
+
+Integration, per IMU interval ``[t_k, t_k+1]`` (samples are instantaneous
+values at their time stamps, docs/formats.md):
+
+1. Attitude: exact rotation ``C_k+1 = C_k Exp(phi_k)`` (Rodrigues).  The
+   rate at the interval midpoint ``w_m`` comes from 4-point Lagrange
+   interpolation of the samples; the quadratic through ``(w_k, w_m, w_k+1)``
+   gives the angle increments of the two half intervals
+   ``d1 = dt/24 (5 w_k + 8 w_m - w_k+1)``, ``d2 = dt/24 (-w_k + 8 w_m + 5 w_k+1)``
+   and the two-sample coning-corrected rotation vector
+   ``phi = d1 + d2 + 2/3 d1 x d2``.
+2. Specific force in inertial axes ``a_k = C_k F_k`` at every sample; its
+   value at the interval midpoint by 4-point Lagrange interpolation in time
+   (3-point at the ends): 4th-order accurate.
+3. Translation: classical RK4 on ``(r_i, v_i)`` with ``G_i`` evaluated at each
+   stage (normal gravitation of the ellipsoid, :mod:`gravsurvey.geodesy`).
+
+Gravity model with external radius (``use_ext``, Andreev section 6): the
+radius ``R`` of the current point is taken from the altimeter's ellipsoidal
+height ``h_ext`` at the computed latitude/longitude, and::
+
+    G_model(r) = (|r| / R) * G_normal(r * R / |r|)
+
+which for a point mass is ``-mu r / R^3``: the computed vector with the
+external radius in the denominator, so the error is
+``dG = -w0^2 dr + 3 w0^2 r0 eps`` and every channel is a Schuler oscillator.
+With ``use_ext = False`` the computed position is used (vertical channel
+unstable, ``dG = -w0^2 (dr - 3 r0 r0.dr)``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..geodesy import (
+    WGS84,
+    Ellipsoid,
+    ecef_to_geodetic,
+    ecef_to_geodetic_scalar,
+    geodetic_to_ecef,
+    mat_en,
+    mat_ie,
+    normal_gravitation_ecef,
+    normal_gravitation_ecef_scalar,
+)
+
+
+# --------------------------------------------------------------------------
+# Compiled kernels
+# --------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _rot_into(phi, m):
+    """Write ``Exp([phi x])`` into the (3, 3) buffer ``m`` (Rodrigues, no allocation)."""
+    x, y, z = phi[0], phi[1], phi[2]
+    th2 = x * x + y * y + z * z
+    if th2 < 1e-8:
+        a = 1.0 - th2 / 6.0 + th2 * th2 / 120.0
+        b = 0.5 - th2 / 24.0 + th2 * th2 / 720.0
+    else:
+        th = math.sqrt(th2)
+        a = math.sin(th) / th
+        b = (1.0 - math.cos(th)) / th2
+    # I + a K + b K^2, K^2 = phi phi^T - th2 I
+    m[0, 0] = 1.0 + b * (x * x - th2)
+    m[1, 1] = 1.0 + b * (y * y - th2)
+    m[2, 2] = 1.0 + b * (z * z - th2)
+    m[0, 1] = -a * z + b * x * y
+    m[1, 0] = a * z + b * x * y
+    m[0, 2] = a * y + b * x * z
+    m[2, 0] = -a * y + b * x * z
+    m[1, 2] = -a * x + b * y * z
+    m[2, 1] = a * x + b * y * z
+
+
+@njit(cache=True)
+def rodrigues(phi):
+    """Rotation matrix ``Exp([phi x])`` for a rotation vector ``phi`` (rad), (3, 3)."""
+    th2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
+    if th2 < 1e-8:
+        # series to th^6: errors < 1e-26
+        a = 1.0 - th2 / 6.0 + th2 * th2 / 120.0
+        b = 0.5 - th2 / 24.0 + th2 * th2 / 720.0
+    else:
+        th = math.sqrt(th2)
+        a = math.sin(th) / th
+        b = (1.0 - math.cos(th)) / th2
+    k = np.zeros((3, 3))
+    k[0, 1] = -phi[2]
+    k[0, 2] = phi[1]
+    k[1, 0] = phi[2]
+    k[1, 2] = -phi[0]
+    k[2, 0] = -phi[1]
+    k[2, 1] = phi[0]
+    return np.eye(3) + a * k + b * (k @ k)
+
+
+@njit(cache=True)
+def _lagrange_mid(t, a, k, tm, out):
+    """Interpolate a (n,3) at time tm in [t_k, t_k+1] with up to 4 nodes."""
+    n = t.shape[0]
+    lo = k - 1
+    hi = k + 2
+    if lo < 0:
+        lo = 0
+    if hi > n - 1:
+        hi = n - 1
+    # prefer 3 nodes at the ends
+    out[0] = 0.0
+    out[1] = 0.0
+    out[2] = 0.0
+    for i in range(lo, hi + 1):
+        li = 1.0
+        for j in range(lo, hi + 1):
+            if j != i:
+                li *= (tm - t[j]) / (t[i] - t[j])
+        out[0] += li * a[i, 0]
+        out[1] += li * a[i, 1]
+        out[2] += li * a[i, 2]
+
+
+@njit(cache=True)
+def _attitude_kernel(t, w, c0, c_out):
+    c_out[0] = c0
+    phi = np.empty(3)
+    wm = np.empty(3)
+    rot = np.empty((3, 3))
+    for k in range(t.shape[0] - 1):
+        h = t[k + 1] - t[k]
+        _lagrange_mid(t, w, k, t[k] + 0.5 * h, wm)
+        # angle increments of the two half intervals, quadratic rate through (w_k, w_m, w_k+1)
+        d1x = h / 24.0 * (5.0 * w[k, 0] + 8.0 * wm[0] - w[k + 1, 0])
+        d1y = h / 24.0 * (5.0 * w[k, 1] + 8.0 * wm[1] - w[k + 1, 1])
+        d1z = h / 24.0 * (5.0 * w[k, 2] + 8.0 * wm[2] - w[k + 1, 2])
+        d2x = h / 24.0 * (-w[k, 0] + 8.0 * wm[0] + 5.0 * w[k + 1, 0])
+        d2y = h / 24.0 * (-w[k, 1] + 8.0 * wm[1] + 5.0 * w[k + 1, 1])
+        d2z = h / 24.0 * (-w[k, 2] + 8.0 * wm[2] + 5.0 * w[k + 1, 2])
+        # two-sample coning correction (2/3) d1 x d2
+        phi[0] = d1x + d2x + 2.0 / 3.0 * (d1y * d2z - d1z * d2y)
+        phi[1] = d1y + d2y + 2.0 / 3.0 * (d1z * d2x - d1x * d2z)
+        phi[2] = d1z + d2z + 2.0 / 3.0 * (d1x * d2y - d1y * d2x)
+        _rot_into(phi, rot)
+        for i in range(3):
+            for j in range(3):
+                c_out[k + 1, i, j] = (c_out[k, i, 0] * rot[0, j] + c_out[k, i, 1] * rot[1, j]
+                                      + c_out[k, i, 2] * rot[2, j])
+
+
+@njit(cache=True)
+def _gravity_i(r, ts, radius, use_ext, a, f, gm, omega):
+    """Model gravitation on inertial axes at inertial point r, time ts."""
+    c = math.cos(omega * ts)
+    s = math.sin(omega * ts)
+    rn = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    scale = radius / rn if use_ext else 1.0
+    px = r[0] * scale
+    py = r[1] * scale
+    pz = r[2] * scale
+    # inertial -> ECEF: rotate by -omega t about z
+    ex = c * px + s * py
+    ey = -s * px + c * py
+    gx, gy, gz = normal_gravitation_ecef_scalar(ex, ey, pz, a, f, gm, omega)
+    back = 1.0 / scale
+    return (c * gx - s * gy) * back, (s * gx + c * gy) * back, gz * back
+
+
+@njit(cache=True)
+def _translation_kernel(t, a_i, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, omega, r_out, v_out):
+    n = t.shape[0]
+    r_out[0] = r0
+    v_out[0] = v0
+    am = np.empty(3)
+    y = np.empty(6)
+    ys = np.empty(6)
+    kk = np.empty((4, 6))
+    acc = np.empty((3, 3))
+    for k in range(n - 1):
+        tk = t[k]
+        dt = t[k + 1] - tk
+        tm = tk + 0.5 * dt
+        _lagrange_mid(t, a_i, k, tm, am)
+        for j in range(3):
+            acc[0, j] = a_i[k, j]
+            acc[1, j] = am[j]
+            acc[2, j] = a_i[k + 1, j]
+            y[j] = r_out[k, j]
+            y[3 + j] = v_out[k, j]
+        # geometry of the external radius at the step start
+        nx = 0.0
+        ny = 0.0
+        nz = 0.0
+        hc = 0.0
+        cosa = 1.0
+        if use_ext:
+            cw = math.cos(omega * tk)
+            sw = math.sin(omega * tk)
+            ex = cw * y[0] + sw * y[1]
+            ey = -sw * y[0] + cw * y[1]
+            lat, lon, hc = ecef_to_geodetic_scalar(ex, ey, y[2], a, f)
+            cl = math.cos(lat)
+            ne_x = cl * math.cos(lon)
+            ne_y = cl * math.sin(lon)
+            nz = math.sin(lat)
+            nx = cw * ne_x - sw * ne_y
+            ny = sw * ne_x + cw * ne_y
+            rn = math.sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2])
+            cosa = (nx * y[0] + ny * y[1] + nz * y[2]) / rn
+        for st in range(4):
+            if st == 0:
+                hs = 0.0
+                ts = tk
+                ia = 0
+                hx = h_ext[k]
+            elif st == 3:
+                hs = dt
+                ts = tk + dt
+                ia = 2
+                hx = h_ext[k + 1]
+            else:
+                hs = 0.5 * dt
+                ts = tm
+                ia = 1
+                hx = h_ext_mid[k]
+            for j in range(6):
+                ys[j] = y[j] + (hs * kk[st - 1, j] if st > 0 else 0.0)
+            radius = 0.0
+            if use_ext:
+                rs = math.sqrt(ys[0] * ys[0] + ys[1] * ys[1] + ys[2] * ys[2])
+                dh = nx * (ys[0] - y[0]) + ny * (ys[1] - y[1]) + nz * (ys[2] - y[2])
+                radius = rs + cosa * (hx - hc - dh)
+            gx, gy, gz = _gravity_i(ys, ts, radius, use_ext, a, f, gm, omega)
+            kk[st, 0] = ys[3]
+            kk[st, 1] = ys[4]
+            kk[st, 2] = ys[5]
+            kk[st, 3] = gx + acc[ia, 0]
+            kk[st, 4] = gy + acc[ia, 1]
+            kk[st, 5] = gz + acc[ia, 2]
+        for j in range(6):
+            y[j] += dt / 6.0 * (kk[0, j] + 2.0 * kk[1, j] + 2.0 * kk[2, j] + kk[3, j])
+        for j in range(3):
+            r_out[k + 1, j] = y[j]
+            v_out[k + 1, j] = y[3 + j]
+
+
+@njit(cache=True)
+def mechanize_kernel(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, a, f, gm, omega):
+    """Compiled mechanization (see module docstring).
+
+    Parameters
+    ----------
+    t : ndarray (n,)
+        IMU times, s (inertial frame = ECEF at t = 0).
+    f_t, w_t : ndarray (n, 3)
+        Specific force (m/s^2) and absolute angular rate (rad/s) on the triad.
+    h_ext : ndarray (n,)
+        External ellipsoidal height at the IMU times, m (ignored unless ``use_ext``).
+    h_ext_mid : ndarray (n-1,)
+        External height at the interval midpoints, m.
+    use_ext : bool
+    r0, v0 : ndarray (3,)
+        Inertial position (m) and inertial velocity (m/s) at ``t[0]``.
+    c0 : ndarray (3, 3)
+        Triad -> inertial at ``t[0]``.
+    a, f, gm, omega : float
+        Ellipsoid parameters.
+
+    Returns
+    -------
+    r_i, v_i : ndarray (n, 3)
+    mat_it : ndarray (n, 3, 3)
+    """
+    n = t.shape[0]
+    c_out = np.empty((n, 3, 3))
+    _attitude_kernel(t, w_t, c0, c_out)
+    a_i = np.empty((n, 3))
+    for k in range(n):
+        for i in range(3):
+            a_i[k, i] = c_out[k, i, 0] * f_t[k, 0] + c_out[k, i, 1] * f_t[k, 1] + c_out[k, i, 2] * f_t[k, 2]
+    r_out = np.empty((n, 3))
+    v_out = np.empty((n, 3))
+    _translation_kernel(t, a_i, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, omega, r_out, v_out)
+    return r_out, v_out, c_out
+
+
+# --------------------------------------------------------------------------
+# Pure-numpy reference path (slow; for tests)
+# --------------------------------------------------------------------------
+
+
+def _rotvec_to_mat_ref(phi):
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_rotvec(phi).as_matrix()
+
+
+def _lagrange_ref(t, a, k, tm):
+    nodes = np.arange(max(k - 1, 0), min(k + 2, t.size - 1) + 1)
+    w = np.array([np.prod([(tm - t[j]) / (t[i] - t[j]) for j in nodes if j != i]) for i in nodes])
+    return w @ a[nodes]
+
+
+def mechanize_reference(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, ellipsoid=WGS84):
+    """Pure-numpy/scipy implementation of :func:`mechanize_kernel` (same algorithm)."""
+    t = np.asarray(t, float)
+    n = t.size
+    om = ellipsoid.omega
+    c = np.empty((n, 3, 3))
+    c[0] = c0
+    for k in range(n - 1):
+        dt = t[k + 1] - t[k]
+        wm = _lagrange_ref(t, w_t, k, t[k] + 0.5 * dt)
+        d1 = dt / 24.0 * (5.0 * w_t[k] + 8.0 * wm - w_t[k + 1])
+        d2 = dt / 24.0 * (-w_t[k] + 8.0 * wm + 5.0 * w_t[k + 1])
+        c[k + 1] = c[k] @ _rotvec_to_mat_ref(d1 + d2 + 2.0 / 3.0 * np.cross(d1, d2))
+    a_i = np.einsum("nij,nj->ni", c, f_t)
+
+    def grav(r, ts, radius):
+        scale = radius / np.linalg.norm(r) if use_ext else 1.0
+        p_e = mat_ie(ts, om).T @ (r * scale)
+        return mat_ie(ts, om) @ normal_gravitation_ecef(p_e, ellipsoid) / scale
+
+    r = np.empty((n, 3))
+    v = np.empty((n, 3))
+    r[0], v[0] = r0, v0
+    for k in range(n - 1):
+        dt = t[k + 1] - t[k]
+        tm = t[k] + 0.5 * dt
+        amid = _lagrange_ref(t, a_i, k, tm)
+        if use_ext:
+            r_e = mat_ie(t[k], om).T @ r[k]
+            lat, lon, hc = ecef_to_geodetic(r_e, ellipsoid)
+            n_i = mat_ie(t[k], om) @ mat_en(lat, lon)[:, 2]
+            cosa = n_i @ r[k] / np.linalg.norm(r[k])
+        y = np.concatenate([r[k], v[k]])
+        stages = [(0.0, t[k], a_i[k], h_ext[k]), (0.5 * dt, tm, amid, h_ext_mid[k]),
+                  (0.5 * dt, tm, amid, h_ext_mid[k]), (dt, t[k + 1], a_i[k + 1], h_ext[k + 1])]
+        kprev = np.zeros(6)
+        ks = []
+        for hs, ts, acc, hx in stages:
+            ys = y + hs * kprev
+            radius = 0.0
+            if use_ext:
+                radius = np.linalg.norm(ys[:3]) + cosa * (hx - hc - n_i @ (ys[:3] - y[:3]))
+            kprev = np.concatenate([ys[3:], grav(ys[:3], ts, radius) + acc])
+            ks.append(kprev)
+        y = y + dt / 6.0 * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
+        r[k + 1], v[k + 1] = y[:3], y[3:]
+    return r, v, c
+
+
+# --------------------------------------------------------------------------
+# User-facing wrapper
+# --------------------------------------------------------------------------
+
+
+@dataclass
+class Navigation:
+    """Mechanized (uncorrected) navigation solution at the IMU times.
+
+    Attributes
+    ----------
+    time : ndarray (n,)
+        s, record time base.
+    r_i, v_i : ndarray (n, 3)
+        Inertial position (m) and velocity (m/s).
+    mat_it : ndarray (n, 3, 3)
+        Triad -> inertial.
+    h_ext : ndarray (n,)
+        External (altimeter) ellipsoidal height interpolated to ``time``, m.
+    """
+
+    time: np.ndarray
+    r_i: np.ndarray
+    v_i: np.ndarray
+    mat_it: np.ndarray
+    h_ext: np.ndarray
+
+    @property
+    def q_t(self):
+        """Position on the triad, ``C^T r_i``, (n, 3) m."""
+        return np.einsum("nji,nj->ni", self.mat_it, self.r_i)
+
+    @property
+    def p_t(self):
+        """Inertial velocity on the triad, ``C^T v_i``, (n, 3) m/s."""
+        return np.einsum("nji,nj->ni", self.mat_it, self.v_i)
+
+
+def initial_inertial_state(time0, lat, lon, height, vel_n, mat_nt, ellipsoid: Ellipsoid = WGS84):
+    """Inertial position, velocity and triad->inertial matrix at record time ``time0``.
+
+    Returns
+    -------
+    r_i (3,), v_i (3,), mat_it (3, 3)
+    """
+    r_e = geodetic_to_ecef(lat, lon, height, ellipsoid)
+    m_en = mat_en(lat, lon)
+    m_ie = mat_ie(time0, ellipsoid.omega)
+    v_e = m_en @ np.asarray(vel_n, float) + np.cross([0.0, 0.0, ellipsoid.omega], r_e)
+    return m_ie @ r_e, m_ie @ v_e, m_ie @ m_en @ np.asarray(mat_nt, float)
+
+
+def mechanize(time, f_t, w_t, initial, alt_time=None, alt_height=None, use_ext=True,
+              ellipsoid: Ellipsoid = WGS84, reference=False) -> Navigation:
+    """Mechanize a flight from its initial state.
+
+    Parameters
+    ----------
+    time : ndarray (n,)
+        IMU times, s (record base; inertial frame = ECEF at time 0).
+    f_t, w_t : ndarray (n, 3)
+        Specific force (m/s^2), angular rate (rad/s) on the triad.
+    initial : InitialState
+        State at ``time[0]``.
+    alt_time, alt_height : ndarray (m,)
+        Altimeter ellipsoidal heights (m); linearly interpolated (held at the ends).
+    use_ext : bool
+        Gravity model with the altimeter radius (default) or with the computed one.
+    reference : bool
+        Use the pure-numpy reference path.
+    """
+    t = np.ascontiguousarray(time, dtype=float)
+    f_t = np.ascontiguousarray(f_t, dtype=float)
+    w_t = np.ascontiguousarray(w_t, dtype=float)
+    if alt_time is not None and len(alt_time) > 0:
+        h_ext = np.interp(t, alt_time, alt_height)
+        h_mid = np.interp(0.5 * (t[1:] + t[:-1]), alt_time, alt_height)
+    else:
+        if use_ext:
+            raise ValueError("use_ext needs altimeter data")
+        h_ext = np.zeros_like(t)
+        h_mid = np.zeros(max(t.size - 1, 0))
+    r0, v0, c0 = initial_inertial_state(t[0], initial.lat, initial.lon, initial.height,
+                                        initial.vel_n, initial.mat_nt, ellipsoid)
+    if reference:
+        r, v, c = mechanize_reference(t, f_t, w_t, h_ext, h_mid, use_ext, r0, v0, c0, ellipsoid)
+    else:
+        r, v, c = mechanize_kernel(t, f_t, w_t, h_ext, h_mid, bool(use_ext), r0, v0, c0, *ellipsoid.params())
+    return Navigation(t, r, v, c, h_ext)
+
+
+def navigation_to_geodetic(time, r_i, v_i, ellipsoid: Ellipsoid = WGS84):
+    """Inertial position/velocity -> (lat rad, lon rad, h m, vel_n (n,3) ENU m/s relative to the Earth)."""
+    m_ie = mat_ie(np.asarray(time, float), ellipsoid.omega)
+    r_e = np.einsum("nji,nj->ni", m_ie, r_i)
+    v_e = np.einsum("nji,nj->ni", m_ie, v_i) - np.cross([0.0, 0.0, ellipsoid.omega], r_e)
+    lat, lon, h = ecef_to_geodetic(r_e, ellipsoid)
+    vel_n = np.einsum("nji,nj->ni", mat_en(lat, lon), v_e)
+    return lat, lon, h, vel_n

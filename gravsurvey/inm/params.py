@@ -1,0 +1,322 @@
+"""Filter parameters and initial state of the 3D-INM estimator.
+
+Defaults are the seed-004 benchmark values (model.md section 3).  Every
+quantity is SI; the gyro drift is the only non-SI key (deg/h, named so).
+
+Noise conventions (shared with the simulator's sensor model):
+
+* ``accel_noise_mps2``, ``gyro_drift_degph`` and ``gravimeter_white_mps2``
+  are white noises given by their one-second standard deviation
+  ``sigma_1s`` (the sigma of the noise averaged over 1 s): continuous
+  two-sided spectral density ``sigma_1s**2 * 1 s``; a sample at ``R`` Hz has
+  sigma ``sigma_1s * sqrt(R)`` (the simulator's convention,
+  gravsurvey/simulate/sensors.py).
+* ``altimeter_sigma_m`` is the standard deviation of each altimeter sample.
+* The gravimeter error ``f3`` and the anomaly ``g`` are first-order Markov
+  processes with stationary standard deviation ``sigma`` and correlation rate
+  ``lambda``: ``dx/dt = -lambda x + sqrt(2 lambda) sigma u``.  For the anomaly
+  the rate is in space, ``lambda_g(t) = anomaly_lambda_per_m * v(t)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ConfigError
+
+RADIUS_SOURCES = ("altimeter", "computed")
+
+
+@dataclass
+class InmParams:
+    """Settings of the 3D-INM Kalman dynamic inversion (config section ``model``).
+
+    Attributes
+    ----------
+    filter_rate_hz : float
+        Kalman epoch rate, Hz; the IMU rate is decimated by the nearest integer factor.
+    accel_noise_mps2 : float
+        sigma_f1 = sigma_f2: white error of accelerometers 1 and 2, m/s^2 (one-second sigma).
+    gyro_drift_degph : float
+        White gyro drift sigma_nu, deg/h (one-second sigma).
+    gravimeter_lambda_per_s : float
+        lambda_f3, correlation rate of the gravimeter (third accelerometer) error, 1/s.
+    gravimeter_sigma_mps2 : float
+        sigma_f3, stationary sigma of the gravimeter error, m/s^2.
+    gravimeter_white_mps2 : float
+        Optional white noise of the gravimeter on top of the Markov error, m/s^2
+        (one-second sigma); 0 in the seed.
+    anomaly_lambda_per_m : float
+        lambda_s, spatial correlation rate of the anomaly, 1/m.
+    anomaly_sigma_mps2 : float
+        sigma_s, stationary sigma of the anomaly, m/s^2.
+    altimeter_sigma_m : float
+        sigma_eps, white error of the radial (height) information, m.
+    radius_source : str
+        ``"altimeter"``: the gravity model takes |q| from the altimeter (Andreev section 6,
+        stable in all channels); ``"computed"``: from the navigation solution.
+    initial_position_sigma_m, initial_velocity_sigma_mps : float
+        Initial 1-sigma of each component of dq (m) and dp (m/s).
+    initial_anomaly_sigma_mps2, initial_gravimeter_sigma_mps2 : float
+        Initial 1-sigma of g and f3, m/s^2.
+    """
+
+    filter_rate_hz: float = 1.0
+    accel_noise_mps2: float = 1.0e-3
+    gyro_drift_degph: float = 0.01
+    gravimeter_lambda_per_s: float = 0.025
+    gravimeter_sigma_mps2: float = 1.0e-6
+    gravimeter_white_mps2: float = 0.0
+    anomaly_lambda_per_m: float = 1.0e-5
+    anomaly_sigma_mps2: float = 1.0e-3
+    altimeter_sigma_m: float = 1.0
+    radius_source: str = "altimeter"
+    initial_position_sigma_m: float = 50.0
+    initial_velocity_sigma_mps: float = 0.05
+    initial_anomaly_sigma_mps2: float = 1.0e-3
+    initial_gravimeter_sigma_mps2: float = 1.0e-5
+
+    def __post_init__(self):
+        self.validate()
+
+    # ------------------------------------------------------------------
+    def validate(self, key_path: str = "model") -> None:
+        """Raise :class:`ConfigError` naming the key for nonsense values."""
+        for f in dataclasses.fields(self):
+            val = getattr(self, f.name)
+            key = f"{key_path}.{f.name}"
+            if f.name == "radius_source":
+                if not isinstance(val, str) or val not in RADIUS_SOURCES:
+                    raise ConfigError(f"{key}: expected one of {list(RADIUS_SOURCES)}, got {val!r}")
+                continue
+            if isinstance(val, bool) or not isinstance(val, (int, float)):
+                raise ConfigError(f"{key}: expected a number, got {type(val).__name__} {val!r}")
+            if not math.isfinite(val) or val < 0:
+                raise ConfigError(f"{key}: expected a finite value >= 0, got {val!r}")
+            if f.name == "filter_rate_hz" and val == 0:
+                raise ConfigError(f"{key}: expected a rate > 0 Hz, got {val!r}")
+
+    @classmethod
+    def from_dict(cls, d, key_path: str = "model") -> "InmParams":
+        """Build from a config mapping; unknown keys rejected with the nearest valid name.
+
+        Parameters
+        ----------
+        d : mapping or None
+            The ``model:`` section (missing keys take the seed defaults).
+        key_path : str
+            Dotted path used in error messages.
+        """
+        if d is None:
+            d = {}
+        if not isinstance(d, dict):
+            raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
+        names = [f.name for f in dataclasses.fields(cls)]
+        for k in d:
+            if k not in names:
+                near = difflib.get_close_matches(str(k), names, n=1)
+                hint = f"; did you mean {near[0]!r}?" if near else ""
+                raise ConfigError(f"{key_path}.{k}: unknown key{hint}")
+        obj = cls.__new__(cls)
+        for f in dataclasses.fields(cls):
+            setattr(obj, f.name, d.get(f.name, f.default))
+        obj.validate(key_path)
+        # integers are fine in YAML; store floats
+        for f in dataclasses.fields(cls):
+            if f.name != "radius_source":
+                setattr(obj, f.name, float(getattr(obj, f.name)))
+        return obj
+
+    def to_dict(self) -> dict:
+        """Plain mapping of the settings (for reports)."""
+        return dataclasses.asdict(self)
+
+    @property
+    def gyro_drift_radps(self) -> float:
+        """sigma_nu in rad/s."""
+        return math.radians(self.gyro_drift_degph) / 3600.0
+
+
+def solvability_warnings(params: InmParams, speed_mps) -> list[str]:
+    """Warn when the anomaly and gravimeter-error models become inseparable (seed 004).
+
+    At ground speed ``v`` the anomaly's time correlation rate is
+    ``lambda_g = lambda_s v``; if it is within a factor 2 of ``lambda_f3`` the
+    filter can hardly tell g from f3.
+
+    Parameters
+    ----------
+    params : InmParams
+    speed_mps : float or array_like
+        Ground speed(s), m/s; e.g. the median speed of each line.
+
+    Returns
+    -------
+    list of str
+        One message per offending speed value (empty when all are fine).
+    """
+    out = []
+    lam_f = params.gravimeter_lambda_per_s
+    for v in np.atleast_1d(np.asarray(speed_mps, dtype=float)):
+        lam_g = params.anomaly_lambda_per_m * v
+        if lam_f > 0 and lam_g > 0 and 0.5 <= lam_g / lam_f <= 2.0:
+            out.append(
+                f"solvability: lambda_s*v = {lam_g:.3g} 1/s at v = {v:.1f} m/s is within a factor 2 of "
+                f"gravimeter_lambda_per_s = {lam_f:.3g} 1/s; anomaly and gravimeter error are hard to separate"
+            )
+    return out
+
+
+@dataclass
+class InitialState:
+    """Navigation state at the first IMU sample.
+
+    Attributes
+    ----------
+    lat, lon : float
+        Geodetic latitude and longitude, rad.
+    height : float
+        Ellipsoidal height, m.
+    vel_n : ndarray, shape (3,)
+        Velocity relative to the Earth, ENU, m/s.
+    mat_nt : ndarray, shape (3, 3)
+        Triad -> local ENU rotation (identity for an ENU platform).
+    """
+
+    lat: float
+    lon: float
+    height: float
+    vel_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    mat_nt: np.ndarray = field(default_factory=lambda: np.eye(3))
+
+
+def mat_nb_from_attitude(roll, pitch, heading):
+    """Body (forward, left, up) -> ENU rotation from roll, pitch, heading (rad).
+
+    ``mat_nb = Rz(pi/2 - heading) @ Ry(-pitch) @ Rx(roll)`` (docs/conventions.md):
+    heading clockwise from north, pitch nose up, roll right wing down.
+    """
+
+    def rx(a):
+        c, s = math.cos(a), math.sin(a)
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+    def ry(a):
+        c, s = math.cos(a), math.sin(a)
+        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+    def rz(a):
+        c, s = math.cos(a), math.sin(a)
+        return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+    return rz(0.5 * math.pi - heading) @ ry(-pitch) @ rx(roll)
+
+
+def _num(d, k, key_path, length=None):
+    if k not in d:
+        raise ConfigError(f"{key_path}.{k}: missing")
+    v = d[k]
+    try:
+        arr = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{key_path}.{k}: expected numbers, got {v!r}") from None
+    if length is None:
+        if arr.shape != () or isinstance(v, bool):
+            raise ConfigError(f"{key_path}.{k}: expected a number, got {v!r}")
+    elif arr.shape != (length,):
+        raise ConfigError(f"{key_path}.{k}: expected a list of {length} numbers, got {v!r}")
+    if not np.all(np.isfinite(arr)):
+        raise ConfigError(f"{key_path}.{k}: expected finite numbers, got {v!r}")
+    return arr
+
+
+_INITIAL_KEYS = ("lat_deg", "lon_deg", "height_m", "velocity_enu_mps", "attitude_deg")
+
+
+def _check_triad(triad, key_path):
+    if triad not in ("platform", "strapdown"):
+        raise ConfigError(f"{key_path}: triad must be 'platform' or 'strapdown', got {triad!r}")
+
+
+def initial_state_from_dict(d, triad: str, key_path: str = "initial") -> InitialState:
+    """Initial state from the config's ``initial:`` block.
+
+    Keys: ``lat_deg``, ``lon_deg``, ``height_m``, ``velocity_enu_mps`` [E, N, U],
+    ``attitude_deg`` [roll, pitch, heading] of the triad w.r.t. ENU, deg (required for a
+    strapdown triad; ignored for a platform, whose triad is ENU).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``key_path.<key>`` for missing, unknown or malformed keys.
+    """
+    _check_triad(triad, key_path.rsplit(".", 1)[0] + ".triad" if "." in key_path else "triad")
+    if not isinstance(d, dict):
+        raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
+    for k in d:
+        if k not in _INITIAL_KEYS:
+            near = difflib.get_close_matches(str(k), _INITIAL_KEYS, n=1)
+            hint = f"; did you mean {near[0]!r}?" if near else ""
+            raise ConfigError(f"{key_path}.{k}: unknown key{hint}")
+    lat = float(_num(d, "lat_deg", key_path))
+    lon = float(_num(d, "lon_deg", key_path))
+    if not -90.0 < lat < 90.0:
+        raise ConfigError(f"{key_path}.lat_deg: expected a latitude in (-90, 90) deg, got {lat}")
+    h = float(_num(d, "height_m", key_path))
+    vel = _num(d, "velocity_enu_mps", key_path, 3)
+    mat_nt = np.eye(3)
+    if triad == "strapdown":
+        att = _num(d, "attitude_deg", key_path, 3)
+        mat_nt = mat_nb_from_attitude(*np.radians(att))
+    return InitialState(math.radians(lat), math.radians(lon), h, vel, mat_nt)
+
+
+def initial_state_from_gnss(record, triad: str, attitude_deg=None) -> InitialState:
+    """Initial state from the GNSS channel at the first IMU sample.
+
+    Position and velocity come from a quadratic least-squares fit to the GNSS
+    positions over the first 10 s (at least 3 samples).  A platform triad is
+    ENU; a strapdown triad needs ``attitude_deg`` [roll, pitch, heading] from
+    the config.
+
+    Raises
+    ------
+    ConfigError
+        Strapdown triad without attitude, or no usable GNSS data.
+    """
+    _check_triad(triad, "triad")
+    gn = record.gnss
+    if gn is None or len(gn.time) < 3:
+        raise ConfigError("initial: no GNSS channel (>= 3 samples) to initialise from; give an 'initial:' block")
+    if triad == "strapdown":
+        if attitude_deg is None:
+            raise ConfigError("initial.attitude_deg: required for a strapdown triad (GNSS gives no attitude)")
+        mat_nt = mat_nb_from_attitude(*np.radians(np.asarray(attitude_deg, dtype=float)))
+    else:
+        mat_nt = np.eye(3)
+    t0 = float(record.imu.time[0])
+    t = np.asarray(gn.time, dtype=float)
+    sel = np.flatnonzero(t <= t[0] + 10.0)
+    if sel.size < 3:
+        sel = np.arange(min(3, t.size))
+    from ..geodesy import radii_of_curvature
+
+    tt = t[sel] - t0
+    lat = np.asarray(gn.lat, dtype=float)[sel]
+    lon = np.unwrap(np.asarray(gn.lon, dtype=float)[sel])
+    hh = np.asarray(gn.height, dtype=float)[sel]
+    deg = 2 if sel.size >= 4 else 1
+    pl = np.polyfit(tt, lat, deg)
+    po = np.polyfit(tt, lon, deg)
+    ph = np.polyfit(tt, hh, deg)
+    lat0, lon0, h0 = np.polyval(pl, 0.0), np.polyval(po, 0.0), np.polyval(ph, 0.0)
+    m, n = radii_of_curvature(lat0)
+    ve = np.polyval(np.polyder(po), 0.0) * (n + h0) * math.cos(lat0)
+    vn = np.polyval(np.polyder(pl), 0.0) * (m + h0)
+    vu = np.polyval(np.polyder(ph), 0.0)
+    return InitialState(float(lat0), float(lon0), float(h0), np.array([ve, vn, vu]), mat_nt)
