@@ -105,6 +105,28 @@ class SurveyConfig:
         return h.hexdigest()
 
 
+class _Loader(yaml.SafeLoader):
+    """SafeLoader that also reads ``1e-5`` and ``5E+3`` as floats (YAML 1.2 style).
+
+    PyYAML follows YAML 1.1, where a float needs a dot (``1.0e-5``); geophysicists write
+    ``1e-5`` and would otherwise get a string and a confusing type error.
+    """
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(
+        r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+        |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+        |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+        |[-+]?\.(?:inf|Inf|INF)
+        |\.(?:nan|NaN|NAN))$""",
+        re.X,
+    ),
+    list("-+0123456789."),
+)
+
+
 def load_yaml(path: Path) -> dict:
     """Read a YAML mapping safely; errors name the file and line."""
     path = Path(path)
@@ -112,7 +134,7 @@ def load_yaml(path: Path) -> dict:
         raise ConfigError(f"{path}: config file not found")
     try:
         with open(path, "rb") as fh:
-            data = yaml.safe_load(fh)
+            data = yaml.load(fh, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "?"

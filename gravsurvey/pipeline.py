@@ -187,7 +187,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
             z, info = postprocess(sol.g_smooth[a:b], dt, speed, options=cfg.postprocess, sigma=sol.sigma_smooth[a:b])
         final[a:b] = z
         line[a:b] = s.name
-        line_info[s.name] = {**_jsonable(info), "kind": s.kind, "speed_mps": speed, "n": b - a}
+        line_info[s.name] = {**_jsonable(info), "kind": s.kind, "speed_mps": speed, "samples": b - a}
     timings["postprocess_s"] = time.perf_counter() - t
 
     truth = None
