@@ -28,7 +28,7 @@ TOP_KEYS = ("survey", "ellipsoid", "flights", "model", "lines", "postprocess", "
 SURVEY_KEYS = ("name", "description")
 #: flight keys handled here; every other key of a flight goes to the ingestion options
 FLIGHT_OWN_KEYS = ("name", "triad", "initial", "truth", "lines")
-OUTPUT_KEYS = ("dir", "epsg", "plots", "xyz", "geojson", "log_file")
+OUTPUT_KEYS = ("dir", "epsg", "plots", "xyz", "geojson")
 PROCESSING_KEYS = ("method", "classic_resolution_m")
 TRIADS = ("platform", "strapdown")
 PROCESSING_METHODS = ("inm", "classic")

@@ -233,9 +233,34 @@ class _ClassicSolution:
 
 
 def _classic_solution(cfg, fl, record):
-    from .classic import classic_reduction
+    """The conventional scalar reduction, on the same radial information as the 3D-INM.
 
-    res = classic_reduction(record, ellipsoid=cfg.ellipsoid, resolution_m=cfg.classic_resolution_m)
+    A strapdown triad needs its attitude to find the vertical: it comes from the 3D-INM
+    mechanization of the same record (``classic.strapdown_attitude``). Without GNSS the
+    position track for the Eotvos correction also comes from the mechanization.
+    """
+    from .classic import classic_reduction, strapdown_attitude
+    from .inm.params import initial_state_from_gnss
+
+    mat_nt, track = None, None
+    needs_nav = fl.triad == "strapdown" or record.gnss is None
+    if needs_nav:
+        initial = fl.initial if fl.initial is not None else initial_state_from_gnss(record, fl.triad)
+        if fl.triad == "strapdown":
+            mat_nt = strapdown_attitude(record, initial, ellipsoid=cfg.ellipsoid)
+        if record.gnss is None:
+            from .inm.solve import estimate_anomaly
+
+            track = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid)
+    res = classic_reduction(
+        record,
+        ellipsoid=cfg.ellipsoid,
+        resolution_m=cfg.classic_resolution_m,
+        triad=fl.triad,
+        mat_nt=mat_nt,
+        track=track,
+        height_source="altimeter",
+    )
     return _ClassicSolution(res, record)
 
 
