@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from gravsurvey.errors import DataError, GravsurveyError
+from gravsurvey.survey import Crossovers
 
 __all__ = [
     "PROFILE_COLUMNS",
@@ -87,20 +88,8 @@ _DECIMALS = {
     "time_unix_s": 3,
 }
 XYZ_COLUMNS = ("time_unix_s",) + PROFILE_COLUMNS[4:]
-CROSSOVER_COLUMNS = (
-    "flight_a",
-    "line_a",
-    "flight_b",
-    "line_b",
-    "easting_m",
-    "northing_m",
-    "time_a_s",
-    "time_b_s",
-    "value_a_mgal",
-    "value_b_mgal",
-    "diff_mgal",
-    "angle_deg",
-)
+#: crossovers.csv columns: the fields of :class:`gravsurvey.survey.Crossovers`, in order
+CROSSOVER_COLUMNS = Crossovers.COLUMNS
 SUMMARY_NAME = "summary.json"
 
 
