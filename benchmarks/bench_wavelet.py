@@ -28,6 +28,7 @@ from gravsurvey.errors import DataWarning  # noqa: E402
 
 COMPLEXITY = {
     "ti_cosphi": "O(N log N) DCT + O(K N) for Phi at all K levels",
+    "ti_cosphi+context": "as ti_cosphi, plus 2 DCTs over N + 2^(n+4) samples (gate, filter)",
     "cosphi": "K(s+1) syntheses O(N L K s) + Gram O(N (K s)^2) + search O(sweeps K^3 s^2)",
     "visushrink": "O(N L)",
     "sure": "O(N L + N log N)",
@@ -69,13 +70,20 @@ def run(quick: bool = False) -> list[dict]:
         cases = [("ti_cosphi", "db10"), ("ti_cosphi", "auto"), ("cosphi", "db10"),
                  ("visushrink", "db10"), ("sure", "db10"), ("bayes", "db10"),
                  ("butterworth", None), ("gaussian", None)]
+        cases.append(("ti_cosphi+context", "db10"))
+        # the line cut from the middle of a flight twice its length (context=(z_full, a, b))
+        z_full = _line(2 * n, seed=1)
+        a = n // 2
         for method, wav in cases:
             kw = {"filter_length_s": 500.0} if wav is None else {"wavelet": wav}
+            if method == "ti_cosphi+context":
+                kw["context"] = (z_full, a, a + n)
 
-            def call():
+            def call(method=method, kw=kw, z=z, z_full=z_full, a=a, n=n):
+                zz = z_full[a:a + n] if "context" in kw else z
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", DataWarning)
-                    return W.postprocess(z, 1.0, 50.0, method, **kw)
+                    return W.postprocess(zz, 1.0, 50.0, method.split("+")[0], **kw)
 
             sec = _time(call, repeats)
             _, info = call()

@@ -299,7 +299,11 @@ def evaluate_flight(cfg, fl, methods, edge_s: float):
                 kw["resolution_m"] = r
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                out, info = postprocess(np.asarray(sol.g_smooth, float)[a:b], dt, speed, method=m, **kw)
+                # exactly as gravsurvey.pipeline calls it: the smoother's sigma and the flight as context
+                g_full = np.asarray(sol.g_smooth, float)
+                out, info = postprocess(g_full[a:b], dt, speed, method=m,
+                                        sigma=np.asarray(sol.sigma_smooth, float)[a:b],
+                                        context=(g_full, a, b), **kw)
             for w in caught:
                 notes.append(f"{m} {s.name}: {w.message}")
             z[a:b] = out

@@ -4,6 +4,7 @@
 Usage::
 
     python benchmarks/wavelet_study.py [--seeds 1,2,3,4,5] [--no-surrogate]
+    python benchmarks/wavelet_study.py --lines     # short survey lines and line edges
 
 Data: the SMOOTHED 3D-INM estimate of the seed scenarios (model.md section 3; configs/
 seed_smooth.yaml and configs/seed_steps.yaml, simulated by gravsurvey.simulate and estimated by
@@ -34,6 +35,8 @@ import yaml
 REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
+if str(REPO / "benchmarks") not in sys.path:
+    sys.path.insert(0, str(REPO / "benchmarks"))
 
 from gravsurvey import wavelet as W  # noqa: E402
 
@@ -238,13 +241,117 @@ def _print_headline(results):
     print(table(results, ["real smooth", "real steps", "real markov"]))
 
 
+# ------------------------------------------------------------------------------------------
+# survey lines: short lines and line edges on the real pipeline (docs/wavelet.md section 7)
+# ------------------------------------------------------------------------------------------
+def survey_line_estimates(which):
+    """The smoothed estimate of every flight of a survey, its sigma, speed, truth (mGal) and the
+    pipeline's line/tie segments (>= 8 samples), from the pipeline's own stages.
+
+    ``which``: ``"grid_ros2"`` (sample_data/grid_ros2 as shipped) or ``"platform"`` /
+    ``"strapdown"`` (configs/realistic_survey.yaml reduced to that flight and simulated into a
+    temporary directory with benchmarks/run.py's functions).
+    Yields ``(label, z, sigma, speed, truth_mgal, [(name, start, stop), ...])``.
+    """
+    import tempfile
+
+    from gravsurvey.config import load_config
+    from gravsurvey.inm.params import initial_state_from_gnss
+    from gravsurvey.inm.solve import estimate_anomaly
+    from gravsurvey.io.ingest import load_flight
+    from gravsurvey.pipeline import _segments, _truth_at, read_truth_csv
+
+    tmp = None
+    if which == "grid_ros2":
+        cfg_path = REPO / "sample_data" / "grid_ros2" / "survey.yaml"
+    else:
+        import run as bench_run
+
+        tmp = tempfile.TemporaryDirectory()
+        cfg_path = bench_run.simulate(bench_run._survey_sim(which, False), Path(tmp.name), which)
+    cfg = load_config(cfg_path)
+    for fl in cfg.flights:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            record = load_flight(fl.ingest, cfg.base_dir)
+            initial = fl.initial if fl.initial is not None else \
+                initial_state_from_gnss(record, fl.triad)
+            sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid)
+        t = np.asarray(sol.time, float)
+        unix = record.t0_unix_ns + np.round(t * 1e9).astype(np.int64)
+        truth = _truth_at(read_truth_csv(fl.truth), unix)
+        segs = [(s.name, int(s.start_index), int(s.stop_index)) for s in _segments(cfg, fl, sol)
+                if s.kind in ("line", "tie") and s.stop_index - s.start_index >= 8]
+        yield (f"{which} {fl.name}", np.asarray(sol.g_smooth, float),
+               np.asarray(sol.sigma_smooth, float), np.asarray(sol.speed, float), truth, segs)
+    if tmp is not None:
+        tmp.cleanup()
+
+
+def line_study(whiches=("grid_ros2", "platform", "strapdown")):
+    """Per survey: RMS vs truth (mGal) over all lines, and in the first/last 5 % of every line
+    vs the rest, for the input, the default without context (mirror at the line's ends), with
+    context (gated, as the pipeline would pass it) and with context ungated; plus per line."""
+    variants = {
+        "default (mirror ends)": lambda z, a, b, dt, sp, sg: W.postprocess(z[a:b], dt, sp, sigma=sg),
+        "default + context": lambda z, a, b, dt, sp, sg: W.postprocess(
+            z[a:b], dt, sp, sigma=sg, context=(z, a, b)),
+    }
+
+    def ungated(z, a, b, dt, sp, sg):
+        out, info = W.postprocess(z[a:b], dt, sp, sigma=sg)
+        if info["n"]:
+            out = W.ti_apply_with_context(z, a, b, info["wavelet"], info["n"],
+                                          gate_ratio=float("inf"))
+        return out, info
+
+    variants["context, gate off"] = ungated
+    print("\n## Survey lines: RMS vs truth, mGal (all lines / first+last 5 % / middle 90 %)\n")
+    print("| flight | lines (samples) | input | " + " | ".join(variants) + " |")
+    print("|---|---|---|" + "---|" * len(variants))
+    per_line = []
+    for label, z, sigma, speed, truth, segs in (x for w in whiches for x in survey_line_estimates(w)):
+        dt = 1.0
+        cols = {}
+        for name, fn in [("input", None)] + list(variants.items()):
+            allr, edge, mid = [], [], []
+            for sname, a, b in segs:
+                sp = float(np.nanmean(speed[a:b]))
+                if fn is None:
+                    out, info = z[a:b], {}
+                else:
+                    out, info = fn(z, a, b, dt, sp, sigma[a:b])
+                e = out / MGAL - truth[a:b]
+                k = max(1, int(0.05 * (b - a)))
+                allr.append(e)
+                edge.append(np.r_[e[:k], e[-k:]])
+                mid.append(e[k:-k])
+                if name == "default (mirror ends)":
+                    per_line.append((label, sname, b - a, float(np.sqrt(np.mean((z[a:b] / MGAL - truth[a:b]) ** 2))),
+                                     float(np.sqrt(np.mean(e ** 2))), info.get("n")))
+            r = [float(np.sqrt(np.mean(np.concatenate(x) ** 2))) for x in (allr, edge, mid)]
+            cols[name] = f"{r[0]:.2f} / {r[1]:.2f} / {r[2]:.2f}"
+        lens = ",".join(str(b - a) for _, a, b in segs)
+        print(f"| {label} | {lens} | " + " | ".join(cols.values()) + " |")
+    print("\n| flight | line | samples | input | default | n |")
+    print("|---|---|---|---|---|---|")
+    for label, sname, n, rin, rout, lev in per_line:
+        print(f"| {label} | {sname} | {n} | {rin:.2f} | {rout:.2f} | {lev} |")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", default="1,2,3,5", help="extra noise realisations (comma list)")
     ap.add_argument("--no-surrogate", action="store_true")
     ap.add_argument("--curves-only", action="store_true", help="only the Phi(n) tables")
+    ap.add_argument("--lines", action="store_true",
+                    help="only the survey-line study (sample_data/grid_ros2, realistic survey)")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
+    if args.lines:
+        line_study()
+        print(f"\n(line study ran in {time.perf_counter() - t0:.0f} s)")
+        return
     results, data = {}, {}
     for kind in ("smooth", "steps", "markov"):
         data[kind] = real_estimate(kind)

@@ -184,7 +184,8 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
             if cfg.processing_method == "inm":
                 for w in solvability_warnings(cfg.model, speed):
                     notes.append(f"{fl.name} {s.name}: {w}")
-            z, info = postprocess(sol.g_smooth[a:b], dt, speed, options=cfg.postprocess, sigma=sol.sigma_smooth[a:b])
+            z, info = postprocess(sol.g_smooth[a:b], dt, speed, options=cfg.postprocess,
+                                  sigma=sol.sigma_smooth[a:b], context=(sol.g_smooth, a, b))
         final[a:b] = z
         line[a:b] = s.name
         line_info[s.name] = {**_jsonable(info), "kind": s.kind, "speed_mps": speed, "samples": b - a}

@@ -66,6 +66,7 @@ __all__ = [
     "ti_approximation",
     "ti_period_samples",
     "ti_cosphi",
+    "ti_apply_with_context",
     "visushrink",
     "sure_shrink",
     "bayes_shrink",
@@ -108,6 +109,13 @@ BOUNDARY_MODES = (
 )
 
 THRESHOLDINGS = ("soft", "hard")
+
+#: Margin of the context extension, in periods ``2^(n+1)`` of the chosen level (see
+#: :func:`ti_apply_with_context`).
+CONTEXT_MARGIN_PERIODS = 2.0
+#: Context consistency gate: a side is used only if the RMS of the part removed there is at
+#: most this multiple of the RMS removed on the line.
+CONTEXT_GATE_RATIO = 1.25
 
 _WAVELET_METHODS = ("ti_cosphi", "cosphi", "visushrink", "sure", "bayes")
 _LOWPASS_METHODS = ("butterworth", "gaussian")
@@ -727,7 +735,8 @@ def ti_cosphi(z, wavelet="db10", min_level=1, max_level=None, sigma_rms=None):
     z : ndarray, shape (N,)
     wavelet : str
     min_level, max_level : int
-        Search range (default 1..K-1).
+        Search range (default 1..K-2: the coarsest level whose -6 dB period ``2^(n+1)`` samples
+        still fits in the line; coarser levels turn a short line into a near-straight line).
     sigma_rms : float, optional
         RMS of the estimator's own 1-sigma over the line (unit of ``z``).  When given, levels
         whose removed part has an RMS above it are not searched: the removed part is meant to
@@ -739,9 +748,10 @@ def ti_cosphi(z, wavelet="db10", min_level=1, max_level=None, sigma_rms=None):
     -------
     z_tilde : ndarray, shape (N,)
     info : dict
-        ``n``, ``Phi``, ``phi_deg``, ``phi_by_level`` (levels 1..K-1), ``period_samples``
+        ``n``, ``Phi``, ``phi_deg``, ``phi_by_level`` (levels 1..K-2), ``period_samples``
         (-6 dB period), ``gap_found``, ``removed_rms_by_level``, ``sigma_limited_level``
-        (largest level allowed by ``sigma_rms``, or None).
+        (largest level allowed by ``sigma_rms``, or None), ``length_limited_level`` (K-2, at
+        least 1).
 
     Notes
     -----
@@ -751,9 +761,15 @@ def ti_cosphi(z, wavelet="db10", min_level=1, max_level=None, sigma_rms=None):
     z = np.asarray(z, dtype=float)
     n_samples = z.size
     kmax = n_levels(n_samples)
-    # Level K cuts below the line's fundamental (period 2^(K+1) > 2N on the mirror extension):
-    # its kept part is a near-constant and Phi is trivially small there, so it is not searched.
-    top = max(1, kmax - 1)
+    # Level n keeps periods longer than 2^(n+1) samples (its -6 dB period).  Level K cuts below
+    # the line's fundamental (2^(K+1) > 2N on the mirror extension) and level K-1 still cuts at
+    # a period longer than the line (2^K > N): their kept parts are close to a constant or a
+    # straight line, and Phi is small there for that reason alone.  The search therefore stops
+    # at level K-2, the coarsest whose period fits in the line (2^(n+1) <= N).  Measured on
+    # lines of 129-165 samples (sample_data/grid_ros2): 3.42 -> 2.60 mGal with level K-1
+    # allowed, 2.29 mGal without it; no change on lines >= 2^(n_chosen+2) samples.
+    length_top = max(1, kmax - 2)
+    top = length_top
     if max_level is not None:
         top = max(1, min(int(max_level), top))
     lo = min(max(1, int(min_level)), top)
@@ -778,7 +794,8 @@ def ti_cosphi(z, wavelet="db10", min_level=1, max_level=None, sigma_rms=None):
     if n_best is None:  # constant line, or sigma allows no level: nothing to remove
         return z.copy(), {"n": 0, "Phi": float("nan"), "phi_deg": float("nan"),
                           "phi_by_level": phis, "period_samples": 0.0, "gap_found": False,
-                          "removed_rms_by_level": removed_rms, "sigma_limited_level": sigma_top}
+                          "removed_rms_by_level": removed_rms, "sigma_limited_level": sigma_top,
+                          "length_limited_level": length_top}
     phi = phis[n_best - 1]
     return _sfft.idct(c * resp[n_best - 1], 2, norm="ortho"), {
         "n": n_best,
@@ -789,6 +806,7 @@ def ti_cosphi(z, wavelet="db10", min_level=1, max_level=None, sigma_rms=None):
         "gap_found": found,
         "removed_rms_by_level": removed_rms,
         "sigma_limited_level": sigma_top,
+        "length_limited_level": length_top,
     }
 
 
@@ -1012,7 +1030,105 @@ def _wavelet_candidates(name):
     return ("db10", "coif4") if name == "auto" else (name,)
 
 
-def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, **kwargs):
+def _check_context(context, z):
+    """Validate ``context=(z_full, start, stop)``; return it as (ndarray, int, int)."""
+    try:
+        z_full, start, stop = context
+    except (TypeError, ValueError):
+        raise DataError("wavelet post-processor: context must be (z_full, start, stop)") from None
+    z_full = np.asarray(z_full, dtype=float)
+    if z_full.ndim != 1:
+        raise DataError(f"wavelet post-processor: context z_full has shape {z_full.shape}, "
+                        "expected 1-D (the whole flight's estimate)")
+    if isinstance(start, bool) or isinstance(stop, bool) or \
+            int(start) != start or int(stop) != stop:
+        raise DataError(f"wavelet post-processor: context start/stop {start!r}/{stop!r}, "
+                        "expected integer sample indices")
+    start, stop = int(start), int(stop)
+    if not (0 <= start < stop <= z_full.size) or stop - start != z.size:
+        raise DataError(f"wavelet post-processor: context range [{start}, {stop}) does not hold "
+                        f"the line's {z.size} samples inside the {z_full.size}-sample flight")
+    if not np.array_equal(z_full[start:stop], z):
+        raise DataError("wavelet post-processor: context z_full[start:stop] differs from the "
+                        "line; expected the same estimate the line was cut from")
+    return z_full, start, stop
+
+
+def ti_apply_with_context(z_full, start, stop, wavelet, level, margin_periods=CONTEXT_MARGIN_PERIODS,
+                          gate_ratio=CONTEXT_GATE_RATIO):
+    """The level-``level`` TI approximation of the line ``z_full[start:stop]``, filtered over
+    the line extended on both sides by the flight's own estimate.
+
+    The window is ``z_full[start - M : stop + M]`` with ``M = margin_periods * 2^(level+1)``
+    samples (default one -6 dB period of the level), clipped to the flight and
+    to the finite samples next to the line; only beyond the window is the mirror extension
+    used.  The line's ends then see real data instead of a mirror image, which removes the
+    mirror's end bias (a smooth signal with a slope at the end is bent over half a filter
+    length) wherever the estimate outside the line is as good as inside it.
+
+    Consistency gate: a side is used only if the part the level removes there (``z - A_n z``
+    over the margin) has an RMS at most ``gate_ratio`` times that on the line itself; a noisier
+    side (e.g. a turn with large dynamic errors) is dropped and the mirror is used at that end.
+    The ratio is not 1 because the RMS over one margin of stationary noise scatters by about
+    +-25 % (measured); 1.25 keeps most sides on stationary data and drops most of the realistic
+    survey's turns.  Measured in docs/wavelet.md section 7.
+
+    Parameters
+    ----------
+    z_full : ndarray, shape (M_total,)
+        The whole flight's smoothed estimate.
+    start, stop : int
+        The line is ``z_full[start:stop]``.
+    wavelet : str
+    level : int
+        ``>= 1``.
+    margin_periods : float
+        Margin on each side, in periods ``2^(level+1)`` samples.
+    gate_ratio : float
+        Consistency gate (``inf`` disables it).
+
+    Returns
+    -------
+    ndarray, shape (stop - start,)
+    """
+    if level <= 0:
+        return np.array(z_full[start:stop], dtype=float)
+    m = round(margin_periods * 2 ** (int(level) + 1))
+    lo, hi = max(0, start - m), min(z_full.size, stop + m)
+    bad = ~np.isfinite(z_full[lo:hi])
+    if np.any(bad):  # keep only the finite run around the line
+        idx = np.flatnonzero(bad) + lo
+        left, right = idx[idx < start], idx[idx >= stop]
+        if left.size:
+            lo = int(left[-1]) + 1
+        if right.size:
+            hi = int(right[0])
+    if lo < start or hi > stop:
+        # the gate's removed part is computed on a window one margin wider still, so that the
+        # mirror bias at that window's own ends does not reach the margins being judged
+        lo2, hi2 = max(0, lo - m), min(z_full.size, hi + m)
+        w = np.asarray(z_full[lo2:hi2], dtype=float)
+        if np.all(np.isfinite(w)):
+            r = w - ti_approximation(w, wavelet, level)
+        else:  # non-finite beyond the finite run: judge on the run alone
+            lo2, hi2 = lo, hi
+            w = np.asarray(z_full[lo:hi], dtype=float)
+            r = w - ti_approximation(w, wavelet, level)
+
+        def _ms(x):
+            return float(np.mean(x * x))
+
+        limit = gate_ratio ** 2 * _ms(r[start - lo2:stop - lo2])
+        if lo < start and _ms(r[lo - lo2:start - lo2]) > limit:
+            lo = start
+        if hi > stop and _ms(r[stop - lo2:hi - lo2]) > limit:
+            hi = stop
+    out = ti_approximation(np.asarray(z_full[lo:hi], dtype=float), wavelet, level)
+    return out[start - lo:stop - lo]
+
+
+def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, context=None,
+                **kwargs):
     """Clean the smoothed anomaly estimate of ONE survey line.
 
     Parameters
@@ -1033,6 +1149,16 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
         The estimator's own 1-sigma of ``z`` (e.g. ``InmSolution.sigma_smooth``), same unit.
         ``ti_cosphi`` then never removes more (RMS) than the RMS of ``sigma``: see
         :func:`ti_cosphi`.  Ignored by the other methods.
+    context : tuple (z_full, start, stop), optional
+        The whole flight's estimate (shape ``(M,)``, same unit) and the line's index range, with
+        ``z_full[start:stop]`` equal to ``z``.  ``ti_cosphi`` then chooses the level on the line
+        alone, exactly as without context, but applies it to the line extended by up to the
+        level's period on each side with the flight's own estimate
+        (:func:`ti_apply_with_context`), instead of the mirror image.  This removes the mirror's
+        end bias only where the estimate outside the line (turns) is as good as on the line;
+        measured in docs/wavelet.md section 7 (it helps on sample_data/grid_ros2 and hurts on
+        the realistic survey, whose turn estimates are 2-3x worse).  Ignored by the other
+        methods.
     **kwargs
         Otherwise, any key of the ``postprocess:`` block except ``method`` (``wavelet``,
         ``thresholding``, ``boundary``, ``resolution_m``, ``filter_length_s``,
@@ -1090,6 +1216,8 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
         if not np.any(ok) or np.any(sg[ok] < 0):
             raise DataError("wavelet post-processor: sigma must hold finite values >= 0")
         sigma_rms = float(np.sqrt(np.mean(sg[ok] ** 2)))
+    if context is not None:
+        context = _check_context(context, z)
     info = {"method": method, "wavelet": None, "n": None, "p": None, "Phi": None,
             "phi_deg": None, "resolution_m": None}
     if method == "none":
@@ -1121,6 +1249,10 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
     info.update(sub)
     info["wavelet"] = wname
     info["method"] = method
+    if method == "ti_cosphi":
+        info["context"] = context is not None
+        if context is not None and info.get("n"):
+            out = ti_apply_with_context(*context, wname, info["n"])
     return out, info
 
 

@@ -123,8 +123,9 @@ def test_ti_phi_by_level_is_phi_of_the_output():
     n = 3000
     z = np.cumsum(rng.standard_normal(n)) + 3 * rng.standard_normal(n)
     _, info = W.ti_cosphi(z, "coif4")
-    assert len(info["phi_by_level"]) == W.n_levels(n) - 1
-    for level in range(1, W.n_levels(n)):
+    # levels 1..K-2: the coarsest whose -6 dB period 2^(n+1) still fits in the line
+    assert len(info["phi_by_level"]) == W.n_levels(n) - 2 == info["length_limited_level"]
+    for level in range(1, W.n_levels(n) - 1):
         a = W.ti_approximation(z, "coif4", level)
         assert info["phi_by_level"][level - 1] == pytest.approx(W.phi_criterion(z, a), rel=1e-9)
 
@@ -238,8 +239,11 @@ def test_step_stays_centred(method):
 
 @pytest.mark.parametrize("n", [7201, 8192, 9973])
 def test_edges_not_worse_than_input_and_middle_cleaned(n):
-    """Smooth anomaly + smoother-like coloured noise.  Measured: error RMS of the default in the
-    first/last 5 % vs the middle 90 %, and vs the input error there."""
+    """Smooth anomaly + smoother-like coloured noise, line on its own (no context: mirror
+    extension).  Measured: error RMS of the default in the first/last 5 % vs the middle 90 %,
+    and vs the input error there.  Issue 5's "edges no larger than the middle" is NOT met
+    without context (edges ~10x the middle; docs/wavelet.md section 7); it is met with context,
+    see test_context_makes_line_edges_no_worse_than_the_middle."""
     t = np.arange(n, dtype=float)
     edge_in, edge_out, mid_out, mid_in = [], [], [], []
     for seed in range(4):
@@ -257,6 +261,102 @@ def test_edges_not_worse_than_input_and_middle_cleaned(n):
     m_in, m_out = _rms(np.concatenate(mid_in)), _rms(np.concatenate(mid_out))
     assert m_out < 0.1 * m_in  # middle: ~0.15 of 4 mGal measured
     assert e_out < 0.5 * e_in  # edges: ~1.3-1.8 of 4 mGal measured (docs/wavelet.md)
+
+
+def _stationary_flight(seed, m=12000):
+    """A whole flight of smooth truth + smoother-like noise (the same statistics everywhere)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(m, dtype=float)
+    g = _smooth_truth(t, rng.uniform(0, 2 * np.pi, 3))
+    return g, g + _coloured_noise(m, rng)
+
+
+def test_context_makes_line_edges_no_worse_than_the_middle():
+    """Issue 5 item 5 (edge artefacts no larger than the middle), met when the flight's estimate
+    outside the line is as good as on it: lines of 2000 samples cut from a stationary flight,
+    default method with context=(z_full, start, stop).  Measured (6 realisations): edge
+    0.76 mGal vs middle 0.75 mGal with context; 2.26 mGal at the edges without it (mirror)."""
+    n = 2000
+    e_ctx, m_ctx, e_mir = [], [], []
+    for seed in range(6):
+        g, z = _stationary_flight(700 + seed)
+        a = 3000 + 400 * seed
+        b = a + n
+        out, info = W.postprocess(z[a:b], 1.0, 50.0, context=(z, a, b))
+        mirror, info_m = W.postprocess(z[a:b], 1.0, 50.0)
+        assert info["n"] == info_m["n"] and info["context"]  # same level: chosen on the line
+        k = int(0.05 * n)
+        e, em = out - g[a:b], mirror - g[a:b]
+        e_ctx.append(np.r_[e[:k], e[-k:]])
+        m_ctx.append(e[k:-k])
+        e_mir.append(np.r_[em[:k], em[-k:]])
+    edge, mid = _rms(np.concatenate(e_ctx)), _rms(np.concatenate(m_ctx))
+    assert edge <= 1.25 * mid  # tolerance: RMS over 2 x 5 % of a line of coloured noise scatters
+    assert edge < 0.5 * _rms(np.concatenate(e_mir))
+
+
+def test_context_gate_drops_noisier_sides_and_trivial_context_is_the_mirror():
+    _, z = _stationary_flight(41)
+    a, b = 4000, 6000
+    mirror, info = W.postprocess(z[a:b], 1.0, 50.0)
+    # the context is only the line itself: nothing to extend with
+    same, _ = W.postprocess(z[a:b], 1.0, 50.0, context=(z[a:b], 0, b - a))
+    np.testing.assert_allclose(same, mirror, atol=1e-15 * np.max(np.abs(z)) + 1e-20)
+    # both sides 4x noisier than the line in the same band (RMS ~16 vs 4 mGal; like a turn with
+    # large dynamic errors): the gate does not use them, the result is the mirror's
+    rng = np.random.default_rng(42)
+    noisy = z.copy()
+    noisy[:a] += np.sqrt(15.0) * _coloured_noise(a, rng)
+    noisy[b:] += np.sqrt(15.0) * _coloured_noise(z.size - b, rng)
+    gated, _ = W.postprocess(noisy[a:b], 1.0, 50.0, context=(noisy, a, b))
+    np.testing.assert_allclose(gated, mirror, rtol=0, atol=1e-12 * np.max(np.abs(z)))
+    # the gate's limit is a heuristic: measured here, those noisy sides would still have beaten
+    # the mirror's end bias (docs/wavelet.md section 7); with the gate disabled they are used
+    leaky = W.ti_apply_with_context(noisy, a, b, info["wavelet"], info["n"], gate_ratio=np.inf)
+    assert np.max(np.abs(leaky - mirror)) > 0.1 * MGAL
+    # NaN outside the line (e.g. no estimate in a gap) stops the extension there
+    holes = z.copy()
+    holes[a - 10] = np.nan
+    holes[b + 5] = np.nan
+    out, _ = W.postprocess(z[a:b], 1.0, 50.0, context=(holes, a, b))
+    assert np.all(np.isfinite(out))
+
+
+def test_context_validation():
+    z = np.arange(100.0)
+    with pytest.raises(DataError, match="context must be"):
+        W.postprocess(z[10:40], 1.0, 50.0, context=z)
+    with pytest.raises(DataError, match="does not hold"):
+        W.postprocess(z[10:40], 1.0, 50.0, context=(z, 10, 41))
+    with pytest.raises(DataError, match="differs from the line"):
+        W.postprocess(z[10:40], 1.0, 50.0, context=(z, 11, 41))
+    with pytest.raises(DataError, match="expected 1-D"):
+        W.postprocess(z[10:40], 1.0, 50.0, context=(z[None, :], 10, 40))
+
+
+@pytest.mark.parametrize("n", [129, 165, 300, 560])
+def test_short_lines_level_fits_the_line_and_beats_the_input(n):
+    """Short survey lines (100-600 samples): the level's -6 dB period 2^(n+1) never exceeds the
+    line, and the result is closer to truth than the input and than level K-1 (which turned a
+    165-sample line of sample_data/grid_ros2 into a near-straight line).  Truth: the seed's
+    smooth field 4x compressed (periods 225-900 s), smoother-like noise of 4 mGal, 12
+    realisations.  Measured (in / default / level K-1, mGal): 129: 5.13/4.81/7.21,
+    165: 4.54/4.33/6.35, 300: 4.04/3.65/12.97, 560: 4.02/3.43/19.17."""
+    r_in, r_out, r_k1 = [], [], []
+    for seed in range(12):
+        rng = np.random.default_rng(500 + seed)
+        t = np.arange(n, dtype=float)
+        g = _smooth_truth(4 * t, rng.uniform(0, 2 * np.pi, 3))
+        z = g + _coloured_noise(n, rng)
+        out, info = W.postprocess(z, 1.0, 80.0, sigma=4 * MGAL)
+        assert 1 <= info["n"] <= info["length_limited_level"] == W.n_levels(n) - 2
+        assert info["period_samples"] <= n
+        r_in.append(z - g)
+        r_out.append(out - g)
+        r_k1.append(W.ti_approximation(z, info["wavelet"], W.n_levels(n) - 1) - g)
+    e_out = _rms(np.concatenate(r_out))
+    assert e_out < 0.97 * _rms(np.concatenate(r_in))
+    assert e_out < 0.8 * _rms(np.concatenate(r_k1))
 
 
 def test_shrinkage_baselines_beat_white_noise():
@@ -329,7 +429,7 @@ def test_no_gap_uses_the_coarsest_level_searched():
     z = np.linspace(0.0, 1.0, 500) ** 3  # a smooth curve without noise: Phi(n) rises throughout
     out, info = W.postprocess(z, 1.0, 50.0, "ti_cosphi", wavelet="db10")
     phis = info["phi_by_level"]
-    assert len(phis) == W.n_levels(500) - 1  # level K (below the line's fundamental) excluded
+    assert len(phis) == W.n_levels(500) - 2  # levels K, K-1 (periods longer than N) excluded
     assert not info["gap_found"]
     assert all(b > a for a, b in zip(phis, phis[1:]))  # measured: monotone, no valley
     assert info["n"] == len(phis)
