@@ -25,6 +25,10 @@ Sign of ``g``: the mechanization uses normal gravitation only; the true
 gravitation has the extra ``-g Up``, so the computed inertial velocity gains
 ``+g Up`` relative to the truth: ``+g n`` in ``d(dp)/dt``.
 
+With GNSS position aiding the state is extended to 14 (attitude error ``theta`` and gyro
+bias ``b`` on the triad, :func:`continuous_model_n`), because GNSS sees the true position
+error ``C (dq + q x theta)`` while the seed's ``dq`` carries the attitude error as position.
+
 Exact discretisation: with ``y = (C dq, C dp, g, f3)`` (``C`` the computed
 triad->inertial matrix) the ``w x`` terms cancel, and the model becomes
 ``dy/dt = A_y y + noise`` with ``A_y`` varying only at the Earth/transport
@@ -53,6 +57,13 @@ DQ = np.array([DQ1, DQ2, DQ3])
 DP = np.array([DP1, DP2, DP3])
 #: Position in the block order (dq1..3, dp1..3, g, f3) of each seed index.
 _PERM = np.array([0, 3, 1, 4, 2, 5, 6, 7])
+#: Extension for position (GNSS) aiding: attitude error ``theta`` and gyro bias ``b`` on the
+#: triad (rad, rad/s), after the seed's eight states.
+TH1, TH2, TH3, BG1, BG2, BG3 = range(8, 14)
+N_STATE_AIDED = 14
+TH = np.array([TH1, TH2, TH3])
+BG = np.array([BG1, BG2, BG3])
+_PERM_AIDED = np.array([0, 3, 1, 4, 2, 5, 6, 7, 8, 9, 10, 11, 12, 13])
 
 
 @dataclass
@@ -123,6 +134,7 @@ def _noise_params(params, alt_dt):
         params.anomaly_sigma_mps2,
         params.altimeter_sigma_m**2 * alt_dt,  # altimeter error as a white noise in the dynamics
         1.0 if params.radius_source == "altimeter" else 0.0,
+        0.0,  # gyro-bias random walk PSD (the bias is a constant)
     ])
 
 
@@ -139,14 +151,25 @@ def _skew(v):
 
 
 @njit(cache=True)
-def continuous_model(r, v, up, e1, e2, e3, w02, speed, c):
-    """``A_y`` (8, 8) and noise density ``Qc_y`` (8, 8) in block order (dr, dv, g, f3).
+def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
+    """``A_y`` and noise density ``Qc_y`` (n, n) in block order, ``n`` = 8 or 14.
 
-    ``c`` = noise parameter vector from :func:`_noise_params`.
+    Block order ``(dr, dv, g, f3)`` (n = 8, the seed) or ``(dr, dv, g, f3, theta, b)``
+    (n = 14): ``dr = C dq``, ``dv = C dp``, ``theta`` (C theta on inertial axes) the attitude
+    error and ``b`` the gyro bias on the triad.  ``c`` = noise parameter vector from
+    :func:`_noise_params`; ``e1, e2, e3`` are the columns of ``C`` at the interval midpoint.
+
+    With ``theta`` defined by ``C_true = C (I + [theta x])`` the seed's ``dq`` is
+    ``C^T dr_i - q x theta`` (the rotation of the triad merges into it) and
+    ``d theta/dt = -w x theta - nu`` with the gyro error ``nu = b + white``; on inertial axes
+    ``d(C theta)/dt = -C nu``.  The same ``nu`` drives ``dq`` (``+q x nu``) and ``dp``
+    (``+p x nu``): the process noise is correlated across the three blocks.  The radius
+    ``R_ext`` of the gravity model is taken at the computed latitude, which moves with the
+    true position error ``C^T dr_i = dq + q x theta``: the theta part enters like dq.
     """
     s_nu, s_f, s_w, lam_f3, sig_f3, lam_s, sig_s, s_eps, ext = c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8]
-    a = np.zeros((8, 8))
-    qc = np.zeros((8, 8))
+    a = np.zeros((n, n))
+    qc = np.zeros((n, n))
     rn = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
     r0 = r / rn
     for i in range(3):
@@ -154,6 +177,7 @@ def continuous_model(r, v, up, e1, e2, e3, w02, speed, c):
         a[3 + i, i] = -w02
         a[3 + i, 6] = up[i]
         a[3 + i, 7] = e3[i]
+    aided = n == 14
     if ext == 0.0:
         for i in range(3):
             for j in range(3):
@@ -165,17 +189,43 @@ def continuous_model(r, v, up, e1, e2, e3, w02, speed, c):
         for i in range(3):
             for j in range(3):
                 a[3 + i, j] += 3.0 * w02 * r0[i] * (r0[j] - cosa * up[j])
+        if aided:
+            # ... with dr_i = C dq + r x (C theta): n . (r x th) = th . (n x r)
+            nxr = np.empty(3)
+            nxr[0] = up[1] * r[2] - up[2] * r[1]
+            nxr[1] = up[2] * r[0] - up[0] * r[2]
+            nxr[2] = up[0] * r[1] - up[1] * r[0]
+            for i in range(3):
+                for j in range(3):
+                    a[3 + i, 8 + j] += -3.0 * w02 * r0[i] * cosa * nxr[j]
     lam_g = lam_s * speed
     a[6, 6] = -lam_g
     a[7, 7] = -lam_f3
-    # gyro drift: d(dr) += [r x] C nu, d(dv) += [v x] C nu, C nu isotropic white
-    lg = np.zeros((6, 3))
+    # gyro drift: d(dr) += [r x] C nu, d(dv) += [v x] C nu, (d(C theta) -= C nu), C nu isotropic
+    nb = 9 if aided else 6
+    lg = np.zeros((nb, 3))
     lg[0:3, :] = _skew(r)
     lg[3:6, :] = _skew(v)
+    if aided:
+        for i in range(3):
+            lg[6 + i, i] = -1.0
     qg = s_nu * (lg @ lg.T)
-    for i in range(6):
-        for j in range(6):
-            qc[i, j] += qg[i, j]
+    # rows of lg -> state rows (0..5, then theta at 8..10)
+    rows = np.array([0, 1, 2, 3, 4, 5, 8, 9, 10])
+    for i in range(nb):
+        for j in range(nb):
+            qc[rows[i], rows[j]] += qg[i, j]
+    if aided:
+        # the bias is nu's constant part: the same couplings with C (triad -> inertial)
+        cm = np.empty((3, 3))
+        for i in range(3):
+            cm[i, 0] = e1[i]
+            cm[i, 1] = e2[i]
+            cm[i, 2] = e3[i]
+        lb = lg @ cm
+        for i in range(nb):
+            for j in range(3):
+                a[rows[i], 11 + j] = lb[i, j]
     for i in range(3):
         for j in range(3):
             qc[3 + i, 3 + j] += s_f * (e1[i] * e1[j] + e2[i] * e2[j]) + s_w * e3[i] * e3[j]
@@ -183,14 +233,27 @@ def continuous_model(r, v, up, e1, e2, e3, w02, speed, c):
                 qc[3 + i, 3 + j] += 9.0 * w02 * w02 * s_eps * r0[i] * r0[j]
     qc[6, 6] = 2.0 * lam_g * sig_s * sig_s
     qc[7, 7] = 2.0 * lam_f3 * sig_f3 * sig_f3
+    if aided:
+        for i in range(3):
+            qc[11 + i, 11 + i] = c[9]
     return a, qc
 
 
 @njit(cache=True)
+def continuous_model(r, v, up, e1, e2, e3, w02, speed, c):
+    """``A_y`` (8, 8) and noise density ``Qc_y`` (8, 8) in block order (dr, dv, g, f3).
+
+    ``c`` = noise parameter vector from :func:`_noise_params`.
+    """
+    return continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, 8)
+
+
+@njit(cache=True)
 def _to_seed(m_blk, perm):
-    out = np.empty((8, 8))
-    for i in range(8):
-        for j in range(8):
+    n = perm.shape[0]
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
             out[i, j] = m_blk[perm[i], perm[j]]
     return out
 
@@ -199,25 +262,30 @@ def _to_seed(m_blk, perm):
 def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     """Transition and process noise of every epoch, seed order (see module docstring).
 
+    The state size is ``perm.shape[0]`` (8, or 14 with attitude and gyro-bias states).
+
     Returns
     -------
-    phi, q : ndarray (N, 8, 8)
+    phi, q : ndarray (N, n, n)
         Index 0 is identity / zero.
     """
     nep = dt.shape[0]
-    phi = np.zeros((nep, 8, 8))
-    q = np.zeros((nep, 8, 8))
-    phi[0] = np.eye(8)
-    t_prev = np.eye(8)
-    t_cur = np.eye(8)
+    n = perm.shape[0]
+    phi = np.zeros((nep, n, n))
+    q = np.zeros((nep, n, n))
+    phi[0] = np.eye(n)
+    t_prev = np.eye(n)
+    t_cur = np.eye(n)
+    nblk = 3 if n == 14 else 2
     for k in range(1, nep):
-        a, qc = continuous_model(r[k], v[k], up[k], e1[k], e2[k], e3[k], w02[k], speed[k], c)
+        a, qc = continuous_model_n(r[k], v[k], up[k], e1[k], e2[k], e3[k], w02[k], speed[k], c, n)
         phy, qy = van_loan(a, qc, dt[k])
-        for blk in range(2):
+        for blk in range(nblk):
+            o = 3 * blk if blk < 2 else 8
             for i in range(3):
                 for j in range(3):
-                    t_prev[3 * blk + i, 3 * blk + j] = mat_it[k - 1, i, j]
-                    t_cur[3 * blk + i, 3 * blk + j] = mat_it[k, i, j]
+                    t_prev[o + i, o + j] = mat_it[k - 1, i, j]
+                    t_cur[o + i, o + j] = mat_it[k, i, j]
         phx = t_cur.T @ phy @ t_prev
         qx = t_cur.T @ qy @ t_cur
         phi[k] = _to_seed(phx, perm)
@@ -226,8 +294,8 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     return phi, q
 
 
-def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = False):
-    """Phi, Q sequences ``(N, 8, 8)`` for the filter (seed state order).
+def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = False, aided: bool = False):
+    """Phi, Q sequences ``(N, n, n)`` for the filter (seed state order).
 
     Parameters
     ----------
@@ -237,41 +305,83 @@ def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = Fal
         Altimeter sampling interval, s (density of its error in the dynamics).
     reference : bool
         Pure-numpy/scipy path (for tests).
+    aided : bool
+        14 states: the seed's 8 plus attitude error and gyro bias (position aiding);
+        otherwise n = 8.
     """
     c = _noise_params(params, alt_dt)
+    perm = _PERM_AIDED if aided else _PERM
+    n = perm.size
     args = (geom.dt, geom.r_i, geom.v_i, geom.up_i, geom.e1_i, geom.e2_i, geom.e3_i, geom.w02,
             geom.speed, geom.mat_it)
     if not reference:
-        return discretise_kernel(*[np.ascontiguousarray(x) for x in args], c, _PERM)
+        return discretise_kernel(*[np.ascontiguousarray(x) for x in args], c, perm)
     nep = geom.dt.size
-    phi = np.zeros((nep, 8, 8))
-    q = np.zeros((nep, 8, 8))
-    phi[0] = np.eye(8)
+    phi = np.zeros((nep, n, n))
+    q = np.zeros((nep, n, n))
+    phi[0] = np.eye(n)
     for k in range(1, nep):
-        a, qc = continuous_model.py_func(geom.r_i[k], geom.v_i[k], geom.up_i[k], geom.e1_i[k], geom.e2_i[k],
-                                         geom.e3_i[k], geom.w02[k], geom.speed[k], c)
-        m = np.zeros((16, 16))
+        a, qc = continuous_model_n.py_func(geom.r_i[k], geom.v_i[k], geom.up_i[k], geom.e1_i[k], geom.e2_i[k],
+                                           geom.e3_i[k], geom.w02[k], geom.speed[k], c, n)
+        m = np.zeros((2 * n, 2 * n))
         dt = geom.dt[k]
-        m[:8, :8], m[:8, 8:], m[8:, 8:] = -a * dt, qc * dt, a.T * dt
+        m[:n, :n], m[:n, n:], m[n:, n:] = -a * dt, qc * dt, a.T * dt
         e = scipy.linalg.expm(m)
-        phy = e[8:, 8:].T
-        qy = phy @ e[:8, 8:]
-        tp = scipy.linalg.block_diag(geom.mat_it[k - 1], geom.mat_it[k - 1], 1.0, 1.0)
-        tc = scipy.linalg.block_diag(geom.mat_it[k], geom.mat_it[k], 1.0, 1.0)
-        phi[k] = (tc.T @ phy @ tp)[np.ix_(_PERM, _PERM)]
-        qs = (tc.T @ qy @ tc)[np.ix_(_PERM, _PERM)]
+        phy = e[n:, n:].T
+        qy = phy @ e[:n, n:]
+        blocks_p = [geom.mat_it[k - 1], geom.mat_it[k - 1], 1.0, 1.0]
+        blocks_c = [geom.mat_it[k], geom.mat_it[k], 1.0, 1.0]
+        if aided:
+            blocks_p += [geom.mat_it[k - 1], np.eye(3)]
+            blocks_c += [geom.mat_it[k], np.eye(3)]
+        tp = scipy.linalg.block_diag(*blocks_p)
+        tc = scipy.linalg.block_diag(*blocks_c)
+        phi[k] = (tc.T @ phy @ tp)[np.ix_(perm, perm)]
+        qs = (tc.T @ qy @ tc)[np.ix_(perm, perm)]
         q[k] = 0.5 * (qs + qs.T)
     return phi, q
 
 
-def initial_covariance(params) -> np.ndarray:
-    """Prior covariance (8, 8) at the first epoch (zero prior mean)."""
-    d = np.empty(8)
-    d[DQ] = params.initial_position_sigma_m**2
-    d[DP] = params.initial_velocity_sigma_mps**2
-    d[G] = params.initial_anomaly_sigma_mps2**2
-    d[F3] = params.initial_gravimeter_sigma_mps2**2
-    return np.diag(d)
+def initial_covariance(params, q_t=None, p_t=None) -> np.ndarray:
+    """Prior covariance at the first epoch (zero prior mean).
+
+    Parameters
+    ----------
+    params : InmParams
+    q_t, p_t : ndarray (3,), optional
+        Triad-resolved position (m) and inertial velocity (m/s) at the first epoch.  Given
+        both, the 14-state prior of the aided filter: ``dq = C^T dr - q x theta`` and
+        ``dp = C^T dv - p x theta`` with independent ``dr`` (initial_position_sigma_m),
+        ``dv`` (initial_velocity_sigma_mps) and ``theta`` (initial_attitude_sigma_deg), and
+        the gyro bias (gyro_bias_sigma_degph).  Otherwise the seed's diagonal (8, 8).
+    """
+    if q_t is None or p_t is None:
+        d = np.empty(8)
+        d[DQ] = params.initial_position_sigma_m**2
+        d[DP] = params.initial_velocity_sigma_mps**2
+        d[G] = params.initial_anomaly_sigma_mps2**2
+        d[F3] = params.initial_gravimeter_sigma_mps2**2
+        return np.diag(d)
+    # linear map from independent (dr, dv, theta) to (dq, dp, theta), block order
+    sq, sv = params.initial_position_sigma_m, params.initial_velocity_sigma_mps
+    sa = math.radians(params.initial_attitude_sigma_deg)
+    m = np.zeros((9, 9))
+    m[0:3, 0:3] = np.eye(3)
+    m[3:6, 3:6] = np.eye(3)
+    m[6:9, 6:9] = np.eye(3)
+    m[0:3, 6:9] = -_skew.py_func(np.asarray(q_t, float))
+    m[3:6, 6:9] = -_skew.py_func(np.asarray(p_t, float))
+    cov = m @ np.diag([sq**2] * 3 + [sv**2] * 3 + [sa**2] * 3) @ m.T
+    blk = np.zeros((14, 14))
+    rows = [0, 1, 2, 3, 4, 5, 8, 9, 10]
+    blk[np.ix_(rows, rows)] = cov
+    blk[6, 6] = params.initial_anomaly_sigma_mps2**2
+    blk[7, 7] = params.initial_gravimeter_sigma_mps2**2
+    sb = math.radians(params.gyro_bias_sigma_degph) / 3600.0
+    for i in range(11, 14):
+        blk[i, i] = sb**2
+    p = blk[np.ix_(_PERM_AIDED, _PERM_AIDED)]
+    return 0.5 * (p + p.T)
 
 
 # --------------------------------------------------------------------------
@@ -317,14 +427,18 @@ class AltimeterMeasurement:
         self.sigma_m = float(sigma_m)
         self.ellipsoid = ellipsoid
 
-    def build(self, nav, idx, half_window):
-        """Return ``z (N, m)``, ``H (N, m, 8)``, ``R (N, m, m)`` with NaN for missing."""
+    def build(self, nav, idx, half_window, n_state: int = N_STATE):
+        """Return ``z (N, m)``, ``H (N, m, n_state)``, ``R (N, m, m)`` with NaN for missing.
+
+        With ``n_state`` = 14 (attitude states) the latitude term of ``R`` sees the true
+        position error ``dq + q x theta``: ``H`` gains ``cos(a) (n x q)`` on ``theta``.
+        """
         t_ep = nav.time[idx]
         ok = (self.time >= nav.time[0]) & (self.time <= nav.time[-1]) & np.isfinite(self.height)
         ta, ha = self.time[ok], self.height[ok]
         nep = t_ep.size
         if ta.size == 0:
-            return np.full((nep, 1), np.nan), np.zeros((nep, 1, 8)), np.ones((nep, 1, 1))
+            return np.full((nep, 1), np.nan), np.zeros((nep, 1, n_state)), np.ones((nep, 1, 1))
         pos = np.clip(np.searchsorted(t_ep, ta), 0, nep - 1)
         prev = np.clip(pos - 1, 0, nep - 1)
         k = np.where(np.abs(ta - t_ep[prev]) <= np.abs(ta - t_ep[pos]), prev, pos)
@@ -339,7 +453,7 @@ class AltimeterMeasurement:
         counts = np.bincount(k, minlength=nep)
         m = max(int(counts.max()), 1)
         z = np.full((nep, m), np.nan)
-        h = np.zeros((nep, m, 8))
+        h = np.zeros((nep, m, n_state))
         r = np.broadcast_to(np.eye(m) * self.sigma_m**2, (nep, m, m)).copy()
         slot = np.zeros(nep, dtype=int)
         # z = |r_c| - R(lat_c, lon_c, h_alt): a horizontal error moves both terms, so that
@@ -350,7 +464,11 @@ class AltimeterMeasurement:
         n_e = mat_en(lat_ep, lon_ep)[:, :, 2]
         cosa = np.einsum("ni,ni->n", n_e, r_e / np.linalg.norm(r_e, axis=1)[:, None])
         n_i = np.einsum("nij,nj->ni", mat_ie(nav.time[idx], self.ellipsoid.omega), n_e)
-        q0_t = np.einsum("nji,nj->ni", nav.mat_it[idx], n_i) * cosa[:, None]
+        n_t = np.einsum("nji,nj->ni", nav.mat_it[idx], n_i)
+        q0_t = n_t * cosa[:, None]
+        if n_state == N_STATE_AIDED:
+            q_t = np.einsum("nji,nj->ni", nav.mat_it[idx], r_ep)
+            h_th = np.cross(n_t, q_t) * cosa[:, None]
         for j in range(k.size):
             kk = k[j]
             s = slot[kk]
@@ -358,4 +476,104 @@ class AltimeterMeasurement:
             z[kk, s] = zval[j]
             h[kk, s, DQ] = q0_t[kk]
             h[kk, s, DP] = d[j] * q0_t[kk]
+            if n_state == N_STATE_AIDED:
+                h[kk, s, TH] = h_th[kk]
+        return z, h, r
+
+
+def _nearest_epoch(t_ep, ts, half_window):
+    """Index of the nearest filter epoch of each sample time and the offset ``ts - t_ep[k]``;
+    ``use`` marks samples within ``half_window`` (s) of their epoch."""
+    nep = t_ep.size
+    pos = np.clip(np.searchsorted(t_ep, ts), 0, nep - 1)
+    prev = np.clip(pos - 1, 0, nep - 1)
+    k = np.where(np.abs(ts - t_ep[prev]) <= np.abs(ts - t_ep[pos]), prev, pos)
+    d = ts - t_ep[k]
+    use = np.abs(d) <= half_window + 1e-9
+    return k, d, use
+
+
+class GnssMeasurement:
+    """GNSS position aiding: ``z = M_in^T (r_computed - r_gnss)`` on local ENU axes, m.
+
+    ``r_computed`` is the mechanized inertial position at the GNSS time (cubic Hermite),
+    ``r_gnss`` the GNSS geodetic position mapped to the inertial frame, and ``M_in`` the
+    local ENU -> inertial rotation at the GNSS point.  The seed's ``dq`` merges the triad's
+    attitude error into the position (``dq = C^T dr_i - q x theta``, see
+    :func:`continuous_model_n`), and GNSS sees the true position error
+    ``dr_i = C (dq + q x theta)`` (``C`` the computed triad -> inertial matrix at the epoch):
+    the measurement needs the 14-state model, where a sample at time offset ``d`` from its
+    epoch has ``H = M_in^T C [I, d I, [q x]]`` on ``(dq, dp, theta)``.
+
+    Samples within half an epoch of a filter epoch are averaged there (exact for the linear
+    model: the mean of ``H_j x + v_j`` is ``mean(H_j) x + mean(v_j)``); their errors are taken
+    as white per sample, so ``R = diag(sh^2, sh^2, sv^2) / n`` for ``n`` samples.
+
+    Parameters
+    ----------
+    time : ndarray (k,)
+        GNSS times, s (record base).
+    lat, lon : ndarray (k,)
+        Geodetic latitude and longitude, rad.
+    height : ndarray (k,)
+        Ellipsoidal height, m.
+    horizontal_sigma_m, vertical_sigma_m : float
+        1-sigma of each sample's east/north and up error, m (> 0).
+    ellipsoid : Ellipsoid
+    """
+
+    def __init__(self, time, lat, lon, height, horizontal_sigma_m, vertical_sigma_m, ellipsoid: Ellipsoid = WGS84):
+        self.time = np.asarray(time, float)
+        self.lat = np.asarray(lat, float)
+        self.lon = np.asarray(lon, float)
+        self.height = np.asarray(height, float)
+        self.sigma = np.array([horizontal_sigma_m, horizontal_sigma_m, vertical_sigma_m], float)
+        self.ellipsoid = ellipsoid
+
+    def build(self, nav, idx, half_window, n_state: int = N_STATE_AIDED):
+        """Return ``z (N, 3)``, ``H (N, 3, n_state)``, ``R (N, 3, 3)`` (ENU), NaN where no sample.
+
+        ``n_state`` = 8 leaves out the attitude term (only right when ``theta`` is negligible
+        against the GNSS noise; kept for tests of the geometry).
+        """
+        t_ep = nav.time[idx]
+        nep = t_ep.size
+        z = np.full((nep, 3), np.nan)
+        h = np.zeros((nep, 3, n_state))
+        r = np.broadcast_to(np.diag(self.sigma**2), (nep, 3, 3)).copy()
+        ok = ((self.time >= nav.time[0]) & (self.time <= nav.time[-1]) & np.isfinite(self.lat)
+              & np.isfinite(self.lon) & np.isfinite(self.height))
+        if not ok.any():
+            return z, h, r
+        ts, lat, lon, hh = self.time[ok], self.lat[ok], self.lon[ok], self.height[ok]
+        k, d, use = _nearest_epoch(t_ep, ts, half_window)
+        ts, lat, lon, hh, k, d = ts[use], lat[use], lon[use], hh[use], k[use], d[use]
+        if ts.size == 0:
+            return z, h, r
+        m_ie = mat_ie(ts, self.ellipsoid.omega)
+        r_g = np.einsum("nij,nj->ni", m_ie, geodetic_to_ecef(lat, lon, hh, self.ellipsoid))
+        m_in = np.einsum("nij,njk->nik", m_ie, mat_en(lat, lon))
+        zs = np.einsum("nji,nj->ni", m_in, _hermite(nav, ts) - r_g)
+        # H (dq block) = M_in^T C_k: ENU <- triad
+        c_k = nav.mat_it[idx][k]
+        hq = np.einsum("nji,njk->nik", m_in, c_k)
+        cnt = np.bincount(k, minlength=nep).astype(float)
+        zsum = np.zeros((nep, 3))
+        hsum = np.zeros((nep, 3, n_state))
+        np.add.at(zsum, k, zs)
+        hblk = np.zeros((ts.size, 3, n_state))
+        hblk[:, :, DQ] = hq
+        hblk[:, :, DP] = d[:, None, None] * hq
+        if n_state == N_STATE_AIDED:
+            # q x theta = [q x] theta with q = C^T r on the triad at the epoch
+            q_t = np.einsum("nji,nj->ni", c_k, nav.r_i[idx][k])
+            sk = np.zeros((ts.size, 3, 3))
+            sk[:, 0, 1], sk[:, 0, 2], sk[:, 1, 2] = -q_t[:, 2], q_t[:, 1], -q_t[:, 0]
+            sk[:, 1, 0], sk[:, 2, 0], sk[:, 2, 1] = q_t[:, 2], -q_t[:, 1], q_t[:, 0]
+            hblk[:, :, TH] = np.einsum("nij,njk->nik", hq, sk)
+        np.add.at(hsum, k, hblk)
+        have = cnt > 0
+        z[have] = zsum[have] / cnt[have, None]
+        h[have] = hsum[have] / cnt[have, None, None]
+        r[have] /= cnt[have, None, None]
         return z, h, r

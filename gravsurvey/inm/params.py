@@ -30,6 +30,8 @@ import numpy as np
 from ..errors import ConfigError
 
 RADIUS_SOURCES = ("altimeter", "computed")
+#: Boolean settings (everything else but ``radius_source`` is a number).
+_BOOL_KEYS = ("gnss_aiding",)
 
 
 @dataclass
@@ -64,6 +66,18 @@ class InmParams:
         Initial 1-sigma of each component of dq (m) and dp (m/s).
     initial_anomaly_sigma_mps2, initial_gravimeter_sigma_mps2 : float
         Initial 1-sigma of g and f3, m/s^2.
+    gnss_aiding : bool
+        Use the record's GNSS positions (when it has any) as a position measurement besides
+        the altimeter (:class:`gravsurvey.inm.errormodel.GnssMeasurement`).  Without it the
+        horizontal position is unobserved and gyro biases rotate the whole solution (about
+        ``|q| nu t``: km after hours), which moves the normal field under the estimate.
+    gnss_horizontal_sigma_m, gnss_vertical_sigma_m : float
+        1-sigma of each GNSS sample's east/north and up error, m (> 0).
+    initial_attitude_sigma_deg : float
+        Initial 1-sigma of each triad attitude-error component, deg (GNSS-aided filter only).
+    gyro_bias_sigma_degph : float
+        1-sigma of each gyro's constant bias, deg/h (GNSS-aided filter only: with position
+        aiding the bias is observable and is estimated as three extra states).
     """
 
     filter_rate_hz: float = 1.0
@@ -80,6 +94,11 @@ class InmParams:
     initial_velocity_sigma_mps: float = 0.05
     initial_anomaly_sigma_mps2: float = 1.0e-3
     initial_gravimeter_sigma_mps2: float = 1.0e-5
+    gnss_aiding: bool = True
+    gnss_horizontal_sigma_m: float = 1.0
+    gnss_vertical_sigma_m: float = 2.0
+    initial_attitude_sigma_deg: float = 0.05
+    gyro_bias_sigma_degph: float = 0.05
 
     def __post_init__(self):
         self.validate()
@@ -94,12 +113,18 @@ class InmParams:
                 if not isinstance(val, str) or val not in RADIUS_SOURCES:
                     raise ConfigError(f"{key}: expected one of {list(RADIUS_SOURCES)}, got {val!r}")
                 continue
+            if f.name in _BOOL_KEYS:
+                if not isinstance(val, bool):
+                    raise ConfigError(f"{key}: expected true or false, got {type(val).__name__} {val!r}")
+                continue
             if isinstance(val, bool) or not isinstance(val, (int, float)):
                 raise ConfigError(f"{key}: expected a number, got {type(val).__name__} {val!r}")
             if not math.isfinite(val) or val < 0:
                 raise ConfigError(f"{key}: expected a finite value >= 0, got {val!r}")
             if f.name == "filter_rate_hz" and val == 0:
                 raise ConfigError(f"{key}: expected a rate > 0 Hz, got {val!r}")
+            if f.name in ("gnss_horizontal_sigma_m", "gnss_vertical_sigma_m") and val == 0:
+                raise ConfigError(f"{key}: expected a sigma > 0 m, got {val!r}")
 
     @classmethod
     def from_dict(cls, d, key_path: str = "model") -> "InmParams":
@@ -128,7 +153,7 @@ class InmParams:
         obj.validate(key_path)
         # integers are fine in YAML; store floats
         for f in dataclasses.fields(cls):
-            if f.name != "radius_source":
+            if f.name != "radius_source" and f.name not in _BOOL_KEYS:
                 setattr(obj, f.name, float(getattr(obj, f.name)))
         return obj
 

@@ -9,7 +9,8 @@ import numpy as np
 
 from ..errors import ConfigError, DataError
 from ..geodesy import WGS84, Ellipsoid
-from .errormodel import DP, DQ, F3, G, AltimeterMeasurement, discretise, epoch_geometry, initial_covariance
+from .errormodel import (DP, DQ, F3, G, N_STATE, N_STATE_AIDED, TH, AltimeterMeasurement, GnssMeasurement,
+                         discretise, epoch_geometry, initial_covariance)
 from .kalman import filter_and_smooth
 from .mechanization import mechanize, navigation_to_geodetic
 from .params import InitialState, InmParams, initial_state_from_gnss, solvability_warnings
@@ -47,10 +48,15 @@ class InmSolution:
     dq_smooth, dp_smooth : ndarray (N, 3)
         Smoothed navigation corrections on the triad (m, m/s).
     sigma_position_m : ndarray (N, 3)
-        Smoothed 1-sigma of dq on the triad axes, m.
-    x_smooth, p_smooth : ndarray (N, 8), (N, 8, 8)
-        Full smoothed state and covariance (seed order, see errormodel).
+        Smoothed 1-sigma of the position error on the triad axes, m (``dq``; with GNSS
+        aiding ``dq + q x theta``, the true position error).
+    x_smooth, p_smooth : ndarray (N, n), (N, n, n)
+        Full smoothed state and covariance (seed order, see errormodel); n = 8, or 14 with
+        GNSS aiding (attitude error ``TH`` and gyro bias ``BG`` appended).
     warnings : list of str
+    gnss_aided : bool
+        Whether GNSS positions were used as a measurement (``model.gnss_aiding`` and a GNSS
+        channel in the record).
     """
 
     time: np.ndarray
@@ -74,6 +80,7 @@ class InmSolution:
     p_smooth: np.ndarray
     x_forward: np.ndarray
     warnings: list = field(default_factory=list)
+    gnss_aided: bool = False
 
 
 def _check_record(record):
@@ -93,6 +100,26 @@ def _check_record(record):
     alt = record.altimeter
     if alt is None or len(alt.time) == 0:
         raise DataError(f"{src}: altimeter: no samples; the 3D-INM needs radial (height) information")
+
+
+def stack_measurements(parts):
+    """Concatenate per-epoch measurement sets ``[(z, H, R), ...]`` into one ``(z, H, R)``.
+
+    ``z`` (N, m_i) are joined along the component axis, ``H`` (N, m_i, n) likewise and ``R``
+    block-diagonally (the sources' errors are independent).
+    """
+    if len(parts) == 1:
+        return parts[0]
+    z = np.concatenate([p[0] for p in parts], axis=1)
+    h = np.concatenate([p[1] for p in parts], axis=1)
+    n, m = z.shape
+    r = np.zeros((n, m, m))
+    o = 0
+    for p in parts:
+        k = p[0].shape[1]
+        r[:, o:o + k, o:o + k] = p[2]
+        o += k
+    return z, h, r
 
 
 def estimate_anomaly(record, params: InmParams, initial: InitialState | None, triad: str,
@@ -138,26 +165,57 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     half = 0.5 * step / imu_rate
     geom = epoch_geometry(nav, idx, params.radius_source == "altimeter", ellipsoid)
     alt_dt = float(np.median(np.diff(alt_t))) if alt_t.size > 1 else 1.0
-    phi, q = discretise(geom, params, alt_dt, reference=reference)
-    meas = AltimeterMeasurement(alt_t, alt_h, params.altimeter_sigma_m, ellipsoid)
-    z, h, r = meas.build(nav, idx, half)
-    p0 = initial_covariance(params)
-    out = filter_and_smooth(np.zeros(8), p0, phi, q, z, h, r, reference=reference)
+    gnss_used = bool(params.gnss_aiding) and record.gnss is not None and len(record.gnss.time) > 0
+    # position aiding needs the attitude error explicitly (the seed's dq merges it into the
+    # position): 14 states (errormodel.continuous_model_n)
+    n_state = N_STATE_AIDED if gnss_used else N_STATE
+    phi, q = discretise(geom, params, alt_dt, reference=reference, aided=gnss_used)
+    meas = [AltimeterMeasurement(alt_t, alt_h, params.altimeter_sigma_m, ellipsoid)]
+    if gnss_used:
+        gn = record.gnss
+        meas.append(GnssMeasurement(gn.time, gn.lat, gn.lon, gn.height, params.gnss_horizontal_sigma_m,
+                                    params.gnss_vertical_sigma_m, ellipsoid))
+    z, h, r = stack_measurements([m.build(nav, idx, half, n_state) for m in meas])
+    c = nav.mat_it[idx]
+    if gnss_used:
+        q_t0 = c[0].T @ nav.r_i[idx[0]]
+        p_t0 = c[0].T @ nav.v_i[idx[0]]
+        p0 = initial_covariance(params, q_t0, p_t0)
+    else:
+        p0 = initial_covariance(params)
+    out = filter_and_smooth(np.zeros(n_state), p0, phi, q, z, h, r, reference=reference)
     x_s, p_s, x_f, p_f = out["x_s"], out["p_s"], out["x_f"], out["p_f"]
 
-    # corrections: true = computed - error; dq, dp on the triad -> inertial through C
-    c = nav.mat_it[idx]
+    # corrections: true = computed - error; the position and velocity errors on the triad are
+    # dq (+ q x theta when aided) and dp (+ p x theta), to inertial through C
     dq = x_s[:, DQ]
     dp = x_s[:, DP]
-    r_corr = nav.r_i[idx] - np.einsum("nij,nj->ni", c, dq)
-    v_corr = nav.v_i[idx] - np.einsum("nij,nj->ni", c, dp)
+    err_q, err_p = dq.copy(), dp.copy()
+    if gnss_used:
+        th = x_s[:, TH]
+        q_t = np.einsum("nji,nj->ni", c, nav.r_i[idx])
+        p_t = np.einsum("nji,nj->ni", c, nav.v_i[idx])
+        err_q += np.cross(q_t, th)
+        err_p += np.cross(p_t, th)
+        # covariance of dq + [q x] theta
+        jac = np.zeros((idx.size, 3, n_state))
+        jac[:, :, DQ] = np.eye(3)
+        sk = np.zeros((idx.size, 3, 3))
+        sk[:, 0, 1], sk[:, 0, 2], sk[:, 1, 2] = -q_t[:, 2], q_t[:, 1], -q_t[:, 0]
+        sk[:, 1, 0], sk[:, 2, 0], sk[:, 2, 1] = q_t[:, 2], -q_t[:, 1], q_t[:, 0]
+        jac[:, :, TH] = sk
+        cov_pos = np.einsum("nij,njk,nlk->nil", jac, p_s, jac)
+        sig_pos = np.sqrt(np.einsum("nii->ni", cov_pos))
+    else:
+        sig_pos = np.sqrt(np.stack([p_s[:, i, i] for i in DQ], axis=1))
+    r_corr = nav.r_i[idx] - np.einsum("nij,nj->ni", c, err_q)
+    v_corr = nav.v_i[idx] - np.einsum("nij,nj->ni", c, err_p)
     lat, lon, height, vel_n = navigation_to_geodetic(t[idx], r_corr, v_corr, ellipsoid)
     speed = np.hypot(vel_n[:, 0], vel_n[:, 1])
     heading = np.mod(np.arctan2(vel_n[:, 0], vel_n[:, 1]), 2.0 * math.pi)
     innov = out["innov"]
     if innov.shape[1] == 1:
         innov = innov[:, 0]
-    sig_pos = np.sqrt(np.stack([p_s[:, i, i] for i in DQ], axis=1))
     warn = solvability_warnings(params, float(np.median(speed)))
     return InmSolution(
         time=t[idx].copy(),
@@ -181,4 +239,5 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
         p_smooth=p_s,
         x_forward=x_f,
         warnings=warn,
+        gnss_aided=gnss_used,
     )

@@ -417,7 +417,11 @@ def _model_block(cfg: SimConfig, processing: dict) -> dict:
 
     A simulated error that is off is replaced by the seed's value (the filter
     needs non-zero noise); the anomaly model is the Markov field's parameters
-    when the field is one, else the seed's.
+    when the field is one, else the seed's.  The GNSS sigmas are the simulated
+    ones when the GNSS is noisy (else the estimator's defaults stand).  Keys of
+    ``processing.model`` override the result (what a user would set from prior
+    knowledge, e.g. the area's anomaly statistics); the processing config loader
+    checks them.
     """
     s = cfg.flights[0]["sensors"]
 
@@ -427,7 +431,7 @@ def _model_block(cfg: SimConfig, processing: dict) -> dict:
     lam_s, sig_s = 1.0e-5, 1.0e-3
     if cfg.field_model is not None and cfg.field_model.type == "markov":
         lam_s, sig_s = cfg.field_model.lambda_s_per_m, cfg.field_model.sigma_mps2
-    return {
+    block = {
         "filter_rate_hz": processing["filter_rate_hz"],
         "accel_noise_mps2": pick(s["accelerometer"]["white_sigma_mps2"], 1.0e-3),
         "gyro_drift_degph": pick(s["gyro"]["white_drift_degph"], 0.01),
@@ -438,6 +442,11 @@ def _model_block(cfg: SimConfig, processing: dict) -> dict:
         "altimeter_sigma_m": pick(s["altimeter"]["sigma_m"], 1.0),
         "radius_source": "altimeter",
     }
+    if s["gnss"]["horizontal_sigma_m"] > 0 and s["gnss"]["vertical_sigma_m"] > 0:
+        block["gnss_horizontal_sigma_m"] = float(s["gnss"]["horizontal_sigma_m"])
+        block["gnss_vertical_sigma_m"] = float(s["gnss"]["vertical_sigma_m"])
+    block.update(processing.get("model") or {})
+    return block
 
 
 def _initial_block(sim: FlightSimulation) -> dict:

@@ -72,6 +72,9 @@ DEFAULT_PROCESSING = {
     "lines_mode": "auto",
     "postprocess_method": "default",
     "output_dir": "out",
+    # survey.yaml `model` keys overriding the simulator's matched values (e.g. the anomaly
+    # prior a user would set from the area's known field); checked by the processing config
+    "model": None,
 }
 TOP_KEYS = ("name", "seed", "ellipsoid", "formats", "field", "processing", "flights")
 FLIGHT_KEYS = ("name", "start_utc", "triad", "rates", "plan", "turbulence", "sensors")
@@ -392,6 +395,14 @@ def _validate(raw, path):
     for k in ("lines_mode", "postprocess_method", "output_dir"):
         if not isinstance(proc[k], str):
             raise ConfigError(f"processing.{k}: expected a string, got {_describe(proc[k])}")
+    pm = proc["model"]
+    if pm is not None:
+        if not isinstance(pm, dict):
+            raise ConfigError(f"processing.model: expected a mapping of survey.yaml model keys, got {_describe(pm)}")
+        for k, v in pm.items():
+            if not isinstance(k, str) or isinstance(v, (dict, list)) or v is None:
+                raise ConfigError(f"processing.model.{k}: expected a scalar value, got {_describe(v)}")
+        proc["model"] = dict(pm)
     flights = raw.get("flights")
     if not isinstance(flights, list) or not flights:
         raise ConfigError(f"flights: expected a non-empty list of flights, got {_describe(flights)}")
