@@ -31,7 +31,7 @@ from .geodesy import MGAL
 
 log = logging.getLogger("gravsurvey")
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 
 
 # --------------------------------------------------------------------------
@@ -105,6 +105,7 @@ class FlightResult:
     notes: list[str] = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     input_hashes: dict = field(default_factory=dict)
+    estimator: dict = field(default_factory=dict)  # method, triad, GNSS aiding used
 
 
 def _segments(cfg: SurveyConfig, fl: FlightConfig, sol) -> list:
@@ -215,6 +216,11 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
         truth=truth,
         notes=notes,
         timings=timings,
+        estimator={
+            "method": cfg.processing_method,
+            "triad": fl.triad,
+            "gnss_aided": bool(getattr(sol, "gnss_aided", False)),
+        },
     )
 
 
@@ -553,6 +559,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
             "segments": r.segments,
             "lines": {s["line"]: s for s in line_stats if s["flight"] == r.name},
             "notes": r.notes,
+            "estimator": r.estimator,
             "timings_s": r.timings,
             "input_sha256": r.input_hashes,
             "rms_vs_truth_mgal": _rms(np.concatenate(fl_err)) if fl_err else None,
