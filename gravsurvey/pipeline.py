@@ -523,6 +523,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     for i, k in enumerate(keys):
         if k[1]:
             order.setdefault(k, []).append(i)
+    t0_of = {r.name: r.t0_unix_ns for r in results}
     for (fname, lname), idx in order.items():
         idx = np.asarray(idx)
         lines.append(
@@ -532,7 +533,9 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                 "easting_m": table["easting_m"][idx],
                 "northing_m": table["northing_m"][idx],
                 "value_mgal": table["disturbance_mgal"][idx],
-                "time_s": (table["time_unix_ns"][idx] - table["time_unix_ns"][idx][0]) / 1e9,
+                # the flight's common time base: find_crossovers tells a real crossing of two
+                # lines of one flight from a track touching itself by their time separation
+                "time_s": (table["time_unix_ns"][idx] - t0_of[fname]) / 1e9,
                 "index": idx,
             }
         )

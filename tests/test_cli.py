@@ -78,6 +78,13 @@ def test_sample_survey_end_to_end(sample_run):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["software"]["version"]
     assert summary["config"]["sha256"]
+    if name == "grid_ros2":
+        # the tie line crosses each of the three survey lines once (configs/sample_grid_ros2.yaml)
+        assert summary["crossovers"]["count"] == 3
+        with open(out / "crossovers.csv", newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        assert sorted(r["line_a"] for r in rows) == ["L01", "L02", "L03"]
+        assert all(r["line_b"] == "T01" for r in rows)
     bound = _bounds_from_docs()[name]
     assert summary["rms_vs_truth_mgal"] is not None
     assert summary["rms_vs_truth_mgal"] <= bound, (name, summary["rms_vs_truth_mgal"], bound)
