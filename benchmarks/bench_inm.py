@@ -110,15 +110,27 @@ def run(quick: bool = False) -> list[dict]:
     rec, init = _flight(hours * 3600.0)
     model = _model(rec, init, params)
     filter_and_smooth(*model[:2], *[a[:5] for a in model[2:]])  # compile outside the timing
+    _filterpy(*model[:2], *[a[:5] for a in model[2:]])  # and import filterpy outside it
     rows = []
     n_ep = model[2].shape[0]
-    # best of several runs: the machine may be shared (CI, parallel tests)
-    t_ours, ours = _best(lambda: filter_and_smooth(*model), 7)
-    t_fp, (xf, pf, xs, ps) = _best(lambda: _filterpy(*model), 1 if quick else 2)
+    # best of several runs on both sides: the machine may be shared (CI, parallel tests).
+    # filter_and_smooth is exactly what gravsurvey.inm.solve calls (compiled path).
+    # The two are timed in interleaved rounds (8 of ours, then 1 of filterpy's), so a noisy spell
+    # hits both sides alike; the best time of each side is reported.
+    t_ours = t_fp = np.inf
+    for _ in range(1 if quick else 3):
+        t, ours = _best(lambda: filter_and_smooth(*model), 8)
+        t_ours = min(t_ours, t)
+        t, (xf, pf, xs, ps) = _best(lambda: _filterpy(*model), 1)
+        t_fp = min(t_fp, t)
+    # agreement per state component (the states' scales differ by ~1e8)
     scale = np.abs(xs).max(axis=0) + 1e-300
     agree = float(np.max(np.abs(ours["x_s"] - xs) / scale))
+    sd = np.sqrt(np.abs(np.einsum("kii->ki", ps))).max(axis=0) + 1e-300
+    agree_p = float(np.max(np.abs(ours["p_s"] - ps) / (sd[:, None] * sd[None, :])))
     rows.append({"stage": "filter+smoother", "n": n_ep, "ours_s": t_ours, "filterpy_s": t_fp,
-                 "speedup": t_fp / t_ours, "goal": ">= 30x", "max_rel_diff_smoothed_state": agree})
+                 "speedup": t_fp / t_ours, "goal": ">= 30x", "max_rel_diff_smoothed_state": agree,
+                 "max_rel_diff_smoothed_cov": agree_p})
     # mechanization per IMU sample
     t = rec.imu.time
     mechanize(t[:100], rec.imu.specific_force_t[:100], rec.imu.angular_rate_t[:100], init,
@@ -141,7 +153,8 @@ def main(argv=None):
     for r in rows:
         if r["stage"] == "filter+smoother":
             print(f"| {r['stage']} | {r['n']} epochs | {r['ours_s']:.4f} | {r['filterpy_s']:.3f} | "
-                  f"{r['speedup']:.0f}x (states agree to {r['max_rel_diff_smoothed_state']:.1e}) | {r['goal']} |")
+                  f"{r['speedup']:.1f}x (smoothed states agree to {r['max_rel_diff_smoothed_state']:.1e}, "
+                  f"covariances to {r['max_rel_diff_smoothed_cov']:.1e}) | {r['goal']} |")
         elif r["stage"] == "mechanization":
             print(f"| {r['stage']} | {r['n']} samples | {r['ours_s']:.4f} | - | {r['us_per_sample']:.2f} us/sample | "
                   f"{r['goal']} |")

@@ -5,12 +5,12 @@ import pytest
 import scipy.linalg
 from filterpy.kalman import KalmanFilter
 
-from gravsurvey.inm.kalman import expm, filter_and_smooth, van_loan
+from gravsurvey.inm.kalman import expm, filter_and_smooth, kalman_filter, rts_smoother, van_loan
 
 
 def _random_model(rng, nep=300, n=8, m=1, missing=0.1, diag=False):
     """Time-varying stable model with varied scales (like the 3D-INM state)."""
-    scales = np.array([50.0, 0.05, 50.0, 0.05, 10.0, 0.05, 1e-3, 1e-5])[:n]
+    scales = np.resize(np.array([50.0, 0.05, 50.0, 0.05, 10.0, 0.05, 1e-3, 1e-5]), n)
     phi = np.empty((nep, n, n))
     q = np.empty((nep, n, n))
     h = np.empty((nep, m, n))
@@ -109,6 +109,35 @@ def test_numba_matches_numpy_reference(diag):
     ok = ~np.isnan(b["innov"])
     assert np.array_equal(ok, ~np.isnan(a["innov"]))
     assert np.max(np.abs(a["innov"][ok] - b["innov"][ok])) < 1e-8
+
+
+@pytest.mark.parametrize("n,m,diag", [(14, 3, True), (14, 2, False), (5, 1, True), (13, 2, True)])
+def test_other_state_sizes_match_filterpy_and_reference(n, m, diag):
+    """The 14-state (GNSS-aided) size and sizes that exercise every column-block remainder."""
+    rng = np.random.default_rng(100 + n + m)
+    model = _random_model(rng, nep=150, n=n, m=m, missing=0.2, diag=diag)
+    ours = filter_and_smooth(*model)
+    ref = filter_and_smooth(*model, reference=True)
+    xf, pf, xs, ps = _filterpy(*model)
+    for key, other in (("x_f", xf), ("p_f", pf), ("x_s", xs), ("p_s", ps)):
+        assert _rel_per_state(ours[key], other) < 1e-9, key
+        assert _rel_per_state(ours[key], ref[key]) < 1e-10, key
+    assert _rel_per_state(ours["x_s"], ours["x_f"]) > 1e-3
+
+
+def test_public_kernels_equal_the_fused_pipeline_path():
+    """kalman_filter + rts_smoother (smoother recomputes phi P_f) == filter_and_smooth (reuses it)."""
+    rng = np.random.default_rng(21)
+    model = _random_model(rng, nep=120, m=2, missing=0.3, diag=True)
+    fused = filter_and_smooth(*model)
+    x_f, p_f, x_p, p_p, innov = kalman_filter(*model)
+    x_s, p_s = rts_smoother(x_f, p_f, x_p, p_p, model[2])
+    for key, val in (("x_f", x_f), ("p_f", p_f), ("x_p", x_p), ("p_p", p_p), ("x_s", x_s), ("p_s", p_s)):
+        assert np.array_equal(fused[key], val), key
+    assert np.array_equal(fused["innov"], innov, equal_nan=True)
+    # and the smoother really used the epochs' own transitions: a wrong phi changes x_s
+    x_s2, _ = rts_smoother(x_f, p_f, x_p, p_p, model[2][::-1].copy())
+    assert _rel_per_state(x_s2, x_s) > 1e-6
 
 
 def test_filterpy_module_smoother_indexing_differs():

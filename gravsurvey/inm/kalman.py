@@ -13,6 +13,12 @@ predictions).  ``h`` is ``(N, m, n)`` and ``r`` ``(N, m, m)``.
 Both a numba kernel (``kalman_filter``/``rts_smoother``) and a pure-numpy
 reference (``kalman_filter_ref``/``rts_smoother_ref``) are provided; tests
 check one against the other and both against filterpy.
+
+Speed notes (measured on the 8-state model, 14,401 epochs): no fastmath anywhere; scalar
+measurement updates in O(n^2); small products in scalar-accumulator column blocks
+(:func:`_matmul`); outputs allocated by numpy, not inside the kernels (page faults);
+``phi[k+1] P_f[k]`` from the prediction reused by the smoother (:func:`filter_and_smooth`);
+the backward sweep reads its inputs block-wise forwards first (prefetching).
 """
 
 from __future__ import annotations
@@ -144,70 +150,205 @@ def _update(x, p, z, h, r, nis_out):
         nis_out[idx[a]] = w[a]
 
 
-#: Floating-point flags for the small dense loops: let LLVM reassociate and fuse (SIMD sums);
-#: NaN/Inf semantics are kept (missing measurements are NaN).
-_FAST = {"reassoc", "contract", "arcp"}
+@njit(cache=True)
+def _matmul(a, b, out, upper):
+    """``out = a @ b`` for small square matrices, no allocation.
+
+    With ``upper`` only the upper triangle ``j >= i`` is guaranteed (row ``i`` starts at the
+    column block ``4 * (i // 4)``, so a few elements below the diagonal are computed too).
+
+    Each output element is the sum over ``l = 0, 1, ...`` of ``a[i, l] b[l, j]`` in that order
+    (the same rounding as a plain triple loop).  Columns are processed in blocks of 8 and 4
+    held in scalar accumulators: without this, aliasing between ``out`` and ``b`` forces a
+    load/store of ``out`` per multiply-add, which dominates for n = 8..14.
+    """
+    n = a.shape[0]
+    for i in range(n):
+        j = 4 * (i // 4) if upper else 0
+        while j + 8 <= n:
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            s3 = 0.0
+            s4 = 0.0
+            s5 = 0.0
+            s6 = 0.0
+            s7 = 0.0
+            for l in range(n):
+                c = a[i, l]
+                s0 += c * b[l, j]
+                s1 += c * b[l, j + 1]
+                s2 += c * b[l, j + 2]
+                s3 += c * b[l, j + 3]
+                s4 += c * b[l, j + 4]
+                s5 += c * b[l, j + 5]
+                s6 += c * b[l, j + 6]
+                s7 += c * b[l, j + 7]
+            out[i, j] = s0
+            out[i, j + 1] = s1
+            out[i, j + 2] = s2
+            out[i, j + 3] = s3
+            out[i, j + 4] = s4
+            out[i, j + 5] = s5
+            out[i, j + 6] = s6
+            out[i, j + 7] = s7
+            j += 8
+        while j + 4 <= n:
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            s3 = 0.0
+            for l in range(n):
+                c = a[i, l]
+                s0 += c * b[l, j]
+                s1 += c * b[l, j + 1]
+                s2 += c * b[l, j + 2]
+                s3 += c * b[l, j + 3]
+            out[i, j] = s0
+            out[i, j + 1] = s1
+            out[i, j + 2] = s2
+            out[i, j + 3] = s3
+            j += 4
+        while j < n:
+            s0 = 0.0
+            for l in range(n):
+                s0 += a[i, l] * b[l, j]
+            out[i, j] = s0
+            j += 1
 
 
-@njit(cache=True, fastmath=_FAST)
-def _predict_into(phi, q, x, p, tmp, xout, pout):
-    """x <- phi x, p <- sym(phi p phi^T + q) with explicit loops (no allocation)."""
+@njit(cache=True)
+def _tri_solve_rows(lch, idg, b, forward):
+    """In place ``b <- L^-1 b`` (``forward``) or ``b <- L^-T b``; ``idg = 1 / diag(L)``.
+
+    Row ``i`` is ``(b[i] - sum_l L[i, l] b[l]) * idg[i]`` with ``l`` ascending (forward) or
+    ``(b[i] - sum_l L[l, i] b[l]) * idg[i]`` with ``l`` from ``i + 1`` up (backward); the
+    columns are held in scalar accumulators in blocks of 8 and 4 (see :func:`_matmul`).
+    """
+    n = b.shape[0]
+    for ii in range(n):
+        i = ii if forward else n - 1 - ii
+        lo = 0 if forward else i + 1
+        hi = i if forward else n
+        g = idg[i]
+        j = 0
+        while j + 8 <= n:
+            s0 = b[i, j]
+            s1 = b[i, j + 1]
+            s2 = b[i, j + 2]
+            s3 = b[i, j + 3]
+            s4 = b[i, j + 4]
+            s5 = b[i, j + 5]
+            s6 = b[i, j + 6]
+            s7 = b[i, j + 7]
+            for l in range(lo, hi):
+                c = lch[i, l] if forward else lch[l, i]
+                s0 -= c * b[l, j]
+                s1 -= c * b[l, j + 1]
+                s2 -= c * b[l, j + 2]
+                s3 -= c * b[l, j + 3]
+                s4 -= c * b[l, j + 4]
+                s5 -= c * b[l, j + 5]
+                s6 -= c * b[l, j + 6]
+                s7 -= c * b[l, j + 7]
+            b[i, j] = s0 * g
+            b[i, j + 1] = s1 * g
+            b[i, j + 2] = s2 * g
+            b[i, j + 3] = s3 * g
+            b[i, j + 4] = s4 * g
+            b[i, j + 5] = s5 * g
+            b[i, j + 6] = s6 * g
+            b[i, j + 7] = s7 * g
+            j += 8
+        while j + 4 <= n:
+            s0 = b[i, j]
+            s1 = b[i, j + 1]
+            s2 = b[i, j + 2]
+            s3 = b[i, j + 3]
+            for l in range(lo, hi):
+                c = lch[i, l] if forward else lch[l, i]
+                s0 -= c * b[l, j]
+                s1 -= c * b[l, j + 1]
+                s2 -= c * b[l, j + 2]
+                s3 -= c * b[l, j + 3]
+            b[i, j] = s0 * g
+            b[i, j + 1] = s1 * g
+            b[i, j + 2] = s2 * g
+            b[i, j + 3] = s3 * g
+            j += 4
+        while j < n:
+            s0 = b[i, j]
+            for l in range(lo, hi):
+                c = lch[i, l] if forward else lch[l, i]
+                s0 -= c * b[l, j]
+            b[i, j] = s0 * g
+            j += 1
+
+
+@njit(cache=True)
+def _transpose(a, out):
+    n = a.shape[0]
+    for i in range(n):
+        for j in range(n):
+            out[j, i] = a[i, j]
+
+
+@njit(cache=True)
+def _predict_into(phi, q, x, p, tmp, phit, xout, pout, xout2, pout2):
+    """xout, xout2 <- phi x; pout, pout2 <- phi p phi^T + sym(q) (upper triangle mirrored).
+
+    ``tmp`` <- phi p.  No allocation.
+    """
     n = x.shape[0]
     for i in range(n):
         acc = 0.0
         for j in range(n):
             acc += phi[i, j] * x[j]
         xout[i] = acc
-    for i in range(n):
-        for j in range(n):
-            tmp[i, j] = 0.0
-        for l in range(n):
-            c = phi[i, l]
-            for j in range(n):
-                tmp[i, j] += c * p[l, j]
+        xout2[i] = acc
+    _matmul(phi, p, tmp, False)
+    _transpose(phi, phit)
+    _matmul(tmp, phit, pout, True)
     for i in range(n):
         for j in range(i, n):
-            acc = 0.0
-            for l in range(n):
-                acc += tmp[i, l] * phi[j, l]
-            v = acc + 0.5 * (q[i, j] + q[j, i])
+            v = pout[i, j] + 0.5 * (q[i, j] + q[j, i])
             pout[i, j] = v
             pout[j, i] = v
+            pout2[i, j] = v
+            pout2[j, i] = v
 
 
-@njit(cache=True, fastmath=_FAST)
-def _scalar_update(x, p, z, h, r, a, tmp, ph):
-    """Joseph-form update with one scalar measurement; returns the whitened innovation."""
+@njit(cache=True)
+def _scalar_update(x, p, z, h, r, k, ph):
+    """Joseph-form update with one scalar measurement in O(n^2); returns the whitened innovation.
+
+    With ``k = P h / s`` and ``s = h^T P h + r``:
+    ``(I - k h^T) P (I - k h^T)^T + r k k^T = P - k (P h)^T - (P h) k^T + s k k^T``.
+    """
     n = x.shape[0]
+    # P h as a sum of rows (P is exactly symmetric)
+    for j in range(n):
+        ph[j] = 0.0
+    for i in range(n):
+        c = h[i]
+        if c != 0.0:
+            for j in range(n):
+                ph[j] += c * p[i, j]
     s = r
     nu = z
     for i in range(n):
-        acc = 0.0
-        for j in range(n):
-            acc += p[i, j] * h[j]
-        ph[i] = acc
-        s += h[i] * acc
+        s += h[i] * ph[i]
         nu -= h[i] * x[i]
-    # Joseph form P <- A P A^T + r k k^T with A = I - k h^T, evaluated as two rank-one
-    # products: M = A P = P - k (P h)^T, then M A^T = M - (M h) k^T
     for i in range(n):
-        a[0, i] = ph[i] / s  # k
+        k[i] = ph[i] / s
     for i in range(n):
-        x[i] += a[0, i] * nu
+        x[i] += k[i] * nu
     for i in range(n):
-        ki = a[0, i]
-        for j in range(n):
-            tmp[i, j] = p[i, j] - ki * ph[j]
-    for i in range(n):
-        acc = 0.0
-        for j in range(n):
-            acc += tmp[i, j] * h[j]
-        a[1, i] = acc  # M h
-    for i in range(n):
+        ki = k[i]
+        phi_ = ph[i]
+        ski = s * ki
         for j in range(i, n):
-            v = tmp[i, j] - a[1, i] * a[0, j] + r * a[0, i] * a[0, j]
-            w = tmp[j, i] - a[1, j] * a[0, i] + r * a[0, j] * a[0, i]
-            v = 0.5 * (v + w)
+            v = p[i, j] - ki * ph[j] - phi_ * k[j] + ski * k[j]
             p[i, j] = v
             p[j, i] = v
     return nu / math.sqrt(s)
@@ -223,10 +364,12 @@ def _diagonal(r):
     return True
 
 
-
-@njit(cache=True)
 def kalman_filter(x0, p0, phi, q, z, h, r):
-    """Forward Kalman filter over ``N`` epochs (numba kernel).
+    """Forward Kalman filter over ``N`` epochs (numba kernel :func:`_kalman_filter_into`).
+
+    The outputs are allocated here with numpy (whose large allocations are backed by huge
+    pages) rather than inside the kernel: with numba's allocator every call page-faulted
+    ~2000 4-KiB pages per (N, 8, 8) array, a third of the run time.
 
     Parameters
     ----------
@@ -258,16 +401,39 @@ def kalman_filter(x0, p0, phi, q, z, h, r):
     x_p = np.empty((nep, n))
     p_p = np.empty((nep, n, n))
     innov = np.empty((nep, m))
-    x = x0.copy()
-    p = 0.5 * (p0 + p0.T)
-    tmp = np.empty((n, n))
-    a = np.empty((n, n))
+    _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, np.empty((1, n, n)))
+    return x_f, p_f, x_p, p_p, innov
+
+
+@njit(cache=True)
+def _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf):
+    """Kernel of :func:`kalman_filter`; writes into the preallocated outputs.
+
+    If ``phi_pf`` has ``N`` rows, ``phi_pf[k - 1] = phi[k] @ p_f[k - 1]`` (a by-product of the
+    prediction, stored one row down so that the smoother's ``p_s`` can hold it) is kept for the
+    smoother; give it one row to discard it.
+    """
+    nep = phi.shape[0]
+    n = x0.shape[0]
+    m = z.shape[1]
+    keep = phi_pf.shape[0] == nep
+    phit = np.empty((n, n))
+    kg = np.empty(n)
     ph = np.empty(n)
     for k in range(nep):
+        x = x_f[k]
+        p = p_f[k]
         if k > 0:
-            _predict_into(phi[k], q[k], x_f[k - 1], p_f[k - 1], tmp, x, p)
-        x_p[k] = x
-        p_p[k] = p
+            tmp = phi_pf[k - 1] if keep else phi_pf[0]
+            _predict_into(phi[k], q[k], x_f[k - 1], p_f[k - 1], tmp, phit, x_p[k], p_p[k], x, p)
+        else:
+            for i in range(n):
+                x_p[0, i] = x0[i]
+                x[i] = x0[i]
+                for j in range(n):
+                    v = 0.5 * (p0[i, j] + p0[j, i])
+                    p_p[0, i, j] = v
+                    p[i, j] = v
         if _diagonal(r[k]):
             # sequential scalar updates: identical to the batch update for a diagonal R, and the
             # normalised innovations are the Cholesky-whitened ones
@@ -275,118 +441,143 @@ def kalman_filter(x0, p0, phi, q, z, h, r):
                 if math.isnan(z[k, i]):
                     innov[k, i] = np.nan
                 else:
-                    innov[k, i] = _scalar_update(x, p, z[k, i], h[k, i], r[k, i, i], a, tmp, ph)
+                    innov[k, i] = _scalar_update(x, p, z[k, i], h[k, i], r[k, i, i], kg, ph)
         else:
             _update(x, p, z[k], h[k], r[k], innov[k])
-        x_f[k] = x
-        p_f[k] = p
-    return x_f, p_f, x_p, p_p, innov
 
 
-@njit(cache=True, fastmath=_FAST)
 def rts_smoother(x_f, p_f, x_p, p_p, phi):
-    """Rauch-Tung-Striebel smoother over the filter output (numba kernel).
+    """Rauch-Tung-Striebel smoother over the filter output (numba kernel :func:`_rts_into`).
 
     ``G_k = P_f[k] phi[k+1]^T P_p[k+1]^-1``; the inverse is applied through a
-    solve on the diagonally scaled (correlation) matrix, because the state
+    Cholesky solve on the diagonally scaled (correlation) matrix, because the state
     mixes metres with 1e-6 m/s^2.
 
     Returns
     -------
     x_s, p_s : ndarray (N, n), (N, n, n)
     """
+    x_s = np.empty(x_f.shape)
+    p_s = np.empty(p_f.shape)
+    _rts_into(x_f, p_f, x_p, p_p, phi, phi, False, x_s, p_s)
+    return x_s, p_s
+
+
+@njit(cache=True)
+def _rts_into(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s):
+    """Kernel of :func:`rts_smoother`; writes into the preallocated ``x_s, p_s``.
+
+    With ``have_phi_pf``, ``phi_pf[k]`` must hold ``phi[k + 1] @ p_f[k]`` exactly as the
+    filter computed it (see :func:`_kalman_filter_into`) and is used instead of recomputing it.
+    ``phi_pf`` may be ``p_s`` itself: row ``k`` is read before ``p_s[k]`` is written.
+    """
     nep, n = x_f.shape
-    x_s = x_f.copy()
-    p_s = p_f.copy()
+    if nep == 0:
+        return 0.0
+    x_s[nep - 1] = x_f[nep - 1]
+    p_s[nep - 1] = p_f[nep - 1]
     d = np.empty(n)
     idg = np.empty(n)
     lch = np.empty((n, n))
     b = np.empty((n, n))
+    bt = np.empty((n, n))
     dx = np.empty(n)
     dp = np.empty((n, n))
     tmp = np.empty((n, n))
-    # loops are ordered i-l-j (row axpy on contiguous rows) so that LLVM vectorises them
-    for k in range(nep - 2, -1, -1):
-        pp = p_p[k + 1]
-        ph = phi[k + 1]
-        pf = p_f[k]
+    # The recursion runs backwards in time, and backward streams through the (N, n, n) arrays
+    # are badly prefetched (measured: 8x8 products 2.4x slower than in a forward loop).  So the
+    # epochs are processed in blocks: each block's inputs are first read in a forward sweep
+    # (pulling them into cache), then the block is smoothed backwards from cache.
+    sink = 0.0
+    for k1 in range(nep - 2, -1, -_BLOCK):
+        k0 = max(k1 - _BLOCK + 1, 0)
+        sink += _touch(p_p, k0 + 1, k1 + 2) + _touch(p_f, k0, k1 + 1) + _touch(p_s, k0, k1 + 1)
+        if have_phi_pf:
+            sink += _touch(phi_pf, k0, k1 + 1)
+        else:
+            sink += _touch(phi, k0 + 1, k1 + 2)
+        for kk in range(k1 - k0 + 1):
+            k = k1 - kk
+            _rts_step(k, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg, lch, b, bt, dx, dp,
+                      tmp)
+    return sink
+
+
+#: Epochs per block of the smoother's cache-friendly sweep (4 (n, n) arrays x 64 x 512 B for
+#: n = 8 stay well inside L2).
+_BLOCK = 64
+
+
+@njit(cache=True)
+def _touch(a, lo, hi):
+    """Read one element per cache line of ``a[lo:hi]`` (n x n, C order) in ascending order."""
+    n = a.shape[2]
+    s = 0.0
+    for k in range(lo, hi):
         for i in range(n):
-            d[i] = 1.0 / math.sqrt(pp[i, i]) if pp[i, i] > 0 else 1.0  # D^-1
-        # Cholesky of the correlation matrix D^-1 P_p D^-1 (inverse diagonal kept in idg)
+            s += a[k, i, 0] + a[k, i, n - 1]
+    return s
+
+
+@njit(cache=True)
+def _rts_step(k, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg, lch, b, bt, dx, dp, tmp):
+    """One backward RTS step: ``x_s[k], p_s[k]`` from epoch ``k + 1``."""
+    n = x_f.shape[1]
+    pp = p_p[k + 1]
+    ph = phi[k + 1]
+    pf = p_f[k]
+    for i in range(n):
+        d[i] = 1.0 / math.sqrt(pp[i, i]) if pp[i, i] > 0 else 1.0  # D^-1
+    # Cholesky of the correlation matrix D^-1 P_p D^-1 (inverse diagonal kept in idg)
+    for i in range(n):
+        for j in range(i + 1):
+            acc = pp[i, j] * d[i] * d[j]
+            for l in range(j):
+                acc -= lch[i, l] * lch[j, l]
+            if i == j:
+                lch[i, i] = math.sqrt(acc) if acc > 0 else 1e-300
+                idg[i] = 1.0 / lch[i, i]
+            else:
+                lch[i, j] = acc * idg[j]
+    # B = D^-1 phi P_f
+    if have_phi_pf:
         for i in range(n):
-            for j in range(i + 1):
-                acc = pp[i, j] * d[i] * d[j]
-                for l in range(j):
-                    acc -= lch[i, l] * lch[j, l]
-                if i == j:
-                    lch[i, i] = math.sqrt(acc) if acc > 0 else 1e-300
-                    idg[i] = 1.0 / lch[i, i]
-                else:
-                    lch[i, j] = acc * idg[j]
-        # B = D^-1 phi P_f
-        for i in range(n):
+            c = d[i]
             for j in range(n):
-                b[i, j] = 0.0
-            for l in range(n):
-                c = ph[i, l]
-                for j in range(n):
-                    b[i, j] += c * pf[l, j]
+                b[i, j] = phi_pf[k, i, j] * c
+    else:
+        _matmul(ph, pf, b, False)
+        for i in range(n):
             c = d[i]
             for j in range(n):
                 b[i, j] *= c
-        # solve L L^T Y = B for all columns at once (row operations); G^T = D^-1 Y -> b
-        for i in range(n):
-            for l in range(i):
-                c = lch[i, l]
-                for j in range(n):
-                    b[i, j] -= c * b[l, j]
-            c = idg[i]
-            for j in range(n):
-                b[i, j] *= c
-        for i in range(n - 1, -1, -1):
-            for l in range(i + 1, n):
-                c = lch[l, i]
-                for j in range(n):
-                    b[i, j] -= c * b[l, j]
-            c = idg[i]
-            for j in range(n):
-                b[i, j] *= c
-        for i in range(n):
-            c = d[i]
-            for j in range(n):
-                b[i, j] *= c
-        # now b = G^T.  x_s = x_f + G (x_s[k+1] - x_p[k+1])
-        for i in range(n):
-            dx[i] = x_s[k + 1, i] - x_p[k + 1, i]
-        for i in range(n):
-            x_s[k, i] = x_f[k, i]
+    # solve L L^T Y = B for all columns at once (row operations); G^T = D^-1 Y -> b
+    _tri_solve_rows(lch, idg, b, True)
+    _tri_solve_rows(lch, idg, b, False)
+    for i in range(n):
+        c = d[i]
+        for j in range(n):
+            b[i, j] *= c
+    # now b = G^T.  x_s = x_f + G (x_s[k+1] - x_p[k+1])
+    for i in range(n):
+        dx[i] = x_s[k + 1, i] - x_p[k + 1, i]
+    for i in range(n):
+        acc = x_f[k, i]
         for l in range(n):
-            c = dx[l]
-            for i in range(n):
-                x_s[k, i] += b[l, i] * c
-        # P_s = P_f + G (P_s[k+1] - P_p) G^T:  tmp = G dp = b^T dp, then tmp b
-        for i in range(n):
-            for j in range(n):
-                dp[i, j] = p_s[k + 1, i, j] - pp[i, j]
-                tmp[i, j] = 0.0
-        for l in range(n):
-            for i in range(n):
-                c = b[l, i]
-                for j in range(n):
-                    tmp[i, j] += c * dp[l, j]
-        for i in range(n):
-            for j in range(n):
-                dp[i, j] = 0.0
-            for l in range(n):
-                c = tmp[i, l]
-                for j in range(n):
-                    dp[i, j] += c * b[l, j]
-        for i in range(n):
-            for j in range(i, n):
-                v = pf[i, j] + 0.5 * (dp[i, j] + dp[j, i])
-                p_s[k, i, j] = v
-                p_s[k, j, i] = v
-    return x_s, p_s
+            acc += b[l, i] * dx[l]
+        x_s[k, i] = acc
+    # P_s = P_f + G (P_s[k+1] - P_p) G^T:  tmp = G dp = b^T dp, then tmp b
+    for i in range(n):
+        for j in range(n):
+            dp[i, j] = p_s[k + 1, i, j] - pp[i, j]
+    _transpose(b, bt)
+    _matmul(bt, dp, tmp, False)
+    _matmul(tmp, b, dp, True)  # symmetric: the upper triangle is used
+    for i in range(n):
+        for j in range(i, n):
+            v = pf[i, j] + dp[i, j]
+            p_s[k, i, j] = v
+            p_s[k, j, i] = v
 
 
 # --------------------------------------------------------------------------
@@ -451,6 +642,13 @@ def filter_and_smooth(x0, p0, phi, q, z, h, r, reference: bool = False):
         x_f, p_f, x_p, p_p, innov = kalman_filter_ref(*args)
         x_s, p_s = rts_smoother_ref(x_f, p_f, x_p, p_p, args[2])
     else:
-        x_f, p_f, x_p, p_p, innov = kalman_filter(*args)
-        x_s, p_s = rts_smoother(x_f, p_f, x_p, p_p, args[2])
+        x0, p0, phi, q, z, h, r = args
+        nep, n, m = phi.shape[0], x0.shape[0], z.shape[1]
+        x_f, x_p, x_s = np.empty((nep, n)), np.empty((nep, n)), np.empty((nep, n))
+        p_f, p_p, p_s = np.empty((nep, n, n)), np.empty((nep, n, n)), np.empty((nep, n, n))
+        innov = np.empty((nep, m))
+        # phi[k + 1] @ p_f[k] is computed by the prediction and reused by the smoother; it is
+        # parked in p_s[k] (written by the smoother only after it has been read)
+        _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, p_s)
+        _rts_into(x_f, p_f, x_p, p_p, phi, p_s, True, x_s, p_s)
     return dict(x_f=x_f, p_f=p_f, x_p=x_p, p_p=p_p, innov=innov, x_s=x_s, p_s=p_s)
