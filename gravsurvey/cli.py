@@ -57,18 +57,19 @@ def run(config, output_dir, jobs, force, wait_s, quiet):
     Example:
       gravsurvey run survey.yaml --jobs 4
     Exit code 0 when every flight succeeded, 1 when at least one flight had a
-    data problem (the others are still processed and written), 2 for a usage
-    or config problem.
+    data problem (failed, or processed from a damaged input salvaged up to the
+    damage; the others are still processed and written), 2 for a usage or
+    config problem.
     """
     from .pipeline import run_survey
 
     show = _interactive() and not quiet
     result = run_survey(config, output_dir=output_dir, jobs=jobs, force=force, wait_s=wait_s,
                         progress=show)
-    if show or result.failed:
+    if show or result.data_problem:
         for line in result.report_lines(verbose=show):
-            click.echo(line, err=bool(result.failed))
-    sys.exit(1 if result.failed else 0)
+            click.echo(line, err=result.data_problem)
+    sys.exit(1 if result.data_problem else 0)
 
 
 @cli.command()

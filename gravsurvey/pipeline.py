@@ -31,7 +31,7 @@ from .geodesy import MGAL
 
 log = logging.getLogger("gravsurvey")
 
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 
 
 # --------------------------------------------------------------------------
@@ -106,6 +106,7 @@ class FlightResult:
     timings: dict = field(default_factory=dict)
     input_hashes: dict = field(default_factory=dict)
     estimator: dict = field(default_factory=dict)  # method, triad, GNSS aiding used
+    data_loss: list = field(default_factory=list)  # input damage: processed, but exit code 1
 
 
 def _segments(cfg: SurveyConfig, fl: FlightConfig, sol) -> list:
@@ -216,6 +217,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
         truth=truth,
         notes=notes,
         timings=timings,
+        data_loss=[f"{fl.name}: {n}" for n in record.data_loss],
         estimator={
             "method": cfg.processing_method,
             "triad": fl.triad,
@@ -335,10 +337,18 @@ class RunResult:
     failed: list[str]
     notes: list[str]
     summary: dict
+    data_loss: list[str] = field(default_factory=list)
+
+    @property
+    def data_problem(self) -> bool:
+        """Exit code 1: a flight failed, or was processed from a damaged (salvaged) input."""
+        return bool(self.failed or self.data_loss)
 
     def report_lines(self, verbose: bool = True):
         for f in self.failed:
             yield f"gravsurvey: flight failed: {f.splitlines()[0]}"
+        for d in self.data_loss:
+            yield f"gravsurvey: input damaged, processed what was salvaged: {d}"
         if verbose:
             for n in self.notes:
                 yield f"note: {n}"
@@ -464,8 +474,10 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
         if bar:
             bar.__exit__(None, None, None)
 
+    data_loss = []
     for r in results.values():
         notes.extend(r.notes)
+        data_loss.extend(getattr(r, "data_loss", []))
     ordered = [results[f.name] for f in cfg.flights if f.name in results]
     t_out = time.perf_counter()
     summary = {}
@@ -475,7 +487,7 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
     log.info("outputs written in %.1f s; total %.1f s", summary_timing, time.perf_counter() - t_start)
     if not ordered:
         summary = {"survey": cfg.name}
-    return RunResult(out_dir, processed, skipped, failed, notes, summary)
+    return RunResult(out_dir, processed, skipped, failed, notes, summary, data_loss)
 
 
 def _profile_table(cfg: SurveyConfig, results: list[FlightResult]):
@@ -563,6 +575,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
             "lines": {s["line"]: s for s in line_stats if s["flight"] == r.name},
             "notes": r.notes,
             "estimator": r.estimator,
+            "data_loss": r.data_loss,
             "timings_s": r.timings,
             "input_sha256": r.input_hashes,
             "rms_vs_truth_mgal": _rms(np.concatenate(fl_err)) if fl_err else None,

@@ -525,4 +525,11 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
         imu=ImuChannel(rel(imu.time_ns), imu.values["specific_force"],
                        imu.values["angular_rate"]),
         altimeter=AltimeterChannel(rel(alt.time_ns), alt.values["height"]),
-        gnss=gnss, source=src, notes=notes)
+        gnss=gnss, source=src, notes=notes, data_loss=_data_loss(options, base_dir, content))
+
+
+def _data_loss(options: IngestOptions, base_dir, content) -> list:
+    """The salvage description when the MCAP file was damaged (data after it are lost)."""
+    if content is None or content.salvage is None:
+        return []
+    return [content.salvage.describe(options._resolve(options.mcap_path, base_dir))]

@@ -55,7 +55,9 @@ class FlightRecord:
     """One flight's sensor data, checked and on strictly increasing time bases.
 
     ``notes`` lists what ingestion found and repaired (one line each), e.g.
-    dropped duplicates, gaps, salvaged messages.
+    dropped duplicates, gaps, salvaged messages. ``data_loss`` repeats the notes that mean
+    recorded data were lost (a damaged file salvaged up to the damage): the survey job still
+    processes what was recovered but reports the flight as a data problem (exit code 1).
     """
 
     t0_unix_ns: int
@@ -64,6 +66,7 @@ class FlightRecord:
     gnss: GnssChannel | None = None
     source: str = ""
     notes: list[str] = field(default_factory=list)
+    data_loss: list[str] = field(default_factory=list)
 
     def epochs(self, rate_hz):
         """Filter epochs (s) at ``rate_hz`` from the first IMU sample through the last one.
