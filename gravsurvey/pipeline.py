@@ -28,6 +28,7 @@ from . import __version__
 from .config import FlightConfig, SurveyConfig, load_config
 from .errors import ConfigError, DataError, GravsurveyError
 from .geodesy import MGAL
+from .io.writers import to_jsonable
 
 log = logging.getLogger("gravsurvey")
 
@@ -190,7 +191,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
                                   sigma=sol.sigma_smooth[a:b], context=(sol.g_smooth, a, b))
         final[a:b] = z
         line[a:b] = s.name
-        line_info[s.name] = {**_jsonable(info), "kind": s.kind, "speed_mps": speed, "samples": b - a}
+        line_info[s.name] = {**to_jsonable(info), "kind": s.kind, "speed_mps": speed, "samples": b - a}
     timings["postprocess_s"] = time.perf_counter() - t
 
     truth = None
@@ -271,21 +272,6 @@ def _classic_solution(cfg, fl, record):
         height_source="altimeter",
     )
     return _ClassicSolution(res, record)
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return [_jsonable(v) for v in obj.tolist()]
-    if isinstance(obj, (np.floating, float)):
-        v = float(obj)
-        return v if np.isfinite(v) else None
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    return obj
 
 
 # --------------------------------------------------------------------------
@@ -593,7 +579,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         "crossovers": xo_stats,
         "rms_vs_truth_mgal": _rms(table["error_mgal"][in_line]) if "error_mgal" in table else None,
     }
-    summary = _jsonable(summary)
+    summary = to_jsonable(summary)
 
     with OutputTransaction(out_dir) as tx:
         writers.write_profiles_csv(tx.path("profiles.csv"), table)

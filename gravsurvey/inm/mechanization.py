@@ -96,24 +96,14 @@ def _rot_into(phi, m):
 
 @njit(cache=True)
 def rodrigues(phi):
-    """Rotation matrix ``Exp([phi x])`` for a rotation vector ``phi`` (rad), (3, 3)."""
-    th2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
-    if th2 < 1e-8:
-        # series to th^6: errors < 1e-26
-        a = 1.0 - th2 / 6.0 + th2 * th2 / 120.0
-        b = 0.5 - th2 / 24.0 + th2 * th2 / 720.0
-    else:
-        th = math.sqrt(th2)
-        a = math.sin(th) / th
-        b = (1.0 - math.cos(th)) / th2
-    k = np.zeros((3, 3))
-    k[0, 1] = -phi[2]
-    k[0, 2] = phi[1]
-    k[1, 0] = phi[2]
-    k[1, 2] = -phi[0]
-    k[2, 0] = -phi[1]
-    k[2, 1] = phi[0]
-    return np.eye(3) + a * k + b * (k @ k)
+    """Rotation matrix ``Exp([phi x])`` for a rotation vector ``phi`` (rad), (3, 3).
+
+    The allocating form of :func:`_rot_into`, the kernel the mechanization uses (so a test of
+    this function tests that kernel).
+    """
+    m = np.empty((3, 3))
+    _rot_into(phi, m)
+    return m
 
 
 @njit(cache=True)
