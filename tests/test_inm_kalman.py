@@ -194,3 +194,92 @@ def test_real_inm_model_sequences_match_filterpy():
     xf, pf, xs, ps = _filterpy(*model)
     for a, b in ((ours["x_f"], xf), (ours["p_f"], pf), (ours["x_s"], xs), (ours["p_s"], ps)):
         assert _rel_per_state(a, b) < 1e-9
+
+
+# --------------------------------------------------------------------------
+# Generated 8-state vector steps (gravsurvey.inm._unrolled8) vs the generic loops
+# --------------------------------------------------------------------------
+
+
+def _bits(a):
+    """Bit patterns, so that even the sign of a zero or the payload of a NaN must agree."""
+    return np.ascontiguousarray(a).view(np.uint64)
+
+
+def test_generated_module_is_what_the_generator_writes():
+    from gravsurvey.inm import codegen
+
+    assert codegen.TARGET.read_text() == codegen.generate()
+
+
+@pytest.mark.parametrize("m,missing,mixed", [(1, 0.1, False), (2, 0.3, False), (3, 0.2, True), (2, 1.0, False)])
+def test_unrolled_steps_equal_the_generic_loops_bit_for_bit(m, missing, mixed):
+    """Same model through the generated 8-state steps and through the generic loops.
+
+    ``mixed``: every third epoch has a non-diagonal R (that epoch falls back to the generic
+    batch update inside the same run); ``missing=1.0``: prediction-only epochs.
+    """
+    rng = np.random.default_rng(40 + m)
+    model = list(_random_model(rng, nep=240, n=8, m=m, missing=missing, diag=True))
+    if mixed:
+        r = model[6].copy()
+        r[::3, 0, 1] = r[::3, 1, 0] = 0.3
+        model[6] = r
+    a = filter_and_smooth(*model)
+    b = filter_and_smooth(*model, unrolled=False)
+    for key in a:
+        assert np.array_equal(_bits(a[key]), _bits(b[key])), key
+    # the public kernels (the smoother recomputes phi P_f) take the same steps
+    fa = kalman_filter(*model)
+    fb = kalman_filter(*model, unrolled=False)
+    for u, v in zip(fa, fb):
+        assert np.array_equal(_bits(u), _bits(v))
+    sa = rts_smoother(*fa[:4], model[2])
+    sb = rts_smoother(*fb[:4], model[2], unrolled=False)
+    for u, v in zip(sa, sb):
+        assert np.array_equal(_bits(u), _bits(v))
+    if missing < 1.0:
+        assert _rel_per_state(a["x_s"], a["x_f"]) > 1e-3
+
+
+def test_unrolled_steps_directly_against_the_generic_step_functions():
+    """One filter epoch and one smoother epoch through filter_step8 / rts_step8 themselves."""
+    from gravsurvey.inm import kalman as K
+    from gravsurvey.inm._unrolled8 import filter_step8, rts_step8
+
+    rng = np.random.default_rng(8)
+    x0, p0, phi, q, z, h, r = _random_model(rng, nep=3, n=8, m=2, missing=0.0, diag=True)
+    x_f, p_f, x_p, p_p, innov = K.kalman_filter(x0, p0, phi, q, z, h, r, unrolled=False)
+    # epoch 2 again, with the generated step
+    x_f2, p_f2, x_p2, p_p2, innov2 = x_f.copy(), p_f.copy(), x_p.copy(), p_p.copy(), innov.copy()
+    for arr in (x_f2, p_f2, x_p2, p_p2, innov2):
+        arr[2] = np.nan
+    phi_pf = np.empty((1, 8, 8))
+    filter_step8(2, phi, q, z, h, r, x_f2, p_f2, x_p2, p_p2, innov2, phi_pf, 0)
+    for u, v in ((x_f2, x_f), (p_f2, p_f), (x_p2, x_p), (p_p2, p_p), (innov2, innov)):
+        assert np.array_equal(_bits(u), _bits(v))
+    expected = np.empty((8, 8))
+    K._matmul(phi[2], p_f[1], expected, False)
+    assert np.array_equal(_bits(phi_pf[0]), _bits(expected))
+    # the smoother step for epoch 1 from epoch 2
+    x_s, p_s = K.rts_smoother(x_f, p_f, x_p, p_p, phi, unrolled=False)
+    x_s2, p_s2 = x_s.copy(), p_s.copy()
+    x_s2[1] = p_s2[1] = np.nan
+    a = np.empty((1, 8, 8))
+    K._matmul(phi[2], p_f[1], a[0], False)
+    rts_step8(1, x_f, p_f, x_p, p_p, a, 0, x_s2, p_s2)
+    assert np.array_equal(_bits(x_s2), _bits(x_s))
+    assert np.array_equal(_bits(p_s2), _bits(p_s))
+
+
+def test_non_contiguous_inputs_are_accepted():
+    rng = np.random.default_rng(9)
+    model = _random_model(rng, nep=60, n=8, m=2, missing=0.2, diag=True)
+    a = filter_and_smooth(*model)
+    fortran = [np.asfortranarray(x) for x in model]
+    strided = [np.repeat(x, 2, axis=0)[::2] if x.ndim > 1 else x for x in fortran]
+    for args in (fortran, strided):
+        out = kalman_filter(*args)
+        assert np.array_equal(out[0], a["x_f"]) and np.array_equal(out[1], a["p_f"])
+        x_s, p_s = rts_smoother(*[np.asfortranarray(o) for o in out[:4]], np.asfortranarray(model[2]))
+        assert np.array_equal(x_s, a["x_s"]) and np.array_equal(p_s, a["p_s"])

@@ -1,0 +1,57 @@
+"""The 8-wide vector intrinsics (gravsurvey.inm.simd) against numpy, lane by lane."""
+
+import numpy as np
+import pytest
+from numba import njit
+from numba.core.errors import TypingError
+
+from gravsurvey.inm.simd import vadd, vcol, vdiv, vget, vload, vmul, vset, vsplat, vstore, vsub
+
+
+@njit
+def _ops(a, out):
+    x = vload(a, 8)  # row 1
+    y = vcol(a, 2, 8)  # column 2
+    vstore(out, 0, vadd(x, y))
+    vstore(out, 8, vsub(x, y))
+    vstore(out, 16, vmul(x, y))
+    vstore(out, 24, vdiv(x, y))
+    vstore(out, 32, vmul(vsplat(a[0, 0]), y))
+    vstore(out, 40, vset(x, 3, vget(y, 5)))
+    return vget(x, 7)
+
+
+def test_vector_ops_equal_numpy_lane_by_lane():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(8, 8))
+    a[1, 4] = 0.0
+    a[1, 6] = -0.0
+    out = np.full((6, 8), np.nan)
+    last = _ops(a, out)
+    x, y = a[1], a[:, 2]
+    expected = np.stack([x + y, x - y, x * y, x / y, a[0, 0] * y, np.where(np.arange(8) == 3, y[5], x)])
+    assert np.array_equal(out.view(np.uint64), expected.view(np.uint64))
+    assert last == x[7]
+
+
+def test_offsets_address_rows_of_a_3d_array():
+    @njit
+    def copy_rows(src, dst, k):
+        for i in range(4):
+            vstore(dst, 32 * k + 8 * i, vload(src, 32 * k + 8 * i))
+
+    src = np.arange(3 * 4 * 8, dtype=float).reshape(3, 4, 8)
+    dst = np.zeros_like(src)
+    copy_rows(src, dst, 2)
+    assert np.array_equal(dst[2], src[2]) and not dst[:2].any()
+
+
+def test_non_contiguous_arrays_are_refused_at_compile_time():
+    @njit
+    def first_row(a):
+        return vget(vload(a, 0), 0)
+
+    a = np.ones((8, 8))
+    assert first_row(a) == 1.0
+    with pytest.raises(TypingError):
+        first_row(np.asfortranarray(a))
