@@ -10,15 +10,22 @@ from gravsurvey.inm.simd import vadd, vcol, vdiv, vget, vload, vmul, vset, vspla
 
 @njit
 def _ops(a, out):
-    x = vload(a, 8)  # row 1
-    y = vcol(a, 2, 8)  # column 2
+    x = vload(a, 8, 8)  # row 1
+    y = vcol(a, 2, 8, 8)  # column 2
     vstore(out, 0, vadd(x, y))
     vstore(out, 8, vsub(x, y))
     vstore(out, 16, vmul(x, y))
     vstore(out, 24, vdiv(x, y))
-    vstore(out, 32, vmul(vsplat(a[0, 0]), y))
+    vstore(out, 32, vmul(vsplat(a[0, 0], 8), y))
     vstore(out, 40, vset(x, 3, vget(y, 5)))
     return vget(x, 7)
+
+
+@njit
+def _ops6(a, out):
+    x = vload(a, 16 + 2, 6)  # row 2, columns 2..7
+    y = vcol(a, 8 + 3, 8, 6)  # column 3, rows 1..6
+    vstore(out, 1, vadd(vmul(x, y), vsplat(0.5, 6)))
 
 
 def test_vector_ops_equal_numpy_lane_by_lane():
@@ -34,11 +41,21 @@ def test_vector_ops_equal_numpy_lane_by_lane():
     assert last == x[7]
 
 
+def test_partial_width_vectors_touch_only_their_lanes():
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(8, 8))
+    out = np.full(8, -7.0)
+    _ops6(a, out)
+    expected = np.full(8, -7.0)
+    expected[1:7] = a[2, 2:8] * a[1:7, 3] + 0.5
+    assert np.array_equal(out, expected)
+
+
 def test_offsets_address_rows_of_a_3d_array():
     @njit
     def copy_rows(src, dst, k):
         for i in range(4):
-            vstore(dst, 32 * k + 8 * i, vload(src, 32 * k + 8 * i))
+            vstore(dst, 32 * k + 8 * i, vload(src, 32 * k + 8 * i, 8))
 
     src = np.arange(3 * 4 * 8, dtype=float).reshape(3, 4, 8)
     dst = np.zeros_like(src)
@@ -49,7 +66,7 @@ def test_offsets_address_rows_of_a_3d_array():
 def test_non_contiguous_arrays_are_refused_at_compile_time():
     @njit
     def first_row(a):
-        return vget(vload(a, 0), 0)
+        return vget(vload(a, 0, 8), 0)
 
     a = np.ones((8, 8))
     assert first_row(a) == 1.0

@@ -16,7 +16,7 @@ check one against the other and both against filterpy.
 
 Speed notes (measured on the 8-state model, 14,401 epochs): no fastmath anywhere (results are
 bit-for-bit reproducible across machines); for n = 8 and a diagonal R each epoch is one call of
-a generated step (:mod:`gravsurvey.inm._unrolled8`) that keeps every covariance row in an
+a generated step (:mod:`gravsurvey.inm._unrolled`) that keeps every covariance row in an
 8-wide vector (:mod:`gravsurvey.inm.simd`): 0.6 us per epoch for filter + smoother against
 1.4 us for the generic loops below, and the same numbers to the last bit (tested).  The generic
 loops (any n, any R): scalar measurement updates in O(n^2); small products in
@@ -26,7 +26,7 @@ smoother (:func:`filter_and_smooth`); the backward sweep reads its inputs block-
 first (prefetching).
 
 numba's on-disk cache tracks only the file that defines a function: after editing
-``simd.py`` or regenerating ``_unrolled8.py``, delete ``gravsurvey/inm/__pycache__/*.nb?``
+``simd.py`` or regenerating ``_unrolled.py``, delete ``gravsurvey/inm/__pycache__/*.nb?``
 (the cached kernels of this module would otherwise keep the old steps).
 """
 
@@ -37,8 +37,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._unrolled8 import N as _N_UNROLLED
-from ._unrolled8 import filter_step8, rts_step8
+from ._unrolled import filter_step8, filter_step14, rts_step8, rts_step14
 
 
 # --------------------------------------------------------------------------
@@ -407,7 +406,7 @@ def kalman_filter(x0, p0, phi, q, z, h, r, unrolled=True):
     h : ndarray (N, m, n)
     r : ndarray (N, m, m)
     unrolled : bool
-        Use the generated fully unrolled 8-state step where it applies (see
+        Use the generated unrolled vector step where it applies (n = 8 or 14; see
         :mod:`gravsurvey.inm.codegen`); ``False`` forces the generic loops (same numbers).
 
     Returns
@@ -440,13 +439,13 @@ def _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_
     If ``phi_pf`` has ``N`` rows, ``phi_pf[k - 1] = phi[k] @ p_f[k - 1]`` (a by-product of the
     prediction, stored one row down so that the smoother's ``p_s`` can hold it) is kept for the
     smoother; give it one row to discard it.  ``unrolled``: use the generated fixed-size step
-    (:mod:`gravsurvey.inm._unrolled8`) where it applies (n = 8, diagonal R), same numbers.
+    (:mod:`gravsurvey.inm._unrolled`) where it applies (n = 8 or 14, diagonal R), same numbers.
     """
     nep = phi.shape[0]
     n = x0.shape[0]
     m = z.shape[1]
     keep = phi_pf.shape[0] == nep
-    fixed = unrolled and n == _N_UNROLLED
+    fixed = unrolled and (n == 8 or n == 14)
     phit = np.empty((n, n))
     kg = np.empty(n)
     ph = np.empty(n)
@@ -454,7 +453,10 @@ def _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_
         # the fixed-size step takes whole arrays and k: no row views (each costs atomic
         # reference-count updates, comparable to the arithmetic of a step)
         if k > 0 and fixed and _diagonal_at(r, k):
-            filter_step8(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, k - 1 if keep else 0)
+            if n == 8:
+                filter_step8(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, k - 1 if keep else 0)
+            else:
+                filter_step14(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, k - 1 if keep else 0)
             continue
         x = x_f[k]
         p = p_f[k]
@@ -506,7 +508,7 @@ def _rts_into(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, unrolled):
     With ``have_phi_pf``, ``phi_pf[k]`` must hold ``phi[k + 1] @ p_f[k]`` exactly as the
     filter computed it (see :func:`_kalman_filter_into`) and is used instead of recomputing it.
     ``phi_pf`` may be ``p_s`` itself: row ``k`` is read before ``p_s[k]`` is written.
-    ``unrolled``: the generated 8-state step (same numbers) when n = 8.
+    ``unrolled``: the generated step (same numbers) when n = 8 or 14.
     """
     nep, n = x_f.shape
     if nep == 0:
@@ -521,7 +523,7 @@ def _rts_into(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, unrolled):
     dx = np.empty(n)
     dp = np.empty((n, n))
     tmp = np.empty((n, n))
-    fixed = unrolled and n == _N_UNROLLED
+    fixed = unrolled and (n == 8 or n == 14)
     phi_pf1 = np.empty((1, n, n))
     # The recursion runs backwards in time, and backward streams through the (N, n, n) arrays
     # are badly prefetched (measured: 8x8 products 2.4x slower than in a forward loop).  So the
@@ -538,11 +540,16 @@ def _rts_into(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, unrolled):
         for kk in range(k1 - k0 + 1):
             k = k1 - kk
             if fixed:
-                if have_phi_pf:
-                    rts_step8(k, x_f, p_f, x_p, p_p, phi_pf, k, x_s, p_s)
-                else:
+                a = phi_pf
+                ka = k
+                if not have_phi_pf:
                     _matmul(phi[k + 1], p_f[k], phi_pf1[0], False)
-                    rts_step8(k, x_f, p_f, x_p, p_p, phi_pf1, 0, x_s, p_s)
+                    a = phi_pf1
+                    ka = 0
+                if n == 8:
+                    rts_step8(k, x_f, p_f, x_p, p_p, a, ka, x_s, p_s)
+                else:
+                    rts_step14(k, x_f, p_f, x_p, p_p, a, ka, x_s, p_s)
                 continue
             _rts_step(k, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg, lch, b, bt, dx, dp,
                       tmp)

@@ -1,10 +1,12 @@
-"""Eight-wide float64 vectors for numba kernels (one row of an 8-state covariance).
+"""Float64 vectors of up to 8 lanes for numba kernels (rows of small covariance matrices).
 
 numba compiles element loops over small matrices to scalar code: its SLP vectoriser is off by
 default, and for a trip count of 8 the loop vectoriser's runtime checks cost more than they
-save.  These intrinsics give the kernels an explicit LLVM ``<8 x double>`` value type
-(:data:`f64x8`), so that one row operation of an 8x8 product is one vector instruction on
-AVX-512 (two on AVX2, four on SSE2 or NEON; LLVM legalises the width for the machine).
+save.  These intrinsics give the kernels explicit LLVM ``<w x double>`` value types
+(:func:`f64x`, ``w <= 8``), so that one row operation of an 8x8 product is one vector
+instruction on AVX-512 (two on AVX2, four on SSE2 or NEON; LLVM legalises the width for the
+machine); a 14-wide row is an 8-lane and a 6-lane vector.  Widths are literal integer arguments
+(``vload(a, off, 8)``).
 
 Every operation is a plain IEEE ``fadd``/``fsub``/``fmul``/``fdiv`` per lane with no fast-math
 flags (no contraction into FMA, no reassociation), so a kernel written with these computes
@@ -20,31 +22,47 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic, models, register_model
 
-#: Lanes per vector.
+#: Most lanes per vector (one AVX-512 register of float64).
 W = 8
 
-_VT = ir.VectorType(ir.DoubleType(), W)
 _I32 = ir.IntType(32)
 
 
-class F64x8Type(types.Type):
-    """numba type of an ``<8 x double>`` value."""
+class F64xNType(types.Type):
+    """numba type of an ``<w x double>`` value, ``1 <= w <= 8``."""
 
-    def __init__(self):
-        super().__init__(name="f64x8")
-
-
-f64x8 = F64x8Type()
+    def __init__(self, width):
+        self.width = width
+        super().__init__(name=f"f64x{width}")
 
 
-@register_model(F64x8Type)
-class _F64x8Model(models.PrimitiveModel):
+_TYPES = {w: F64xNType(w) for w in range(1, W + 1)}
+
+
+def f64x(width: int) -> F64xNType:
+    """The vector type with ``width`` lanes."""
+    return _TYPES[width]
+
+
+#: The full-width type.
+f64x8 = f64x(W)
+
+
+@register_model(F64xNType)
+class _F64xNModel(models.PrimitiveModel):
     def __init__(self, dmm, fe_type):
-        super().__init__(dmm, fe_type, _VT)
+        super().__init__(dmm, fe_type, ir.VectorType(ir.DoubleType(), fe_type.width))
 
 
 def _check_array(arr):
     return isinstance(arr, types.Array) and arr.dtype == types.float64 and arr.layout == "C"
+
+
+def _width(w):
+    """The lane count of a literal-integer argument, or None."""
+    if isinstance(w, types.IntegerLiteral) and 1 <= w.literal_value <= W:
+        return w.literal_value
+    return None
 
 
 def _elem_ptr(context, builder, arrty, arr, off):
@@ -52,50 +70,55 @@ def _elem_ptr(context, builder, arrty, arr, off):
     return builder.gep(ary.data, [off])
 
 
-@intrinsic
-def vload(typingctx, arr, off):
-    """``arr.flat[off:off + 8]`` as a vector."""
-    if not (_check_array(arr) and isinstance(off, types.Integer)):
+@intrinsic(prefer_literal=True)
+def vload(typingctx, arr, off, w):
+    """``arr.flat[off:off + w]`` as a vector (``w`` a literal integer)."""
+    width = _width(w)
+    if not (_check_array(arr) and isinstance(off, types.Integer) and width):
         return None
-    sig = f64x8(arr, types.intp)
+    vt = f64x(width)
+    sig = vt(arr, types.intp, w)
 
     def codegen(context, builder, sig, args):
         off = context.cast(builder, args[1], sig.args[1], types.intp)
         p = _elem_ptr(context, builder, sig.args[0], args[0], off)
-        return builder.load(builder.bitcast(p, _VT.as_pointer()), align=8)
+        lt = context.get_value_type(vt)
+        return builder.load(builder.bitcast(p, lt.as_pointer()), align=8)
 
     return sig, codegen
 
 
 @intrinsic
 def vstore(typingctx, arr, off, v):
-    """``arr.flat[off:off + 8] = v``."""
-    if not (_check_array(arr) and isinstance(off, types.Integer) and v == f64x8):
+    """``arr.flat[off:off + w] = v`` (``w`` lanes of ``v``)."""
+    if not (_check_array(arr) and isinstance(off, types.Integer) and isinstance(v, F64xNType)):
         return None
-    sig = types.void(arr, types.intp, f64x8)
+    sig = types.void(arr, types.intp, v)
 
     def codegen(context, builder, sig, args):
         off = context.cast(builder, args[1], sig.args[1], types.intp)
         p = _elem_ptr(context, builder, sig.args[0], args[0], off)
-        builder.store(args[2], builder.bitcast(p, _VT.as_pointer()), align=8)
+        builder.store(args[2], builder.bitcast(p, args[2].type.as_pointer()), align=8)
         return context.get_dummy_value()
 
     return sig, codegen
 
 
-@intrinsic
-def vcol(typingctx, arr, off, stride):
-    """``arr.flat[off + stride * i]`` for ``i = 0..7`` (a column of a row-major matrix)."""
-    if not (_check_array(arr) and isinstance(off, types.Integer) and isinstance(stride, types.Integer)):
+@intrinsic(prefer_literal=True)
+def vcol(typingctx, arr, off, stride, w):
+    """``arr.flat[off + stride * i]`` for ``i = 0..w-1`` (part of a column of a row-major matrix)."""
+    width = _width(w)
+    if not (_check_array(arr) and isinstance(off, types.Integer) and isinstance(stride, types.Integer) and width):
         return None
-    sig = f64x8(arr, types.intp, types.intp)
+    vt = f64x(width)
+    sig = vt(arr, types.intp, types.intp, w)
 
     def codegen(context, builder, sig, args):
         off = context.cast(builder, args[1], sig.args[1], types.intp)
         stride = context.cast(builder, args[2], sig.args[2], types.intp)
         ary = context.make_array(sig.args[0])(context, builder, args[0])
-        v = ir.Constant(_VT, ir.Undefined)
-        for i in range(W):
+        v = ir.Constant(context.get_value_type(vt), ir.Undefined)
+        for i in range(width):
             idx = builder.add(off, builder.mul(stride, ir.Constant(off.type, i)))
             x = builder.load(builder.gep(ary.data, [idx]), align=8)
             v = builder.insert_element(v, x, ir.Constant(_I32, i))
@@ -104,16 +127,20 @@ def vcol(typingctx, arr, off, stride):
     return sig, codegen
 
 
-@intrinsic
-def vsplat(typingctx, x):
-    """The scalar ``x`` in every lane."""
-    if not isinstance(x, types.Float):
+@intrinsic(prefer_literal=True)
+def vsplat(typingctx, x, w):
+    """The scalar ``x`` in each of ``w`` lanes (``w`` a literal integer)."""
+    width = _width(w)
+    if not (isinstance(x, types.Float) and width):
         return None
-    sig = f64x8(types.float64)
+    vt = f64x(width)
+    sig = vt(types.float64, w)
 
     def codegen(context, builder, sig, args):
-        v = builder.insert_element(ir.Constant(_VT, ir.Undefined), args[0], ir.Constant(_I32, 0))
-        return builder.shuffle_vector(v, ir.Constant(_VT, ir.Undefined), ir.Constant(ir.VectorType(_I32, W), [0] * W))
+        lt = context.get_value_type(vt)
+        v = builder.insert_element(ir.Constant(lt, ir.Undefined), args[0], ir.Constant(_I32, 0))
+        mask = ir.Constant(ir.VectorType(_I32, width), [0] * width)
+        return builder.shuffle_vector(v, ir.Constant(lt, ir.Undefined), mask)
 
     return sig, codegen
 
@@ -121,9 +148,9 @@ def vsplat(typingctx, x):
 def _binop(op, doc):
     @intrinsic
     def fn(typingctx, a, b):
-        if not (a == f64x8 and b == f64x8):
+        if not (isinstance(a, F64xNType) and a == b):
             return None
-        sig = f64x8(f64x8, f64x8)
+        sig = a(a, b)
 
         def codegen(context, builder, sig, args):
             return getattr(builder, op)(args[0], args[1])
@@ -143,9 +170,9 @@ vdiv = _binop("fdiv", "Lane-wise ``a / b``.")
 @intrinsic
 def vget(typingctx, v, i):
     """Lane ``i`` of ``v``."""
-    if not (v == f64x8 and isinstance(i, types.Integer)):
+    if not (isinstance(v, F64xNType) and isinstance(i, types.Integer)):
         return None
-    sig = types.float64(f64x8, types.intp)
+    sig = types.float64(v, types.intp)
 
     def codegen(context, builder, sig, args):
         i = context.cast(builder, args[1], sig.args[1], types.intp)
@@ -157,9 +184,9 @@ def vget(typingctx, v, i):
 @intrinsic
 def vset(typingctx, v, i, x):
     """``v`` with lane ``i`` replaced by ``x``."""
-    if not (v == f64x8 and isinstance(i, types.Integer) and isinstance(x, types.Float)):
+    if not (isinstance(v, F64xNType) and isinstance(i, types.Integer) and isinstance(x, types.Float)):
         return None
-    sig = f64x8(f64x8, types.intp, types.float64)
+    sig = v(v, types.intp, types.float64)
 
     def codegen(context, builder, sig, args):
         i = context.cast(builder, args[1], sig.args[1], types.intp)
