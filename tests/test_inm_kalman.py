@@ -167,6 +167,42 @@ def test_expm_and_van_loan_against_scipy():
     assert _rel(qd, quad) < 1e-9
 
 
+@pytest.mark.parametrize("n", [5, 8, 14])
+def test_block_van_loan_equals_the_full_matrix_exponential(n):
+    """van_loan works on the blocks of the 2n x 2n Van Loan matrix (generated vector products
+    for n = 8 and 14, the generic loops otherwise): same result as scipy's expm of the whole
+    matrix, with and without the scaling-and-squaring steps."""
+    rng = np.random.default_rng(n)
+    for scale, dt in ((1e-4, 1.0), (0.05, 1.0), (0.3, 2.0), (3.0, 1.0), (0.4, 4.0)):
+        a = rng.normal(size=(n, n)) * scale
+        qc = rng.normal(size=(n, n))
+        qc = qc @ qc.T * scale  # 1e-4: no squaring (|M| < 0.25); the others need it
+        m = np.zeros((2 * n, 2 * n))
+        m[:n, :n], m[:n, n:], m[n:, n:] = -a * dt, qc * dt, a.T * dt
+        e = scipy.linalg.expm(m)
+        phi_ref = e[n:, n:].T
+        qd_ref = phi_ref @ e[:n, n:]
+        phi, qd = van_loan(a, qc, dt)
+        assert _rel(phi, phi_ref) < 1e-12, scale
+        assert _rel(qd, 0.5 * (qd_ref + qd_ref.T)) < 1e-12, scale
+        assert np.array_equal(qd, qd.T)
+
+
+@pytest.mark.parametrize("n", [8, 14])
+def test_generated_matmul_equals_generic_loops_bit_for_bit(n):
+    from gravsurvey.inm import _unrolled
+    from gravsurvey.inm import kalman as K
+
+    rng = np.random.default_rng(n)
+    a, b = rng.normal(size=(2, n, n)) * np.logspace(-8, 3, n)
+    a[0, 1] = -0.0
+    out, ref = np.empty((n, n)), np.empty((n, n))
+    getattr(_unrolled, f"matmul{n}")(a, b, out)
+    K._matmul(a, b, ref, False)
+    assert np.array_equal(_bits(out), _bits(ref))
+    assert _rel(out, a @ b) < 1e-13
+
+
 def test_real_inm_model_sequences_match_filterpy():
     """The badly scaled 3D-INM model itself (metres next to 1e-6 m/s^2), 20 min of noisy data."""
     import sys

@@ -275,11 +275,31 @@ def _rts_step(n):
     return g.lines
 
 
+def _matmul(n):
+    g = _Gen(n)
+    e = g.emit
+    e("@njit(cache=True)")
+    e(f"def matmul{n}(a, b, out):")
+    e(f'    """``out = a @ b`` for C-contiguous ({n}, {n}) float64 arrays; ``out`` must not alias them.')
+    e("")
+    e("    Each element is ``0.0 + a[i, 0] b[0, j] + a[i, 1] b[1, j] + ...`` in that order: the")
+    e("    rounding of :func:`gravsurvey.inm.kalman._matmul`.")
+    e('    """')
+    g.header("    ")
+    for i in range(n):
+        g.load("    ", f"b{i}", "b", f"{n * i}")
+    for i in range(n):
+        g.assign("    ", f"o{i}", lambda c, i=i: _sum(g.zero(c), [f"vmul({g.splat(f'a[{i}, {l}]', c)}, b{l}_{c})"
+                                                                for l in range(n)]))
+        g.store("    ", "out", f"{n * i}", f"o{i}")
+    return g.lines
+
+
 def generate() -> str:
     """Source text of :mod:`gravsurvey.inm._unrolled`."""
     body = [HEADER.format(sizes=" and ".join(map(str, SIZES)), sizes_tuple=repr(SIZES)), ""]
     for n in SIZES:
-        body += _filter_step(n) + ["", ""] + _rts_step(n) + ["", ""]
+        body += _filter_step(n) + ["", ""] + _rts_step(n) + ["", ""] + _matmul(n) + ["", ""]
     return "\n".join(body[:-2]) + "\n"
 
 

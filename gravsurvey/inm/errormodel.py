@@ -48,7 +48,7 @@ import scipy.linalg
 from numba import njit
 
 from ..geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef, mat_en, mat_ie, normal_gravitation_ecef
-from .kalman import van_loan
+from .kalman import _mm, van_loan
 
 #: State indices (seed 004 order).
 DQ1, DP1, DQ2, DP2, DQ3, DP3, G, F3 = range(8)
@@ -276,6 +276,10 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     phi[0] = np.eye(n)
     t_prev = np.eye(n)
     t_cur = np.eye(n)
+    t_cur_t = np.empty((n, n))
+    w = np.empty((n, n))
+    phx = np.empty((n, n))
+    qx = np.empty((n, n))
     nblk = 3 if n == 14 else 2
     for k in range(1, nep):
         a, qc = continuous_model_n(r[k], v[k], up[k], e1[k], e2[k], e3[k], w02[k], speed[k], c, n)
@@ -286,8 +290,14 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
                 for j in range(3):
                     t_prev[o + i, o + j] = mat_it[k - 1, i, j]
                     t_cur[o + i, o + j] = mat_it[k, i, j]
-        phx = t_cur.T @ phy @ t_prev
-        qx = t_cur.T @ qy @ t_cur
+        # phx = t_cur^T phy t_prev, qx = t_cur^T qy t_cur (small fixed-size products, no BLAS)
+        for i in range(n):
+            for j in range(n):
+                t_cur_t[i, j] = t_cur[j, i]
+        _mm(t_cur_t, phy, w)
+        _mm(w, t_prev, phx)
+        _mm(t_cur_t, qy, w)
+        _mm(w, t_cur, qx)
         phi[k] = _to_seed(phx, perm)
         qs = _to_seed(qx, perm)
         q[k] = 0.5 * (qs + qs.T)
