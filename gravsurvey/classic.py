@@ -53,7 +53,6 @@ This module must not import :mod:`gravsurvey.simulate` (estimator and simulator 
 
 from __future__ import annotations
 
-import difflib
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -63,7 +62,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.signal import fftconvolve
 
-from .errors import ConfigError, DataError, DataWarning
+from .errors import ConfigError, DataError, DataWarning, check_keys
 from .geodesy import MGAL, WGS84, Ellipsoid, radii_of_curvature
 from .io.record import FlightRecord
 
@@ -178,11 +177,7 @@ def classic_options_from_dict(d, key_path: str = "postprocess.classic") -> Class
         return ClassicOptions()
     if not isinstance(d, dict):
         raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-    for k in d:
-        if k not in _OPTION_KEYS:
-            near = difflib.get_close_matches(str(k), _OPTION_KEYS, n=1)
-            hint = f"; did you mean {near[0]!r}?" if near else f"; valid keys: {', '.join(_OPTION_KEYS)}"
-            raise ConfigError(f"{key_path}.{k}: unknown key{hint}")
+    check_keys(d, _OPTION_KEYS, key_path)
     vals = {}
     for k in ("filter_length_s", "resolution_m"):
         v = d.get(k)

@@ -11,7 +11,6 @@ the key path in every error.
 
 from __future__ import annotations
 
-import difflib
 import hashlib
 import json
 import re
@@ -21,7 +20,7 @@ from typing import Any
 
 import yaml
 
-from .errors import ConfigError
+from .errors import ConfigError, check_keys
 from .io.ingest import INGEST_KEYS as FLIGHT_INGEST_KEYS
 
 TOP_KEYS = ("survey", "ellipsoid", "flights", "model", "lines", "postprocess", "processing", "output")
@@ -33,22 +32,6 @@ PROCESSING_KEYS = ("method", "classic_resolution_m")
 TRIADS = ("platform", "strapdown")
 PROCESSING_METHODS = ("inm", "classic")
 _NAME_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
-
-
-def suggest(key: str, valid) -> str:
-    """' (did you mean X?)' for the nearest valid key, or ''."""
-    close = difflib.get_close_matches(str(key), list(valid), n=1, cutoff=0.5)
-    return f" (did you mean {close[0]!r}?)" if close else ""
-
-
-def check_keys(d: dict, valid, path: str) -> None:
-    """Raise ConfigError for the first key of ``d`` not in ``valid``."""
-    for k in d:
-        if k not in valid:
-            where = f"{path}.{k}" if path else str(k)
-            raise ConfigError(
-                f"{where}: unknown key{suggest(k, valid)}; valid keys here: {', '.join(valid)}"
-            )
 
 
 def expect_mapping(v: Any, path: str) -> dict:

@@ -25,3 +25,38 @@ class ConfigError(GravsurveyError):
 
 class DataWarning(UserWarning):
     """Something in the data was repaired or looks suspicious; processing continues."""
+
+
+def suggest(word, choices) -> str:
+    """``" (did you mean 'x'?)"`` for the choice nearest to ``word``, or ``""``.
+
+    A choice equal to ``word`` up to case wins; otherwise the closest by
+    :func:`difflib.get_close_matches` with a similarity of at least 0.5.
+    """
+    import difflib
+
+    names = [str(c) for c in choices]
+    same = [c for c in names if c.lower() == str(word).lower()]
+    near = same or difflib.get_close_matches(str(word), names, n=1, cutoff=0.5)
+    return f" (did you mean {near[0]!r}?)" if near else ""
+
+
+def check_keys(d, valid, path: str, required=()) -> None:
+    """Reject the first key of mapping ``d`` that is not in ``valid``, then any missing ``required``.
+
+    Messages (one format for every configuration section)::
+
+        <path>.<key>: unknown key (did you mean 'x'?); valid keys here: a, b, c
+        <path>.<key>: missing required key
+
+    ``path`` is the key path of ``d`` ("" at the top level).
+    """
+    valid = [str(v) for v in valid]
+    for k in d:
+        if str(k) not in valid:
+            where = f"{path}.{k}" if path else str(k)
+            raise ConfigError(f"{where}: unknown key{suggest(k, valid)}; valid keys here: {', '.join(valid)}")
+    for k in required:
+        if k not in d:
+            where = f"{path}.{k}" if path else str(k)
+            raise ConfigError(f"{where}: missing required key")

@@ -23,14 +23,13 @@ headings and angles at the edges in degrees (named ``_deg``).
 
 from __future__ import annotations
 
-import difflib
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from gravsurvey.errors import ConfigError, DataError
+from gravsurvey.errors import ConfigError, DataError, check_keys
 from gravsurvey.geodesy import radii_of_curvature
 
 __all__ = [
@@ -440,7 +439,7 @@ def segments_from_windows(time_s, windows: list[dict], *, key_path: str = "lines
         kp = f"{key_path}[{i}]"
         if not isinstance(wdw, dict):
             raise ConfigError(f"{kp}: expected a mapping with name, start_s, stop_s")
-        _reject_unknown(wdw, ("name", "start_s", "stop_s", "kind"), kp)
+        check_keys(wdw, ("name", "start_s", "stop_s", "kind"), kp)
         for k in ("name", "start_s", "stop_s"):
             if k not in wdw:
                 raise ConfigError(f"{kp}: missing key '{k}'")
@@ -471,14 +470,6 @@ def segments_from_windows(time_s, windows: list[dict], *, key_path: str = "lines
             )
         out.append(Segment(name, kind, a, b))
     return out
-
-
-def _reject_unknown(d: dict, valid, key_path: str) -> None:
-    for k in d:
-        if k not in valid:
-            near = difflib.get_close_matches(str(k), list(valid), n=1)
-            hint = f"; did you mean '{near[0]}'?" if near else f"; valid keys: {', '.join(valid)}"
-            raise ConfigError(f"{key_path}: unknown key '{k}'{hint}")
 
 
 @dataclass
@@ -543,7 +534,7 @@ class SegmentationOptions:
             d = {}
         if not isinstance(d, dict):
             raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-        _reject_unknown(d, cls.keys(), key_path)
+        check_keys(d, cls.keys(), key_path)
         opts = cls()
         if "mode" in d:
             if d["mode"] not in ("auto", "windows", "whole"):
@@ -577,7 +568,7 @@ class SegmentationOptions:
                 kp = f"{key_path}.windows[{i}]"
                 if not isinstance(wdw, dict):
                     raise ConfigError(f"{kp}: expected a mapping with name, start_s, stop_s")
-                _reject_unknown(wdw, ("name", "start_s", "stop_s", "kind"), kp)
+                check_keys(wdw, ("name", "start_s", "stop_s", "kind"), kp)
             opts.windows = list(wins)
         if opts.mode == "windows" and not opts.windows:
             raise ConfigError(f"{key_path}.windows: required (a non-empty list) when mode is 'windows'")

@@ -47,7 +47,7 @@ from numba import njit
 from scipy import fft as _sfft
 from scipy import signal as _sps
 
-from gravsurvey.errors import ConfigError, DataError
+from gravsurvey.errors import ConfigError, DataError, suggest
 
 __all__ = [
     "METHODS",
@@ -172,13 +172,6 @@ class PostprocessOptions:
 _OPTION_KEYS = tuple(PostprocessOptions.__dataclass_fields__)
 
 
-def _nearest(name, choices):
-    import difflib
-
-    near = difflib.get_close_matches(str(name), list(choices), n=1)
-    return f" (did you mean '{near[0]}'?)" if near else ""
-
-
 def options_from_dict(d, key_path="postprocess"):
     """Validate the configuration's ``postprocess:`` block.
 
@@ -205,7 +198,7 @@ def options_from_dict(d, key_path="postprocess"):
     for key in d:
         if key not in _OPTION_KEYS:
             raise ConfigError(
-                f"{key_path}.{key}: unknown key{_nearest(key, _OPTION_KEYS)}; "
+                f"{key_path}.{key}: unknown key{suggest(key, _OPTION_KEYS)}; "
                 f"allowed: {', '.join(_OPTION_KEYS)}"
             )
 
@@ -213,7 +206,7 @@ def options_from_dict(d, key_path="postprocess"):
         v = d.get(key, default)
         if not isinstance(v, str) or v not in allowed:
             raise ConfigError(
-                f"{key_path}.{key}: {v!r} is not allowed{_nearest(v, allowed)}; "
+                f"{key_path}.{key}: {v!r} is not allowed{suggest(v, allowed)}; "
                 f"expected one of {', '.join(allowed)}"
             )
         return v

@@ -303,7 +303,7 @@ def test_options_from_dict():
     o = cl.classic_options_from_dict({"resolution_m": 3000, "height_source": "altimeter"}, "postprocess.classic")
     assert o.resolution_m == 3000.0 and o.height_source == "altimeter" and o.filter_length_s is None
     assert cl.classic_options_from_dict(None) == cl.ClassicOptions()
-    with pytest.raises(ConfigError, match=r"postprocess\.classic\.filter_lenght_s: unknown key; did you mean 'filter_length_s'"):
+    with pytest.raises(ConfigError, match=r"^postprocess\.classic\.filter_lenght_s: unknown key \(did you mean 'filter_length_s'\?\); valid keys here: filter_length_s, "):
         cl.classic_options_from_dict({"filter_lenght_s": 100})
     with pytest.raises(ConfigError, match=r"postprocess\.classic\.resolution_m: expected a positive number"):
         cl.classic_options_from_dict({"resolution_m": -5})

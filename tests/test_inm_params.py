@@ -27,7 +27,7 @@ def test_defaults_are_seed_004():
 
 
 @pytest.mark.parametrize("d,msg", [
-    ({"acel_noise_mps2": 1e-3}, "model.acel_noise_mps2: unknown key; did you mean 'accel_noise_mps2'?"),
+    ({"acel_noise_mps2": 1e-3}, "model.acel_noise_mps2: unknown key (did you mean 'accel_noise_mps2'?); valid keys"),
     ({"altimeter_sigma_m": -1.0}, "model.altimeter_sigma_m: expected a finite value >= 0"),
     ({"gravimeter_lambda_per_s": -0.1}, "model.gravimeter_lambda_per_s: expected a finite value >= 0"),
     ({"filter_rate_hz": 0}, "model.filter_rate_hz: expected a rate > 0 Hz"),
@@ -88,7 +88,7 @@ def test_initial_state_from_dict():
                                 "flights[0].initial")
     with pytest.raises(ConfigError, match=r"initial\.velocity_enu_mps: expected a list of 3 numbers"):
         initial_state_from_dict({**d, "velocity_enu_mps": [1, 2]}, "platform")
-    with pytest.raises(ConfigError, match=r"initial\.lat_dg: unknown key; did you mean 'lat_deg'"):
+    with pytest.raises(ConfigError, match=r"initial\.lat_dg: unknown key \(did you mean 'lat_deg'\?\)"):
         initial_state_from_dict({**d, "lat_dg": 1}, "platform")
     with pytest.raises(ConfigError, match=r"initial\.lat_deg: expected a latitude"):
         initial_state_from_dict({**d, "lat_deg": 95}, "platform")

@@ -21,13 +21,12 @@ Noise conventions (shared with the simulator's sensor model):
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ConfigError, check_keys
 
 RADIUS_SOURCES = ("altimeter", "computed")
 #: Boolean settings (everything else but ``radius_source`` is a number).
@@ -141,12 +140,7 @@ class InmParams:
             d = {}
         if not isinstance(d, dict):
             raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-        names = [f.name for f in dataclasses.fields(cls)]
-        for k in d:
-            if k not in names:
-                near = difflib.get_close_matches(str(k), names, n=1)
-                hint = f"; did you mean {near[0]!r}?" if near else ""
-                raise ConfigError(f"{key_path}.{k}: unknown key{hint}")
+        check_keys(d, [f.name for f in dataclasses.fields(cls)], key_path)
         obj = cls.__new__(cls)
         for f in dataclasses.fields(cls):
             setattr(obj, f.name, d.get(f.name, f.default))
@@ -283,11 +277,7 @@ def initial_state_from_dict(d, triad: str, key_path: str = "initial") -> Initial
     _check_triad(triad, key_path.rsplit(".", 1)[0] + ".triad" if "." in key_path else "triad")
     if not isinstance(d, dict):
         raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-    for k in d:
-        if k not in _INITIAL_KEYS:
-            near = difflib.get_close_matches(str(k), _INITIAL_KEYS, n=1)
-            hint = f"; did you mean {near[0]!r}?" if near else ""
-            raise ConfigError(f"{key_path}.{k}: unknown key{hint}")
+    check_keys(d, _INITIAL_KEYS, key_path)
     lat = float(_num(d, "lat_deg", key_path))
     lon = float(_num(d, "lon_deg", key_path))
     if not -90.0 < lat < 90.0:

@@ -9,7 +9,6 @@ per finding, the same line in ``record.notes``.
 
 from __future__ import annotations
 
-import difflib
 import os
 import warnings
 from dataclasses import dataclass, field
@@ -17,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gravsurvey.errors import ConfigError, DataError, DataWarning
+from gravsurvey.errors import ConfigError, DataError, DataWarning, check_keys, suggest
 from gravsurvey.io import checks as ck
 from gravsurvey.io.csv import (DEFAULT_COLUMNS, TIME_FORMATS, UNITS,
                                read_csv_channel)
@@ -74,23 +73,10 @@ class IngestOptions:
 
 
 # ----------------------------------------------------------------------------- config parsing
-def _suggest(key, allowed):
-    same = [a for a in allowed if str(a).lower() == str(key).lower()]
-    m = same or difflib.get_close_matches(str(key), list(map(str, allowed)), n=1, cutoff=0.5)
-    return f" (did you mean {m[0]!r}?)" if m else ""
-
-
 def _mapping(value, path):
     if not isinstance(value, dict):
         raise ConfigError(f"{path}: expected a mapping, got {type(value).__name__}")
     return value
-
-
-def _keys(d, allowed, path):
-    for k in d:
-        if k not in allowed:
-            raise ConfigError(f"{path}.{k}: unknown key{_suggest(k, allowed)}; allowed: "
-                              f"{', '.join(allowed)}")
 
 
 def _str_value(v, path):
@@ -102,7 +88,7 @@ def _str_value(v, path):
 def _choice(v, allowed, path):
     if v not in allowed:
         raise ConfigError(f"{path}: expected one of {', '.join(map(str, allowed))}, got {v!r}"
-                          f"{_suggest(v, allowed)}")
+                          f"{suggest(v, allowed)}")
     return v
 
 
@@ -117,7 +103,7 @@ def _number(v, path, lo=None, hi=None, integer=False):
 
 def _units(d, path):
     d = _mapping(d, path)
-    _keys(d, tuple(UNITS), path)
+    check_keys(d, tuple(UNITS), path)
     out = {k: next(iter(UNITS[k])) for k in UNITS}
     for k, v in d.items():
         out[k] = _choice(v, tuple(UNITS[k]), f"{path}.{k}")
@@ -146,7 +132,7 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
         full key path.
     """
     cfg = _mapping(flight_cfg, key_path)
-    _keys(cfg, INGEST_KEYS, key_path)
+    check_keys(cfg, INGEST_KEYS, key_path)
     o = IngestOptions(key_path=key_path,
                       base_dir=os.fspath(base_dir) if base_dir is not None else None)
     if "inputs" not in cfg:
@@ -154,7 +140,7 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
                           "{csv: {imu: FILE, altimeter: FILE, gnss: FILE}}")
     p = f"{key_path}.inputs"
     inputs = _mapping(cfg["inputs"], p)
-    _keys(inputs, ("mcap", "csv"), p)
+    check_keys(inputs, ("mcap", "csv"), p)
     if len(inputs) != 1:
         raise ConfigError(f"{p}: expected exactly one of mcap, csv, got "
                           f"{', '.join(inputs) or 'none'}")
@@ -163,7 +149,7 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
     else:
         o.kind = "csv"
         c = _mapping(inputs["csv"], f"{p}.csv")
-        _keys(c, ROLES, f"{p}.csv")
+        check_keys(c, ROLES, f"{p}.csv")
         for r in ("imu", "altimeter"):
             if r not in c:
                 raise ConfigError(f"{p}.csv.{r}: missing; expected a CSV file path")
@@ -171,21 +157,21 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
     if "topics" in cfg:
         p = f"{key_path}.topics"
         t = _mapping(cfg["topics"], p)
-        _keys(t, ROLES, p)
+        check_keys(t, ROLES, p)
         for r, v in t.items():
             o.topics[r] = _str_value(v, f"{p}.{r}")
         o.topics_explicit = tuple(t)
     if "mcap" in cfg:
         p = f"{key_path}.mcap"
         m = _mapping(cfg["mcap"], p)
-        _keys(m, ("json_fields", "units", "time_source", "check_crc", "max_record_mib"), p)
+        check_keys(m, ("json_fields", "units", "time_source", "check_crc", "max_record_mib"), p)
         if "json_fields" in m:
             jf = _mapping(m["json_fields"], f"{p}.json_fields")
-            _keys(jf, ROLES, f"{p}.json_fields")
+            check_keys(jf, ROLES, f"{p}.json_fields")
             for r, fm in jf.items():
                 q = f"{p}.json_fields.{r}"
                 fm = _mapping(fm, q)
-                _keys(fm, tuple(DEFAULT_JSON_FIELDS[r]), q)
+                check_keys(fm, tuple(DEFAULT_JSON_FIELDS[r]), q)
                 for k, v in fm.items():
                     vec = k in ("specific_force", "angular_rate")
                     if vec and isinstance(v, list):
@@ -210,16 +196,16 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
     if "csv" in cfg:
         p = f"{key_path}.csv"
         c = _mapping(cfg["csv"], p)
-        _keys(c, ("columns", "time_format", "units", "delimiter", "gps_leap_seconds"), p)
+        check_keys(c, ("columns", "time_format", "units", "delimiter", "gps_leap_seconds"), p)
         if "time_format" in c:
             o.csv_time_format = _choice(c["time_format"], TIME_FORMATS, f"{p}.time_format")
         if "columns" in c:
             cols = _mapping(c["columns"], f"{p}.columns")
-            _keys(cols, ROLES, f"{p}.columns")
+            check_keys(cols, ROLES, f"{p}.columns")
             for r, cm in cols.items():
                 q = f"{p}.columns.{r}"
                 cm = _mapping(cm, q)
-                _keys(cm, tuple(DEFAULT_COLUMNS[r]), q)
+                check_keys(cm, tuple(DEFAULT_COLUMNS[r]), q)
                 out = {}
                 for k, v in cm.items():
                     if k == "time" and isinstance(v, list):
@@ -250,7 +236,7 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
     if "checks" in cfg:
         p = f"{key_path}.checks"
         c = _mapping(cfg["checks"], p)
-        _keys(c, ("gap_factor", "plausibility"), p)
+        check_keys(c, ("gap_factor", "plausibility"), p)
         if "gap_factor" in c:
             o.gap_factor = float(_number(c["gap_factor"], f"{p}.gap_factor", 1.5, 1e6))
         if "plausibility" in c:

@@ -31,7 +31,6 @@ excess mass), in m/s^2.
 
 from __future__ import annotations
 
-import difflib
 import math
 import numbers
 from dataclasses import dataclass, field as dc_field
@@ -39,7 +38,7 @@ from dataclasses import dataclass, field as dc_field
 import numpy as np
 from numba import njit, prange
 
-from gravsurvey.errors import ConfigError, DataError
+from gravsurvey.errors import ConfigError, DataError, check_keys
 from gravsurvey.geodesy import MGAL, WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef, mat_en
 
 #: Newtonian constant of gravitation, CODATA 2018, m^3 kg^-1 s^-2.
@@ -830,16 +829,6 @@ def _describe(v):
     return f"{type(v).__name__} {v!r}" if not isinstance(v, str) else repr(v)
 
 
-def _check_keys(d, allowed, path, required=()):
-    for k in d:
-        if k not in allowed:
-            close = difflib.get_close_matches(str(k), list(allowed), n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else f"; expected one of {sorted(allowed)}"
-            raise ConfigError(f"{path}.{k}: unknown key{hint}")
-    for k in required:
-        if k not in d:
-            raise ConfigError(f"{path}.{k}: missing required key")
-
 
 def _parse_float_str(v):
     # PyYAML (YAML 1.1) reads 5.0e11 (no sign after e) as a string: accept such
@@ -941,7 +930,7 @@ def field_model_from_dict(d, key_path: str = "field", ellipsoid: Ellipsoid = WGS
     if not isinstance(d, dict):
         raise ConfigError(f"{key_path}: expected a mapping, got {_describe(d)}")
     if "type" not in d:
-        _check_keys(d, _ALL_TOP_KEYS, key_path)
+        check_keys(d, _ALL_TOP_KEYS, key_path)
         raise ConfigError(f"{key_path}.type: missing required key; expected one of {list(FIELD_TYPES)}")
     ftype = d["type"]
     if not isinstance(ftype, str) or ftype not in FIELD_TYPES:
@@ -950,7 +939,7 @@ def field_model_from_dict(d, key_path: str = "field", ellipsoid: Ellipsoid = WGS
     for k in d:
         if k not in allowed and k in _ALL_TOP_KEYS:
             raise ConfigError(f"{key_path}.{k}: not allowed with {key_path}.type {ftype!r}; allowed keys {list(allowed)}")
-    _check_keys(d, allowed, key_path)
+    check_keys(d, allowed, key_path)
 
     if ftype == "markov":
         lam = _number(d.get("lambda_s_per_m", 1.0e-5), f"{key_path}.lambda_s_per_m", "1/m", 0.0, lo_open=True)
@@ -974,7 +963,7 @@ def field_model_from_dict(d, key_path: str = "field", ellipsoid: Ellipsoid = WGS
             path = f"{key_path}.{name}[{i}]"
             if not isinstance(item, dict):
                 raise ConfigError(f"{path}: expected a mapping with keys {list(keys)}, got {_describe(item)}")
-            _check_keys(item, keys, path, required=keys)
+            check_keys(item, keys, path, required=keys)
             out.append(_SOURCE_PARSERS[name](item, path))
         parsed[name] = tuple(out)
     return FieldModel(type="model", ellipsoid=ellipsoid, **parsed)

@@ -12,7 +12,6 @@ from __future__ import annotations
 import calendar
 import copy
 import datetime as _dt
-import difflib
 import math
 import numbers
 import re
@@ -22,6 +21,7 @@ from pathlib import Path
 import yaml
 
 from gravsurvey.errors import ConfigError
+from gravsurvey.errors import check_keys as _check_keys
 from gravsurvey.geodesy import ELLIPSOIDS, Ellipsoid
 
 from .trajectory import MAP_MAX_EAST_WEST_M, MAP_MAX_NORTH_SOUTH_M, plan_extent
@@ -124,12 +124,7 @@ def check_keys(d, allowed, path):
     """Reject unknown keys of mapping ``d`` (at key path ``path``)."""
     if not isinstance(d, dict):
         raise ConfigError(f"{path}: expected a mapping, got {_describe(d)}")
-    for k in d:
-        if k not in allowed:
-            close = difflib.get_close_matches(str(k), list(allowed), n=1)
-            hint = f"did you mean {close[0]!r}?" if close else f"expected one of {list(allowed)}"
-            where = f"{path}.{k}" if path else str(k)
-            raise ConfigError(f"{where}: unknown key; {hint}")
+    _check_keys(d, allowed, path)
 
 
 def _merge(d, defaults, path):

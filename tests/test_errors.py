@@ -1,0 +1,23 @@
+"""The one unknown-key helper every configuration section uses."""
+
+import pytest
+
+from gravsurvey.errors import ConfigError, check_keys, suggest
+
+
+def test_suggest_prefers_a_case_match_then_the_closest_name():
+    assert suggest("MGAL", ["g", "mGal", "m/s^2"]) == " (did you mean 'mGal'?)"
+    assert suggest("speeed", ["speed_mps", "height_m"]) == " (did you mean 'speed_mps'?)"
+    assert suggest("colour", ["speed_mps", "height_m"]) == ""
+    assert suggest(7, [1, 2, 3.5]) == ""  # non-strings are compared as text
+    assert suggest(3, [1, 2, 3.5]) == " (did you mean '3.5'?)"
+
+
+def test_check_keys_names_the_key_path_and_the_valid_keys():
+    check_keys({"a": 1}, ("a", "b"), "x")
+    with pytest.raises(ConfigError, match=r"^x\.y\.bb: unknown key \(did you mean 'b'\?\); valid keys here: a, b$"):
+        check_keys({"a": 1, "bb": 2}, ("a", "b"), "x.y")
+    with pytest.raises(ConfigError, match=r"^zzz: unknown key; valid keys here: a, b$"):
+        check_keys({"zzz": 1}, ("a", "b"), "")
+    with pytest.raises(ConfigError, match=r"^x\.b: missing required key$"):
+        check_keys({"a": 1}, ("a", "b"), "x", required=("a", "b"))
