@@ -18,7 +18,9 @@ Speed notes (measured on the 8-state model, 14,401 epochs): no fastmath anywhere
 bit-for-bit reproducible across machines); for n = 8 and a diagonal R each epoch is one call of
 a generated step (:mod:`gravsurvey.inm._unrolled`) that keeps every covariance row in an
 8-wide vector (:mod:`gravsurvey.inm.simd`): 0.6 us per epoch for filter + smoother against
-1.4 us for the generic loops below, and the same numbers to the last bit (tested).  The generic
+1.4 us for the generic loops below, and the same numbers to the last bit (tested).  Not for
+the 14-state GNSS-aided model: its generated steps took ~27 s to compile (once per machine) to
+save ~0.01 s per flight-hour (:mod:`gravsurvey.inm.codegen`).  The generic
 loops (any n, any R): scalar measurement updates in O(n^2); small products in
 scalar-accumulator column blocks (:func:`_matmul`).  Both: outputs allocated by numpy, not
 inside the kernels (page faults); ``phi[k+1] P_f[k]`` from the prediction reused by the
@@ -37,7 +39,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._unrolled import filter_step8, filter_step14, matmul8, matmul14, rts_step8, rts_step14
+from ._unrolled import filter_step8, matmul8, matmul14, rts_step8
 
 
 # --------------------------------------------------------------------------
@@ -483,7 +485,7 @@ def kalman_filter(x0, p0, phi, q, z, h, r, unrolled=True):
     h : ndarray (N, m, n)
     r : ndarray (N, m, m)
     unrolled : bool
-        Use the generated unrolled vector step where it applies (n = 8 or 14; see
+        Use the generated unrolled vector step where it applies (n = 8; see
         :mod:`gravsurvey.inm.codegen`); ``False`` forces the generic loops (same numbers).
 
     Returns
@@ -516,13 +518,13 @@ def _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_
     If ``phi_pf`` has ``N`` rows, ``phi_pf[k - 1] = phi[k] @ p_f[k - 1]`` (a by-product of the
     prediction, stored one row down so that the smoother's ``p_s`` can hold it) is kept for the
     smoother; give it one row to discard it.  ``unrolled``: use the generated fixed-size step
-    (:mod:`gravsurvey.inm._unrolled`) where it applies (n = 8 or 14, diagonal R), same numbers.
+    (:mod:`gravsurvey.inm._unrolled`) where it applies (n = 8, diagonal R), same numbers.
     """
     nep = phi.shape[0]
     n = x0.shape[0]
     m = z.shape[1]
     keep = phi_pf.shape[0] == nep
-    fixed = unrolled and (n == 8 or n == 14)
+    fixed = unrolled and n == 8
     phit = np.empty((n, n))
     kg = np.empty(n)
     ph = np.empty(n)
@@ -530,10 +532,7 @@ def _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_
         # the fixed-size step takes whole arrays and k: no row views (each costs atomic
         # reference-count updates, comparable to the arithmetic of a step)
         if k > 0 and fixed and _diagonal_at(r, k):
-            if n == 8:
-                filter_step8(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, k - 1 if keep else 0)
-            else:
-                filter_step14(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, k - 1 if keep else 0)
+            filter_step8(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, k - 1 if keep else 0)
             continue
         x = x_f[k]
         p = p_f[k]
@@ -585,7 +584,7 @@ def _rts_into(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, unrolled):
     With ``have_phi_pf``, ``phi_pf[k]`` must hold ``phi[k + 1] @ p_f[k]`` exactly as the
     filter computed it (see :func:`_kalman_filter_into`) and is used instead of recomputing it.
     ``phi_pf`` may be ``p_s`` itself: row ``k`` is read before ``p_s[k]`` is written.
-    ``unrolled``: the generated step (same numbers) when n = 8 or 14.
+    ``unrolled``: the generated step (same numbers) when n = 8.
     """
     nep, n = x_f.shape
     if nep == 0:
@@ -600,7 +599,7 @@ def _rts_into(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, unrolled):
     dx = np.empty(n)
     dp = np.empty((n, n))
     tmp = np.empty((n, n))
-    fixed = unrolled and (n == 8 or n == 14)
+    fixed = unrolled and n == 8
     phi_pf1 = np.empty((1, n, n))
     # The recursion runs backwards in time, and backward streams through the (N, n, n) arrays
     # are badly prefetched (measured: 8x8 products 2.4x slower than in a forward loop).  So the
@@ -623,10 +622,7 @@ def _rts_into(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, unrolled):
                     _matmul(phi[k + 1], p_f[k], phi_pf1[0], False)
                     a = phi_pf1
                     ka = 0
-                if n == 8:
-                    rts_step8(k, x_f, p_f, x_p, p_p, a, ka, x_s, p_s)
-                else:
-                    rts_step14(k, x_f, p_f, x_p, p_p, a, ka, x_s, p_s)
+                rts_step8(k, x_f, p_f, x_p, p_p, a, ka, x_s, p_s)
                 continue
             _rts_step(k, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg, lch, b, bt, dx, dp,
                       tmp)
