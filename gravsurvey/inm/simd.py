@@ -65,9 +65,27 @@ def _width(w):
     return None
 
 
+_F64 = ir.DoubleType()
+
+
+def _gep(builder, ptr, idx):
+    """``&ptr[idx]`` for a ``double*``; element type given explicitly (opaque pointers)."""
+    try:
+        return builder.gep(ptr, [idx], source_etype=_F64)
+    except TypeError:  # an llvmlite from before opaque pointers: typed pointers only
+        return builder.gep(ptr, [idx])
+
+
+def _load(builder, ptr, ty):
+    try:
+        return builder.load(ptr, align=8, typ=ty)
+    except TypeError:  # an llvmlite from before opaque pointers
+        return builder.load(ptr, align=8)
+
+
 def _elem_ptr(context, builder, arrty, arr, off):
     ary = context.make_array(arrty)(context, builder, arr)
-    return builder.gep(ary.data, [off])
+    return _gep(builder, ary.data, off)
 
 
 @intrinsic(prefer_literal=True)
@@ -83,7 +101,7 @@ def vload(typingctx, arr, off, w):
         off = context.cast(builder, args[1], sig.args[1], types.intp)
         p = _elem_ptr(context, builder, sig.args[0], args[0], off)
         lt = context.get_value_type(vt)
-        return builder.load(builder.bitcast(p, lt.as_pointer()), align=8)
+        return _load(builder, builder.bitcast(p, lt.as_pointer()), lt)
 
     return sig, codegen
 
@@ -120,7 +138,7 @@ def vcol(typingctx, arr, off, stride, w):
         v = ir.Constant(context.get_value_type(vt), ir.Undefined)
         for i in range(width):
             idx = builder.add(off, builder.mul(stride, ir.Constant(off.type, i)))
-            x = builder.load(builder.gep(ary.data, [idx]), align=8)
+            x = _load(builder, _gep(builder, ary.data, idx), _F64)
             v = builder.insert_element(v, x, ir.Constant(_I32, i))
         return v
 
