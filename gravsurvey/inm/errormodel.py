@@ -48,7 +48,7 @@ import scipy.linalg
 from numba import njit
 
 from ..geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef, mat_en, mat_ie, normal_gravitation_ecef
-from .kalman import _mm, van_loan
+from .kalman import _mm, _transpose, van_loan
 
 #: State indices (seed 004 order).
 DQ1, DP1, DQ2, DP2, DQ3, DP3, G, F3 = range(8)
@@ -291,9 +291,7 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
                     t_prev[o + i, o + j] = mat_it[k - 1, i, j]
                     t_cur[o + i, o + j] = mat_it[k, i, j]
         # phx = t_cur^T phy t_prev, qx = t_cur^T qy t_cur (small fixed-size products, no BLAS)
-        for i in range(n):
-            for j in range(n):
-                t_cur_t[i, j] = t_cur[j, i]
+        _transpose(t_cur, t_cur_t)
         _mm(t_cur_t, phy, w)
         _mm(w, t_prev, phx)
         _mm(t_cur_t, qy, w)

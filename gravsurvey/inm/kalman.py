@@ -144,6 +144,7 @@ def van_loan(a, qc, dt):
     t_new = np.empty((n, n))
     u_new = np.empty((n, n))
     tmp = np.empty((n, n))
+    ft = np.empty((n, n))
     e11 += t
     f -= t
     for k in range(2, 14):
@@ -167,10 +168,8 @@ def van_loan(a, qc, dt):
     # squaring: [[E11, E12], [0, F^T]]^2 = [[E11^2, E11 E12 + E12 F^T], [0, (F^2)^T]]
     for _ in range(sq):
         _mm(e11, e12, tmp)
-        for i in range(n):
-            for j in range(n):
-                xt[i, j] = f[j, i]
-        _mm(e12, xt, u_new)
+        _transpose(f, ft)
+        _mm(e12, ft, u_new)
         for i in range(n):
             for j in range(n):
                 e12[i, j] = tmp[i, j] + u_new[i, j]
@@ -445,18 +444,8 @@ def _scalar_update(x, p, z, h, r, k, ph):
 
 
 @njit(cache=True)
-def _diagonal(r):
-    m = r.shape[0]
-    for i in range(m):
-        for j in range(m):
-            if i != j and r[i, j] != 0.0:
-                return False
-    return True
-
-
-@njit(cache=True)
 def _diagonal_at(r, k):
-    """``_diagonal(r[k])`` without creating the view."""
+    """Whether ``r[k]`` is diagonal (without creating the row view)."""
     m = r.shape[1]
     for i in range(m):
         for j in range(m):
@@ -531,7 +520,8 @@ def _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_
     for k in range(nep):
         # the fixed-size step takes whole arrays and k: no row views (each costs atomic
         # reference-count updates, comparable to the arithmetic of a step)
-        if k > 0 and fixed and _diagonal_at(r, k):
+        diag = _diagonal_at(r, k)
+        if k > 0 and fixed and diag:
             filter_step8(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, k - 1 if keep else 0)
             continue
         x = x_f[k]
@@ -547,7 +537,7 @@ def _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_
                     v = 0.5 * (p0[i, j] + p0[j, i])
                     p_p[0, i, j] = v
                     p[i, j] = v
-        if _diagonal(r[k]):
+        if diag:
             # sequential scalar updates: identical to the batch update for a diagonal R, and the
             # normalised innovations are the Cholesky-whitened ones
             for i in range(m):

@@ -44,10 +44,6 @@ def f64x(width: int) -> F64xNType:
     return _TYPES[width]
 
 
-#: The full-width type.
-f64x8 = f64x(W)
-
-
 @register_model(F64xNType)
 class _F64xNModel(models.PrimitiveModel):
     def __init__(self, dmm, fe_type):
