@@ -223,6 +223,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
             "method": cfg.processing_method,
             "triad": fl.triad,
             "gnss_aided": bool(getattr(sol, "gnss_aided", False)),
+            "identification": getattr(sol, "identification", {}),
         },
     )
 

@@ -30,7 +30,11 @@ from ..errors import ConfigError, check_keys
 
 RADIUS_SOURCES = ("altimeter", "computed")
 #: Boolean settings (everything else but ``radius_source`` is a number).
-_BOOL_KEYS = ("gnss_aiding",)
+_BOOL_KEYS = ("gnss_aiding", "identify")
+#: Settings that may be null (``None``: not set).
+_OPTIONAL_KEYS = ("target_resolution_m",)
+#: Attributes that are not config keys.
+_INTERNAL = ("given",)
 
 
 @dataclass
@@ -77,6 +81,19 @@ class InmParams:
     gyro_bias_sigma_degph : float
         1-sigma of each gyro's constant bias, deg/h (GNSS-aided filter only: with position
         aiding the bias is observable and is estimated as three extra states).
+    identify : bool
+        Estimate the anomaly prior (``anomaly_sigma_mps2``, ``anomaly_lambda_per_m``), the
+        gravimeter's white noise and the altimeter noise from the flight itself
+        (:mod:`gravsurvey.inm.identify`); the keys set in the config are held fixed.  With
+        ``false`` the configured values or the seed defaults are used as they are.
+    target_resolution_m : float or None
+        Half-wavelength resolution (m) the smoother should have; the anomaly sigma is chosen
+        to put the smoother's half-power point there (more noise for a finer resolution).
+        ``None``: the identified model's own optimum (least expected error).
+    given : frozenset of str
+        The keys held fixed by identification: those written in the config
+        (:meth:`from_dict`) or, when constructed directly and not given, every key whose value
+        differs from its default.  Not a config key itself.
     """
 
     filter_rate_hz: float = 1.0
@@ -98,9 +115,17 @@ class InmParams:
     gnss_vertical_sigma_m: float = 2.0
     initial_attitude_sigma_deg: float = 0.05
     gyro_bias_sigma_degph: float = 0.05
+    identify: bool = True
+    target_resolution_m: float | None = None
+    given: frozenset | None = None
 
     def __post_init__(self):
         self.validate()
+        if self.given is None:
+            self.given = frozenset(
+                f.name for f in dataclasses.fields(self)
+                if f.name not in _INTERNAL and f.name not in _BOOL_KEYS
+                and getattr(self, f.name) != f.default)
 
     # ------------------------------------------------------------------
     def validate(self, key_path: str = "model") -> None:
@@ -108,6 +133,15 @@ class InmParams:
         for f in dataclasses.fields(self):
             val = getattr(self, f.name)
             key = f"{key_path}.{f.name}"
+            if f.name in _INTERNAL:
+                continue
+            if f.name in _OPTIONAL_KEYS:
+                if val is None:
+                    continue
+                if isinstance(val, bool) or not isinstance(val, (int, float)) or not (
+                        math.isfinite(val) and val > 0):
+                    raise ConfigError(f"{key}: expected a length > 0 m or null, got {val!r}")
+                continue
             if f.name == "radius_source":
                 if not isinstance(val, str) or val not in RADIUS_SOURCES:
                     raise ConfigError(f"{key}: expected one of {list(RADIUS_SOURCES)}, got {val!r}")
@@ -140,20 +174,25 @@ class InmParams:
             d = {}
         if not isinstance(d, dict):
             raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-        check_keys(d, [f.name for f in dataclasses.fields(cls)], key_path)
+        check_keys(d, [f.name for f in dataclasses.fields(cls) if f.name not in _INTERNAL], key_path)
         obj = cls.__new__(cls)
         for f in dataclasses.fields(cls):
+            if f.name in _INTERNAL:
+                continue
             setattr(obj, f.name, d.get(f.name, f.default))
+        obj.given = frozenset(d)
         obj.validate(key_path)
         # integers are fine in YAML; store floats
         for f in dataclasses.fields(cls):
-            if f.name != "radius_source" and f.name not in _BOOL_KEYS:
+            if f.name in _INTERNAL or f.name in _BOOL_KEYS or f.name == "radius_source":
+                continue
+            if getattr(obj, f.name) is not None:
                 setattr(obj, f.name, float(getattr(obj, f.name)))
         return obj
 
     def to_dict(self) -> dict:
         """Plain mapping of the settings (for reports)."""
-        return dataclasses.asdict(self)
+        return {k: v for k, v in dataclasses.asdict(self).items() if k not in _INTERNAL}
 
     @property
     def gyro_drift_radps(self) -> float:

@@ -8,9 +8,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError, DataError
-from ..geodesy import WGS84, Ellipsoid
+from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef
 from .errormodel import (DP, DQ, F3, G, N_STATE, N_STATE_AIDED, TH, AltimeterMeasurement, GnssMeasurement,
                          discretise, epoch_geometry, initial_covariance)
+from .identify import identify_params, refine_prior, wide_prior_params
 from .kalman import filter_and_smooth
 from .mechanization import mechanize, navigation_to_geodetic
 from .params import InitialState, InmParams, initial_state_from_gnss, solvability_warnings
@@ -54,6 +55,13 @@ class InmSolution:
         Full smoothed state and covariance (seed order, see errormodel); n = 8, or 14 with
         GNSS aiding (attitude error ``TH`` and gyro bias ``BG`` appended).
     warnings : list of str
+    params : InmParams
+        The settings the filter ran with (identified values filled in).
+    identification : dict
+        What :func:`gravsurvey.inm.identify.identify_params` found (empty when
+        ``params.identify`` is false).
+    log_likelihood : float
+        :func:`innovation_log_likelihood` of the run (compares models on the same data).
     gnss_aided : bool
         Whether GNSS positions were used as a measurement (``model.gnss_aiding`` and a GNSS
         channel in the record).
@@ -81,6 +89,9 @@ class InmSolution:
     x_forward: np.ndarray
     warnings: list = field(default_factory=list)
     gnss_aided: bool = False
+    params: InmParams | None = None
+    identification: dict = field(default_factory=dict)
+    log_likelihood: float = float("nan")
 
 
 def _check_record(record):
@@ -122,6 +133,43 @@ def stack_measurements(parts):
     return z, h, r
 
 
+def _filter_pass(record, nav, params: InmParams, alt_t, alt_h, ellipsoid, reference=False) -> dict:
+    """Discretise, build the measurements and run filter + smoother once.
+
+    Returns the :func:`filter_and_smooth` dict plus ``idx`` (IMU indices of the epochs),
+    ``c`` (triad -> inertial at the epochs), ``z, h, r``, ``gnss_used`` and ``n_state``.
+    """
+    t = nav.time
+    # filter epochs: IMU samples decimated by the nearest integer factor
+    imu_rate = (t.size - 1) / (t[-1] - t[0])
+    step = max(1, int(round(imu_rate / params.filter_rate_hz)))
+    idx = np.arange(0, t.size, step)
+    half = 0.5 * step / imu_rate
+    geom = epoch_geometry(nav, idx, params.radius_source == "altimeter", ellipsoid)
+    alt_dt = float(np.median(np.diff(alt_t))) if alt_t.size > 1 else 1.0
+    gnss_used = bool(params.gnss_aiding) and record.gnss is not None and len(record.gnss.time) > 0
+    # position aiding needs the attitude error explicitly (the seed's dq merges it into the
+    # position): 14 states (errormodel.continuous_model_n)
+    n_state = N_STATE_AIDED if gnss_used else N_STATE
+    phi, q = discretise(geom, params, alt_dt, reference=reference, aided=gnss_used)
+    meas = [AltimeterMeasurement(alt_t, alt_h, params.altimeter_sigma_m, ellipsoid)]
+    if gnss_used:
+        gn = record.gnss
+        meas.append(GnssMeasurement(gn.time, gn.lat, gn.lon, gn.height, params.gnss_horizontal_sigma_m,
+                                    params.gnss_vertical_sigma_m, ellipsoid))
+    z, h, r = stack_measurements([m.build(nav, idx, half, n_state) for m in meas])
+    c = nav.mat_it[idx]
+    if gnss_used:
+        q_t0 = c[0].T @ nav.r_i[idx[0]]
+        p_t0 = c[0].T @ nav.v_i[idx[0]]
+        p0 = initial_covariance(params, q_t0, p_t0)
+    else:
+        p0 = initial_covariance(params)
+    out = filter_and_smooth(np.zeros(n_state), p0, phi, q, z, h, r, reference=reference)
+    out.update(idx=idx, c=c, z=z, h=h, r=r, gnss_used=gnss_used, n_state=n_state)
+    return out
+
+
 def estimate_anomaly(record, params: InmParams, initial: InitialState | None, triad: str,
                      ellipsoid: Ellipsoid = WGS84, attitude_deg=None, reference: bool = False) -> InmSolution:
     """Estimate the gravity disturbance along a flight (3D-INM + Kalman + RTS).
@@ -158,33 +206,22 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
         raise DataError(f"{record.source or 'record'}: altimeter.height: no finite samples")
     nav = mechanize(t, imu.specific_force_t, imu.angular_rate_t, initial, alt_t, alt_h,
                     use_ext=params.radius_source == "altimeter", ellipsoid=ellipsoid, reference=reference)
-    # filter epochs: IMU samples decimated by the nearest integer factor
-    imu_rate = (t.size - 1) / (t[-1] - t[0])
-    step = max(1, int(round(imu_rate / params.filter_rate_hz)))
-    idx = np.arange(0, t.size, step)
-    half = 0.5 * step / imu_rate
-    geom = epoch_geometry(nav, idx, params.radius_source == "altimeter", ellipsoid)
-    alt_dt = float(np.median(np.diff(alt_t))) if alt_t.size > 1 else 1.0
-    gnss_used = bool(params.gnss_aiding) and record.gnss is not None and len(record.gnss.time) > 0
-    # position aiding needs the attitude error explicitly (the seed's dq merges it into the
-    # position): 14 states (errormodel.continuous_model_n)
-    n_state = N_STATE_AIDED if gnss_used else N_STATE
-    phi, q = discretise(geom, params, alt_dt, reference=reference, aided=gnss_used)
-    meas = [AltimeterMeasurement(alt_t, alt_h, params.altimeter_sigma_m, ellipsoid)]
-    if gnss_used:
-        gn = record.gnss
-        meas.append(GnssMeasurement(gn.time, gn.lat, gn.lon, gn.height, params.gnss_horizontal_sigma_m,
-                                    params.gnss_vertical_sigma_m, ellipsoid))
-    z, h, r = stack_measurements([m.build(nav, idx, half, n_state) for m in meas])
-    c = nav.mat_it[idx]
-    if gnss_used:
-        q_t0 = c[0].T @ nav.r_i[idx[0]]
-        p_t0 = c[0].T @ nav.v_i[idx[0]]
-        p0 = initial_covariance(params, q_t0, p_t0)
-    else:
-        p0 = initial_covariance(params)
-    out = filter_and_smooth(np.zeros(n_state), p0, phi, q, z, h, r, reference=reference)
+    speed0 = _typical_speed(record, nav, ellipsoid)
+    ident = {}
+    if params.identify:
+        # 1) noise levels from the vertical channel's spectrum; 2) a first pass with a wide
+        # anomaly prior; 3) the prior that minimises the expected error given the spectrum of
+        # that first estimate (gravsurvey.inm.identify, docs/method.md)
+        params, ident = identify_params(params, nav, imu.specific_force_t, alt_t, alt_h, speed0, ellipsoid)
+        if ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
+            wide = wide_prior_params(params, ident, speed0)
+            first = _filter_pass(record, nav, wide, alt_t, alt_h, ellipsoid, reference)
+            params, ident = refine_prior(params, ident, first["x_s"][:, G],
+                                         float(np.median(np.diff(t[first["idx"]]))), wide, speed0)
+    fp = _filter_pass(record, nav, params, alt_t, alt_h, ellipsoid, reference)
+    out, idx, c, gnss_used, n_state = fp, fp["idx"], fp["c"], fp["gnss_used"], fp["n_state"]
     x_s, p_s, x_f, p_f = out["x_s"], out["p_s"], out["x_f"], out["p_f"]
+    loglik = innovation_log_likelihood(out["x_p"], out["p_p"], fp["z"], fp["h"], fp["r"])
 
     # corrections: true = computed - error; the position and velocity errors on the triad are
     # dq (+ q x theta when aided) and dp (+ p x theta), to inertial through C
@@ -216,7 +253,7 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     innov = out["innov"]
     if innov.shape[1] == 1:
         innov = innov[:, 0]
-    warn = solvability_warnings(params, float(np.median(speed)))
+    warn = solvability_warnings(params, float(np.median(speed))) + list(ident.get("warnings", []))
     return InmSolution(
         time=t[idx].copy(),
         g_forward=x_f[:, G].copy(),
@@ -240,4 +277,53 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
         x_forward=x_f,
         warnings=warn,
         gnss_aided=gnss_used,
+        params=params,
+        identification=ident,
+        log_likelihood=loglik,
     )
+
+
+def innovation_log_likelihood(x_p, p_p, z, h, r) -> float:
+    """Gaussian log-likelihood of the measurements given the model (prediction-error form).
+
+    ``sum_k -0.5 [nu_k^T S_k^-1 nu_k + log det S_k + m_k log 2 pi]`` with the innovation
+    ``nu_k = z_k - H_k x_p[k]`` and ``S_k = H_k P_p[k] H_k^T + R_k`` over the finite components
+    of each epoch (the sequential scalar updates of the filter give the same value).
+
+    Parameters
+    ----------
+    x_p, p_p : ndarray (N, n), (N, n, n)
+        Predicted state and covariance.
+    z, h, r : ndarray (N, m), (N, m, n), (N, m, m)
+        Measurements (NaN where missing), their matrices and noise covariances.
+    """
+    ok = np.isfinite(z)
+    zz = np.where(ok, z, 0.0)
+    nu = zz - np.einsum("kmn,kn->km", h, x_p)
+    s = np.einsum("kmn,knj,kij->kmi", h, p_p, h) + r
+    # missing components: decouple them with unit variance and zero innovation
+    miss = ~ok
+    s = np.where(miss[:, :, None] | miss[:, None, :], 0.0, s)
+    idx = np.arange(z.shape[1])
+    s[:, idx, idx] = np.where(miss, 1.0, s[:, idx, idx])
+    nu = np.where(ok, nu, 0.0)
+    sign, logdet = np.linalg.slogdet(s)
+    quad = np.einsum("km,km->k", nu, np.linalg.solve(s, nu[:, :, None])[:, :, 0])
+    return float(-0.5 * np.sum(quad + logdet + ok.sum(axis=1) * np.log(2.0 * np.pi)))
+
+
+def _typical_speed(record, nav, ellipsoid):
+    """Median ground speed of the flight, m/s: from GNSS positions, else the mechanization."""
+    gn = record.gnss
+    if gn is not None and len(gn.time) > 2:
+        r_e = geodetic_to_ecef(np.asarray(gn.lat, float), np.asarray(gn.lon, float),
+                               np.asarray(gn.height, float), ellipsoid)
+        dt = np.diff(np.asarray(gn.time, float))
+        ok = dt > 0
+        v = np.linalg.norm(np.diff(r_e, axis=0)[ok], axis=1) / dt[ok]
+        v = v[np.isfinite(v)]
+        if v.size:
+            return float(np.median(v))
+    step = max(1, nav.time.size // 2000)
+    _, _, _, vel_n = navigation_to_geodetic(nav.time[::step], nav.r_i[::step], nav.v_i[::step], ellipsoid)
+    return float(np.median(np.hypot(vel_n[:, 0], vel_n[:, 1])))

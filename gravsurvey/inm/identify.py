@@ -1,0 +1,728 @@
+"""Identify the estimator's stochastic model from the flight itself.
+
+The 3D-INM Kalman/RTS estimate is only as good as its noise levels and anomaly prior
+(``model:`` keys).  A user knows at most a datasheet figure; the rest - the gravimeter's white
+noise, the height noise, the anomaly's variance and correlation length - is estimated here from
+the flight's own data, by a Whittle (spectral maximum-likelihood) fit of the vertical channel.
+
+The vertical channel in one line
+--------------------------------
+With the altimeter radius in the gravity model (``radius_source: altimeter``) the mechanized
+height ``h_ins`` differs from the measured height ``h_alt = h + eps`` by
+
+    e(t) = h_ins - h_alt,      e'' = f(t) - dg(t) + eps''(t)
+
+where ``f`` is the gravimeter (vertical accelerometer) error and ``dg`` the gravity disturbance
+that the normal-gravity model leaves out.  The second difference of ``e`` at the altimeter's
+sample spacing ``dt``, ``y_k = (e_{k+1} - 2 e_k + e_{k-1}) / dt^2``, therefore has the two-sided
+power spectral density
+
+    S_y(f) = [ 2 s^2 l / (l^2 + (2 pi f)^2) + w^2 * 1 s ] sinc^4(f dt)
+             + sigma_eps^2 dt (2 - 2 cos(2 pi f dt))^2 / dt^4
+
+with ``s, l = 1/tau`` the anomaly's Markov sigma and rate in time (the filter's prior; the
+spatial rate is ``l / v``), ``w`` the one-second sigma of the vertical white acceleration noise,
+``sigma_eps`` the per-sample height noise (``sinc^4`` is the second difference's triangular
+average of a continuous process).  The four parameters are found by maximising Whittle's
+likelihood ``-sum_k [log S_y(f_k) + I(f_k) / S_y(f_k)]`` over the Hann-tapered periodograms
+``I`` of the straight, unaccelerated stretches of the flight (turns couple the horizontal
+specific force into the vertical through attitude errors and are left out).  The gravimeter's
+slow (Markov) error has the same spectral shape as the anomaly and cannot be told from it within
+one flight (seed 004's solvability condition); it is part of ``s, tau``.
+
+The fit is bounded (every parameter within documented physical limits), starts from several
+points, and reports each value with a 1-sigma factor from the inverse Hessian of the likelihood.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef, mat_ie
+
+__all__ = [
+    "IDENTIFIED_KEYS",
+    "SpectralModel",
+    "VerticalFit",
+    "vertical_psd",
+    "vertical_residual",
+    "straight_runs",
+    "fit_vertical_spectrum",
+    "identify_params",
+    "wiener_resolution_m",
+    "wide_prior_params",
+    "refine_prior",
+    "prior_risk",
+    "prior_for_resolution",
+]
+
+#: ``model:`` keys this module identifies (a key given in the config is held fixed instead).
+IDENTIFIED_KEYS = ("anomaly_sigma_mps2", "anomaly_lambda_per_m", "gravimeter_white_mps2", "altimeter_sigma_m")
+
+#: Bounds of the fit (SI): anomaly sigma 0.02-1000 mGal, correlation time 5 s - 1 day,
+#: white vertical noise 0.001-1000 mGal in one second, height noise 0.1 mm - 50 m.
+BOUNDS = {
+    "anomaly_sigma_mps2": (2e-7, 1e-2),
+    "anomaly_tau_s": (5.0, 86400.0),
+    "white_mps2": (1e-8, 1e-2),
+    "height_sigma_m": (1e-4, 50.0),
+}
+_ORDER = ("anomaly_sigma_mps2", "anomaly_tau_s", "white_mps2", "height_sigma_m")
+
+#: Horizontal specific force (m/s^2) above which an epoch counts as manoeuvring (about 3 deg of
+#: bank); such epochs, dilated by :data:`MANOEUVRE_MARGIN_S`, are left out of the fit.
+MANOEUVRE_MPS2 = 0.5
+#: Averaging window of the horizontal specific force, s.
+MANOEUVRE_WINDOW_S = 20.0
+MANOEUVRE_MARGIN_S = 30.0
+#: Upper frequency (Hz) of the band in which the attitude-error leak is regressed out.
+REGRESSION_MAX_HZ = 0.05
+#: Order of the polynomial removed from each stretch before its periodogram.
+DETREND_ORDER = 2
+#: Shortest straight stretch used, s.
+MIN_RUN_S = 300.0
+
+
+@dataclass(frozen=True)
+class SpectralModel:
+    """Parameters of the vertical-channel spectrum (all SI).
+
+    Attributes
+    ----------
+    anomaly_sigma_mps2 : float
+        Stationary sigma of the disturbance (plus the gravimeter's slow error), m/s^2.
+    anomaly_tau_s : float
+        Its correlation time along the flight, s (``1 / lambda_g``).
+    white_mps2 : float
+        One-second sigma of the white vertical acceleration noise, m/s^2
+        (two-sided PSD ``white_mps2**2 * 1 s``).
+    height_sigma_m : float
+        Per-sample sigma of the height measurement, m.
+    """
+
+    anomaly_sigma_mps2: float
+    anomaly_tau_s: float
+    white_mps2: float
+    height_sigma_m: float
+
+    def as_vector(self) -> np.ndarray:
+        return np.log([getattr(self, k) for k in _ORDER])
+
+    @classmethod
+    def from_vector(cls, v) -> "SpectralModel":
+        return cls(*[float(x) for x in np.exp(v)])
+
+
+def vertical_psd(freq_hz, model: SpectralModel, dt_s: float) -> np.ndarray:
+    """Two-sided PSD of the second-differenced height residual ``y``, (m/s^2)^2/Hz.
+
+    Parameters
+    ----------
+    freq_hz : ndarray (k,)
+        Frequencies, Hz (``0 < f <= 1 / (2 dt)``).
+    model : SpectralModel
+    dt_s : float
+        Sample spacing of ``y`` (the altimeter's), s.
+    """
+    f = np.asarray(freq_hz, float)
+    lam = 1.0 / model.anomaly_tau_s
+    s_g = 2.0 * model.anomaly_sigma_mps2**2 * lam / (lam**2 + (2.0 * math.pi * f) ** 2)
+    s_w = model.white_mps2**2
+    x = math.pi * f * dt_s
+    sinc4 = (np.sin(x) / x) ** 4
+    s_eps = model.height_sigma_m**2 * dt_s * (2.0 - 2.0 * np.cos(2.0 * math.pi * f * dt_s)) ** 2 / dt_s**4
+    return (s_g + s_w) * sinc4 + s_eps
+
+
+def vertical_residual(nav, alt_time, alt_height, ellipsoid: Ellipsoid = WGS84):
+    """Mechanized minus measured height at the altimeter's times.
+
+    Parameters
+    ----------
+    nav : gravsurvey.inm.mechanization.Navigation
+        Uncorrected mechanization (inertial position at the IMU times).
+    alt_time, alt_height : ndarray (m,)
+        Altimeter times (s, record base) and ellipsoidal heights (m), finite.
+
+    Returns
+    -------
+    time : ndarray (k,)
+        Altimeter times inside the mechanization's span, s.
+    residual_m : ndarray (k,)
+        ``|r_ins| - |r(lat_ins, lon_ins, h_alt)|``: the height difference along the radius, m.
+    """
+    t = np.asarray(alt_time, float)
+    h = np.asarray(alt_height, float)
+    ok = (t >= nav.time[0]) & (t <= nav.time[-1]) & np.isfinite(h)
+    t, h = t[ok], h[ok]
+    # linear interpolation of the inertial position between IMU samples (>= 20 Hz): its
+    # radial error is a_up dt^2 / 8 < 1 mm, far below any altimeter's noise
+    r_i = np.stack([np.interp(t, nav.time, nav.r_i[:, j]) for j in range(3)], axis=1)
+    r_e = np.einsum("nji,nj->ni", mat_ie(t, ellipsoid.omega), r_i)
+    lat, lon, _ = ecef_to_geodetic(r_e, ellipsoid)
+    r_ext = np.linalg.norm(geodetic_to_ecef(lat, lon, h, ellipsoid), axis=1)
+    return t, np.linalg.norm(r_i, axis=1) - r_ext
+
+
+def _running_mean(x, w):
+    """Centred running mean over ``w`` samples along axis 0 (shrinking at the ends)."""
+    c = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)])
+    i = np.arange(x.shape[0])
+    lo = np.clip(i - w // 2, 0, x.shape[0])
+    hi = np.clip(i + w // 2 + 1, 0, x.shape[0])
+    return (c[hi] - c[lo]) / (hi - lo).reshape((-1,) + (1,) * (x.ndim - 1))
+
+
+def _horizontal_specific_force(nav, f_t, times):
+    """Horizontal specific force at ``times``: manoeuvre indicator and leak regressors.
+
+    Returns
+    -------
+    magnitude : ndarray (k,)
+        Horizontal part of the specific force averaged over :data:`MANOEUVRE_WINDOW_S`, m/s^2.
+        The vector is averaged before its magnitude is taken: turbulence (seconds, zero mean)
+        averages out, a turn or a speed change (tens of seconds, one direction) does not.
+    horizontal : ndarray (k, 2)
+        East and north components (m/s^2) averaged with the triangle of a second difference
+        at the spacing of ``times`` (what ``y`` sees of them).
+    """
+    f_i = np.einsum("nij,nj->ni", nav.mat_it, np.asarray(f_t, float))
+    dt = float(np.median(np.diff(nav.time)))
+    up = nav.r_i / np.linalg.norm(nav.r_i, axis=1)[:, None]
+    east = np.cross([0.0, 0.0, 1.0], up)
+    east /= np.linalg.norm(east, axis=1)[:, None]
+    north = np.cross(up, east)
+    f_w = _running_mean(f_i, max(1, int(round(MANOEUVRE_WINDOW_S / dt))))
+    f_up = np.einsum("ni,ni->n", f_w, up)
+    mag = np.sqrt(np.maximum(np.einsum("ni,ni->n", f_w, f_w) - f_up**2, 0.0))
+    step = float(np.median(np.diff(times))) if len(times) > 1 else dt
+    box = max(1, int(round(step / dt)))
+    f_tri = _running_mean(_running_mean(f_i, box), box)
+    hor = [np.interp(times, nav.time, np.einsum("ni,ni->n", f_tri, axis)) for axis in (east, north)]
+    return np.interp(times, nav.time, mag), np.stack(hor, axis=1)
+
+
+def straight_runs(time, manoeuvring, *, min_run_s: float = MIN_RUN_S,
+                  margin_s: float = MANOEUVRE_MARGIN_S) -> list[tuple[int, int]]:
+    """Index ranges ``[a, b)`` of evenly sampled, non-manoeuvring stretches.
+
+    Parameters
+    ----------
+    time : ndarray (k,)
+        Sample times, s.
+    manoeuvring : ndarray of bool (k,)
+        True where the platform turns or accelerates.
+    min_run_s, margin_s : float
+        Shortest run kept; margin removed around every manoeuvring sample, s.
+    """
+    t = np.asarray(time, float)
+    if t.size < 8:
+        return []
+    dt = float(np.median(np.diff(t)))
+    bad = np.asarray(manoeuvring, bool).copy()
+    if bad.any():
+        # dilate by the margin on both sides
+        m = max(1, int(round(margin_s / dt)))
+        c = np.concatenate([[0], np.cumsum(bad.astype(np.int64))])
+        idx = np.arange(t.size)
+        lo = np.clip(idx - m, 0, t.size)
+        hi = np.clip(idx + m + 1, 0, t.size)
+        bad = (c[hi] - c[lo]) > 0
+    broken = np.abs(np.diff(t) - dt) > 0.5 * dt
+    edge = np.diff(np.concatenate([[0], (~bad).astype(np.int8), [0]]))
+    runs = []
+    for a, b in zip(np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)):
+        cuts = np.flatnonzero(broken[a:b - 1]) + a + 1
+        bounds = [int(a), *[int(c) for c in cuts], int(b)]
+        runs += [(s, e) for s, e in zip(bounds[:-1], bounds[1:]) if (e - s) * dt >= min_run_s]
+    return runs
+
+
+@dataclass
+class VerticalFit:
+    """Result of :func:`fit_vertical_spectrum`.
+
+    Attributes
+    ----------
+    model : SpectralModel
+        Maximum-likelihood parameters.
+    sigma_factor : dict
+        Per parameter, the 1-sigma multiplicative uncertainty ``exp(sd(log p))`` from the
+        inverse Hessian of the likelihood (``None`` where the parameter sits on a bound or is
+        held fixed).
+    at_bound : tuple of str
+        Parameters that ended on a bound of :data:`BOUNDS`.
+    dt_s : float
+        Sample spacing used, s.
+    seconds_used : float
+        Length of the straight stretches that entered the fit, s.
+    n_runs : int
+    nll : float
+        Negative Whittle log-likelihood at the optimum.
+    unresolved : tuple of str
+        ``("anomaly_tau_s",)`` when the correlation time is longer than the straight stretches
+        can show; it is then set to the lowest observed frequency's corner (see the code).
+    """
+
+    model: SpectralModel
+    sigma_factor: dict
+    at_bound: tuple
+    dt_s: float
+    seconds_used: float
+    n_runs: int
+    nll: float
+    unresolved: tuple = ()
+
+
+def _periodograms(y_runs, dt, x_runs=None):
+    """Hann-tapered periodograms of the stretches, concatenated.
+
+    Parameters
+    ----------
+    y_runs : list of ndarray (n_i,)
+        Second-differenced height residual of each stretch, m/s^2.
+    dt : float
+        Sample spacing, s.
+    x_runs : list of ndarray (n_i, 2) or None
+        Horizontal specific force (m/s^2) of each stretch; its leak into the vertical through
+        a slowly varying attitude error (``theta x f``, theta linear in time over a stretch) is
+        regressed out below :data:`REGRESSION_MAX_HZ`, where the height noise is small.
+
+    Returns
+    -------
+    f, i_f, weight : ndarray (k,)
+        Frequencies (Hz), two-sided periodogram ((m/s^2)^2/Hz), and the weight that turns a
+        sum over bins into a variance averaged over the stretches.
+    """
+    out = []
+    for j, y in enumerate(y_runs):
+        n = y.size
+        k = np.linspace(-1.0, 1.0, n)
+        w = np.hanning(n)
+        # remove a quadratic (gravimeter bias and drift, and the slow normal-gravity error of
+        # the free mechanization's horizontal drift - Schuler period, ~0.8 mGal per km of
+        # latitude).  The fit is weighted by the taper: y is a second difference, so an
+        # unweighted fit is driven by the height noise of the stretch's end samples and would
+        # inject a polynomial of that size - hundreds of mGal - into the lowest bins.
+        y = y - np.polyval(np.polyfit(k, y, DETREND_ORDER, w=np.sqrt(w)), k)
+        spec = np.fft.rfft(w * y)
+        f = np.fft.rfftfreq(n, dt)
+        sel = slice(3, n // 2 if n % 2 == 0 else n // 2 + 1)
+        if x_runs is not None and x_runs[j] is not None:
+            x = np.asarray(x_runs[j], float)
+            cols = np.stack([x[:, 0], x[:, 1], x[:, 0] * k, x[:, 1] * k], axis=1)
+            xs = np.fft.rfft(w[:, None] * cols, axis=0)
+            band = np.zeros(f.size, bool)
+            band[sel] = True
+            band &= f <= REGRESSION_MAX_HZ
+            if band.sum() > 2 * cols.shape[1]:
+                a_mat = np.concatenate([xs[band].real, xs[band].imag])
+                rhs = np.concatenate([spec[band].real, spec[band].imag])
+                beta, *_ = np.linalg.lstsq(a_mat, rhs, rcond=None)
+                spec = spec - xs @ beta
+        i_f = dt * np.abs(spec) ** 2 / np.sum(w**2)
+        # DC and the first bins carry the removed polynomial and the taper's leak; no Nyquist
+        out.append((f[sel], i_f[sel], np.full(f[sel].size, 2.0 / (n * dt * len(y_runs)))))
+    f = np.concatenate([o[0] for o in out])
+    i_f = np.concatenate([o[1] for o in out])
+    weight = np.concatenate([o[2] for o in out])
+    return f, i_f, weight
+
+
+def _nll(v, f, i_f, dt, fixed_mask, fixed_v):
+    vv = np.where(fixed_mask, fixed_v, v)
+    s = vertical_psd(f, SpectralModel.from_vector(vv), dt)
+    return float(np.sum(np.log(s) + i_f / s))
+
+
+def fit_vertical_spectrum(time, residual_m, manoeuvring=None, horizontal_force=None, *,
+                          fixed: dict | None = None,
+                          start: SpectralModel | None = None) -> VerticalFit | None:
+    """Whittle fit of the vertical-channel spectrum (module docstring).
+
+    Parameters
+    ----------
+    time : ndarray (k,)
+        Altimeter times, s.
+    residual_m : ndarray (k,)
+        Mechanized minus measured height, m (:func:`vertical_residual`).
+    manoeuvring : ndarray of bool (k,), optional
+        Epochs to leave out (turns).
+    horizontal_force : ndarray (k, 2), optional
+        Horizontal specific force, m/s^2 (its leak through attitude errors is regressed out).
+    fixed : dict, optional
+        Parameters of :class:`SpectralModel` held at a given value (user overrides).
+    start : SpectralModel, optional
+        An extra starting point (e.g. the configured values).
+
+    Returns
+    -------
+    VerticalFit or None
+        None when the flight has no straight stretch of :data:`MIN_RUN_S`.
+    """
+    from scipy.optimize import minimize
+
+    t = np.asarray(time, float)
+    e = np.asarray(residual_m, float)
+    if t.size < 16:
+        return None
+    dt = float(np.median(np.diff(t)))
+    man = np.zeros(t.size, bool) if manoeuvring is None else np.asarray(manoeuvring, bool)
+    runs = straight_runs(t, man)
+    if not runs:
+        return None
+    runs = [(a, b) for a, b in runs if b - a >= 16]
+    y_runs = [np.diff(e[a:b], 2) / dt**2 for a, b in runs]
+    x_runs = None if horizontal_force is None else [np.asarray(horizontal_force)[a + 1:b - 1] for a, b in runs]
+    f, i_f, weight = _periodograms(y_runs, dt, x_runs)
+    if f.size < 16:
+        return None
+    fixed = dict(fixed or {})
+    fixed_mask = np.array([k in fixed for k in _ORDER])
+    fixed_v = np.array([math.log(fixed[k]) if k in fixed else 0.0 for k in _ORDER])
+    lo = np.log([BOUNDS[k][0] for k in _ORDER])
+    hi = np.log([BOUNDS[k][1] for k in _ORDER])
+    # data-driven starting points: the white level from the middle of the band, the height
+    # noise from the top, the anomaly from the lowest frequencies
+    fny = 0.5 / dt
+    top = i_f[f > 0.7 * fny]
+    mid = i_f[(f > 0.01) & (f < 0.05)] if np.any((f > 0.01) & (f < 0.05)) else i_f
+    low = i_f[f < 2e-3] if np.any(f < 2e-3) else i_f[: max(1, i_f.size // 50)]
+    h_amp = (2.0 - 2.0 * np.cos(math.pi * 0.85)) ** 2 / dt**3
+    eps0 = math.sqrt(max(float(np.median(top)) / h_amp, 1e-8)) if top.size else 0.05
+    w0 = math.sqrt(max(float(np.median(mid)), 1e-16))
+    starts = []
+    for tau in (30.0, 300.0, 3000.0):
+        s0 = math.sqrt(max(float(np.median(low)) / (2.0 * tau), 1e-14))
+        starts.append(np.log([s0, tau, w0, eps0]))
+    if start is not None:
+        starts.append(start.as_vector())
+    best = None
+    for v0 in starts:
+        v0 = np.clip(np.where(fixed_mask, fixed_v, v0), lo, hi)
+        res = minimize(_nll, v0, args=(f, i_f, dt, fixed_mask, fixed_v), method="L-BFGS-B",
+                       bounds=list(zip(lo, hi)))
+        if best is None or res.fun < best.fun:
+            best = res
+    v = np.where(fixed_mask, fixed_v, best.x)
+    at_bound = tuple(k for k, x, a, b in zip(_ORDER, v, lo, hi)
+                     if not fixed_mask[_ORDER.index(k)] and (x - a < 1e-3 or b - x < 1e-3))
+    free = [i for i, k in enumerate(_ORDER) if not fixed_mask[i] and k not in at_bound]
+    factors = {k: None for k in _ORDER}
+    if free:
+        hess = _hessian(lambda u: _nll(_embed(u, v, free), f, i_f, dt, fixed_mask, fixed_v), v[free])
+        try:
+            cov = np.linalg.inv(hess)
+            for j, i in enumerate(free):
+                if 0 < cov[j, j] < 25.0:
+                    factors[_ORDER[i]] = float(math.exp(math.sqrt(cov[j, j])))
+        except np.linalg.LinAlgError:
+            pass
+    used = float(sum((b - a) * dt for a, b in runs))
+    model = SpectralModel.from_vector(v)
+    unresolved = ()
+    tau_max = 1.0 / (2.0 * math.pi * float(f.min()))
+    if "anomaly_tau_s" not in fixed and model.anomaly_tau_s > tau_max:
+        # the anomaly's corner lies below the lowest frequency the straight stretches show:
+        # only the level of its f^-2 tail, sigma^2 / tau, is measured.  Keep that level and put
+        # the corner at the lowest observed frequency (the shortest correlation time the data
+        # allow), so the prior claims no long-wavelength knowledge it does not have.
+        k = model.anomaly_sigma_mps2**2 / model.anomaly_tau_s
+        model = dataclasses.replace(model, anomaly_tau_s=tau_max, anomaly_sigma_mps2=math.sqrt(k * tau_max))
+        unresolved = ("anomaly_tau_s",)
+        factors["anomaly_tau_s"] = None
+        at_bound = tuple(x for x in at_bound if x != "anomaly_tau_s")
+    return VerticalFit(model, factors, at_bound, dt, used, len(runs), float(best.fun), unresolved)
+
+
+def _embed(u, v, free):
+    w = np.array(v, float)
+    w[free] = u
+    return w
+
+
+def _hessian(fun, x, h=1e-3):
+    n = x.size
+    out = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            e_i = np.zeros(n)
+            e_j = np.zeros(n)
+            e_i[i] = h
+            e_j[j] = h
+            d = (fun(x + e_i + e_j) - fun(x + e_i - e_j) - fun(x - e_i + e_j) + fun(x - e_i - e_j)) / (4 * h * h)
+            out[i, j] = out[j, i] = d
+    return out
+
+
+def wiener_resolution_m(model: SpectralModel, speed_mps: float, dt_s: float = 1.0) -> float:
+    """Half-wavelength resolution of the optimal smoother for the identified model, m.
+
+    The RTS smoother of a stationary model is the non-causal Wiener filter
+    ``H(f) = S_g / (S_g + S_n)``; its half-power point ``f_c`` is where the anomaly's spectrum
+    meets the noise referred to the disturbance, ``S_n = w^2 + sigma_eps^2 dt (2 pi f)^4``
+    (continuous limit of :func:`vertical_psd`).  Resolution = ``v / (2 f_c)``.
+    """
+    lam = 1.0 / model.anomaly_tau_s
+
+    def gap(logf):
+        f = math.exp(logf)
+        s_g = 2.0 * model.anomaly_sigma_mps2**2 * lam / (lam**2 + (2 * math.pi * f) ** 2)
+        s_n = model.white_mps2**2 + model.height_sigma_m**2 * dt_s * (2 * math.pi * f) ** 4
+        return math.log(s_g) - math.log(s_n)
+
+    lo, hi = math.log(1e-7), math.log(10.0)
+    if gap(lo) < 0:
+        return float("inf")
+    if gap(hi) > 0:
+        return speed_mps / (2.0 * 10.0)
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if gap(mid) > 0:
+            lo = mid
+        else:
+            hi = mid
+    return speed_mps / (2.0 * math.exp(0.5 * (lo + hi)))
+
+
+def prior_for_resolution(model: SpectralModel, speed_mps: float, resolution_m: float,
+                         dt_s: float = 1.0) -> SpectralModel:
+    """The anomaly sigma that puts the smoother's half-power point at ``resolution_m``.
+
+    Keeps the correlation time and the noise; solves ``S_g(f_c) = S_n(f_c)`` with
+    ``f_c = v / (2 resolution)`` for the anomaly sigma: a larger sigma widens the smoother's
+    band (finer resolution, more noise), a smaller one narrows it.
+    """
+    f_c = speed_mps / (2.0 * resolution_m)
+    lam = 1.0 / model.anomaly_tau_s
+    s_n = model.white_mps2**2 + model.height_sigma_m**2 * dt_s * (2 * math.pi * f_c) ** 4
+    sigma = math.sqrt(s_n * (lam**2 + (2 * math.pi * f_c) ** 2) / (2.0 * lam))
+    return dataclasses.replace(model, anomaly_sigma_mps2=sigma)
+
+
+def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
+                    ellipsoid: Ellipsoid = WGS84):
+    """Identify the ``model:`` noise levels and anomaly prior of one flight.
+
+    Keys the user set in the config (``params.given``) are held fixed; the others are
+    estimated by :func:`fit_vertical_spectrum`.  When ``params.target_resolution_m`` is set,
+    the anomaly sigma is then chosen to give that resolution (:func:`prior_for_resolution`).
+
+    Parameters
+    ----------
+    params : InmParams
+    nav : Navigation
+        Uncorrected mechanization.
+    f_t : ndarray (n, 3)
+        Specific force on the triad at ``nav.time``, m/s^2.
+    alt_time, alt_height : ndarray (m,)
+        Finite altimeter samples.
+    speed_mps : float
+        Typical ground speed on the straight stretches, m/s (converts time to space).
+
+    Returns
+    -------
+    params : InmParams
+        A copy with the identified values.
+    report : dict
+        Per key: ``value``, ``sigma_factor`` (1-sigma multiplicative), ``how``
+        (``identified`` / ``config`` / ``default``); plus ``method``, ``seconds_used``,
+        ``resolution_m`` and warnings.
+    """
+    v = max(float(speed_mps), 1.0)
+    given = set(getattr(params, "given", ()))
+    t, e = vertical_residual(nav, alt_time, alt_height, ellipsoid)
+    f_mag, f_hor = _horizontal_specific_force(nav, f_t, t)
+    man = f_mag > MANOEUVRE_MPS2
+    fixed = {}
+    if "anomaly_sigma_mps2" in given:
+        fixed["anomaly_sigma_mps2"] = params.anomaly_sigma_mps2
+    if "anomaly_lambda_per_m" in given:
+        fixed["anomaly_tau_s"] = 1.0 / max(params.anomaly_lambda_per_m * v, 1e-12)
+    if "gravimeter_white_mps2" in given and params.gravimeter_white_mps2 > 0:
+        fixed["white_mps2"] = params.gravimeter_white_mps2
+    if "altimeter_sigma_m" in given:
+        fixed["height_sigma_m"] = params.altimeter_sigma_m
+    fixed = {k: min(max(val, BOUNDS[k][0]), BOUNDS[k][1]) for k, val in fixed.items()}
+    report: dict = {"method": "whittle-vertical-spectrum", "warnings": []}
+    fit = fit_vertical_spectrum(t, e, man, None, fixed=fixed)
+    if fit is None:
+        report["method"] = "none"
+        report["warnings"].append(
+            f"model identification: no straight stretch of {MIN_RUN_S:.0f} s with evenly sampled "
+            "heights; the configured or default noise levels and anomaly prior are used")
+        for k in IDENTIFIED_KEYS:
+            report[k] = {"value": getattr(params, k), "sigma_factor": None,
+                         "how": "config" if k in given else "default"}
+        return params, report
+    m = fit.model
+    if params.target_resolution_m is not None:
+        m = prior_for_resolution(m, v, params.target_resolution_m, fit.dt_s)
+    new = dataclasses.replace(
+        params,
+        anomaly_sigma_mps2=m.anomaly_sigma_mps2,
+        anomaly_lambda_per_m=1.0 / (m.anomaly_tau_s * v),
+        gravimeter_white_mps2=m.white_mps2,
+        altimeter_sigma_m=m.height_sigma_m,
+    )
+    src = {"anomaly_sigma_mps2": "anomaly_sigma_mps2", "anomaly_lambda_per_m": "anomaly_tau_s",
+           "gravimeter_white_mps2": "white_mps2", "altimeter_sigma_m": "height_sigma_m"}
+    for k in IDENTIFIED_KEYS:
+        how = "config" if k in given else "identified"
+        if k == "anomaly_sigma_mps2" and params.target_resolution_m is not None:
+            how = "target_resolution_m"
+        report[k] = {"value": getattr(new, k), "sigma_factor": fit.sigma_factor.get(src[k]), "how": how}
+    for k in fit.at_bound:
+        report["warnings"].append(f"model identification: {k} ended on its bound {BOUNDS[k]} (SI); "
+                                  "the data say little about it")
+    if fit.unresolved:
+        report["anomaly_lambda_per_m"]["how"] = "identified (lower bound: straight stretches too short)"
+    report["seconds_used"] = fit.seconds_used
+    report["straight_runs"] = fit.n_runs
+    report["speed_mps"] = v
+    report["spectral_model"] = dataclasses.asdict(m)
+    report["height_dt_s"] = fit.dt_s
+    report["resolution_m"] = wiener_resolution_m(m, v, fit.dt_s)
+    return new, report
+
+
+#: Resolution (m) of the first, deliberately wide pass of :func:`refine_prior`.
+WIDE_RESOLUTION_M = 1000.0
+#: Correlation time of the wide prior, s (long: it claims no knowledge of the mean level).
+WIDE_TAU_S = 3600.0
+
+
+def _model_of(report) -> SpectralModel:
+    return SpectralModel(**report["spectral_model"])
+
+
+def wide_prior_params(params, report, speed_mps: float):
+    """Settings for the first pass: the identified noise and a prior of fine resolution.
+
+    Its smoother passes the signal AND the noise up to :data:`WIDE_RESOLUTION_M`; the spectrum
+    of its estimate then shows the signal above the (known) noise at every wavelength longer
+    than that, over the whole flight - turns included, where the filter's attitude states
+    keep the estimate sound - unlike the straight stretches used for the noise levels.
+    """
+    v = max(float(speed_mps), 1.0)
+    m = dataclasses.replace(_model_of(report), anomaly_tau_s=WIDE_TAU_S)
+    m = prior_for_resolution(m, v, WIDE_RESOLUTION_M, report["height_dt_s"])
+    return dataclasses.replace(params, anomaly_sigma_mps2=m.anomaly_sigma_mps2,
+                               anomaly_lambda_per_m=1.0 / (m.anomaly_tau_s * v))
+
+
+def _noise_psd_g(f, m: SpectralModel, dt_h: float):
+    """Noise of the vertical channel referred to the disturbance, two-sided, (m/s^2)^2/Hz."""
+    return m.white_mps2**2 + m.height_sigma_m**2 * dt_h * (2.0 * math.pi * f) ** 4
+
+
+def _markov_psd(f, sigma, tau):
+    lam = 1.0 / tau
+    return 2.0 * sigma**2 * lam / (lam**2 + (2.0 * math.pi * f) ** 2)
+
+
+def prior_risk(f, s_signal, s_noise, sigma, tau, count=None) -> float:
+    """Expected error variance (up to a constant factor) of the smoother with prior (sigma, tau).
+
+    ``sum_k count_k [(1 - H_k)^2 S_s,k + H_k^2 S_n,k]`` with ``H = S_g / (S_g + S_n)``, the
+    steady-state transfer of the RTS smoother built on the Markov prior ``S_g`` - applied to a
+    signal of spectrum ``S_s``, whatever its shape.
+    """
+    s_g = _markov_psd(f, sigma, tau)
+    h = s_g / (s_g + s_noise)
+    c = np.ones_like(f) if count is None else count
+    return float(np.sum(c * ((1.0 - h) ** 2 * s_signal + h**2 * s_noise)))
+
+
+def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float):
+    """Choose the anomaly prior from the spectrum of a first, wide estimate.
+
+    The first estimate ``g1 = H1 (s + n)`` (``H1`` the wide prior's transfer) has the
+    periodogram ``P ~ H1^2 (S_s + S_n)``.  Where ``H1 >= 0.5`` the signal's spectrum is
+    estimated, band by band, as ``P / H1^2 - S_n`` minus twice its standard error (only
+    signal that stands out of the noise counts); above, the signal is taken to be below the
+    noise.  The prior (sigma, tau) on a grid that minimises :func:`prior_risk` for that signal
+    is kept: the smoother's resolution is thereby the one of least expected error for THIS
+    flight's field and noise, not a fixed assumption about either.
+
+    Parameters
+    ----------
+    params : InmParams
+        After :func:`identify_params` (noise identified).
+    report : dict
+        Its report (updated and returned).
+    g_first : ndarray (N,)
+        Smoothed disturbance of the first pass at the filter epochs, m/s^2.
+    dt_s : float
+        Epoch spacing, s.
+    wide : InmParams
+        The first pass's settings (:func:`wide_prior_params`).
+    speed_mps : float
+    """
+    v = max(float(speed_mps), 1.0)
+    g = np.asarray(g_first, float)
+    g = g[np.isfinite(g)]
+    report = dict(report)
+    if g.size < 64:
+        return params, report
+    noise = _model_of(report)
+    dt_h = report["height_dt_s"]
+    given = set(getattr(params, "given", ()))
+    n = g.size
+    k = np.linspace(-1.0, 1.0, n)
+    w = np.hanning(n)
+    g = g - np.polyval(np.polyfit(k, g, DETREND_ORDER, w=np.sqrt(w)), k)
+    p = dt_s * np.abs(np.fft.rfft(w * g)) ** 2 / np.sum(w**2)
+    f = np.fft.rfftfreq(n, dt_s)
+    sel = slice(3, n // 2)
+    f, p = f[sel], p[sel]
+    s_n = _noise_psd_g(f, noise, dt_h)
+    tau1 = 1.0 / (wide.anomaly_lambda_per_m * v)
+    s_g1 = _markov_psd(f, wide.anomaly_sigma_mps2, tau1)
+    h1 = s_g1 / (s_g1 + s_n)
+    valid = h1 >= 0.5
+    # bands of >= 8 bins, log-spaced: the periodogram's scatter (100 % per bin) averages down
+    s_sig = np.zeros_like(f)
+    edges = np.unique(np.concatenate([[0], np.geomspace(8, max(valid.sum(), 9), 24).astype(int)]))
+    idx_valid = np.flatnonzero(valid)
+    for a, b in zip(edges[:-1], edges[1:]):
+        ii = idx_valid[a:b]
+        if ii.size == 0:
+            continue
+        est = np.mean(p[ii] / h1[ii] ** 2) - np.mean(s_n[ii]) * (1.0 + 2.0 / math.sqrt(ii.size))
+        s_sig[ii] = max(est, 0.0) * s_n[ii] / np.mean(s_n[ii]) if False else max(est, 0.0)
+    # candidates
+    tau_fixed = 1.0 / (params.anomaly_lambda_per_m * v) if "anomaly_lambda_per_m" in given else None
+    sig_fixed = params.anomaly_sigma_mps2 if "anomaly_sigma_mps2" in given else None
+    taus = [tau_fixed] if tau_fixed else np.geomspace(*BOUNDS["anomaly_tau_s"], 29)
+    sigmas = [sig_fixed] if sig_fixed else np.geomspace(*BOUNDS["anomaly_sigma_mps2"], 61)
+    best = None
+    for tau in taus:
+        for sg in sigmas:
+            r = prior_risk(f, s_sig, s_n, sg, tau)
+            if best is None or r < best[0]:
+                best = (r, float(sg), float(tau))
+    _, sg, tau = best
+    model = dataclasses.replace(noise, anomaly_sigma_mps2=sg, anomaly_tau_s=tau)
+    if params.target_resolution_m is not None:
+        model = prior_for_resolution(model, v, params.target_resolution_m, dt_h)
+    new = dataclasses.replace(params, anomaly_sigma_mps2=model.anomaly_sigma_mps2,
+                              anomaly_lambda_per_m=1.0 / (model.anomaly_tau_s * v))
+    # expected error variance of the chosen smoother: the risk as a variance (two-sided
+    # periodogram bins of width 1/(n dt), both signs of frequency)
+    expected = prior_risk(f, s_sig, s_n, model.anomaly_sigma_mps2, model.anomaly_tau_s) * 2.0 / (n * dt_s)
+    how_sigma = "target_resolution_m" if params.target_resolution_m is not None else (
+        "config" if "anomaly_sigma_mps2" in given else "least expected error (first-pass spectrum)")
+    report["anomaly_sigma_mps2"] = {"value": new.anomaly_sigma_mps2, "sigma_factor": None, "how": how_sigma}
+    report["anomaly_lambda_per_m"] = {
+        "value": new.anomaly_lambda_per_m, "sigma_factor": None,
+        "how": "config" if "anomaly_lambda_per_m" in given else "least expected error (first-pass spectrum)"}
+    report["spectral_model"] = dataclasses.asdict(model)
+    report["resolution_m"] = wiener_resolution_m(model, v, dt_h)
+    report["expected_error_mgal"] = math.sqrt(max(expected, 0.0)) / 1e-5
+    report["signal_seen_to_m"] = (v / (2.0 * float(f[s_sig > 0].max()))) if np.any(s_sig > 0) else None
+    return new, report
