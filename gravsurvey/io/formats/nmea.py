@@ -250,6 +250,7 @@ def read_nmea(path, *, time_source: str = "auto") -> "FormatTable":  # noqa: F82
     fix_ns = np.full(n, np.iinfo(np.int64).min, dtype=np.int64)
     log_ns = np.full(n, np.iinfo(np.int64).min, dtype=np.int64)
     undated = 0
+    prev_t = None
     for i, r in enumerate(base):
         line_i, tod, lg = r[0], r[1], r[2]
         lat[i], lon[i] = r[3], r[4]
@@ -271,6 +272,8 @@ def read_nmea(path, *, time_source: str = "auto") -> "FormatTable":  # noqa: F82
         date0 = None
         if base is rmc:
             date0 = r[7]
+        elif base is gga and rmc_by_tod.get(tod) is not None:
+            date0 = rmc_by_tod[tod][7]  # the RMC of the same fix carries its date
         elif date_lines.size:
             j = np.searchsorted(date_lines, line_i, side="right") - 1
             date0 = date_vals[max(j, 0)]
@@ -282,13 +285,15 @@ def read_nmea(path, *, time_source: str = "auto") -> "FormatTable":  # noqa: F82
             undated += 1
             continue
         t = date0 + tod
-        # midnight: the date (or logger day) and the time of day may belong to adjacent days
-        ref = lg if lg is not None else t
+        # midnight: the date (or logger day) and the time of day may belong to adjacent days;
+        # the reference is the logger clock, else the previous fix
+        ref = lg if lg is not None else (prev_t if prev_t is not None else t)
         if t - ref > _DAY_NS // 2:
             t -= _DAY_NS
         elif ref - t > _DAY_NS // 2:
             t += _DAY_NS
         fix_ns[i] = t
+        prev_t = t
     have_fix = fix_ns != np.iinfo(np.int64).min
     have_log = log_ns != np.iinfo(np.int64).min
     if time_source == "auto":
