@@ -242,6 +242,9 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
             windows = fr["lines"]
             if not isinstance(windows, list):
                 raise ConfigError(f"{kp}.lines: expected a list of {{name, start_s, stop_s}} windows")
+        if ingest.kind == "gravimeter" and method != "classic":
+            raise ConfigError(f"{kp}.inputs.gravimeter: a gravimeter file is processed by the classic chain only; "
+                              f"set processing.method: classic (got {method!r})")
         flights.append(
             FlightConfig(fname, i, triad, fr, ingest, initial, init_raw, truth, windows)
         )
