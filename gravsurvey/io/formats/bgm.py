@@ -55,6 +55,7 @@ def read_bgm_serial(path, *, scale_mgal_per_count: float | None = None) -> "Form
     path = os.fspath(path)
     tally = LineTally(path)
     times, counts, status = [], [], []
+    kind = None  # logger stamp style of the previous line
     for n, ln in enumerate(read_lines(path), start=1):
         s = ln.strip()
         if not s or s.startswith("#"):
@@ -64,7 +65,8 @@ def read_bgm_serial(path, *, scale_mgal_per_count: float | None = None) -> "Form
         if m is None:
             tally.bad(n, "no BGM count 'cc:nnnnnn ss'", s)
             continue
-        st = parse_logger_stamp(s[: m.start()])
+        st = parse_logger_stamp(s[: m.start()], kind)
+        kind = st[1] if st else kind
         if st is None:
             tally.bad(n, "no logger time stamp before the count", s)
             continue

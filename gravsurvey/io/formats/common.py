@@ -245,15 +245,19 @@ _STAMPS = (
     ("unix", re.compile(r"(?<![\d.])(\d{10}(?:\.\d+)?)(?![\d.])")),
 )
 
+_STAMP_INDEX = {k: i for i, (k, _) in enumerate(_STAMPS)}
 
-def parse_logger_stamp(prefix: str) -> tuple[int, str] | None:
+
+def parse_logger_stamp(prefix: str, first: str | None = None) -> tuple[int, str] | None:
     """The first data-logger time stamp in ``prefix`` -> ``(unix_ns, kind)``, or None.
 
     Kinds: ``iso`` (2024-12-13T00:00:00.4059Z), ``ymd_slash`` (2022/07/01 12:17:33.233),
     ``mdy_slash`` (03/13/2022,00:00:02.105, US order), ``year_doy`` (2020:244:00:00:00.6212),
     ``yy_doy`` (23+013:00:00:00.113), ``unix`` (1674228947.582, 10 integer digits).
+    ``first``: a kind to try first (the previous line's: a file keeps one style), for speed.
     """
-    for kind, rx in _STAMPS:
+    order = ((_STAMPS[_STAMP_INDEX[first]],) + _STAMPS) if first in _STAMP_INDEX else _STAMPS
+    for kind, rx in order:
         m = rx.search(prefix)
         if not m:
             continue

@@ -151,6 +151,7 @@ def read_dgs_laptop(path, *, time_source: str = "auto") -> "FormatTable":  # noq
     vals = [[] for _ in LAPTOP_FIELDS]
     meter, logger = [], []
     pre_notes = []
+    kind = None  # logger stamp style of the previous line
     for n, ln in enumerate(read_lines(path, pre_notes), start=1):
         s = ln.strip()
         if not s or s.startswith("#"):
@@ -174,7 +175,8 @@ def read_dgs_laptop(path, *, time_source: str = "auto") -> "FormatTable":  # noq
         if not all(np.isfinite(nums)):
             tally.bad(n, "non-finite number", s)
             continue
-        st = parse_logger_stamp(prefix) if prefix.strip() else None
+        st = parse_logger_stamp(prefix, kind) if prefix.strip() else None
+        kind = st[1] if st else kind
         if prefix.strip() and st is None:
             tally.bad(n, "unrecognised text before the record", s)
             continue
@@ -229,6 +231,7 @@ def read_dgs_raw(path, *, time_source: str = "auto") -> "FormatTable":  # noqa: 
     counter, pos = [], []
     meter, logger = [], []
     pre_notes = []
+    kind = None  # logger stamp style of the previous line
     for n, ln in enumerate(read_lines(path, pre_notes), start=1):
         s = ln.strip()
         if not s or s.startswith("#"):
@@ -251,7 +254,8 @@ def read_dgs_raw(path, *, time_source: str = "auto") -> "FormatTable":  # noqa: 
             tally.bad(n, f"unparsable field ({exc})", s)
             continue
         prefix = s[:k]
-        st = parse_logger_stamp(prefix) if prefix.strip() else None
+        st = parse_logger_stamp(prefix, kind) if prefix.strip() else None
+        kind = st[1] if st else kind
         if prefix.strip() and st is None:
             tally.bad(n, "unrecognised text before the $AT1 string", s)
             continue

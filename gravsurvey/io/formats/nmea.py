@@ -39,6 +39,8 @@ from __future__ import annotations
 
 import os
 import re
+from functools import reduce
+from operator import xor
 
 import numpy as np
 
@@ -64,10 +66,7 @@ def _checksum_ok(sentence: str) -> bool | None:
         want = int(cs, 16)
     except ValueError:
         return False
-    got = 0
-    for ch in body[1:]:
-        got ^= ord(ch)
-    return got == want
+    return reduce(xor, body[1:].encode("latin-1", "replace"), 0) == want
 
 
 def _latlon(v: str, hemi: str, deg_digits: int) -> float:
@@ -158,7 +157,7 @@ def read_nmea(path, *, time_source: str = "auto") -> "FormatTable":  # noqa: F82
         tally.n_lines += 1
         m = _SENTENCE.search(ln)
         prefix = ln[: m.start()] if m else ln
-        st = parse_logger_stamp(prefix) if prefix.strip() else None
+        st = parse_logger_stamp(prefix, stamp_kind) if prefix.strip() else None
         if st is not None:
             logger_ns, stamp_kind = st
         if m is None:

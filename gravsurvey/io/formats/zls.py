@@ -24,7 +24,7 @@ import numpy as np
 
 from gravsurvey.errors import DataError
 
-from .common import MGAL, FormatTable, LineTally, doy_to_ns, finish, read_lines
+from .common import MGAL, FormatTable, LineTally, doy_to_ns, read_lines
 
 WIDTHS = (10, 4, 3, 2, 2, 2, 8, 8, 7, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 6)
 NAMES = (
