@@ -179,3 +179,25 @@ def test_data_errors(tmp_path):
     o = gravimeter_options_from_dict({"format": "mgd77t", "file": "nope.m77t"})
     with pytest.raises(DataError, match=r"nope\.m77t: gravimeter file not found"):
         gravimeter_record(o, d)
+
+
+def test_positions_from_the_gravimeter_file(tmp_path):
+    d, truth = ship(tmp_path, n=600)
+    o = gravimeter_options_from_dict({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL})
+    with pytest.warns(Warning, match="taken at 0 m"):
+        rec = gravimeter_record(o, d)
+    assert rec.gnss.time.size == 600 and np.all(rec.altimeter.height == 0.0)
+    # the meter's 12-decimal degrees are the track: the record keeps them exactly
+    assert np.degrees(rec.gnss.lat[0]) == pytest.approx(48.07, abs=1e-12)
+    o = gravimeter_options_from_dict({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL, "height_m": 12.0})
+    with pytest.warns(Warning, match="height 12 m"):
+        assert np.all(gravimeter_record(o, d).altimeter.height == 12.0)
+
+
+def test_zls_with_a_trajectory_of_another_day_is_refused():
+    # DGP's ZLS sample (2015-11-12) and GNSS sample (2017-03-22) are real files of different flights
+    dgp = ROOT / "tests" / "data" / "formats" / "dgp"
+    o = gravimeter_options_from_dict({"format": "zls", "file": "sample_zls", "offset_mgal": 967000.0,
+                                      "nav": {"format": "trajectory", "file": "sample_trajectory.txt"}})
+    with pytest.raises(DataError, match=r"sample_zls.*do not overlap in time"):
+        gravimeter_record(o, dgp)

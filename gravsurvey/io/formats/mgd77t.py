@@ -144,12 +144,16 @@ def read_mgd77t(path) -> "FormatTable":  # noqa: F821 (doc name)
         f += [""] * (nf - len(f))
         try:
             t = _time_ns(f[i_date], f[i_time], f[i_tz] if i_tz is not None else "")
+        except ValueError as exc:
+            tally.bad(n, f"bad DATE/TIME/TIMEZONE ({exc})", ln)
+            continue
+        try:
             row = {}
             for name, i in idx.items():
                 s = f[i].strip()
                 row[name] = float(s) if s else np.nan
-        except ValueError as exc:
-            tally.bad(n, f"unparsable field ({exc})" if "TIME" in str(exc) or "DATE" in str(exc) else "unparsable number", ln)
+        except ValueError:
+            tally.bad(n, f"unparsable number in {name}", ln)
             continue
         lat, lon = row.get("LAT"), row.get("LON")
         if not (np.isfinite(lat) and np.isfinite(lon)) or abs(lat) > 90 or abs(lon) > 180:

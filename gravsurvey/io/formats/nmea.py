@@ -220,8 +220,7 @@ def read_nmea(path, *, time_source: str = "auto") -> "FormatTable":  # noqa: F82
         n_ok_lines += 1
 
     # a file of sentences we do not use is NMEA, but has no fix: say so
-    if n_ok_lines < 0.5 * tally.n_lines or n_ok_lines == 0:
-        tally.check_enough(0, "NMEA")
+    tally.check_enough(n_ok_lines, "NMEA")
     base = gga if gga else rmc
     if not base:
         raise DataError(
@@ -248,7 +247,6 @@ def read_nmea(path, *, time_source: str = "auto") -> "FormatTable":  # noqa: F82
     course = np.full(n, np.nan)
     fix_ns = np.full(n, np.iinfo(np.int64).min, dtype=np.int64)
     log_ns = np.full(n, np.iinfo(np.int64).min, dtype=np.int64)
-    undated = 0
     prev_t = None
     for i, r in enumerate(base):
         line_i, tod, lg = r[0], r[1], r[2]
@@ -281,7 +279,6 @@ def read_nmea(path, *, time_source: str = "auto") -> "FormatTable":  # noqa: F82
         if date0 is None and lg is not None:
             date0 = (lg // _DAY_NS) * _DAY_NS
         if date0 is None:
-            undated += 1
             continue
         t = date0 + tod
         # midnight: the date (or logger day) and the time of day may belong to adjacent days;
