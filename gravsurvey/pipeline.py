@@ -271,6 +271,10 @@ def _classic_solution(cfg, fl, record):
         track=track,
         height_source="altimeter",
     )
+    if cfg.normal_gravity != "exact":
+        from .marine import use_normal_gravity_formula
+
+        use_normal_gravity_formula(res, cfg.normal_gravity, cfg.ellipsoid)
     return _ClassicSolution(res, record)
 
 
