@@ -91,3 +91,25 @@ def test_track_gaps_and_errors():
         track_velocity(t[::-1], lat, lon)
     with pytest.raises(DataError, match="need at least 3"):
         track_velocity(t[:2], lat[:2], lon[:2])
+
+
+def test_use_normal_gravity_formula_shifts_by_the_formula_difference():
+    from types import SimpleNamespace
+
+    from gravsurvey.classic import normal_gravity_boule
+    from gravsurvey.marine import use_normal_gravity_formula
+
+    lat = np.radians(np.linspace(-60, 60, 50))
+    h = np.linspace(0, 3000, 50)
+    base = np.full(50, 3.0 * MGAL)
+    r = SimpleNamespace(lat=lat, height=h, disturbance=base.copy(), raw=base.copy(),
+                        terms={"raw": base.copy(), "normal_gravity": np.full(50, 9.8)}, info={})
+    use_normal_gravity_formula(r, "exact", GRS80)
+    assert np.array_equal(r.disturbance, base) and "exact" in r.info["normal_gravity"]
+    use_normal_gravity_formula(r, "IGF1967", GRS80)
+    shift = (r.disturbance - base) / MGAL
+    want = (normal_gravity_boule(lat, h, GRS80) - normal_gravity_formula_at_height(lat, h, "IGF1967")) / MGAL
+    assert np.allclose(shift, want, atol=1e-9) and 0.80 < shift.min() and shift.max() < 0.92
+    assert np.allclose(r.raw, r.disturbance) and np.allclose(r.terms["normal_gravity"] - 9.8, -want * MGAL)
+    with pytest.raises(ValueError, match="IGF1967"):
+        use_normal_gravity_formula(r, "igf67", GRS80)
