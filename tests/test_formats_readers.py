@@ -340,3 +340,50 @@ def test_time_helpers():
     # leap second table: GPS-UTC 13 s in 2000, 18 s in 2020
     assert week_sow_to_unix_ns(1042, "0") == unix_ns(1999, 12, 26) - 13 * NS
     assert gps_to_unix_ns((unix_ns(2020, 1, 1) - 315964800 * NS) + 18 * NS) == unix_ns(2020, 1, 1)
+
+
+# ----------------------------------------------------------------------------- damage fuzz
+def _fixtures(tmp_path):
+    """One small valid file per reader: (reader, bytes)."""
+    lines, _ = nav_lines(unix_ns(2022, 7, 1, 12), 8, 41.5, -70.6, 3, 0, "iso")
+    t0 = unix_ns(2019, 7, 11)
+    lap = [laptop_line(t0 + k * NS, 12295.0, 48.07, -10.3) for k in range(8)]
+    raw = [f"{iso(t0 + k * NS)}Z {raw_line(k, 5, 1)}" for k in range(8)]
+    bgm = [f"BGM 2022/07/01 12:17:3{k}.492 BGM3 04:0249{k}3 00" for k in range(8)]
+    m77 = (Path(__file__).parent / "data" / "formats" / "nbp9908_part.m77t").read_text().splitlines()[:9]
+    return [
+        (read_nmea, "\n".join(lines).encode()),
+        (read_dgs_laptop, "\n".join(lap).encode()),
+        (read_dgs_raw, "\n".join(raw).encode()),
+        (read_bgm_serial, "\n".join(bgm).encode()),
+        (read_at1a, (DGP / "sample_gravity.csv").read_bytes()),
+        (read_trajectory, (DGP / "sample_trajectory.txt").read_bytes()),
+        (read_zls, (DGP / "sample_zls" / "2015_00.316").read_bytes()[:2000]),
+        (__import__("gravsurvey.io.formats", fromlist=["read_mgd77t"]).read_mgd77t, "\n".join(m77).encode()),
+    ]
+
+
+def test_damaged_files_give_data_error_or_a_table(tmp_path):
+    """Random truncations, byte flips and insertions: a FormatTable or a DataError, nothing else."""
+    rng = np.random.default_rng(7)
+    for reader, data in _fixtures(tmp_path):
+        p = tmp_path / f"f_{reader.__name__}"
+        p.write_bytes(data)
+        assert len(reader(p)) > 0  # the intact fixture reads
+        for _ in range(40):
+            b = bytearray(data)
+            op = rng.integers(3)
+            if op == 0:
+                b = b[: rng.integers(0, len(b))]
+            elif op == 1:
+                for i in rng.integers(0, len(b), size=rng.integers(1, 8)):
+                    b[i] = int(rng.integers(0, 256))
+            else:
+                i = int(rng.integers(0, len(b)))
+                b[i:i] = bytes(rng.integers(0, 256, size=int(rng.integers(1, 20))).astype(np.uint8))
+            p.write_bytes(bytes(b))
+            try:
+                tb = reader(p)
+            except DataError:
+                continue
+            assert len(tb.time_ns) == len(next(iter(tb.columns.values())))

@@ -27,6 +27,8 @@ KNOT = 1852.0 / 3600.0
 NS = 1_000_000_000
 #: A file is refused when fewer than this fraction of its content lines are records.
 MIN_GOOD_FRACTION = 0.5
+#: Years accepted in dates (int64 ns reach 2262; earlier than 1900 is no digital record).
+YEARS = (1900, 2200)
 #: GPS epoch 1980-01-06T00:00:00 UTC, Unix seconds.
 GPS_EPOCH_UNIX_S = 315964800
 #: GPS - UTC (s) from each date on (IERS bulletin C); valid for data after 1999-01-01.
@@ -192,7 +194,7 @@ def civil_to_ns(year: int, month: int, day: int, hour: int, minute: int, sec: st
     ValueError
         A field out of range (month 13, minute 60, ...).
     """
-    if not (1 <= month <= 12 and 1 <= day <= 31 and 0 <= hour <= 23 and 0 <= minute <= 59):
+    if not (YEARS[0] <= year <= YEARS[1] and 1 <= month <= 12 and 1 <= day <= 31 and 0 <= hour <= 23 and 0 <= minute <= 59):
         raise ValueError("date/time field out of range")
     sec_ns = seconds_str_to_ns(sec) if isinstance(sec, str) else int(round(float(sec) * NS))
     if not 0 <= sec_ns < 61 * NS:
@@ -202,8 +204,8 @@ def civil_to_ns(year: int, month: int, day: int, hour: int, minute: int, sec: st
 
 def doy_to_ns(year: int, doy: int, hour: int, minute: int, sec: str | float) -> int:
     """UTC year, day of year (1-based), time -> Unix ns."""
-    if not 1 <= doy <= 366:
-        raise ValueError("day of year out of range")
+    if not (1 <= doy <= 366 and YEARS[0] <= year <= YEARS[1]):
+        raise ValueError("year or day of year out of range")
     base = calendar.timegm((year, 1, 1, 0, 0, 0)) + (doy - 1) * 86400
     return base * NS + civil_to_ns(1970, 1, 1, hour, minute, sec)
 
@@ -229,7 +231,7 @@ def gps_to_unix_ns(gps_ns: int) -> int:
 def week_sow_to_unix_ns(week: int, sow: str | float) -> int:
     """GPS week and seconds of week (GPS time) -> UTC Unix ns."""
     sow_ns = seconds_str_to_ns(sow) if isinstance(sow, str) else int(round(float(sow) * NS))
-    if not 0 <= sow_ns < 604800 * NS or week < 0:
+    if not 0 <= sow_ns < 604800 * NS or not 0 <= week <= 10000:
         raise ValueError("GPS week/seconds of week out of range")
     return gps_to_unix_ns(week * 604800 * NS + sow_ns)
 
@@ -246,6 +248,7 @@ _STAMPS = (
 )
 
 _STAMP_INDEX = {k: i for i, (k, _) in enumerate(_STAMPS)}
+_YEAR_END_NS = calendar.timegm((YEARS[1], 1, 1, 0, 0, 0)) * NS
 
 
 def parse_logger_stamp(prefix: str, first: str | None = None) -> tuple[int, str] | None:
@@ -271,7 +274,10 @@ def parse_logger_stamp(prefix: str, first: str | None = None) -> tuple[int, str]
                 return doy_to_ns(int(g[0]), int(g[1]), int(g[2]), int(g[3]), g[4]), kind
             if kind == "yy_doy":
                 return doy_to_ns(2000 + int(g[0]), int(g[1]), int(g[2]), int(g[3]), g[4]), kind
-            return seconds_str_to_ns(g[0]), kind
+            t = seconds_str_to_ns(g[0])
+            if t >= _YEAR_END_NS:
+                raise ValueError("Unix time after the accepted years")
+            return t, kind
         except ValueError:
             continue
     return None

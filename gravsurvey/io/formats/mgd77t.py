@@ -90,7 +90,10 @@ def _time_ns(date: str, hhmm: str, tz: str) -> int:
     t = civil_to_ns(int(date[:4]), int(date[4:6]), int(date[6:]), hour, minute, "0") + frac_ns
     tz = tz.strip()
     if tz:
-        t += int(round(float(tz) * 3600.0)) * NS
+        tz_h = float(tz)
+        if not -13.0 <= tz_h <= 14.0:
+            raise ValueError("TIMEZONE outside -13..14 h")
+        t += int(round(tz_h * 3600.0)) * NS
     return t
 
 
