@@ -275,6 +275,11 @@ def _classic_solution(cfg, fl, record):
         from .marine import use_normal_gravity_formula
 
         use_normal_gravity_formula(res, cfg.normal_gravity, cfg.ellipsoid)
+    if fl.ingest.kind == "gravimeter":
+        # no made-up values across gaps of a vendor gravimeter or its navigation
+        from .io.formats.flight import blank_gaps
+
+        blank_gaps(res, record, fl.ingest.gap_factor)
     return _ClassicSolution(res, record)
 
 
