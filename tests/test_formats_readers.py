@@ -387,3 +387,19 @@ def test_damaged_files_give_data_error_or_a_table(tmp_path):
             except DataError:
                 continue
             assert len(tb.time_ns) == len(next(iter(tb.columns.values())))
+
+
+def test_nmea_gga_only_dated_by_the_logger_across_midnight(tmp_path):
+    # Thompson-style: GGA only, the date comes from the logger stamp, which runs 0.6 s behind
+    # the fix clock across midnight
+    lines = []
+    for k, (stamp, hms) in enumerate((("03/12/2022,23:59:58.900", "235959.50"), ("03/12/2022,23:59:59.900", "000000.50"),
+                                      ("03/13/2022,00:00:00.900", "000001.50"))):
+        lines.append(f"{stamp},{nmea(f'INGGA,{hms},3217.33152,N,11839.14935,W,5,26,0.8,0.19,M,,,7,1015')}")
+    p = tmp_path / "POSMV.Raw"
+    p.write_text("\n".join(lines) + "\n")
+    tb = read_nmea(p)
+    want = unix_ns(2022, 3, 12, 23, 59, 59.5) + np.arange(3) * NS
+    np.testing.assert_array_equal(tb.time_ns, want)
+    assert tb.meta["logger_minus_fix_s"] == pytest.approx(-0.6)
+    assert np.isnan(tb.columns["height"]).all() and any("no geoid separation" in n for n in tb.notes)
