@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 import os
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -114,7 +114,6 @@ class GravimeterOptions:
     height_m: float | None = None
     nav: dict | None = None
     key_path: str = "flights[0].inputs.gravimeter"
-    extra: dict = field(default_factory=dict)
 
     def paths(self, base_dir=None) -> list:
         """Gravimeter file(s) then the navigation file, resolved against ``base_dir``."""
