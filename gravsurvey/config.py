@@ -28,7 +28,7 @@ SURVEY_KEYS = ("name", "description")
 #: flight keys handled here; every other key of a flight goes to the ingestion options
 FLIGHT_OWN_KEYS = ("name", "triad", "initial", "truth", "lines")
 OUTPUT_KEYS = ("dir", "epsg", "plots", "xyz", "geojson")
-PROCESSING_KEYS = ("method", "classic_resolution_m")
+PROCESSING_KEYS = ("method", "classic_resolution_m", "normal_gravity")
 TRIADS = ("platform", "strapdown")
 PROCESSING_METHODS = ("inm", "classic")
 _NAME_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
@@ -72,6 +72,7 @@ class SurveyConfig:
     postprocess: Any  # wavelet options
     processing_method: str = "inm"
     classic_resolution_m: float | None = None
+    normal_gravity: str = "exact"  # classic: "exact" (the ellipsoid's field) or a closed-form formula
     output_dir: Path = Path("out")
     epsg: int | None = None
     plots: bool = True
@@ -192,6 +193,16 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
     classic_res = proc.get("classic_resolution_m")
     if classic_res is not None and (not isinstance(classic_res, (int, float)) or classic_res <= 0):
         raise ConfigError(f"processing.classic_resolution_m: expected a positive number (m), got {classic_res!r}")
+    from .errors import suggest
+    from .marine import NORMAL_GRAVITY_CHOICES
+
+    normal_g = proc.get("normal_gravity", "exact")
+    if normal_g not in NORMAL_GRAVITY_CHOICES:
+        raise ConfigError(f"processing.normal_gravity: expected one of {', '.join(NORMAL_GRAVITY_CHOICES)}, "
+                          f"got {normal_g!r}{suggest(normal_g, NORMAL_GRAVITY_CHOICES)}")
+    if normal_g != "exact" and method != "classic":
+        raise ConfigError(f"processing.normal_gravity: {normal_g} applies to processing.method classic only "
+                          "(the 3D-INM uses the exact normal gravity field)")
 
     out = expect_mapping(raw.get("output"), "output")
     check_keys(out, OUTPUT_KEYS, "output")
@@ -242,6 +253,9 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
             windows = fr["lines"]
             if not isinstance(windows, list):
                 raise ConfigError(f"{kp}.lines: expected a list of {{name, start_s, stop_s}} windows")
+        if ingest.kind == "gravimeter" and method != "classic":
+            raise ConfigError(f"{kp}.inputs.gravimeter: a gravimeter file is processed by the classic chain only; "
+                              f"set processing.method: classic (got {method!r})")
         flights.append(
             FlightConfig(fname, i, triad, fr, ingest, initial, init_raw, truth, windows)
         )
@@ -258,6 +272,7 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
         postprocess=post,
         processing_method=method,
         classic_resolution_m=classic_res,
+        normal_gravity=normal_g,
         output_dir=out_dir,
         epsg=epsg,
         plots=flags["plots"],

@@ -380,3 +380,89 @@ def mat_ie(t, omega: float = OMEGA_E):
     m[..., 1, 1] = c
     m[..., 2, 2] = 1.0
     return m
+
+
+# --------------------------------------------------------------------------
+# Closed-form normal gravity formulas at the ellipsoid (marine / survey practice)
+# --------------------------------------------------------------------------
+
+#: Named closed-form normal gravity formulas (on the ellipsoid, m/s^2 from latitude only).
+#: IGF1930: International Gravity Formula 1930 (Cassinis), ``978049 (1 + 0.0052884 sin^2 phi -
+#: 0.0000059 sin^2 2phi)`` mGal.  IGF1967: Geodetic Reference System 1967 series, ``978031.846
+#: (1 + 0.005278895 sin^2 phi + 0.000023462 sin^4 phi)`` mGal (the formula of most marine
+#: gravity archives, e.g. NCEI MGD77).  GRS80 and WGS84: Somigliana's closed form
+#: ``gamma_e (1 + k sin^2 phi) / sqrt(1 - e^2 sin^2 phi)`` (Moritz 2000; NIMA TR8350.2).
+NORMAL_GRAVITY_FORMULAS = ("IGF1930", "IGF1967", "GRS80", "WGS84")
+#: Formula used when none is configured.
+DEFAULT_NORMAL_GRAVITY_FORMULA = "GRS80"
+#: Somigliana constants (gamma_e m/s^2, k, e^2) of GRS80 (Moritz 2000) and WGS84 (TR8350.2).
+SOMIGLIANA = {
+    "GRS80": (9.7803267715, 0.001931851353, 0.00669438002290),
+    "WGS84": (9.7803253359, 0.00193185265241, 0.00669437999013),
+}
+#: GRS80 m = omega^2 a^2 b / GM, for the second-order free-air term.
+GRS80_M = 0.00344978600308
+
+
+def normal_gravity_formula(lat, formula: str = DEFAULT_NORMAL_GRAVITY_FORMULA):
+    """Normal gravity on the ellipsoid by a named closed-form formula, m/s^2.
+
+    Parameters
+    ----------
+    lat : array_like, shape (n,)
+        Geodetic latitude, rad.
+    formula : {'IGF1930', 'IGF1967', 'GRS80', 'WGS84'}
+        See :data:`NORMAL_GRAVITY_FORMULAS`.  GRS80/WGS84 equal :func:`normal_gravity` at
+        ``h = 0`` to < 1e-9 m/s^2 (tested); IGF1967 is 0.7-0.9 mGal above GRS80 and IGF1930
+        about 16 mGal above.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+
+    Raises
+    ------
+    ValueError
+        Unknown formula name (the message lists the valid ones).
+    """
+    s2 = np.sin(np.asarray(lat, dtype=float)) ** 2
+    key = str(formula).upper()
+    if key in SOMIGLIANA:
+        ge, k, e2 = SOMIGLIANA[key]
+        return ge * (1.0 + k * s2) / np.sqrt(1.0 - e2 * s2)
+    if key == "IGF1967":
+        return 978031.846e-5 * (1.0 + 0.005278895 * s2 + 0.000023462 * s2 * s2)
+    if key == "IGF1930":
+        # sin^2(2 phi) = 4 sin^2 phi cos^2 phi
+        return 978049.0e-5 * (1.0 + 0.0052884 * s2 - 0.0000059 * 4.0 * s2 * (1.0 - s2))
+    raise ValueError(f"unknown normal gravity formula {formula!r}; expected one of {', '.join(NORMAL_GRAVITY_FORMULAS)}")
+
+
+def normal_gravity_formula_at_height(lat, height, formula: str = DEFAULT_NORMAL_GRAVITY_FORMULA):
+    """Closed-form normal gravity at ellipsoidal ``height`` (m) above the ellipsoid, m/s^2.
+
+    ``gamma_h = gamma_0 [1 - 2/a (1 + f + m - 2 f sin^2 phi) h + 3 h^2 / a^2]`` (Heiskanen &
+    Moritz 1967 eq. 2-124, GRS80 a, f, m for every formula: the height term of the other
+    ellipsoids differs by < 1e-6 of itself).  At 0 m it is :func:`normal_gravity_formula`.  It is
+    a series to first order in f: with GRS80 it departs from the exact :func:`normal_gravity`
+    (and boule) by up to 0.010 mGal per km of height at the equator, 0 at the poles (measured:
+    0.0102 mGal at 1 km, 0.070 mGal at 10 km).  Use :func:`normal_gravity` where that matters.
+
+    Parameters
+    ----------
+    lat : array_like, shape (n,)
+        Geodetic latitude, rad.
+    height : array_like, shape (n,)
+        Ellipsoidal height, m.
+    formula : str
+        See :func:`normal_gravity_formula`.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    g0 = normal_gravity_formula(lat, formula)
+    a, f = GRS80.a, GRS80.f
+    s2 = np.sin(np.asarray(lat, dtype=float)) ** 2
+    h = np.asarray(height, dtype=float)
+    return g0 * (1.0 - 2.0 / a * (1.0 + f + GRS80_M - 2.0 * f * s2) * h + 3.0 * h * h / (a * a))

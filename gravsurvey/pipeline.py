@@ -272,6 +272,15 @@ def _classic_solution(cfg, fl, record):
         track=track,
         height_source="altimeter",
     )
+    if cfg.normal_gravity != "exact":
+        from .marine import use_normal_gravity_formula
+
+        use_normal_gravity_formula(res, cfg.normal_gravity, cfg.ellipsoid)
+    if fl.ingest.kind == "gravimeter":
+        # no made-up values across gaps of a vendor gravimeter or its navigation
+        from .io.formats.flight import blank_gaps
+
+        blank_gaps(res, record, fl.ingest.gap_factor)
     return _ClassicSolution(res, record)
 
 

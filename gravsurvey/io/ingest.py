@@ -37,7 +37,7 @@ class IngestOptions:
     Paths are as written in the config; :func:`load_flight` resolves them against ``base_dir``.
     """
 
-    kind: str = "mcap"  # "mcap" | "csv"
+    kind: str = "mcap"  # "mcap" | "csv" | "gravimeter"
     mcap_path: str | None = None
     csv_paths: dict = field(default_factory=dict)  # role -> path
     topics: dict = field(default_factory=lambda: dict(DEFAULT_TOPICS))
@@ -59,6 +59,7 @@ class IngestOptions:
     plausibility: str = "error"  # "error" | "warn"
     key_path: str = "flight"
     base_dir: str | None = None  # relative input paths refer to it
+    gravimeter: object = None  # io.formats.flight.GravimeterOptions for kind "gravimeter"
 
     def _resolve(self, p, base_dir=None):
         base = base_dir if base_dir is not None else self.base_dir
@@ -69,6 +70,8 @@ class IngestOptions:
         ``base_dir`` (default: the one given to :func:`ingest_options_from_dict`)."""
         if self.kind == "mcap":
             return [self._resolve(self.mcap_path, base_dir)]
+        if self.kind == "gravimeter":
+            return self.gravimeter.paths(base_dir if base_dir is not None else self.base_dir)
         return [self._resolve(self.csv_paths[r], base_dir) for r in ROLES if r in self.csv_paths]
 
 
@@ -140,11 +143,17 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
                           "{csv: {imu: FILE, altimeter: FILE, gnss: FILE}}")
     p = f"{key_path}.inputs"
     inputs = _mapping(cfg["inputs"], p)
-    check_keys(inputs, ("mcap", "csv"), p)
+    check_keys(inputs, ("mcap", "csv", "gravimeter"), p)
     if len(inputs) != 1:
-        raise ConfigError(f"{p}: expected exactly one of mcap, csv, got "
+        raise ConfigError(f"{p}: expected exactly one of mcap, csv, gravimeter, got "
                           f"{', '.join(inputs) or 'none'}")
-    if "mcap" in inputs:
+    if "gravimeter" in inputs:
+        # a vendor gravimeter file + navigation (gravsurvey.io.formats.flight)
+        from gravsurvey.io.formats.flight import gravimeter_options_from_dict
+
+        o.kind = "gravimeter"
+        o.gravimeter = gravimeter_options_from_dict(inputs["gravimeter"], f"{p}.gravimeter")
+    elif "mcap" in inputs:
         o.kind, o.mcap_path = "mcap", _str_value(inputs["mcap"], f"{p}.mcap")
     else:
         o.kind = "csv"
@@ -474,6 +483,11 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
         Missing/unreadable/undecodable input, no IMU or altimeter samples, or a plausibility
         error (unless ``checks.plausibility: warn``); the message names file/channel.
     """
+    if options.kind == "gravimeter":
+        from gravsurvey.io.formats.flight import gravimeter_record
+
+        return gravimeter_record(options.gravimeter, base_dir if base_dir is not None else options.base_dir,
+                                 gap_factor=options.gap_factor, plausibility=options.plausibility)
     notes = []
     raw, content = read_raw_channels(options, base_dir, notes)
     for ch in raw.values():
