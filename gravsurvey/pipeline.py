@@ -189,6 +189,9 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
                     notes.append(f"{fl.name} {s.name}: {w}")
             z, info = postprocess(sol.g_smooth[a:b], dt, speed, options=cfg.postprocess,
                                   sigma=sol.sigma_smooth[a:b], context=(sol.g_smooth, a, b))
+            if info.get("method") == "none":
+                # the product is the smoother's own estimate: state the smoother's resolution
+                info["resolution_m"] = float(sol.resolution_m)
         final[a:b] = z
         line[a:b] = s.name
         line_info[s.name] = {**to_jsonable(info), "kind": s.kind, "speed_mps": speed, "samples": b - a}
@@ -224,6 +227,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
             "triad": fl.triad,
             "gnss_aided": bool(getattr(sol, "gnss_aided", False)),
             "identification": getattr(sol, "identification", {}),
+            "kalman_resolution_m": float(getattr(sol, "resolution_m", float("nan"))),
         },
     )
 

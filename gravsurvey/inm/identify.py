@@ -58,6 +58,7 @@ __all__ = [
     "refine_prior",
     "prior_risk",
     "prior_for_resolution",
+    "model_resolution_m",
 ]
 
 #: ``model:`` keys this module identifies (a key given in the config is held fixed instead).
@@ -84,7 +85,7 @@ REGRESSION_MAX_HZ = 0.05
 #: Order of the polynomial removed from each stretch before its periodogram.
 DETREND_ORDER = 2
 #: Shortest straight stretch used, s.
-MIN_RUN_S = 300.0
+MIN_RUN_S = 240.0
 
 
 @dataclass(frozen=True)
@@ -489,6 +490,18 @@ def wiener_resolution_m(model: SpectralModel, speed_mps: float, dt_s: float = 1.
     return speed_mps / (2.0 * math.exp(0.5 * (lo + hi)))
 
 
+def model_resolution_m(params, speed_mps: float, height_dt_s: float) -> float:
+    """Resolution (m) of the smoother for the settings ``params`` as they are (no identification).
+
+    The vertical channel's noise is the gravimeter's white noise plus the height noise
+    (``altimeter_sigma_m`` per sample at spacing ``height_dt_s``); see :func:`wiener_resolution_m`.
+    """
+    v = max(float(speed_mps), 1.0)
+    m = SpectralModel(max(params.anomaly_sigma_mps2, 1e-12), 1.0 / max(params.anomaly_lambda_per_m * v, 1e-12),
+                      max(params.gravimeter_white_mps2, 1e-12), max(params.altimeter_sigma_m, 1e-9))
+    return wiener_resolution_m(m, v, height_dt_s)
+
+
 def prior_for_resolution(model: SpectralModel, speed_mps: float, resolution_m: float,
                          dt_s: float = 1.0) -> SpectralModel:
     """The anomaly sigma that puts the smoother's half-power point at ``resolution_m``.
@@ -551,6 +564,15 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
     report: dict = {"method": "whittle-vertical-spectrum", "warnings": []}
     fit = fit_vertical_spectrum(t, e, man, None, fixed=fixed)
     if fit is None:
+        # no straight stretch long enough (short lines, a flight of turns): the noise levels
+        # from the whole flight; the turns' attitude-error leak then counts as noise, which
+        # errs on the side of smoothing
+        fit = fit_vertical_spectrum(t, e, None, None, fixed=fixed)
+        if fit is not None:
+            report["warnings"].append(
+                f"model identification: no straight stretch of {MIN_RUN_S:.0f} s; noise levels "
+                "identified over the whole flight, turns included")
+    if fit is None:
         report["method"] = "none"
         report["warnings"].append(
             f"model identification: no straight stretch of {MIN_RUN_S:.0f} s with evenly sampled "
@@ -590,6 +612,8 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
     return new, report
 
 
+#: Least gain the chosen prior's smoother keeps below the lowest analysed frequency.
+PASS_BELOW_GAIN = 0.9
 #: Resolution (m) of the first, deliberately wide pass of :func:`refine_prior`.
 WIDE_RESOLUTION_M = 1000.0
 #: Correlation time of the wide prior, s (long: it claims no knowledge of the mean level).
@@ -700,13 +724,27 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float):
     sig_fixed = params.anomaly_sigma_mps2 if "anomaly_sigma_mps2" in given else None
     taus = [tau_fixed] if tau_fixed else np.geomspace(*BOUNDS["anomaly_tau_s"], 29)
     sigmas = [sig_fixed] if sig_fixed else np.geomspace(*BOUNDS["anomaly_sigma_mps2"], 61)
+    # wavelengths longer than the periodogram shows (the flight's length) are not known to be
+    # weak: the prior must pass them (H >= PASS_BELOW_GAIN at half the lowest frequency)
+    # instead of flattening the estimate to its mean where the data cannot tell
+    # (against the height noise alone: the white level is the least certain estimate, inflated
+    # by turbulence, and would make this constraint pass noise it need not)
+    f_lo = 0.5 * float(f[0])
+    s_n_lo = float(_noise_psd_g(np.array([f_lo]), dataclasses.replace(noise, white_mps2=0.0), dt_h)[0])
     best = None
+    fallback = None
     for tau in taus:
         for sg in sigmas:
+            s_lo = float(_markov_psd(f_lo, sg, tau))
+            gain_lo = s_lo / (s_lo + s_n_lo)
+            if fallback is None or gain_lo > fallback[0]:
+                fallback = (gain_lo, float(sg), float(tau))
+            if gain_lo < PASS_BELOW_GAIN:
+                continue
             r = prior_risk(f, s_sig, s_n, sg, tau)
             if best is None or r < best[0]:
                 best = (r, float(sg), float(tau))
-    _, sg, tau = best
+    _, sg, tau = best if best is not None else fallback
     model = dataclasses.replace(noise, anomaly_sigma_mps2=sg, anomaly_tau_s=tau)
     if params.target_resolution_m is not None:
         model = prior_for_resolution(model, v, params.target_resolution_m, dt_h)

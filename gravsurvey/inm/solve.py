@@ -11,7 +11,7 @@ from ..errors import ConfigError, DataError
 from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef
 from .errormodel import (DP, DQ, F3, G, N_STATE, N_STATE_AIDED, TH, AltimeterMeasurement, GnssMeasurement,
                          discretise, epoch_geometry, initial_covariance)
-from .identify import identify_params, refine_prior, wide_prior_params
+from .identify import identify_params, model_resolution_m, refine_prior, wide_prior_params
 from .kalman import filter_and_smooth
 from .mechanization import mechanize, navigation_to_geodetic
 from .params import InitialState, InmParams, initial_state_from_gnss, solvability_warnings
@@ -62,6 +62,10 @@ class InmSolution:
         ``params.identify`` is false).
     log_likelihood : float
         :func:`innovation_log_likelihood` of the run (compares models on the same data).
+    resolution_m : float
+        Half-wavelength resolution of ``g_smooth``, m: the half-power point of the smoother's
+        steady-state transfer function for the model it ran with
+        (:func:`gravsurvey.inm.identify.wiener_resolution_m`).
     gnss_aided : bool
         Whether GNSS positions were used as a measurement (``model.gnss_aiding`` and a GNSS
         channel in the record).
@@ -92,6 +96,7 @@ class InmSolution:
     params: InmParams | None = None
     identification: dict = field(default_factory=dict)
     log_likelihood: float = float("nan")
+    resolution_m: float = float("nan")
 
 
 def _check_record(record):
@@ -254,6 +259,8 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     if innov.shape[1] == 1:
         innov = innov[:, 0]
     warn = solvability_warnings(params, float(np.median(speed))) + list(ident.get("warnings", []))
+    resolution = ident.get("resolution_m") if ident.get("resolution_m") else model_resolution_m(
+        params, speed0, float(np.median(np.diff(alt_t))) if alt_t.size > 1 else 1.0)
     return InmSolution(
         time=t[idx].copy(),
         g_forward=x_f[:, G].copy(),
@@ -280,6 +287,7 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
         params=params,
         identification=ident,
         log_likelihood=loglik,
+        resolution_m=resolution,
     )
 
 
