@@ -178,6 +178,10 @@ def inspect(files, as_json):
 def validate(config):
     """Check a processing config without reading any data.
 
+    Runs every check `run` makes before processing (keys, types, ranges, EPSG code,
+    post-processor options, truth file header, time windows) and that every input
+    file exists. Exit 0 when valid, 2 (one line naming the key path) otherwise.
+
     \b
     Example:
       gravsurvey validate survey.yaml
@@ -190,6 +194,8 @@ def validate(config):
         for p in fl.ingest.input_paths():
             if not Path(p).exists():
                 missing.append(f"flights[{fl.index}] ({fl.name}): input file not found: {p}")
+            elif not Path(p).is_file():
+                missing.append(f"flights[{fl.index}] ({fl.name}): input is not a file: {p}")
     for m in missing:
         click.echo(m, err=True)
     if missing:
