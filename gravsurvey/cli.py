@@ -67,6 +67,51 @@ class WarningTally:
 TALLY = WarningTally()
 
 
+def kernel_cache_marker() -> Path | None:
+    """Marker file saying the numba cache holds this package's kernels, or None (no cache).
+
+    Named by a stamp of what invalidates numba's cache: the numba and Python versions and the
+    (mtime, size) of every source file of the package (numba checks the same per file).
+    """
+    import hashlib
+    import os
+
+    from . import NUMBA_CACHE_KIND
+
+    cache = os.environ.get("NUMBA_CACHE_DIR")
+    if NUMBA_CACHE_KIND == "none" or not cache:
+        return None
+    try:
+        from importlib.metadata import version
+
+        numba_version = version("numba")
+    except Exception:  # metadata missing (odd installs): the marker just never matches
+        numba_version = "?"
+    h = hashlib.sha256(f"{numba_version}/{sys.version}".encode())
+    pkg = Path(__file__).resolve().parent
+    for f in sorted(pkg.rglob("*.py")):
+        st = f.stat()
+        h.update(f"{f.relative_to(pkg)}:{st.st_mtime_ns}:{st.st_size};".encode())
+    return Path(cache) / f".gravsurvey-warm-{h.hexdigest()[:16]}"
+
+
+def announce_compilation() -> Path | None:
+    """On a terminal, say that the first run compiles the kernels; returns the marker to write
+    after a successful run (None when warm or no cache)."""
+    try:
+        marker = kernel_cache_marker()
+    except OSError:
+        return None
+    if marker is not None and marker.exists():
+        return None
+    if _interactive():
+        if marker is None:
+            click.echo("compiling kernels (no writable cache folder: on every run) ...", err=True)
+        else:
+            click.echo("compiling kernels (first run only) ...", err=True)
+    return marker
+
+
 def _exit_code_table() -> str:
     return "\n".join(f"  {code:>3}  {text}" for code, text in EXIT_CODES.items())
 
@@ -116,6 +161,7 @@ def run(config, output_dir, jobs, force, wait_s, quiet, no_plots):
     from .pipeline import run_survey
 
     show = _interactive() and not quiet
+    marker = announce_compilation()
     result = run_survey(config, output_dir=output_dir, jobs=jobs, force=force, wait_s=wait_s,
                         progress=show, plots=False if no_plots else None)
     for note in result.notes:  # already in the log (pipeline), so only printed and counted
@@ -128,6 +174,11 @@ def run(config, output_dir, jobs, force, wait_s, quiet, no_plots):
                 click.echo(line)
     if show or TALLY.count:
         click.echo(TALLY.summary_line(), err=True)
+    if marker is not None and result.processed:
+        try:
+            marker.touch()
+        except OSError:  # the cache folder went away or read-only: only the message repeats
+            pass
     sys.exit(1 if result.data_problem else 0)
 
 
