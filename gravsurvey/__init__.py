@@ -83,7 +83,7 @@ def _disable_numba_cache() -> None:
     os.environ.pop("NUMBA_CACHE_DIR", None)
     from numba.core import dispatcher
 
-    dispatcher.Dispatcher.enable_caching = lambda self: None
+    setattr(dispatcher.Dispatcher, "enable_caching", lambda self: None)
 
 
 setup_numba_cache()

@@ -98,7 +98,7 @@ def save_result(cache_dir, name: str, key: str, result) -> None:
     import io
 
     buf = io.BytesIO()
-    np.savez(buf, **arrays)
+    np.savez(buf, **arrays)  # type: ignore[arg-type]  # numpy's stub types **kwds too narrowly
     _atomic_write(npath, buf.getvalue())
     entry = {
         "format": CACHE_FORMAT,
@@ -143,4 +143,3 @@ def load_result(cache_dir, name: str, key: str, cls):
     if set(kwargs) != names:
         return None
     return cls(**kwargs)
-

@@ -66,8 +66,9 @@ def os_fault(exc: OSError, what: str = "") -> EnvironmentFault:
     if exc.filename2 is not None:
         path = f"{path} -> {exc.filename2}"
     reason = exc.strerror or (os.strerror(exc.errno) if exc.errno else type(exc).__name__)
-    return EnvironmentFault(f"{os.fsdecode(path) if isinstance(path, bytes) else path}: "
-                            f"{'cannot ' + what + ': ' if what else ''}{reason}")
+    return EnvironmentFault(
+        f"{os.fsdecode(path) if isinstance(path, bytes) else path}: {'cannot ' + what + ': ' if what else ''}{reason}"
+    )
 
 
 class DataWarning(UserWarning):

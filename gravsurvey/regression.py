@@ -49,8 +49,10 @@ def _check_complete(d: Path, role: str) -> dict:
         raise DataError(f"{d}: {role} directory not found")
     sp = d / "summary.json"
     if not sp.is_file():
-        raise DataError(f"{sp}: missing; the {role} is not a complete gravsurvey output "
-                        "(summary.json is written last by every successful run)")
+        raise DataError(
+            f"{sp}: missing; the {role} is not a complete gravsurvey output "
+            "(summary.json is written last by every successful run)"
+        )
     try:
         summary = json.loads(sp.read_text(encoding="utf-8"))
     except (OSError, ValueError, UnicodeDecodeError) as exc:
@@ -67,8 +69,7 @@ def _check_complete(d: Path, role: str) -> dict:
             for block in iter(lambda: fh.read(1 << 20), b""):
                 h.update(block)
         if h.hexdigest() != digest:
-            raise DataError(f"{fp}: changed since the {role} run wrote it (SHA-256 differs from "
-                            "summary.json)")
+            raise DataError(f"{fp}: changed since the {role} run wrote it (SHA-256 differs from summary.json)")
     return summary
 
 
@@ -93,15 +94,17 @@ def compare_runs(result_dir, reference_dir, *, tol_mgal: float = 0.05, tol_rms_m
     res, ref = Path(result_dir), Path(reference_dir)
     sum_ref = _check_complete(ref, "reference")
     sum_res = _check_complete(res, "result")
-    diffs = [f"{name}: in the reference, missing from the result"
-             for name in sorted(set(sum_ref["output_sha256"]) - set(sum_res["output_sha256"]))]
+    diffs = [
+        f"{name}: in the reference, missing from the result"
+        for name in sorted(set(sum_ref["output_sha256"]) - set(sum_res["output_sha256"]))
+    ]
     a = _read_profiles(res / "profiles.csv")
     b = _read_profiles(ref / "profiles.csv")
     ka = list(zip(*(a[k] for k in _KEY_COLS)))
     kb = list(zip(*(b[k] for k in _KEY_COLS)))
     if ka != kb:
-        sa, sb = set(ka), set(kb)
-        only_a, only_b = len(sa - sb), len(sb - sa)
+        set_a, set_b = set(ka), set(kb)
+        only_a, only_b = len(set_a - set_b), len(set_b - set_a)
         diffs.append(
             f"profiles.csv: epochs differ: {len(ka)} rows vs {len(kb)} in the reference "
             f"({only_a} only in result, {only_b} only in reference)"
@@ -123,8 +126,10 @@ def compare_runs(result_dir, reference_dir, *, tol_mgal: float = 0.05, tol_rms_m
             )
     # both summaries exist and were checked by _check_complete
     sa, sb = sum_res, sum_ref
-    pairs = [("crossovers.rms_mgal", sa.get("crossovers", {}).get("rms_mgal"), sb.get("crossovers", {}).get("rms_mgal")),
-             ("rms_vs_truth_mgal", sa.get("rms_vs_truth_mgal"), sb.get("rms_vs_truth_mgal"))]
+    pairs = [
+        ("crossovers.rms_mgal", sa.get("crossovers", {}).get("rms_mgal"), sb.get("crossovers", {}).get("rms_mgal")),
+        ("rms_vs_truth_mgal", sa.get("rms_vs_truth_mgal"), sb.get("rms_vs_truth_mgal")),
+    ]
     for fname, fb in sb.get("flights", {}).items():
         fa = sa.get("flights", {}).get(fname)
         if fa is None:
@@ -132,8 +137,13 @@ def compare_runs(result_dir, reference_dir, *, tol_mgal: float = 0.05, tol_rms_m
             continue
         for lname, lb in fb.get("lines", {}).items():
             la = fa.get("lines", {}).get(lname, {})
-            pairs.append((f"flights.{fname}.lines.{lname}.rms_vs_truth_mgal",
-                          la.get("rms_vs_truth_mgal"), lb.get("rms_vs_truth_mgal")))
+            pairs.append(
+                (
+                    f"flights.{fname}.lines.{lname}.rms_vs_truth_mgal",
+                    la.get("rms_vs_truth_mgal"),
+                    lb.get("rms_vs_truth_mgal"),
+                )
+            )
     for key, x, y in pairs:
         if x is None and y is None:
             continue

@@ -35,14 +35,25 @@ def _result(n=50):
     line = np.full(n, "", dtype=object)
     line[10:40] = "L01"
     return FlightResult(
-        name="F01", t0_unix_ns=1_700_000_000_000_000_000, time=np.arange(n, dtype=float),
-        lat=rng.random(n), lon=rng.random(n), height=rng.random(n), speed=rng.random(n),
-        kalman=rng.random(n), forward=rng.random(n), sigma=rng.random(n),
-        final=np.where(line != "", rng.random(n), np.nan), line=line,
+        name="F01",
+        t0_unix_ns=1_700_000_000_000_000_000,
+        time=np.arange(n, dtype=float),
+        lat=rng.random(n),
+        lon=rng.random(n),
+        height=rng.random(n),
+        speed=rng.random(n),
+        kalman=rng.random(n),
+        forward=rng.random(n),
+        sigma=rng.random(n),
+        final=np.where(line != "", rng.random(n), np.nan),
+        line=line,
         segments=[{"name": "L01", "kind": "line", "start_s": 10.0, "stop_s": 39.0, "n": 30}],
         line_info={"L01": {"method": "ti_cosphi", "Phi": 0.1, "p": [1e-5, 2e-5]}},
-        truth=None, notes=["F01: imu: dropped 1 duplicate samples"], timings={"ingest_s": 0.5},
-        input_hashes={"a.mcap": "00ff"}, estimator={"method": "inm", "gnss_aided": True},
+        truth=None,
+        notes=["F01: imu: dropped 1 duplicate samples"],
+        timings={"ingest_s": 0.5},
+        input_hashes={"a.mcap": "00ff"},
+        estimator={"method": "inm", "gnss_aided": True},
         data_loss=[],
     )
 
@@ -55,8 +66,17 @@ def test_round_trip_is_exact(tmp_path):
         np.testing.assert_array_equal(getattr(back, f), getattr(r, f))
     assert back.line.dtype == object and list(back.line) == list(r.line)
     assert back.truth is None
-    for f in ("name", "t0_unix_ns", "segments", "line_info", "notes", "timings", "input_hashes",
-              "estimator", "data_loss"):
+    for f in (
+        "name",
+        "t0_unix_ns",
+        "segments",
+        "line_info",
+        "notes",
+        "timings",
+        "input_hashes",
+        "estimator",
+        "data_loss",
+    ):
         assert getattr(back, f) == getattr(r, f), f
     # key order is kept (it is the order of the summary and GeoJSON properties)
     assert list(back.line_info["L01"]) == ["method", "Phi", "p"]
@@ -107,8 +127,9 @@ def test_cli_rerun_with_planted_cache_files_runs_no_code(tmp_path):
     shutil.copytree(ROOT / "sample_data" / "seed_line", src)
     out = tmp_path / "out"
     env = dict(os.environ)
-    r = subprocess.run(EXE + ["run", str(src / "survey.yaml"), "-o", str(out)], capture_output=True,
-                       text=True, env=env, timeout=600)
+    r = subprocess.run(
+        EXE + ["run", str(src / "survey.yaml"), "-o", str(out)], capture_output=True, text=True, env=env, timeout=600
+    )
     assert r.returncode == 0, r.stderr
     first = (out / "profiles.csv").read_bytes()
     cache = out / ".cache"
@@ -124,14 +145,16 @@ def test_cli_rerun_with_planted_cache_files_runs_no_code(tmp_path):
     entry = json.loads((cache / "F01.json").read_text())
     entry["npz_sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()
     (cache / "F01.json").write_text(json.dumps(entry))
-    r = subprocess.run(EXE + ["run", str(src / "survey.yaml"), "-o", str(out)], capture_output=True,
-                       text=True, env=env, timeout=600)
+    r = subprocess.run(
+        EXE + ["run", str(src / "survey.yaml"), "-o", str(out)], capture_output=True, text=True, env=env, timeout=600
+    )
     assert r.returncode == 0, r.stderr
     assert not marker.exists()
     assert "reusing" not in (out / "gravsurvey.log").read_text().split(" run ")[-1]
     assert (out / "profiles.csv").read_bytes() == first
     # and the rewritten cache is reused by the next run, with identical outputs
-    r = subprocess.run(EXE + ["run", str(src / "survey.yaml"), "-o", str(out)], capture_output=True,
-                       text=True, env=env, timeout=600)
+    r = subprocess.run(
+        EXE + ["run", str(src / "survey.yaml"), "-o", str(out)], capture_output=True, text=True, env=env, timeout=600
+    )
     assert r.returncode == 0 and "reusing" in (out / "gravsurvey.log").read_text().split(" run ")[-1]
     assert (out / "profiles.csv").read_bytes() == first

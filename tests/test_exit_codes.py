@@ -27,8 +27,9 @@ EXE = [sys.executable, "-m", "gravsurvey"]
 
 def gs(*args, timeout=600):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.run(EXE + [str(a) for a in args], capture_output=True, text=True,
-                          timeout=timeout, env=env, stdin=subprocess.DEVNULL)
+    return subprocess.run(
+        EXE + [str(a) for a in args], capture_output=True, text=True, timeout=timeout, env=env, stdin=subprocess.DEVNULL
+    )
 
 
 def run_in_process(argv, monkeypatch, capsys):
@@ -118,8 +119,7 @@ def test_exit_3_disk_full_or_denied_while_writing_outputs(seed_run, tmp_path, mo
         raise OSError(err, os.strerror(err), str(path))
 
     monkeypatch.setattr(writers, "write_geojson", full)
-    code, _, stderr = run_in_process(["run", src / "survey.yaml", "-o", out, "--force", "-q"],
-                                     monkeypatch, capsys)
+    code, _, stderr = run_in_process(["run", src / "survey.yaml", "-o", out, "--force", "-q"], monkeypatch, capsys)
     assert code == 3, stderr
     lines = _nonblank(stderr)
     assert len(lines) == 1 and "lines.geojson" in lines[0] and os.strerror(err) in lines[0]
@@ -150,9 +150,14 @@ def test_exit_130_on_sigint_publishes_nothing(seed_run, tmp_path):
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     # a shell's background job ignores SIGINT; the child must have the default disposition
-    p = subprocess.Popen(EXE + ["run", str(src / "survey.yaml"), "-o", str(out), "--force"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    p = subprocess.Popen(
+        EXE + ["run", str(src / "survey.yaml"), "-o", str(out), "--force"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     t0 = time.monotonic()
     log = out / "gravsurvey.log"
     while time.monotonic() - t0 < 120:

@@ -23,16 +23,23 @@ def _turning_flight(speed_mps, triad, static_s):
     # rate about the body z axis peaks at ~4 deg/s, at 6 m/s at ~24 deg/s (the simulator's roll-rate limit caps it there).  No static start by default: the quiet
     # windows the rest check finds are then straight flight and the gentle ends of turns.
     spacing, length = (600.0, 3000.0) if speed_mps > 20 else (60.0, 400.0)
-    plan = {"kind": "grid", "origin_lat_deg": 47.0, "origin_lon_deg": 11.0, "altitude_m": 800.0,
-            "speed_mps": speed_mps,
-            "lines": {"count": 4, "spacing_m": spacing, "length_m": length, "heading_deg": 0.0},
-            "max_bank_deg": 25.0, "static_start_s": static_s, "static_end_s": 0.0, "ramp_s": 30.0}
+    plan = {
+        "kind": "grid",
+        "origin_lat_deg": 47.0,
+        "origin_lon_deg": 11.0,
+        "altitude_m": 800.0,
+        "speed_mps": speed_mps,
+        "lines": {"count": 4, "spacing_m": spacing, "length_m": length, "heading_deg": 0.0},
+        "max_bank_deg": 25.0,
+        "static_start_s": static_s,
+        "static_end_s": 0.0,
+        "ramp_s": 30.0,
+    }
     s = simulate_flight(quick_sim(imu_hz=20, noise=True, triad=triad, plan=plan))
     return s.imu_time_ns, s.specific_force_t, s.angular_rate_t
 
 
-CASES = [(60.0, "strapdown", 0.0), (6.0, "strapdown", 0.0), (6.0, "strapdown", 60.0),
-         (60.0, "platform", 0.0)]
+CASES = [(60.0, "strapdown", 0.0), (6.0, "strapdown", 0.0), (6.0, "strapdown", 60.0), (60.0, "platform", 0.0)]
 
 
 @pytest.mark.parametrize("speed,triad,static_s", CASES)

@@ -34,12 +34,10 @@ print(json.dumps(out))
 
 
 def _probe(env_over, *args):
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME", "TMPDIR", "HOME")}
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME", "TMPDIR", "HOME")}
     env.update(env_over)
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-    r = subprocess.run([sys.executable, "-c", PROBE, *args], capture_output=True, text=True,
-                       env=env, timeout=600)
+    r = subprocess.run([sys.executable, "-c", PROBE, *args], capture_output=True, text=True, env=env, timeout=600)
     assert r.returncode == 0, r.stderr
     return json.loads(r.stdout.strip().splitlines()[-1])
 
@@ -93,12 +91,19 @@ def test_run_without_plots_does_not_import_matplotlib(tmp_path):
     src = tmp_path / "seed_line"
     shutil.copytree(ROOT / "sample_data" / "seed_line", src)
     out = tmp_path / "out"
-    code = ("import sys; from gravsurvey.cli import main\n"
-            "try:\n    main(sys.argv[1:])\nexcept SystemExit as e:\n"
-            "    print('MPL', 'matplotlib' in sys.modules, 'scipy.signal' in sys.modules, e.code)\n")
+    code = (
+        "import sys; from gravsurvey.cli import main\n"
+        "try:\n    main(sys.argv[1:])\nexcept SystemExit as e:\n"
+        "    print('MPL', 'matplotlib' in sys.modules, 'scipy.signal' in sys.modules, e.code)\n"
+    )
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    r = subprocess.run([sys.executable, "-c", code, "run", str(src / "survey.yaml"), "-o", str(out),
-                        "--no-plots"], capture_output=True, text=True, env=env, timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-c", code, "run", str(src / "survey.yaml"), "-o", str(out), "--no-plots"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
     assert r.stdout.strip().splitlines()[-1] == "MPL False False 0", (r.stdout, r.stderr)
     assert (out / "profiles.csv").is_file() and not list(out.glob("*.png"))
     summary = json.loads((out / "summary.json").read_text())
