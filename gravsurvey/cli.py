@@ -164,14 +164,15 @@ def run(config, output_dir, jobs, force, wait_s, quiet, no_plots):
     marker = announce_compilation()
     result = run_survey(config, output_dir=output_dir, jobs=jobs, force=force, wait_s=wait_s,
                         progress=show, plots=False if no_plots else None)
+    lost = set(result.data_loss)  # reported below as a data problem, not again as a warning
     for note in result.notes:  # already in the log (pipeline), so only printed and counted
-        TALLY.emit(note, logged=True)
-    for line in result.report_lines(verbose=False):
+        if note not in lost:
+            TALLY.emit(note, logged=True)
+    for line in result.report_lines(verbose=False):  # failed flights, salvaged inputs
         click.echo(line, err=True)
     if show:
-        for line in result.report_lines(verbose=True):
-            if not result.data_problem or not line.startswith("gravsurvey: "):
-                click.echo(line)
+        for line in result.report_lines(verbose=True, problems=False):
+            click.echo(line)
     if show or TALLY.count:
         click.echo(TALLY.summary_line(), err=True)
     if marker is not None and result.processed:
@@ -306,6 +307,8 @@ def main(argv=None):
     """Console entry point: runs the click group and maps every outcome to an exit code."""
     TALLY.count = 0
     warnings.showwarning = TALLY.show
+    if not log.handlers:  # outside a run (no log file) logging must not print to stderr itself
+        log.addHandler(logging.NullHandler())
     warnings.simplefilter("default", DataWarning)
     try:
         cli.main(args=argv, prog_name="gravsurvey", standalone_mode=False)
@@ -329,7 +332,7 @@ def main(argv=None):
     except SystemExit:
         raise
     except Exception as exc:  # a bug: still one line, never a traceback on the user's screen
-        log.exception("internal error")
+        log.exception("internal error")  # to the run's log file when one is open
         click.echo(f"gravsurvey: internal error: {type(exc).__name__}: {exc}", err=True)
         sys.exit(EXIT_INTERNAL)
     sys.exit(EXIT_OK)

@@ -328,12 +328,16 @@ class RunResult:
         """Exit code 1: a flight failed, or was processed from a damaged (salvaged) input."""
         return bool(self.failed or self.data_loss)
 
-    def report_lines(self, verbose: bool = True):
-        for f in self.failed:
-            yield f"gravsurvey: flight failed: {f.splitlines()[0]}"
-        for d in self.data_loss:
-            yield f"gravsurvey: input damaged, processed what was salvaged: {d}"
-        if verbose:  # the notes (warnings) are printed and counted by the CLI
+    def report_lines(self, verbose: bool = True, problems: bool = True):
+        """Lines for the user: with ``problems`` the failed flights and salvaged inputs (for
+        stderr), with ``verbose`` the summary (counts, crossovers, RMS vs truth). The warnings
+        (``notes``) are printed and counted by the CLI."""
+        if problems:
+            for f in self.failed:
+                yield f"gravsurvey: flight failed: {f.splitlines()[0]}"
+            for d in self.data_loss:
+                yield f"gravsurvey: input damaged, processed what was salvaged: {d}"
+        if verbose:
             yield (
                 f"{self.summary.get('survey')}: {len(self.processed)} flight(s) processed, "
                 f"{len(self.skipped)} unchanged (skipped), {len(self.failed)} failed -> {self.out_dir}"
