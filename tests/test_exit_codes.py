@@ -143,15 +143,24 @@ def test_exit_70_internal_error_is_one_line(monkeypatch, capsys, tmp_path):
     assert _nonblank(stderr) == ["gravsurvey: internal error: ZeroDivisionError: float division by zero"]
 
 
-def test_exit_130_on_sigint_publishes_nothing(seed_run, tmp_path):
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_exit_130_on_sigint_publishes_nothing(seed_run, tmp_path, jobs):
     """SIGINT (Ctrl-C) in the middle of a run: exit 130, one line, no output file published and
-    no staging folder left (a first run: the output folder holds only the log and lock)."""
+    no staging folder left (a first run: the output folder holds only the log and lock). With
+    --jobs 2 (two flights, a process pool) as well."""
     src, _ = seed_run
+    if jobs > 1:
+        two = tmp_path / "two"
+        shutil.copytree(src, two)
+        text = (two / "survey.yaml").read_text()
+        block = text.split("flights:\n", 1)[1].split("model:", 1)[0]
+        (two / "survey.yaml").write_text(text.replace(block, block + block.replace("name: F01", "name: F02")))
+        src = two
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     # a shell's background job ignores SIGINT; the child must have the default disposition
     p = subprocess.Popen(
-        EXE + ["run", str(src / "survey.yaml"), "-o", str(out), "--force"],
+        EXE + ["run", str(src / "survey.yaml"), "-o", str(out), "--force", "--jobs", str(jobs)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
