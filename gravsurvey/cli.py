@@ -1,14 +1,21 @@
 """Command-line interface: parse, call, report. No science here.
 
-Exit codes: 0 ok, 1 a data problem (in at least one flight), 2 usage or config problem.
+Exit codes (:data:`gravsurvey.errors.EXIT_CODES`, also in the README and ``--help``):
+0 ok, 1 data problem, 2 usage/config, 3 environment (permissions, disk full, unwritable
+output), 4 regression check failed, 70 internal error (a bug), 130 interrupted.
 Our own errors (:class:`gravsurvey.errors.GravsurveyError`) are caught once, in :func:`main`,
-and printed as one line; anything else is a bug and is reported as such, still in one line
-plus the log file's location when there is one.
+and printed as one line; so are OS faults (naming the path) and anything else (a bug, still in
+one line plus the log file's location when there is one).
+
+Warnings (data repaired or suspicious) always reach people: each is one ``warning: ...`` line
+on stderr and in the run's log, and a run with warnings ends with a ``N warnings`` line.
+``--quiet`` (and a non-terminal stderr, e.g. cron) drops progress and the summary only.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import sys
 import warnings
 from pathlib import Path
@@ -16,16 +23,97 @@ from pathlib import Path
 import click
 
 from . import __version__
-from .errors import ConfigError, DataWarning, GravsurveyError
+from .errors import (
+    EXIT_CODES,
+    EXIT_CONFIG,
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    ConfigError,
+    DataWarning,
+    GravsurveyError,
+    RegressionFailure,
+    os_fault,
+)
+
+log = logging.getLogger("gravsurvey")
 
 
 def _interactive() -> bool:
     return sys.stderr.isatty()
 
 
-def _warn_line(message, category, filename, lineno, file=None, line=None):
-    # Data warnings are part of the report; keep them to one line each.
-    return f"warning: {message}\n"
+class WarningTally:
+    """Counts the warnings shown during one command (``warnings`` module and run notes)."""
+
+    def __init__(self) -> None:
+        self.count = 0
+
+    def show(self, message, category=None, filename=None, lineno=None, file=None, line=None):
+        """``warnings.showwarning`` replacement: one line on stderr and in the log, counted."""
+        self.emit(str(message))
+
+    def emit(self, text: str, *, logged: bool = False) -> None:
+        """Print one warning line to stderr (and to the log unless ``logged``), count it."""
+        self.count += 1
+        click.echo(f"warning: {text}", err=True)
+        if not logged:
+            log.warning("%s", text)
+
+    def summary_line(self) -> str:
+        return f"{self.count} warning{'' if self.count == 1 else 's'}"
+
+
+TALLY = WarningTally()
+
+
+def kernel_cache_marker() -> Path | None:
+    """Marker file saying the numba cache holds this package's kernels, or None (no cache).
+
+    Named by a stamp of what invalidates numba's cache: the numba and Python versions and the
+    (mtime, size) of every source file of the package (numba checks the same per file).
+    """
+    import hashlib
+    import os
+
+    from . import NUMBA_CACHE_KIND
+
+    cache = os.environ.get("NUMBA_CACHE_DIR")
+    if NUMBA_CACHE_KIND == "none" or not cache:
+        return None
+    try:
+        from importlib.metadata import version
+
+        numba_version = version("numba")
+    except Exception:  # metadata missing (odd installs): the marker just never matches
+        numba_version = "?"
+    h = hashlib.sha256(f"{numba_version}/{sys.version}".encode())
+    pkg = Path(__file__).resolve().parent
+    for f in sorted(pkg.rglob("*.py")):
+        st = f.stat()
+        h.update(f"{f.relative_to(pkg)}:{st.st_mtime_ns}:{st.st_size};".encode())
+    return Path(cache) / f".gravsurvey-warm-{h.hexdigest()[:16]}"
+
+
+def announce_compilation() -> Path | None:
+    """On a terminal, say that the first run compiles the kernels; returns the marker to write
+    after a successful run (None when warm or no cache)."""
+    try:
+        marker = kernel_cache_marker()
+    except OSError:
+        return None
+    if marker is not None and marker.exists():
+        return None
+    if _interactive():
+        if marker is None:
+            click.echo("compiling kernels (no writable cache folder: on every run) ...", err=True)
+        else:
+            click.echo("compiling kernels (first run only) ...", err=True)
+    return marker
+
+
+def _exit_code_table() -> str:
+    return "\n".join(f"  {code:>3}  {text}" for code, text in EXIT_CODES.items())
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -40,6 +128,10 @@ def cli():
     """
 
 
+# the exit-code table in `gravsurvey --help`, from the one table in errors.py
+cli.epilog = "\b\nExit codes:\n" + _exit_code_table()
+
+
 @cli.command()
 @click.argument("config", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "output_dir", type=click.Path(file_okay=False), default=None,
@@ -49,8 +141,11 @@ def cli():
 @click.option("--force", is_flag=True, help="Reprocess flights whose inputs and config are unchanged.")
 @click.option("--wait", "wait_s", type=click.FloatRange(0), default=0.0, show_default=True,
               help="Seconds to wait for another run holding the output directory.")
-@click.option("-q", "--quiet", is_flag=True, help="No progress or summary output (default when not on a terminal).")
-def run(config, output_dir, jobs, force, wait_s, quiet):
+@click.option("-q", "--quiet", is_flag=True,
+              help="No progress or summary (default when not on a terminal); warnings and errors "
+                   "are still printed.")
+@click.option("--no-plots", is_flag=True, help="Write no PNG plots (overrides output.plots).")
+def run(config, output_dir, jobs, force, wait_s, quiet, no_plots):
     """Process a survey: ingest, 3D-INM Kalman/RTS, wavelet, deliverables.
 
     \b
@@ -59,16 +154,32 @@ def run(config, output_dir, jobs, force, wait_s, quiet):
     Exit code 0 when every flight succeeded, 1 when at least one flight had a
     data problem (failed, or processed from a damaged input salvaged up to the
     damage; the others are still processed and written), 2 for a usage or
-    config problem.
+    config problem, 3 when the output cannot be written (permissions, disk
+    full), 130 when interrupted (no output of this run is published).
+    Warnings go to stderr and the log; a run with warnings ends with "N warnings".
     """
     from .pipeline import run_survey
 
     show = _interactive() and not quiet
+    marker = announce_compilation()
     result = run_survey(config, output_dir=output_dir, jobs=jobs, force=force, wait_s=wait_s,
-                        progress=show)
-    if show or result.data_problem:
-        for line in result.report_lines(verbose=show):
-            click.echo(line, err=result.data_problem)
+                        progress=show, plots=False if no_plots else None)
+    lost = set(result.data_loss)  # reported below as a data problem, not again as a warning
+    for note in result.notes:  # already in the log (pipeline), so only printed and counted
+        if note not in lost:
+            TALLY.emit(note, logged=True)
+    for line in result.report_lines(verbose=False):  # failed flights, salvaged inputs
+        click.echo(line, err=True)
+    if show:
+        for line in result.report_lines(verbose=True, problems=False):
+            click.echo(line)
+    if show or TALLY.count:
+        click.echo(TALLY.summary_line(), err=True)
+    if marker is not None and result.processed:
+        try:
+            marker.touch()
+        except OSError:  # the cache folder went away or read-only: only the message repeats
+            pass
     sys.exit(1 if result.data_problem else 0)
 
 
@@ -119,6 +230,10 @@ def inspect(files, as_json):
 def validate(config):
     """Check a processing config without reading any data.
 
+    Runs every check `run` makes before processing (keys, types, ranges, EPSG code,
+    post-processor options, truth file header, time windows) and that every input
+    file exists. Exit 0 when valid, 2 (one line naming the key path) otherwise.
+
     \b
     Example:
       gravsurvey validate survey.yaml
@@ -131,6 +246,8 @@ def validate(config):
         for p in fl.ingest.input_paths():
             if not Path(p).exists():
                 missing.append(f"flights[{fl.index}] ({fl.name}): input file not found: {p}")
+            elif not Path(p).is_file():
+                missing.append(f"flights[{fl.index}] ({fl.name}): input is not a file: {p}")
     for m in missing:
         click.echo(m, err=True)
     if missing:
@@ -170,7 +287,9 @@ def check(result_dir, reference_dir, tol_mgal, tol_rms_mgal):
     \b
     Example:
       gravsurvey check out/ reference_out/ --tol-mgal 0.1
-    Exit 0 when within tolerance, 1 with a readable list of differences otherwise.
+    Exit 0 when within tolerance, 4 with a readable list of differences
+    otherwise, 1 when either directory is not a complete gravsurvey output
+    (no summary.json, or a file its summary lists is missing or altered).
     """
     from .regression import compare_runs
 
@@ -178,35 +297,45 @@ def check(result_dir, reference_dir, tol_mgal, tol_rms_mgal):
     if diffs:
         for d in diffs:
             click.echo(d, err=True)
-        sys.exit(1)
+        raise RegressionFailure(f"{result_dir}: {len(diffs)} difference(s) from {reference_dir} "
+                                "beyond tolerance")
     if _interactive():
         click.echo("check: outputs agree with the reference within tolerance")
 
 
 def main(argv=None):
-    """Console entry point: runs the click group and maps our errors to exit codes."""
-    warnings.formatwarning = _warn_line
+    """Console entry point: runs the click group and maps every outcome to an exit code."""
+    TALLY.count = 0
+    warnings.showwarning = TALLY.show
+    if not log.handlers:  # outside a run (no log file) logging must not print to stderr itself
+        log.addHandler(logging.NullHandler())
     warnings.simplefilter("default", DataWarning)
     try:
         cli.main(args=argv, prog_name="gravsurvey", standalone_mode=False)
     except GravsurveyError as exc:
         click.echo(f"gravsurvey: error: {exc}", err=True)
         sys.exit(exc.exit_code)
-    except click.exceptions.Abort:
-        click.echo("gravsurvey: aborted", err=True)
-        sys.exit(2)
+    except (KeyboardInterrupt, click.exceptions.Abort):
+        # output transactions discard their staging on the way out: nothing is published
+        click.echo("gravsurvey: interrupted; no output of this run was published", err=True)
+        sys.exit(EXIT_INTERRUPTED)
     except click.ClickException as exc:
         click.echo(f"gravsurvey: error: {exc.format_message()}", err=True)
-        sys.exit(2)
-    except KeyboardInterrupt:
-        click.echo("gravsurvey: interrupted", err=True)
-        sys.exit(130)
+        sys.exit(EXIT_CONFIG)
+    except OSError as exc:  # permissions, disk full, read-only or vanished output
+        fault = os_fault(exc)
+        click.echo(f"gravsurvey: error: {fault}", err=True)
+        sys.exit(fault.exit_code)
+    except MemoryError:
+        click.echo("gravsurvey: error: out of memory (try fewer --jobs or a shorter flight)", err=True)
+        sys.exit(os_fault(OSError(12, "Cannot allocate memory")).exit_code)
     except SystemExit:
         raise
     except Exception as exc:  # a bug: still one line, never a traceback on the user's screen
+        log.exception("internal error")  # to the run's log file when one is open
         click.echo(f"gravsurvey: internal error: {type(exc).__name__}: {exc}", err=True)
-        sys.exit(3)
-    sys.exit(0)
+        sys.exit(EXIT_INTERNAL)
+    sys.exit(EXIT_OK)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from .errors import ConfigError, check_keys
@@ -89,12 +91,68 @@ class SurveyConfig:
         return h.hexdigest()
 
 
+#: a processing config is a few kB (one block per flight); larger files are refused unread
+MAX_CONFIG_BYTES = 2 * 1024 * 1024
+#: YAML nodes after expanding aliases: a 1 kB "billion laughs" file expands to ~1e9 nodes and
+#: would take GB of memory and minutes downstream (hashing, JSON); a real config has < 1e4
+MAX_CONFIG_NODES = 200_000
+#: flow-collection nesting ([ and {): PyYAML's scanner is quadratic in it (100k levels: ~2 s
+#: before the parser's recursion limit); a real config nests < 5 levels
+MAX_CONFIG_FLOW_DEPTH = 64
+
+
 class _Loader(yaml.SafeLoader):
-    """SafeLoader that also reads ``1e-5`` and ``5E+3`` as floats (YAML 1.2 style).
+    """SafeLoader that also reads ``1e-5`` and ``5E+3`` as floats (YAML 1.2 style), and refuses
+    a key given twice in one mapping (PyYAML would silently keep the last one).
 
     PyYAML follows YAML 1.1, where a float needs a dot (``1.0e-5``); geophysicists write
     ``1e-5`` and would otherwise get a string and a confusing type error.
     """
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen = {}
+            for key_node, _ in node.value:
+                if isinstance(key_node, yaml.ScalarNode):
+                    k = key_node.value
+                    if k in seen:
+                        raise yaml.constructor.ConstructorError(
+                            None, None, f"key {k!r} given twice (first on line {seen[k] + 1})",
+                            key_node.start_mark)
+                    seen[k] = key_node.start_mark.line
+        return super().construct_mapping(node, deep=deep)
+
+
+def _expanded_nodes(node, limit: int) -> int:
+    """Number of YAML nodes with every alias expanded, counted without expanding (memoised per
+    node, so a bomb costs time linear in its size); stops counting once above ``limit``.
+    A recursive alias (a collection containing itself) counts as more than ``limit``."""
+    memo: dict[int, int] = {}
+    active: set[int] = set()
+
+    def count(n) -> int:
+        key = id(n)
+        if key in active:  # an alias inside its own anchor: infinite once expanded
+            return limit + 1
+        if key in memo:
+            return memo[key]
+        active.add(key)
+        total = 1
+        if isinstance(n, yaml.SequenceNode):
+            for child in n.value:
+                total += count(child)
+                if total > limit:
+                    break
+        elif isinstance(n, yaml.MappingNode):
+            for kn, vn in n.value:
+                total += count(kn) + count(vn)
+                if total > limit:
+                    break
+        active.discard(key)
+        memo[key] = total
+        return total
+
+    return count(node)
 
 
 _Loader.add_implicit_resolver(
@@ -112,21 +170,53 @@ _Loader.add_implicit_resolver(
 
 
 def load_yaml(path: Path) -> dict:
-    """Read a YAML mapping safely; errors name the file and line."""
+    """Read a YAML mapping safely; errors name the file and line.
+
+    Refused before any object is built: files over :data:`MAX_CONFIG_BYTES`, documents whose
+    alias expansion exceeds :data:`MAX_CONFIG_NODES` nodes (alias bombs), a key given twice.
+    A UTF-8 byte-order mark is accepted.
+    """
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{path}: config file not found")
     try:
+        size = path.stat().st_size
+        if size > MAX_CONFIG_BYTES:
+            raise ConfigError(f"{path}: {size} bytes; a config may have at most {MAX_CONFIG_BYTES} "
+                              "bytes (is this the right file?)")
         with open(path, "rb") as fh:
-            data = yaml.load(fh, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+            raw_bytes = fh.read(MAX_CONFIG_BYTES + 1)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the config: {exc.strerror}") from None
+    try:
+        text = raw_bytes.decode("utf-8-sig")  # a BOM (Windows editors) is not content
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not a text (UTF-8) YAML file") from None
+    b = np.frombuffer(raw_bytes, dtype=np.uint8)
+    if b.size:
+        # bracket depth, counting brackets inside quotes and comments too: an upper bound
+        step = (np.isin(b, (0x5B, 0x7B)).astype(np.int64) - np.isin(b, (0x5D, 0x7D)))
+        if int(np.cumsum(step).max()) > MAX_CONFIG_FLOW_DEPTH:
+            raise ConfigError(f"{path}: YAML nested more than {MAX_CONFIG_FLOW_DEPTH} levels "
+                              "deep; refused")
+    try:
+        loader = _Loader(text)
+        try:
+            node = loader.get_single_node()
+            if node is not None and _expanded_nodes(node, MAX_CONFIG_NODES) > MAX_CONFIG_NODES:
+                raise ConfigError(f"{path}: more than {MAX_CONFIG_NODES} YAML nodes once aliases "
+                                  "are expanded (an alias bomb or a recursive alias?); refused")
+            data = loader.construct_document(node) if node is not None else None
+        finally:
+            loader.dispose()
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "?"
         raise ConfigError(f"{path}: invalid YAML at {where}: {exc.problem}") from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: invalid YAML: {str(exc).splitlines()[0]}") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{path}: not a text (UTF-8) YAML file") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: YAML nested too deeply; refused") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a YAML mapping at the top level, got {type(data).__name__}")
     return data
@@ -260,7 +350,7 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
             FlightConfig(fname, i, triad, fr, ingest, initial, init_raw, truth, windows)
         )
 
-    return SurveyConfig(
+    cfg = SurveyConfig(
         path=path,
         base_dir=base,
         raw=raw,
@@ -279,3 +369,81 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
         xyz=flags["xyz"],
         geojson=flags["geojson"],
     )
+    preflight_checks(cfg)
+    return cfg
+
+
+#: columns a truth file must have (docs/formats.md)
+TRUTH_COLUMNS = ("time_ns", "disturbance_mgal")
+_LOWPASS_METHODS = ("butterworth", "gaussian")
+
+
+def preflight_checks(cfg: SurveyConfig) -> None:
+    """Checks ``run`` would otherwise make only after processing, made before it (and by
+    ``validate``): every one raises :class:`ConfigError` (exit 2) naming the key path.
+
+    - ``output.epsg``: known to PROJ and projected (metre coordinates), via the same
+      :func:`gravsurvey.georef.project` the writers use;
+    - ``postprocess``: a low-pass method has ``resolution_m`` or ``filter_length_s``;
+    - ``flights[i].truth``: an existing text CSV whose header has :data:`TRUTH_COLUMNS`
+      (only the header is read);
+    - time windows (``lines.windows`` with ``mode: windows``, ``flights[i].lines``): well
+      formed, by :func:`gravsurvey.survey.segments_from_windows` itself on a time axis made of
+      the windows' own ends (whether each window holds samples is checked with the data).
+    """
+    if cfg.epsg is not None:
+        from .georef import project
+
+        project(np.zeros(1), np.zeros(1), cfg.epsg, key="output.epsg")
+    post = cfg.postprocess
+    if (getattr(post, "method", None) in _LOWPASS_METHODS
+            and post.resolution_m is None and post.filter_length_s is None):
+        raise ConfigError(f"postprocess.resolution_m: required by method {post.method!r} "
+                          "(or give postprocess.filter_length_s)")
+    for fl in cfg.flights:
+        if fl.truth is not None:
+            check_truth_header(fl.truth, f"flights[{fl.index}].truth")
+        if fl.lines_windows is not None:
+            check_windows(fl.lines_windows, f"flights[{fl.index}].lines")
+    if getattr(cfg.lines, "mode", None) == "windows" and getattr(cfg.lines, "windows", None):
+        check_windows(cfg.lines.windows, "lines.windows")
+
+
+def check_truth_header(path: Path, key: str) -> None:
+    """The truth file exists, is UTF-8 text, and its header names :data:`TRUTH_COLUMNS`."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{key}: truth file not found: {path}")
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            for line in fh:
+                if line.strip() and not line.startswith("#"):
+                    break
+            else:
+                line = ""
+    except UnicodeDecodeError:
+        raise ConfigError(f"{key}: {path}: not a text CSV (truth file, docs/formats.md)") from None
+    except OSError as exc:
+        raise ConfigError(f"{key}: {path}: cannot read: {exc.strerror}") from None
+    head = [h.strip() for h in line.strip().split(",")]
+    missing = [c for c in TRUTH_COLUMNS if c not in head]
+    if missing:
+        raise ConfigError(f"{key}: {path}: truth file lacks column(s) {', '.join(missing)}; "
+                          f"header has {', '.join(h for h in head if h) or 'nothing'}")
+
+
+def check_windows(windows, key: str) -> None:
+    """Structure of time windows, checked by the segmentation's own parser."""
+    from .survey import segments_from_windows
+
+    ends = []
+    if isinstance(windows, (list, tuple)):
+        for w in windows:
+            if isinstance(w, dict):
+                for k in ("start_s", "stop_s"):
+                    v = w.get(k)
+                    if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
+                        ends.append(float(v))
+    # every well-formed window (start < stop) holds its own two ends on this axis
+    segments_from_windows(np.unique(np.asarray(ends, float)) if ends else np.zeros(0), windows,
+                          key_path=key)

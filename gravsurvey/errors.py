@@ -1,8 +1,29 @@
-"""gravsurvey's own exception types.
+"""gravsurvey's own exception types and the exit codes they map to.
 
 The CLI catches :class:`GravsurveyError` once and turns it into an exit code
-and a one-line message: 1 for data problems, 2 for usage/config problems.
+and a one-line message (table :data:`EXIT_CODES`, also in the README and
+``gravsurvey --help``).
 """
+
+import os
+
+#: exit code -> meaning; the one table of exit codes (README, ``--help`` and tests use it)
+EXIT_OK = 0
+EXIT_DATA = 1
+EXIT_CONFIG = 2
+EXIT_ENVIRONMENT = 3
+EXIT_REGRESSION = 4
+EXIT_INTERNAL = 70
+EXIT_INTERRUPTED = 130
+EXIT_CODES = {
+    EXIT_OK: "ok",
+    EXIT_DATA: "data problem: input missing, damaged or implausible (in at least one flight)",
+    EXIT_CONFIG: "usage or configuration error (the message names the option or key path)",
+    EXIT_ENVIRONMENT: "environment: permission denied, disk full, unwritable output or cache",
+    EXIT_REGRESSION: "regression check failed: `check` found differences beyond tolerance",
+    EXIT_INTERNAL: "internal error (a bug in gravsurvey; please report it with the log)",
+    EXIT_INTERRUPTED: "interrupted (Ctrl-C / SIGINT); outputs of the run are discarded",
+}
 
 
 class GravsurveyError(Exception):
@@ -21,6 +42,33 @@ class ConfigError(GravsurveyError):
     """A configuration file or command line is invalid (exit code 2)."""
 
     exit_code = 2
+
+
+class EnvironmentFault(GravsurveyError):
+    """The machine refused: permission denied, disk full, read-only or missing output (exit 3)."""
+
+    exit_code = 3
+
+
+class RegressionFailure(GravsurveyError):
+    """``gravsurvey check`` found differences beyond tolerance (exit 4)."""
+
+    exit_code = 4
+
+
+def os_fault(exc: OSError, what: str = "") -> EnvironmentFault:
+    """One-line :class:`EnvironmentFault` for an :class:`OSError`, naming its path.
+
+    ``"<path>: cannot <what>: <reason>"``, e.g. ``out/profiles.csv: cannot write: No space
+    left on device``; the path is the exception's filename (and filename2, for renames).
+    """
+    path = exc.filename if exc.filename is not None else "?"
+    if exc.filename2 is not None:
+        path = f"{path} -> {exc.filename2}"
+    reason = exc.strerror or (os.strerror(exc.errno) if exc.errno else type(exc).__name__)
+    return EnvironmentFault(
+        f"{os.fsdecode(path) if isinstance(path, bytes) else path}: {'cannot ' + what + ': ' if what else ''}{reason}"
+    )
 
 
 class DataWarning(UserWarning):

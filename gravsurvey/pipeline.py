@@ -11,8 +11,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import os
-import pickle
 import platform
 import time
 import traceback
@@ -26,7 +24,7 @@ import numpy as np
 
 from . import __version__
 from .config import FlightConfig, SurveyConfig, load_config
-from .errors import ConfigError, DataError, GravsurveyError
+from .errors import DataError, GravsurveyError, os_fault
 from .geodesy import MGAL
 from .io.writers import to_jsonable
 
@@ -344,14 +342,16 @@ class RunResult:
         """Exit code 1: a flight failed, or was processed from a damaged (salvaged) input."""
         return bool(self.failed or self.data_loss)
 
-    def report_lines(self, verbose: bool = True):
-        for f in self.failed:
-            yield f"gravsurvey: flight failed: {f.splitlines()[0]}"
-        for d in self.data_loss:
-            yield f"gravsurvey: input damaged, processed what was salvaged: {d}"
+    def report_lines(self, verbose: bool = True, problems: bool = True):
+        """Lines for the user: with ``problems`` the failed flights and salvaged inputs (for
+        stderr), with ``verbose`` the summary (counts, crossovers, RMS vs truth). The warnings
+        (``notes``) are printed and counted by the CLI."""
+        if problems:
+            for f in self.failed:
+                yield f"gravsurvey: flight failed: {f.splitlines()[0]}"
+            for d in self.data_loss:
+                yield f"gravsurvey: input damaged, processed what was salvaged: {d}"
         if verbose:
-            for n in self.notes:
-                yield f"note: {n}"
             yield (
                 f"{self.summary.get('survey')}: {len(self.processed)} flight(s) processed, "
                 f"{len(self.skipped)} unchanged (skipped), {len(self.failed)} failed -> {self.out_dir}"
@@ -374,7 +374,7 @@ def _setup_log(out_dir: Path) -> logging.Handler:
 
 
 def run_survey(config_path, *, output_dir=None, jobs: int = 1, force: bool = False,
-               wait_s: float = 0.0, progress: bool = False) -> RunResult:
+               wait_s: float = 0.0, progress: bool = False, plots: bool | None = None) -> RunResult:
     """Run a whole survey and write the deliverables (docs/outputs.md).
 
     Returns a RunResult; raises ConfigError for config problems (exit 2). Data problems of a
@@ -384,11 +384,13 @@ def run_survey(config_path, *, output_dir=None, jobs: int = 1, force: bool = Fal
 
     t_start = time.perf_counter()
     cfg = load_config(config_path, output_dir=output_dir)
+    if plots is not None:  # `run --no-plots` overrides output.plots
+        cfg.plots = plots
     out_dir = Path(cfg.output_dir)
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ConfigError(f"output.dir: cannot create {out_dir}: {exc.strerror}") from None
+    except OSError as exc:  # read-only parent, permissions: the environment, exit 3
+        raise os_fault(exc, "create the output directory") from None
     with OutputLock(out_dir, wait_s=wait_s):
         handler = _setup_log(out_dir)
         try:
@@ -400,6 +402,8 @@ def run_survey(config_path, *, output_dir=None, jobs: int = 1, force: bool = Fal
 
 def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction) -> RunResult:
     log.info("run %s (%d flights), gravsurvey %s", cfg.path, len(cfg.flights), __version__)
+    from .cache import load_result, save_result
+
     cache_dir = out_dir / ".cache"
     cache_dir.mkdir(exist_ok=True)
     results: dict[str, FlightResult] = {}
@@ -409,18 +413,13 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
     for fl in cfg.flights:
         key, hashes = _flight_key(cfg, fl)
         keys[fl.name] = (key, hashes)
-        cpath = cache_dir / f"{fl.name}.pkl"
-        if not force and cpath.is_file():
-            try:
-                with open(cpath, "rb") as fh:
-                    cached = pickle.load(fh)
-                if cached.get("key") == key:
-                    results[fl.name] = cached["result"]
-                    skipped.append(fl.name)
-                    log.info("%s: inputs and config unchanged, reusing the previous result", fl.name)
-                    continue
-            except Exception:  # unreadable cache: recompute
-                log.info("%s: cache unreadable, reprocessing", fl.name)
+        # no pickle: JSON checked against the key before the arrays are read (gravsurvey.cache)
+        cached = None if force else load_result(cache_dir, fl.name, key, FlightResult)
+        if cached is not None:
+            results[fl.name] = cached
+            skipped.append(fl.name)
+            log.info("%s: inputs and config unchanged, reusing the previous result", fl.name)
+            continue
         todo.append(fl)
 
     def _collect(fl, status, payload):
@@ -428,10 +427,7 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
             payload.input_hashes = keys[fl.name][1]
             results[fl.name] = payload
             processed.append(fl.name)
-            tmp = cache_dir / f".{fl.name}.pkl.tmp"
-            with open(tmp, "wb") as fh:
-                pickle.dump({"key": keys[fl.name][0], "result": payload}, fh)
-            os.replace(tmp, cache_dir / f"{fl.name}.pkl")
+            save_result(cache_dir, fl.name, keys[fl.name][0], payload)
             log.info("%s: processed in %.1f s", fl.name, sum(payload.timings.values()))
         else:
             failed.append(payload)
@@ -478,6 +474,8 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
     for r in results.values():
         notes.extend(r.notes)
         data_loss.extend(getattr(r, "data_loss", []))
+    for n in notes:  # every warning reaches the log (the CLI prints and counts them)
+        log.warning("%s", n)
     ordered = [results[f.name] for f in cfg.flights if f.name in results]
     t_out = time.perf_counter()
     summary = {}

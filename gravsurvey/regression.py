@@ -31,6 +31,48 @@ def _read_profiles(path: Path) -> dict:
     return cols
 
 
+def _check_complete(d: Path, role: str) -> dict:
+    """The summary of output directory ``d`` after checking it is complete and unaltered.
+
+    A gravsurvey run publishes ``summary.json`` last, listing the SHA-256 of every other
+    output (``output_sha256``): a directory without it, or with a listed file missing or
+    changed, is not a (complete) run and cannot serve as either side of a comparison.
+
+    Raises
+    ------
+    DataError
+        Naming the directory, its role (result or reference) and the first problem.
+    """
+    import hashlib
+
+    if not d.is_dir():
+        raise DataError(f"{d}: {role} directory not found")
+    sp = d / "summary.json"
+    if not sp.is_file():
+        raise DataError(
+            f"{sp}: missing; the {role} is not a complete gravsurvey output "
+            "(summary.json is written last by every successful run)"
+        )
+    try:
+        summary = json.loads(sp.read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError) as exc:
+        raise DataError(f"{sp}: unreadable {role} summary: {exc}") from None
+    listed = summary.get("output_sha256") if isinstance(summary, dict) else None
+    if not isinstance(listed, dict) or "profiles.csv" not in listed:
+        raise DataError(f"{sp}: no output_sha256 list with profiles.csv; the {role} is incomplete")
+    for name, digest in sorted(listed.items()):
+        fp = d / name
+        if not fp.is_file():
+            raise DataError(f"{fp}: missing; listed in the {role}'s summary.json (incomplete {role})")
+        h = hashlib.sha256()
+        with open(fp, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+        if h.hexdigest() != digest:
+            raise DataError(f"{fp}: changed since the {role} run wrote it (SHA-256 differs from summary.json)")
+    return summary
+
+
 def _floats(v):
     return np.array([float(x) if x not in ("", "nan", "NaN") else np.nan for x in v])
 
@@ -38,20 +80,31 @@ def _floats(v):
 def compare_runs(result_dir, reference_dir, *, tol_mgal: float = 0.05, tol_rms_mgal: float = 0.02) -> list[str]:
     """Differences beyond tolerance between two output directories, as readable lines.
 
-    An empty list means the result agrees with the reference: same flights, lines and epochs
-    in ``profiles.csv``; every ``disturbance_mgal`` and ``kalman_mgal`` within ``tol_mgal``;
-    positions within 1 cm; per-line RMS vs truth and the crossover RMS in ``summary.json``
-    within ``tol_rms_mgal``.
+    An empty list means the result agrees with the reference: every output file of the
+    reference exists in the result; same flights, lines and epochs in ``profiles.csv``; every
+    ``disturbance_mgal`` and ``kalman_mgal`` within ``tol_mgal``; positions within 1 cm;
+    per-line RMS vs truth and the crossover RMS in ``summary.json`` within ``tol_rms_mgal``.
+
+    Raises
+    ------
+    DataError
+        Either directory is not a complete, unaltered gravsurvey output (no ``summary.json``,
+        or a file it lists is missing or changed): nothing to compare against (exit 1).
     """
     res, ref = Path(result_dir), Path(reference_dir)
+    sum_ref = _check_complete(ref, "reference")
+    sum_res = _check_complete(res, "result")
+    diffs = [
+        f"{name}: in the reference, missing from the result"
+        for name in sorted(set(sum_ref["output_sha256"]) - set(sum_res["output_sha256"]))
+    ]
     a = _read_profiles(res / "profiles.csv")
     b = _read_profiles(ref / "profiles.csv")
-    diffs = []
     ka = list(zip(*(a[k] for k in _KEY_COLS)))
     kb = list(zip(*(b[k] for k in _KEY_COLS)))
     if ka != kb:
-        sa, sb = set(ka), set(kb)
-        only_a, only_b = len(sa - sb), len(sb - sa)
+        set_a, set_b = set(ka), set(kb)
+        only_a, only_b = len(set_a - set_b), len(set_b - set_a)
         diffs.append(
             f"profiles.csv: epochs differ: {len(ka)} rows vs {len(kb)} in the reference "
             f"({only_a} only in result, {only_b} only in reference)"
@@ -71,23 +124,29 @@ def compare_runs(result_dir, reference_dir, *, tol_mgal: float = 0.05, tol_rms_m
                 f"profiles.csv {col}: {int(bad.sum())} of {len(va)} values differ by more than {tol:g}; "
                 f"worst at flight {ka[i][0]} line {ka[i][1] or '-'} t={ka[i][2]}: {va[i]:.4f} vs {vb[i]:.4f}"
             )
-    sa_path, sb_path = res / "summary.json", ref / "summary.json"
-    if sa_path.is_file() and sb_path.is_file():
-        sa, sb = json.loads(sa_path.read_text()), json.loads(sb_path.read_text())
-        pairs = [("crossovers.rms_mgal", sa.get("crossovers", {}).get("rms_mgal"), sb.get("crossovers", {}).get("rms_mgal")),
-                 ("rms_vs_truth_mgal", sa.get("rms_vs_truth_mgal"), sb.get("rms_vs_truth_mgal"))]
-        for fname, fb in sb.get("flights", {}).items():
-            fa = sa.get("flights", {}).get(fname)
-            if fa is None:
-                diffs.append(f"summary.json: flight {fname} missing from the result")
-                continue
-            for lname, lb in fb.get("lines", {}).items():
-                la = fa.get("lines", {}).get(lname, {})
-                pairs.append((f"flights.{fname}.lines.{lname}.rms_vs_truth_mgal",
-                              la.get("rms_vs_truth_mgal"), lb.get("rms_vs_truth_mgal")))
-        for key, x, y in pairs:
-            if x is None and y is None:
-                continue
-            if x is None or y is None or abs(x - y) > tol_rms_mgal:
-                diffs.append(f"summary.json {key}: {x} vs reference {y} (tolerance {tol_rms_mgal:g} mGal)")
+    # both summaries exist and were checked by _check_complete
+    sa, sb = sum_res, sum_ref
+    pairs = [
+        ("crossovers.rms_mgal", sa.get("crossovers", {}).get("rms_mgal"), sb.get("crossovers", {}).get("rms_mgal")),
+        ("rms_vs_truth_mgal", sa.get("rms_vs_truth_mgal"), sb.get("rms_vs_truth_mgal")),
+    ]
+    for fname, fb in sb.get("flights", {}).items():
+        fa = sa.get("flights", {}).get(fname)
+        if fa is None:
+            diffs.append(f"summary.json: flight {fname} missing from the result")
+            continue
+        for lname, lb in fb.get("lines", {}).items():
+            la = fa.get("lines", {}).get(lname, {})
+            pairs.append(
+                (
+                    f"flights.{fname}.lines.{lname}.rms_vs_truth_mgal",
+                    la.get("rms_vs_truth_mgal"),
+                    lb.get("rms_vs_truth_mgal"),
+                )
+            )
+    for key, x, y in pairs:
+        if x is None and y is None:
+            continue
+        if x is None or y is None or abs(x - y) > tol_rms_mgal:
+            diffs.append(f"summary.json {key}: {x} vs reference {y} (tolerance {tol_rms_mgal:g} mGal)")
     return diffs

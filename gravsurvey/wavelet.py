@@ -45,7 +45,6 @@ import numpy as np
 import pywt
 from numba import njit
 from scipy import fft as _sfft
-from scipy import signal as _sps
 
 from gravsurvey.errors import ConfigError, DataError, suggest
 
@@ -118,6 +117,11 @@ CONTEXT_MARGIN_PERIODS = 2.0
 #: Context consistency gate: a side is used only if the RMS of the part removed there is at
 #: most this multiple of the RMS removed on the line.
 CONTEXT_GATE_RATIO = 1.25
+#: a |cos phi| candidate whose removed part r or kept part z~ has energy below this fraction of
+#: ||z||^2 is degenerate ("remove nothing" / "remove everything"): its Phi is rounding noise of
+#: the Gram-matrix updates (seen as 4.7e-10 with numpy 2.4 / PyWavelets 1.9) or undefined, never
+#: a real angle.  1e-12 is ~1e4 times the float64 rounding of those updates.
+DEGENERATE_ENERGY_FRACTION = 1e-12
 
 _WAVELET_METHODS = ("ti_cosphi", "cosphi", "visushrink", "sure", "bayes")
 _LOWPASS_METHODS = ("butterworth", "gaussian")
@@ -443,7 +447,8 @@ def _cosphi_descent_kernel(gram, rz, zz, top, steps, max_sweeps, out_k, out_phi)
             a = j * s1 + ks[j]
             rr += rimg[a]
             rzs += rz[a]
-        cur = _phi_dots_nb(rr, rzs - rr, zz - 2.0 * rzs + rr)
+        floor = DEGENERATE_ENERGY_FRACTION * zz
+        cur = _phi_dots_nb(rr, rzs - rr, zz - 2.0 * rzs + rr, floor)
         for _ in range(max_sweeps):
             changed = False
             for j in range(n):
@@ -458,7 +463,7 @@ def _cosphi_descent_kernel(gram, rz, zz, top, steps, max_sweeps, out_k, out_phi)
                     rr2 = (rr - 2.0 * rimg[old] + gram[old, old]
                            + 2.0 * (rimg[new] - gram[old, new]) + gram[new, new])
                     rz2 = rzs - rz[old] + rz[new]
-                    ph = _phi_dots_nb(rr2, rz2 - rr2, zz - 2.0 * rz2 + rr2)
+                    ph = _phi_dots_nb(rr2, rz2 - rr2, zz - 2.0 * rz2 + rr2, floor)
                     if not np.isnan(ph) and (np.isnan(best_phi) or ph < best_phi):
                         best_k = k
                         best_phi = ph
@@ -480,22 +485,38 @@ def _cosphi_descent_kernel(gram, rz, zz, top, steps, max_sweeps, out_k, out_phi)
 
 
 @njit(cache=True)
-def _phi_dots_nb(rr, rk, kk):
-    if rr <= 0.0 or kk <= 0.0:
+def _phi_dots_nb(rr, rk, kk, floor):
+    # a removed or kept part with (near-)zero energy makes Phi rounding noise: undefined (nan)
+    if rr <= floor or kk <= floor:
         return np.nan
     return abs(rk) / np.sqrt(rr * kk)
 
 
+def _phi_candidate(z, r, floor):
+    """Phi of the candidate ``z~ = z - r`` from direct dot products; nan when degenerate
+    (``r.r`` or ``z~.z~`` at most ``floor``), as in :func:`_phi_dots_nb`."""
+    zt = z - r
+    return _phi_from_dots_floor(float(r @ r), float(r @ zt), float(zt @ zt), floor)
+
+
+def _phi_from_dots_floor(rr, rk, kk, floor):
+    if rr <= floor or kk <= floor:
+        return float("nan")
+    return abs(rk) / math.sqrt(rr * kk)
+
+
 def _cosphi_descent_numpy(images, z, top, steps, max_sweeps):
     """Pure-numpy reference of :func:`_cosphi_descent_kernel`: Phi evaluated directly from the
-    signal-domain vectors ``z~ = z - r`` with :func:`phi_criterion` for every candidate."""
+    signal-domain vectors ``r`` and ``z~ = z - r`` for every candidate (the Phi of
+    :func:`phi_criterion`, with the same degenerate-candidate floor as the kernel)."""
     kmax = images.shape[0]
     out_k = np.zeros((kmax, kmax), dtype=np.int64)
     out_phi = np.full(kmax, np.nan)
+    floor = DEGENERATE_ENERGY_FRACTION * float(z @ z)
     for n in range(1, top + 1):
         ks = [steps] * n
         r = images[np.arange(n), ks].sum(axis=0)
-        cur = phi_criterion(z, z - r)
+        cur = _phi_candidate(z, r, floor)
         for _ in range(max_sweeps):
             changed = False
             for j in range(n):
@@ -504,7 +525,7 @@ def _cosphi_descent_numpy(images, z, top, steps, max_sweeps):
                 for k in range(steps, -1, -1):
                     if k == ks[j]:
                         continue
-                    ph = phi_criterion(z, z - (base + images[j, k]))
+                    ph = _phi_candidate(z, base + images[j, k], floor)
                     if not np.isnan(ph) and (np.isnan(best_phi) or ph < best_phi):
                         best_k, best_phi = k, ph
                 if best_k != ks[j]:
@@ -529,6 +550,10 @@ def cosphi_search(z, wavelet="db10", mode="symmetric", thresholding="soft", step
     ``k = steps, ..., 0``, until a sweep changes nothing (at most ``max_sweeps``).  The
     ``(n, p)`` with the smallest Phi wins; exact ties go to the smallest ``n`` (that tie is the
     ill-posedness documented in docs/wavelet.md).
+    A candidate that removes nothing (or keeps nothing) is never chosen: its removed (kept)
+    energy is at most ``DEGENERATE_ENERGY_FRACTION ||z||^2`` and its Phi is rounding noise or
+    undefined, so it counts as nan; when every candidate is degenerate the line is returned
+    unchanged with ``n = 0``.
 
     Because the synthesis is linear, ``z - z~ = sum_j W_j(d_j - T(d_j, p_j))``; the images of
     every (level, grid threshold) are synthesised once and the search runs on their Gram

@@ -4,6 +4,7 @@ atomic outputs under SIGKILL, the output lock, reruns and `check`."""
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import os
 import re
@@ -114,8 +115,16 @@ def test_rerun_skips_unchanged_and_check_passes(tmp_path):
             prof[i] = ",".join(parts)
             break
     (ref / "profiles.csv").write_text("\n".join(prof) + "\n")
+    # edited behind the summary's back: the reference is damaged, not a different run (exit 1)
     c = gs("check", out, ref)
-    assert c.returncode == 1
+    assert c.returncode == 1, c.stderr
+    assert "profiles.csv: changed since the reference run wrote it" in c.stderr
+    # as a different run would have written it (its summary lists the new hash): exit 4
+    summary = json.loads((ref / "summary.json").read_text())
+    summary["output_sha256"]["profiles.csv"] = hashlib.sha256((ref / "profiles.csv").read_bytes()).hexdigest()
+    (ref / "summary.json").write_text(json.dumps(summary))
+    c = gs("check", out, ref)
+    assert c.returncode == 4, c.stderr
     assert "disturbance_mgal" in c.stderr and "1 of" in c.stderr
     assert "Traceback" not in c.stderr
 

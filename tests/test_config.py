@@ -75,7 +75,9 @@ def test_strapdown_without_initial_attitude(tmp_path):
     start = text.index("  initial:")
     end = text.index("  truth:")
     p = tmp_path / "c.yaml"
-    p.write_text(text[:start] + text[end:].replace("triad: platform", "") .replace("truth:", "triad: strapdown\n  truth:", 1))
+    # (the triad key is replaced, not added: a key given twice is itself an error now)
+    text = text[:start].replace("  triad: platform\n", "") + text[end:]
+    p.write_text(text.replace("truth:", "triad: strapdown\n  truth:", 1))
     with pytest.raises(ConfigError, match=r"flights\[0\]\.initial"):
         C.load_config(p)
 
@@ -105,3 +107,93 @@ def test_example_config_from_init_is_documented_and_valid_apart_from_inputs(tmp_
     # validation goes as far as the inputs, which do not exist here: that is a data problem
     cfg = C.load_config(p)
     assert cfg.flights[0].name == "F01"
+
+
+# ---------------------------------------------------------------- issue 14.7: one validation layer
+
+
+@pytest.mark.parametrize(
+    "old,new,match",
+    [
+        ("output: {dir: out}", "output: {dir: out, epsg: 4326}",
+         r"^output\.epsg: EPSG:4326 .* not a projected CRS"),
+        ("output: {dir: out}", "output: {dir: out, epsg: 99999}", r"^output\.epsg: unknown EPSG code 99999"),
+        ("postprocess: {method: default}", "postprocess: {method: butterworth}",
+         r"^postprocess\.resolution_m: required by method 'butterworth'"),
+        ("postprocess: {method: default}", "postprocess: {method: gaussian}",
+         r"^postprocess\.resolution_m: required by method 'gaussian'"),
+        ("truth: ", "truth: nope/", r"^flights\[0\]\.truth: truth file not found"),
+        ("truth.csv", "F01_json.mcap", r"^flights\[0\]\.truth: .* not a text CSV"),
+        ("lines: {mode: whole}", "lines: {mode: windows, windows: [{name: A, start_s: 10}]}",
+         r"^lines\.windows\[0\]: missing key 'stop_s'"),
+        ("  truth: ", "  lines: [{name: A, start_s: 500, stop_s: 10}]\n  truth: ",
+         r"^flights\[0\]\.lines\[0\]: expected finite start_s < stop_s"),
+        ("ellipsoid: WGS84", "ellipsoid: WGS84\nellipsoid: GRS80", r"key 'ellipsoid' given twice"),
+    ],
+)
+def test_checks_run_made_after_processing_are_made_by_load_config(tmp_path, old, new, match):
+    """The config mistakes that `run` found only after processing (exit 1, or not at all for a
+    duplicate key) are found when the config is loaded: `validate` and `run` alike, exit 2."""
+    p = _sample_with(tmp_path, old, new)
+    with pytest.raises(ConfigError, match=match):
+        C.load_config(p)
+
+
+def test_truth_file_without_the_required_columns(tmp_path):
+    bad = tmp_path / "truth.csv"
+    bad.write_text("# header comment\ntime_s,anomaly\n1,2\n")
+    p = _sample_with(tmp_path, f"truth: {SAMPLE.parent}/F01/truth.csv", f"truth: {bad}")
+    with pytest.raises(ConfigError, match=r"flights\[0\]\.truth: .* lacks column\(s\) time_ns, "
+                                          r"disturbance_mgal; header has time_s, anomaly"):
+        C.load_config(p)
+
+
+def test_valid_windows_pass_the_structure_check(tmp_path):
+    p = _sample_with(tmp_path, "lines: {mode: whole}",
+                     "lines: {mode: windows, windows: [{name: L1, start_s: 10, stop_s: 20}, "
+                     "{name: T1, start_s: 15.5, stop_s: 15.6}]}")
+    assert C.load_config(p).lines.mode == "windows"
+
+
+def _timed_refusal(path, match):
+    import time
+
+    t = time.perf_counter()
+    with pytest.raises(ConfigError, match=match):
+        C.load_yaml(path)
+    return time.perf_counter() - t
+
+
+def test_alias_bombs_deep_and_oversized_yaml_refused_fast(tmp_path):
+    bomb = 'a: &a ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]\n'
+    prev = "a"
+    for c in "bcdefghi":  # 9^9 ~ 3.9e8 nodes once expanded, from 342 bytes
+        bomb += f"{c}: &{c} [" + ",".join([f"*{prev}"] * 9) + "]\n"
+        prev = c
+    (tmp_path / "bomb.yaml").write_text(bomb)
+    assert _timed_refusal(tmp_path / "bomb.yaml", r"more than 200000 YAML nodes") < 0.5
+    (tmp_path / "self.yaml").write_text("a: &a [1, *a]\n")
+    assert _timed_refusal(tmp_path / "self.yaml", r"recursive alias") < 0.5
+    (tmp_path / "deep.yaml").write_text("a: " + "[" * 100_000 + "]" * 100_000 + "\n")
+    assert _timed_refusal(tmp_path / "deep.yaml", r"nested more than 64 levels") < 0.5
+    (tmp_path / "big.yaml").write_text("# padding\n" * 300_000)
+    assert _timed_refusal(tmp_path / "big.yaml", r"at most 2097152 bytes") < 0.5
+    block = "".join(" " * i + "k:\n" for i in range(1200))  # block nesting: parser recursion
+    (tmp_path / "deepblock.yaml").write_text(block)
+    assert _timed_refusal(tmp_path / "deepblock.yaml", r"nested too deeply") < 2.0
+
+
+def test_a_small_anchor_config_still_loads(tmp_path):
+    """Anchors and aliases themselves are fine (shared model blocks are common)."""
+    text = SAMPLE.read_text().replace("F01/", str(SAMPLE.parent / "F01") + "/")
+    text = text.replace("lines: {mode: whole}", "lines: &l {mode: whole}\n")
+    p = tmp_path / "c.yaml"
+    p.write_text(text)
+    assert C.load_config(p).lines.mode == "whole"
+
+
+def test_utf8_bom_is_accepted(tmp_path):
+    text = SAMPLE.read_text().replace("F01/", str(SAMPLE.parent / "F01") + "/")
+    p = tmp_path / "bom.yaml"
+    p.write_bytes(b"\xef\xbb\xbf" + text.encode())
+    assert C.load_config(p).name == "sample_seed_line"

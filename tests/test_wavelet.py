@@ -118,6 +118,39 @@ def test_cosphi_search_phi_is_signal_domain_phi(mode, kind):
     assert info["phi_deg"] == pytest.approx(math.degrees(math.acos(info["Phi"])))
 
 
+@pytest.mark.parametrize("mode,kind", [("symmetric", "soft"), ("symmetric", "hard"),
+                                        ("smooth", "soft"), ("periodization", "soft"),
+                                        ("periodization", "hard")])
+def test_cosphi_search_never_returns_a_degenerate_candidate(mode, kind):
+    """Issue 14.12: the candidate that removes nothing (all thresholds 0) has Phi = rounding
+    (4.7e-10 on numpy 2.4.6 / PyWavelets 1.9.0) in the Gram search and must never win; nor may
+    a candidate that keeps nothing.  Both search paths, several lines."""
+    for seed in range(4):
+        rng = np.random.default_rng(seed)
+        n = int(rng.integers(300, 900))
+        z = np.cumsum(rng.standard_normal(n)) + rng.standard_normal(n)
+        for reference in (False, True):
+            zt, info = W.cosphi_search(z, "db10", mode, kind, steps=5, reference=reference)
+            zz = float(z @ z)
+            removed, kept = float((z - zt) @ (z - zt)), float(zt @ zt)
+            assert info["n"] >= 1
+            assert removed > 1e-9 * zz, (seed, reference, removed / zz)
+            assert kept > 1e-9 * zz, (seed, reference, kept / zz)
+            # Phi may be ~0 legitimately (periodization is orthogonal: removing whole levels
+            # is an orthogonal projection), but it is the Phi of a real, finite angle
+            assert math.isfinite(info["Phi"])
+            assert info["Phi"] == pytest.approx(W.phi_criterion(z, zt), rel=1e-9, abs=1e-9)
+
+
+def test_cosphi_search_on_a_line_with_nothing_to_remove_keeps_it():
+    """A constant line has zero detail at every level: every candidate is degenerate, and the
+    line comes back unchanged with n = 0 (not a rounding-noise 'best' candidate)."""
+    z = np.full(256, 3.0)
+    zt, info = W.cosphi_search(z, "db10", "periodization", "soft", steps=4)
+    assert info["n"] == 0 and math.isnan(info["Phi"])
+    np.testing.assert_array_equal(zt, z)
+
+
 def test_ti_phi_by_level_is_phi_of_the_output():
     rng = np.random.default_rng(4)
     n = 3000

@@ -22,6 +22,11 @@ ACCEL_OK = (8.8, 10.8)  # m/s^2
 HEIGHT_OK = (-600.0, 15000.0)  # m
 # gyro: any |w| above this is not an aircraft or a vehicle (deg/s declared as rad/s?)
 GYRO_MAX_OK = 3.5  # rad/s (200 deg/s)
+# rest rate check: a quiet window's mean rate vector may differ from the run's median by
+# 4 standard errors or this fraction of the median (transport rate changes), else it is a turn
+REST_RATE_STEADY_REL = 0.1
+# ... and at least this fraction of the quiet windows must be steady for the unit check to run
+REST_STEADY_MIN_FRACTION = 0.5
 # rest detection: windows where |F| scatters less than this and sits within ACCEL_OK
 REST_WINDOW_S = 2.0
 REST_ACCEL_STD = 0.05  # m/s^2
@@ -241,7 +246,33 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
                            f"converting from {gyro_unit}; more than {GYRO_MAX_OK} rad/s is not a "
                            "vehicle: deg/s or deg/h declared as rad/s?", wmax))
     rest = _rest_mask(fn, time_ns, nominal_step_ns)
-    if rest.sum() >= 8:
+    # |F| steady near g is also true in straight flight and in the gentle parts of turns
+    # (bank < ~14 deg): a run of such windows spanning a turn's roll-in has a mean rate of
+    # ~0.1-0.5 deg/s, exactly the "deg/s declared as rad/s" signature.  Keep only the windows
+    # whose mean rate vector agrees with the run's median (at rest and in straight flight the
+    # rate is Earth + transport rate, constant); the test is scale-free, so a real unit
+    # mistake (every rate x 57.3) keeps its windows steady and is still caught.
+    idx = np.flatnonzero(rest)
+    nw_all, steady_windows = 0, 0
+    if idx.size >= 8 and np.isfinite(nominal_step_ns) and nominal_step_ns > 0:
+        win = max(4, int(round(REST_WINDOW_S * 1e9 / nominal_step_ns)))
+        nw_all = idx.size // win
+        if nw_all >= 1:
+            blocks = w[idx[:nw_all * win]].reshape(nw_all, win, 3)
+            means = blocks.mean(axis=1)  # (nw, 3) rad/s
+            se_win = np.linalg.norm(blocks.std(axis=1), axis=1) / np.sqrt(win)  # (nw,)
+            centre = np.median(means, axis=0)
+            tol = max(4.0 * float(np.median(se_win)), REST_RATE_STEADY_REL * float(np.linalg.norm(centre)))
+            steady = np.linalg.norm(means - centre, axis=1) <= tol
+            steady_windows = int(steady.sum())
+            keep = np.zeros(len(fn), bool)
+            keep[idx[:nw_all * win].reshape(nw_all, win)[steady].ravel()] = True
+            rest = keep
+    if nw_all and steady_windows < REST_STEADY_MIN_FRACTION * nw_all:
+        out.append(Finding("imu", "gyro at rest", "info",
+                           f"imu: angular rate not steady in the quiet windows ({steady_windows} of "
+                           f"{nw_all} windows steady: turning?); gyro unit checked by range only"))
+    elif rest.sum() >= 8:
         wr = w[rest]
         wmean = float(np.linalg.norm(wr.mean(axis=0)))
         # standard error of the mean rate vector: is the rest rate measured well enough?

@@ -1,0 +1,234 @@
+"""Issue 14.5/14.6: documented exit codes, each produced by running the CLI; warnings reach
+stderr and the log with a closing count; Ctrl-C and OS faults publish no partial output."""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import pytest
+
+from gravsurvey import cli
+from gravsurvey.errors import EXIT_CODES
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLES = ROOT / "sample_data"
+EXE = [sys.executable, "-m", "gravsurvey"]
+
+
+def gs(*args, timeout=600):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.run(
+        EXE + [str(a) for a in args], capture_output=True, text=True, timeout=timeout, env=env, stdin=subprocess.DEVNULL
+    )
+
+
+def run_in_process(argv, monkeypatch, capsys):
+    """main(argv) in this process (for faults injected with monkeypatch): (code, stdout, stderr)."""
+    monkeypatch.setattr(warnings, "showwarning", warnings.showwarning)
+    with pytest.raises(SystemExit) as exc:
+        cli.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return exc.value.code, out, err
+
+
+def _nonblank(text):
+    return [ln for ln in text.splitlines() if ln.strip()]
+
+
+@pytest.fixture(scope="module")
+def seed_run(tmp_path_factory):
+    """One processed copy of the smallest sample survey (seed_line) and its output folder."""
+    tmp = tmp_path_factory.mktemp("seed")
+    src = tmp / "seed_line"
+    shutil.copytree(SAMPLES / "seed_line", src)
+    out = tmp / "out"
+    r = gs("run", src / "survey.yaml", "-o", out)
+    assert r.returncode == 0, r.stderr
+    return src, out
+
+
+def test_exit_code_table_in_help_and_readme():
+    r = gs("--help")
+    assert r.returncode == 0
+    readme = (ROOT / "README.md").read_text()
+    for code, text in EXIT_CODES.items():
+        assert re.search(rf"^\s+{code}\s+{re.escape(text)}$", r.stdout, re.M), (code, r.stdout)
+        assert re.search(rf"^\| {code} \| {re.escape(text)} \|$", readme, re.M), code
+    assert sorted(EXIT_CODES) == [0, 1, 2, 3, 4, 70, 130]
+
+
+def test_exit_2_usage_and_config(tmp_path):
+    r = gs("run", "--no-such-option", "x.yaml")
+    assert r.returncode == 2 and len(_nonblank(r.stderr)) == 1 and "--no-such-option" in r.stderr
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text("survey: {name: x}\nflights: []\n")
+    r = gs("run", cfg)
+    assert r.returncode == 2 and "flights" in r.stderr and len(_nonblank(r.stderr)) == 1
+
+
+def test_exit_3_output_below_a_regular_file(seed_run, tmp_path):
+    src, _ = seed_run
+    blocker = tmp_path / "afile"
+    blocker.write_text("not a directory\n")
+    r = gs("run", src / "survey.yaml", "-o", blocker / "out")
+    assert r.returncode == 3, r.stderr
+    lines = _nonblank(r.stderr)
+    assert len(lines) == 1 and str(blocker / "out") in lines[0] and "Traceback" not in r.stderr
+
+
+def test_exit_3_unwritable_output_folder(seed_run, tmp_path):
+    """A folder the user may not write: a chmod 555 folder, or (root ignores permissions) a
+    folder below /sys, where even root cannot create entries."""
+    src, _ = seed_run
+    as_root = hasattr(os, "geteuid") and os.geteuid() == 0
+    out = Path("/sys/gravsurvey-test-out") if as_root else tmp_path / "ro"
+    if not as_root:
+        out.mkdir()
+        out.chmod(0o555)
+    try:
+        r = gs("run", src / "survey.yaml", "-o", out)
+    finally:
+        if not as_root:
+            out.chmod(0o755)
+    assert r.returncode == 3, r.stderr
+    assert str(out) in r.stderr and len(_nonblank(r.stderr)) == 1 and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("err", [errno.ENOSPC, errno.EACCES, errno.EROFS])
+def test_exit_3_disk_full_or_denied_while_writing_outputs(seed_run, tmp_path, monkeypatch, capsys, err):
+    """An OS fault while the deliverables are written: one line naming the file, exit 3, and
+    the previous outputs untouched (the output transaction is discarded)."""
+    from gravsurvey.io import writers
+
+    src, ref_out = seed_run
+    out = tmp_path / "out"
+    shutil.copytree(ref_out, out)
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and p.suffix != ".log"}
+
+    def full(path, *a, **k):
+        raise OSError(err, os.strerror(err), str(path))
+
+    monkeypatch.setattr(writers, "write_geojson", full)
+    code, _, stderr = run_in_process(["run", src / "survey.yaml", "-o", out, "--force", "-q"], monkeypatch, capsys)
+    assert code == 3, stderr
+    lines = _nonblank(stderr)
+    assert len(lines) == 1 and "lines.geojson" in lines[0] and os.strerror(err) in lines[0]
+    after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and p.suffix != ".log"}
+    assert after.keys() == before.keys()
+    for name in before:
+        if name != ".gravsurvey.lock":
+            assert after[name] == before[name], name
+    assert not [p for p in out.iterdir() if p.name.startswith(".staging")]
+
+
+def test_exit_70_internal_error_is_one_line(monkeypatch, capsys, tmp_path):
+    from gravsurvey import pipeline
+
+    def boom(*a, **k):
+        raise ZeroDivisionError("float division by zero")
+
+    monkeypatch.setattr(pipeline, "run_survey", boom)
+    code, _, stderr = run_in_process(["run", tmp_path / "x.yaml"], monkeypatch, capsys)
+    assert code == 70
+    assert _nonblank(stderr) == ["gravsurvey: internal error: ZeroDivisionError: float division by zero"]
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_exit_130_on_sigint_publishes_nothing(seed_run, tmp_path, jobs):
+    """SIGINT (Ctrl-C) in the middle of a run: exit 130, one line, no output file published and
+    no staging folder left (a first run: the output folder holds only the log and lock). With
+    --jobs 2 (two flights, a process pool) as well."""
+    src, _ = seed_run
+    if jobs > 1:
+        two = tmp_path / "two"
+        shutil.copytree(src, two)
+        text = (two / "survey.yaml").read_text()
+        block = text.split("flights:\n", 1)[1].split("model:", 1)[0]
+        (two / "survey.yaml").write_text(text.replace(block, block + block.replace("name: F01", "name: F02")))
+        src = two
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    # a shell's background job ignores SIGINT; the child must have the default disposition
+    p = subprocess.Popen(
+        EXE + ["run", str(src / "survey.yaml"), "-o", str(out), "--force", "--jobs", str(jobs)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    t0 = time.monotonic()
+    log = out / "gravsurvey.log"
+    while time.monotonic() - t0 < 120:
+        if log.is_file() and "run " in log.read_text():
+            break
+        time.sleep(0.02)
+    p.send_signal(signal.SIGINT)
+    _, stderr = p.communicate(timeout=120)
+    assert p.returncode == 130, stderr
+    assert _nonblank(stderr) == ["gravsurvey: interrupted; no output of this run was published"]
+    left = sorted(x.name for x in out.iterdir())
+    assert not [n for n in left if not n.startswith(".") and n != "gravsurvey.log"], left
+    assert not [n for n in left if n.startswith(".staging")], left
+
+
+def _duplicate_one_imu_sample(src: Path) -> None:
+    imu = src / "F01" / "imu.csv"
+    lines = imu.read_text().splitlines()
+    data = [i for i, ln in enumerate(lines) if ln[:1].isdigit()]
+    lines.insert(data[500] + 1, lines[data[500]])
+    imu.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.parametrize("quiet", [False, True])
+def test_warnings_reach_stderr_and_log_with_a_count(tmp_path, quiet):
+    src = tmp_path / "mc"
+    shutil.copytree(SAMPLES / "markov_csv", src)
+    _duplicate_one_imu_sample(src)
+    out = tmp_path / "out"
+    r = gs("run", src / "survey.yaml", "-o", out, *(["-q"] if quiet else []))
+    assert r.returncode == 0, r.stderr
+    lines = _nonblank(r.stderr)
+    assert lines == ["warning: F01: imu: dropped 1 duplicate samples", "1 warning"], r.stderr
+    assert r.stdout == ""
+    log = (out / "gravsurvey.log").read_text()
+    assert re.search(r" WARNING F01: imu: dropped 1 duplicate samples$", log, re.M)
+    # a rerun reuses the cached flight and still reports its warning
+    r2 = gs("run", src / "survey.yaml", "-o", out)
+    assert _nonblank(r2.stderr)[-1] == "1 warning"
+
+
+def test_check_exit_codes(seed_run, tmp_path):
+    """check: 0 agree, 4 differ (a file of the reference missing from the result), 1 when the
+    reference is not a complete output (no summary.json, or a listed file missing)."""
+    _, out = seed_run
+    assert gs("check", out, out).returncode == 0
+    ref = tmp_path / "ref"
+    shutil.copytree(out, ref)
+    res = tmp_path / "res"
+    shutil.copytree(out, res)
+    summary = json.loads((res / "summary.json").read_text())
+    del summary["output_sha256"]["profiles.xyz"]
+    (res / "profiles.xyz").unlink()
+    (res / "summary.json").write_text(json.dumps(summary))
+    r = gs("check", res, ref)
+    assert r.returncode == 4, r.stderr
+    assert "profiles.xyz: in the reference, missing from the result" in r.stderr
+    assert _nonblank(r.stderr)[-1].startswith("gravsurvey: error: ")
+    (ref / "lines.geojson").unlink()
+    r = gs("check", out, ref)
+    assert r.returncode == 1 and "lines.geojson: missing" in r.stderr and "reference" in r.stderr
+    (ref / "summary.json").unlink()
+    r = gs("check", out, ref)
+    assert r.returncode == 1 and "summary.json: missing" in r.stderr
+    assert len(_nonblank(r.stderr)) == 1
