@@ -281,7 +281,7 @@ def test_at1a_and_trajectory_airborne(tmp_path):
     n, rate = 9000, 10.0
     t = np.arange(n) / rate
     gps0 = (calendar.timegm((2017, 3, 22, 14, 0, 0)) + 18 - 315964800)  # GPS seconds of 14:00 UTC
-    ve, vn = 80.0, 0.0
+    ve = 80.0  # due east
     lat = np.full(n, np.radians(76.5))
     m_rad, n_rad = radii_of_curvature(lat, GRS80)
     h = 2000.0 + 30.0 * np.sin(2 * np.pi * t / 120.0)

@@ -251,7 +251,16 @@ def _crossing(y, level, near):
     return min(xs, key=lambda x: abs(x - near))
 
 
-@pytest.mark.parametrize("method", ["default", "ti_cosphi", "visushrink", "sure", "bayes",
+def test_default_is_the_smoothed_estimate_itself():
+    """The default post-processor returns the smoother's estimate unchanged (docs/wavelet.md,
+    "Default": none of the post-processors beat the identified smoother on unseen flights)."""
+    z = np.sin(np.arange(500) / 30.0) * MGAL
+    out, info = W.postprocess(z, 1.0, 50.0, "default")
+    assert info["method"] == "none"
+    assert np.array_equal(out, z) and out is not z
+
+
+@pytest.mark.parametrize("method", ["ti_cosphi", "visushrink", "sure", "bayes",
                                     "butterworth", "gaussian"])
 def test_step_stays_centred(method):
     """A 40 mGal step at a non-dyadic time, plus white noise; the half-height crossing of the
@@ -283,7 +292,7 @@ def test_edges_not_worse_than_input_and_middle_cleaned(n):
         rng = np.random.default_rng(100 + seed)
         g = _smooth_truth(t, rng.uniform(0, 2 * np.pi, 3))
         z = g + _coloured_noise(n, rng)
-        out, info = W.postprocess(z, 1.0, 50.0)
+        out, info = W.postprocess(z, 1.0, 50.0, "ti_cosphi")
         k = int(0.05 * n)
         e_in, e_out = z - g, out - g
         edge_in.append(np.r_[e_in[:k], e_in[-k:]])
@@ -315,8 +324,8 @@ def test_context_makes_line_edges_no_worse_than_the_middle():
         g, z = _stationary_flight(700 + seed)
         a = 3000 + 400 * seed
         b = a + n
-        out, info = W.postprocess(z[a:b], 1.0, 50.0, context=(z, a, b))
-        mirror, info_m = W.postprocess(z[a:b], 1.0, 50.0)
+        out, info = W.postprocess(z[a:b], 1.0, 50.0, "ti_cosphi", context=(z, a, b))
+        mirror, info_m = W.postprocess(z[a:b], 1.0, 50.0, "ti_cosphi")
         assert info["n"] == info_m["n"] and info["context"]  # same level: chosen on the line
         k = int(0.05 * n)
         e, em = out - g[a:b], mirror - g[a:b]
@@ -331,9 +340,9 @@ def test_context_makes_line_edges_no_worse_than_the_middle():
 def test_context_gate_drops_noisier_sides_and_trivial_context_is_the_mirror():
     _, z = _stationary_flight(41)
     a, b = 4000, 6000
-    mirror, info = W.postprocess(z[a:b], 1.0, 50.0)
+    mirror, info = W.postprocess(z[a:b], 1.0, 50.0, "ti_cosphi")
     # the context is only the line itself: nothing to extend with
-    same, _ = W.postprocess(z[a:b], 1.0, 50.0, context=(z[a:b], 0, b - a))
+    same, _ = W.postprocess(z[a:b], 1.0, 50.0, "ti_cosphi", context=(z[a:b], 0, b - a))
     np.testing.assert_allclose(same, mirror, atol=1e-15 * np.max(np.abs(z)) + 1e-20)
     # both sides 4x noisier than the line in the same band (RMS ~16 vs 4 mGal; like a turn with
     # large dynamic errors): the gate does not use them, the result is the mirror's
@@ -341,7 +350,7 @@ def test_context_gate_drops_noisier_sides_and_trivial_context_is_the_mirror():
     noisy = z.copy()
     noisy[:a] += np.sqrt(15.0) * _coloured_noise(a, rng)
     noisy[b:] += np.sqrt(15.0) * _coloured_noise(z.size - b, rng)
-    gated, _ = W.postprocess(noisy[a:b], 1.0, 50.0, context=(noisy, a, b))
+    gated, _ = W.postprocess(noisy[a:b], 1.0, 50.0, "ti_cosphi", context=(noisy, a, b))
     np.testing.assert_allclose(gated, mirror, rtol=0, atol=1e-12 * np.max(np.abs(z)))
     # the gate's limit is a heuristic: measured here, those noisy sides would still have beaten
     # the mirror's end bias (docs/wavelet.md section 7); with the gate disabled they are used
@@ -351,20 +360,20 @@ def test_context_gate_drops_noisier_sides_and_trivial_context_is_the_mirror():
     holes = z.copy()
     holes[a - 10] = np.nan
     holes[b + 5] = np.nan
-    out, _ = W.postprocess(z[a:b], 1.0, 50.0, context=(holes, a, b))
+    out, _ = W.postprocess(z[a:b], 1.0, 50.0, "ti_cosphi", context=(holes, a, b))
     assert np.all(np.isfinite(out))
 
 
 def test_context_validation():
     z = np.arange(100.0)
     with pytest.raises(DataError, match="context must be"):
-        W.postprocess(z[10:40], 1.0, 50.0, context=z)
+        W.postprocess(z[10:40], 1.0, 50.0, "ti_cosphi", context=z)
     with pytest.raises(DataError, match="does not hold"):
-        W.postprocess(z[10:40], 1.0, 50.0, context=(z, 10, 41))
+        W.postprocess(z[10:40], 1.0, 50.0, "ti_cosphi", context=(z, 10, 41))
     with pytest.raises(DataError, match="differs from the line"):
-        W.postprocess(z[10:40], 1.0, 50.0, context=(z, 11, 41))
+        W.postprocess(z[10:40], 1.0, 50.0, "ti_cosphi", context=(z, 11, 41))
     with pytest.raises(DataError, match="expected 1-D"):
-        W.postprocess(z[10:40], 1.0, 50.0, context=(z[None, :], 10, 40))
+        W.postprocess(z[10:40], 1.0, 50.0, "ti_cosphi", context=(z[None, :], 10, 40))
 
 
 @pytest.mark.parametrize("n", [129, 165, 300, 560])
@@ -381,7 +390,7 @@ def test_short_lines_level_fits_the_line_and_beats_the_input(n):
         t = np.arange(n, dtype=float)
         g = _smooth_truth(4 * t, rng.uniform(0, 2 * np.pi, 3))
         z = g + _coloured_noise(n, rng)
-        out, info = W.postprocess(z, 1.0, 80.0, sigma=4 * MGAL)
+        out, info = W.postprocess(z, 1.0, 80.0, "ti_cosphi", sigma=4 * MGAL)
         assert 1 <= info["n"] <= info["length_limited_level"] == W.n_levels(n) - 2
         assert info["period_samples"] <= n
         r_in.append(z - g)
@@ -506,7 +515,7 @@ def test_seed_scenarios_postprocessing_beats_the_smoother(seed_estimates, kind):
     t, z, truth, speed, sigma = seed_estimates[kind]
     keep = (t >= t[0] + SEED_EDGE_S) & (t <= t[-1] - SEED_EDGE_S)
     dt = float(np.median(np.diff(t)))
-    out, info = W.postprocess(z, dt, speed, sigma=sigma)
+    out, info = W.postprocess(z, dt, speed, "ti_cosphi", sigma=sigma)
     rms_in = _rms((z - truth)[keep]) / MGAL
     rms_out = _rms((out - truth)[keep]) / MGAL
     # measured (docs/wavelet.md): smooth 4.93 -> 0.62 mGal, steps 4.38 -> 3.45 mGal, n = 8
@@ -522,7 +531,7 @@ def test_seed_smooth_default_reaches_the_seeds_figure(seed_estimates):
     own figure).  Measured: 0.62 mGal at 12.8 km half-wavelength."""
     t, z, truth, speed, sigma = seed_estimates["smooth"]
     keep = (t >= t[0] + SEED_EDGE_S) & (t <= t[-1] - SEED_EDGE_S)
-    out, info = W.postprocess(z, float(np.median(np.diff(t))), speed, "default", sigma=sigma)
+    out, info = W.postprocess(z, float(np.median(np.diff(t))), speed, "ti_cosphi", sigma=sigma)
     assert _rms((out - truth)[keep]) / MGAL <= 0.99
 
 
@@ -534,7 +543,7 @@ def test_seed_smooth_default_reaches_the_estimators_long_period_floor(seed_estim
     ~4.9 mGal of 100-600 s noise is gone."""
     t, z, truth, speed, sigma = seed_estimates["smooth"]
     keep = (t >= t[0] + SEED_EDGE_S) & (t <= t[-1] - SEED_EDGE_S)
-    out, _ = W.postprocess(z, 1.0, speed, sigma=sigma)
+    out, _ = W.postprocess(z, 1.0, speed, "ti_cosphi", sigma=sigma)
     total = _rms((out - truth)[keep]) / MGAL
     floor = _rms(W.gaussian_lowpass(z - truth, 1.0, 2000.0)[keep]) / MGAL
     assert total**2 <= floor**2 + 0.5**2
@@ -548,9 +557,9 @@ def test_seed_markov_sigma_guard_keeps_the_optimal_smoother_nearly_intact(seed_e
     t, z, truth, speed, sigma = seed_estimates["markov"]
     keep = (t >= t[0] + SEED_EDGE_S) & (t <= t[-1] - SEED_EDGE_S)
     rms_in = _rms((z - truth)[keep]) / MGAL
-    out, info = W.postprocess(z, 1.0, speed, sigma=sigma)
+    out, info = W.postprocess(z, 1.0, speed, "ti_cosphi", sigma=sigma)
     assert info["removed_rms_by_level"][info["n"] - 1] <= _rms(sigma)
     assert _rms((out - truth)[keep]) / MGAL < 1.15 * rms_in
-    out_ng, info_ng = W.postprocess(z, 1.0, speed)
+    out_ng, info_ng = W.postprocess(z, 1.0, speed, "ti_cosphi")
     assert info_ng["n"] > info["n"]  # the guard changed the decision, and for the better
     assert _rms((out_ng - truth)[keep]) > _rms((out - truth)[keep])
