@@ -43,6 +43,7 @@ __all__ = [
     "spec_summary",
     "limit_spec",
     "noise_psd",
+    "peak_disturbance",
 ]
 
 MGAL = 1e-5
@@ -138,15 +139,17 @@ def _grid_plan(rng, speed, altitude, heading, lat0, lon0, target_s, ell):
         "static_start_s": static_start,
         "static_end_s": static_end,
     }
-    for _ in range(3):  # overhead (turns, ramps, statics) depends a little on the count
+    # The overhead (turns, ramps, statics) depends on the count and spacing, not on the line
+    # length: one probe per count tried gives the length that meets the target.
+    while True:
         probe = _built_plan(plan, ell)
         overhead = probe.duration - count * plan["lines"]["length_m"] / speed
         length = (target_s - overhead) * speed / count
-        while length < MIN_LINE_S * speed and count > 2:
-            count -= 1
-            length = (target_s - overhead) * speed / count
+        if length >= MIN_LINE_S * speed or count == 2:
+            break
+        count -= 1
         plan["lines"]["count"] = count
-        plan["lines"]["length_m"] = float(min(MAX_LINE_M, max(MIN_LINE_S * speed, length)))
+    plan["lines"]["length_m"] = float(min(MAX_LINE_M, max(MIN_LINE_S * speed, length)))
     return plan
 
 
@@ -184,7 +187,7 @@ def _unit_source(kind, rng, lat, lon, z, altitude):
             "density_kgm3": 100.0}
 
 
-def _peak_disturbance(key, item, altitude, z, ell):
+def peak_disturbance(key, item, altitude, z, ell):
     """Largest |gravity disturbance| (m/s^2) of one source on a grid at the flight altitude."""
     model = field_model_from_dict({"type": "model", key: [item]}, "field", ell)
     span = 1.5 * z + float(item.get("separation_m", 0.0)) + max(abs(x) for x in item.get("east_m", [0.0]))
@@ -216,7 +219,7 @@ def _random_field(rng, plan, altitude, ell, sources_out: list) -> dict:
         lon = math.degrees(lon0 + x / rp)
         item = _unit_source(kind, rng, lat, lon, z, altitude)
         target = scale * rng.uniform(*RANGES["source_fraction"]) * MGAL
-        peak = _peak_disturbance(kind, item, altitude, z, ell)
+        peak = peak_disturbance(kind, item, altitude, z, ell)
         gain = target / peak
         sign = float(rng.choice((-1.0, 1.0)))
         if kind == "prisms":
