@@ -374,7 +374,8 @@ def spec_summary(spec: dict) -> str:
     """One line describing a drawn flight (for tables and logs)."""
     return (f"{spec['name']} {spec['triad']} imu {spec['imu_hz']} Hz gnss {spec['gnss_hz']} Hz "
             f"alt {spec['altimeter_hz']} Hz, {spec['speed_mps']:.0f} m/s, {spec['altitude_m']:.0f} m, "
-            f"{spec['duration_s'] / 60:.0f} min ({spec['line_count']} x {spec['line_length_m'] / 1000:.0f} km), "
+            f"{spec['duration_s'] / 60:.0f} min ({spec['line_count']} x {spec['line_length_m'] / 1000:.0f} km"
+            f"{', static start' if spec['static_start_s'] > 0 else ''}), "
             f"field {spec['field_scale_mgal']:.1f} mGal ({len(spec['sources'])} sources)")
 
 
