@@ -298,3 +298,21 @@ def test_sample_survey_yaml_is_accepted_by_the_processing_config(sample):
 
     cfg = load_config(ROOT / "sample_data" / sample / "survey.yaml")
     assert [f.name for f in cfg.flights] == ["F01"]
+
+
+def test_cli_oracle_config_flag(tmp_path):
+    """`gravsurvey simulate --oracle-config` adds oracle.yaml; without it there is none."""
+    import sys
+
+    sim = quick_sim(duration_s=60.0, noise=True, formats=["csv"])
+    p = tmp_path / "SIM.yaml"
+    p.write_text(yaml.safe_dump(sim))
+    exe = [sys.executable, "-m", "gravsurvey", "simulate", str(p)]
+    r = subprocess.run(exe + ["-o", str(tmp_path / "a")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "a" / "survey.yaml").is_file() and not (tmp_path / "a" / "oracle.yaml").exists()
+    r = subprocess.run(exe + ["-o", str(tmp_path / "b"), "--oracle-config"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    oracle = yaml.safe_load((tmp_path / "b" / "oracle.yaml").read_text())
+    assert oracle["model"]["accel_noise_mps2"] == 1e-3
+    assert "model" not in yaml.safe_load((tmp_path / "b" / "survey.yaml").read_text())
