@@ -49,8 +49,14 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from gravsurvey.pipeline import read_truth_csv, run_survey  # noqa: E402
-from gravsurvey.simulate.unseen import draw_flight_spec, limit_spec, noise_psd, spec_summary, write_flight  # noqa: E402
+from gravsurvey.pipeline import read_truth_csv, run_survey
+from gravsurvey.simulate.unseen import (
+    draw_flight_spec,
+    limit_spec,
+    noise_psd,
+    spec_summary,
+    write_flight,
+)
 
 CACHE = REPO / "benchmarks" / ".unseen_cache"
 MGAL = 1e-5

@@ -4,7 +4,6 @@ the default configuration."""
 
 from __future__ import annotations
 
-import copy
 import math
 
 import numpy as np
@@ -133,7 +132,7 @@ def test_noise_psd_matches_the_simulated_errors():
     ratio = p[band] / U.noise_psd(flight, f[band])
     assert np.median(ratio) == pytest.approx(1.0, abs=0.1)
     # height: per-sample sigma at R Hz is a one-sided PSD 2 sigma^2 / R; twice differentiated
-    fa, pa = welch(s.truth["altimeter_error"], fs=5.0, nperseg=1024)
+    _, pa = welch(s.truth["altimeter_error"], fs=5.0, nperseg=1024)
     assert np.median(pa[1:] / (2 * 0.1**2 / 5.0)) == pytest.approx(1.0, abs=0.1)
     h_only = {"sensors": {"altimeter": {"sigma_m": 0.1}}, "rates": {"altimeter_hz": 5.0, "gnss_hz": 1.0}}
     fq = np.array([0.01, 0.1])

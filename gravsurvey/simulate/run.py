@@ -454,7 +454,7 @@ def matched_anomaly_prior(distance_m, disturbance_mps2, step_m: float = 100.0):
     return float(math.sqrt(var)), float(1.0 / d_e)
 
 
-def oracle_model_block(cfg: SimConfig, sim: "FlightSimulation | None" = None) -> dict:
+def oracle_model_block(cfg: SimConfig, sim: FlightSimulation | None = None) -> dict:
     """The processing ``model`` block matched to the first flight's simulated errors (ORACLE).
 
     These are values derived from the simulator's truth, which no user has: they go only

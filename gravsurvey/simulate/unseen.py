@@ -39,11 +39,11 @@ __all__ = [
     "NOMINAL_TURBULENCE",
     "RANGES",
     "draw_flight_spec",
-    "write_flight",
-    "spec_summary",
     "limit_spec",
     "noise_psd",
     "peak_disturbance",
+    "spec_summary",
+    "write_flight",
 ]
 
 MGAL = 1e-5
@@ -345,7 +345,7 @@ def limit_spec(spec: dict, max_duration_s: float | None = None, max_imu_hz: floa
         keep = max_duration_s / out["duration_s"]
         plan["static_start_s"] = min(plan["static_start_s"], 0.05 * max_duration_s)
         plan["static_end_s"] = min(plan["static_end_s"], 0.05 * max_duration_s)
-        count = max(2, min(g["count"], int(round(g["count"] * math.sqrt(keep)))))
+        count = max(2, min(g["count"], round(g["count"] * math.sqrt(keep))))
         length = g["length_m"] * keep * g["count"] / count
         g["count"] = count
         g["length_m"] = float(max(MIN_LINE_S * plan["speed_mps"], length))
