@@ -286,6 +286,11 @@ def print_table(rows):
     worse = [r["name"] for r in rows if r.get("default_rms") is not None and r.get("classic_rms") is not None
              and r["default_rms"] > r["classic_rms"]]
     print(f"default worse than classic on {len(worse)} of {len(rows)} flights: {', '.join(worse) or '-'}")
+    # issue 12: never worse than the scalar chain at the same or coarser resolution
+    coarser = [r["name"] for r in rows if r["name"] in worse and r.get("default_resolution_km") is not None
+               and r.get("classic_resolution_km") is not None
+               and r["default_resolution_km"] >= r["classic_resolution_km"]]
+    print(f"... of which at the same or coarser stated resolution: {len(coarser)}: {', '.join(coarser) or '-'}")
     failed = [r["name"] for r in rows if any(k in r for k in ("default_error", "oracle_error", "classic_error"))]
     if failed:
         print(f"runs that failed: {', '.join(failed)}")
