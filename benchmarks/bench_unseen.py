@@ -49,6 +49,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
+from gravsurvey.errors import GravsurveyError
 from gravsurvey.pipeline import read_truth_csv, run_survey
 from gravsurvey.simulate.unseen import (
     draw_flight_spec,
@@ -313,9 +314,14 @@ def main(argv=None):
         if a.quick:
             spec = limit_spec(spec, QUICK_MAX_DURATION_S, QUICK_MAX_IMU_HZ)
         t0 = time.perf_counter()
-        folder = prepare_flight(spec, a.cache)
-        t_sim = time.perf_counter() - t0
-        row = evaluate_flight(spec, folder)
+        try:
+            folder = prepare_flight(spec, a.cache)
+            t_sim = time.perf_counter() - t0
+            row = evaluate_flight(spec, folder)
+        except GravsurveyError as exc:  # one bad flight must not hide the others' rows
+            t_sim = time.perf_counter() - t0
+            row = {"name": spec["name"], "seed": spec["seed"], "summary": spec_summary(spec),
+                   "default_error": f"{type(exc).__name__}: {exc}"}
         row["simulate_s"] = t_sim
         rows.append(row)
         print(f"{row['summary']}: default {_fmt(row.get('default_rms'))} kalman {_fmt(row.get('kalman_rms'))} "
