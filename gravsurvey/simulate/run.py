@@ -660,8 +660,8 @@ def simulate_to_dir(sim_path, out_dir, oracle: bool = False) -> list[Path]:
         oracle_entry["initial"] = _initial_block(sim)
         user_entry["truth"] = oracle_entry["truth"] = f"{sim.name}/truth.csv"
         flights_yaml.append(user_entry)
-        if k == 0:
-            first_sim = sim
+        if k == 0 and oracle:  # the matched values come from the first flight; drop its arrays after
+            oracle_model = oracle_model_block(cfg, sim)
         oracle_flights.append(oracle_entry)
     proc = cfg.processing
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -672,7 +672,7 @@ def simulate_to_dir(sim_path, out_dir, oracle: bool = False) -> list[Path]:
     }
     head = {"survey": {"name": cfg.name}, "ellipsoid": cfg.ellipsoid.name}
     if oracle:
-        doc = {**head, "flights": oracle_flights, "model": oracle_model_block(cfg, first_sim), **tail}
+        doc = {**head, "flights": oracle_flights, "model": oracle_model, **tail}
         doc["output"] = {"dir": proc["output_dir"] + "_oracle"}
         written.append(_write_yaml(out_dir / "oracle.yaml", doc,
                                    "# written by gravsurvey simulate --oracle-config: ORACLE values derived from the\n"
