@@ -187,8 +187,14 @@ def run(config, output_dir, jobs, force, wait_s, quiet, no_plots):
 @click.argument("sim_config", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "output_dir", required=True, type=click.Path(file_okay=False),
               help="Directory to write the simulated survey into.")
-def simulate(sim_config, output_dir):
+@click.option("--oracle-config", "oracle", is_flag=True,
+              help="Also write oracle.yaml: the noise model, anomaly prior and exact initial state "
+                   "matched to the simulated truth (a benchmark reference no user has).")
+def simulate(sim_config, output_dir, oracle):
     """Simulate a survey with known truth: sensor logs, truth.csv, survey.yaml.
+
+    survey.yaml holds only what a user knows (file layout, rates, triad); the
+    estimator's defaults do the rest.
 
     \b
     Example:
@@ -197,7 +203,7 @@ def simulate(sim_config, output_dir):
     """
     from .simulate.run import simulate_to_dir
 
-    paths = simulate_to_dir(sim_config, output_dir)
+    paths = simulate_to_dir(sim_config, output_dir, oracle=oracle)
     if _interactive():
         for p in paths:
             click.echo(str(p))

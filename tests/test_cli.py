@@ -148,7 +148,7 @@ def test_error_unknown_key(tmp_path):
 
 def test_error_wrong_type(tmp_path):
     src = _copy_sample("seed_line", tmp_path)
-    text = (src / "survey.yaml").read_text().replace("altimeter_sigma_m: 1.0", "altimeter_sigma_m: one")
+    text = (src / "survey.yaml").read_text().replace("lines: {mode: whole}", "model: {altimeter_sigma_m: one}\nlines: {mode: whole}")
     (src / "survey.yaml").write_text(text)
     r = gs("validate", src / "survey.yaml")
     _one_line_error(r, 2, "model.altimeter_sigma_m")
@@ -194,7 +194,7 @@ def test_truncated_mcap_is_salvaged_and_reported(tmp_path):
 def test_one_failing_flight_does_not_stop_the_others(tmp_path):
     src = _copy_sample("seed_line", tmp_path)
     text = (src / "survey.yaml").read_text()
-    block = text.split("flights:\n", 1)[1].split("model:", 1)[0]
+    block = text.split("flights:\n", 1)[1].split("\nlines:", 1)[0] + "\n"
     bad = block.replace("name: F01", "name: F02").replace("F01/F01_json.mcap", "F01/missing.mcap")
     (src / "survey.yaml").write_text(text.replace(block, block + bad))
     r = gs("run", src / "survey.yaml", "-o", tmp_path / "out", "--jobs", "2")

@@ -58,7 +58,7 @@ def test_sample_config_loads_with_paths_relative_to_file():
         ("output: {dir: out}", "output: {dir: out, epsg: -3}", r"output\.epsg: expected a positive integer"),
         ("output: {dir: out}", "output: {dirr: out}", r"output\.dirr: unknown key \(did you mean 'dir'\?\)"),
         ("ellipsoid: WGS84", "ellipsoid: Krassowsky", r"ellipsoid: expected one of WGS84, GRS80"),
-        ("altimeter_sigma_m: 1.0", "altimeter_sigma_m: -1", r"model\.altimeter_sigma_m"),
+        ("lines: {mode: whole}", "model: {altimeter_sigma_m: -1}\nlines: {mode: whole}", r"model\.altimeter_sigma_m"),
         ("postprocess: {method: default}", "postprocess: {method: median}", r"postprocess\.method"),
         ("lines: {mode: whole}", "lines: {mode: diagonal}", r"lines\.mode"),
         ("name: F01", "name: 'F 01/x'", r"flights\[0\]\.name"),
@@ -72,18 +72,15 @@ def test_errors_name_the_key(tmp_path, old, new, match):
 
 def test_strapdown_without_initial_attitude(tmp_path):
     text = SAMPLE.read_text()
-    start = text.index("  initial:")
-    end = text.index("  truth:")
+    assert "initial:" not in text  # the sample is a platform flight initialised from GNSS
     p = tmp_path / "c.yaml"
-    # (the triad key is replaced, not added: a key given twice is itself an error now)
-    text = text[:start].replace("  triad: platform\n", "") + text[end:]
-    p.write_text(text.replace("truth:", "triad: strapdown\n  truth:", 1))
+    p.write_text(text.replace("triad: platform", "triad: strapdown"))
     with pytest.raises(ConfigError, match=r"flights\[0\]\.initial"):
         C.load_config(p)
 
 
 def test_yaml_12_floats_and_bad_yaml(tmp_path):
-    p = _sample_with(tmp_path, "altimeter_sigma_m: 1.0", "altimeter_sigma_m: 5e-2")
+    p = _sample_with(tmp_path, "lines: {mode: whole}", "model: {altimeter_sigma_m: 5e-2}\nlines: {mode: whole}")
     assert C.load_config(p).model.altimeter_sigma_m == 0.05
     bad = tmp_path / "bad.yaml"
     bad.write_text("survey: {name: x\nflights: [\n")

@@ -1,4 +1,4 @@
-"""The anomaly prior and other filter settings passed from a SIM file to survey.yaml."""
+"""The anomaly prior and other filter settings passed from a SIM file to survey.yaml (and oracle.yaml)."""
 
 import copy
 
@@ -25,14 +25,19 @@ def _sim(tmp_path, processing=None):
 
 def test_processing_model_overrides_survey_model(tmp_path):
     over = {"anomaly_sigma_mps2": 1.0e-4, "anomaly_lambda_per_m": 2.0e-4, "gnss_aiding": False}
-    simulate_to_dir(_sim(tmp_path, {"model": over}), tmp_path / "out")
+    simulate_to_dir(_sim(tmp_path, {"model": over}), tmp_path / "out", oracle=True)
     cfg = load_config(tmp_path / "out" / "survey.yaml")
     assert cfg.model.anomaly_sigma_mps2 == 1.0e-4
     assert cfg.model.anomaly_lambda_per_m == 2.0e-4
     assert cfg.model.gnss_aiding is False
-    # matched values stay where not overridden: the simulated GNSS and altimeter noise
-    assert cfg.model.gnss_horizontal_sigma_m == 0.5 and cfg.model.gnss_vertical_sigma_m == 1.0
-    assert cfg.model.altimeter_sigma_m == 0.05
+    # survey.yaml holds what the SIM author says a user knows, nothing matched to the truth:
+    # the estimator's defaults stand for the simulated GNSS and altimeter noise
+    assert cfg.model.gnss_horizontal_sigma_m == 1.0 and cfg.model.altimeter_sigma_m == 1.0
+    # the matched values (and the overrides) are in oracle.yaml
+    oracle = load_config(tmp_path / "out" / "oracle.yaml")
+    assert oracle.model.gnss_horizontal_sigma_m == 0.5 and oracle.model.gnss_vertical_sigma_m == 1.0
+    assert oracle.model.altimeter_sigma_m == 0.05
+    assert oracle.model.anomaly_sigma_mps2 == 1.0e-4 and oracle.model.gnss_aiding is False
 
 
 def test_processing_model_without_override_and_bad_values(tmp_path):

@@ -40,6 +40,8 @@ CASES = [
     (("flights", 0, "rates", "imu_hz"), 500.0, "flights[0].rates.imu_hz", "<= 200"),
     (("flights", 0, "rates", "gnss_hz"), 0.0, "flights[0].rates.gnss_hz", ">= 1"),
     (("flights", 0, "rates", "altimeter_hz"), "fast", "flights[0].rates.altimeter_hz", "expected a number"),
+    (("flights", 0, "rates", "gnss_hz"), 25.0, "flights[0].rates.gnss_hz", "<= 20"),
+    (("flights", 0, "rates", "altimeter_hz"), 20.5, "flights[0].rates.altimeter_hz", "<= 20"),
     (("flights", 0, "plan", "duration_s"), -5.0, "flights[0].plan.duration_s", "> 0"),
     (("flights", 0, "plan", "max_bank_deg"), 60.0, "flights[0].plan.max_bank_deg", "<= 35"),
     (("flights", 0, "triad"), "gimbal", "flights[0].triad", "platform"),
@@ -140,3 +142,9 @@ def test_defaults_and_start_time():
 def test_shipped_configs_are_valid(name):
     cfg = load_sim_config(CONFIGS / name)
     assert cfg.flights
+
+
+def test_gnss_and_altimeter_up_to_20_hz():
+    sim = quick_sim(gnss_hz=20.0, altimeter_hz=20.0, imu_hz=40.0)
+    f = load_sim_config(sim).flights[0]
+    assert f["rates"]["gnss_hz"] == 20.0 and f["rates"]["altimeter_hz"] == 20.0

@@ -13,7 +13,12 @@ import yaml
 
 from gravsurvey import geodesy as gd
 from gravsurvey.simulate import sensors as sn
-from gravsurvey.simulate.run import quick_sim, simulate_flight, simulate_to_dir
+from gravsurvey.simulate.run import (
+    SEED_SENSORS,
+    quick_sim,
+    simulate_flight,
+    simulate_to_dir,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 G_NEWTON = 6.67430e-11
@@ -46,7 +51,10 @@ def test_point_mass_below_the_track_adds_gm_over_r2_to_the_vertical_force():
 
 @pytest.mark.parametrize("kind", ["seed_smooth", "seed_steps"])
 def test_seed_time_functions_enter_the_vertical_force(kind):
-    from gravsurvey.simulate.field import seed_smooth_disturbance, seed_steps_disturbance
+    from gravsurvey.simulate.field import (
+        seed_smooth_disturbance,
+        seed_steps_disturbance,
+    )
 
     fn = seed_smooth_disturbance if kind == "seed_smooth" else seed_steps_disturbance
     clean = simulate_flight(quick_sim(duration_s=4000.0, imu_hz=1.0))
@@ -257,20 +265,28 @@ def test_survey_yaml_and_truth_csv(tmp_path):
     plan = {"kind": "grid", "origin_lat_deg": 45.0, "origin_lon_deg": 135.0, "altitude_m": 700.0, "speed_mps": 60.0,
             "lines": {"count": 2, "spacing_m": 3000.0, "length_m": 3000.0, "heading_deg": 90.0},
             "static_start_s": 30.0, "ramp_s": 30.0}
-    sim = quick_sim(plan=plan, triad="strapdown", formats=["csv"], noise=True, imu_hz=20.0, altimeter_hz=2.0)
-    paths = simulate_to_dir(sim, tmp_path)
-    assert paths[-1] == tmp_path / "survey.yaml"
+    noise = {**SEED_SENSORS, "gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0}}
+    sim = quick_sim(plan=plan, triad="strapdown", formats=["csv"], noise=noise, imu_hz=20.0, altimeter_hz=2.0)
+    paths = simulate_to_dir(sim, tmp_path, oracle=True)
+    assert paths[-1] == tmp_path / "survey.yaml" and paths[-2] == tmp_path / "oracle.yaml"
     cfg = yaml.safe_load((tmp_path / "survey.yaml").read_text())
-    assert set(cfg) == {"survey", "ellipsoid", "flights", "model", "lines", "postprocess", "output"}
+    # only what a user knows: no model block derived from the simulated errors or field
+    assert set(cfg) == {"survey", "ellipsoid", "flights", "lines", "postprocess", "output"}
     f = cfg["flights"][0]
     assert f["inputs"] == {"csv": {"imu": "F01/imu.csv", "altimeter": "F01/altimeter.csv", "gnss": "F01/gnss.csv"}}
     assert f["triad"] == "strapdown" and f["truth"] == "F01/truth.csv"
-    assert f["initial"]["velocity_enu_mps"] == [0.0, 0.0, 0.0]  # starts static
-    assert f["initial"]["attitude_deg"] == [0.0, 0.0, 90.0]
-    assert cfg["model"]["accel_noise_mps2"] == 1e-3 and cfg["model"]["altimeter_sigma_m"] == 1.0
+    assert f["initial"]["velocity_enu_mps"] == [0.0, 0.0, 0.0]  # the plan starts static
+    assert f["initial"]["attitude_deg"] == [0.0, 0.0, 90.0]  # level, plan heading
+    s = simulate_flight(sim)
+    # position: the first GNSS fix as logged (noisy), not the truth
+    assert f["initial"]["lat_deg"] == s.gnss_lat_deg[0] != np.degrees(s.truth["lat"][0])
+    oracle = yaml.safe_load((tmp_path / "oracle.yaml").read_text())
+    assert oracle["model"]["accel_noise_mps2"] == 1e-3 and oracle["model"]["altimeter_sigma_m"] == 1.0
+    assert oracle["model"]["gnss_horizontal_sigma_m"] == 0.5
+    assert oracle["flights"][0]["initial"]["lat_deg"] == np.degrees(s.truth["lat"][0])
+    assert oracle["output"]["dir"] != cfg["output"]["dir"]
     for rel in ("F01/imu.csv", "F01/altimeter.csv", "F01/gnss.csv", "F01/truth.csv"):
         assert (tmp_path / rel).is_file()
-    s = simulate_flight(sim)
     rows = [r for r in csv.reader(l for l in (tmp_path / "F01/truth.csv").read_text().splitlines() if not l.startswith("#"))]
     header, rows = rows[0], rows[1:]
     col = {k: i for i, k in enumerate(header)}
@@ -290,3 +306,22 @@ def test_sample_survey_yaml_is_accepted_by_the_processing_config(sample):
 
     cfg = load_config(ROOT / "sample_data" / sample / "survey.yaml")
     assert [f.name for f in cfg.flights] == ["F01"]
+
+
+def test_cli_oracle_config_flag(tmp_path):
+    """`gravsurvey simulate --oracle-config` adds oracle.yaml; without it there is none."""
+    import sys
+
+    sim = quick_sim(duration_s=60.0, noise=True, formats=["csv"])
+    p = tmp_path / "SIM.yaml"
+    p.write_text(yaml.safe_dump(sim))
+    exe = [sys.executable, "-m", "gravsurvey", "simulate", str(p)]
+    r = subprocess.run(exe + ["-o", str(tmp_path / "a")], capture_output=True, text=True, timeout=300, check=False)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "a" / "survey.yaml").is_file() and not (tmp_path / "a" / "oracle.yaml").exists()
+    r = subprocess.run(exe + ["-o", str(tmp_path / "b"), "--oracle-config"], capture_output=True, text=True, timeout=300,
+                       check=False)
+    assert r.returncode == 0, r.stderr
+    oracle = yaml.safe_load((tmp_path / "b" / "oracle.yaml").read_text())
+    assert oracle["model"]["accel_noise_mps2"] == 1e-3
+    assert "model" not in yaml.safe_load((tmp_path / "b" / "survey.yaml").read_text())

@@ -39,7 +39,8 @@ from .sensors import (
 from .simconfig import SimConfig, load_sim_config
 from .trajectory import FlightPlan, Kinematics, build_plan, earth_rate_n, kinematics, mat_ne
 
-__all__ = ["FlightSimulation", "simulate_flight", "simulate_to_dir", "quick_sim", "load_sim_config", "sample_times_ns"]
+__all__ = ["FlightSimulation", "simulate_flight", "simulate_to_dir", "quick_sim", "load_sim_config", "sample_times_ns",
+           "oracle_model_block", "matched_anomaly_prior", "user_model_block", "user_initial_block"]
 
 MGAL = 1e-5
 _STREAM_TURBULENCE, _STREAM_IMU, _STREAM_ALT, _STREAM_GNSS, _STREAM_FIELD = range(5)
@@ -412,17 +413,62 @@ def quick_sim(**overrides) -> dict:
 # --------------------------------------------------------------------------
 
 
-def _model_block(cfg: SimConfig, processing: dict) -> dict:
-    """The survey.yaml ``model`` block matched to the first flight's simulated errors.
+def matched_anomaly_prior(distance_m, disturbance_mps2, step_m: float = 100.0):
+    """First-order Gauss-Markov parameters matched to a true along-track disturbance (ORACLE).
 
-    A simulated error that is off is replaced by the seed's value (the filter
-    needs non-zero noise); the anomaly model is the Markov field's parameters
-    when the field is one, else the seed's.  The GNSS sigmas are the simulated
-    ones when the GNSS is noisy (else the estimator's defaults stand).  Keys of
-    ``processing.model`` override the result (what a user would set from prior
-    knowledge, e.g. the area's anomaly statistics); the processing config loader
-    checks them.
+    The truth is resampled on a uniform ground-distance grid of ``step_m``; ``sigma`` is its
+    standard deviation and ``lambda = 1 / d_e`` with ``d_e`` the lag where its
+    autocorrelation first falls below ``1/e`` (the Markov model's own relation), bounded to
+    ``[step_m, track length]``.
+
+    Parameters
+    ----------
+    distance_m : ndarray (n,)
+        Along-track ground distance, non-decreasing, m.
+    disturbance_mps2 : ndarray (n,)
+        True gravity disturbance at the same samples, m/s^2.
+    step_m : float
+
+    Returns
+    -------
+    (sigma_mps2, lambda_per_m) : tuple of float, or None when the track is shorter than
+    four steps or the disturbance is constant.
     """
+    d = np.asarray(distance_m, float)
+    g = np.asarray(disturbance_mps2, float)
+    d_u, first = np.unique(d, return_index=True)
+    if d_u.size < 2 or d_u[-1] - d_u[0] < 4 * step_m:
+        return None
+    grid = np.arange(d_u[0], d_u[-1], step_m)
+    x = np.interp(grid, d_u, g[first])
+    x = x - x.mean()
+    var = float(np.mean(x**2))
+    if not var > 0:
+        return None
+    n = x.size
+    spec = np.fft.rfft(x, 2 * n)
+    acf = np.fft.irfft(spec * np.conj(spec))[:n] / (n - np.arange(n)) / var
+    below = np.flatnonzero(acf < math.exp(-1.0))
+    d_e = (below[0] if below.size else n) * step_m
+    d_e = min(max(d_e, step_m), n * step_m)
+    return float(math.sqrt(var)), float(1.0 / d_e)
+
+
+def oracle_model_block(cfg: SimConfig, sim: FlightSimulation | None = None) -> dict:
+    """The processing ``model`` block matched to the first flight's simulated errors (ORACLE).
+
+    These are values derived from the simulator's truth, which no user has: they go only
+    into ``oracle.yaml`` (``simulate_to_dir(..., oracle=True)``, ``gravsurvey simulate
+    --oracle-config``), the "oracle-tuned" reference of the benchmarks, never into
+    ``survey.yaml``.  A simulated error that is off is replaced by the seed's value (the
+    filter needs non-zero noise); the anomaly model is the Markov field's parameters when the
+    field is one, else (given the first flight's ``sim``) the Gauss-Markov parameters
+    matched to its true along-track disturbance (:func:`matched_anomaly_prior`), else the
+    seed's.  The GNSS sigmas are the simulated ones when the GNSS is
+    noisy (else the estimator's defaults stand).  Keys of ``processing.model`` override the
+    result.
+    """
+    processing = cfg.processing
     s = cfg.flights[0]["sensors"]
 
     def pick(v, seed_v):
@@ -431,6 +477,10 @@ def _model_block(cfg: SimConfig, processing: dict) -> dict:
     lam_s, sig_s = 1.0e-5, 1.0e-3
     if cfg.field_model is not None and cfg.field_model.type == "markov":
         lam_s, sig_s = cfg.field_model.lambda_s_per_m, cfg.field_model.sigma_mps2
+    elif cfg.field_model is not None and sim is not None:
+        matched = matched_anomaly_prior(sim.truth["distance"], sim.truth["disturbance"])
+        if matched is not None:
+            sig_s, lam_s = matched
     block = {
         "filter_rate_hz": processing["filter_rate_hz"],
         "accel_noise_mps2": pick(s["accelerometer"]["white_sigma_mps2"], 1.0e-3),
@@ -442,6 +492,8 @@ def _model_block(cfg: SimConfig, processing: dict) -> dict:
         "altimeter_sigma_m": pick(s["altimeter"]["sigma_m"], 1.0),
         "radius_source": "altimeter",
     }
+    if s["gravimeter"]["white_sigma_mps2"] > 0:
+        block["gravimeter_white_mps2"] = float(s["gravimeter"]["white_sigma_mps2"])
     if s["gnss"]["horizontal_sigma_m"] > 0 and s["gnss"]["vertical_sigma_m"] > 0:
         block["gnss_horizontal_sigma_m"] = float(s["gnss"]["horizontal_sigma_m"])
         block["gnss_vertical_sigma_m"] = float(s["gnss"]["vertical_sigma_m"])
@@ -449,10 +501,30 @@ def _model_block(cfg: SimConfig, processing: dict) -> dict:
     return block
 
 
+#: ``filter_rate_hz`` the processing config assumes when survey.yaml does not set it.
+DEFAULT_FILTER_RATE_HZ = 1.0
+
+
+def user_model_block(cfg: SimConfig) -> dict | None:
+    """The survey.yaml ``model`` block: only what the SIM file's author says a user knows.
+
+    ``processing.filter_rate_hz`` when it is not the processing default, plus the keys of
+    ``processing.model`` verbatim (e.g. datasheet noise figures); nothing derived from the
+    simulated errors or field.  None when both are absent (the estimator's defaults apply).
+    """
+    processing = cfg.processing
+    block = {}
+    if processing["filter_rate_hz"] != DEFAULT_FILTER_RATE_HZ:
+        block["filter_rate_hz"] = processing["filter_rate_hz"]
+    block.update(processing.get("model") or {})
+    return block or None
+
+
 def _initial_block(sim: FlightSimulation) -> dict:
-    """State at the first IMU sample; ``attitude_deg`` is the TRIAD's (roll, pitch, heading)
-    w.r.t. ENU: the aircraft's for strapdown, ``(0, 0, 90)`` (= identity ``mat_nt``: x E, y N,
-    z U) for the platform."""
+    """EXACT state at the first IMU sample (ORACLE: for oracle.yaml only).
+
+    ``attitude_deg`` is the TRIAD's (roll, pitch, heading) w.r.t. ENU: the aircraft's for
+    strapdown, ``(0, 0, 90)`` (= identity ``mat_nt``: x E, y N, z U) for the platform."""
     t = sim.truth
     if sim.triad == "platform":
         att = [0.0, 0.0, 90.0]
@@ -464,6 +536,35 @@ def _initial_block(sim: FlightSimulation) -> dict:
         "height_m": float(t["height"][0]),
         "velocity_enu_mps": [float(x) for x in t["vel_n"][0]],
         "attitude_deg": att,
+    }
+
+
+def user_initial_block(sim: FlightSimulation) -> dict | None:
+    """The survey.yaml ``initial`` block: only what a user knows at take-off.
+
+    A platform flight gets none (the pipeline initialises it from the GNSS channel).  The
+    processing config requires one for a strapdown triad (GNSS gives no attitude), so it is
+    filled from what the crew knows, never from the truth: position = the first GNSS fix as
+    logged (with its noise), velocity = the flight plan's nominal one (0 during a static
+    start, else the plan speed along the plan heading, level), attitude = level with the plan
+    heading rounded to a whole degree (a compass / GNSS-track figure).  The true attitude at
+    the first sample differs by the turbulence and the rounding.
+    """
+    if sim.triad == "platform":
+        return None
+    plan = sim.flight["plan"]
+    if plan["kind"] == "grid":
+        heading = float(plan["lines"]["heading_deg"])
+    else:
+        heading = float(plan["heading_deg"])
+    speed = 0.0 if plan["static_start_s"] > 0 else float(plan["speed_mps"])
+    psi = math.radians(heading)
+    return {
+        "lat_deg": float(sim.gnss_lat_deg[0]),
+        "lon_deg": float(sim.gnss_lon_deg[0]),
+        "height_m": float(sim.gnss_height[0]),
+        "velocity_enu_mps": [speed * math.sin(psi) + 0.0, speed * math.cos(psi) + 0.0, 0.0],
+        "attitude_deg": [0.0, 0.0, float(round(heading % 360.0))],
     }
 
 
@@ -481,12 +582,24 @@ def _comments(cfg: SimConfig, sim: FlightSimulation) -> list[str]:
     ]
 
 
-def simulate_to_dir(sim_path, out_dir) -> list[Path]:
+def simulate_to_dir(sim_path, out_dir, oracle: bool = False) -> list[Path]:
     """Simulate every flight of a SIM config and write a complete survey.
 
     Writes ``out_dir/<flight>/`` logs (formats from the config; the
     processing config points at the first format) and ``truth.csv`` per
-    flight, and ``out_dir/survey.yaml`` (docs/config.md).
+    flight, and ``out_dir/survey.yaml`` (docs/config.md) holding only what a
+    user knows (no noise levels or field statistics derived from the truth,
+    no exact initial state; :func:`user_model_block`, :func:`user_initial_block`).
+
+    Parameters
+    ----------
+    sim_path : path, dict or SimConfig
+    out_dir : path
+    oracle : bool
+        Also write ``out_dir/oracle.yaml``: the same survey with the ``model``
+        block matched to the simulated errors and the exact initial state
+        (:func:`oracle_model_block`), the "oracle-tuned" reference of the
+        benchmarks.  ``gravsurvey simulate --oracle-config``.
 
     Returns
     -------
@@ -499,6 +612,7 @@ def simulate_to_dir(sim_path, out_dir) -> list[Path]:
     out_dir = Path(out_dir)
     written: list[Path] = []
     flights_yaml = []
+    oracle_flights = []
     for k, f in enumerate(cfg.flights):
         sim = simulate_flight(cfg, k)
         s = f["sensors"]
@@ -538,25 +652,46 @@ def simulate_to_dir(sim_path, out_dir) -> list[Path]:
         entry = {"name": sim.name, "inputs": inputs}
         if first != "csv":
             entry["topics"] = {"imu": "/imu", "altimeter": "/altimeter", "gnss": "/gnss"}
-        entry.update({"triad": sim.triad, "initial": _initial_block(sim), "truth": f"{sim.name}/truth.csv"})
-        flights_yaml.append(entry)
+        entry["triad"] = sim.triad
+        user_entry, oracle_entry = dict(entry), dict(entry)
+        initial = user_initial_block(sim)
+        if initial is not None:
+            user_entry["initial"] = initial
+        oracle_entry["initial"] = _initial_block(sim)
+        user_entry["truth"] = oracle_entry["truth"] = f"{sim.name}/truth.csv"
+        flights_yaml.append(user_entry)
+        if k == 0 and oracle:  # the matched values come from the first flight; drop its arrays after
+            oracle_model = oracle_model_block(cfg, sim)
+        oracle_flights.append(oracle_entry)
     proc = cfg.processing
-    survey = {
-        "survey": {"name": cfg.name},
-        "ellipsoid": cfg.ellipsoid.name,
-        "flights": flights_yaml,
-        "model": _model_block(cfg, proc),
+    out_dir.mkdir(parents=True, exist_ok=True)
+    tail = {
         "lines": {"mode": proc["lines_mode"]},
         "postprocess": {"method": proc["postprocess_method"]},
         "output": {"dir": proc["output_dir"]},
     }
-    text = "# written by gravsurvey simulate; process with: gravsurvey run survey.yaml\n" + yaml.safe_dump(
-        survey, sort_keys=False, default_flow_style=None
-    )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    target = out_dir / "survey.yaml"
-    tmp = out_dir / ".survey.yaml.tmp"
+    head = {"survey": {"name": cfg.name}, "ellipsoid": cfg.ellipsoid.name}
+    if oracle:
+        doc = {**head, "flights": oracle_flights, "model": oracle_model, **tail}
+        doc["output"] = {"dir": proc["output_dir"] + "_oracle"}
+        written.append(_write_yaml(out_dir / "oracle.yaml", doc,
+                                   "# written by gravsurvey simulate --oracle-config: ORACLE values derived from the\n"
+                                   "# simulated truth (matched noise model, anomaly prior, exact initial state), which\n"
+                                   "# no user has; the reference of the benchmarks. Process with: gravsurvey run oracle.yaml\n"))
+    survey = {**head, "flights": flights_yaml}
+    model = user_model_block(cfg)
+    if model is not None:
+        survey["model"] = model
+    survey.update(tail)
+    written.append(_write_yaml(out_dir / "survey.yaml", survey,
+                               "# written by gravsurvey simulate; process with: gravsurvey run survey.yaml\n"))
+    return written
+
+
+def _write_yaml(target: Path, doc: dict, header: str) -> Path:
+    """Write a YAML document atomically (temporary file, then rename)."""
+    text = header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
+    tmp = target.parent / f".{target.name}.tmp"
     tmp.write_text(text, encoding="utf-8")
     tmp.replace(target)
-    written.append(target)
-    return written
+    return target

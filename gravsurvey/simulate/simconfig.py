@@ -28,6 +28,8 @@ from .trajectory import MAP_MAX_EAST_WEST_M, MAP_MAX_NORTH_SOUTH_M, plan_extent
 
 FORMATS = ("mcap_json", "mcap_ros2", "csv")
 TRIADS = ("platform", "strapdown")
+#: Highest altimeter and GNSS rate, Hz (20 Hz GNSS receivers exist; the unseen-flight suite draws 1-20 Hz).
+MAX_AUX_RATE_HZ = 20.0
 
 #: Defaults of every optional key (the schema's shape is the dict's shape).
 DEFAULT_RATES = {"imu_hz": 10.0, "altimeter_hz": 1.0, "gnss_hz": 1.0, "truth_hz": None}
@@ -280,8 +282,8 @@ def _validate_flight(f, path, index):
     f["triad"] = _choice(f.get("triad", "platform"), f"{path}.triad", TRIADS)
     r = _merge(f.get("rates"), DEFAULT_RATES, f"{path}.rates")
     r["imu_hz"] = number(r["imu_hz"], f"{path}.rates.imu_hz", "Hz", 1.0, 200.0)
-    r["altimeter_hz"] = number(r["altimeter_hz"], f"{path}.rates.altimeter_hz", "Hz", 1.0, 10.0)
-    r["gnss_hz"] = number(r["gnss_hz"], f"{path}.rates.gnss_hz", "Hz", 1.0, 10.0)
+    r["altimeter_hz"] = number(r["altimeter_hz"], f"{path}.rates.altimeter_hz", "Hz", 1.0, MAX_AUX_RATE_HZ)
+    r["gnss_hz"] = number(r["gnss_hz"], f"{path}.rates.gnss_hz", "Hz", 1.0, MAX_AUX_RATE_HZ)
     if r["truth_hz"] is None:
         r["truth_hz"] = r["altimeter_hz"]
     r["truth_hz"] = number(r["truth_hz"], f"{path}.rates.truth_hz", "Hz", 0.0, r["imu_hz"], lo_open=True)

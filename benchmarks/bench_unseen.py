@@ -1,0 +1,339 @@
+#!/usr/bin/env python
+"""Unseen-flight suite (issue 12 item 6): default configuration vs oracle, scalar chain, Wiener bound.
+
+Usage::
+
+    python benchmarks/bench_unseen.py [--flights N] [--quick] [--first-seed S] [--json out.json]
+
+Draws ``N`` (default 20) flights with seeds ``S .. S+N-1`` from the unseen-flight generator
+(``gravsurvey.simulate.unseen``: random fields, noise x0.3-x3, rates, triads, headings,
+speeds, heights, 30-240 min), simulates each once into ``benchmarks/.unseen_cache/<name>/``
+(gitignored; reused while the drawn flight is unchanged) and runs ``gravsurvey run`` in-process
+(``gravsurvey.pipeline.run_survey``) three times:
+
+* ``default``: ``survey.yaml`` as written by the simulator, i.e. only what a user knows;
+* ``oracle``: ``oracle.yaml``, the model matched to the simulated errors and the true field's
+  Gauss-Markov fit, exact initial state (no user has this);
+* ``classic``: ``survey.yaml`` plus ``processing: {method: classic}`` (the conventional scalar
+  chain, docs/benchmarks.md).
+
+Scored samples: the epochs on the simulator's survey lines (truth.csv ``line`` = ``L..``/``T..``)
+more than 10 min from the first and last epoch.  RMS after removing the mean error over those
+samples (mGal), for the final product (``disturbance_mgal``) and the smoothed Kalman estimate
+(``kalman_mgal``) of the default run, the oracle run's final product and the classic product.
+The Wiener bound is the RMS error of the optimal non-causal filter for the stationary
+along-track problem, ``sqrt(int S_s S_n / (S_s + S_n) df)``, with ``S_s`` the Welch PSD of the
+true disturbance on the scored lines and ``S_n`` the noise PSD of the drawn sensor errors
+(``gravsurvey.simulate.unseen.noise_psd``; derivation in docs/simulate.md).  Resolutions
+(half wavelength, km): stated by the default and classic products (median over lines), and the
+bound's (where ``S_s = S_n``: Wiener gain 1/2).  Prints a Markdown table and the median and
+worst ratio RMS / bound.  ``--quick`` caps every drawn flight at 40 min and 50 Hz IMU (the
+same draws otherwise) for a fast check.  Uses public API only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import hashlib
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+from gravsurvey.errors import GravsurveyError
+from gravsurvey.pipeline import read_truth_csv, run_survey
+from gravsurvey.simulate.unseen import (
+    draw_flight_spec,
+    limit_spec,
+    noise_psd,
+    spec_summary,
+    write_flight,
+)
+
+CACHE = REPO / "benchmarks" / ".unseen_cache"
+MGAL = 1e-5
+#: scored samples start/stop this long after/before the first/last epoch, s
+EDGE_S = 600.0
+QUICK_MAX_DURATION_S = 2400.0
+QUICK_MAX_IMU_HZ = 50.0
+
+
+def _spec_hash(spec) -> str:
+    return hashlib.sha256(json.dumps(spec["sim"], sort_keys=True).encode()).hexdigest()[:16]
+
+
+def prepare_flight(spec, cache=CACHE) -> Path:
+    """Simulate the flight into the cache unless the same draw is already there; its folder."""
+    d = Path(cache) / f"{spec['name']}_{_spec_hash(spec)}"
+    done = d / "spec.json"
+    if not done.is_file():
+        write_flight(spec, d, oracle=True)
+        cfg = yaml.safe_load((d / "survey.yaml").read_text())
+        cfg["processing"] = {"method": "classic"}
+        cfg["output"] = {"dir": "out_classic"}
+        (d / "classic.yaml").write_text("# survey.yaml with the conventional scalar chain\n"
+                                        + yaml.safe_dump(cfg, sort_keys=False, default_flow_style=None))
+        done.write_text(json.dumps({k: v for k, v in spec.items() if k != "sim"}, indent=1, default=float))
+    return d
+
+
+def read_profiles(path: Path) -> dict:
+    """profiles.csv (docs/outputs.md) -> columns (``time_unix_ns`` int64, ``line`` str, floats)."""
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(line for line in fh if not line.startswith("#")))
+    head, rows = rows[0], rows[1:]
+    out = {}
+    for i, h in enumerate(head):
+        col = [r[i] for r in rows]
+        if h == "time_unix_ns":
+            out[h] = np.array(col, dtype=np.int64)
+        elif h in ("flight", "line", "time_utc"):
+            out[h] = np.array(col, dtype=object)
+        else:
+            out[h] = np.array([float(x) if x not in ("", "NaN", "nan") else np.nan for x in col])
+    return out
+
+
+def scored_mask(time_ns, truth) -> np.ndarray:
+    """Epochs on the simulator's survey/tie lines, >= EDGE_S from both ends of the flight."""
+    tt = truth["time_ns"]
+    k = np.clip(np.searchsorted(tt, time_ns), 1, tt.size - 1)
+    k = np.where(np.abs(tt[k - 1] - time_ns) <= np.abs(tt[k] - time_ns), k - 1, k)  # nearest truth sample
+    on_line = np.array([str(lab).startswith(("L", "T")) for lab in truth["line"][k]])
+    t = (time_ns - time_ns[0]) / 1e9
+    return on_line & (t >= EDGE_S) & (t <= t[-1] - EDGE_S)
+
+
+def rms_after_bias(err) -> tuple[float | None, float]:
+    """(RMS of ``err`` minus its mean over the finite samples, fraction finite)."""
+    e = np.asarray(err, float)
+    ok = np.isfinite(e)
+    if not ok.any():
+        return None, 0.0
+    x = e[ok] - e[ok].mean()
+    return float(np.sqrt(np.mean(x**2))), float(ok.mean())
+
+
+def _runs(mask):
+    """(start, stop) index pairs of the True runs of a boolean array."""
+    m = np.concatenate([[False], mask, [False]]).astype(int)
+    d = np.diff(m)
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
+
+
+def truth_psd(truth_mgal, mask, dt_s=1.0):
+    """One-sided PSD ((m/s^2)^2/Hz) of the true disturbance on the scored samples.
+
+    On the frequency grid ``k / T`` of the longest scored run (line) of duration ``T``:
+
+    * within the lines: per line, its least-squares straight line removed, the periodogram of
+      the first differences (Blackman-Harris window) divided by ``|2 sin(pi f dt)|^2``:
+      differencing flattens the steep field spectrum by ``f^2`` and the window's -92 dB
+      sidelobes keep a strong long-wavelength field from leaking into the band where the
+      noise decides (a plain Hann periodogram of an 8-min line of an 80 mGal field put
+      leakage 100x above the true spectrum at 5 km wavelength); interpolated onto the grid,
+      averaged weighted by line length and scaled so its integral equals the lines' mean
+      residual variance;
+    * wavelengths of a line length and longer: the variance of the lines' straight lines
+      about the flight mean (their offsets and slopes; the score removes one mean per
+      flight) as power in the lowest bin ``1 / T``.
+
+    Joining the lines into one series instead would turn the jumps between them into
+    broadband power that is not in the field.
+
+    Returns
+    -------
+    (f, psd) : ndarrays (m,) on ``f = k / T``, k = 0..; psd[0] = 0; or (None, None).
+    """
+    from scipy.signal import periodogram
+
+    x_all = np.asarray(truth_mgal, float) * MGAL
+    runs = [(a, b) for a, b in _runs(mask) if b - a >= 16]
+    if not runs:
+        return None, None
+    n_max = max(b - a for a, b in runs)
+    f = np.fft.rfftfreq(n_max, dt_s)
+    df = f[1]
+    within = np.zeros_like(f)
+    weights, variances, trends = [], [], []
+    for a, b in runs:
+        x = x_all[a:b]
+        t = np.arange(x.size) * dt_s
+        trend = np.polyval(np.polyfit(t, x, 1), t)
+        r = x - trend
+        fk, pd = periodogram(np.diff(r), fs=1.0 / dt_s, window="blackmanharris", detrend="constant")
+        pk = pd[1:] / (2.0 * np.sin(np.pi * fk[1:] * dt_s)) ** 2
+        within[1:] += np.interp(f[1:], fk[1:], pk) * (b - a)
+        weights.append(b - a)
+        variances.append(np.var(r))
+        trends.append(trend)
+    w = np.asarray(weights, float)
+    within /= w.sum()
+    area = within[1:].sum() * df
+    target = float(np.sum(w * np.asarray(variances)) / w.sum())
+    if area > 0:
+        within *= target / area
+    all_trends = np.concatenate(trends)
+    long_wave = float(np.var(all_trends))
+    psd = within.copy()
+    psd[0] = 0.0
+    psd[1] += long_wave / df
+    return f, psd
+
+
+def wiener_bound(f, s_s, s_n, speed_mps):
+    """(RMS error of the optimal non-causal filter, mGal; its half-wavelength resolution, km).
+
+    ``sqrt(int_0^fN S_s S_n / (S_s + S_n) df)`` over one-sided PSDs on a uniform grid ``f``
+    (rectangle rule; the DC bin is excluded: the score removes the mean); resolution =
+    ``speed / (2 f_half)`` with ``f_half`` the lowest frequency where ``S_s < S_n`` (Wiener
+    gain below 1/2).
+    """
+    df = f[1] - f[0]
+    keep = f > 0
+    f, s_s, s_n = f[keep], s_s[keep], s_n[keep]
+    mse = float(np.sum(s_s * s_n / (s_s + s_n)) * df)
+    below = np.flatnonzero(s_s < s_n)
+    f_half = f[below[0]] if below.size else f[-1]
+    return math.sqrt(mse) / MGAL, speed_mps / (2.0 * f_half) / 1000.0
+
+
+def _median_resolution_km(summary, key="resolution_m"):
+    vals = [ln.get(key) for fl in summary.get("flights", {}).values() for ln in fl.get("lines", {}).values()]
+    vals = [v for v in vals if isinstance(v, (int, float)) and v > 0]
+    return float(np.median(vals)) / 1000.0 if vals else None
+
+
+def evaluate_flight(spec, folder: Path) -> dict:
+    """Run default / oracle / classic on one prepared flight and score them against truth."""
+    truth = read_truth_csv(folder / "F01" / "truth.csv")
+    truth["line"] = np.array(_truth_lines(folder / "F01" / "truth.csv"), dtype=object)
+    row = {"name": spec["name"], "seed": spec["seed"], "summary": spec_summary(spec)}
+    prof = {}
+    for tag, cfg in (("default", "survey.yaml"), ("oracle", "oracle.yaml"), ("classic", "classic.yaml")):
+        t0 = time.perf_counter()
+        res = run_survey(folder / cfg, output_dir=folder / f"out_{tag}", force=True)
+        row[f"{tag}_s"] = time.perf_counter() - t0
+        if res.failed:
+            row[f"{tag}_error"] = res.failed[0].splitlines()[0]
+            continue
+        prof[tag] = read_profiles(folder / f"out_{tag}" / "profiles.csv")
+        row[f"{tag}_resolution_km"] = _median_resolution_km(res.summary)
+    if "default" not in prof:
+        return row
+    p = prof["default"]
+    mask = scored_mask(p["time_unix_ns"], truth)
+    tr = p["truth_mgal"]
+    row["scored_samples"] = int(mask.sum())
+    row["default_rms"], row["default_coverage"] = rms_after_bias((p["disturbance_mgal"] - tr)[mask])
+    row["kalman_rms"], _ = rms_after_bias((p["kalman_mgal"] - tr)[mask])
+    for tag in ("oracle", "classic"):
+        if tag in prof:
+            q = prof[tag]
+            m = scored_mask(q["time_unix_ns"], truth)
+            row[f"{tag}_rms"], row[f"{tag}_coverage"] = rms_after_bias((q["disturbance_mgal"] - q["truth_mgal"])[m])
+    f, s_s = truth_psd(tr, mask, float(np.median(np.diff(p["time_unix_ns"]))) / 1e9)
+    if f is not None:
+        row["truth_psd_check"] = float(s_s.sum() * f[1] / np.var(tr[mask] * MGAL))
+        s_n = noise_psd(spec["sim"]["flights"][0], f)
+        row["bound_rms"], row["bound_resolution_km"] = wiener_bound(f, s_s, s_n, spec["speed_mps"])
+    row["truth_std_mgal"] = float(np.nanstd(tr[mask]))
+    return row
+
+
+def _truth_lines(path):
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(line for line in fh if not line.startswith("#")))
+    i = rows[0].index("line")
+    return [r[i] for r in rows[1:]]
+
+
+def _fmt(v, nd=2):
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{nd}f}"
+
+
+def print_table(rows):
+    print("| flight | drawn | default | kalman | oracle | classic | bound | default/bound | kalman/bound "
+          "| res default / classic / bound (km) | truth std |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        b = r.get("bound_rms")
+        ratio = (r["default_rms"] / b) if (b and r.get("default_rms") is not None) else None
+        kr = (r["kalman_rms"] / b) if (b and r.get("kalman_rms") is not None) else None
+        err = "; ".join(dict.fromkeys(r[k] for k in ("default_error", "oracle_error", "classic_error") if k in r))
+        cov = r.get("default_coverage")
+        cov = f" ({cov:.0%} covered)" if cov is not None and cov < 0.995 else ""
+        print(f"| {r['name']} | {r['summary'].split(' ', 1)[1]} | {_fmt(r.get('default_rms'))}{cov} | "
+              f"{_fmt(r.get('kalman_rms'))} | {_fmt(r.get('oracle_rms'))} | {_fmt(r.get('classic_rms'))} | "
+              f"{_fmt(b)} | {_fmt(ratio)} | {_fmt(kr)} | {_fmt(r.get('default_resolution_km'), 1)} / "
+              f"{_fmt(r.get('classic_resolution_km'), 1)} / {_fmt(r.get('bound_resolution_km'), 1)} | "
+              f"{_fmt(r.get('truth_std_mgal'))} |" + (f" {err}" if err else ""))
+    print()
+    for key in ("default", "kalman", "oracle", "classic"):
+        ratios = [r[f"{key}_rms"] / r["bound_rms"] for r in rows
+                  if r.get(f"{key}_rms") is not None and r.get("bound_rms")]
+        if ratios:
+            print(f"{key:8s} RMS / bound: median {np.median(ratios):.2f}, worst {np.max(ratios):.2f} "
+                  f"over {len(ratios)} flights")
+    worse = [r["name"] for r in rows if r.get("default_rms") is not None and r.get("classic_rms") is not None
+             and r["default_rms"] > r["classic_rms"]]
+    print(f"default worse than classic on {len(worse)} of {len(rows)} flights: {', '.join(worse) or '-'}")
+    # issue 12: never worse than the scalar chain at the same or coarser resolution
+    coarser = [r["name"] for r in rows if r["name"] in worse and r.get("default_resolution_km") is not None
+               and r.get("classic_resolution_km") is not None
+               and r["default_resolution_km"] >= r["classic_resolution_km"]]
+    print(f"... of which at the same or coarser stated resolution: {len(coarser)}: {', '.join(coarser) or '-'}")
+    failed = [r["name"] for r in rows if any(k in r for k in ("default_error", "oracle_error", "classic_error"))]
+    if failed:
+        print(f"runs that failed: {', '.join(failed)}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--flights", type=int, default=20, help="number of flights (seeds first-seed ..)")
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--quick", action="store_true",
+                    help=f"cap each flight at {QUICK_MAX_DURATION_S / 60:.0f} min and {QUICK_MAX_IMU_HZ:g} Hz IMU")
+    ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON")
+    ap.add_argument("--cache", type=Path, default=CACHE, help="where simulated flights are kept")
+    a = ap.parse_args(argv)
+    if a.flights < 1:
+        ap.error("--flights must be >= 1")
+    rows = []
+    for seed in range(a.first_seed, a.first_seed + a.flights):
+        spec = draw_flight_spec(seed)
+        if a.quick:
+            spec = limit_spec(spec, QUICK_MAX_DURATION_S, QUICK_MAX_IMU_HZ)
+        t0 = time.perf_counter()
+        try:
+            folder = prepare_flight(spec, a.cache)
+            t_sim = time.perf_counter() - t0
+            row = evaluate_flight(spec, folder)
+        except GravsurveyError as exc:  # one bad flight must not hide the others' rows
+            t_sim = time.perf_counter() - t0
+            row = {"name": spec["name"], "seed": spec["seed"], "summary": spec_summary(spec),
+                   "default_error": f"{type(exc).__name__}: {exc}"}
+        row["simulate_s"] = t_sim
+        rows.append(row)
+        print(f"{row['summary']}: default {_fmt(row.get('default_rms'))} kalman {_fmt(row.get('kalman_rms'))} "
+              f"oracle {_fmt(row.get('oracle_rms'))} classic {_fmt(row.get('classic_rms'))} "
+              f"bound {_fmt(row.get('bound_rms'))} mGal (sim {t_sim:.0f} s, run "
+              f"{row.get('default_s', 0):.0f}/{row.get('oracle_s', 0):.0f}/{row.get('classic_s', 0):.0f} s)",
+              file=sys.stderr, flush=True)
+    print_table(rows)
+    if a.json:
+        a.json.write_text(json.dumps(rows, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,236 @@
+"""Unseen-flight generator (gravsurvey.simulate.unseen): ranges, determinism, no oracle values
+in survey.yaml, the noise PSD used for the Wiener bound, and one short flight end to end with
+the default configuration."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from gravsurvey.simulate import unseen as U
+from gravsurvey.simulate.run import matched_anomaly_prior, quick_sim, simulate_flight
+
+SEEDS = range(8)
+MGAL = 1e-5
+
+
+@pytest.fixture(scope="module")
+def specs():
+    return [U.draw_flight_spec(s) for s in SEEDS]
+
+
+def _in(v, lo_hi, rel=1e-9):
+    lo, hi = lo_hi
+    return lo * (1 - rel) <= v <= hi * (1 + rel)
+
+
+def test_drawn_flights_stay_in_their_ranges(specs):
+    r = U.RANGES
+    for sp in specs:
+        f = sp["sim"]["flights"][0]
+        assert sp["triad"] in ("platform", "strapdown") and f["triad"] == sp["triad"]
+        assert _in(sp["imu_hz"], r["imu_hz"]) and f["rates"]["imu_hz"] == sp["imu_hz"]
+        assert _in(sp["gnss_hz"], r["aux_hz"]) and _in(sp["altimeter_hz"], r["aux_hz"])
+        assert _in(sp["speed_mps"], r["speed_mps"]) and _in(sp["altitude_m"], r["altitude_m"])
+        assert 0.0 <= sp["heading_deg"] < 360.0
+        # the built plan lasts what was drawn (turns and statics included), within 30-240 min
+        assert abs(sp["duration_s"] - sp["target_duration_s"]) < 0.02 * sp["target_duration_s"] + 60.0
+        assert _in(sp["duration_s"], (r["duration_s"][0] - 60.0, r["duration_s"][1] + 60.0))
+        assert sp["line_count"] >= 2  # turns between lines
+        assert sp["line_length_m"] <= U.MAX_LINE_M
+        assert _in(sp["field_scale_mgal"], r["field_scale_mgal"])
+        assert len(sp["sources"]) >= U.MIN_SOURCES
+        for src in sp["sources"]:
+            assert _in(src["wavelength_m"], r["wavelength_m"])
+            assert src["distance_below_aircraft_m"] >= sp["altitude_m"] + U.MIN_CLEARANCE_M - 1e-6
+            assert 0.0 < src["peak_mgal"] <= sp["field_scale_mgal"] * (1 + 1e-9)
+        assert len(sp["noise_factors"]) >= 13
+        for k, fac in sp["noise_factors"].items():
+            assert _in(fac, r["noise_factor"]), k
+        # every sensor number is its nominal value times its factor
+        s = f["sensors"]
+        assert s["accelerometer"]["white_sigma_mps2"] == pytest.approx(
+            U.NOMINAL_SENSORS["accelerometer"]["white_sigma_mps2"] * sp["noise_factors"]["accelerometer.white_sigma_mps2"])
+        assert s["altimeter"]["sigma_m"] == pytest.approx(
+            U.NOMINAL_SENSORS["altimeter"]["sigma_m"] * sp["noise_factors"]["altimeter.sigma_m"])
+        assert _in(s["gravimeter"]["markov_lambda_per_s"], r["gravimeter_lambda_per_s"])
+
+
+def test_the_draws_cover_the_ranges(specs):
+    """Not one corner: both triads, low and high rates, weak and strong fields."""
+    assert {sp["triad"] for sp in specs} == {"platform", "strapdown"}
+    assert min(sp["imu_hz"] for sp in specs) < 50 and max(sp["imu_hz"] for sp in specs) > 100
+    assert min(sp["field_scale_mgal"] for sp in specs) < 3 and max(sp["field_scale_mgal"] for sp in specs) > 30
+    assert min(sp["duration_s"] for sp in specs) < 3600 and max(sp["duration_s"] for sp in specs) > 3 * 3600
+    kinds = {src["kind"] for sp in specs for src in sp["sources"]}
+    assert kinds == {"point_masses", "dipoles", "prisms"}
+
+
+def test_same_seed_same_flight_other_seed_other_flight():
+    a, b, c = U.draw_flight_spec(7), U.draw_flight_spec(7), U.draw_flight_spec(8)
+    assert a == b
+    assert a["sim"] != c["sim"]
+    with pytest.raises(ValueError, match="seed"):
+        U.draw_flight_spec(-1)
+
+
+def test_source_peaks_are_what_the_spec_says():
+    """Each source written into the SIM mapping has the drawn peak amplitude (alone, on a grid
+    at the flight altitude) and a peak within the flight's field scale."""
+    from gravsurvey.geodesy import WGS84
+
+    sp = U.draw_flight_spec(2)
+    fld = sp["sim"]["field"]
+    checked = 0
+    for kind in ("point_masses", "dipoles", "prisms"):
+        drawn = [s for s in sp["sources"] if s["kind"] == kind]
+        assert len(drawn) == len(fld.get(kind, []))
+        for item, want in list(zip(fld.get(kind, []), drawn))[:2]:
+            peak = U.peak_disturbance(kind, item, sp["altitude_m"], want["distance_below_aircraft_m"], WGS84) / MGAL
+            assert peak == pytest.approx(want["peak_mgal"], rel=1e-6)
+            checked += 1
+    assert checked >= 2
+
+
+def test_survey_yaml_holds_no_oracle_values(tmp_path):
+    """survey.yaml: file layout, triad, a user's initial guess at most; oracle.yaml has the rest."""
+    sp = U.limit_spec(U.draw_flight_spec(1), max_duration_s=600.0, max_imu_hz=20.0)
+    path = U.write_flight(sp, tmp_path)
+    cfg = yaml.safe_load(path.read_text())
+    assert "model" not in cfg and "processing" not in cfg
+    f = cfg["flights"][0]
+    assert set(f) <= {"name", "inputs", "topics", "triad", "initial", "truth"}
+    text = path.read_text()
+    for key in ("anomaly_", "gravimeter_", "accel_noise", "altimeter_sigma", "gnss_horizontal", "gyro_drift"):
+        assert key not in text
+    oracle = yaml.safe_load((tmp_path / "oracle.yaml").read_text())
+    assert oracle["model"]["altimeter_sigma_m"] == pytest.approx(sp["sim"]["flights"][0]["sensors"]["altimeter"]["sigma_m"])
+    if f["triad"] == "strapdown":
+        ini, exact = f["initial"], oracle["flights"][0]["initial"]
+        assert ini["attitude_deg"][:2] == [0.0, 0.0] and float(ini["attitude_deg"][2]).is_integer()
+        assert ini != exact
+    else:
+        assert "initial" not in f
+
+
+def test_noise_psd_matches_the_simulated_errors():
+    """noise_psd's conventions (one-sided, one-second sigmas, per-sample height noise) against
+    the simulator's own error realisations: gravimeter error averaged to 1 s, altimeter error."""
+    from scipy.signal import welch
+
+    sensors = {"gravimeter": {"white_sigma_mps2": 2e-5, "markov_sigma_mps2": 1e-5, "markov_lambda_per_s": 0.01},
+               "altimeter": {"sigma_m": 0.1}}
+    sim = quick_sim(duration_s=20000.0, imu_hz=10.0, altimeter_hz=5.0, noise=sensors, seed=3)
+    s = simulate_flight(sim)
+    g1 = s.truth["gravimeter_error"][:-1].reshape(-1, 10).mean(axis=1)  # 1 s averages
+    f, p = welch(g1, fs=1.0, nperseg=2048)
+    flight = {"sensors": {"gravimeter": sensors["gravimeter"]}, "rates": {"altimeter_hz": 5.0, "gnss_hz": 1.0}}
+    band = (f > 0.003) & (f < 0.1)  # above Welch's resolution, below the 1 s averaging's roll-off
+    ratio = p[band] / U.noise_psd(flight, f[band])
+    assert np.median(ratio) == pytest.approx(1.0, abs=0.1)
+    # height: per-sample sigma at R Hz is a one-sided PSD 2 sigma^2 / R; twice differentiated
+    _, pa = welch(s.truth["altimeter_error"], fs=5.0, nperseg=1024)
+    assert np.median(pa[1:] / (2 * 0.1**2 / 5.0)) == pytest.approx(1.0, abs=0.1)
+    h_only = {"sensors": {"altimeter": {"sigma_m": 0.1}}, "rates": {"altimeter_hz": 5.0, "gnss_hz": 1.0}}
+    fq = np.array([0.01, 0.1])
+    np.testing.assert_allclose(U.noise_psd(h_only, fq), (2 * math.pi * fq) ** 4 * 2 * 0.1**2 / 5.0)
+
+
+def test_wiener_bound_formula_equals_the_optimal_filter_on_a_realisation():
+    """sqrt(int S_s S_n / (S_s + S_n) df) (benchmarks/bench_unseen.py) is the RMS error the
+    frequency-domain Wiener filter achieves on synthetic signal + noise of those spectra."""
+    bench = _bench()
+    rng = np.random.default_rng(5)
+    n, dt = 2**17, 1.0
+    f = np.fft.rfftfreq(n, dt)
+    s_s = 4 * 0.002 * (5 * MGAL) ** 2 / (0.002**2 + (2 * math.pi * f) ** 2)  # Markov signal, one-sided
+    flight = {"sensors": {"gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 1e-5,
+                                         "markov_lambda_per_s": 0.005},
+                          "altimeter": {"sigma_m": 0.05}}, "rates": {"altimeter_hz": 5.0, "gnss_hz": 1.0}}
+    s_n = U.noise_psd(flight, f)
+
+    def realise(psd):
+        # one-sided PSD -> real series: |X_k|^2 = psd * n / (2 dt)
+        amp = np.sqrt(psd * n / (2 * dt))
+        spec_ = amp * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)) / math.sqrt(2)
+        spec_[0] = 0
+        return np.fft.irfft(spec_, n)
+
+    sig, noise = realise(s_s), realise(s_n)
+    est = np.fft.irfft(np.fft.rfft(sig + noise) * s_s / (s_s + s_n), n)
+    achieved = np.sqrt(np.mean((est - sig) ** 2)) / MGAL
+    bound, res_km = bench.wiener_bound(f, s_s, s_n, speed_mps=80.0)
+    assert achieved == pytest.approx(bound, rel=0.03)
+    assert 0 < res_km < 1000
+
+
+def _bench():
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location(
+        "bench_unseen", Path(__file__).resolve().parents[1] / "benchmarks" / "bench_unseen.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    return bench
+
+
+def test_truth_spectrum_of_short_lines_gives_the_bound_of_the_true_spectrum():
+    """The benchmark's S_s estimate from 8-min lines and 64-s pieces of a strong, steep field
+    (80 mGal, almost all power at periods beyond 10 min) gives the bound of the spectrum it
+    was drawn from within 15 % (a plain per-line Hann periodogram gives 2x: leakage of the
+    short pieces' ramps into the band where the noise decides)."""
+    bench = _bench()
+    rng = np.random.default_rng(8)
+    n, dt = 2**16, 1.0
+    f = np.fft.rfftfreq(n, dt)
+    s_true = np.exp(-f / 0.001)
+    s_true[0] = 0.0
+    s_true *= (80 * MGAL) ** 2 / (s_true.sum() * f[1])
+    amp = np.sqrt(s_true * n / (2 * dt))
+    x = np.fft.irfft(amp * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)) / math.sqrt(2), n)
+    phase = np.arange(n) % 800
+    mask = (phase < 480) | ((phase >= 600) & (phase < 664))
+    flight = {"sensors": {"gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 5e-6,
+                                         "markov_lambda_per_s": 0.004},
+                          "altimeter": {"sigma_m": 0.1}, "gnss": {"vertical_sigma_m": 0.4}},
+              "rates": {"altimeter_hz": 14.0, "gnss_hz": 2.0}}
+    f_est, s_est = bench.truth_psd(x / MGAL, mask, dt)
+    b_est, _ = bench.wiener_bound(f_est, s_est, U.noise_psd(flight, f_est), 100.0)
+    b_true, _ = bench.wiener_bound(f, s_true, U.noise_psd(flight, f), 100.0)
+    assert b_est == pytest.approx(b_true, rel=0.15)
+    assert s_est.sum() * f_est[1] == pytest.approx(np.var(x[mask]), rel=0.05)
+
+
+def test_matched_anomaly_prior_recovers_a_markov_field():
+    """The oracle's anomaly prior fit returns the parameters of a known Gauss-Markov field."""
+    from gravsurvey.simulate.field import markov_disturbance
+
+    rng = np.random.default_rng(11)
+    dist = np.arange(0.0, 3.0e6, 50.0)
+    g = markov_disturbance(dist, 1.0e-4, 2.0e-4, rng)
+    sig, lam = matched_anomaly_prior(dist, g)
+    assert sig == pytest.approx(2.0e-4, rel=0.15)
+    assert lam == pytest.approx(1.0e-4, rel=0.2)
+    assert matched_anomaly_prior(dist[:3], g[:3]) is None
+
+
+def test_one_short_unseen_flight_runs_end_to_end_with_defaults(tmp_path):
+    """A few minutes of a drawn flight at low rates, processed with survey.yaml as written."""
+    from gravsurvey.pipeline import run_survey
+
+    sp = U.draw_flight_spec(4)
+    sp = U.limit_spec(sp, max_duration_s=900.0, max_imu_hz=20.0)
+    assert sp["duration_s"] < 1500.0
+    path = U.write_flight(sp, tmp_path, oracle=False)
+    res = run_survey(path, output_dir=tmp_path / "out")
+    assert not res.failed, res.failed
+    fl = res.summary["flights"]["F01"]
+    assert fl["lines"], fl["segments"]
+    rms = res.summary["rms_vs_truth_mgal"]
+    assert rms is not None and math.isfinite(rms)
+    text = (tmp_path / "out" / "profiles.csv").read_text()
+    assert "disturbance_mgal" in text and "truth_mgal" in text
