@@ -31,6 +31,10 @@ from ..errors import ConfigError, check_keys
 RADIUS_SOURCES = ("altimeter", "computed")
 #: Boolean settings (everything else but ``radius_source`` is a number).
 _BOOL_KEYS = ("gnss_aiding",)
+#: Numbers that may be None (null: derived from the data).
+_OPTIONAL_KEYS = ("initial_attitude_sigma_deg",)
+#: Integer settings.
+_INT_KEYS = ("attitude_passes",)
 
 
 @dataclass
@@ -72,8 +76,16 @@ class InmParams:
         ``|q| nu t``: km after hours), which moves the normal field under the estimate.
     gnss_horizontal_sigma_m, gnss_vertical_sigma_m : float
         1-sigma of each GNSS sample's east/north and up error, m (> 0).
-    initial_attitude_sigma_deg : float
+    initial_attitude_sigma_deg : float or None
         Initial 1-sigma of each triad attitude-error component, deg (GNSS-aided filter only).
+        None (default): the coarse alignment's own covariance when the attitude comes from
+        the alignment (docs/method.md, "Alignment"), 0.05 deg when it is given (a platform's
+        levelled triad, or ``initial.attitude_deg``).
+    attitude_passes : int
+        Most filter/smoother passes for a strapdown triad with GNSS aiding (1-5, default 3):
+        after a pass the initial attitude is corrected by the smoothed attitude error and the
+        flight is mechanized and filtered again about it (the prior stays the alignment's);
+        it stops when the correction is below 0.001 deg.
     gyro_bias_sigma_degph : float
         1-sigma of each gyro's constant bias, deg/h (GNSS-aided filter only: with position
         aiding the bias is observable and is estimated as three extra states).
@@ -96,8 +108,9 @@ class InmParams:
     gnss_aiding: bool = True
     gnss_horizontal_sigma_m: float = 1.0
     gnss_vertical_sigma_m: float = 2.0
-    initial_attitude_sigma_deg: float = 0.05
+    initial_attitude_sigma_deg: float | None = None
     gyro_bias_sigma_degph: float = 0.05
+    attitude_passes: int = 3
 
     def __post_init__(self):
         self.validate()
@@ -115,6 +128,12 @@ class InmParams:
             if f.name in _BOOL_KEYS:
                 if not isinstance(val, bool):
                     raise ConfigError(f"{key}: expected true or false, got {type(val).__name__} {val!r}")
+                continue
+            if f.name in _OPTIONAL_KEYS and val is None:
+                continue
+            if f.name in _INT_KEYS:
+                if isinstance(val, bool) or not isinstance(val, int) or not 1 <= val <= 5:
+                    raise ConfigError(f"{key}: expected an integer from 1 to 5, got {val!r}")
                 continue
             if isinstance(val, bool) or not isinstance(val, (int, float)):
                 raise ConfigError(f"{key}: expected a number, got {type(val).__name__} {val!r}")
@@ -147,7 +166,8 @@ class InmParams:
         obj.validate(key_path)
         # integers are fine in YAML; store floats
         for f in dataclasses.fields(cls):
-            if f.name != "radius_source" and f.name not in _BOOL_KEYS:
+            if (f.name != "radius_source" and f.name not in _BOOL_KEYS + _INT_KEYS
+                    and getattr(obj, f.name) is not None):
                 setattr(obj, f.name, float(getattr(obj, f.name)))
         return obj
 
@@ -205,6 +225,11 @@ class InitialState:
         Velocity relative to the Earth, ENU, m/s.
     mat_nt : ndarray, shape (3, 3)
         Triad -> local ENU rotation (identity for an ENU platform).
+    attitude_cov_t : ndarray, shape (3, 3), or None
+        Covariance of the attitude error on the triad axes, rad^2, when the attitude comes
+        from the coarse alignment (:mod:`gravsurvey.inm.alignment`); None when it was given.
+    alignment : Alignment or None
+        The coarse alignment the attitude came from (method, sigmas, time to converge).
     """
 
     lat: float
@@ -212,6 +237,8 @@ class InitialState:
     height: float
     vel_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
     mat_nt: np.ndarray = field(default_factory=lambda: np.eye(3))
+    attitude_cov_t: np.ndarray | None = None
+    alignment: object | None = None
 
 
 def mat_nb_from_attitude(roll, pitch, heading):
@@ -291,27 +318,36 @@ def initial_state_from_dict(d, triad: str, key_path: str = "initial") -> Initial
     return InitialState(math.radians(lat), math.radians(lon), h, vel, mat_nt)
 
 
-def initial_state_from_gnss(record, triad: str, attitude_deg=None) -> InitialState:
-    """Initial state from the GNSS channel at the first IMU sample.
+def initial_state_from_gnss(record, triad: str, attitude_deg=None, params=None, ellipsoid=None) -> InitialState:
+    """Initial state from the data at the first IMU sample.
 
     Position and velocity come from a quadratic least-squares fit to the GNSS
     positions over the first 10 s (at least 3 samples).  A platform triad is
-    ENU; a strapdown triad needs ``attitude_deg`` [roll, pitch, heading] from
-    the config.
+    ENU; a strapdown triad takes ``attitude_deg`` [roll, pitch, heading] when
+    given, else the coarse alignment (:func:`gravsurvey.inm.alignment.align`), whose
+    covariance and report travel with the state.
 
     Raises
     ------
     ConfigError
-        Strapdown triad without attitude, or no usable GNSS data.
+        No usable GNSS data.
+    DataError
+        A strapdown record that cannot be aligned.
     """
     _check_triad(triad, "triad")
     gn = record.gnss
     if gn is None or len(gn.time) < 3:
         raise ConfigError("initial: no GNSS channel (>= 3 samples) to initialise from; give an 'initial:' block")
+    cov, alignment = None, None
     if triad == "strapdown":
         if attitude_deg is None:
-            raise ConfigError("initial.attitude_deg: required for a strapdown triad (GNSS gives no attitude)")
-        mat_nt = mat_nb_from_attitude(*np.radians(np.asarray(attitude_deg, dtype=float)))
+            from ..geodesy import WGS84
+            from .alignment import align
+
+            alignment = align(record, params, ellipsoid or WGS84)
+            mat_nt, cov = alignment.mat_nt, alignment.cov_t
+        else:
+            mat_nt = mat_nb_from_attitude(*np.radians(np.asarray(attitude_deg, dtype=float)))
     else:
         mat_nt = np.eye(3)
     t0 = float(record.imu.time[0])
@@ -334,4 +370,4 @@ def initial_state_from_gnss(record, triad: str, attitude_deg=None) -> InitialSta
     ve = np.polyval(np.polyder(po), 0.0) * (n + h0) * math.cos(lat0)
     vn = np.polyval(np.polyder(pl), 0.0) * (m + h0)
     vu = np.polyval(np.polyder(ph), 0.0)
-    return InitialState(float(lat0), float(lon0), float(h0), np.array([ve, vn, vu]), mat_nt)
+    return InitialState(float(lat0), float(lon0), float(h0), np.array([ve, vn, vu]), mat_nt, cov, alignment)

@@ -9,10 +9,11 @@ import numpy as np
 
 from ..errors import ConfigError, DataError
 from ..geodesy import WGS84, Ellipsoid
+from ..geodesy import mat_en, mat_ie
 from .errormodel import (DP, DQ, F3, G, N_STATE, N_STATE_AIDED, TH, AltimeterMeasurement, GnssMeasurement,
-                         discretise, epoch_geometry, initial_covariance)
+                         discretise, epoch_geometry, initial_covariance, initial_mean)
 from .kalman import filter_and_smooth
-from .mechanization import mechanize, navigation_to_geodetic
+from .mechanization import mechanize, navigation_to_geodetic, rodrigues
 from .params import InitialState, InmParams, initial_state_from_gnss, solvability_warnings
 
 __all__ = ["InmSolution", "estimate_anomaly", "solvability_warnings", "initial_state_from_gnss"]
@@ -57,6 +58,16 @@ class InmSolution:
     gnss_aided : bool
         Whether GNSS positions were used as a measurement (``model.gnss_aiding`` and a GNSS
         channel in the record).
+    attitude : ndarray (N, 3)
+        Corrected roll, pitch, heading of a strapdown (forward-left-up) triad, rad (heading
+        in [0, 2 pi)); NaN for a platform triad.
+    attitude_sigma : ndarray (N, 3)
+        Smoothed 1-sigma of roll, pitch and heading, rad (GNSS-aided strapdown only; NaN
+        otherwise).
+    passes : int
+        Filter/smoother passes run (``model.attitude_passes``).
+    attitude_corrections : list of float
+        Size of the initial-attitude correction after each pass, rad.
     """
 
     time: np.ndarray
@@ -81,6 +92,10 @@ class InmSolution:
     x_forward: np.ndarray
     warnings: list = field(default_factory=list)
     gnss_aided: bool = False
+    attitude: np.ndarray | None = None
+    attitude_sigma: np.ndarray | None = None
+    passes: int = 1
+    attitude_corrections: list = field(default_factory=list)
 
 
 def _check_record(record):
@@ -122,9 +137,19 @@ def stack_measurements(parts):
     return z, h, r
 
 
+#: The passes stop once the initial-attitude correction is below this, rad (0.001 deg).
+ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
+
+
 def estimate_anomaly(record, params: InmParams, initial: InitialState | None, triad: str,
                      ellipsoid: Ellipsoid = WGS84, attitude_deg=None, reference: bool = False) -> InmSolution:
     """Estimate the gravity disturbance along a flight (3D-INM + Kalman + RTS).
+
+    A GNSS-aided strapdown flight runs up to ``params.attitude_passes`` passes: after each,
+    the initial attitude is corrected by the smoothed attitude error at the first epoch
+    (``C_true = C Exp(theta)``) and the flight is mechanized and filtered again about it.
+    The prior is kept (the alignment's): its mean becomes the old attitude seen from the new
+    one (:func:`gravsurvey.inm.errormodel.initial_mean`), an iterated (Gauss-Newton) smoother.
 
     Parameters
     ----------
@@ -147,7 +172,31 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
         raise ConfigError(f"triad: expected 'platform' or 'strapdown', got {triad!r}")
     _check_record(record)
     if initial is None:
-        initial = initial_state_from_gnss(record, triad, attitude_deg)
+        initial = initial_state_from_gnss(record, triad, attitude_deg, params=params, ellipsoid=ellipsoid)
+    mat_nt0 = np.array(initial.mat_nt, float)
+    theta_prior = np.zeros(3)  # the prior attitude seen from the current linearisation point
+    corrections = []
+    passes = int(params.attitude_passes)
+    for k in range(passes):
+        cur = InitialState(initial.lat, initial.lon, initial.height, initial.vel_n, mat_nt0,
+                           initial.attitude_cov_t, initial.alignment)
+        nav, idx, c, gnss_used, n_state, out = _one_pass(record, params, cur, ellipsoid, reference, theta_prior)
+        if not (gnss_used and triad == "strapdown") or k == passes - 1:
+            break
+        th0 = out["x_s"][0, TH]
+        corrections.append(float(np.linalg.norm(th0)))
+        if corrections[-1] < ATTITUDE_CONVERGED_RAD:
+            break
+        # C_true = C Exp(theta): the triad -> ENU matrix gets the same right factor
+        rot = rodrigues(np.ascontiguousarray(th0))
+        mat_nt0 = mat_nt0 @ rot
+        # prior attitude (old point) seen from the new point: C_old = C_new Exp(-th0)
+        theta_prior = theta_prior - th0
+    return _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, k + 1, corrections)
+
+
+def _one_pass(record, params, initial, ellipsoid, reference, theta_prior):
+    """Mechanize, discretise, filter and smooth once about ``initial``."""
     imu = record.imu
     t = np.asarray(imu.time, float)
     alt_t = np.asarray(record.altimeter.time, float)
@@ -177,13 +226,21 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
                                     params.gnss_vertical_sigma_m, ellipsoid))
     z, h, r = stack_measurements([m.build(nav, idx, half, n_state) for m in meas])
     c = nav.mat_it[idx]
+    att_cov = initial.attitude_cov_t if params.initial_attitude_sigma_deg is None else None
     if gnss_used:
         q_t0 = c[0].T @ nav.r_i[idx[0]]
         p_t0 = c[0].T @ nav.v_i[idx[0]]
-        p0 = initial_covariance(params, q_t0, p_t0)
+        p0 = initial_covariance(params, q_t0, p_t0, attitude_cov_t=att_cov)
+        x0 = initial_mean(theta_prior, q_t0, p_t0)
     else:
         p0 = initial_covariance(params)
-    out = filter_and_smooth(np.zeros(n_state), p0, phi, q, z, h, r, reference=reference)
+        x0 = np.zeros(n_state)
+    out = filter_and_smooth(x0, p0, phi, q, z, h, r, reference=reference)
+    return nav, idx, c, gnss_used, n_state, out
+
+def _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, passes, corrections):
+    """Corrected navigation, attitude and the anomaly from the last pass's smoother output."""
+    t = nav.time
     x_s, p_s, x_f, p_f = out["x_s"], out["p_s"], out["x_f"], out["p_f"]
 
     # corrections: true = computed - error; the position and velocity errors on the triad are
@@ -217,6 +274,7 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     if innov.shape[1] == 1:
         innov = innov[:, 0]
     warn = solvability_warnings(params, float(np.median(speed)))
+    att, att_sig = _attitude(nav, idx, c, x_s, p_s, lat, lon, gnss_used, triad, ellipsoid)
     return InmSolution(
         time=t[idx].copy(),
         g_forward=x_f[:, G].copy(),
@@ -240,4 +298,42 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
         x_forward=x_f,
         warnings=warn,
         gnss_aided=gnss_used,
+        attitude=att,
+        attitude_sigma=att_sig,
+        passes=passes,
+        attitude_corrections=corrections,
     )
+
+
+def _attitude(nav, idx, c, x_s, p_s, lat, lon, gnss_used, triad, ellipsoid):
+    """Corrected roll, pitch, heading (rad) and their 1-sigma per epoch, (N, 3) each.
+
+    ``C_true = C (I + [theta x])`` (triad -> inertial), to ENU at the corrected position.
+    The sigmas map the smoothed ``theta`` covariance to ENU axes: heading about Up, roll
+    about the nose's and pitch about the left wing's horizontal direction (exact in level
+    flight).  NaN for a platform triad (its axes are ENU, not the aircraft's).
+    """
+    n = idx.size
+    if triad != "strapdown":
+        return np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    th = x_s[:, TH] if gnss_used else np.zeros((n, 3))
+    sk = np.zeros((n, 3, 3))
+    sk[:, 0, 1], sk[:, 0, 2], sk[:, 1, 2] = -th[:, 2], th[:, 1], -th[:, 0]
+    sk[:, 1, 0], sk[:, 2, 0], sk[:, 2, 1] = th[:, 2], -th[:, 1], th[:, 0]
+    c_true = c + np.einsum("nij,njk->nik", c, sk)
+    m_in = np.einsum("nij,njk->nik", mat_ie(nav.time[idx], ellipsoid.omega), mat_en(lat, lon))
+    m_nt = np.einsum("nji,njk->nik", m_in, c_true)
+    nose, left, roof = m_nt[:, :, 0], m_nt[:, :, 1], m_nt[:, :, 2]
+    heading = np.mod(np.arctan2(nose[:, 0], nose[:, 1]), 2.0 * math.pi)
+    pitch = np.arcsin(np.clip(nose[:, 2], -1.0, 1.0))
+    roll = np.arctan2(left[:, 2], roof[:, 2])
+    sig = np.full((n, 3), np.nan)
+    if gnss_used:
+        p_th = p_s[:, TH][:, :, TH]
+        cov_n = np.einsum("nij,njk,nlk->nil", m_nt, p_th, m_nt)
+        along = np.stack([np.sin(heading), np.cos(heading), np.zeros(n)], axis=1)
+        across = np.stack([-np.cos(heading), np.sin(heading), np.zeros(n)], axis=1)
+        sig[:, 0] = np.sqrt(np.einsum("ni,nij,nj->n", along, cov_n, along))
+        sig[:, 1] = np.sqrt(np.einsum("ni,nij,nj->n", across, cov_n, across))
+        sig[:, 2] = np.sqrt(cov_n[:, 2, 2])
+    return np.stack([roll, pitch, heading], axis=1), sig
