@@ -371,3 +371,135 @@ def initial_state_from_gnss(record, triad: str, attitude_deg=None, params=None, 
     vn = np.polyval(np.polyder(pl), 0.0) * (m + h0)
     vu = np.polyval(np.polyder(ph), 0.0)
     return InitialState(float(lat0), float(lon0), float(h0), np.array([ve, vn, vu]), mat_nt, cov, alignment)
+
+
+#: Agreement required between an ``initial`` override and the data, in combined sigmas.
+INITIAL_AGREEMENT_SIGMAS = 5.0
+#: Span of the GNSS fit for the initial velocity (initial_state_from_gnss), s.
+_GNSS_FIT_S = 10.0
+
+
+def initial_override_from_dict(d, triad: str, key_path: str = "initial") -> dict:
+    """Validate an ``initial:`` block whose keys are all optional (overrides of the data).
+
+    Returns
+    -------
+    dict
+        The keys present, as floats (``velocity_enu_mps``, ``attitude_deg``: ndarray (3,)).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``key_path.<key>`` for unknown or malformed keys.
+    """
+    if not isinstance(d, dict):
+        raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
+    check_keys(d, _INITIAL_KEYS, key_path)
+    out = {}
+    for k in ("lat_deg", "lon_deg", "height_m"):
+        if k in d:
+            out[k] = float(_num(d, k, key_path))
+    if "lat_deg" in out and not -90.0 < out["lat_deg"] < 90.0:
+        raise ConfigError(f"{key_path}.lat_deg: expected a latitude in (-90, 90) deg, got {out['lat_deg']}")
+    for k in ("velocity_enu_mps", "attitude_deg"):
+        if k in d:
+            out[k] = _num(d, k, key_path, 3)
+    return out
+
+
+def resolve_initial_state(record, triad: str, params: InmParams | None = None, ellipsoid=None, given=None,
+                          key_path: str = "initial") -> InitialState:
+    """Initial state from the data, with the config's ``initial`` keys as checked overrides.
+
+    Position, velocity (GNSS fit) and, for a strapdown triad, attitude (coarse alignment)
+    come from the data.  Each key of ``given`` replaces its value after a check: a value
+    that disagrees with the data by more than :data:`INITIAL_AGREEMENT_SIGMAS` combined
+    sigmas (its stated ``model.initial_*_sigma`` and the data's) is a :class:`ConfigError`
+    naming the key.  A given attitude is used when it is consistent and its sigma
+    (``model.initial_attitude_sigma_deg``, default 0.05 deg) beats the alignment's.
+    Without GNSS the position and velocity keys are required.
+
+    Parameters
+    ----------
+    record : FlightRecord
+    triad : {"platform", "strapdown"}
+    params : InmParams, optional
+    ellipsoid : Ellipsoid, optional
+    given : dict, optional
+        From :func:`initial_override_from_dict`.
+    key_path : str
+        Path of the ``initial`` block in error messages.
+    """
+    from ..geodesy import WGS84, radii_of_curvature
+
+    p = params if params is not None else InmParams()
+    ell = ellipsoid or WGS84
+    given = dict(given or {})
+    _check_triad(triad, "triad")
+    gn = record.gnss
+    have_gnss = gn is not None and len(gn.time) >= 3
+    from .errormodel import GIVEN_ATTITUDE_SIGMA_DEG
+
+    s_att = math.radians(GIVEN_ATTITUDE_SIGMA_DEG if p.initial_attitude_sigma_deg is None
+                         else p.initial_attitude_sigma_deg)
+    att_given = given.get("attitude_deg")
+    if not have_gnss:
+        for k in ("lat_deg", "lon_deg", "height_m", "velocity_enu_mps"):
+            if k not in given:
+                raise ConfigError(f"{key_path}.{k}: missing; the record has no GNSS (>= 3 samples) to take the initial "
+                                  "position and velocity from")
+        mat_nt, cov, alignment = np.eye(3), None, None
+        if triad == "strapdown":
+            if att_given is not None:
+                mat_nt = mat_nb_from_attitude(*np.radians(att_given))
+            else:
+                from .alignment import align
+
+                alignment = align(record, p, ell, lat=math.radians(given["lat_deg"]))
+                mat_nt, cov = alignment.mat_nt, alignment.cov_t
+        return InitialState(math.radians(given["lat_deg"]), math.radians(given["lon_deg"]), given["height_m"],
+                            np.asarray(given["velocity_enu_mps"], float), mat_nt, cov, alignment)
+    base = initial_state_from_gnss(record, triad, None, params=p, ellipsoid=ell)
+    m, n = radii_of_curvature(base.lat, ell)
+    k = INITIAL_AGREEMENT_SIGMAS
+    s_h = math.hypot(p.initial_position_sigma_m, p.gnss_horizontal_sigma_m)
+    s_v = math.hypot(p.initial_position_sigma_m, p.gnss_vertical_sigma_m)
+    s_vel = math.hypot(p.initial_velocity_sigma_mps, p.gnss_horizontal_sigma_m / _GNSS_FIT_S)
+    lat = math.radians(given["lat_deg"]) if "lat_deg" in given else base.lat
+    lon = math.radians(given["lon_deg"]) if "lon_deg" in given else base.lon
+    d_n = (lat - base.lat) * (m + base.height)
+    d_e = (((lon - base.lon + math.pi) % (2 * math.pi)) - math.pi) * (n + base.height) * math.cos(base.lat)
+    for key, dist in (("lat_deg", abs(d_n)), ("lon_deg", abs(d_e))):
+        if key in given and dist > k * s_h:
+            raise ConfigError(f"{key_path}.{key}: {given[key]} deg is {dist:.4g} m from the GNSS position at the first "
+                              f"IMU sample (allowed {k:g} x {s_h:.3g} m from model.initial_position_sigma_m and "
+                              "model.gnss_horizontal_sigma_m); fix or remove it")
+    height = given.get("height_m", base.height)
+    if abs(height - base.height) > k * s_v:
+        raise ConfigError(f"{key_path}.height_m: {height} m differs from the GNSS height {base.height:.2f} m by more "
+                          f"than {k:g} x {s_v:.3g} m; fix or remove it")
+    vel = np.asarray(given.get("velocity_enu_mps", base.vel_n), float)
+    dv = float(np.max(np.abs(vel - base.vel_n)))
+    if dv > k * s_vel:
+        raise ConfigError(f"{key_path}.velocity_enu_mps: {list(np.round(vel, 3))} m/s differs from the GNSS velocity "
+                          f"{list(np.round(base.vel_n, 3))} m/s by {dv:.3g} m/s (allowed {k:g} x {s_vel:.3g} m/s from "
+                          "model.initial_velocity_sigma_mps); fix or remove it")
+    mat_nt, cov, alignment = base.mat_nt, base.attitude_cov_t, base.alignment
+    if triad == "strapdown" and att_given is not None:
+        from scipy.spatial.transform import Rotation
+
+        m_given = mat_nb_from_attitude(*np.radians(att_given))
+        th_n = Rotation.from_matrix(m_given @ mat_nt.T).as_rotvec()
+        lev, head = math.hypot(th_n[0], th_n[1]), abs(th_n[2])
+        s_lev = math.hypot(s_att, alignment.sigma_level_rad)
+        s_head = math.hypot(s_att, alignment.sigma_heading_rad)
+        if lev > k * s_lev or head > k * s_head:
+            al = alignment.attitude_deg()
+            raise ConfigError(
+                f"{key_path}.attitude_deg: {list(np.round(att_given, 3))} (roll, pitch, heading) disagrees with the "
+                f"alignment from the data ({al[0]:.3f}, {al[1]:.3f}, {al[2] % 360:.3f}) by {math.degrees(lev):.3g} deg "
+                f"level, {math.degrees(head):.3g} deg heading (allowed {k:g} x {math.degrees(s_lev):.2g} / "
+                f"{math.degrees(s_head):.2g} deg with model.initial_attitude_sigma_deg); fix or remove it")
+        if s_att < alignment.sigma_heading_rad:
+            mat_nt, cov = m_given, None
+    return InitialState(lat, lon, height, vel, mat_nt, cov, alignment)

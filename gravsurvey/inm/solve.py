@@ -68,6 +68,13 @@ class InmSolution:
         Filter/smoother passes run (``model.attitude_passes``).
     attitude_corrections : list of float
         Size of the initial-attitude correction after each pass, rad.
+    alignment : Alignment or None
+        The coarse alignment the initial attitude came from (None: given).
+    attitude_converge_s : float
+        Time after the first epoch from which the forward filter's heading sigma stays
+        within twice its median over the flight, s (GNSS-aided strapdown; NaN otherwise).
+    gnss_residual_rms_m : float
+        RMS horizontal distance of the corrected track from the GNSS positions, m.
     """
 
     time: np.ndarray
@@ -96,6 +103,9 @@ class InmSolution:
     attitude_sigma: np.ndarray | None = None
     passes: int = 1
     attitude_corrections: list = field(default_factory=list)
+    alignment: object | None = None
+    attitude_converge_s: float = float("nan")
+    gnss_residual_rms_m: float = float("nan")
 
 
 def _check_record(record):
@@ -192,7 +202,40 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
         mat_nt0 = mat_nt0 @ rot
         # prior attitude (old point) seen from the new point: C_old = C_new Exp(-th0)
         theta_prior = theta_prior - th0
-    return _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, k + 1, corrections)
+    sol = _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, k + 1, corrections)
+    sol.alignment = initial.alignment
+    if gnss_used:
+        _check_track(record, params, sol, ellipsoid)
+    return sol
+
+
+#: The corrected track may not leave the GNSS positions by more than this many GNSS sigmas
+#: (RMS): beyond it the navigation has diverged (wrong axes, triad or attitude).
+TRACK_RESIDUAL_SIGMAS = 20.0
+
+
+def _check_track(record, params, sol, ellipsoid):
+    """DataError when the corrected navigation leaves the GNSS track (RMS >> GNSS sigma)."""
+    from ..geodesy import radii_of_curvature
+
+    gn = record.gnss
+    tg = np.asarray(gn.time, float)
+    ok = (tg >= sol.time[0]) & (tg <= sol.time[-1]) & np.isfinite(gn.lat) & np.isfinite(gn.lon)
+    if ok.sum() < 3:
+        return
+    lat = np.interp(tg[ok], sol.time, sol.lat)
+    lon = np.interp(tg[ok], sol.time, np.unwrap(sol.lon))
+    m, n = radii_of_curvature(lat, ellipsoid)
+    d_lon = (np.asarray(gn.lon, float)[ok] - lon + math.pi) % (2.0 * math.pi) - math.pi
+    d = np.hypot((np.asarray(gn.lat, float)[ok] - lat) * m, d_lon * n * np.cos(lat))
+    rms = float(np.sqrt(np.mean(d * d)))
+    sol.gnss_residual_rms_m = rms
+    # 1 s epochs interpolated between: allow the speed x interpolation error on top of the sigma
+    limit = TRACK_RESIDUAL_SIGMAS * params.gnss_horizontal_sigma_m + 0.05 * float(np.median(sol.speed))
+    if not rms <= limit:
+        raise DataError(f"{record.source or 'record'}: the navigation leaves the GNSS track: corrected positions are "
+                        f"{rms:.3g} m RMS from the GNSS positions (expected about model.gnss_horizontal_sigma_m = "
+                        f"{params.gnss_horizontal_sigma_m:g} m); check triad, imu_axes and the initial attitude")
 
 
 def _one_pass(record, params, initial, ellipsoid, reference, theta_prior):
@@ -275,6 +318,8 @@ def _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state,
         innov = innov[:, 0]
     warn = solvability_warnings(params, float(np.median(speed)))
     att, att_sig = _attitude(nav, idx, c, x_s, p_s, lat, lon, gnss_used, triad, ellipsoid)
+    conv = (_heading_converge_s(t[idx], c, p_f, lat, lon, ellipsoid) if gnss_used and triad == "strapdown"
+            else float("nan"))
     return InmSolution(
         time=t[idx].copy(),
         g_forward=x_f[:, G].copy(),
@@ -302,6 +347,7 @@ def _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state,
         attitude_sigma=att_sig,
         passes=passes,
         attitude_corrections=corrections,
+        attitude_converge_s=conv,
     )
 
 
@@ -337,3 +383,16 @@ def _attitude(nav, idx, c, x_s, p_s, lat, lon, gnss_used, triad, ellipsoid):
         sig[:, 1] = np.sqrt(np.einsum("ni,nij,nj->n", across, cov_n, across))
         sig[:, 2] = np.sqrt(cov_n[:, 2, 2])
     return np.stack([roll, pitch, heading], axis=1), sig
+
+
+def _heading_converge_s(time, c, p_f, lat, lon, ellipsoid):
+    """Time from the first epoch after which the forward heading sigma stays <= 2 x its median, s."""
+    m_in = np.einsum("nij,njk->nik", mat_ie(time, ellipsoid.omega), mat_en(lat, lon))
+    up_t = np.einsum("nji,nj->ni", c, m_in[:, :, 2])  # Up on the triad (C^T M_in e_U)
+    p_th = p_f[:, TH][:, :, TH]
+    s_head = np.sqrt(np.einsum("ni,nij,nj->n", up_t, p_th, up_t))
+    bad = np.flatnonzero(s_head > 2.0 * np.median(s_head))
+    if bad.size == 0:
+        return 0.0
+    k = min(bad[-1] + 1, time.size - 1)
+    return float(time[k] - time[0])
