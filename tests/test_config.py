@@ -76,8 +76,9 @@ def test_strapdown_without_initial_attitude(tmp_path):
     end = text.index("  truth:")
     p = tmp_path / "c.yaml"
     p.write_text(text[:start] + text[end:].replace("triad: platform", "") .replace("truth:", "triad: strapdown\n  truth:", 1))
-    with pytest.raises(ConfigError, match=r"flights\[0\]\.initial"):
-        C.load_config(p)
+    # issue 13: no initial block needed; position/velocity from GNSS, attitude from the alignment
+    fl = C.load_config(p).flights[0]
+    assert fl.triad == "strapdown" and fl.initial is None and fl.initial_given is None
 
 
 def test_yaml_12_floats_and_bad_yaml(tmp_path):
