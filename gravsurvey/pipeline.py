@@ -163,7 +163,8 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
 
         initial = resolve_initial_state(record, fl.triad, cfg.model, cfg.ellipsoid, fl.initial_given,
                                         f"flights[{fl.index}].initial")
-        sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid)
+        sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid,
+                               gnss_lever_arm_t=getattr(fl.ingest, "gnss_lever_arm_m", None))
     timings["estimate_s"] = time.perf_counter() - t
 
     t = time.perf_counter()

@@ -147,7 +147,7 @@ def test_alignment_error_inside_three_sigma(which, request):
     al = align(_record(s), _params())
     th = _theta_n(al.mat_nt, s.truth["mat_nt"][0])
     sig = np.sqrt(np.diag(al.cov_n))
-    assert al.method == "velocity-matching"
+    assert al.method == {"in_flight": "velocity-matching", "static_start": "static-levelling+velocity-matching"}[which]
     assert np.all(np.abs(th) < 3.0 * sig), (np.degrees(th), np.degrees(sig))
     # measured: heading error 0.069 / 0.091 deg, sigma 0.038 / 0.040 deg (in flight / static start)
     assert math.degrees(al.sigma_heading_rad) < 0.1
@@ -283,3 +283,106 @@ def test_static_levelling_on_real_vn310():
     # even with an optimistic bias sigma the rate at rest is no Earth rate: refused as inconsistent
     _, cov, warn = gyrocompass(f_t.mean(axis=0), w_t.mean(axis=0), lat, span, 0.01 * DEGPH, 0.005 * DEGPH)
     assert warn and "refused" in warn[0]
+
+
+def _vn310_options(**extra):
+    from gravsurvey.io.ingest import ingest_options_from_dict
+
+    t = ["GpsCycle", "GpsWeek", "GpsTow [s]"]
+    cfg = {"inputs": {"csv": {"imu": "vn310-imu-part.csv", "altimeter": "vn310-gnss-part.csv",
+                              "gnss": "vn310-gnss-part.csv"}},
+           "csv": {"time_format": "gps_week_sow", "columns": {
+               "imu": {"time": t, **{f"f{a.lower()}": f"IMU::UncompAccel::{a} [m/s^2]" for a in "XYZ"},
+                       **{f"w{a.lower()}": f"IMU::UncompGyro::{a} [rad/s]" for a in "XYZ"}},
+               "altimeter": {"time": t, "height": "GNSS1::PosLla::altitude [m]"},
+               "gnss": {"time": t, "lat": "GNSS1::PosLla::latitude [deg]", "lon": "GNSS1::PosLla::longitude [deg]",
+                        "height": "GNSS1::PosLla::altitude [m]"}}},
+           **extra}
+    return ingest_options_from_dict(cfg, base_dir=DATA)
+
+
+def test_vn310_csv_with_frd_axes_and_gps_cycle_week_tow():
+    """The vendor CSV as a new user would declare it: FRD axes, GpsCycle/GpsWeek/GpsTow time."""
+    from gravsurvey.io.ingest import load_flight
+
+    with pytest.warns(Warning):  # the ingest check notes the MEMS gyro bias at rest
+        rec = load_flight(_vn310_options(imu_axes="FRD"))
+    # GPS week 1024 * 2 + 255 = 2303, TOW 403575.847627 s GPS = 2024-02-29 16:06:15.847627 GPS
+    # = 16:05:57.847627 UTC (18 leap seconds)
+    import datetime
+
+    t0 = datetime.datetime(2024, 2, 29, 16, 5, 57, 847627, tzinfo=datetime.timezone.utc)
+    assert rec.t0_unix_ns == int(t0.timestamp()) * 10**9 + 847627000
+    # FRD -> FLU: at rest the z axis now reads +g, y flips sign
+    f = rec.imu.specific_force_t.mean(axis=0)
+    assert f[2] == pytest.approx(9.80, abs=0.01) and f[1] == pytest.approx(-0.2987, abs=1e-3)
+    al = align(rec, InmParams())
+    # static and no motion: the vertical from levelling; heading unknown and said so
+    assert al.method == "static-levelling+velocity-matching"
+    roll, pitch, _ = al.attitude_deg()
+    assert roll == pytest.approx(-1.7463, abs=0.01) and pitch == pytest.approx(0.5683, abs=0.01)
+    text = " ".join(al.warnings)
+    assert "gyrocompassing refused" in text and "poor alignment" in text
+
+
+def test_gps_cycle_week_tow_time_columns(tmp_path):
+    from gravsurvey.errors import DataError
+    from gravsurvey.io.csv import read_csv_channel
+
+    p = tmp_path / "alt.csv"
+    p.write_text("cyc,wk,tow,h\n2,255,403575.5,10\n2,255,403576.0,11\n")
+    t, v = read_csv_channel(p, "altimeter", {"time": ["cyc", "wk", "tow"], "height": "h"}, "gps_week_sow")
+    t2, _ = read_csv_channel(p, "altimeter", {"time": ["wk", "tow"], "height": "h"}, "gps_week_sow")
+    assert t[0] - t2[0] == 2 * 1024 * 7 * 86400 * 10**9 and t[1] - t[0] == 500_000_000
+    p.write_text("cyc,wk,tow,h\n2,1300,403575.5,10\n")
+    with pytest.raises(DataError, match=r"line 2: columns 'cyc', 'wk': expected a roll-over count >= 0 and a 10-bit"):
+        read_csv_channel(p, "altimeter", {"time": ["cyc", "wk", "tow"], "height": "h"}, "gps_week_sow")
+
+
+def test_imu_axes_and_lever_arm_options():
+    from gravsurvey.io.ingest import IMU_AXES, imu_axes_matrix
+
+    for name, m in IMU_AXES.items():
+        assert np.linalg.det(m) == pytest.approx(1.0) and np.allclose(m @ m.T, np.eye(3))
+    # RFU: the right axis is -left, forward is the sensor's y
+    np.testing.assert_allclose(imu_axes_matrix("RFU") @ [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
+    np.testing.assert_allclose(imu_axes_matrix("RFU") @ [1.0, 0.0, 0.0], [0.0, -1.0, 0.0])
+    np.testing.assert_allclose(imu_axes_matrix([[0, 1, 0], [-1, 0, 0], [0, 0, 1]]), IMU_AXES["RFU"])
+    with pytest.raises(ConfigError, match=r"^flights\[0\]\.imu_axes: expected one of FLU, FRD, RFU"):
+        _vn310_options(imu_axes="NED")
+    with pytest.raises(ConfigError, match=r"^flights\[0\]\.imu_axes: the matrix must be a proper rotation"):
+        _vn310_options(imu_axes=[[1, 0, 0], [0, -1, 0], [0, 0, 1]])
+    with pytest.raises(ConfigError, match=r"^flights\[0\]\.gnss_lever_arm_m: expected \[forward, left, up\]"):
+        _vn310_options(gnss_lever_arm_m=[1.0, 2.0])
+    assert np.array_equal(_vn310_options(gnss_lever_arm_m=[1, 0, 2]).gnss_lever_arm_m, [1.0, 0.0, 2.0])
+
+
+def test_gnss_lever_arm_is_applied(in_flight):
+    """An antenna 6 m ahead of and 2 m above the IMU: with the lever arm declared the track is as
+    good as without any arm; ignored, the navigation is off by metres."""
+    from gravsurvey.geodesy import geodetic_to_ecef, ecef_to_geodetic, mat_en
+
+    s = in_flight
+    arm = np.array([6.0, 0.0, 2.0])
+    tr = s.truth
+    k = np.clip(np.searchsorted(tr["time"], s.gnss_time), 1, tr["time"].size - 1)
+    # truth attitude at the GNSS times (nearest truth sample: 5 Hz, same grid as the GNSS)
+    m_nt = tr["mat_nt"][k]
+    lat, lon = np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg)
+    off_e = np.einsum("nij,nj->ni", mat_en(lat, lon), np.einsum("nij,j->ni", m_nt, arm))
+    lat2, lon2, h2 = ecef_to_geodetic(geodetic_to_ecef(lat, lon, s.gnss_height) + off_e)
+    rec = _record(s)
+    rec.gnss = GnssChannel(s.gnss_time, lat2, lon2, h2)
+
+    def track_error(sol):
+        la = np.interp(sol.time, tr["time"], tr["lat"])
+        lo = np.interp(sol.time, tr["time"], tr["lon"])
+        return _rms(np.hypot((sol.lat - la) * 6.37e6, (sol.lon - lo) * 6.37e6 * np.cos(la)))
+
+    with_arm = estimate_anomaly(rec, _params(), None, "strapdown", gnss_lever_arm_t=arm)
+    without = estimate_anomaly(rec, _params(), None, "strapdown")
+    base = estimate_anomaly(_record(s), _params(), None, "strapdown")
+    assert track_error(with_arm) < 1.5 * track_error(base) + 0.05
+    assert track_error(without) > 3.0
+    with pytest.raises(ConfigError, match="gnss_lever_arm_m: a lever arm on body axes needs a strapdown triad"):
+        estimate_anomaly(rec, _params(), None, "platform", gnss_lever_arm_t=arm)

@@ -77,8 +77,8 @@ class Alignment:
         Covariance of the attitude error ``theta_n`` on ENU axes, rad^2, with
         ``mat_nt_true = (I + [theta_n x]) mat_nt``; ``theta_n[2]`` is the heading error.
     method : str
-        ``static-gyrocompass``, ``velocity-matching`` (in motion, GNSS),
-        ``static-levelling`` (roll/pitch only, heading unknown) or ``given``.
+        ``static-gyrocompass``, ``velocity-matching`` (in motion, GNSS), or
+        ``static-levelling+velocity-matching`` (the static vertical, the motion's north).
     converge_s : float
         Time span of data after the first sample the alignment used, s.
     static_s : float
@@ -501,6 +501,15 @@ def align(record, params=None, ellipsoid: Ellipsoid = WGS84, lat=None) -> Alignm
         raise DataError(f"{src}: alignment: no static period at the start and no GNSS to align a strapdown triad "
                         "with; give flights[].initial.attitude_deg")
     out = min(candidates, key=lambda c: c.sigma_heading_rad)
+    stat = candidates[0] if candidates[0].method.startswith("static") else None
+    if stat is not None and out is not stat and stat.sigma_level_rad < out.sigma_level_rad:
+        # the static levelling is the better vertical: keep the motion's north about it
+        up = stat.mat_nt[2]
+        north = out.mat_nt[1] - (out.mat_nt[1] @ up) * up
+        north /= np.linalg.norm(north)
+        mat = np.stack([np.cross(north, up), north, up])
+        cov = np.diag([stat.cov_n[0, 0], stat.cov_n[1, 1], out.cov_n[2, 2]])
+        out = Alignment(mat, cov, "static-levelling+" + out.method, out.converge_s, static)
     if out.method == "static-levelling":
         raise DataError(f"{src}: alignment: heading unknown (gyros too noisy to gyrocompass and no GNSS to align "
                         "in motion); give flights[].initial.attitude_deg")

@@ -555,9 +555,16 @@ class GnssMeasurement:
     horizontal_sigma_m, vertical_sigma_m : float
         1-sigma of each sample's east/north and up error, m (> 0).
     ellipsoid : Ellipsoid
+    lever_arm_t : ndarray (3,), optional
+        Antenna position from the IMU on the triad axes, m.  The antenna sits at
+        ``r + C_true l``: the measurement becomes ``z = M_in^T (r_computed + C l - r_gnss)``
+        (``C`` the computed attitude at the IMU sample nearest the GNSS time) and
+        ``C_true = C (I + [theta x])`` adds ``M_in^T C [l x]`` on ``theta``.
     """
 
-    def __init__(self, time, lat, lon, height, horizontal_sigma_m, vertical_sigma_m, ellipsoid: Ellipsoid = WGS84):
+    def __init__(self, time, lat, lon, height, horizontal_sigma_m, vertical_sigma_m, ellipsoid: Ellipsoid = WGS84,
+                 lever_arm_t=None):
+        self.lever_arm_t = None if lever_arm_t is None else np.asarray(lever_arm_t, float)
         self.time = np.asarray(time, float)
         self.lat = np.asarray(lat, float)
         self.lon = np.asarray(lon, float)
@@ -588,7 +595,13 @@ class GnssMeasurement:
         m_ie = mat_ie(ts, self.ellipsoid.omega)
         r_g = np.einsum("nij,nj->ni", m_ie, geodetic_to_ecef(lat, lon, hh, self.ellipsoid))
         m_in = np.einsum("nij,njk->nik", m_ie, mat_en(lat, lon))
-        zs = np.einsum("nji,nj->ni", m_in, _hermite(nav, ts) - r_g)
+        r_c = _hermite(nav, ts)
+        arm = self.lever_arm_t is not None and np.any(self.lever_arm_t != 0.0)
+        if arm:
+            j = np.clip(np.searchsorted(nav.time, ts), 1, nav.time.size - 1)
+            j -= (ts - nav.time[j - 1]) < (nav.time[j] - ts)
+            r_c = r_c + np.einsum("nij,j->ni", nav.mat_it[j], self.lever_arm_t)
+        zs = np.einsum("nji,nj->ni", m_in, r_c - r_g)
         # H (dq block) = M_in^T C_k: ENU <- triad
         c_k = nav.mat_it[idx][k]
         hq = np.einsum("nji,njk->nik", m_in, c_k)
@@ -606,6 +619,8 @@ class GnssMeasurement:
             sk[:, 0, 1], sk[:, 0, 2], sk[:, 1, 2] = -q_t[:, 2], q_t[:, 1], -q_t[:, 0]
             sk[:, 1, 0], sk[:, 2, 0], sk[:, 2, 1] = q_t[:, 2], -q_t[:, 1], q_t[:, 0]
             hblk[:, :, TH] = np.einsum("nij,njk->nik", hq, sk)
+            if arm:
+                hblk[:, :, TH] += hq @ _skew.py_func(self.lever_arm_t)
         np.add.at(hsum, k, hblk)
         have = cnt > 0
         z[have] = zsum[have] / cnt[have, None]

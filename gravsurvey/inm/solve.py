@@ -152,7 +152,8 @@ ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
 
 
 def estimate_anomaly(record, params: InmParams, initial: InitialState | None, triad: str,
-                     ellipsoid: Ellipsoid = WGS84, attitude_deg=None, reference: bool = False) -> InmSolution:
+                     ellipsoid: Ellipsoid = WGS84, attitude_deg=None, reference: bool = False,
+                     gnss_lever_arm_t=None) -> InmSolution:
     """Estimate the gravity disturbance along a flight (3D-INM + Kalman + RTS).
 
     A GNSS-aided strapdown flight runs up to ``params.attitude_passes`` passes: after each,
@@ -173,6 +174,8 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
         Roll, pitch, heading for a strapdown triad initialised from GNSS.
     reference : bool
         Use the pure-numpy reference kernels (slow; tests).
+    gnss_lever_arm_t : ndarray (3,), optional
+        GNSS antenna position from the IMU on the (strapdown) triad axes, m.
 
     Returns
     -------
@@ -180,6 +183,9 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     """
     if triad not in ("platform", "strapdown"):
         raise ConfigError(f"triad: expected 'platform' or 'strapdown', got {triad!r}")
+    if gnss_lever_arm_t is not None and np.any(np.asarray(gnss_lever_arm_t, float) != 0.0) and triad != "strapdown":
+        raise ConfigError("gnss_lever_arm_m: a lever arm on body axes needs a strapdown triad (a platform's axes are "
+                          "ENU, not the aircraft's)")
     _check_record(record)
     if initial is None:
         initial = initial_state_from_gnss(record, triad, attitude_deg, params=params, ellipsoid=ellipsoid)
@@ -190,7 +196,8 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     for k in range(passes):
         cur = InitialState(initial.lat, initial.lon, initial.height, initial.vel_n, mat_nt0,
                            initial.attitude_cov_t, initial.alignment)
-        nav, idx, c, gnss_used, n_state, out = _one_pass(record, params, cur, ellipsoid, reference, theta_prior)
+        nav, idx, c, gnss_used, n_state, out = _one_pass(record, params, cur, ellipsoid, reference, theta_prior,
+                                                         gnss_lever_arm_t)
         if not (gnss_used and triad == "strapdown") or k == passes - 1:
             break
         th0 = out["x_s"][0, TH]
@@ -238,7 +245,7 @@ def _check_track(record, params, sol, ellipsoid):
                         f"{params.gnss_horizontal_sigma_m:g} m); check triad, imu_axes and the initial attitude")
 
 
-def _one_pass(record, params, initial, ellipsoid, reference, theta_prior):
+def _one_pass(record, params, initial, ellipsoid, reference, theta_prior, lever_arm_t=None):
     """Mechanize, discretise, filter and smooth once about ``initial``."""
     imu = record.imu
     t = np.asarray(imu.time, float)
@@ -266,7 +273,7 @@ def _one_pass(record, params, initial, ellipsoid, reference, theta_prior):
     if gnss_used:
         gn = record.gnss
         meas.append(GnssMeasurement(gn.time, gn.lat, gn.lon, gn.height, params.gnss_horizontal_sigma_m,
-                                    params.gnss_vertical_sigma_m, ellipsoid))
+                                    params.gnss_vertical_sigma_m, ellipsoid, lever_arm_t))
     z, h, r = stack_measurements([m.build(nav, idx, half, n_state) for m in meas])
     c = nav.mat_it[idx]
     att_cov = initial.attitude_cov_t if params.initial_attitude_sigma_deg is None else None
