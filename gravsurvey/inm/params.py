@@ -379,6 +379,19 @@ INITIAL_AGREEMENT_SIGMAS = 5.0
 _GNSS_FIT_S = 10.0
 
 
+def _gnss_fit_velocity_factor(record) -> float:
+    """Velocity sigma of :func:`initial_state_from_gnss`'s fit per metre of GNSS noise, 1/s."""
+    t = np.asarray(record.gnss.time, float)
+    sel = np.flatnonzero(t <= t[0] + _GNSS_FIT_S)
+    if sel.size < 3:
+        sel = np.arange(min(3, t.size))
+    tt = t[sel] - float(record.imu.time[0])
+    deg = 2 if sel.size >= 4 else 1
+    x = np.vander(tt, deg + 1, increasing=True)
+    cov = np.linalg.pinv(x.T @ x)
+    return float(math.sqrt(max(cov[1, 1], 0.0)))
+
+
 def initial_override_from_dict(d, triad: str, key_path: str = "initial") -> dict:
     """Validate an ``initial:`` block whose keys are all optional (overrides of the data).
 
@@ -464,7 +477,10 @@ def resolve_initial_state(record, triad: str, params: InmParams | None = None, e
     k = INITIAL_AGREEMENT_SIGMAS
     s_h = math.hypot(p.initial_position_sigma_m, p.gnss_horizontal_sigma_m)
     s_v = math.hypot(p.initial_position_sigma_m, p.gnss_vertical_sigma_m)
-    s_vel = math.hypot(p.initial_velocity_sigma_mps, p.gnss_horizontal_sigma_m / _GNSS_FIT_S)
+    # the GNSS fit's own velocity sigma (quadratic least squares, derivative at the first IMU sample)
+    s_fit = _gnss_fit_velocity_factor(record)
+    s_vel_h = math.hypot(p.initial_velocity_sigma_mps, p.gnss_horizontal_sigma_m * s_fit)
+    s_vel_v = math.hypot(p.initial_velocity_sigma_mps, p.gnss_vertical_sigma_m * s_fit)
     lat = math.radians(given["lat_deg"]) if "lat_deg" in given else base.lat
     lon = math.radians(given["lon_deg"]) if "lon_deg" in given else base.lon
     d_n = (lat - base.lat) * (m + base.height)
@@ -479,11 +495,13 @@ def resolve_initial_state(record, triad: str, params: InmParams | None = None, e
         raise ConfigError(f"{key_path}.height_m: {height} m differs from the GNSS height {base.height:.2f} m by more "
                           f"than {k:g} x {s_v:.3g} m; fix or remove it")
     vel = np.asarray(given.get("velocity_enu_mps", base.vel_n), float)
-    dv = float(np.max(np.abs(vel - base.vel_n)))
-    if dv > k * s_vel:
-        raise ConfigError(f"{key_path}.velocity_enu_mps: {list(np.round(vel, 3))} m/s differs from the GNSS velocity "
-                          f"{list(np.round(base.vel_n, 3))} m/s by {dv:.3g} m/s (allowed {k:g} x {s_vel:.3g} m/s from "
-                          "model.initial_velocity_sigma_mps); fix or remove it")
+    dv = np.abs(vel - base.vel_n)
+    if dv[0] > k * s_vel_h or dv[1] > k * s_vel_h or dv[2] > k * s_vel_v:
+        fmt = ", ".join
+        raise ConfigError(
+            f"{key_path}.velocity_enu_mps: [{fmt(f'{x:.3f}' for x in vel)}] m/s differs from the GNSS velocity "
+            f"[{fmt(f'{x:.3f}' for x in base.vel_n)}] m/s by more than {k:g} sigma ({s_vel_h:.3g} m/s horizontal, "
+            f"{s_vel_v:.3g} m/s up, from model.initial_velocity_sigma_mps and the GNSS fit); fix or remove it")
     mat_nt, cov, alignment = base.mat_nt, base.attitude_cov_t, base.alignment
     if triad == "strapdown" and att_given is not None:
         from scipy.spatial.transform import Rotation
