@@ -64,6 +64,11 @@ def _flight(static_s):
     return simulate_flight(sim)
 
 
+def rotation_deg(roll, pitch, heading):
+    """The rotation that turns a level, north-pointing FLU frame to (roll, pitch, heading), deg."""
+    return mat_nb_from_attitude(*np.radians([roll, pitch, heading])) @ mat_nb_from_attitude(0.0, 0.0, 0.0).T
+
+
 def _params(**kw):
     return InmParams(accel_noise_mps2=5e-4, gyro_drift_degph=0.005, gravimeter_sigma_mps2=1e-6,
                      gravimeter_white_mps2=1e-4, altimeter_sigma_m=0.05, gnss_horizontal_sigma_m=0.5,
@@ -99,7 +104,7 @@ def run(quick=False) -> list[dict]:
         if not quick:
             errors += [(90.0, 0.0), (180.0, 0.0)]
         for dh, dl in errors:
-            m = mat_nb_from_attitude(math.radians(dl), math.radians(-dl), math.radians(dh)) @ tr["mat_nt"][0]
+            m = rotation_deg(dl, -dl, dh) @ tr["mat_nt"][0]
             given = InitialState(ini.lat, ini.lon, ini.height, ini.vel_n, m)
             for passes, sig in ((1, 0.05), (1, max(dh, dl, 0.05)), (5, max(dh, dl, 0.05))):
                 try:
@@ -114,7 +119,7 @@ def run(quick=False) -> list[dict]:
         if quick:
             mounts = mounts[:2]
         for mount_deg in mounts:
-            mount = mat_nb_from_attitude(*np.radians(mount_deg))
+            mount = rotation_deg(*mount_deg)
             rec = _record(s, mount)
             ex_m = estimate_anomaly(rec, _params(attitude_passes=1),
                                     InitialState(ini.lat, ini.lon, ini.height, ini.vel_n, tr["mat_nt"][0] @ mount),
