@@ -17,7 +17,8 @@ sample and a covariance of its error:
 * **velocity matching in motion** (:func:`velocity_matching`): in inertial axes
   ``v_i(t) - v_i(t_r) - int G_i dt = C_it(t0) int C_t0_t(tau) f_t(tau) dtau``, where the
   left side comes from GNSS positions (differentiated locally, normal gravitation at the
-  GNSS positions) and ``C_t0_t`` from the gyros alone.  The unknown rotation ``C_it(t0)``
+  GNSS positions) and ``C_t0_t`` from the gyros alone; the unknown ``v_i(t_r)`` drops out
+  by centring both sides over the window.  The unknown rotation ``C_it(t0)``
   maps the integrated triad specific force onto the GNSS velocity increments minus gravity:
   Wahba's problem, solved exactly by an SVD at any initial attitude.  Gravity makes the
   vertical observable at once; heading needs horizontal accelerations (speed changes,
@@ -48,19 +49,22 @@ MIN_STATIC_S = 5.0
 #: Block length of the static-period detector, s.
 STATIC_BLOCK_S = 1.0
 #: A block is still static while its mean specific force stays within this of the first
-#: block's (m/s^2; 0.1 m/s^2 ~ 0.6 deg of tilt or a 1 % speed change per second) and its
-#: mean rate within STATIC_RATE_TOL (rad/s; 0.1 deg/s).
-STATIC_FORCE_TOL = 0.1
+#: block's (m/s^2; 0.02 m/s^2 ~ 0.1 deg of tilt) and its mean rate within STATIC_RATE_TOL
+#: (rad/s; 0.1 deg/s).  The IMU cannot tell rest from steady straight flight: with GNSS the
+#: span also ends where the GNSS positions start to move (:func:`align`).
+STATIC_FORCE_TOL = 0.02
 STATIC_RATE_TOL = math.radians(0.1)
+#: Blocks left out before the first moving one (a smooth start of motion stays below the
+#: tolerance for a few seconds and would tilt the levelling).
+STATIC_MARGIN_BLOCKS = 5
 #: Velocity matching: spacing of the matched epochs (s) and window lengths tried (s).
 MATCH_SPACING_S = 2.0
 MATCH_WINDOWS_S = (60.0, 120.0, 240.0, 480.0, 900.0, 1800.0)
 #: Stop growing the window once the heading sigma is below this, deg.
 MATCH_TARGET_HEADING_DEG = 0.05
-#: The matched epochs' errors are not independent (GNSS velocity from overlapping fits, gyro
-#: drift over the window): the least-squares sigma is inflated by this factor (measured:
-#: docs/method.md).
-MATCH_SIGMA_INFLATION = 3.0
+#: Safety factor on the velocity-matching sigma after the residual-correlation scaling
+#: (docs/method.md: the residuals do not show every error, e.g. the gyro-propagated attitude's).
+MATCH_SIGMA_INFLATION = 2.0
 #: Heading sigma above which the alignment is reported as poor, deg.
 POOR_HEADING_DEG = 1.0
 
@@ -191,9 +195,28 @@ def static_span(time, f_t, w_t) -> float:
     moving = have & ((np.linalg.norm(fm - fm[0], axis=1) > STATIC_FORCE_TOL)
                      | (np.linalg.norm(wm - wm[0], axis=1) > STATIC_RATE_TOL))
     first = int(np.argmax(moving)) if moving.any() else nb
-    # the last block before motion may hold its start: leave it out
-    span = max(0.0, (first - 1) * STATIC_BLOCK_S) if moving.any() else float(t[-1] - t[0])
+    # the blocks just before motion may hold its smooth start: leave them out
+    span = max(0.0, (first - STATIC_MARGIN_BLOCKS) * STATIC_BLOCK_S) if moving.any() else float(t[-1] - t[0])
     return float(span)
+
+
+def gnss_static_span(gnss, t0, sigma_m, ellipsoid: Ellipsoid = WGS84) -> float:
+    """Time from ``t0`` until the GNSS positions move from the first one by more than
+    ``5 sigma_m + 0.5 m`` horizontally, s (0 when the first sample is after ``t0 + 2 s``)."""
+    tg = np.asarray(gnss.time, float)
+    lat = np.asarray(gnss.lat, float)
+    lon = np.asarray(gnss.lon, float)
+    ok = np.isfinite(lat) & np.isfinite(lon)
+    tg, lat, lon = tg[ok], lat[ok], lon[ok]
+    if tg.size < 2 or tg[0] > t0 + 2.0:
+        return 0.0
+    r = geodetic_to_ecef(lat, lon, np.zeros_like(lat), ellipsoid)
+    up = r[0] / np.linalg.norm(r[0])
+    d = r - r[0]
+    horiz = np.linalg.norm(d - np.outer(d @ up, up), axis=1)
+    moved = np.flatnonzero(horiz > 5.0 * sigma_m + 0.5)
+    end = tg[moved[0]] if moved.size else tg[-1]
+    return float(max(0.0, end - t0 - STATIC_MARGIN_BLOCKS * STATIC_BLOCK_S))
 
 
 def level(f_mean_t):
@@ -336,6 +359,33 @@ def gnss_inertial_velocity(gnss_time, lat, lon, height, t_query, half_window_s, 
     return out_r, out_v
 
 
+def residual_correlation_factor(res, max_lag=None) -> float:
+    """Variance inflation ``1 + 2 sum_k rho_k`` of a correlated residual series, >= 1.
+
+    Parameters
+    ----------
+    res : ndarray (n, 3)
+        Residuals in time order; the three components' autocorrelations are averaged.
+    max_lag : int, optional
+        Largest lag summed (default n // 4); the sum stops at the first lag whose
+        autocorrelation drops below zero (Geyer's initial positive sequence, simplified).
+    """
+    r = np.asarray(res, float)
+    r = r - r.mean(axis=0)
+    n = r.shape[0]
+    var = float(np.sum(r * r))
+    if n < 4 or var == 0.0:
+        return 1.0
+    lags = max_lag if max_lag is not None else max(1, n // 4)
+    total = 0.0
+    for k in range(1, lags + 1):
+        rho = float(np.sum(r[k:] * r[:-k])) / var
+        if rho <= 0.0:
+            break
+        total += rho
+    return max(1.0, 1.0 + 2.0 * total)
+
+
 def wahba(a, b):
     """Rotation ``R`` minimising ``sum |a_k - R b_k|^2`` (SVD solution of Wahba's problem).
 
@@ -409,15 +459,22 @@ def velocity_matching(time, f_t, w_t, gnss, window_s, ellipsoid: Ellipsoid = WGS
     g_cum = np.zeros_like(g_i)
     g_cum[1:] = np.cumsum(0.5 * (g_i[1:] + g_i[:-1]) * np.diff(tq)[:, None], axis=0)
     u_q = np.stack([np.interp(tq, t, u_cum[:, i]) for i in range(3)], axis=1)
-    a = (v_q[1:] - v_q[0]) - g_cum[1:]
-    b = u_q[1:] - u_q[0]
+    # v(t_k) - int G = v(t_r) + C_it(t0) u(t_k): the unknown v(t_r) is removed by centring both
+    # sides (differencing against one GNSS velocity would put that fit's error into every epoch)
+    a = v_q - g_cum
+    b = u_q
+    a = a - a.mean(axis=0)
+    b = b - b.mean(axis=0)
     rot = wahba(a, b)
     res = a - b @ rot.T
-    dof = max(3 * res.shape[0] - 3, 1)
+    dof = max(3 * res.shape[0] - 6, 1)
     s2 = float(np.sum(res * res)) / dof
     sk = skew(b)
     info = np.einsum("nji,njk->ik", sk, sk)
-    cov = s2 * np.linalg.inv(info) * MATCH_SIGMA_INFLATION**2
+    # the matched epochs' errors are correlated (overlapping GNSS fits, gyro drift, unmodelled
+    # motion): scale by the residuals' own integrated autocorrelation 1 + 2 sum(rho_k)
+    # (the effective number of independent epochs is N / that)
+    cov = s2 * np.linalg.inv(info) * residual_correlation_factor(res) * MATCH_SIGMA_INFLATION**2
     cov += np.eye(3) * (0.5 * gyro_bias_sigma_radps * (tq[-1] - t[0])) ** 2
     return rot, 0.5 * (cov + cov.T), int(tq.size)
 
@@ -461,6 +518,8 @@ def align(record, params=None, ellipsoid: Ellipsoid = WGS84, lat=None) -> Alignm
     have_gnss = gn is not None and len(gn.time) >= 3
     if lat is None and have_gnss:
         lat = float(np.asarray(gn.lat, float)[np.isfinite(gn.lat)][0])
+    if have_gnss and static > 0.0:
+        static = min(static, gnss_static_span(gn, float(t[0]), p.gnss_horizontal_sigma_m, ellipsoid))
     candidates = []
     s_b = math.radians(p.gyro_bias_sigma_degph) / 3600.0
     s_n = math.radians(p.gyro_drift_degph) / 3600.0
