@@ -443,3 +443,20 @@ def test_strapdown_sample_without_initial_block(tmp_path):
     err = np.array([float(r["error_mgal"]) for r in rows if r["error_mgal"] not in ("", "nan")])
     err = err[np.isfinite(err)]
     assert err.size > 100 and _rms(err) < 2.2
+
+
+def test_given_attitude_is_used_when_the_data_cannot_align(in_flight):
+    """GNSS only for the first 30 s of a flight that starts in motion: no alignment possible, but a
+    given attitude is accepted (unchecked) instead of failing."""
+    s = in_flight
+    rec = _record(s)
+    keep = s.gnss_time <= 3.0
+    rec.gnss = GnssChannel(s.gnss_time[keep], np.radians(s.gnss_lat_deg[keep]), np.radians(s.gnss_lon_deg[keep]),
+                           s.gnss_height[keep])
+    with pytest.raises(DataError, match="alignment"):
+        resolve_initial_state(rec, "strapdown", _params())
+    r, p, h = np.degrees(attitude_from_mat_nb(s.truth["mat_nt"][0]))
+    given = initial_override_from_dict({"attitude_deg": [r, p, h]}, "strapdown")
+    st = resolve_initial_state(rec, "strapdown", _params(), given=given)
+    np.testing.assert_allclose(st.mat_nt, s.truth["mat_nt"][0], atol=1e-9)
+    assert st.alignment is None and st.attitude_cov_t is None

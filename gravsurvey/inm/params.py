@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError, check_keys
+from ..errors import ConfigError, DataError, check_keys
 
 RADIUS_SOURCES = ("altimeter", "computed")
 #: Boolean settings (everything else but ``radius_source`` is a number).
@@ -472,7 +472,14 @@ def resolve_initial_state(record, triad: str, params: InmParams | None = None, e
                 mat_nt, cov = alignment.mat_nt, alignment.cov_t
         return InitialState(math.radians(given["lat_deg"]), math.radians(given["lon_deg"]), given["height_m"],
                             np.asarray(given["velocity_enu_mps"], float), mat_nt, cov, alignment)
-    base = initial_state_from_gnss(record, triad, None, params=p, ellipsoid=ell)
+    try:
+        base = initial_state_from_gnss(record, triad, None, params=p, ellipsoid=ell)
+    except DataError:
+        if triad != "strapdown" or att_given is None:
+            raise
+        # the data cannot align this triad (no static period, no usable motion): the given
+        # attitude is all there is; it cannot be checked
+        base = initial_state_from_gnss(record, triad, att_given, params=p, ellipsoid=ell)
     m, n = radii_of_curvature(base.lat, ell)
     k = INITIAL_AGREEMENT_SIGMAS
     s_h = math.hypot(p.initial_position_sigma_m, p.gnss_horizontal_sigma_m)
@@ -503,7 +510,9 @@ def resolve_initial_state(record, triad: str, params: InmParams | None = None, e
             f"[{fmt(f'{x:.3f}' for x in base.vel_n)}] m/s by more than {k:g} sigma ({s_vel_h:.3g} m/s horizontal, "
             f"{s_vel_v:.3g} m/s up, from model.initial_velocity_sigma_mps and the GNSS fit); fix or remove it")
     mat_nt, cov, alignment = base.mat_nt, base.attitude_cov_t, base.alignment
-    if triad == "strapdown" and att_given is not None:
+    if triad == "strapdown" and att_given is not None and alignment is None:
+        mat_nt, cov = mat_nb_from_attitude(*np.radians(att_given)), None
+    elif triad == "strapdown" and att_given is not None:
         from scipy.spatial.transform import Rotation
 
         m_given = mat_nb_from_attitude(*np.radians(att_given))
