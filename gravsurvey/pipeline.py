@@ -221,10 +221,10 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
         timings=timings,
         data_loss=[f"{fl.name}: {n}" for n in record.data_loss],
         estimator={
+            **_attitude_report(sol),
             "method": cfg.processing_method,
             "triad": fl.triad,
             "gnss_aided": bool(getattr(sol, "gnss_aided", False)),
-            **_attitude_report(sol),
         },
     )
 

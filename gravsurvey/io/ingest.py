@@ -62,14 +62,14 @@ class IngestOptions:
                                                      "height": "m"})
     csv_delimiter: str = ","
     gps_leap_seconds: int = 18
-    gap_factor: float = 5.0
-    plausibility: str = "error"  # "error" | "warn"
-    key_path: str = "flight"
-    base_dir: str | None = None  # relative input paths refer to it
     #: sensor axes -> forward-left-up triad axes, (3, 3) proper rotation (``imu_axes``)
     mat_axes: np.ndarray = field(default_factory=lambda: np.eye(3))
     #: GNSS antenna position from the IMU on the forward-left-up triad axes, m, (3,) (``gnss_lever_arm_m``)
     gnss_lever_arm_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    gap_factor: float = 5.0
+    plausibility: str = "error"  # "error" | "warn"
+    key_path: str = "flight"
+    base_dir: str | None = None  # relative input paths refer to it
 
     def _resolve(self, p, base_dir=None):
         base = base_dir if base_dir is not None else self.base_dir
