@@ -28,13 +28,14 @@ import numpy as np
 
 from ..errors import ConfigError, DataError, check_keys
 
+#: Numbers that may be None (null: derived from the data).
+_NULLABLE_KEYS = ("initial_attitude_sigma_deg",)
+#: Integer settings.
+_INT_KEYS = ("attitude_passes",)
+
 RADIUS_SOURCES = ("altimeter", "computed")
 #: Boolean settings (everything else but ``radius_source`` is a number).
 _BOOL_KEYS = ("gnss_aiding",)
-#: Numbers that may be None (null: derived from the data).
-_OPTIONAL_KEYS = ("initial_attitude_sigma_deg",)
-#: Integer settings.
-_INT_KEYS = ("attitude_passes",)
 
 
 @dataclass
@@ -108,9 +109,9 @@ class InmParams:
     gnss_aiding: bool = True
     gnss_horizontal_sigma_m: float = 1.0
     gnss_vertical_sigma_m: float = 2.0
+    attitude_passes: int = 3
     initial_attitude_sigma_deg: float | None = None
     gyro_bias_sigma_degph: float = 0.05
-    attitude_passes: int = 3
 
     def __post_init__(self):
         self.validate()
@@ -129,7 +130,7 @@ class InmParams:
                 if not isinstance(val, bool):
                     raise ConfigError(f"{key}: expected true or false, got {type(val).__name__} {val!r}")
                 continue
-            if f.name in _OPTIONAL_KEYS and val is None:
+            if f.name in _NULLABLE_KEYS and val is None:
                 continue
             if f.name in _INT_KEYS:
                 if isinstance(val, bool) or not isinstance(val, int) or not 1 <= val <= 5:
