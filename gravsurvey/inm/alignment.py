@@ -484,7 +484,7 @@ def align(record, params=None, ellipsoid: Ellipsoid = WGS84, lat=None) -> Alignm
 
     Static levelling + gyrocompassing when the record starts at rest and the gyros are good
     enough; otherwise (or when better) velocity matching against GNSS over a growing window
-    (60 s, 120 s, ... up to 30 min) until the heading sigma is below
+    (60 s, 120 s, ... up to 30 min, or the record) until the heading sigma is below
     :data:`MATCH_TARGET_HEADING_DEG`.
 
     Parameters
@@ -537,22 +537,26 @@ def align(record, params=None, ellipsoid: Ellipsoid = WGS84, lat=None) -> Alignm
     else:
         warn.append("no static period at the start: no levelling or gyrocompassing; aligned in motion")
     if have_gnss:
-        c_t0 = propagate_attitude(t, w, np.eye(3))
+        # only the longest window's samples are needed (a long 200 Hz record would otherwise
+        # hold a (n, 3, 3) attitude history of several 100 MB)
+        cut = t <= t[0] + MATCH_WINDOWS_S[-1]
+        tw, fw, ww = t[cut], f[cut], w[cut]
+        c_t0 = propagate_attitude(tw, ww, np.eye(3))
         best = None
         for win in MATCH_WINDOWS_S:
-            span = min(win, t[-1] - t[0])
+            span = min(win, tw[-1] - tw[0])
             try:
-                rot, cov_t, _ = velocity_matching(t, f, w, gn, span, ellipsoid, c_t0=c_t0,
+                rot, cov_t, _ = velocity_matching(tw, fw, ww, gn, span, ellipsoid, c_t0=c_t0,
                                                   gyro_bias_sigma_radps=s_b)
             except DataError:
-                if span >= t[-1] - t[0]:
+                if span >= tw[-1] - tw[0]:
                     break
                 continue
             m_in0 = _mat_in_at(gn, t[0], ellipsoid)
             mat = m_in0.T @ rot
             cov_n = mat @ cov_t @ mat.T
             best = Alignment(mat, cov_n, "velocity-matching", span, static)
-            if math.degrees(best.sigma_heading_rad) < MATCH_TARGET_HEADING_DEG or span >= t[-1] - t[0]:
+            if math.degrees(best.sigma_heading_rad) < MATCH_TARGET_HEADING_DEG or span >= tw[-1] - tw[0]:
                 break
         if best is not None:
             candidates.append(best)
