@@ -460,3 +460,15 @@ def test_given_attitude_is_used_when_the_data_cannot_align(in_flight):
     st = resolve_initial_state(rec, "strapdown", _params(), given=given)
     np.testing.assert_allclose(st.mat_nt, s.truth["mat_nt"][0], atol=1e-9)
     assert st.alignment is None and st.attitude_cov_t is None
+
+
+def test_gnss_outliers_do_not_fail_a_good_flight(in_flight):
+    """5 % of the GNSS samples 200 m off (multipath, a bad fix): the track check keeps the flight."""
+    s = in_flight
+    rec = _record(s)
+    lat = np.radians(s.gnss_lat_deg).copy()
+    lat[::20] += 200.0 / 6.37e6
+    rec.gnss = GnssChannel(s.gnss_time, lat, np.radians(s.gnss_lon_deg), s.gnss_height)
+    sol = estimate_anomaly(rec, _params(), None, "strapdown")
+    assert sol.gnss_residual_rms_m > 20.0  # the outliers show in the RMS ...
+    assert np.isfinite(sol.g_smooth).all()  # ... but the flight is processed

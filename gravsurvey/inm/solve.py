@@ -217,12 +217,12 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
 
 
 #: The corrected track may not leave the GNSS positions by more than this many GNSS sigmas
-#: (RMS): beyond it the navigation has diverged (wrong axes, triad or attitude).
+#: (median distance): beyond it the navigation has diverged (wrong axes, triad or attitude).
 TRACK_RESIDUAL_SIGMAS = 20.0
 
 
 def _check_track(record, params, sol, ellipsoid):
-    """DataError when the corrected navigation leaves the GNSS track (RMS >> GNSS sigma)."""
+    """DataError when the corrected navigation leaves the GNSS track (median distance >> GNSS sigma)."""
     from ..geodesy import radii_of_curvature
 
     gn = record.gnss
@@ -237,12 +237,16 @@ def _check_track(record, params, sol, ellipsoid):
     d = np.hypot((np.asarray(gn.lat, float)[ok] - lat) * m, d_lon * n * np.cos(lat))
     rms = float(np.sqrt(np.mean(d * d)))
     sol.gnss_residual_rms_m = rms
-    # 1 s epochs interpolated between: allow the speed x interpolation error on top of the sigma
+    # 1 s epochs interpolated between: allow the speed x interpolation error on top of the sigma;
+    # the median, so that a few GNSS outliers do not fail a good flight (a diverged one is off
+    # almost everywhere)
+    med = float(np.median(d))
     limit = TRACK_RESIDUAL_SIGMAS * params.gnss_horizontal_sigma_m + 0.05 * float(np.median(sol.speed))
-    if not rms <= limit:
+    if not med <= limit:
         raise DataError(f"{record.source or 'record'}: the navigation leaves the GNSS track: corrected positions are "
-                        f"{rms:.3g} m RMS from the GNSS positions (expected about model.gnss_horizontal_sigma_m = "
-                        f"{params.gnss_horizontal_sigma_m:g} m); check triad, imu_axes and the initial attitude")
+                        f"{med:.3g} m (median; RMS {rms:.3g} m) from the GNSS positions (expected about "
+                        f"model.gnss_horizontal_sigma_m = {params.gnss_horizontal_sigma_m:g} m); check triad, imu_axes "
+                        "and the initial attitude")
 
 
 def _one_pass(record, params, initial, ellipsoid, reference, theta_prior, lever_arm_t=None):
