@@ -38,13 +38,17 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from gravsurvey.errors import DataError  # noqa: E402
-from gravsurvey.geodesy import MGAL  # noqa: E402
-from gravsurvey.inm.params import (InitialState, InmParams, mat_nb_from_attitude,  # noqa: E402
-                                   resolve_initial_state)
-from gravsurvey.inm.solve import estimate_anomaly  # noqa: E402
-from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel  # noqa: E402
-from gravsurvey.simulate.run import quick_sim, simulate_flight  # noqa: E402
+from gravsurvey.errors import DataError
+from gravsurvey.geodesy import MGAL
+from gravsurvey.inm.params import (
+    InitialState,
+    InmParams,
+    mat_nb_from_attitude,
+    resolve_initial_state,
+)
+from gravsurvey.inm.solve import estimate_anomaly
+from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
+from gravsurvey.simulate.run import quick_sim, simulate_flight
 
 SENSORS = {
     "accelerometer": {"white_sigma_mps2": 5.0e-4},
@@ -99,7 +103,7 @@ def run(quick=False) -> list[dict]:
         exact = estimate_anomaly(_record(s, eye), _params(attitude_passes=1), ini, "strapdown")
         t_from = exact.attitude_converge_s
         base = _rms_after(exact, s, t_from)
-        rows.append(dict(flight=label, case="exact attitude", passes=1, rms_mgal=base, t_from_s=t_from))
+        rows.append({"flight": label, "case": "exact attitude", "passes": 1, "rms_mgal": base, "t_from_s": t_from})
         errors = [(1.0, 0.0), (5.0, 0.0), (20.0, 0.0), (0.0, 3.0), (5.0, 5.0)]
         if not quick:
             errors += [(90.0, 0.0), (180.0, 0.0)]
@@ -113,8 +117,8 @@ def run(quick=False) -> list[dict]:
                     rms = _rms_after(sol, s, t_from)
                 except DataError:
                     rms = math.inf  # the navigation left the GNSS track
-                rows.append(dict(flight=label, case=f"given, heading off {dh:g} deg, roll/pitch off {dl:g} deg",
-                                 passes=passes, sigma_deg=sig, rms_mgal=rms, t_from_s=t_from))
+                rows.append({"flight": label, "case": f"given, heading off {dh:g} deg, roll/pitch off {dl:g} deg",
+                             "passes": passes, "sigma_deg": sig, "rms_mgal": rms, "t_from_s": t_from})
         mounts = [(0.0, 0.0, 0.0), (5.0, -3.0, 90.0), (-4.0, 5.0, 180.0), (3.0, 4.0, 270.0)]
         if quick:
             mounts = mounts[:2]
@@ -129,13 +133,13 @@ def run(quick=False) -> list[dict]:
             sol = estimate_anomaly(rec, _params(), init, "strapdown")
             dt = time.perf_counter() - t0
             al = sol.alignment
-            rows.append(dict(flight=label, case=f"no initial, triad mounted at roll/pitch/heading {mount_deg}",
-                             passes=sol.passes, rms_mgal=_rms_after(sol, s, sol.attitude_converge_s),
-                             exact_rms_mgal=_rms_after(ex_m, s, sol.attitude_converge_s),
-                             t_from_s=sol.attitude_converge_s, method=al.method,
-                             align_sigma_heading_deg=math.degrees(al.sigma_heading_rad),
-                             align_converge_s=al.converge_s,
-                             corrections_deg=[math.degrees(c) for c in sol.attitude_corrections], seconds=dt))
+            rows.append({"flight": label, "case": f"no initial, triad mounted at roll/pitch/heading {mount_deg}",
+                         "passes": sol.passes, "rms_mgal": _rms_after(sol, s, sol.attitude_converge_s),
+                         "exact_rms_mgal": _rms_after(ex_m, s, sol.attitude_converge_s),
+                         "t_from_s": sol.attitude_converge_s, "method": al.method,
+                         "align_sigma_heading_deg": math.degrees(al.sigma_heading_rad),
+                         "align_converge_s": al.converge_s,
+                         "corrections_deg": [math.degrees(c) for c in sol.attitude_corrections], "seconds": dt})
     return rows
 
 

@@ -13,10 +13,22 @@ import pytest
 
 from gravsurvey.errors import ConfigError, DataError
 from gravsurvey.geodesy import MGAL, WGS84
-from gravsurvey.inm.alignment import (ACCEL_BIAS_SIGMA_MPS2, align, attitude_from_mat_nb, gyrocompass, level,
-                                      static_span, wahba)
-from gravsurvey.inm.params import (InitialState, InmParams, initial_override_from_dict, mat_nb_from_attitude,
-                                   resolve_initial_state)
+from gravsurvey.inm.alignment import (
+    ACCEL_BIAS_SIGMA_MPS2,
+    align,
+    attitude_from_mat_nb,
+    gyrocompass,
+    level,
+    static_span,
+    wahba,
+)
+from gravsurvey.inm.params import (
+    InitialState,
+    InmParams,
+    initial_override_from_dict,
+    mat_nb_from_attitude,
+    resolve_initial_state,
+)
 from gravsurvey.inm.solve import estimate_anomaly
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
 from gravsurvey.simulate.run import quick_sim, simulate_flight
@@ -64,8 +76,9 @@ def _params(**kw):
                      gnss_vertical_sigma_m=1.0, **kw)
 
 
-def _record(s, mount=np.eye(3), gnss=True):
-    """The flight as logged by a triad turned by ``mount`` (triad -> body) against the body."""
+def _record(s, mount=None, gnss=True):
+    """The flight as logged by a triad turned by ``mount`` (triad -> body, default identity) against the body."""
+    mount = np.eye(3) if mount is None else mount
     f = s.specific_force_t @ mount  # rows: (mount^T f_b)^T
     w = s.angular_rate_t @ mount
     g = GnssChannel(s.gnss_time, np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg), s.gnss_height) if gnss else None
@@ -73,8 +86,9 @@ def _record(s, mount=np.eye(3), gnss=True):
                         source="sim")
 
 
-def _exact_initial(s, mount=np.eye(3)):
+def _exact_initial(s, mount=None):
     tr = s.truth
+    mount = np.eye(3) if mount is None else mount
     return InitialState(tr["lat"][0], tr["lon"][0], tr["height"][0], tr["vel_n"][0].copy(), tr["mat_nt"][0] @ mount)
 
 
@@ -111,7 +125,7 @@ def test_levelling_and_gyrocompassing_synthetic():
         m_nb = mat_nb_from_attitude(*np.radians([roll, pitch, heading]))
         f_b = m_nb.T @ [0.0, 0.0, g]
         w_b = m_nb.T @ (WGS84.omega * np.array([0.0, math.cos(lat), math.sin(lat)]))
-        up, r, p = level(f_b)
+        _, r, p = level(f_b)
         assert math.degrees(r) == pytest.approx(roll, abs=1e-10)
         assert math.degrees(p) == pytest.approx(pitch, abs=1e-10)
         mat, cov, warn = gyrocompass(f_b, w_b, lat, 600.0, 0.01 * DEGPH, 0.005 * DEGPH)
@@ -333,7 +347,7 @@ def test_gps_cycle_week_tow_time_columns(tmp_path):
 
     p = tmp_path / "alt.csv"
     p.write_text("cyc,wk,tow,h\n2,255,403575.5,10\n2,255,403576.0,11\n")
-    t, v = read_csv_channel(p, "altimeter", {"time": ["cyc", "wk", "tow"], "height": "h"}, "gps_week_sow")
+    t, _ = read_csv_channel(p, "altimeter", {"time": ["cyc", "wk", "tow"], "height": "h"}, "gps_week_sow")
     t2, _ = read_csv_channel(p, "altimeter", {"time": ["wk", "tow"], "height": "h"}, "gps_week_sow")
     assert t[0] - t2[0] == 2 * 1024 * 7 * 86400 * 10**9 and t[1] - t[0] == 500_000_000
     p.write_text("cyc,wk,tow,h\n2,1300,403575.5,10\n")
@@ -344,7 +358,7 @@ def test_gps_cycle_week_tow_time_columns(tmp_path):
 def test_imu_axes_and_lever_arm_options():
     from gravsurvey.io.ingest import IMU_AXES, imu_axes_matrix
 
-    for name, m in IMU_AXES.items():
+    for m in IMU_AXES.values():
         assert np.linalg.det(m) == pytest.approx(1.0) and np.allclose(m @ m.T, np.eye(3))
     # RFU: the right axis is -left, forward is the sensor's y
     np.testing.assert_allclose(imu_axes_matrix("RFU") @ [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
@@ -362,7 +376,7 @@ def test_imu_axes_and_lever_arm_options():
 def test_gnss_lever_arm_is_applied(in_flight):
     """An antenna 6 m ahead of and 2 m above the IMU: with the lever arm declared the track is as
     good as without any arm; ignored, the navigation is off by metres."""
-    from gravsurvey.geodesy import geodetic_to_ecef, ecef_to_geodetic, mat_en
+    from gravsurvey.geodesy import ecef_to_geodetic, geodetic_to_ecef, mat_en
 
     s = in_flight
     arm = np.array([6.0, 0.0, 2.0])
@@ -404,10 +418,11 @@ def _run_cli(cfg, tmp_path):
     import sys
 
     r = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg)], capture_output=True, text=True,
-                       timeout=600, env=dict(os.environ), stdin=subprocess.DEVNULL, cwd=tmp_path)
+                       timeout=600, env=dict(os.environ), stdin=subprocess.DEVNULL, cwd=tmp_path, check=False)
     assert r.returncode == 0, r.stderr
     out = cfg.parent / "out"
-    rows = list(csv.DictReader(open(out / "profiles.csv")))
+    with open(out / "profiles.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
     return json.loads((out / "summary.json").read_text()), rows
 
 

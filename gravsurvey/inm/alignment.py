@@ -36,7 +36,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import DataError
-from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, mat_en, mat_ie, normal_gravitation_ecef
+from ..geodesy import (
+    WGS84,
+    Ellipsoid,
+    geodetic_to_ecef,
+    mat_en,
+    mat_ie,
+    normal_gravitation_ecef,
+)
 from .mechanization import propagate_attitude
 
 #: Heading sigma above which gyrocompassing is refused (the GNSS/motion method is used).
