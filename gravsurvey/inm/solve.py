@@ -8,8 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError, DataError
-from ..geodesy import WGS84, Ellipsoid
-from ..geodesy import mat_en, mat_ie
+from ..geodesy import WGS84, Ellipsoid, mat_en, mat_ie
 from .errormodel import (DP, DQ, F3, G, N_STATE, N_STATE_AIDED, TH, AltimeterMeasurement, GnssMeasurement,
                          discretise, epoch_geometry, initial_covariance, initial_mean)
 from .kalman import filter_and_smooth
