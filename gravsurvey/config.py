@@ -57,6 +57,8 @@ class FlightConfig:
     initial_raw: dict | None
     truth: Path | None
     lines_windows: list | None
+    #: the ``initial`` keys given (all optional overrides of the data; inm.params.resolve_initial_state)
+    initial_given: dict | None = None
 
 
 @dataclass
@@ -245,7 +247,7 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
         Naming the key path and what was expected.
     """
     from .geodesy import get_ellipsoid
-    from .inm.params import InmParams, initial_state_from_dict
+    from .inm.params import InmParams, initial_override_from_dict, initial_state_from_dict
     from .io.ingest import ingest_options_from_dict
     from .survey import SegmentationOptions
     from .wavelet import options_from_dict as postprocess_options_from_dict
@@ -329,14 +331,14 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
             {k: v for k, v in fr.items() if k in FLIGHT_INGEST_KEYS}, key_path=kp, base_dir=base
         )
         init_raw = fr.get("initial")
-        initial = None
+        initial, given = None, None
         if init_raw is not None:
-            initial = initial_state_from_dict(expect_mapping(init_raw, f"{kp}.initial"), triad, f"{kp}.initial")
-        elif triad == "strapdown":
-            raise ConfigError(
-                f"{kp}.initial: a strapdown flight needs initial.attitude_deg (roll, pitch, heading) "
-                "and position/velocity; none given"
-            )
+            given = initial_override_from_dict(expect_mapping(init_raw, f"{kp}.initial"), triad, f"{kp}.initial")
+            complete = {"lat_deg", "lon_deg", "height_m", "velocity_enu_mps"}
+            if triad == "strapdown":
+                complete.add("attitude_deg")
+            if complete <= set(given):
+                initial = initial_state_from_dict(init_raw, triad, f"{kp}.initial")
         truth = _resolve(base, fr["truth"], f"{kp}.truth") if fr.get("truth") is not None else None
         windows = None
         if fr.get("lines") is not None:
@@ -347,7 +349,7 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
             raise ConfigError(f"{kp}.inputs.gravimeter: a gravimeter file is processed by the classic chain only; "
                               f"set processing.method: classic (got {method!r})")
         flights.append(
-            FlightConfig(fname, i, triad, fr, ingest, initial, init_raw, truth, windows)
+            FlightConfig(fname, i, triad, fr, ingest, initial, init_raw, truth, windows, given)
         )
 
     cfg = SurveyConfig(

@@ -156,12 +156,13 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
     if cfg.processing_method == "classic":
         sol = _classic_solution(cfg, fl, record)
     else:
-        from .inm.params import initial_state_from_gnss
-        from .inm.params import solvability_warnings
+        from .inm.params import resolve_initial_state, solvability_warnings
         from .inm.solve import estimate_anomaly
 
-        initial = fl.initial if fl.initial is not None else initial_state_from_gnss(record, fl.triad)
-        sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid)
+        initial = resolve_initial_state(record, fl.triad, cfg.model, cfg.ellipsoid, fl.initial_given,
+                                        f"flights[{fl.index}].initial")
+        sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid,
+                               gnss_lever_arm_t=getattr(fl.ingest, "gnss_lever_arm_m", None))
     timings["estimate_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -221,6 +222,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
         timings=timings,
         data_loss=[f"{fl.name}: {n}" for n in record.data_loss],
         estimator={
+            **_attitude_report(sol),
             "method": cfg.processing_method,
             "triad": fl.triad,
             "gnss_aided": bool(getattr(sol, "gnss_aided", False)),
@@ -228,6 +230,25 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
             "kalman_resolution_m": float(getattr(sol, "resolution_m", float("nan"))),
         },
     )
+
+
+def _attitude_report(sol) -> dict:
+    """Alignment and attitude-estimation summary for the flight's ``estimator`` (summary.json)."""
+    out = {}
+    al = getattr(sol, "alignment", None)
+    if al is not None:
+        out.update(al.to_dict())
+        for w in al.warnings:
+            warnings.warn(f"alignment: {w}")
+    att_sig = getattr(sol, "attitude_sigma", None)
+    if att_sig is not None and np.isfinite(att_sig).any():
+        med = np.degrees(np.nanmedian(att_sig, axis=0))
+        out["attitude_sigma_median_deg"] = {"roll": float(med[0]), "pitch": float(med[1]), "heading": float(med[2])}
+        out["attitude_passes"] = int(sol.passes)
+        out["attitude_corrections_deg"] = [float(np.degrees(c)) for c in sol.attitude_corrections]
+        out["attitude_converge_s"] = float(sol.attitude_converge_s)
+        out["gnss_residual_rms_m"] = float(sol.gnss_residual_rms_m)
+    return out
 
 
 class _ClassicSolution:
@@ -253,12 +274,13 @@ def _classic_solution(cfg, fl, record):
     position track for the Eotvos correction also comes from the mechanization.
     """
     from .classic import classic_reduction, strapdown_attitude
-    from .inm.params import initial_state_from_gnss
+    from .inm.params import resolve_initial_state
 
     mat_nt, track = None, None
     needs_nav = fl.triad == "strapdown" or record.gnss is None
     if needs_nav:
-        initial = fl.initial if fl.initial is not None else initial_state_from_gnss(record, fl.triad)
+        initial = resolve_initial_state(record, fl.triad, cfg.model, cfg.ellipsoid, fl.initial_given,
+                                        f"flights[{fl.index}].initial")
         if fl.triad == "strapdown":
             mat_nt = strapdown_attitude(record, initial, ellipsoid=cfg.ellipsoid)
         if record.gnss is None:

@@ -14,12 +14,12 @@ flights:
       # csv: {imu: F01/imu.csv, altimeter: F01/altimeter.csv, gnss: F01/gnss.csv}
     topics: {imu: /imu, altimeter: /altimeter, gnss: /gnss}
     triad: platform                # platform (ENU-stabilised) | strapdown (body axes)
-    initial:                       # state at the first IMU sample (optional with GNSS, platform)
-      lat_deg: 45.0
-      lon_deg: 135.0
-      height_m: 1000.0
-      velocity_enu_mps: [50.0, 0.0, 0.0]
-      attitude_deg: [0.0, 0.0, 90.0]   # roll, pitch, heading (deg) of the triad w.r.t. ENU
+    # imu_axes: FLU                # strapdown sensor axes: FLU | FRD (VectorNav, Xsens, iMAR, NovAtel) | RFU | 3x3
+    # gnss_lever_arm_m: [0, 0, 0]  # antenna from the IMU, m, forward-left-up (strapdown)
+    # initial:                     # optional: the first state comes from the data (GNSS position and
+    #   attitude_deg: [r, p, h]    # velocity, attitude from the alignment); any key given here
+    #                              # (lat_deg, lon_deg, height_m, velocity_enu_mps, attitude_deg)
+    #                              # overrides it and is checked against the data
     # truth: F01/truth.csv         # simulator truth: adds truth_mgal / error_mgal columns
 
 model:                             # 3D-INM Kalman filter; defaults are seed 004's values

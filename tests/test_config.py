@@ -74,9 +74,11 @@ def test_strapdown_without_initial_attitude(tmp_path):
     text = SAMPLE.read_text()
     assert "initial:" not in text  # the sample is a platform flight initialised from GNSS
     p = tmp_path / "c.yaml"
-    p.write_text(text.replace("triad: platform", "triad: strapdown"))
-    with pytest.raises(ConfigError, match=r"flights\[0\]\.initial"):
-        C.load_config(p)
+    p.write_text(text.replace("triad: platform", "triad: strapdown").replace(
+        "truth: F01/truth.csv", f"truth: {SAMPLE.parent / 'F01' / 'truth.csv'}"))
+    # issue 13: no initial block needed; position/velocity from GNSS, attitude from the alignment
+    fl = C.load_config(p).flights[0]
+    assert fl.triad == "strapdown" and fl.initial is None and fl.initial_given is None
 
 
 def test_yaml_12_floats_and_bad_yaml(tmp_path):

@@ -214,8 +214,11 @@ def test_gnss_initialisation_and_bad_records():
     ref = estimate_anomaly(rec, InmParams(**TINY), initial_of(s), "platform")
     keep = sol.time >= 300.0
     assert rms((sol.g_smooth - ref.g_smooth)[keep]) < 0.05 * MGAL
-    with pytest.raises(ConfigError, match="initial.attitude_deg: required"):
-        estimate_anomaly(rec, InmParams(), None, "strapdown")
+    # issue 13: a strapdown triad without an attitude is aligned from the data; this ENU platform
+    # record read as a body triad is level with its x axis (the "nose") east
+    sd = estimate_anomaly(rec, InmParams(**TINY), None, "strapdown")
+    assert sd.alignment is not None
+    np.testing.assert_allclose(np.degrees(sd.attitude[0]), [0.0, 0.0, 90.0], atol=0.05)
     with pytest.raises(ConfigError, match="triad"):
         estimate_anomaly(rec, InmParams(), initial_of(s), "gimbal")
     bad = record_of(s)

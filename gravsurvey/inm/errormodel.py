@@ -63,6 +63,9 @@ TH1, TH2, TH3, BG1, BG2, BG3 = range(8, 14)
 N_STATE_AIDED = 14
 TH = np.array([TH1, TH2, TH3])
 BG = np.array([BG1, BG2, BG3])
+#: Attitude sigma (deg) of an attitude that was given (platform, ``initial.attitude_deg``) when
+#: ``model.initial_attitude_sigma_deg`` is not set.
+GIVEN_ATTITUDE_SIGMA_DEG = 0.05
 _PERM_AIDED = np.array([0, 3, 1, 4, 2, 5, 6, 7, 8, 9, 10, 11, 12, 13])
 
 
@@ -350,7 +353,7 @@ def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = Fal
     return phi, q
 
 
-def initial_covariance(params, q_t=None, p_t=None) -> np.ndarray:
+def initial_covariance(params, q_t=None, p_t=None, attitude_cov_t=None) -> np.ndarray:
     """Prior covariance at the first epoch (zero prior mean).
 
     Parameters
@@ -362,6 +365,10 @@ def initial_covariance(params, q_t=None, p_t=None) -> np.ndarray:
         ``dp = C^T dv - p x theta`` with independent ``dr`` (initial_position_sigma_m),
         ``dv`` (initial_velocity_sigma_mps) and ``theta`` (initial_attitude_sigma_deg), and
         the gyro bias (gyro_bias_sigma_degph).  Otherwise the seed's diagonal (8, 8).
+    attitude_cov_t : ndarray (3, 3), optional
+        Covariance of ``theta`` on the triad axes, rad^2 (e.g. from the coarse alignment,
+        :attr:`gravsurvey.inm.alignment.Alignment.cov_t`); replaces the isotropic
+        ``initial_attitude_sigma_deg``.
     """
     if q_t is None or p_t is None:
         d = np.empty(8)
@@ -372,14 +379,18 @@ def initial_covariance(params, q_t=None, p_t=None) -> np.ndarray:
         return np.diag(d)
     # linear map from independent (dr, dv, theta) to (dq, dp, theta), block order
     sq, sv = params.initial_position_sigma_m, params.initial_velocity_sigma_mps
-    sa = math.radians(params.initial_attitude_sigma_deg)
+    sa = math.radians(GIVEN_ATTITUDE_SIGMA_DEG if params.initial_attitude_sigma_deg is None
+                      else params.initial_attitude_sigma_deg)
     m = np.zeros((9, 9))
     m[0:3, 0:3] = np.eye(3)
     m[3:6, 3:6] = np.eye(3)
     m[6:9, 6:9] = np.eye(3)
     m[0:3, 6:9] = -_skew.py_func(np.asarray(q_t, float))
     m[3:6, 6:9] = -_skew.py_func(np.asarray(p_t, float))
-    cov = m @ np.diag([sq**2] * 3 + [sv**2] * 3 + [sa**2] * 3) @ m.T
+    indep = np.diag([sq**2] * 3 + [sv**2] * 3 + [sa**2] * 3)
+    if attitude_cov_t is not None:
+        indep[6:9, 6:9] = np.asarray(attitude_cov_t, float)
+    cov = m @ indep @ m.T
     blk = np.zeros((14, 14))
     rows = [0, 1, 2, 3, 4, 5, 8, 9, 10]
     blk[np.ix_(rows, rows)] = cov
@@ -390,6 +401,22 @@ def initial_covariance(params, q_t=None, p_t=None) -> np.ndarray:
         blk[i, i] = sb**2
     p = blk[np.ix_(_PERM_AIDED, _PERM_AIDED)]
     return 0.5 * (p + p.T)
+
+
+def initial_mean(theta_t, q_t, p_t) -> np.ndarray:
+    """Prior mean (14,) of the aided state for an attitude error ``theta_t`` (rad, triad axes).
+
+    With the position and velocity errors ``dr``, ``dv`` of zero mean the seed's states carry
+    the attitude: ``dq = -q x theta`` and ``dp = -p x theta`` (:func:`continuous_model_n`).
+    Used when the filter is re-run about a corrected attitude while the prior stays the
+    alignment's (the prior mean is then the old attitude seen from the new one).
+    """
+    th = np.asarray(theta_t, float)
+    x = np.zeros(N_STATE_AIDED)
+    x[DQ] = -np.cross(np.asarray(q_t, float), th)
+    x[DP] = -np.cross(np.asarray(p_t, float), th)
+    x[TH] = th
+    return x
 
 
 # --------------------------------------------------------------------------
@@ -528,9 +555,16 @@ class GnssMeasurement:
     horizontal_sigma_m, vertical_sigma_m : float
         1-sigma of each sample's east/north and up error, m (> 0).
     ellipsoid : Ellipsoid
+    lever_arm_t : ndarray (3,), optional
+        Antenna position from the IMU on the triad axes, m.  The antenna sits at
+        ``r + C_true l``: the measurement becomes ``z = M_in^T (r_computed + C l - r_gnss)``
+        (``C`` the computed attitude at the IMU sample nearest the GNSS time) and
+        ``C_true = C (I + [theta x])`` adds ``M_in^T C [l x]`` on ``theta``.
     """
 
-    def __init__(self, time, lat, lon, height, horizontal_sigma_m, vertical_sigma_m, ellipsoid: Ellipsoid = WGS84):
+    def __init__(self, time, lat, lon, height, horizontal_sigma_m, vertical_sigma_m, ellipsoid: Ellipsoid = WGS84,
+                 lever_arm_t=None):
+        self.lever_arm_t = None if lever_arm_t is None else np.asarray(lever_arm_t, float)
         self.time = np.asarray(time, float)
         self.lat = np.asarray(lat, float)
         self.lon = np.asarray(lon, float)
@@ -561,7 +595,13 @@ class GnssMeasurement:
         m_ie = mat_ie(ts, self.ellipsoid.omega)
         r_g = np.einsum("nij,nj->ni", m_ie, geodetic_to_ecef(lat, lon, hh, self.ellipsoid))
         m_in = np.einsum("nij,njk->nik", m_ie, mat_en(lat, lon))
-        zs = np.einsum("nji,nj->ni", m_in, _hermite(nav, ts) - r_g)
+        r_c = _hermite(nav, ts)
+        arm = self.lever_arm_t is not None and np.any(self.lever_arm_t != 0.0)
+        if arm:
+            j = np.clip(np.searchsorted(nav.time, ts), 1, nav.time.size - 1)
+            j -= (ts - nav.time[j - 1]) < (nav.time[j] - ts)
+            r_c = r_c + np.einsum("nij,j->ni", nav.mat_it[j], self.lever_arm_t)
+        zs = np.einsum("nji,nj->ni", m_in, r_c - r_g)
         # H (dq block) = M_in^T C_k: ENU <- triad
         c_k = nav.mat_it[idx][k]
         hq = np.einsum("nji,njk->nik", m_in, c_k)
@@ -579,6 +619,8 @@ class GnssMeasurement:
             sk[:, 0, 1], sk[:, 0, 2], sk[:, 1, 2] = -q_t[:, 2], q_t[:, 1], -q_t[:, 0]
             sk[:, 1, 0], sk[:, 2, 0], sk[:, 2, 1] = q_t[:, 2], -q_t[:, 1], q_t[:, 0]
             hblk[:, :, TH] = np.einsum("nij,njk->nik", hq, sk)
+            if arm:
+                hblk[:, :, TH] += hq @ _skew.py_func(self.lever_arm_t)
         np.add.at(hsum, k, hblk)
         have = cnt > 0
         z[have] = zsum[have] / cnt[have, None]

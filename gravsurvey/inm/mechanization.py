@@ -411,6 +411,31 @@ def initial_inertial_state(time0, lat, lon, height, vel_n, mat_nt, ellipsoid: El
     return m_ie @ r_e, m_ie @ v_e, m_ie @ m_en @ np.asarray(mat_nt, float)
 
 
+def propagate_attitude(time, w_t, mat_0) -> np.ndarray:
+    """Triad attitude from integrated gyro rates (the mechanization's attitude step).
+
+    Parameters
+    ----------
+    time : ndarray (n,)
+        IMU times, s.
+    w_t : ndarray (n, 3)
+        Absolute angular rate on the triad, rad/s.
+    mat_0 : ndarray (3, 3)
+        Attitude at ``time[0]`` (any frame ``a`` fixed in inertial space -> triad).
+
+    Returns
+    -------
+    ndarray (n, 3, 3)
+        ``mat_0 @ C_t0_t(t)``: ``C_t0_t`` rotates the triad at ``t`` onto the triad at
+        ``time[0]``; with ``mat_0 = I`` the triad's rotation since the first sample.
+    """
+    t = np.ascontiguousarray(time, dtype=float)
+    w = np.ascontiguousarray(w_t, dtype=float)
+    out = np.empty((t.size, 3, 3))
+    _attitude_kernel(t, w, np.ascontiguousarray(mat_0, dtype=float), out)
+    return out
+
+
 def mechanize(time, f_t, w_t, initial, alt_time=None, alt_height=None, use_ext=True,
               ellipsoid: Ellipsoid = WGS84, reference=False) -> Navigation:
     """Mechanize a flight from its initial state.

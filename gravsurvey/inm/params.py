@@ -26,7 +26,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError, check_keys
+from ..errors import ConfigError, DataError, check_keys
+
+#: Numbers that may be None (null: derived from the data).
+_NULLABLE_KEYS = ("initial_attitude_sigma_deg",)
+#: Integer settings.
+_INT_KEYS = ("attitude_passes",)
 
 RADIUS_SOURCES = ("altimeter", "computed")
 #: Boolean settings (everything else but ``radius_source`` is a number).
@@ -76,8 +81,16 @@ class InmParams:
         ``|q| nu t``: km after hours), which moves the normal field under the estimate.
     gnss_horizontal_sigma_m, gnss_vertical_sigma_m : float
         1-sigma of each GNSS sample's east/north and up error, m (> 0).
-    initial_attitude_sigma_deg : float
+    initial_attitude_sigma_deg : float or None
         Initial 1-sigma of each triad attitude-error component, deg (GNSS-aided filter only).
+        None (default): the coarse alignment's own covariance when the attitude comes from
+        the alignment (docs/method.md, "Alignment"), 0.05 deg when it is given (a platform's
+        levelled triad, or ``initial.attitude_deg``).
+    attitude_passes : int
+        Most filter/smoother passes for a strapdown triad with GNSS aiding (1-5, default 3):
+        after a pass the initial attitude is corrected by the smoothed attitude error and the
+        flight is mechanized and filtered again about it (the prior stays the alignment's);
+        it stops when the correction is below 0.001 deg.
     gyro_bias_sigma_degph : float
         1-sigma of each gyro's constant bias, deg/h (GNSS-aided filter only: with position
         aiding the bias is observable and is estimated as three extra states).
@@ -113,7 +126,8 @@ class InmParams:
     gnss_aiding: bool = True
     gnss_horizontal_sigma_m: float = 1.0
     gnss_vertical_sigma_m: float = 2.0
-    initial_attitude_sigma_deg: float = 0.05
+    attitude_passes: int = 3
+    initial_attitude_sigma_deg: float | None = None
     gyro_bias_sigma_degph: float = 0.05
     identify: bool = True
     target_resolution_m: float | None = None
@@ -150,6 +164,12 @@ class InmParams:
                 if not isinstance(val, bool):
                     raise ConfigError(f"{key}: expected true or false, got {type(val).__name__} {val!r}")
                 continue
+            if f.name in _NULLABLE_KEYS and val is None:
+                continue
+            if f.name in _INT_KEYS:
+                if isinstance(val, bool) or not isinstance(val, int) or not 1 <= val <= 5:
+                    raise ConfigError(f"{key}: expected an integer from 1 to 5, got {val!r}")
+                continue
             if isinstance(val, bool) or not isinstance(val, (int, float)):
                 raise ConfigError(f"{key}: expected a number, got {type(val).__name__} {val!r}")
             if not math.isfinite(val) or val < 0:
@@ -184,7 +204,7 @@ class InmParams:
         obj.validate(key_path)
         # integers are fine in YAML; store floats
         for f in dataclasses.fields(cls):
-            if f.name in _INTERNAL or f.name in _BOOL_KEYS or f.name == "radius_source":
+            if f.name in _INTERNAL or f.name in _BOOL_KEYS + _INT_KEYS or f.name == "radius_source":
                 continue
             if getattr(obj, f.name) is not None:
                 setattr(obj, f.name, float(getattr(obj, f.name)))
@@ -244,6 +264,11 @@ class InitialState:
         Velocity relative to the Earth, ENU, m/s.
     mat_nt : ndarray, shape (3, 3)
         Triad -> local ENU rotation (identity for an ENU platform).
+    attitude_cov_t : ndarray, shape (3, 3), or None
+        Covariance of the attitude error on the triad axes, rad^2, when the attitude comes
+        from the coarse alignment (:mod:`gravsurvey.inm.alignment`); None when it was given.
+    alignment : Alignment or None
+        The coarse alignment the attitude came from (method, sigmas, time to converge).
     """
 
     lat: float
@@ -251,6 +276,8 @@ class InitialState:
     height: float
     vel_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
     mat_nt: np.ndarray = field(default_factory=lambda: np.eye(3))
+    attitude_cov_t: np.ndarray | None = None
+    alignment: object | None = None
 
 
 def mat_nb_from_attitude(roll, pitch, heading):
@@ -330,27 +357,36 @@ def initial_state_from_dict(d, triad: str, key_path: str = "initial") -> Initial
     return InitialState(math.radians(lat), math.radians(lon), h, vel, mat_nt)
 
 
-def initial_state_from_gnss(record, triad: str, attitude_deg=None) -> InitialState:
-    """Initial state from the GNSS channel at the first IMU sample.
+def initial_state_from_gnss(record, triad: str, attitude_deg=None, params=None, ellipsoid=None) -> InitialState:
+    """Initial state from the data at the first IMU sample.
 
     Position and velocity come from a quadratic least-squares fit to the GNSS
     positions over the first 10 s (at least 3 samples).  A platform triad is
-    ENU; a strapdown triad needs ``attitude_deg`` [roll, pitch, heading] from
-    the config.
+    ENU; a strapdown triad takes ``attitude_deg`` [roll, pitch, heading] when
+    given, else the coarse alignment (:func:`gravsurvey.inm.alignment.align`), whose
+    covariance and report travel with the state.
 
     Raises
     ------
     ConfigError
-        Strapdown triad without attitude, or no usable GNSS data.
+        No usable GNSS data.
+    DataError
+        A strapdown record that cannot be aligned.
     """
     _check_triad(triad, "triad")
     gn = record.gnss
     if gn is None or len(gn.time) < 3:
         raise ConfigError("initial: no GNSS channel (>= 3 samples) to initialise from; give an 'initial:' block")
+    cov, alignment = None, None
     if triad == "strapdown":
         if attitude_deg is None:
-            raise ConfigError("initial.attitude_deg: required for a strapdown triad (GNSS gives no attitude)")
-        mat_nt = mat_nb_from_attitude(*np.radians(np.asarray(attitude_deg, dtype=float)))
+            from ..geodesy import WGS84
+            from .alignment import align
+
+            alignment = align(record, params, ellipsoid or WGS84)
+            mat_nt, cov = alignment.mat_nt, alignment.cov_t
+        else:
+            mat_nt = mat_nb_from_attitude(*np.radians(np.asarray(attitude_deg, dtype=float)))
     else:
         mat_nt = np.eye(3)
     t0 = float(record.imu.time[0])
@@ -373,4 +409,163 @@ def initial_state_from_gnss(record, triad: str, attitude_deg=None) -> InitialSta
     ve = np.polyval(np.polyder(po), 0.0) * (n + h0) * math.cos(lat0)
     vn = np.polyval(np.polyder(pl), 0.0) * (m + h0)
     vu = np.polyval(np.polyder(ph), 0.0)
-    return InitialState(float(lat0), float(lon0), float(h0), np.array([ve, vn, vu]), mat_nt)
+    return InitialState(float(lat0), float(lon0), float(h0), np.array([ve, vn, vu]), mat_nt, cov, alignment)
+
+
+#: Agreement required between an ``initial`` override and the data, in combined sigmas.
+INITIAL_AGREEMENT_SIGMAS = 5.0
+#: Span of the GNSS fit for the initial velocity (initial_state_from_gnss), s.
+_GNSS_FIT_S = 10.0
+
+
+def _gnss_fit_velocity_factor(record) -> float:
+    """Velocity sigma of :func:`initial_state_from_gnss`'s fit per metre of GNSS noise, 1/s."""
+    t = np.asarray(record.gnss.time, float)
+    sel = np.flatnonzero(t <= t[0] + _GNSS_FIT_S)
+    if sel.size < 3:
+        sel = np.arange(min(3, t.size))
+    tt = t[sel] - float(record.imu.time[0])
+    deg = 2 if sel.size >= 4 else 1
+    x = np.vander(tt, deg + 1, increasing=True)
+    cov = np.linalg.pinv(x.T @ x)
+    return float(math.sqrt(max(cov[1, 1], 0.0)))
+
+
+def initial_override_from_dict(d, triad: str, key_path: str = "initial") -> dict:
+    """Validate an ``initial:`` block whose keys are all optional (overrides of the data).
+
+    Returns
+    -------
+    dict
+        The keys present, as floats (``velocity_enu_mps``, ``attitude_deg``: ndarray (3,)).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``key_path.<key>`` for unknown or malformed keys.
+    """
+    if not isinstance(d, dict):
+        raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
+    check_keys(d, _INITIAL_KEYS, key_path)
+    out = {}
+    for k in ("lat_deg", "lon_deg", "height_m"):
+        if k in d:
+            out[k] = float(_num(d, k, key_path))
+    if "lat_deg" in out and not -90.0 < out["lat_deg"] < 90.0:
+        raise ConfigError(f"{key_path}.lat_deg: expected a latitude in (-90, 90) deg, got {out['lat_deg']}")
+    for k in ("velocity_enu_mps", "attitude_deg"):
+        if k in d:
+            out[k] = _num(d, k, key_path, 3)
+    return out
+
+
+def resolve_initial_state(record, triad: str, params: InmParams | None = None, ellipsoid=None, given=None,
+                          key_path: str = "initial") -> InitialState:
+    """Initial state from the data, with the config's ``initial`` keys as checked overrides.
+
+    Position, velocity (GNSS fit) and, for a strapdown triad, attitude (coarse alignment)
+    come from the data.  Each key of ``given`` replaces its value after a check: a value
+    that disagrees with the data by more than :data:`INITIAL_AGREEMENT_SIGMAS` combined
+    sigmas (its stated ``model.initial_*_sigma`` and the data's) is a :class:`ConfigError`
+    naming the key.  A given attitude is used when it is consistent and its sigma
+    (``model.initial_attitude_sigma_deg``, default 0.05 deg) beats the alignment's.
+    Without GNSS the position and velocity keys are required.
+
+    Parameters
+    ----------
+    record : FlightRecord
+    triad : {"platform", "strapdown"}
+    params : InmParams, optional
+    ellipsoid : Ellipsoid, optional
+    given : dict, optional
+        From :func:`initial_override_from_dict`.
+    key_path : str
+        Path of the ``initial`` block in error messages.
+    """
+    from ..geodesy import WGS84, radii_of_curvature
+
+    p = params if params is not None else InmParams()
+    ell = ellipsoid or WGS84
+    given = dict(given or {})
+    _check_triad(triad, "triad")
+    gn = record.gnss
+    have_gnss = gn is not None and len(gn.time) >= 3
+    from .errormodel import GIVEN_ATTITUDE_SIGMA_DEG
+
+    s_att = math.radians(GIVEN_ATTITUDE_SIGMA_DEG if p.initial_attitude_sigma_deg is None
+                         else p.initial_attitude_sigma_deg)
+    att_given = given.get("attitude_deg")
+    if not have_gnss:
+        for k in ("lat_deg", "lon_deg", "height_m", "velocity_enu_mps"):
+            if k not in given:
+                raise ConfigError(f"{key_path}.{k}: missing; the record has no GNSS (>= 3 samples) to take the initial "
+                                  "position and velocity from")
+        mat_nt, cov, alignment = np.eye(3), None, None
+        if triad == "strapdown":
+            if att_given is not None:
+                mat_nt = mat_nb_from_attitude(*np.radians(att_given))
+            else:
+                from .alignment import align
+
+                alignment = align(record, p, ell, lat=math.radians(given["lat_deg"]))
+                mat_nt, cov = alignment.mat_nt, alignment.cov_t
+        return InitialState(math.radians(given["lat_deg"]), math.radians(given["lon_deg"]), given["height_m"],
+                            np.asarray(given["velocity_enu_mps"], float), mat_nt, cov, alignment)
+    try:
+        base = initial_state_from_gnss(record, triad, None, params=p, ellipsoid=ell)
+    except DataError:
+        if triad != "strapdown" or att_given is None:
+            raise
+        # the data cannot align this triad (no static period, no usable motion): the given
+        # attitude is all there is; it cannot be checked
+        base = initial_state_from_gnss(record, triad, att_given, params=p, ellipsoid=ell)
+    m, n = radii_of_curvature(base.lat, ell)
+    k = INITIAL_AGREEMENT_SIGMAS
+    s_h = math.hypot(p.initial_position_sigma_m, p.gnss_horizontal_sigma_m)
+    s_v = math.hypot(p.initial_position_sigma_m, p.gnss_vertical_sigma_m)
+    # the GNSS fit's own velocity sigma (quadratic least squares, derivative at the first IMU sample)
+    s_fit = _gnss_fit_velocity_factor(record)
+    s_vel_h = math.hypot(p.initial_velocity_sigma_mps, p.gnss_horizontal_sigma_m * s_fit)
+    s_vel_v = math.hypot(p.initial_velocity_sigma_mps, p.gnss_vertical_sigma_m * s_fit)
+    lat = math.radians(given["lat_deg"]) if "lat_deg" in given else base.lat
+    lon = math.radians(given["lon_deg"]) if "lon_deg" in given else base.lon
+    d_n = (lat - base.lat) * (m + base.height)
+    d_e = (((lon - base.lon + math.pi) % (2 * math.pi)) - math.pi) * (n + base.height) * math.cos(base.lat)
+    for key, dist in (("lat_deg", abs(d_n)), ("lon_deg", abs(d_e))):
+        if key in given and dist > k * s_h:
+            raise ConfigError(f"{key_path}.{key}: {given[key]} deg is {dist:.4g} m from the GNSS position at the first "
+                              f"IMU sample (allowed {k:g} x {s_h:.3g} m from model.initial_position_sigma_m and "
+                              "model.gnss_horizontal_sigma_m); fix or remove it")
+    height = given.get("height_m", base.height)
+    if abs(height - base.height) > k * s_v:
+        raise ConfigError(f"{key_path}.height_m: {height} m differs from the GNSS height {base.height:.2f} m by more "
+                          f"than {k:g} x {s_v:.3g} m; fix or remove it")
+    vel = np.asarray(given.get("velocity_enu_mps", base.vel_n), float)
+    dv = np.abs(vel - base.vel_n)
+    if dv[0] > k * s_vel_h or dv[1] > k * s_vel_h or dv[2] > k * s_vel_v:
+        fmt = ", ".join
+        raise ConfigError(
+            f"{key_path}.velocity_enu_mps: [{fmt(f'{x:.3f}' for x in vel)}] m/s differs from the GNSS velocity "
+            f"[{fmt(f'{x:.3f}' for x in base.vel_n)}] m/s by more than {k:g} sigma ({s_vel_h:.3g} m/s horizontal, "
+            f"{s_vel_v:.3g} m/s up, from model.initial_velocity_sigma_mps and the GNSS fit); fix or remove it")
+    mat_nt, cov, alignment = base.mat_nt, base.attitude_cov_t, base.alignment
+    if triad == "strapdown" and att_given is not None and alignment is None:
+        mat_nt, cov = mat_nb_from_attitude(*np.radians(att_given)), None
+    elif triad == "strapdown" and att_given is not None:
+        from scipy.spatial.transform import Rotation
+
+        m_given = mat_nb_from_attitude(*np.radians(att_given))
+        th_n = Rotation.from_matrix(m_given @ mat_nt.T).as_rotvec()
+        lev, head = math.hypot(th_n[0], th_n[1]), abs(th_n[2])
+        s_lev = math.hypot(s_att, alignment.sigma_level_rad)
+        s_head = math.hypot(s_att, alignment.sigma_heading_rad)
+        if lev > k * s_lev or head > k * s_head:
+            al = alignment.attitude_deg()
+            raise ConfigError(
+                f"{key_path}.attitude_deg: {list(np.round(att_given, 3))} (roll, pitch, heading) disagrees with the "
+                f"alignment from the data ({al[0]:.3f}, {al[1]:.3f}, {al[2] % 360:.3f}) by {math.degrees(lev):.3g} deg "
+                f"level, {math.degrees(head):.3g} deg heading (allowed {k:g} x {math.degrees(s_lev):.2g} / "
+                f"{math.degrees(s_head):.2g} deg with model.initial_attitude_sigma_deg); fix or remove it")
+        if s_att < alignment.sigma_heading_rad:
+            mat_nt, cov = m_given, None
+    return InitialState(lat, lon, height, vel, mat_nt, cov, alignment)

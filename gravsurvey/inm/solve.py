@@ -8,12 +8,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError, DataError
-from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef
+from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, mat_en, mat_ie
 from .errormodel import (DP, DQ, F3, G, N_STATE, N_STATE_AIDED, TH, AltimeterMeasurement, GnssMeasurement,
-                         discretise, epoch_geometry, initial_covariance)
+                         discretise, epoch_geometry, initial_covariance, initial_mean)
 from .identify import identify_params, model_resolution_m, refine_prior, wide_prior_params
 from .kalman import filter_and_smooth
-from .mechanization import mechanize, navigation_to_geodetic
+from .mechanization import mechanize, navigation_to_geodetic, rodrigues
 from .params import InitialState, InmParams, initial_state_from_gnss, solvability_warnings
 
 __all__ = ["InmSolution", "estimate_anomaly", "solvability_warnings", "initial_state_from_gnss"]
@@ -69,6 +69,23 @@ class InmSolution:
     gnss_aided : bool
         Whether GNSS positions were used as a measurement (``model.gnss_aiding`` and a GNSS
         channel in the record).
+    attitude : ndarray (N, 3)
+        Corrected roll, pitch, heading of a strapdown (forward-left-up) triad, rad (heading
+        in [0, 2 pi)); NaN for a platform triad.
+    attitude_sigma : ndarray (N, 3)
+        Smoothed 1-sigma of roll, pitch and heading, rad (GNSS-aided strapdown only; NaN
+        otherwise).
+    passes : int
+        Filter/smoother passes run (``model.attitude_passes``).
+    attitude_corrections : list of float
+        Size of the initial-attitude correction after each pass, rad.
+    alignment : Alignment or None
+        The coarse alignment the initial attitude came from (None: given).
+    attitude_converge_s : float
+        Time after the first epoch from which the forward filter's heading sigma stays
+        within twice its median over the flight, s (GNSS-aided strapdown; NaN otherwise).
+    gnss_residual_rms_m : float
+        RMS horizontal distance of the corrected track from the GNSS positions, m.
     """
 
     time: np.ndarray
@@ -97,6 +114,13 @@ class InmSolution:
     identification: dict = field(default_factory=dict)
     log_likelihood: float = float("nan")
     resolution_m: float = float("nan")
+    attitude: np.ndarray | None = None
+    attitude_sigma: np.ndarray | None = None
+    passes: int = 1
+    attitude_corrections: list = field(default_factory=list)
+    alignment: object | None = None
+    attitude_converge_s: float = float("nan")
+    gnss_residual_rms_m: float = float("nan")
 
 
 def _check_record(record):
@@ -138,13 +162,164 @@ def stack_measurements(parts):
     return z, h, r
 
 
-def _filter_pass(record, nav, params: InmParams, alt_t, alt_h, ellipsoid, reference=False) -> dict:
-    """Discretise, build the measurements and run filter + smoother once.
+#: The passes stop once the initial-attitude correction is below this, rad (0.001 deg).
+ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
 
-    Returns the :func:`filter_and_smooth` dict plus ``idx`` (IMU indices of the epochs),
-    ``c`` (triad -> inertial at the epochs), ``z, h, r``, ``gnss_used`` and ``n_state``.
+
+def estimate_anomaly(record, params: InmParams, initial: InitialState | None, triad: str,
+                     ellipsoid: Ellipsoid = WGS84, attitude_deg=None, reference: bool = False,
+                     gnss_lever_arm_t=None) -> InmSolution:
+    """Estimate the gravity disturbance along a flight (3D-INM + Kalman + RTS).
+
+    A GNSS-aided strapdown flight runs up to ``params.attitude_passes`` passes: after each,
+    the initial attitude is corrected by the smoothed attitude error at the first epoch
+    (``C_true = C Exp(theta)``) and the flight is mechanized and filtered again about it.
+    The prior is kept (the alignment's): its mean becomes the old attitude seen from the new
+    one (:func:`gravsurvey.inm.errormodel.initial_mean`), an iterated (Gauss-Newton) smoother.
+
+    Parameters
+    ----------
+    record : FlightRecord
+    params : InmParams
+    initial : InitialState or None
+        State at the first IMU sample; None: from GNSS (:func:`initial_state_from_gnss`).
+    triad : {"platform", "strapdown"}
+    ellipsoid : Ellipsoid
+    attitude_deg : sequence of 3 floats, optional
+        Roll, pitch, heading for a strapdown triad initialised from GNSS.
+    reference : bool
+        Use the pure-numpy reference kernels (slow; tests).
+    gnss_lever_arm_t : ndarray (3,), optional
+        GNSS antenna position from the IMU on the (strapdown) triad axes, m.
+
+    Returns
+    -------
+    InmSolution
+    """
+    if triad not in ("platform", "strapdown"):
+        raise ConfigError(f"triad: expected 'platform' or 'strapdown', got {triad!r}")
+    if gnss_lever_arm_t is not None and np.any(np.asarray(gnss_lever_arm_t, float) != 0.0) and triad != "strapdown":
+        raise ConfigError("gnss_lever_arm_m: a lever arm on body axes needs a strapdown triad (a platform's axes are "
+                          "ENU, not the aircraft's)")
+    _check_record(record)
+    if initial is None:
+        initial = initial_state_from_gnss(record, triad, attitude_deg, params=params, ellipsoid=ellipsoid)
+    mat_nt0 = np.array(initial.mat_nt, float)
+    theta_prior = np.zeros(3)  # the prior attitude seen from the current linearisation point
+    corrections = []
+    passes = int(params.attitude_passes)
+    ident = {}
+    for k in range(passes):
+        cur = InitialState(initial.lat, initial.lon, initial.height, initial.vel_n, mat_nt0,
+                           initial.attitude_cov_t, initial.alignment)
+        nav = _mechanize(record, params, cur, ellipsoid, reference)
+        if k == 0:
+            speed0 = _typical_speed(record, nav, ellipsoid)
+            if params.identify:
+                params, ident = _identify(record, params, cur, nav, ellipsoid, reference, theta_prior,
+                                          gnss_lever_arm_t, speed0)
+        idx, c, gnss_used, n_state, out = _one_pass(record, params, cur, nav, ellipsoid, reference, theta_prior,
+                                                    gnss_lever_arm_t)
+        if not (gnss_used and triad == "strapdown") or k == passes - 1:
+            break
+        th0 = out["x_s"][0, TH]
+        corrections.append(float(np.linalg.norm(th0)))
+        if corrections[-1] < ATTITUDE_CONVERGED_RAD:
+            break
+        # C_true = C Exp(theta): the triad -> ENU matrix gets the same right factor
+        rot = rodrigues(np.ascontiguousarray(th0))
+        mat_nt0 = mat_nt0 @ rot
+        # prior attitude (old point) seen from the new point: C_old = C_new Exp(-th0)
+        theta_prior = theta_prior - th0
+    sol = _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, k + 1, corrections)
+    sol.alignment = initial.alignment
+    sol.params = params
+    sol.identification = ident
+    sol.warnings = sol.warnings + list(ident.get("warnings", []))
+    sol.log_likelihood = innovation_log_likelihood(out["x_p"], out["p_p"], out["z"], out["h"], out["r"])
+    alt_t = np.asarray(record.altimeter.time, float)
+    sol.resolution_m = float(ident["resolution_m"]) if ident.get("resolution_m") else model_resolution_m(
+        params, speed0, float(np.median(np.diff(alt_t))) if alt_t.size > 1 else 1.0)
+    if gnss_used:
+        _check_track(record, params, sol, ellipsoid)
+    return sol
+
+
+#: The corrected track may not leave the GNSS positions by more than this many GNSS sigmas
+#: (median distance): beyond it the navigation has diverged (wrong axes, triad or attitude).
+TRACK_RESIDUAL_SIGMAS = 20.0
+
+
+def _check_track(record, params, sol, ellipsoid):
+    """DataError when the corrected navigation leaves the GNSS track (median distance >> GNSS sigma)."""
+    from ..geodesy import radii_of_curvature
+
+    gn = record.gnss
+    tg = np.asarray(gn.time, float)
+    ok = (tg >= sol.time[0]) & (tg <= sol.time[-1]) & np.isfinite(gn.lat) & np.isfinite(gn.lon)
+    if ok.sum() < 3:
+        return
+    lat = np.interp(tg[ok], sol.time, sol.lat)
+    lon = np.interp(tg[ok], sol.time, np.unwrap(sol.lon))
+    m, n = radii_of_curvature(lat, ellipsoid)
+    d_lon = (np.asarray(gn.lon, float)[ok] - lon + math.pi) % (2.0 * math.pi) - math.pi
+    d = np.hypot((np.asarray(gn.lat, float)[ok] - lat) * m, d_lon * n * np.cos(lat))
+    rms = float(np.sqrt(np.mean(d * d)))
+    sol.gnss_residual_rms_m = rms
+    # 1 s epochs interpolated between: allow the speed x interpolation error on top of the sigma;
+    # the median, so that a few GNSS outliers do not fail a good flight (a diverged one is off
+    # almost everywhere)
+    med = float(np.median(d))
+    limit = TRACK_RESIDUAL_SIGMAS * params.gnss_horizontal_sigma_m + 0.05 * float(np.median(sol.speed))
+    if not med <= limit:
+        raise DataError(f"{record.source or 'record'}: the navigation leaves the GNSS track: corrected positions are "
+                        f"{med:.3g} m (median; RMS {rms:.3g} m) from the GNSS positions (expected about "
+                        f"model.gnss_horizontal_sigma_m = {params.gnss_horizontal_sigma_m:g} m); check triad, imu_axes "
+                        "and the initial attitude")
+
+
+def _altimeter(record):
+    """Finite altimeter samples: times (s) and heights (m)."""
+    alt_t = np.asarray(record.altimeter.time, float)
+    alt_h = np.asarray(record.altimeter.height, float)
+    good = np.isfinite(alt_h)
+    if not good.any():
+        raise DataError(f"{record.source or 'record'}: altimeter.height: no finite samples")
+    return alt_t[good], alt_h[good]
+
+
+def _mechanize(record, params, initial, ellipsoid, reference):
+    """Mechanize the record about ``initial`` (gravity with the altimeter radius by default)."""
+    imu = record.imu
+    alt_t, alt_h = _altimeter(record)
+    return mechanize(np.asarray(imu.time, float), imu.specific_force_t, imu.angular_rate_t, initial, alt_t, alt_h,
+                     use_ext=params.radius_source == "altimeter", ellipsoid=ellipsoid, reference=reference)
+
+
+def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, speed0):
+    """Identify the model from the flight (gravsurvey.inm.identify; docs/method.md).
+
+    1) noise levels from the vertical channel's spectrum; 2) a first pass with a wide anomaly
+    prior; 3) the prior that minimises the expected error given that estimate's spectrum.
+    """
+    alt_t, alt_h = _altimeter(record)
+    params, ident = identify_params(params, nav, record.imu.specific_force_t, alt_t, alt_h, speed0, ellipsoid)
+    if ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
+        wide = wide_prior_params(params, ident, speed0)
+        idx, _, _, _, first = _one_pass(record, wide, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t)
+        params, ident = refine_prior(params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))),
+                                     wide, speed0)
+    return params, ident
+
+
+def _one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t=None):
+    """Discretise, filter and smooth once about the mechanization ``nav``.
+
+    Returns ``idx`` (IMU indices of the epochs), ``c`` (triad -> inertial at the epochs),
+    ``gnss_used``, ``n_state`` and the :func:`filter_and_smooth` dict (plus ``z, h, r``).
     """
     t = nav.time
+    alt_t, alt_h = _altimeter(record)
     # filter epochs: IMU samples decimated by the nearest integer factor
     imu_rate = (t.size - 1) / (t[-1] - t[0])
     step = max(1, int(round(imu_rate / params.filter_rate_hz)))
@@ -161,72 +336,26 @@ def _filter_pass(record, nav, params: InmParams, alt_t, alt_h, ellipsoid, refere
     if gnss_used:
         gn = record.gnss
         meas.append(GnssMeasurement(gn.time, gn.lat, gn.lon, gn.height, params.gnss_horizontal_sigma_m,
-                                    params.gnss_vertical_sigma_m, ellipsoid))
+                                    params.gnss_vertical_sigma_m, ellipsoid, lever_arm_t))
     z, h, r = stack_measurements([m.build(nav, idx, half, n_state) for m in meas])
     c = nav.mat_it[idx]
+    att_cov = initial.attitude_cov_t if params.initial_attitude_sigma_deg is None else None
     if gnss_used:
         q_t0 = c[0].T @ nav.r_i[idx[0]]
         p_t0 = c[0].T @ nav.v_i[idx[0]]
-        p0 = initial_covariance(params, q_t0, p_t0)
+        p0 = initial_covariance(params, q_t0, p_t0, attitude_cov_t=att_cov)
+        x0 = initial_mean(theta_prior, q_t0, p_t0)
     else:
         p0 = initial_covariance(params)
-    out = filter_and_smooth(np.zeros(n_state), p0, phi, q, z, h, r, reference=reference)
-    out.update(idx=idx, c=c, z=z, h=h, r=r, gnss_used=gnss_used, n_state=n_state)
-    return out
+        x0 = np.zeros(n_state)
+    out = filter_and_smooth(x0, p0, phi, q, z, h, r, reference=reference)
+    out.update(z=z, h=h, r=r)
+    return idx, c, gnss_used, n_state, out
 
-
-def estimate_anomaly(record, params: InmParams, initial: InitialState | None, triad: str,
-                     ellipsoid: Ellipsoid = WGS84, attitude_deg=None, reference: bool = False) -> InmSolution:
-    """Estimate the gravity disturbance along a flight (3D-INM + Kalman + RTS).
-
-    Parameters
-    ----------
-    record : FlightRecord
-    params : InmParams
-    initial : InitialState or None
-        State at the first IMU sample; None: from GNSS (:func:`initial_state_from_gnss`).
-    triad : {"platform", "strapdown"}
-    ellipsoid : Ellipsoid
-    attitude_deg : sequence of 3 floats, optional
-        Roll, pitch, heading for a strapdown triad initialised from GNSS.
-    reference : bool
-        Use the pure-numpy reference kernels (slow; tests).
-
-    Returns
-    -------
-    InmSolution
-    """
-    if triad not in ("platform", "strapdown"):
-        raise ConfigError(f"triad: expected 'platform' or 'strapdown', got {triad!r}")
-    _check_record(record)
-    if initial is None:
-        initial = initial_state_from_gnss(record, triad, attitude_deg)
-    imu = record.imu
-    t = np.asarray(imu.time, float)
-    alt_t = np.asarray(record.altimeter.time, float)
-    alt_h = np.asarray(record.altimeter.height, float)
-    good = np.isfinite(alt_h)
-    alt_t, alt_h = alt_t[good], alt_h[good]
-    if alt_t.size == 0:
-        raise DataError(f"{record.source or 'record'}: altimeter.height: no finite samples")
-    nav = mechanize(t, imu.specific_force_t, imu.angular_rate_t, initial, alt_t, alt_h,
-                    use_ext=params.radius_source == "altimeter", ellipsoid=ellipsoid, reference=reference)
-    speed0 = _typical_speed(record, nav, ellipsoid)
-    ident = {}
-    if params.identify:
-        # 1) noise levels from the vertical channel's spectrum; 2) a first pass with a wide
-        # anomaly prior; 3) the prior that minimises the expected error given the spectrum of
-        # that first estimate (gravsurvey.inm.identify, docs/method.md)
-        params, ident = identify_params(params, nav, imu.specific_force_t, alt_t, alt_h, speed0, ellipsoid)
-        if ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
-            wide = wide_prior_params(params, ident, speed0)
-            first = _filter_pass(record, nav, wide, alt_t, alt_h, ellipsoid, reference)
-            params, ident = refine_prior(params, ident, first["x_s"][:, G],
-                                         float(np.median(np.diff(t[first["idx"]]))), wide, speed0)
-    fp = _filter_pass(record, nav, params, alt_t, alt_h, ellipsoid, reference)
-    out, idx, c, gnss_used, n_state = fp, fp["idx"], fp["c"], fp["gnss_used"], fp["n_state"]
+def _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, passes, corrections):
+    """Corrected navigation, attitude and the anomaly from the last pass's smoother output."""
+    t = nav.time
     x_s, p_s, x_f, p_f = out["x_s"], out["p_s"], out["x_f"], out["p_f"]
-    loglik = innovation_log_likelihood(out["x_p"], out["p_p"], fp["z"], fp["h"], fp["r"])
 
     # corrections: true = computed - error; the position and velocity errors on the triad are
     # dq (+ q x theta when aided) and dp (+ p x theta), to inertial through C
@@ -258,9 +387,10 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     innov = out["innov"]
     if innov.shape[1] == 1:
         innov = innov[:, 0]
-    warn = solvability_warnings(params, float(np.median(speed))) + list(ident.get("warnings", []))
-    resolution = ident.get("resolution_m") if ident.get("resolution_m") else model_resolution_m(
-        params, speed0, float(np.median(np.diff(alt_t))) if alt_t.size > 1 else 1.0)
+    warn = solvability_warnings(params, float(np.median(speed)))
+    att, att_sig = _attitude(nav, idx, c, x_s, p_s, lat, lon, gnss_used, triad, ellipsoid)
+    conv = (_heading_converge_s(t[idx], c, p_f, lat, lon, ellipsoid) if gnss_used and triad == "strapdown"
+            else float("nan"))
     return InmSolution(
         time=t[idx].copy(),
         g_forward=x_f[:, G].copy(),
@@ -284,11 +414,59 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
         x_forward=x_f,
         warnings=warn,
         gnss_aided=gnss_used,
-        params=params,
-        identification=ident,
-        log_likelihood=loglik,
-        resolution_m=resolution,
+        attitude=att,
+        attitude_sigma=att_sig,
+        passes=passes,
+        attitude_corrections=corrections,
+        attitude_converge_s=conv,
     )
+
+
+def _attitude(nav, idx, c, x_s, p_s, lat, lon, gnss_used, triad, ellipsoid):
+    """Corrected roll, pitch, heading (rad) and their 1-sigma per epoch, (N, 3) each.
+
+    ``C_true = C (I + [theta x])`` (triad -> inertial), to ENU at the corrected position.
+    The sigmas map the smoothed ``theta`` covariance to ENU axes: heading about Up, roll
+    about the nose's and pitch about the left wing's horizontal direction (exact in level
+    flight).  NaN for a platform triad (its axes are ENU, not the aircraft's).
+    """
+    n = idx.size
+    if triad != "strapdown":
+        return np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    th = x_s[:, TH] if gnss_used else np.zeros((n, 3))
+    sk = np.zeros((n, 3, 3))
+    sk[:, 0, 1], sk[:, 0, 2], sk[:, 1, 2] = -th[:, 2], th[:, 1], -th[:, 0]
+    sk[:, 1, 0], sk[:, 2, 0], sk[:, 2, 1] = th[:, 2], -th[:, 1], th[:, 0]
+    c_true = c + np.einsum("nij,njk->nik", c, sk)
+    m_in = np.einsum("nij,njk->nik", mat_ie(nav.time[idx], ellipsoid.omega), mat_en(lat, lon))
+    m_nt = np.einsum("nji,njk->nik", m_in, c_true)
+    nose, left, roof = m_nt[:, :, 0], m_nt[:, :, 1], m_nt[:, :, 2]
+    heading = np.mod(np.arctan2(nose[:, 0], nose[:, 1]), 2.0 * math.pi)
+    pitch = np.arcsin(np.clip(nose[:, 2], -1.0, 1.0))
+    roll = np.arctan2(left[:, 2], roof[:, 2])
+    sig = np.full((n, 3), np.nan)
+    if gnss_used:
+        p_th = p_s[:, TH][:, :, TH]
+        cov_n = np.einsum("nij,njk,nlk->nil", m_nt, p_th, m_nt)
+        along = np.stack([np.sin(heading), np.cos(heading), np.zeros(n)], axis=1)
+        across = np.stack([-np.cos(heading), np.sin(heading), np.zeros(n)], axis=1)
+        sig[:, 0] = np.sqrt(np.einsum("ni,nij,nj->n", along, cov_n, along))
+        sig[:, 1] = np.sqrt(np.einsum("ni,nij,nj->n", across, cov_n, across))
+        sig[:, 2] = np.sqrt(cov_n[:, 2, 2])
+    return np.stack([roll, pitch, heading], axis=1), sig
+
+
+def _heading_converge_s(time, c, p_f, lat, lon, ellipsoid):
+    """Time from the first epoch after which the forward heading sigma stays <= 2 x its median, s."""
+    m_in = np.einsum("nij,njk->nik", mat_ie(time, ellipsoid.omega), mat_en(lat, lon))
+    up_t = np.einsum("nji,nj->ni", c, m_in[:, :, 2])  # Up on the triad (C^T M_in e_U)
+    p_th = p_f[:, TH][:, :, TH]
+    s_head = np.sqrt(np.einsum("ni,nij,nj->n", up_t, p_th, up_t))
+    bad = np.flatnonzero(s_head > 2.0 * np.median(s_head))
+    if bad.size == 0:
+        return 0.0
+    k = min(bad[-1] + 1, time.size - 1)
+    return float(time[k] - time[0])
 
 
 def innovation_log_likelihood(x_p, p_p, z, h, r) -> float:

@@ -109,7 +109,9 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
     role : {"imu", "altimeter", "gnss"}
     columns : dict, optional
         quantity -> column name (``DEFAULT_COLUMNS[role]`` completed by these).  ``time`` is
-        one column, or two ``[week, seconds_of_week]`` for ``gps_week_sow``.
+        one column, or two ``[week, seconds_of_week]`` for ``gps_week_sow``, or three
+        ``[cycle, week, seconds_of_week]`` for a 10-bit week with its roll-over count
+        (full week = 1024 cycle + week; VectorNav's ``GpsCycle, GpsWeek, GpsTow``).
     time_format : {"ns", "s", "gps_week_sow", "iso"}
         Integer ns since the Unix epoch; decimal seconds since the Unix epoch; GPS week and
         seconds of week (GPS time, converted to UTC by ``gps_leap_seconds``); ISO 8601 UTC.
@@ -175,9 +177,9 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
         if len(r) != ncol:
             raise DataError(f"{path}: line {line_no[k]}: {len(r)} fields, header has {ncol}")
     tcols = cols["time"] if isinstance(cols["time"], list) else [cols["time"]]
-    if time_format == "gps_week_sow" and len(tcols) != 2:
+    if time_format == "gps_week_sow" and len(tcols) not in (2, 3):
         raise DataError(f"{path}: time format gps_week_sow needs two time columns "
-                        "[week, seconds_of_week]")
+                        "[week, seconds_of_week] or three [cycle, week, seconds_of_week]")
     if time_format != "gps_week_sow" and len(tcols) != 1:
         raise DataError(f"{path}: time format {time_format} needs one time column")
     tstr = [[r[index[c]] for r in rows] for c in tcols]
@@ -188,8 +190,17 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
     elif time_format == "iso":
         t = _iso(tstr[0], path, line_no, tcols[0])
     else:
-        week = _ns(tstr[0], path, line_no, tcols[0])
-        sow = _seconds_to_ns(tstr[1], path, line_no, tcols[1])
+        week = _ns(tstr[-2], path, line_no, tcols[-2])
+        if len(tcols) == 3:
+            # 10-bit week (0-1023) and the number of roll-overs (GPS ICD: cycles of 1024 weeks)
+            cycle = _ns(tstr[0], path, line_no, tcols[0])
+            bad = np.flatnonzero((week < 0) | (week > 1023) | (cycle < 0))
+            if bad.size:
+                k = int(bad[0])
+                raise DataError(f"{path}: line {line_no[k]}: columns {tcols[0]!r}, {tcols[1]!r}: expected a "
+                                f"roll-over count >= 0 and a 10-bit week 0-1023, got {cycle[k]}, {week[k]}")
+            week = cycle * 1024 + week
+        sow = _seconds_to_ns(tstr[-1], path, line_no, tcols[-1])
         t = (GPS_EPOCH_UNIX_S - gps_leap_seconds) * 10**9 + week * WEEK_NS + sow
     vals = {}
     for q, kind in QUANTITIES[role]:

@@ -27,7 +27,14 @@ from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, Im
 ROLES = ("imu", "altimeter", "gnss")
 DEFAULT_TOPICS = {"imu": "/imu", "altimeter": "/altimeter", "gnss": "/gnss"}
 #: Flight-level keys this module owns (config.py should hand them over / not reject them).
-INGEST_KEYS = ("inputs", "topics", "mcap", "csv", "checks")
+INGEST_KEYS = ("inputs", "topics", "mcap", "csv", "checks", "imu_axes", "gnss_lever_arm_m")
+#: IMU axis conventions -> matrix mapping the sensor axes onto forward-left-up body axes
+#: (``vec_flu = M @ vec_sensor``); any other mounting is given as a 3x3 matrix.
+IMU_AXES = {
+    "FLU": np.eye(3),
+    "FRD": np.diag([1.0, -1.0, -1.0]),  # VectorNav, Xsens, iMAR, NovAtel
+    "RFU": np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+}
 
 
 @dataclass
@@ -55,6 +62,10 @@ class IngestOptions:
                                                      "height": "m"})
     csv_delimiter: str = ","
     gps_leap_seconds: int = 18
+    #: sensor axes -> forward-left-up triad axes, (3, 3) proper rotation (``imu_axes``)
+    mat_axes: np.ndarray = field(default_factory=lambda: np.eye(3))
+    #: GNSS antenna position from the IMU on the forward-left-up triad axes, m, (3,) (``gnss_lever_arm_m``)
+    gnss_lever_arm_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
     gap_factor: float = 5.0
     plausibility: str = "error"  # "error" | "warn"
     key_path: str = "flight"
@@ -218,9 +229,10 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
                 out = {}
                 for k, v in cm.items():
                     if k == "time" and isinstance(v, list):
-                        if len(v) != 2:
+                        if len(v) not in (2, 3):
                             raise ConfigError(f"{q}.time: expected a column name, or "
-                                              f"[week, seconds_of_week] columns, got {v!r}")
+                                              f"[week, seconds_of_week] or [cycle, week, seconds_of_week] "
+                                              f"columns, got {v!r}")
                         out[k] = [_str_value(x, f"{q}.time") for x in v]
                     else:
                         out[k] = _str_value(v, f"{q}.{k}")
@@ -242,6 +254,18 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
         if "gps_leap_seconds" in c:
             o.gps_leap_seconds = _number(c["gps_leap_seconds"], f"{p}.gps_leap_seconds", 0, 100,
                                          integer=True)
+    if "imu_axes" in cfg:
+        o.mat_axes = imu_axes_matrix(cfg["imu_axes"], f"{key_path}.imu_axes")
+    if "gnss_lever_arm_m" in cfg:
+        v = cfg["gnss_lever_arm_m"]
+        q = f"{key_path}.gnss_lever_arm_m"
+        if (not isinstance(v, list) or len(v) != 3
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+            raise ConfigError(f"{q}: expected [forward, left, up] in m on the IMU's (FLU) axes, got {v!r}")
+        arm = np.array(v, dtype=float)
+        if not np.all(np.isfinite(arm)) or np.max(np.abs(arm)) > 100.0:
+            raise ConfigError(f"{q}: expected finite components within 100 m, got {v!r}")
+        o.gnss_lever_arm_m = arm
     if "checks" in cfg:
         p = f"{key_path}.checks"
         c = _mapping(cfg["checks"], p)
@@ -251,6 +275,37 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
         if "plausibility" in c:
             o.plausibility = _choice(c["plausibility"], ("error", "warn"), f"{p}.plausibility")
     return o
+
+
+def imu_axes_matrix(value, key_path="imu_axes") -> np.ndarray:
+    """Matrix (3, 3) mapping the IMU's axes onto forward-left-up axes from ``imu_axes``.
+
+    Parameters
+    ----------
+    value : str or list
+        ``FLU`` (gravsurvey's own), ``FRD`` (forward-right-down: VectorNav, Xsens, iMAR,
+        NovAtel), ``RFU`` (right-forward-up), or a 3x3 matrix (rows: the FLU axes on the
+        sensor axes, ``vec_flu = M @ vec_sensor``), which must be a proper rotation.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``key_path`` for an unknown name or a matrix that is not a proper rotation.
+    """
+    if isinstance(value, str):
+        if value.upper() not in IMU_AXES:
+            raise ConfigError(f"{key_path}: expected one of {', '.join(IMU_AXES)} or a 3x3 matrix, got {value!r}")
+        return IMU_AXES[value.upper()].copy()
+    try:
+        m = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        m = None
+    if m is None or m.shape != (3, 3) or not np.all(np.isfinite(m)):
+        raise ConfigError(f"{key_path}: expected one of {', '.join(IMU_AXES)} or a 3x3 matrix, got {value!r}")
+    if not np.allclose(m @ m.T, np.eye(3), atol=1e-6) or np.linalg.det(m) < 0:
+        raise ConfigError(f"{key_path}: the matrix must be a proper rotation (orthonormal rows, determinant +1; a "
+                          f"mirrored axis set cannot be a sensor triad), got {value!r}")
+    return m
 
 
 # ----------------------------------------------------------------------------- loading
@@ -492,6 +547,10 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
     raw, content = read_raw_channels(options, base_dir, notes)
     for ch in raw.values():
         _drop_nonfinite(ch, notes)
+    if "imu" in raw and not np.array_equal(options.mat_axes, np.eye(3)):
+        # the sensor axes onto forward-left-up (imu_axes) before the checks, which expect +g on z at rest
+        for q in ("specific_force", "angular_rate"):
+            raw["imu"].values[q] = raw["imu"].values[q] @ options.mat_axes.T
     for role in ("imu", "altimeter"):
         if role not in raw or len(raw[role].time_ns) == 0:
             src = raw[role].source if role in raw else (options.mcap_path or "")

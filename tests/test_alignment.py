@@ -1,0 +1,493 @@
+"""Coarse alignment and attitude estimation (gravsurvey.inm.alignment, issue 13) against known truth.
+
+Truth: the simulator (gravsurvey/simulate) and a real static VectorNav VN-310E recording
+(tests/data/real-imu, MPL-2.0) with the device's own attitude solution.
+"""
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gravsurvey.errors import ConfigError, DataError
+from gravsurvey.geodesy import MGAL, WGS84
+from gravsurvey.inm.alignment import (
+    ACCEL_BIAS_SIGMA_MPS2,
+    align,
+    attitude_from_mat_nb,
+    gyrocompass,
+    level,
+    static_span,
+    wahba,
+)
+from gravsurvey.inm.params import (
+    InitialState,
+    InmParams,
+    initial_override_from_dict,
+    mat_nb_from_attitude,
+    resolve_initial_state,
+)
+from gravsurvey.inm.solve import estimate_anomaly
+from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
+from gravsurvey.simulate.run import quick_sim, simulate_flight
+
+DATA = Path(__file__).parent / "data" / "real-imu"
+DEGPH = math.radians(1.0) / 3600.0
+
+SENSORS = {
+    "accelerometer": {"white_sigma_mps2": 5.0e-4},
+    "gravimeter": {"markov_sigma_mps2": 1.0e-6, "markov_lambda_per_s": 0.025, "white_sigma_mps2": 1.0e-4},
+    "gyro": {"bias_degph": [0.03, -0.02, 0.01], "white_drift_degph": 0.005},
+    "altimeter": {"sigma_m": 0.05},
+    "gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0},
+}
+
+
+def _grid(static_s):
+    return {"kind": "grid", "origin_lat_deg": 47.0, "origin_lon_deg": 11.0, "altitude_m": 800.0, "speed_mps": 70.0,
+            "lines": {"count": 3, "spacing_m": 3000.0, "length_m": 25000.0, "heading_deg": 0.0},
+            "static_start_s": static_s}
+
+
+def _simulate(static_s):
+    """Strapdown grid, 22-25 min at 10 Hz, gyro biases <= 0.03 deg/h, 0.5 m GNSS at 5 Hz."""
+    sim = quick_sim(plan=_grid(static_s), triad="strapdown", noise=SENSORS, field="seed_smooth", gnss_hz=5.0,
+                    altimeter_hz=5.0, seed=3,
+                    turbulence={"vertical_sigma_m": 1.0, "horizontal_sigma_m": 1.0, "attitude_sigma_deg": 0.5})
+    return simulate_flight(sim)
+
+
+@pytest.fixture(scope="module")
+def in_flight():
+    """Starts at cruise speed: no static period."""
+    return _simulate(0.0)
+
+
+@pytest.fixture(scope="module")
+def static_start():
+    return _simulate(120.0)
+
+
+def _params(**kw):
+    # the simulated sensors' model, held fixed: these tests are about the attitude, not about
+    # identifying the anomaly prior (with it identified the heading error leaves its 3 sigma
+    # band on ~20 % of the epochs of one mount: noted in docs/method.md, "Identification")
+    kw.setdefault("identify", False)
+    return InmParams(accel_noise_mps2=5e-4, gyro_drift_degph=0.005, gravimeter_sigma_mps2=1e-6,
+                     gravimeter_white_mps2=1e-4, altimeter_sigma_m=0.05, gnss_horizontal_sigma_m=0.5,
+                     gnss_vertical_sigma_m=1.0, **kw)
+
+
+def _record(s, mount=None, gnss=True):
+    """The flight as logged by a triad turned by ``mount`` (triad -> body, default identity) against the body."""
+    mount = np.eye(3) if mount is None else mount
+    f = s.specific_force_t @ mount  # rows: (mount^T f_b)^T
+    w = s.angular_rate_t @ mount
+    g = GnssChannel(s.gnss_time, np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg), s.gnss_height) if gnss else None
+    return FlightRecord(s.start_unix_ns, ImuChannel(s.imu_time, f, w), AltimeterChannel(s.alt_time, s.alt_height), g,
+                        source="sim")
+
+
+def _exact_initial(s, mount=None):
+    tr = s.truth
+    mount = np.eye(3) if mount is None else mount
+    return InitialState(tr["lat"][0], tr["lon"][0], tr["height"][0], tr["vel_n"][0].copy(), tr["mat_nt"][0] @ mount)
+
+
+def _rms(x):
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def _theta_n(mat_est, mat_true):
+    """Attitude error on ENU axes, rad: mat_true = (I + [theta x]) mat_est."""
+    e = mat_true @ mat_est.T
+    return np.array([e[2, 1] - e[1, 2], e[0, 2] - e[2, 0], e[1, 0] - e[0, 1]]) * 0.5
+
+
+# --------------------------------------------------------------------------
+# building blocks
+# --------------------------------------------------------------------------
+
+
+def test_wahba_recovers_any_rotation():
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        rot = mat_nb_from_attitude(*rng.uniform(-math.pi, math.pi, 3))
+        b = rng.normal(size=(20, 3))
+        r = wahba(b @ rot.T, b)
+        np.testing.assert_allclose(r, rot, atol=1e-12)
+        assert np.linalg.det(r) == pytest.approx(1.0)
+
+
+def test_levelling_and_gyrocompassing_synthetic():
+    """Exact static data: levelling and north to round-off; a gyro bias b turns north by b / (W cos lat)."""
+    lat = math.radians(47.0)
+    g = 9.81
+    for roll, pitch, heading in [(2.0, -3.0, 0.0), (-5.0, 4.0, 135.0), (1.0, 1.0, 290.0)]:
+        m_nb = mat_nb_from_attitude(*np.radians([roll, pitch, heading]))
+        f_b = m_nb.T @ [0.0, 0.0, g]
+        w_b = m_nb.T @ (WGS84.omega * np.array([0.0, math.cos(lat), math.sin(lat)]))
+        _, r, p = level(f_b)
+        assert math.degrees(r) == pytest.approx(roll, abs=1e-10)
+        assert math.degrees(p) == pytest.approx(pitch, abs=1e-10)
+        mat, cov, warn = gyrocompass(f_b, w_b, lat, 600.0, 0.01 * DEGPH, 0.005 * DEGPH)
+        assert not warn
+        np.testing.assert_allclose(mat, m_nb, atol=1e-9)
+        # the stated heading sigma: 0.01 deg/h against 15.04 cos(47 deg) = 10.26 deg/h -> 0.056 deg
+        assert math.degrees(math.sqrt(cov[2, 2])) == pytest.approx(0.01 / 10.26 * 57.2958, rel=0.01)
+        # a 0.01 deg/h bias across north turns the heading by ~0.056 deg: inside 1 sigma
+        east_b = m_nb.T @ [1.0, 0.0, 0.0]
+        mat2, cov2, _ = gyrocompass(f_b, w_b + 0.01 * DEGPH * east_b, lat, 600.0, 0.01 * DEGPH, 0.005 * DEGPH)
+        err = abs(_theta_n(mat2, m_nb)[2])
+        assert 0.5 * math.sqrt(cov2[2, 2]) < err < 1.5 * math.sqrt(cov2[2, 2])
+    # a tactical gyro (1 deg/h bias sigma): heading sigma 5.6 deg -> refused, says why
+    _, cov, warn = gyrocompass(f_b, w_b, lat, 600.0, 1.0 * DEGPH, 0.1 * DEGPH)
+    assert warn and "gyro too noisy for gyrocompassing" in warn[0] and cov[2, 2] >= math.pi**2
+
+
+def test_static_span_detects_the_static_start(static_start, in_flight):
+    s = static_start
+    span = static_span(s.imu_time, s.specific_force_t, s.angular_rate_t)
+    assert 100.0 <= span <= 125.0  # 120 s at rest, then the speed ramp
+    assert static_span(in_flight.imu_time, in_flight.specific_force_t, in_flight.angular_rate_t) == 0.0
+
+
+# --------------------------------------------------------------------------
+# alignment accuracy against the simulator's truth
+# --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("which", ["in_flight", "static_start"])
+def test_alignment_error_inside_three_sigma(which, request):
+    s = request.getfixturevalue(which)
+    al = align(_record(s), _params())
+    th = _theta_n(al.mat_nt, s.truth["mat_nt"][0])
+    sig = np.sqrt(np.diag(al.cov_n))
+    assert al.method == {"in_flight": "velocity-matching", "static_start": "static-levelling+velocity-matching"}[which]
+    assert np.all(np.abs(th) < 3.0 * sig), (np.degrees(th), np.degrees(sig))
+    # measured: heading error 0.0044 / 0.0090 deg, sigma 0.050 / 0.037 deg (in flight / static start)
+    assert math.degrees(al.sigma_heading_rad) < 0.1
+    assert ("no static period" in " ".join(al.warnings)) == (which == "in_flight")
+
+
+def test_gyrocompassing_without_gnss(static_start):
+    """No GNSS: static levelling + gyrocompassing (0.03 deg/h gyros: heading sigma ~0.3 deg)."""
+    s = static_start
+    al = align(_record(s, gnss=False), _params(), lat=math.radians(47.0))
+    assert al.method == "static-gyrocompass"
+    th = _theta_n(al.mat_nt, s.truth["mat_nt"][0])
+    sig = np.sqrt(np.diag(al.cov_n))
+    assert np.all(np.abs(th) < 3.0 * sig), (np.degrees(th), np.degrees(sig))
+    assert math.degrees(al.sigma_heading_rad) < 0.5
+
+
+def test_no_static_and_no_gnss_is_a_data_error(in_flight):
+    with pytest.raises(DataError, match="no static period at the start and no GNSS"):
+        align(_record(in_flight, gnss=False), _params(), lat=math.radians(47.0))
+
+
+# mounts: the triad turned against the body by (roll, pitch, heading) deg: the initial attitude
+# the estimator must find spans 0-360 deg of heading and up to 5 deg of roll and pitch
+MOUNTS = [(0.0, 0.0, 0.0), (5.0, -3.0, 90.0), (-4.0, 5.0, 180.0), (3.0, 4.0, 270.0), (-5.0, -5.0, 45.0),
+          (2.0, -2.0, 330.0)]
+
+
+@pytest.mark.parametrize("mount_deg", MOUNTS)
+def test_no_initial_block_matches_exact_attitude(in_flight, mount_deg):
+    """No initial state given: after the stated convergence time the RMS is within 10 % of the run
+    started from the exact attitude, and the attitude error is inside 3 sigma."""
+    s = in_flight
+    # turned by (roll, pitch, heading) from the body axes (mat_nb_from_attitude(0, 0, 0) is the
+    # body's own orientation: nose north)
+    mount = mat_nb_from_attitude(*np.radians(mount_deg)) @ mat_nb_from_attitude(0.0, 0.0, 0.0).T
+    rec = _record(s, mount)
+    p = _params()
+    exact = estimate_anomaly(rec, _params(attitude_passes=1), _exact_initial(s, mount), "strapdown")
+    init = resolve_initial_state(rec, "strapdown", p)
+    sol = estimate_anomaly(rec, p, init, "strapdown")
+    assert sol.alignment is not None and sol.passes >= 2
+    conv = sol.attitude_converge_s
+    assert 0.0 <= conv < 900.0
+    keep = sol.time - sol.time[0] >= conv
+    g_true = np.interp(sol.time, s.truth["time"], s.truth["disturbance"])
+    rms = _rms((sol.g_smooth - g_true)[keep]) / MGAL
+    rms_exact = _rms((exact.g_smooth - g_true)[keep]) / MGAL
+    # measured (no mount): 3.18 vs 3.17 mGal, first-pass correction 0.064 deg
+    assert rms <= 1.10 * rms_exact, (rms, rms_exact)
+    # attitude against the truth of the turned triad, every epoch after convergence
+    k = np.clip(np.searchsorted(s.truth["time"], sol.time), 0, s.truth["time"].size - 1)
+    assert np.allclose(s.truth["time"][k], sol.time, atol=1e-6)
+    true_att = np.array([attitude_from_mat_nb(m @ mount) for m in s.truth["mat_nt"][k]])
+    err = sol.attitude - true_att
+    err[:, 2] = (err[:, 2] + math.pi) % (2 * math.pi) - math.pi
+    inside = np.abs(err[keep]) < 3.0 * sol.attitude_sigma[keep]
+    assert inside.mean(axis=0).min() > 0.95, inside.mean(axis=0)
+
+
+def test_given_attitude_disagreeing_with_the_data_is_a_config_error(in_flight):
+    s = in_flight
+    rec = _record(s)
+    r, p, h = np.degrees(attitude_from_mat_nb(s.truth["mat_nt"][0]))
+    good = initial_override_from_dict({"attitude_deg": [r, p, h]}, "strapdown")
+    # consistent, and its stated sigma beats the alignment's (0.038 deg): used, with that sigma
+    st = resolve_initial_state(rec, "strapdown", _params(initial_attitude_sigma_deg=0.01), given=good)
+    np.testing.assert_allclose(st.mat_nt, s.truth["mat_nt"][0], atol=1e-9)
+    assert st.attitude_cov_t is None
+    # with the default 0.05 deg the alignment's own attitude is kept
+    st = resolve_initial_state(rec, "strapdown", _params(), given=good)
+    assert st.attitude_cov_t is not None
+    bad = initial_override_from_dict({"attitude_deg": [r, p, h + 2.0]}, "strapdown")
+    with pytest.raises(ConfigError, match=r"^flights\[0\]\.initial\.attitude_deg: .* disagrees with the alignment"):
+        resolve_initial_state(rec, "strapdown", _params(), given=bad, key_path="flights[0].initial")
+    far = initial_override_from_dict({"lat_deg": float(s.gnss_lat_deg[0]) + 0.01}, "strapdown")
+    with pytest.raises(ConfigError, match=r"^initial\.lat_deg: .* m from the GNSS position"):
+        resolve_initial_state(rec, "strapdown", _params(), given=far)
+
+
+def test_mirrored_axes_leave_the_gnss_track(in_flight):
+    """A left-handed triad (one axis flipped, e.g. FRD declared as FLU with y only) cannot be aligned:
+    the navigation leaves the GNSS track and the flight is a DataError, not a result."""
+    rec = _record(in_flight, np.diag([1.0, -1.0, 1.0]))
+    with pytest.raises(DataError, match="leaves the GNSS track"):
+        estimate_anomaly(rec, _params(), None, "strapdown")
+
+
+# --------------------------------------------------------------------------
+# real data: static VN-310E
+# --------------------------------------------------------------------------
+
+
+def _read(path):
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    head = rows[0]
+    arr = np.array(rows[1:], dtype=float)
+    return {h: arr[:, i] for i, h in enumerate(head)}
+
+
+def test_static_levelling_on_real_vn310():
+    """Roll and pitch from levelling agree with the VN-310E's own within what its accelerometer biases allow.
+
+    Bound: a horizontal accelerometer bias b tilts the levelled vertical by b / g; with the
+    bias sigma ACCEL_BIAS_SIGMA_MPS2 = 5e-4 m/s^2 (the VN-310's datasheet bias stability is
+    well below 1e-3 m/s^2, the NOTES' order of magnitude) 3 sigma is 0.0088 deg; the noise of
+    the 32 s mean (2.5e-3 m/s^2 per sample / sqrt(1612) -> 6e-5 m/s^2, 0.0004 deg) and the
+    device's own attitude scatter (std 0.0015 deg) are added.  Measured: roll differs by
+    0.0002 deg, pitch by 0.0028 deg.
+    """
+    imu = _read(DATA / "vn310-imu-part.csv")
+    gn = _read(DATA / "vn310-gnss-part.csv")
+    f_frd = np.stack([imu[f"IMU::UncompAccel::{a} [m/s^2]"] for a in "XYZ"], axis=1)
+    w_frd = np.stack([imu[f"IMU::UncompGyro::{a} [rad/s]"] for a in "XYZ"], axis=1)
+    to_flu = np.diag([1.0, -1.0, -1.0])  # FRD -> FLU (imu_axes: FRD)
+    f_t, w_t = f_frd @ to_flu, w_frd @ to_flu
+    t = imu["Time [s]"]
+    span = static_span(t, f_t, w_t)
+    assert span >= 30.0
+    _, roll, pitch = level(f_t.mean(axis=0))
+    dev_roll = np.mean(gn["Att::YawPitchRoll::R [deg]"])
+    dev_pitch = np.mean(gn["Att::YawPitchRoll::P [deg]"])
+    g = np.linalg.norm(f_t.mean(axis=0))
+    noise = np.std(f_t[:, :2], axis=0).max() / math.sqrt(t.size)
+    bound = (3.0 * math.degrees(math.hypot(ACCEL_BIAS_SIGMA_MPS2, noise) / g)
+             + 3.0 * max(np.std(gn["Att::YawPitchRoll::R [deg]"]), np.std(gn["Att::YawPitchRoll::P [deg]"])))
+    assert bound < 0.015
+    assert abs(math.degrees(roll) - dev_roll) < bound, (math.degrees(roll), dev_roll, bound)
+    assert abs(math.degrees(pitch) - dev_pitch) < bound, (math.degrees(pitch), dev_pitch, bound)
+    # gyrocompassing must refuse this MEMS device: its gyro output at rest is bias, ~2e-3 rad/s
+    lat = math.radians(float(gn["GNSS1::PosLla::latitude [deg]"][0]))
+    _, cov, warn = gyrocompass(f_t.mean(axis=0), w_t.mean(axis=0), lat, span, 10.0 * DEGPH, 0.5 * DEGPH)
+    assert warn and cov[2, 2] >= math.pi**2
+    # even with an optimistic bias sigma the rate at rest is no Earth rate: refused as inconsistent
+    _, cov, warn = gyrocompass(f_t.mean(axis=0), w_t.mean(axis=0), lat, span, 0.01 * DEGPH, 0.005 * DEGPH)
+    assert warn and "refused" in warn[0]
+
+
+def _vn310_options(**extra):
+    from gravsurvey.io.ingest import ingest_options_from_dict
+
+    t = ["GpsCycle", "GpsWeek", "GpsTow [s]"]
+    cfg = {"inputs": {"csv": {"imu": "vn310-imu-part.csv", "altimeter": "vn310-gnss-part.csv",
+                              "gnss": "vn310-gnss-part.csv"}},
+           "csv": {"time_format": "gps_week_sow", "columns": {
+               "imu": {"time": t, **{f"f{a.lower()}": f"IMU::UncompAccel::{a} [m/s^2]" for a in "XYZ"},
+                       **{f"w{a.lower()}": f"IMU::UncompGyro::{a} [rad/s]" for a in "XYZ"}},
+               "altimeter": {"time": t, "height": "GNSS1::PosLla::altitude [m]"},
+               "gnss": {"time": t, "lat": "GNSS1::PosLla::latitude [deg]", "lon": "GNSS1::PosLla::longitude [deg]",
+                        "height": "GNSS1::PosLla::altitude [m]"}}},
+           **extra}
+    return ingest_options_from_dict(cfg, base_dir=DATA)
+
+
+def test_vn310_csv_with_frd_axes_and_gps_cycle_week_tow():
+    """The vendor CSV as a new user would declare it: FRD axes, GpsCycle/GpsWeek/GpsTow time."""
+    from gravsurvey.io.ingest import load_flight
+
+    with pytest.warns(Warning):  # the ingest check notes the MEMS gyro bias at rest
+        rec = load_flight(_vn310_options(imu_axes="FRD"))
+    # GPS week 1024 * 2 + 255 = 2303, TOW 403575.847627 s GPS = 2024-02-29 16:06:15.847627 GPS
+    # = 16:05:57.847627 UTC (18 leap seconds)
+    import datetime
+
+    t0 = datetime.datetime(2024, 2, 29, 16, 5, 57, 847627, tzinfo=datetime.timezone.utc)
+    assert rec.t0_unix_ns == int(t0.timestamp()) * 10**9 + 847627000
+    # FRD -> FLU: at rest the z axis now reads +g, y flips sign
+    f = rec.imu.specific_force_t.mean(axis=0)
+    assert f[2] == pytest.approx(9.80, abs=0.01) and f[1] == pytest.approx(-0.2987, abs=1e-3)
+    al = align(rec, InmParams())
+    # static and no motion: the vertical from levelling; heading unknown and said so
+    assert al.method == "static-levelling+velocity-matching"
+    roll, pitch, _ = al.attitude_deg()
+    assert roll == pytest.approx(-1.7463, abs=0.01) and pitch == pytest.approx(0.5683, abs=0.01)
+    text = " ".join(al.warnings)
+    assert "gyrocompassing refused" in text and "poor alignment" in text
+
+
+def test_gps_cycle_week_tow_time_columns(tmp_path):
+    from gravsurvey.errors import DataError
+    from gravsurvey.io.csv import read_csv_channel
+
+    p = tmp_path / "alt.csv"
+    p.write_text("cyc,wk,tow,h\n2,255,403575.5,10\n2,255,403576.0,11\n")
+    t, _ = read_csv_channel(p, "altimeter", {"time": ["cyc", "wk", "tow"], "height": "h"}, "gps_week_sow")
+    t2, _ = read_csv_channel(p, "altimeter", {"time": ["wk", "tow"], "height": "h"}, "gps_week_sow")
+    assert t[0] - t2[0] == 2 * 1024 * 7 * 86400 * 10**9 and t[1] - t[0] == 500_000_000
+    p.write_text("cyc,wk,tow,h\n2,1300,403575.5,10\n")
+    with pytest.raises(DataError, match=r"line 2: columns 'cyc', 'wk': expected a roll-over count >= 0 and a 10-bit"):
+        read_csv_channel(p, "altimeter", {"time": ["cyc", "wk", "tow"], "height": "h"}, "gps_week_sow")
+
+
+def test_imu_axes_and_lever_arm_options():
+    from gravsurvey.io.ingest import IMU_AXES, imu_axes_matrix
+
+    for m in IMU_AXES.values():
+        assert np.linalg.det(m) == pytest.approx(1.0) and np.allclose(m @ m.T, np.eye(3))
+    # RFU: the right axis is -left, forward is the sensor's y
+    np.testing.assert_allclose(imu_axes_matrix("RFU") @ [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
+    np.testing.assert_allclose(imu_axes_matrix("RFU") @ [1.0, 0.0, 0.0], [0.0, -1.0, 0.0])
+    np.testing.assert_allclose(imu_axes_matrix([[0, 1, 0], [-1, 0, 0], [0, 0, 1]]), IMU_AXES["RFU"])
+    with pytest.raises(ConfigError, match=r"^flights\[0\]\.imu_axes: expected one of FLU, FRD, RFU"):
+        _vn310_options(imu_axes="NED")
+    with pytest.raises(ConfigError, match=r"^flights\[0\]\.imu_axes: the matrix must be a proper rotation"):
+        _vn310_options(imu_axes=[[1, 0, 0], [0, -1, 0], [0, 0, 1]])
+    with pytest.raises(ConfigError, match=r"^flights\[0\]\.gnss_lever_arm_m: expected \[forward, left, up\]"):
+        _vn310_options(gnss_lever_arm_m=[1.0, 2.0])
+    assert np.array_equal(_vn310_options(gnss_lever_arm_m=[1, 0, 2]).gnss_lever_arm_m, [1.0, 0.0, 2.0])
+
+
+def test_gnss_lever_arm_is_applied(in_flight):
+    """An antenna 6 m ahead of and 2 m above the IMU: with the lever arm declared the track is as
+    good as without any arm; ignored, the navigation is off by metres."""
+    from gravsurvey.geodesy import ecef_to_geodetic, geodetic_to_ecef, mat_en
+
+    s = in_flight
+    arm = np.array([6.0, 0.0, 2.0])
+    tr = s.truth
+    k = np.clip(np.searchsorted(tr["time"], s.gnss_time), 1, tr["time"].size - 1)
+    # truth attitude at the GNSS times (nearest truth sample: 5 Hz, same grid as the GNSS)
+    m_nt = tr["mat_nt"][k]
+    lat, lon = np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg)
+    off_e = np.einsum("nij,nj->ni", mat_en(lat, lon), np.einsum("nij,j->ni", m_nt, arm))
+    lat2, lon2, h2 = ecef_to_geodetic(geodetic_to_ecef(lat, lon, s.gnss_height) + off_e)
+    rec = _record(s)
+    rec.gnss = GnssChannel(s.gnss_time, lat2, lon2, h2)
+
+    def track_error(sol):
+        la = np.interp(sol.time, tr["time"], tr["lat"])
+        lo = np.interp(sol.time, tr["time"], tr["lon"])
+        return _rms(np.hypot((sol.lat - la) * 6.37e6, (sol.lon - lo) * 6.37e6 * np.cos(la)))
+
+    with_arm = estimate_anomaly(rec, _params(), None, "strapdown", gnss_lever_arm_t=arm)
+    without = estimate_anomaly(rec, _params(), None, "strapdown")
+    base = estimate_anomaly(_record(s), _params(), None, "strapdown")
+    assert track_error(with_arm) < 1.5 * track_error(base) + 0.05
+    assert track_error(without) > 3.0
+    with pytest.raises(ConfigError, match="gnss_lever_arm_m: a lever arm on body axes needs a strapdown triad"):
+        estimate_anomaly(rec, _params(), None, "platform", gnss_lever_arm_t=arm)
+
+
+# --------------------------------------------------------------------------
+# end to end: the init template and a strapdown sample without an initial block
+# --------------------------------------------------------------------------
+
+SAMPLES = Path(__file__).resolve().parents[1] / "sample_data"
+
+
+def _run_cli(cfg, tmp_path):
+    import json
+    import os
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg)], capture_output=True, text=True,
+                       timeout=600, env=dict(os.environ), stdin=subprocess.DEVNULL, cwd=tmp_path, check=False)
+    assert r.returncode == 0, r.stderr
+    out = cfg.parent / "out"
+    with open(out / "profiles.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    return json.loads((out / "summary.json").read_text()), rows
+
+
+def test_init_template_runs_on_sample_data_with_only_paths_edited(tmp_path):
+    from gravsurvey.templates import EXAMPLE_CONFIG
+
+    text = EXAMPLE_CONFIG.replace("mcap: F01/F01_json.mcap", f"mcap: {SAMPLES / 'seed_line' / 'F01' / 'F01_json.mcap'}")
+    assert text != EXAMPLE_CONFIG and "initial:\n" not in text.replace("# initial:", "")
+    cfg = tmp_path / "g.yaml"
+    cfg.write_text(text)
+    summary, rows = _run_cli(cfg, tmp_path)
+    f = summary["flights"]["F01"]
+    assert len(f["lines"]) >= 1
+    h = np.array([float(r["height_m"]) for r in rows])
+    assert np.all(np.abs(h - 1000.0) < 50.0)  # the sample flies at 1000 m (not 2,900 km)
+
+
+def test_strapdown_sample_without_initial_block(tmp_path):
+    """sample_data/grid_ros2 (strapdown) with its initial block deleted: measured 1.706 mGal RMS against
+    truth (1.709 with the block; docs/samples.md bound 2.2)."""
+    import re
+    import shutil
+
+    shutil.copytree(SAMPLES / "grid_ros2", tmp_path / "s")
+    cfg = tmp_path / "s" / "survey.yaml"
+    text = re.sub(r"  initial:\n(    .*\n)+", "", cfg.read_text())
+    assert "initial" not in text
+    cfg.write_text(text)
+    summary, rows = _run_cli(cfg, tmp_path)
+    est = summary["flights"]["F01"]["estimator"]
+    assert est["alignment_method"].endswith("velocity-matching") and est["attitude_passes"] >= 2
+    assert est["alignment_sigma_heading_deg"] < 0.1 and est["gnss_residual_rms_m"] < 2.0
+    err = np.array([float(r["error_mgal"]) for r in rows if r["error_mgal"] not in ("", "nan")])
+    err = err[np.isfinite(err)]
+    assert err.size > 100 and _rms(err) < 2.2
+
+
+def test_given_attitude_is_used_when_the_data_cannot_align(in_flight):
+    """GNSS only for the first 30 s of a flight that starts in motion: no alignment possible, but a
+    given attitude is accepted (unchecked) instead of failing."""
+    s = in_flight
+    rec = _record(s)
+    keep = s.gnss_time <= 3.0
+    rec.gnss = GnssChannel(s.gnss_time[keep], np.radians(s.gnss_lat_deg[keep]), np.radians(s.gnss_lon_deg[keep]),
+                           s.gnss_height[keep])
+    with pytest.raises(DataError, match="alignment"):
+        resolve_initial_state(rec, "strapdown", _params())
+    r, p, h = np.degrees(attitude_from_mat_nb(s.truth["mat_nt"][0]))
+    given = initial_override_from_dict({"attitude_deg": [r, p, h]}, "strapdown")
+    st = resolve_initial_state(rec, "strapdown", _params(), given=given)
+    np.testing.assert_allclose(st.mat_nt, s.truth["mat_nt"][0], atol=1e-9)
+    assert st.alignment is None and st.attitude_cov_t is None
+
+
+def test_gnss_outliers_do_not_fail_a_good_flight(in_flight):
+    """5 % of the GNSS samples 200 m off (multipath, a bad fix): the track check keeps the flight."""
+    s = in_flight
+    rec = _record(s)
+    lat = np.radians(s.gnss_lat_deg).copy()
+    lat[::20] += 200.0 / 6.37e6
+    rec.gnss = GnssChannel(s.gnss_time, lat, np.radians(s.gnss_lon_deg), s.gnss_height)
+    sol = estimate_anomaly(rec, _params(), None, "strapdown")
+    assert sol.gnss_residual_rms_m > 20.0  # the outliers show in the RMS ...
+    assert np.isfinite(sol.g_smooth).all()  # ... but the flight is processed
