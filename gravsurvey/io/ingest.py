@@ -28,8 +28,10 @@ from gravsurvey.io.record import (AltimeterChannel, FlightRecord, GnssChannel, G
 ROLES = ("imu", "altimeter", "gnss")
 #: Channels a flight may have in addition (read when present, never required).
 OPTIONAL_ROLES = ("gradient",)
-DEFAULT_TOPICS = {"imu": "/imu", "altimeter": "/altimeter", "gnss": "/gnss",
-                  "gradient": "/gradient"}
+DEFAULT_TOPICS = {"imu": "/imu", "altimeter": "/altimeter", "gnss": "/gnss"}
+#: Topic of the optional gradient channel unless ``topics.gradient`` says otherwise (a JSON
+#: channel with schema ``gravsurvey.GravityGradient`` on another topic is found by its schema).
+DEFAULT_GRADIENT_TOPIC = "/gradient"
 #: A gradient file whose median vertical eigenvalue (Earth: ~3080 E) lies outside this range,
 #: in Eotvos, is in another unit than declared.
 GRADIENT_VERTICAL_RANGE_E = (1000.0, 10000.0)
@@ -301,7 +303,7 @@ def select_gradient_channels(content: McapContent, options: IngestOptions, notes
         An explicitly configured topic is absent or undecodable; several candidate topics.
     """
     path = content.path
-    topic = options.topics.get("gradient", DEFAULT_TOPICS["gradient"])
+    topic = options.topics.get("gradient", DEFAULT_GRADIENT_TOPIC)
     ids = [c for c, ch in content.channels.items() if ch.topic == topic]
     if ids:
         dec = [c for c in ids if c in content.decoded]
