@@ -28,7 +28,7 @@ SURVEY_KEYS = ("name", "description")
 #: flight keys handled here; every other key of a flight goes to the ingestion options
 FLIGHT_OWN_KEYS = ("name", "triad", "initial", "truth", "lines")
 OUTPUT_KEYS = ("dir", "epsg", "plots", "xyz", "geojson")
-PROCESSING_KEYS = ("method", "classic_resolution_m")
+PROCESSING_KEYS = ("method", "classic_resolution_m", "gradiometer")
 TRIADS = ("platform", "strapdown")
 PROCESSING_METHODS = ("inm", "classic")
 _NAME_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
@@ -193,6 +193,8 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
     if classic_res is not None and (not isinstance(classic_res, (int, float)) or classic_res <= 0):
         raise ConfigError(f"processing.classic_resolution_m: expected a positive number (m), got {classic_res!r}")
 
+    if not isinstance(proc.get("gradiometer", False), bool):
+        raise ConfigError(f"processing.gradiometer: expected true or false, got {proc['gradiometer']!r}")
     out = expect_mapping(raw.get("output"), "output")
     check_keys(out, OUTPUT_KEYS, "output")
     out_dir = Path(output_dir) if output_dir is not None else _resolve(base, out.get("dir", "out"), "output.dir")

@@ -555,3 +555,89 @@ def run_channel_filters(t_s, z_pos, r_pos, q_acc, l0_rad_s, x0_sigma):
         p = p - np.outer(k, p[POS, :])
         x_kf[i] = x
     return x_as, x_kf, k / dt
+
+
+# --------------------------------------------------------------------------
+# 5. Flight products for the pipeline (processing.gradiometer: true)
+# --------------------------------------------------------------------------
+
+
+def flight_products(grad_time, gamma_t, nav_time, lat, lon, height, vel_n, disturbance_start, triad, ellipsoid=None):
+    """Summary products of a flight's gradient channel (summary.json ``estimator.gradiometer``).
+
+    Rotation invariants on any triad: the vertical eigenvalue (median, spread) and the
+    trace (instrument noise/bias indicator).  On a platform triad (axes = ENU) also the
+    gravitation propagated by ``dg/dt = T V`` along the navigation solution, started from
+    the normal gravitation plus ``disturbance_start`` (vertical) at the first gradient epoch
+    (horizontal anomaly assumed 0 there), and the eigen-vertical's tilt from the Up axis.
+
+    Parameters
+    ----------
+    grad_time : ndarray, shape (m,)
+        Gradient epochs, s (record time base).
+    gamma_t : ndarray, shape (m, 3, 3)
+        Tensors on the triad, 1/s^2.
+    nav_time : ndarray, shape (n,)
+        Navigation epochs, s.
+    lat, lon : ndarray, shape (n,)
+        rad.
+    height : ndarray, shape (n,)
+        m.
+    vel_n : ndarray, shape (n, 3)
+        ENU velocity, m/s.
+    disturbance_start : float
+        Gravity disturbance at the start, m/s^2 (e.g. the scalar estimate's first value).
+    triad : {"platform", "strapdown"}
+    ellipsoid : Ellipsoid, optional
+        WGS84 by default.
+
+    Returns
+    -------
+    products : dict
+        JSON-ready numbers (``*_eotvos``, ``*_mgal``, ``*_arcsec``) and, for a platform
+        triad, ``time`` (k,) s, ``disturbance`` (k,) m/s^2 and ``horizontal_n`` (k, 2) m/s^2
+        (anomalous gravitation east/north) at the gradient epochs inside the navigation span.
+    """
+    from gravsurvey.geodesy import WGS84, geodetic_to_ecef, mat_en, normal_gravitation_ecef
+
+    ell = WGS84 if ellipsoid is None else ellipsoid
+    gam = _as_tensors(gamma_t, "gamma_t")
+    lam_all = characteristic_roots(gam)
+    lam_v = lam_all[np.arange(lam_all.shape[0]), np.argmax(np.abs(lam_all), axis=1)]
+    out = {
+        "samples": int(gam.shape[0]),
+        "vertical_eigenvalue_median_eotvos": float(np.median(lam_v) / EOTVOS),
+        "vertical_eigenvalue_std_eotvos": float(np.std(lam_v) / EOTVOS),
+        "trace_median_eotvos": float(np.median(np.trace(gam, axis1=1, axis2=2)) / EOTVOS),
+    }
+    if triad != "platform":
+        out["note"] = ("strapdown triad: dg/dt = T V needs the triad attitude, which the scalar "
+                       "solution does not carry; only rotation invariants reported")
+        return out
+    sel = (grad_time >= nav_time[0]) & (grad_time <= nav_time[-1])
+    t = np.asarray(grad_time)[sel]
+    if t.size < 2:
+        out["note"] = "fewer than 2 gradient samples inside the navigation span"
+        return out
+    la = np.interp(t, nav_time, lat)
+    lo = np.interp(t, nav_time, np.unwrap(lon))
+    h = np.interp(t, nav_time, height)
+    v_n = np.stack([np.interp(t, nav_time, vel_n[:, j]) for j in range(3)], axis=1)
+    r_e = geodetic_to_ecef(la, lo, h, ell)
+    m_en = mat_en(la, lo)
+    g_norm_n = np.einsum("kji,kj->ki", m_en, normal_gravitation_ecef(r_e, ell))
+    gam_e = np.einsum("kij,kjl,kml->kim", m_en, gam[sel], m_en)
+    v_e = np.einsum("kij,kj->ki", m_en, v_n)
+    g0_n = g_norm_n[0] + np.array([0.0, 0.0, -float(disturbance_start)])
+    g_e = propagate_gravitation_e(t, m_en[0] @ g0_n, gam_e, v_e)
+    anom_n = np.einsum("kji,kj->ki", m_en, g_e) - g_norm_n
+    _, g0 = vertical_eigen(gam[sel])
+    tilt = np.degrees(np.arccos(np.clip(-g0[:, 2], -1.0, 1.0))) * 3600.0
+    out.update({
+        "time": t,
+        "disturbance": -anom_n[:, 2],
+        "horizontal_n": anom_n[:, :2],
+        "horizontal_end_mgal": [float(x / 1e-5) for x in anom_n[-1, :2]],
+        "eigen_vertical_tilt_rms_arcsec": float(np.sqrt(np.mean(tilt**2))),
+    })
+    return out
