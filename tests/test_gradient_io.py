@@ -207,3 +207,20 @@ def test_gravsurvey_run_with_processing_gradiometer(tmp_path):
     survey.write_text(yaml.safe_dump(cfg))
     with pytest.raises(ConfigError, match="processing.gradiometer: expected true or false"):
         run_survey(survey, output_dir=tmp_path / "out2")
+
+
+def test_gradiometer_noise_statistics():
+    from gravsurvey.simulate.sensors import gradiometer_errors
+
+    rng = np.random.default_rng(11)
+    cfg = {"gradiometer": {"rate_hz": 4.0, "white_eotvos_rthz": 3.0, "markov_sigma_eotvos": 0.0, "markov_lambda_per_s": 0.001}}
+    e = gradiometer_errors(40000, 4.0, cfg, rng)
+    # one-second sigma 3 E/sqrt(Hz): 6 E per 4 Hz sample, 3 E averaged over 1 s
+    assert abs(np.std(e) - 6.0) < 0.1
+    assert abs(np.std(e[: 40000 // 4 * 4].reshape(-1, 4, 6).mean(axis=1)) - 3.0) < 0.1
+    cfg["gradiometer"].update(white_eotvos_rthz=0.0, markov_sigma_eotvos=2.0, markov_lambda_per_s=0.1)
+    e = gradiometer_errors(200000, 4.0, cfg, rng)
+    assert abs(np.std(e) - 2.0) < 0.1
+    lag = 10  # 2.5 s: correlation exp(-0.25)
+    c = np.mean([np.corrcoef(e[:-lag, j], e[lag:, j])[0, 1] for j in range(6)])
+    assert abs(c - np.exp(-0.25)) < 0.03

@@ -195,6 +195,9 @@ def test_kalman_versus_asymptotic_filter():
     k_kf, p_kf = G.steady_state_kalman_gain(a, h, qm, r)
     wc = (mu**2 * q3 / r) ** (1.0 / 6.0)  # the Kalman poles are a 3rd-order Butterworth of this radius
     np.testing.assert_allclose(np.abs(np.linalg.eigvals(G.closed_loop_matrix(a, h, k_kf))), wc, rtol=1e-6)
+    # Butterworth s^3 + 2 wc s^2 + 2 wc^2 s + wc^3: Kalman gains (2 wc, 2 wc^2/mu, wc^3/mu) against
+    # the seed's (3 wc, 3 wc^2/mu, wc^3/mu) -- the same K3, two thirds of K1 and K2
+    np.testing.assert_allclose(k_kf, [2 * wc, 2 * wc**2 / mu, wc**3 / mu], rtol=1e-6)
     k_as = G.asymptotic_gains_position(wc, mu)
     p_as = G.steady_state_error_covariance(a, h, k_as, qm, r)
     assert np.all(np.diag(p_kf) <= np.diag(p_as) * (1 + 1e-9))  # the Kalman filter is optimal ...
