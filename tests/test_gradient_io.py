@@ -224,3 +224,17 @@ def test_gradiometer_noise_statistics():
     lag = 10  # 2.5 s: correlation exp(-0.25)
     c = np.mean([np.corrcoef(e[:-lag, j], e[lag:, j])[0, 1] for j in range(6)])
     assert abs(c - np.exp(-0.25)) < 0.03
+
+
+def test_inspect_shows_the_gradient_channel(tmp_path):
+    from gravsurvey.io.inspect import format_inspect, inspect_files
+
+    sim = quick_sim(duration_s=60.0, formats=["mcap_json", "csv"], noise={"gradiometer": {"rate_hz": 1.0}})
+    p = tmp_path / "sim.yaml"
+    p.write_text(yaml.safe_dump(sim))
+    simulate_to_dir(p, tmp_path / "s")
+    reps = inspect_files([tmp_path / "s" / "F01" / "F01_json.mcap", tmp_path / "s" / "F01" / "gradient.csv"])
+    assert all("error" not in r for r in reps)
+    roles = [c.get("role") for r in reps for c in r["channels"]]
+    assert roles.count("gradient") == 2
+    assert "gravsurvey.GravityGradient" in format_inspect(reps)

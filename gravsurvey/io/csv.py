@@ -278,7 +278,7 @@ def sniff_csv_role(path):
         return None
     if {"time_ns", "line", "disturbance_mgal"} <= header:
         return "truth"
-    for role in ("imu", "gnss", "altimeter"):
+    for role in ("imu", "gnss", "altimeter", "gradient"):
         if set(_flat(DEFAULT_COLUMNS[role].values())) <= header:
             return role
     return None
