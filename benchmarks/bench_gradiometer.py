@@ -38,11 +38,11 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from gravsurvey import gradiometer as G  # noqa: E402
-from gravsurvey.geodesy import WGS84, mat_en, normal_gravitation_ecef  # noqa: E402
-from gravsurvey.simulate import field as F  # noqa: E402
-from gravsurvey.simulate.run import quick_sim, simulate_flight  # noqa: E402
-from gravsurvey.simulate.simconfig import load_sim_config  # noqa: E402
+from gravsurvey import gradiometer as G
+from gravsurvey.geodesy import WGS84, mat_en, normal_gravitation_ecef
+from gravsurvey.simulate import field as F
+from gravsurvey.simulate.run import quick_sim, simulate_flight
+from gravsurvey.simulate.simconfig import load_sim_config
 
 MGAL = 1e-5
 ARCSEC = math.pi / 180.0 / 3600.0
@@ -116,7 +116,7 @@ def evaluate(fs, cfg):
     _, g0_meas = G.vertical_eigen(gam_n)
     gam_norm_n = F.total_gradient_n(None, r_e, lat, lon, WGS84)
     _, g0_norm = G.vertical_eigen(gam_norm_n)
-    unit = lambda v: v / np.linalg.norm(v, axis=1)[:, None]  # noqa: E731
+    unit = lambda v: v / np.linalg.norm(v, axis=1)[:, None]
     g0_used = unit(g0_meas - g0_norm + unit(g_norm_n))
     gmag = np.linalg.norm(g_true_n, axis=1)
     acc_err_grad = (gmag[:, None] * (g0_used - unit(g_true_n)))[:, :2]  # horizontal, m/s^2
@@ -136,7 +136,7 @@ def evaluate(fs, cfg):
             pos.append(x[:, 0])
         dist = np.hypot(pos[0], pos[1])
         for mins in (10, 60):
-            k = min(int(round(mins * 60 / dt)), t.size - 1)
+            k = min(round(mins * 60 / dt), t.size - 1)
             res[f"{name}_{mins}"] = float(dist[k])
     out.update(res)
     # 4. GNSS-aided gradiometer channel (east axis), asymptotic vs Kalman
@@ -148,7 +148,7 @@ def evaluate(fs, cfg):
     l0 = (q_acc / 9.0) ** (1.0 / 6.0)
     x_as, x_kf, _ = G.run_channel_filters(t, z, 9.0, q_acc, l0, (3.0, 1.0, 1e-2))
     tail = slice(min(600, t.size // 4), None)
-    rms = lambda e: float(np.sqrt(np.mean(e[tail] ** 2)))  # noqa: E731
+    rms = lambda e: float(np.sqrt(np.mean(e[tail] ** 2)))
     out["aided_pos_as"] = rms(x_as[:, 0] - x[:, 0])
     out["aided_pos_kf"] = rms(x_kf[:, 0] - x[:, 0])
     out["aided_acc_as"] = rms(x_as[:, 2] - acc_err_grad[:, 0]) / MGAL

@@ -598,7 +598,12 @@ def flight_products(grad_time, gamma_t, nav_time, lat, lon, height, vel_n, distu
         triad, ``time`` (k,) s, ``disturbance`` (k,) m/s^2 and ``horizontal_n`` (k, 2) m/s^2
         (anomalous gravitation east/north) at the gradient epochs inside the navigation span.
     """
-    from gravsurvey.geodesy import WGS84, geodetic_to_ecef, mat_en, normal_gravitation_ecef
+    from gravsurvey.geodesy import (
+        WGS84,
+        geodetic_to_ecef,
+        mat_en,
+        normal_gravitation_ecef,
+    )
 
     ell = WGS84 if ellipsoid is None else ellipsoid
     gam = _as_tensors(gamma_t, "gamma_t")

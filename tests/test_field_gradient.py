@@ -2,7 +2,6 @@
 symmetry, Laplace (zero trace away from masses), finite differences of the simulator's own
 gravitation, and harmonica's independent prism implementation."""
 
-import math
 
 import numpy as np
 import pytest

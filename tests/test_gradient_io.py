@@ -36,7 +36,7 @@ def _load(inputs, base, **extra):
 def test_gradient_round_trip_csv_and_mcap(tmp_path, triad):
     sim, path = _sim(tmp_path, triad=triad)
     out = tmp_path / "out"
-    files = simulate_to_dir(path, out)
+    simulate_to_dir(path, out)
     assert (out / "F01" / "gradient.csv").exists()
     fs = simulate_flight(load_sim_config(sim))
     comps = fs.gradient_t_eotvos
@@ -91,7 +91,7 @@ def _gradient_csv(path, rows, columns):
 
 
 def _base_csv(tmp_path):
-    sim, path = _sim(tmp_path)
+    _, path = _sim(tmp_path)
     simulate_to_dir(path, tmp_path / "o")
     return tmp_path / "o"
 
@@ -141,14 +141,14 @@ def test_asymmetric_tensor_in_mcap_is_a_clear_error(tmp_path):
         ca = w.register_channel(topic="/altimeter", message_encoding="json", schema_id=sid["gravsurvey.Altimeter"])
         cg = w.register_channel(topic="/gradient", message_encoding="json", schema_id=sid["gravsurvey.GravityGradient"])
         for k in range(len(rec.imu.time)):
-            t = t0 + int(round(rec.imu.time[k] * 1e9))
+            t = t0 + round(rec.imu.time[k] * 1e9)
             msg = {"time_ns": t, "specific_force_t": rec.imu.specific_force_t[k].tolist(), "angular_rate_t": rec.imu.angular_rate_t[k].tolist()}
             w.add_message(ci, t, json.dumps(msg).encode(), t)
         for k in range(len(rec.altimeter.time)):
-            t = t0 + int(round(rec.altimeter.time[k] * 1e9))
+            t = t0 + round(rec.altimeter.time[k] * 1e9)
             w.add_message(ca, t, json.dumps({"time_ns": t, "height_m": float(rec.altimeter.height[k])}).encode(), t)
         for k in range(len(rec.gradient.time)):
-            t = t0 + int(round(rec.gradient.time[k] * 1e9))
+            t = t0 + round(rec.gradient.time[k] * 1e9)
             full = (rec.gradient.gamma_t[k] / E).copy()
             full[1, 0] += 40.0  # yx != xy
             w.add_message(cg, t, json.dumps({"time_ns": t, "gradient_t_eotvos": full.ravel().tolist()}).encode(), t)

@@ -4,7 +4,6 @@ field (gravsurvey.simulate.field) and against closed-form linear-system facts.""
 import math
 
 import numpy as np
-import pytest
 
 from gravsurvey import gradiometer as G
 from gravsurvey.geodesy import WGS84, geodetic_to_ecef, mat_en, normal_gravitation_ecef
