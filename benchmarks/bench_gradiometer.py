@@ -17,7 +17,7 @@ field of random point masses and prisms (a new random field per ``--seed``):
    (corrected by the normal field's known eigenvector-vs-gravitation offset) and the true
    gravitation direction, arcsec, and the horizontal acceleration error it causes, mGal.
    "Without" = the conventional INS vertical of a normal-field model (error = the deflection).
-3. **Free-inertial horizontal position error** after 10 and 60 min driven by that vertical
+3. **Free-inertial horizontal position error** after 10 min and at the end driven by that vertical
    error alone (perfect accelerometers and attitude): conventional Schuler channel vs the
    seed's gradiometer channel (double integrator).
 4. **GNSS-aided channel** (1 Hz positions, 3 m): RMS position and acceleration-error estimation
@@ -135,9 +135,8 @@ def evaluate(fs, cfg):
             x = G.propagate_linear(a, np.zeros(2), dt, t.size, b, acc[:-1, ax : ax + 1])
             pos.append(x[:, 0])
         dist = np.hypot(pos[0], pos[1])
-        for mins in (10, 60):
-            k = min(round(mins * 60 / dt), t.size - 1)
-            res[f"{name}_{mins}"] = float(dist[k])
+        res[f"{name}_10"] = float(dist[min(round(600.0 / dt), t.size - 1)])
+        res[f"{name}_end"] = float(dist[-1])
     out.update(res)
     # 4. GNSS-aided gradiometer channel (east axis), asymptotic vs Kalman
     rng = np.random.default_rng(5)
@@ -177,14 +176,14 @@ def main(argv=None):
     print(f"Anomaly along the line (what a normal-field model misses): vertical RMS {r0['anom_v_rms']:.1f} mGal, "
           f"horizontal RMS {r0['anom_h_rms']:.1f} mGal; conventional vertical error (deflection) RMS "
           f"{r0['tilt_conv_arcsec']:.2f}\"; free-inertial Schuler channel driven by it: "
-          f"{r0['conv_10']:.1f} m after 10 min, {r0['conv_60']:.1f} m after 60 min.\n")
+          f"{r0['conv_10']:.1f} m after 10 min, {r0['conv_end']:.1f} m after {dur / 60:.0f} min.\n")
     print("| gradient noise, E/sqrt(Hz) | gravity by dg/dt=T V: vertical RMS / end, mGal | horizontal RMS, mGal "
-          "| eigen-vertical error RMS, arcsec | free-inertial pos. error 10 / 60 min, m | "
+          f"| eigen-vertical error RMS, arcsec | free-inertial pos. error 10 / {dur / 60:.0f} min, m | "
           "GNSS-aided pos. RMS asym / KF, m | accel.-error estimate RMS asym / KF, mGal |")
     print("|---|---|---|---|---|---|---|")
     for noise, r in rows:
         print(f"| {noise:g} | {r['grav_v_rms']:.3f} / {r['grav_v_end']:.3f} | {r['grav_h_rms']:.3f} | "
-              f"{r['tilt_grad_arcsec']:.1f} | {r['grad_10']:.0f} / {r['grad_60']:.0f} | "
+              f"{r['tilt_grad_arcsec']:.1f} | {r['grad_10']:.0f} / {r['grad_end']:.0f} | "
               f"{r['aided_pos_as']:.2f} / {r['aided_pos_kf']:.2f} | {r['aided_acc_as']:.1f} / {r['aided_acc_kf']:.1f} |")
     print(f"\n({time.perf_counter() - t0:.0f} s)")
     return rows
