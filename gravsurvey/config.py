@@ -30,7 +30,7 @@ SURVEY_KEYS = ("name", "description")
 #: flight keys handled here; every other key of a flight goes to the ingestion options
 FLIGHT_OWN_KEYS = ("name", "triad", "initial", "truth", "lines")
 OUTPUT_KEYS = ("dir", "epsg", "plots", "xyz", "geojson")
-PROCESSING_KEYS = ("method", "classic_resolution_m", "normal_gravity")
+PROCESSING_KEYS = ("method", "classic_resolution_m", "normal_gravity", "gradiometer")
 TRIADS = ("platform", "strapdown")
 PROCESSING_METHODS = ("inm", "classic")
 _NAME_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
@@ -296,6 +296,8 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
         raise ConfigError(f"processing.normal_gravity: {normal_g} applies to processing.method classic only "
                           "(the 3D-INM uses the exact normal gravity field)")
 
+    if not isinstance(proc.get("gradiometer", False), bool):
+        raise ConfigError(f"processing.gradiometer: expected true or false, got {proc['gradiometer']!r}")
     out = expect_mapping(raw.get("output"), "output")
     check_keys(out, OUTPUT_KEYS, "output")
     out_dir = Path(output_dir) if output_dir is not None else _resolve(base, out.get("dir", "out"), "output.dir")

@@ -164,6 +164,9 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
         sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid,
                                gnss_lever_arm_t=getattr(fl.ingest, "gnss_lever_arm_m", None))
     timings["estimate_s"] = time.perf_counter() - t
+    gradio = None
+    if cfg.raw.get("processing", {}).get("gradiometer", False):
+        gradio = _gradiometer_products(fl, record, sol, notes)
 
     t = time.perf_counter()
     segs = _segments(cfg, fl, sol)
@@ -228,6 +231,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
             "gnss_aided": bool(getattr(sol, "gnss_aided", False)),
             "identification": getattr(sol, "identification", {}),
             "kalman_resolution_m": float(getattr(sol, "resolution_m", float("nan"))),
+            **({"gradiometer": gradio} if gradio is not None else {}),
         },
     )
 
@@ -249,6 +253,22 @@ def _attitude_report(sol) -> dict:
         out["attitude_converge_s"] = float(sol.attitude_converge_s)
         out["gnss_residual_rms_m"] = float(sol.gnss_residual_rms_m)
     return out
+def _gradiometer_products(fl, record, sol, notes):
+    """processing.gradiometer: seed-000 products of the flight's gradient channel (summary.json)."""
+    from .gradiometer import flight_products
+
+    if record.gradient is None:
+        notes.append(f"{fl.name}: processing.gradiometer is on but the flight has no gravity-gradient channel")
+        return None
+    p = flight_products(record.gradient.time, record.gradient.gamma_t, sol.time, sol.lat, sol.lon, sol.height,
+                        sol.vel_n, float(sol.g_smooth[0]), fl.triad)
+    if "disturbance" in p:
+        # the gradient-propagated disturbance against the scalar estimate at the gradient epochs
+        d = p.pop("disturbance")
+        est = np.interp(p.pop("time"), sol.time, sol.g_smooth)
+        p.pop("horizontal_n")
+        p["disturbance_rms_vs_estimate_mgal"] = float(np.sqrt(np.mean((d - est) ** 2)) / 1e-5)
+    return p
 
 
 class _ClassicSolution:

@@ -23,6 +23,8 @@ UNITS = {
     "accel": {"m/s^2": 1.0, "g": 9.80665, "mGal": 1e-5},
     "gyro": {"rad/s": 1.0, "deg/s": np.pi / 180.0, "deg/h": np.pi / 180.0 / 3600.0},
     "height": {"m": 1.0, "ft": 0.3048},
+    # gravity gradients: Eotvos (1 E = 1e-9 1/s^2) unless declared SI
+    "gradient": {"E": 1e-9, "1/s^2": 1.0},
 }
 
 # quantities per channel: name -> (unit kind or None, width)
@@ -31,6 +33,7 @@ QUANTITIES = {
             ("wx", "gyro"), ("wy", "gyro"), ("wz", "gyro")),
     "altimeter": (("height", "height"),),
     "gnss": (("lat", None), ("lon", None), ("height", "height")),
+    "gradient": tuple((c, "gradient") for c in ("txx", "txy", "txz", "tyy", "tyz", "tzz")),
 }
 
 DEFAULT_COLUMNS = {
@@ -38,7 +41,12 @@ DEFAULT_COLUMNS = {
             "wx": "wx_radps", "wy": "wy_radps", "wz": "wz_radps"},
     "altimeter": {"time": "time_ns", "height": "height_m"},
     "gnss": {"time": "time_ns", "lat": "lat_deg", "lon": "lon_deg", "height": "height_m"},
+    "gradient": {"time": "time_ns", "txx": "txx_eotvos", "txy": "txy_eotvos", "txz": "txz_eotvos",
+                 "tyy": "tyy_eotvos", "tyz": "tyz_eotvos", "tzz": "tzz_eotvos"},
 }
+#: Optional lower-triangle columns of a gradient CSV (a full 9-component tensor): when all
+#: three are in the header they are read and the tensor's symmetry is checked at ingestion.
+GRADIENT_LOWER_COLUMNS = {"txy": "tyx_eotvos", "txz": "tzx_eotvos", "tyz": "tzy_eotvos"}
 DEFAULT_GPS_TIME_COLUMNS = ["gps_week", "gps_sow"]
 
 
@@ -106,7 +114,7 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
     Parameters
     ----------
     path : str or Path
-    role : {"imu", "altimeter", "gnss"}
+    role : {"imu", "altimeter", "gnss", "gradient"}
     columns : dict, optional
         quantity -> column name (``DEFAULT_COLUMNS[role]`` completed by these).  ``time`` is
         one column, or two ``[week, seconds_of_week]`` for ``gps_week_sow``, or three
@@ -126,7 +134,9 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
     time_ns : ndarray of int64, shape (n,)
     values : dict
         IMU: ``specific_force`` (n, 3) m/s^2, ``angular_rate`` (n, 3) rad/s; altimeter:
-        ``height`` (n,) m; GNSS: ``lat_deg``, ``lon_deg`` (n,) deg, ``height`` (n,) m.
+        ``height`` (n,) m; GNSS: ``lat_deg``, ``lon_deg`` (n,) deg, ``height`` (n,) m;
+        gradient: ``gradient`` (n, 9) 1/s^2, the tensor row by row (lower triangle mirrored
+        from the upper one unless ``GRADIENT_LOWER_COLUMNS`` are all in the header).
         Values already in SI are returned bit-exactly as written.
 
     Raises
@@ -227,9 +237,33 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
                   "angular_rate": np.stack([vals["wx"], vals["wy"], vals["wz"]], axis=1)}
     elif role == "altimeter":
         values = {"height": vals["height"]}
+    elif role == "gradient":
+        lower = {q: vals[q] for q in ("txy", "txz", "tyz")}
+        if all(c in header for c in GRADIENT_LOWER_COLUMNS.values()):
+            unit = units.get("gradient", next(iter(UNITS["gradient"])))
+            for q, c in GRADIENT_LOWER_COLUMNS.items():
+                strs = [r[header.index(c)] for r in rows]
+                try:
+                    lower[q] = np.array(strs, dtype=np.float64) * UNITS["gradient"][unit] if n \
+                        else np.zeros(0)
+                except ValueError:
+                    k = next(k for k, s_ in enumerate(strs) if not _is_float(s_))
+                    raise DataError(f"{path}: line {line_no[k]}, column {c!r}: expected a "
+                                    f"number, got {strs[k].strip()!r}") from None
+        values = {"gradient": np.stack([vals["txx"], vals["txy"], vals["txz"],
+                                        lower["txy"], vals["tyy"], vals["tyz"],
+                                        lower["txz"], lower["tyz"], vals["tzz"]], axis=1)}
     else:
         values = {"lat_deg": vals["lat"], "lon_deg": vals["lon"], "height": vals["height"]}
     return t, values
+
+
+def _is_float(s):
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
 
 
 def _flat(items):
@@ -255,7 +289,7 @@ def sniff_csv_role(path):
         return None
     if {"time_ns", "line", "disturbance_mgal"} <= header:
         return "truth"
-    for role in ("imu", "gnss", "altimeter"):
+    for role in ("imu", "gnss", "altimeter", "gradient"):
         if set(_flat(DEFAULT_COLUMNS[role].values())) <= header:
             return role
     return None

@@ -22,10 +22,22 @@ from gravsurvey.io.csv import (DEFAULT_COLUMNS, TIME_FORMATS, UNITS,
                                read_csv_channel)
 from gravsurvey.io.mcap import (DEFAULT_JSON_FIELDS, DEFAULT_MAX_RECORD_BYTES, ROLE_SCHEMAS,
                                 McapContent, read_mcap)
-from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
+from gravsurvey.io.record import (AltimeterChannel, FlightRecord, GnssChannel, GradientChannel,
+                                  ImuChannel)
 
 ROLES = ("imu", "altimeter", "gnss")
+#: Channels a flight may have in addition (read when present, never required).
+OPTIONAL_ROLES = ("gradient",)
 DEFAULT_TOPICS = {"imu": "/imu", "altimeter": "/altimeter", "gnss": "/gnss"}
+#: Topic of the optional gradient channel unless ``topics.gradient`` says otherwise (a JSON
+#: channel with schema ``gravsurvey.GravityGradient`` on another topic is found by its schema).
+DEFAULT_GRADIENT_TOPIC = "/gradient"
+#: A gradient file whose median vertical eigenvalue (Earth: ~3080 E) lies outside this range,
+#: in Eotvos, is in another unit than declared.
+GRADIENT_VERTICAL_RANGE_E = (1000.0, 10000.0)
+#: Median asymmetry max|T_ij - T_ji| of a 9-component gradient above which the tensor is
+#: rejected as not a gradient tensor (a real one is symmetric to its noise), Eotvos.
+GRADIENT_ASYMMETRY_TOL_E = 10.0
 #: Flight-level keys this module owns (config.py should hand them over / not reject them).
 INGEST_KEYS = ("inputs", "topics", "mcap", "csv", "checks", "imu_axes", "gnss_lever_arm_m")
 #: IMU axis conventions -> matrix mapping the sensor axes onto forward-left-up body axes
@@ -83,7 +95,8 @@ class IngestOptions:
             return [self._resolve(self.mcap_path, base_dir)]
         if self.kind == "gravimeter":
             return self.gravimeter.paths(base_dir if base_dir is not None else self.base_dir)
-        return [self._resolve(self.csv_paths[r], base_dir) for r in ROLES if r in self.csv_paths]
+        return [self._resolve(self.csv_paths[r], base_dir) for r in ROLES + OPTIONAL_ROLES
+                if r in self.csv_paths]
 
 
 # ----------------------------------------------------------------------------- config parsing
@@ -169,7 +182,7 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
     else:
         o.kind = "csv"
         c = _mapping(inputs["csv"], f"{p}.csv")
-        check_keys(c, ROLES, f"{p}.csv")
+        check_keys(c, ROLES + OPTIONAL_ROLES, f"{p}.csv")
         for r in ("imu", "altimeter"):
             if r not in c:
                 raise ConfigError(f"{p}.csv.{r}: missing; expected a CSV file path")
@@ -177,7 +190,7 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
     if "topics" in cfg:
         p = f"{key_path}.topics"
         t = _mapping(cfg["topics"], p)
-        check_keys(t, ROLES, p)
+        check_keys(t, ROLES + OPTIONAL_ROLES, p)
         for r, v in t.items():
             o.topics[r] = _str_value(v, f"{p}.{r}")
         o.topics_explicit = tuple(t)
@@ -187,7 +200,7 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
         check_keys(m, ("json_fields", "units", "time_source", "check_crc", "max_record_mib"), p)
         if "json_fields" in m:
             jf = _mapping(m["json_fields"], f"{p}.json_fields")
-            check_keys(jf, ROLES, f"{p}.json_fields")
+            check_keys(jf, ROLES + OPTIONAL_ROLES, f"{p}.json_fields")
             for r, fm in jf.items():
                 q = f"{p}.json_fields.{r}"
                 fm = _mapping(fm, q)
@@ -221,7 +234,7 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
             o.csv_time_format = _choice(c["time_format"], TIME_FORMATS, f"{p}.time_format")
         if "columns" in c:
             cols = _mapping(c["columns"], f"{p}.columns")
-            check_keys(cols, ROLES, f"{p}.columns")
+            check_keys(cols, ROLES + OPTIONAL_ROLES, f"{p}.columns")
             for r, cm in cols.items():
                 q = f"{p}.columns.{r}"
                 cm = _mapping(cm, q)
@@ -334,9 +347,80 @@ def _apply_units(role, values, units):
             out["specific_force"] = values["specific_force"] * f["accel"]
         if f["gyro"] != 1.0:
             out["angular_rate"] = values["angular_rate"] * f["gyro"]
+    elif role == "gradient":
+        if f["gradient"] != 1.0:
+            out["gradient"] = values["gradient"] * f["gradient"]
     elif f["height"] != 1.0:
         out["height"] = values["height"] * f["height"]
     return out
+
+
+def select_gradient_channels(content: McapContent, options: IngestOptions, notes: list):
+    """The optional gradient channel of an MCAP file: ``{"gradient": [ids]}`` or ``{}``.
+
+    The configured/default topic (``/gradient``) if present, else the one JSON channel with
+    schema ``gravsurvey.GravityGradient``.
+
+    Raises
+    ------
+    DataError
+        An explicitly configured topic is absent or undecodable; several candidate topics.
+    """
+    path = content.path
+    topic = options.topics.get("gradient", DEFAULT_GRADIENT_TOPIC)
+    ids = [c for c, ch in content.channels.items() if ch.topic == topic]
+    if ids:
+        dec = [c for c in ids if c in content.decoded]
+        if not dec:
+            raise DataError(f"{path}: topic {topic} (gradient) has schema "
+                            f"{content.schema_name(ids[0]) or 'none'!r}, encoding "
+                            f"{content.channels[ids[0]].message_encoding!r}; expected "
+                            f"{ROLE_SCHEMAS['gradient'][0]} (JSON)")
+        return {"gradient": dec}
+    if "gradient" in options.topics_explicit:
+        raise DataError(f"{path}: configured topic {topic} for gradient not in the file")
+    cands = sorted({content.channels[c].topic for c in content.decoded
+                    if content.role_of_schema(c) == "gradient"})
+    if len(cands) > 1:
+        raise DataError(f"{path}: several gradient topics ({', '.join(cands)}); "
+                        "set topics.gradient")
+    if cands:
+        notes.append(f"gradient: topic {topic} absent; using {cands[0]}")
+        return {"gradient": [c for c, ch in content.channels.items()
+                             if ch.topic == cands[0] and c in content.decoded]}
+    return {}
+
+
+def gradient_tensors(values_si, source):
+    """Checked ``(n, 3, 3)`` gradient tensors from ``(n, 9)`` row-major components in 1/s^2.
+
+    Raises
+    ------
+    DataError
+        The median vertical eigenvalue is outside ``GRADIENT_VERTICAL_RANGE_E`` (a unit other
+        than the declared one), or the tensor is not symmetric (median asymmetry above
+        ``GRADIENT_ASYMMETRY_TOL_E``).  Returns the symmetric part.
+    """
+    gam = np.asarray(values_si, dtype=np.float64).reshape(-1, 3, 3)
+    if gam.shape[0] == 0:
+        return gam
+    eot = gam / 1e-9
+    asym = np.abs(eot - eot.transpose(0, 2, 1)).max(axis=(1, 2))
+    med_asym = float(np.median(asym))
+    if med_asym > GRADIENT_ASYMMETRY_TOL_E:
+        k = int(np.argmax(asym))
+        raise DataError(f"{source}: gravity-gradient tensor not symmetric: median "
+                        f"max|T_ij - T_ji| = {med_asym:.4g} E (sample {k}: {asym[k]:.4g} E); "
+                        f"expected a symmetric tensor (<= {GRADIENT_ASYMMETRY_TOL_E:g} E)")
+    sym = 0.5 * (gam + gam.transpose(0, 2, 1))
+    vert = float(np.median(np.abs(np.linalg.eigvalsh(sym / 1e-9)).max(axis=1)))
+    lo, hi = GRADIENT_VERTICAL_RANGE_E
+    if not lo <= vert <= hi:
+        raise DataError(f"{source}: gravity gradient: median largest |eigenvalue| is {vert:.4g} E "
+                        f"after unit conversion; expected ~3080 E ({lo:g}..{hi:g}): wrong unit? "
+                        "(files carry Eotvos, 1 E = 1e-9 1/s^2, unless csv/mcap.units.gradient "
+                        "says 1/s^2)")
+    return sym
 
 
 def select_channels(content: McapContent, options: IngestOptions, notes: list):
@@ -415,6 +499,7 @@ def read_raw_channels(options: IngestOptions, base_dir, notes: list):
                          "ignored")
         try:
             chosen = select_channels(content, options, notes)
+            chosen.update(select_gradient_channels(content, options, notes))
         except DataError as exc:
             if content.salvage is None:
                 raise
@@ -578,13 +663,19 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
         g = raw["gnss"]
         gnss = GnssChannel(rel(g.time_ns), np.radians(g.values["lat_deg"]),
                            np.radians(g.values["lon_deg"]), g.values["height"])
+    gradient = None
+    if "gradient" in raw and len(raw["gradient"].time_ns):
+        gr = raw["gradient"]
+        gradient = GradientChannel(rel(gr.time_ns), gradient_tensors(gr.values["gradient"],
+                                                                     gr.source))
     src = ", ".join(os.fspath(p) for p in options.input_paths(base_dir))
     return FlightRecord(
         t0_unix_ns=t0,
         imu=ImuChannel(rel(imu.time_ns), imu.values["specific_force"],
                        imu.values["angular_rate"]),
         altimeter=AltimeterChannel(rel(alt.time_ns), alt.values["height"]),
-        gnss=gnss, source=src, notes=notes, data_loss=_data_loss(options, base_dir, content))
+        gnss=gnss, source=src, notes=notes, data_loss=_data_loss(options, base_dir, content),
+        gradient=gradient)
 
 
 def _data_loss(options: IngestOptions, base_dir, content) -> list:

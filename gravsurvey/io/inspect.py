@@ -48,7 +48,7 @@ def _channel_report(role, time_ns, values, units):
     elif role == "gnss":
         f += ck.check_gnss(values["lat_deg"], values["lon_deg"])
         f += ck.check_height(role, values["height"], units["height"])
-    else:
+    elif role != "gradient":  # the gradient's unit/symmetry checks run at ingestion
         f += ck.check_height(role, values["height"], units["height"])
     rate = 1e9 / rep.nominal_step_ns if np.isfinite(rep.nominal_step_ns) else None
     t0 = int(t[0]) if len(t) else 0

@@ -54,6 +54,8 @@ ROLE_SCHEMAS = {
     "altimeter": ("geometry_msgs/msg/PointStamped", "geometry_msgs/PointStamped",
                   "gravsurvey.Altimeter"),
     "gnss": ("sensor_msgs/msg/NavSatFix", "sensor_msgs/NavSatFix", "gravsurvey.Gnss"),
+    # optional gravity-gradient channel (JSON only; docs/formats.md)
+    "gradient": ("gravsurvey.GravityGradient",),
 }
 ROS2_IMU = ("sensor_msgs/msg/Imu", "sensor_msgs/Imu")
 ROS2_NAVSATFIX = ("sensor_msgs/msg/NavSatFix", "sensor_msgs/NavSatFix")
@@ -627,6 +629,8 @@ def _decode_json(role, payloads, logt, mapping):
     ``mapping`` gives, per quantity, a dotted key path (a 3-list for vectors, or a path to a
     3-element array), and ``time`` (integer ns; missing -> log time, reported).
     """
+    if role == "gradient":
+        return _decode_json_gradient(payloads, logt, mapping)
     try:  # one parse for the whole batch; fall back per message if any is broken
         objs = json.loads(b"[" + b",".join(payloads) + b"]")
     except (ValueError, RecursionError):
@@ -692,6 +696,51 @@ def _decode_json(role, payloads, logt, mapping):
     return DecodedBlock(t_arr, values, keep_lt, bad, problems, np.array(lts, dtype=np.int64))
 
 
+#: Row-major positions of the 6 independent components ``xx, xy, xz, yy, yz, zz`` in a 3x3 tensor.
+GRADIENT_UPPER = (0, 1, 2, 4, 5, 8)
+_GRADIENT_EXPAND = (0, 1, 2, 1, 3, 4, 2, 4, 5)  # 6 -> row-major 9
+
+
+def _decode_json_gradient(payloads, logt, mapping):
+    """Decode ``gravsurvey.GravityGradient`` JSON messages.
+
+    The tensor field holds the 6 independent components ``[xx, xy, xz, yy, yz, zz]`` or the 9
+    of the full tensor row by row (then symmetry is checked at ingestion).  Returns values
+    ``{"gradient": (n, 9)}`` row-major, in the file's unit (Eotvos unless configured).
+    """
+    rows, times, lts, bad, problems, keep_lt = [], [], [], 0, [], 0
+    spec, tspec = mapping["gradient"], mapping.get("time")
+    for k, p in enumerate(payloads):
+        try:
+            obj = json.loads(p)
+            v = _get_path(obj, spec)
+            if not isinstance(v, list) or len(v) not in (6, 9):
+                raise TypeError
+            v = [_as_float(x) for x in v]
+            if len(v) == 6:
+                v = [v[i] for i in _GRADIENT_EXPAND]
+            try:
+                t = _get_path(obj, tspec) if tspec else None
+            except KeyError:
+                t = None
+            if t is None:
+                t = int(logt[k])
+                keep_lt += 1
+            elif isinstance(t, bool) or not isinstance(t, int):
+                raise TypeError
+        except (KeyError, TypeError, ValueError, RecursionError):
+            bad += 1
+            if len(problems) < 3:
+                problems.append(f"message {k}: field {spec!r} is not a list of 6 or 9 numbers")
+            continue
+        rows.append(v)
+        times.append(t)
+        lts.append(int(logt[k]))
+    vals = {"gradient": np.array(rows, dtype=np.float64).reshape(-1, 9)}
+    return DecodedBlock(np.array(times, dtype=np.int64), vals, keep_lt, bad, problems,
+                        np.array(lts, dtype=np.int64))
+
+
 def _concat_blocks(blocks):
     if not blocks:
         return None
@@ -711,6 +760,7 @@ DEFAULT_JSON_FIELDS = {
     "altimeter": {"time": "time_ns", "height": "height_m"},
     "gnss": {"time": "time_ns", "lat_deg": "lat_deg", "lon_deg": "lon_deg",
              "height": "height_m"},
+    "gradient": {"time": "time_ns", "gradient": "gradient_t_eotvos"},
 }
 
 

@@ -51,6 +51,22 @@ class GnssChannel:
 
 
 @dataclass
+class GradientChannel:
+    """Gravity-gradiometer samples: the gravitation gradient tensor on the instrument triad.
+
+    Attributes
+    ----------
+    time : ndarray, shape (n,)
+        s after ``FlightRecord.t0_unix_ns``, strictly increasing.
+    gamma_t : ndarray, shape (n, 3, 3)
+        ``d g_i / d x_j`` on the triad's axes, 1/s^2 (SI; files carry Eotvos), symmetric.
+    """
+
+    time: np.ndarray
+    gamma_t: np.ndarray
+
+
+@dataclass
 class FlightRecord:
     """One flight's sensor data, checked and on strictly increasing time bases.
 
@@ -67,6 +83,7 @@ class FlightRecord:
     source: str = ""
     notes: list[str] = field(default_factory=list)
     data_loss: list[str] = field(default_factory=list)
+    gradient: GradientChannel | None = None  # optional gravity-gradiometer channel
 
     def epochs(self, rate_hz):
         """Filter epochs (s) at ``rate_hz`` from the first IMU sample through the last one.

@@ -105,6 +105,11 @@ class SensorLogs:
         Gyro white-noise standard deviation per sample, rad/s.
     gnss_sigma_m : float or array_like, shape (3,)
         GNSS position standard deviation (East, North, Up), m.
+    gradient_time_ns : ndarray of int64, shape (j,), or None
+        Gravity-gradiometer measurement times, ns; None: no gradient channel.
+    gradient_t_eotvos : ndarray, shape (j, 6), or None
+        Gravitation gradient tensor on the triad, the 6 independent components
+        ``xx, xy, xz, yy, yz, zz``, Eotvos (1 E = 1e-9 1/s^2).
     """
 
     start_unix_ns: int
@@ -120,6 +125,8 @@ class SensorLogs:
     accel_sigma_mps2: float | Sequence[float] = 0.0
     gyro_sigma_radps: float | Sequence[float] = 0.0
     gnss_sigma_m: float | Sequence[float] = 0.0
+    gradient_time_ns: np.ndarray | None = None
+    gradient_t_eotvos: np.ndarray | None = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -186,6 +193,8 @@ class _Checked:
     accel_sigma: np.ndarray
     gyro_sigma: np.ndarray
     gnss_sigma: np.ndarray
+    grad_t: np.ndarray | None = None
+    grad: np.ndarray | None = None
 
 
 def _check_logs(logs: SensorLogs, need_int32_seconds: bool) -> _Checked:
@@ -232,7 +241,16 @@ def _check_logs(logs: SensorLogs, need_int32_seconds: bool) -> _Checked:
                 f"{name} time_ns: {int(t[-1])} beyond the ROS 2 int32 seconds stamp (year 2038)"
             )
 
-    return _Checked(
+    if (logs.gradient_time_ns is None) != (logs.gradient_t_eotvos is None):
+        raise DataError("gradient: gradient_time_ns and gradient_t_eotvos must be both given or both None")
+    grad_t = grad = None
+    if logs.gradient_time_ns is not None:
+        grad_t = _times(logs.gradient_time_ns, "gradient time_ns")
+        grad = _floats(logs.gradient_t_eotvos, "gradient gradient_t_eotvos", (grad_t.size, 6))
+        if grad_t[0] < start:
+            raise DataError(f"gradient time_ns: first sample {int(grad_t[0])} before start_unix_ns {start}")
+
+    checked = _Checked(
         start,
         imu_t,
         f_t,
@@ -247,6 +265,8 @@ def _check_logs(logs: SensorLogs, need_int32_seconds: bool) -> _Checked:
         _sigma3(logs.gyro_sigma_radps, "gyro_sigma_radps"),
         _sigma3(logs.gnss_sigma_m, "gnss_sigma_m"),
     )
+    checked.grad_t, checked.grad = grad_t, grad
+    return checked
 
 
 def _check_formats(formats: Iterable[str]) -> list[str]:
@@ -368,12 +388,13 @@ def _json_schema(title: str, description: str, props: Mapping[str, tuple]) -> by
     """A JSON Schema (2020-12) document for one flat message type."""
     properties = {}
     for key, (kind, desc) in props.items():
-        if kind == "vec3":
+        if kind in ("vec3", "vec6"):
+            size = 3 if kind == "vec3" else 6
             properties[key] = {
                 "type": "array",
                 "items": {"type": "number"},
-                "minItems": 3,
-                "maxItems": 3,
+                "minItems": size,
+                "maxItems": size,
                 "description": desc,
             }
         else:
@@ -425,6 +446,25 @@ JSON_SCHEMAS = {
         ),
     ),
 }
+
+
+JSON_SCHEMAS["/gradient"] = (
+    "gravsurvey.GravityGradient",
+    _json_schema(
+        "gravsurvey.GravityGradient",
+        "gravitation gradient tensor d g_i / d x_j on the instrument triad",
+        {
+            "time_ns": ("integer", _T_DESC),
+            "gradient_t_eotvos": ("vec6", "components xx, xy, xz, yy, yz, zz, Eotvos (1e-9 1/s^2), triad"),
+        },
+    ),
+)
+
+
+def _json_gradient(t, g) -> list[bytes]:
+    fmt = '{{"time_ns":{},"gradient_t_eotvos":[{},{},{},{},{},{}]}}'.format
+    cols = [_ints(t)] + [_reprs(g[:, j]) for j in range(6)]
+    return [s.encode("ascii") for s in map(fmt, *cols)]
 
 
 def _blocked(n: int, make) -> Iterable:
@@ -762,6 +802,9 @@ def _mcap_json_topics(c: _Checked):
         topics.append(
             ("/gnss", tg, _blocked(tg.size, lambda a, b: _json_gnss(tg[a:b], lat[a:b], lon[a:b], hg[a:b])))
         )
+    if c.grad_t is not None:
+        tq, gq = c.grad_t, c.grad
+        topics.append(("/gradient", tq, _blocked(tq.size, lambda a, b: _json_gradient(tq[a:b], gq[a:b]))))
     return topics
 
 
@@ -852,6 +895,22 @@ def _csv_files(flight: str, c: _Checked, comments) -> list[tuple[str, Iterable[b
             lambda a, b: [_ints(tg[a:b]), _reprs(lat[a:b]), _reprs(lon[a:b]), _reprs(hg[a:b])],
         )
         out.append(("gnss.csv", gnss))
+    if c.grad_t is not None:
+        tq, gq = c.grad_t, c.grad
+        names = ("txx", "txy", "txz", "tyy", "tyz", "tzz")
+        grad = _csv_stream(
+            _csv_comments(
+                flight,
+                "gradient",
+                c,
+                ["t??_eotvos: gravitation gradient tensor d g_i / d x_j on the instrument triad, Eotvos (1e-9 1/s^2)"],
+                comments,
+            ),
+            ["time_ns"] + [f"{q}_eotvos" for q in names],
+            tq.size,
+            lambda a, b: [_ints(tq[a:b])] + [_reprs(gq[a:b, j]) for j in range(6)],
+        )
+        out.append(("gradient.csv", grad))
     return out
 
 

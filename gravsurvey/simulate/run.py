@@ -44,6 +44,7 @@ __all__ = ["FlightSimulation", "simulate_flight", "simulate_to_dir", "quick_sim"
 
 MGAL = 1e-5
 _STREAM_TURBULENCE, _STREAM_IMU, _STREAM_ALT, _STREAM_GNSS, _STREAM_FIELD = range(5)
+_STREAM_GRADIOMETER = 5
 
 
 @dataclass
@@ -108,6 +109,35 @@ class FlightSimulation:
     flight: dict
     plan: FlightPlan
     imu_errors: ImuErrors = field(repr=False, default=None)
+    # optional gravity-gradiometer channel (sensors.gradiometer.rate_hz > 0): times (ns and s),
+    # the 6 triad components xx, xy, xz, yy, yz, zz with errors, Eotvos, and their error truth
+    gradient_time_ns: np.ndarray | None = None
+    gradient_time: np.ndarray | None = None
+    gradient_t_eotvos: np.ndarray | None = None
+    gradient_error_eotvos: np.ndarray | None = None
+
+
+def _gradient_channel(plan, cfg: SimConfig, f: dict, flight_index: int, ell):
+    """Gradiometer samples of one flight: times ns (j,), components with errors and errors, E (j, 6).
+
+    The truth is the normal field's gradient plus the exact tensor of the field model's
+    sources (``field.type: model``; along-track anomaly types have no spatial tensor, so
+    only the normal field's is written), rotated to the triad.
+    """
+    from .field import EOTVOS, total_gradient_n
+    from .sensors import gradient_triad_components, gradiometer_errors
+
+    rate = f["sensors"]["gradiometer"]["rate_hz"]
+    t_ns = sample_times_ns(plan.duration, rate)
+    comps = np.empty((t_ns.size, 6))
+    model = cfg.field_model if (cfg.field_model is not None and cfg.field_model.type == "model") else None
+    for sl in _chunks(t_ns.size):
+        kin = kinematics(plan, t_ns[sl] / 1e9)
+        gam_n = total_gradient_n(model, kin.r_e, kin.lat, kin.lon, ell)
+        mat_nt = np.broadcast_to(np.eye(3), gam_n.shape) if f["triad"] == "platform" else kin.mat_nb
+        comps[sl] = gradient_triad_components(gam_n, mat_nt) / EOTVOS
+    err = gradiometer_errors(t_ns.size, rate, f["sensors"], _rng(cfg, flight_index, _STREAM_GRADIOMETER))
+    return t_ns, comps + err, err
 
 
 def sample_times_ns(duration_s, rate_hz):
@@ -311,6 +341,11 @@ def simulate_flight(sim, flight_index: int = 0) -> FlightSimulation:
         "gnss_error": np.stack([dlat, dlon, dh], axis=-1),
     }
     start = int(f["start_unix_ns"])
+    grad = {}
+    if f["sensors"]["gradiometer"]["rate_hz"] > 0:
+        g_ns, g_val, g_err = _gradient_channel(plan, cfg, f, flight_index, ell)
+        grad = {"gradient_time_ns": g_ns + start, "gradient_time": g_ns / 1e9,
+                "gradient_t_eotvos": g_val, "gradient_error_eotvos": g_err}
     tr_ns = sample_times_ns(dur, rates["truth_hz"])
     truth_table = _truth_table(plan, tr_ns / 1e9, start, tr_ns, anomaly)
     return FlightSimulation(
@@ -336,6 +371,7 @@ def simulate_flight(sim, flight_index: int = 0) -> FlightSimulation:
         flight=f,
         plan=plan,
         imu_errors=errs,
+        **grad,
     )
 
 
@@ -635,6 +671,8 @@ def simulate_to_dir(sim_path, out_dir, oracle: bool = False) -> list[Path]:
             ],
             gyro_sigma_radps=s["gyro"]["white_drift_degph"] * DEGPH * math.sqrt(rate),
             gnss_sigma_m=[s["gnss"]["horizontal_sigma_m"], s["gnss"]["horizontal_sigma_m"], s["gnss"]["vertical_sigma_m"]],
+            gradient_time_ns=sim.gradient_time_ns,
+            gradient_t_eotvos=sim.gradient_t_eotvos,
         )
         fdir = out_dir / sim.name
         comments = _comments(cfg, sim)

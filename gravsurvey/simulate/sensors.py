@@ -195,6 +195,44 @@ def imu_errors(n, rate_hz, cfg, rng) -> ImuErrors:
     return ImuErrors(accel_t=a, gravimeter_markov=markov, gyro_t=g)
 
 
+#: Order of the 6 independent gradient-tensor components written to the logs.
+GRADIENT_COMPONENTS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
+def gradient_triad_components(gamma_n, mat_nt):
+    """The 6 independent components of the gradient tensor on the triad axes.
+
+    Parameters
+    ----------
+    gamma_n : ndarray, shape (n, 3, 3)
+        Gradient tensor ``d g_i / d x_j`` on ENU, 1/s^2.
+    mat_nt : ndarray, shape (n, 3, 3)
+        Triad -> ENU.
+
+    Returns
+    -------
+    comps : ndarray, shape (n, 6)
+        ``T_t = C_tn T_n C_nt`` components ``xx, xy, xz, yy, yz, zz``, 1/s^2.
+    """
+    gam_t = np.einsum("kji,kjl,klm->kim", mat_nt, gamma_n, mat_nt)
+    return np.stack([gam_t[:, i, j] for i, j in GRADIENT_COMPONENTS], axis=1)
+
+
+def gradiometer_errors(n, rate_hz, cfg, rng):
+    """Gradiometer errors of the 6 components, Eotvos, shape (n, 6).
+
+    Per component, independently: white noise of one-second standard deviation
+    ``white_eotvos_rthz`` (E/sqrt(Hz); per sample ``* sqrt(rate_hz)``) plus a
+    stationary first-order Gauss-Markov process (``markov_sigma_eotvos``,
+    ``markov_lambda_per_s``), the slowly drifting part of a real instrument.
+    """
+    c = cfg["gradiometer"]
+    out = rng.standard_normal((n, 6)) * (c["white_eotvos_rthz"] * math.sqrt(rate_hz))
+    for j in range(6):
+        out[:, j] += gauss_markov(n, 1.0 / rate_hz, c["markov_lambda_per_s"], c["markov_sigma_eotvos"], rng)
+    return out
+
+
 def altimeter_errors(n, cfg, rng):
     """Altimeter error ``A + sigma w`` (m), ``(n,)``."""
     alt = cfg["altimeter"]

@@ -68,6 +68,8 @@ DEFAULT_SENSORS = {
     "gyro": {"bias_degph": [0.0, 0.0, 0.0], "white_drift_degph": 0.0},
     "altimeter": {"sigma_m": 0.0, "mean_m": 0.0},
     "gnss": {"horizontal_sigma_m": 0.0, "vertical_sigma_m": 0.0},
+    # gravity gradiometer (seed 000); rate_hz 0 = no gradient channel (the default)
+    "gradiometer": {"rate_hz": 0.0, "white_eotvos_rthz": 0.0, "markov_sigma_eotvos": 0.0, "markov_lambda_per_s": 0.001},
 }
 DEFAULT_PROCESSING = {
     "filter_rate_hz": 1.0,
