@@ -478,6 +478,10 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
     raw, content = read_raw_channels(options, base_dir, notes)
     for ch in raw.values():
         _drop_nonfinite(ch, notes)
+    from gravsurvey.consistency import drop_clock_restarts  # restarts before the time repair
+
+    clock_loss = drop_clock_restarts(raw)
+    notes += clock_loss
     for role in ("imu", "altimeter"):
         if role not in raw or len(raw[role].time_ns) == 0:
             src = raw[role].source if role in raw else (options.mcap_path or "")
@@ -511,7 +515,8 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
         imu=ImuChannel(rel(imu.time_ns), imu.values["specific_force"],
                        imu.values["angular_rate"]),
         altimeter=AltimeterChannel(rel(alt.time_ns), alt.values["height"]),
-        gnss=gnss, source=src, notes=notes, data_loss=_data_loss(options, base_dir, content))
+        gnss=gnss, source=src, notes=notes,
+        data_loss=_data_loss(options, base_dir, content) + clock_loss)
 
 
 def _data_loss(options: IngestOptions, base_dir, content) -> list:

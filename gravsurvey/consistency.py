@@ -1,0 +1,792 @@
+"""Gaps, clocks, input consistency and result plausibility of one flight (issue 14).
+
+Free functions over arrays. Each either returns findings (one-line strings for the flight's
+notes) or raises :class:`~gravsurvey.errors.DataError` naming the channel, file and column.
+``pipeline._process_flight`` calls them in this order:
+
+1. :func:`check_overlap` - channels that do not overlap in time (a clock out of step).
+2. :func:`check_gnss_consistency` - GNSS track against the IMU: speed plausibility, the
+   specific-force magnitude the GNSS kinematics imply vs the one the IMU measures (catches
+   lat/lon swapped, radians declared as degrees, a wrong height unit), and the IMU-GNSS time
+   offset by cross-correlating the two (:func:`estimate_time_offset`).
+3. :func:`plan_segments` - the flight is split at IMU gaps longer than
+   ``CheckOptions.max_imu_gap_s`` and at gaps of all vertical aiding (altimeter and GNSS)
+   longer than ``max_aiding_gap_s``; each segment is estimated on its own
+   (:func:`gravsurvey.io.record.slice_record`) and the results concatenated with a NaN epoch
+   between segments (:func:`concatenate_solutions`).
+4. :func:`check_result` - the final product: non-finite values, |disturbance| beyond a
+   limit, a navigation that left the GNSS track, no survey lines.
+
+Clock restarts (a channel's time going back) are found on the raw int64 stamps before the
+time base is repaired (:func:`find_clock_restarts`, called by ``io.ingest.load_flight``).
+
+Limits and their derivation: docs/reliability.md, "Gaps, clocks, consistency".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from datetime import datetime, timezone
+
+import numpy as np
+
+from .errors import ConfigError, DataError, check_keys
+from .geodesy import MGAL, WGS84, geodetic_to_ecef, normal_gravity_ecef
+
+#: Fastest plausible ground speed of a survey aircraft or ship, m/s (a jet at cruise is
+#: ~250 m/s; survey aircraft fly 50-120 m/s).
+MAX_GROUND_SPEED_MPS = 350.0
+#: Window of the GNSS kinematics (position smoothing and differencing), s: long enough that
+#: 1 m GNSS noise gives < 0.01 m/s^2 acceleration noise (sigma sqrt(6) / (W^2 sqrt(W))).
+KINEMATIC_WINDOW_S = 10.0
+#: Window of the GNSS kinematics for the gravity-consistency check, s: 1.5 m vertical GNSS
+#: noise gives ~70 mGal per estimate at 30 s (~1200 mGal at 10 s); the median over a flight
+#: then resolves a few tens of mGal.
+GRAVITY_WINDOW_S = 30.0
+#: Shortest segment worth estimating, s (the GNSS initialisation fits 10 s; the smoother
+#: needs a few of the anomaly's correlation times to settle).
+MIN_SEGMENT_S = 60.0
+#: Initial velocity 1-sigma of a segment re-initialised from GNSS in flight, m/s: the 10 s
+#: quadratic fit of ``initial_state_from_gnss`` evaluated at the segment's first sample has a
+#: velocity error of a few tenths of a m/s with 1 m GNSS noise (docs/reliability.md).
+REINIT_VELOCITY_SIGMA_MPS = 0.5
+#: Least correlation of IMU and GNSS specific force that counts as a measured time offset.
+MIN_OFFSET_CORRELATION = 0.5
+#: Least standard deviation of the GNSS-derived specific force (m/s^2) for the offset search:
+#: without manoeuvres there is nothing to correlate.
+MIN_OFFSET_SIGNAL_MPS2 = 0.02
+
+
+@dataclass
+class CheckOptions:
+    """Settings of the consistency and plausibility checks (config section ``checks``).
+
+    Attributes
+    ----------
+    max_imu_gap_s : float
+        IMU gaps up to this long are bridged by the mechanization (it interpolates the
+        specific force across); longer ones split the flight into segments, s.
+    max_aiding_gap_s : float
+        Gaps with neither altimeter nor GNSS samples up to this long are bridged by the free
+        INS and the Markov model (the smoothed sigma grows across them); longer ones split the
+        flight, s.
+    max_time_offset_s : float
+        Largest tolerated IMU-GNSS clock offset found by cross-correlation, s.
+    max_gravity_mismatch_mgal : float
+        Largest tolerated median difference between the specific-force magnitude the IMU
+        measures and the one the GNSS kinematics and normal gravity imply, mGal (accelerometer
+        bias + anomaly; a wrong latitude or height unit gives thousands).
+    max_abs_disturbance_mgal : float
+        Largest plausible |gravity disturbance| of the final product, mGal.
+    max_track_deviation_m : float
+        Largest horizontal distance of the GNSS-aided navigation from the GNSS track, m.
+    allow_no_lines, allow_nonfinite : bool
+        Accept a flight without survey lines / with non-finite values in the product.
+    """
+
+    max_imu_gap_s: float = 2.0
+    max_aiding_gap_s: float = 120.0
+    max_time_offset_s: float = 0.5
+    max_gravity_mismatch_mgal: float = 500.0
+    max_abs_disturbance_mgal: float = 1000.0
+    max_track_deviation_m: float = 50.0
+    allow_no_lines: bool = False
+    allow_nonfinite: bool = False
+
+    @classmethod
+    def from_dict(cls, d, key_path: str = "checks") -> "CheckOptions":
+        """Validate the ``checks:`` mapping (None: defaults); ConfigError naming the key."""
+        if d is None:
+            d = {}
+        if not isinstance(d, dict):
+            raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
+        check_keys(d, [f.name for f in fields(cls)], key_path)
+        obj = cls()
+        for f in fields(cls):
+            if f.name not in d:
+                continue
+            v = d[f.name]
+            if f.name.startswith("allow_"):
+                if not isinstance(v, bool):
+                    raise ConfigError(f"{key_path}.{f.name}: expected true or false, got {v!r}")
+            elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                raise ConfigError(f"{key_path}.{f.name}: expected a number > 0, got {v!r}")
+            else:
+                v = float(v)
+            setattr(obj, f.name, v)
+        return obj
+
+
+# ----------------------------------------------------------------------------- helpers
+def utc(t0_unix_ns: int, t_s: float) -> str:
+    """``t_s`` seconds after ``t0_unix_ns`` as ISO UTC (to 0.1 s), for messages."""
+    ns = int(t0_unix_ns) + int(round(float(t_s) * 1e9))
+    d = datetime.fromtimestamp(ns // 10**9, tz=timezone.utc)
+    return d.strftime("%Y-%m-%dT%H:%M:%S") + f".{(ns % 10**9) // 10**8}Z"
+
+
+def span_text(t0_unix_ns: int, a: float, b: float) -> str:
+    """A time range as UTC text with its length."""
+    return f"{utc(t0_unix_ns, a)}..{utc(t0_unix_ns, b)} ({b - a:.1f} s)"
+
+
+@dataclass
+class ChannelNames:
+    """Where a flight's channels come from, for messages: file and column names per role."""
+
+    files: dict  # role -> file (or file + topic)
+    columns: dict  # role -> {quantity: column or field name}
+
+    def column(self, role: str, *quantities: str) -> str:
+        """``"<file> column <name>"`` (``columns <a>, <b>``) for a role's quantities."""
+        cols = [str(self.columns.get(role, {}).get(q, q)) for q in quantities]
+        word = "column" if len(cols) == 1 else "columns"
+        return f"{self.files.get(role, role)} {word} {', '.join(cols)}"
+
+
+def channel_names(ingest, base_dir=None) -> ChannelNames:
+    """File and column names of each role from a flight's ingest options (IngestOptions)."""
+    from .io.csv import DEFAULT_COLUMNS
+
+    files, cols = {}, {}
+    if getattr(ingest, "kind", "csv") == "csv":
+        for role, p in ingest.csv_paths.items():
+            files[role] = str(ingest._resolve(p, base_dir)) if hasattr(ingest, "_resolve") else str(p)
+            cols[role] = {**DEFAULT_COLUMNS.get(role, {}), **ingest.csv_columns.get(role, {})}
+    else:
+        for role, topic in ingest.topics.items():
+            files[role] = f"{ingest.mcap_path} topic {topic}"
+            cols[role] = {k: (v if isinstance(v, str) else "/".join(v))
+                          for k, v in ingest.json_fields.get(role, {}).items()}
+    return ChannelNames(files, cols)
+
+
+def channel_spans(record) -> dict:
+    """First and last sample time (s after ``record.t0_unix_ns``) of each channel present."""
+    out = {"imu": (float(record.imu.time[0]), float(record.imu.time[-1]))}
+    if record.altimeter is not None and len(record.altimeter.time):
+        out["altimeter"] = (float(record.altimeter.time[0]), float(record.altimeter.time[-1]))
+    if record.gnss is not None and len(record.gnss.time):
+        out["gnss"] = (float(record.gnss.time[0]), float(record.gnss.time[-1]))
+    return out
+
+
+# ----------------------------------------------------------------------------- clocks
+def find_clock_restarts(time_ns, min_jump_s: float = 1.0):
+    """Clock restarts in a channel's raw stamps (file order): backward jumps that re-sorting
+    would interleave with earlier samples.
+
+    A backward step longer than ``min_jump_s`` starts a *block* (up to the next such step).
+    The block is a restart when its time range overlaps samples before it (re-sorting would
+    interleave two clocks) - an out-of-order chunk that fills a hole is not. Small backward
+    steps (message jitter) are left to the time repair.
+
+    Parameters
+    ----------
+    time_ns : ndarray of int64, shape (n,)
+        Stamps in file order, ns.
+    min_jump_s : float
+        Backward steps shorter than this are jitter, s.
+
+    Returns
+    -------
+    keep : ndarray of bool, shape (n,)
+        False for the samples of restarted blocks (their true times are unknown).
+    events : list of tuple
+        ``(index, t_before_ns, t_after_ns, n_dropped)`` per restart.
+    """
+    t = np.asarray(time_ns, dtype=np.int64)
+    keep = np.ones(len(t), bool)
+    events = []
+    if len(t) < 3:
+        return keep, events
+    jumps = np.flatnonzero(np.diff(t) < -int(min_jump_s * 1e9)) + 1
+    if not len(jumps):
+        return keep, events
+    bounds = list(jumps) + [len(t)]
+    for k, j in enumerate(jumps):
+        end = bounds[k + 1]
+        block = t[j:end]
+        before = np.sort(t[:j][keep[:j]])
+        lo, hi = int(block.min()), int(block.max())
+        inside = np.searchsorted(before, hi, side="right") - np.searchsorted(before, lo, side="left")
+        if inside > 0:
+            keep[j:end] = False
+            events.append((int(j), int(t[j - 1]), int(t[j]), int(end - j)))
+    return keep, events
+
+
+def clock_restart_messages(role: str, source: str, t0_ns: int, events) -> list[str]:
+    """One line per restart: channel, file, where the clock jumped and what was dropped."""
+    out = []
+    for j, tb, ta, n in events:
+        out.append(
+            f"{role}: clock restart in {source} at sample {j}: time went back from "
+            f"{utc(t0_ns, (tb - t0_ns) / 1e9)} to {utc(t0_ns, (ta - t0_ns) / 1e9)} "
+            f"({(tb - ta) / 1e9:.1f} s back); {n} samples after the restart dropped (their time "
+            "is unknown)")
+    return out
+
+
+def drop_clock_restarts(raw: dict, min_jump_s: float = 1.0) -> list[str]:
+    """Find clock restarts in raw channels and drop the restarted blocks (in place).
+
+    Parameters
+    ----------
+    raw : dict
+        role -> object with ``time_ns`` (int64, file order), ``values`` (dict of arrays with
+        the samples along axis 0) and ``source`` (``io.ingest.RawChannel``).
+
+    Returns
+    -------
+    list of str
+        One line per restart (:func:`clock_restart_messages`); samples were lost, so the
+        caller reports them as data loss.
+    """
+    starts = [int(ch.time_ns[0]) for ch in raw.values() if len(ch.time_ns)]
+    t0 = min(starts) if starts else 0
+    out = []
+    for role, ch in raw.items():
+        keep, events = find_clock_restarts(ch.time_ns, min_jump_s)
+        if events:
+            ch.time_ns = ch.time_ns[keep]
+            ch.values = {k: v[keep] for k, v in ch.values.items()}
+            out += clock_restart_messages(role, ch.source, t0, events)
+    return out
+
+
+def check_overlap(record, names: ChannelNames | None = None, min_fraction: float = 0.5) -> list[str]:
+    """Channels must overlap the IMU in time.
+
+    Raises
+    ------
+    DataError
+        The altimeter or GNSS channel does not overlap the IMU at all (e.g. the IMU clock an
+        hour out of step): names both channels, their files and their time ranges.
+
+    Returns
+    -------
+    list of str
+        Notes for channels overlapping less than ``min_fraction`` of the IMU span.
+    """
+    spans = channel_spans(record)
+    t0 = record.t0_unix_ns
+    a0, a1 = spans["imu"]
+    notes = []
+    for role in ("altimeter", "gnss"):
+        if role not in spans:
+            continue
+        b0, b1 = spans[role]
+        ov = min(a1, b1) - max(a0, b0)
+        fi = names.files.get("imu", "imu") if names else "imu"
+        fr = names.files.get(role, role) if names else role
+        if ov <= 0:
+            raise DataError(
+                f"imu ({fi}) {span_text(t0, a0, a1)} and {role} ({fr}) {span_text(t0, b0, b1)} "
+                f"do not overlap in time ({max(a0, b0) - min(a1, b1):.1f} s apart): a clock out of "
+                "step or files of different flights?")
+        if ov < min_fraction * (a1 - a0):
+            notes.append(f"{role} covers only {100 * ov / (a1 - a0):.0f} % of the IMU time span: imu "
+                         f"{span_text(t0, a0, a1)}, {role} {span_text(t0, b0, b1)}")
+    return notes
+
+
+# ----------------------------------------------------------------------------- kinematics
+def _box(x, n):
+    """Centred moving average over ``n`` samples along axis 0 (valid part only)."""
+    c = np.cumsum(np.concatenate([np.zeros((1,) + x.shape[1:]), x]), axis=0)
+    return (c[n:] - c[:-n]) / n
+
+
+def gnss_specific_force(time, lat, lon, height, window_s: float = KINEMATIC_WINDOW_S,
+                        ellipsoid=WGS84):
+    """Specific-force magnitude implied by the GNSS track: ``|r'' + 2 w x r' - gamma(r)|``.
+
+    ECEF positions are averaged over ``window_s`` and twice differenced at a spacing of
+    ``window_s``; in the rotating Earth frame ``f = r'' + 2 omega x r' - gamma`` with gamma the
+    normal gravity vector (gravitation + centrifugal), so the Eotvos effect is included. The
+    result equals the true specific force smoothed by the kernel of :func:`imu_specific_force`.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        s, strictly increasing, roughly uniform.
+    lat, lon : ndarray, shape (n,)
+        rad.
+    height : ndarray, shape (n,)
+        Ellipsoidal height, m.
+
+    Returns
+    -------
+    t_mid : ndarray, shape (m,)
+        Times of the estimates, s.
+    f_mag : ndarray, shape (m,)
+        m/s^2.
+    speed : ndarray, shape (m,)
+        Ground speed (ECEF velocity magnitude), m/s.
+    """
+    t = np.asarray(time, float)
+    if len(t) < 8:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    dt = float(np.median(np.diff(t)))
+    n = max(2, int(round(window_s / dt)))
+    if len(t) < 3 * n + 2:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    # uniform grid (GNSS may have small gaps; interpolate inside the record)
+    tg = np.arange(t[0], t[-1], dt)
+    r = geodetic_to_ecef(np.interp(tg, t, lat), np.interp(tg, t, np.unwrap(lon)),
+                         np.interp(tg, t, height), ellipsoid)
+    rm = _box(r, n)  # mean over n samples, centred at tg[k] + (n - 1) dt / 2
+    tm = tg[: len(rm)] + 0.5 * (n - 1) * dt
+    h = n * dt
+    acc = (rm[2 * n:] - 2 * rm[n:-n] + rm[:-2 * n]) / h**2
+    vel = (rm[2 * n:] - rm[:-2 * n]) / (2 * h)
+    rc = rm[n:-n]
+    omega = np.array([0.0, 0.0, ellipsoid.omega])
+    f = acc + 2.0 * np.cross(omega, vel) - normal_gravity_ecef(rc, ellipsoid)
+    return tm[n:-n], np.linalg.norm(f, axis=1), np.linalg.norm(vel, axis=1)
+
+
+def imu_specific_force(time, specific_force_t, t_out, dt, window_s: float = KINEMATIC_WINDOW_S, shift_s=0.0):
+    """IMU specific-force magnitude smoothed like :func:`gnss_specific_force`, at ``t_out``.
+
+    The GNSS estimate's kernel on the acceleration is a box of ``window_s`` convolved with a
+    triangle of half-width ``window_s``; the same kernel is applied to ``|f|``.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        IMU times, s.
+    specific_force_t : ndarray, shape (n, 3)
+        m/s^2, any triad (only the magnitude is used).
+    t_out : ndarray, shape (m,)
+        Output times, s (+ ``shift_s``).
+    dt : float
+        Grid step of the kernel, s.
+
+    Returns
+    -------
+    ndarray, shape (m,)
+    """
+    t = np.asarray(time, float)
+    fm = np.linalg.norm(np.asarray(specific_force_t, float), axis=1)
+    n = max(2, int(round(window_s / dt)))
+    box = np.full(n, 1.0 / n)
+    tri = np.convolve(np.full(n, 1.0 / n), np.full(n, 1.0 / n))
+    kern = np.convolve(box, tri)
+    half = 0.5 * (len(kern) - 1) * dt
+    tg = np.arange(t[0], t[-1], dt)
+    fg = np.interp(tg, t, fm)
+    sm = np.convolve(fg, kern, mode="valid")
+    ts = tg[: len(sm)] + half
+    return np.interp(np.asarray(t_out) + shift_s, ts, sm, left=np.nan, right=np.nan)
+
+
+def estimate_time_offset(record, max_lag_s: float = 30.0, step_s: float = 0.05):
+    """IMU-GNSS clock offset by cross-correlating the specific-force magnitudes.
+
+    Returns
+    -------
+    offset_s : float or None
+        IMU time minus GNSS time of the same instant, s (positive: IMU stamps late); None when
+        the flight has too little manoeuvring to measure it.
+    corr : float
+        Correlation at the best lag (NaN when not measured).
+    """
+    g = record.gnss
+    if g is None or len(g.time) < 30:
+        return None, float("nan")
+    tm, fg, _ = gnss_specific_force(g.time, g.lat, g.lon, g.height)
+    if len(tm) < 30 or np.std(fg) < MIN_OFFSET_SIGNAL_MPS2:
+        return None, float("nan")
+    dt = float(np.median(np.diff(g.time)))
+    imu = record.imu
+
+    def corr(lag):
+        fi = imu_specific_force(imu.time, imu.specific_force_t, tm, dt, shift_s=lag)
+        ok = np.isfinite(fi)
+        if ok.sum() < 30:
+            return -np.inf
+        a, b = fi[ok] - fi[ok].mean(), fg[ok] - fg[ok].mean()
+        den = math.sqrt(float(a @ a) * float(b @ b))
+        return float(a @ b) / den if den > 0 else -np.inf
+
+    coarse = np.arange(-max_lag_s, max_lag_s + 1e-9, max(dt / 2, 0.5))
+    c = np.array([corr(x) for x in coarse])
+    k = int(np.argmax(c))
+    fine = np.arange(coarse[k] - 1.0, coarse[k] + 1.0 + 1e-9, step_s)
+    cf = np.array([corr(x) for x in fine])
+    k = int(np.argmax(cf))
+    best, cbest = float(fine[k]), float(cf[k])
+    if 0 < k < len(fine) - 1:  # parabolic refinement
+        y0, y1, y2 = cf[k - 1], cf[k], cf[k + 1]
+        d = y0 - 2 * y1 + y2
+        if d < 0:
+            best += 0.5 * step_s * (y0 - y2) / d
+    if cbest < MIN_OFFSET_CORRELATION:
+        return None, cbest
+    return best, cbest
+
+
+# ----------------------------------------------------------------------------- input consistency
+def gravity_mismatch(record, time, lat, lon, height, ellipsoid=WGS84, window_s: float = GRAVITY_WINDOW_S):
+    """Median of IMU |f| minus the GNSS-implied |f| (:func:`gnss_specific_force`), m/s^2.
+
+    Parameters
+    ----------
+    record : FlightRecord
+        For the IMU.
+    time, lat, lon, height : ndarray, shape (n,)
+        A GNSS track (s, rad, rad, m) - the record's, or a hypothesis about its columns.
+
+    Returns
+    -------
+    diff : float
+        m/s^2; NaN when fewer than 10 epochs overlap.
+    n : int
+        Epochs used.
+    """
+    tm, fg, _ = gnss_specific_force(time, lat, lon, height, window_s, ellipsoid)
+    if len(tm) == 0:
+        return float("nan"), 0
+    dt = float(np.median(np.diff(time)))
+    fi = imu_specific_force(record.imu.time, record.imu.specific_force_t, tm, dt, window_s)
+    ok = np.isfinite(fi)
+    if ok.sum() < 10:
+        return float("nan"), int(ok.sum())
+    return float(np.median(fi[ok] - fg[ok])), int(ok.sum())
+
+
+def mismatch_hints(record, ellipsoid=WGS84):
+    """Column mix-ups of the GNSS channel that would make its track agree with the IMU.
+
+    Each hypothesis (lat/lon swapped, radians declared as degrees, feet <-> metres) is applied
+    to the track and :func:`gravity_mismatch` recomputed.
+
+    Returns
+    -------
+    list of (str, float)
+        Hypothesis and its |mismatch|, m/s^2.
+    """
+    g = record.gnss
+    t, lat, lon, h = (np.asarray(x, float) for x in (g.time, g.lat, g.lon, g.height))
+    cands = []
+    if np.all(np.abs(lon) <= math.pi / 2):
+        cands.append(("latitude and longitude swapped", (lon, lat, h)))
+    if np.all(np.abs(np.degrees(lat)) <= math.pi / 2):
+        cands.append(("latitude/longitude in radians but declared as degrees",
+                      (np.degrees(lat), np.degrees(lon), h)))
+    cands.append(("height in feet but declared as metres", (lat, lon, h * 0.3048)))
+    cands.append(("height in metres but declared as feet", (lat, lon, h / 0.3048)))
+    return [(name, abs(gravity_mismatch(record, t, *x, ellipsoid)[0])) for name, x in cands]
+
+
+def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, ellipsoid=WGS84,
+                           initial_raw: dict | None = None, initial_key: str = "initial") -> list[str]:
+    """GNSS positions against themselves and the IMU motion.
+
+    * Ground speed from the GNSS track at most ``MAX_GROUND_SPEED_MPS``.
+    * Median of (IMU |f| - GNSS-implied |f|) within ``max_gravity_mismatch_mgal``: the IMU
+      measures normal gravity at the true latitude and height (plus the anomaly and the
+      accelerometer bias); a swapped or radian latitude or a height in feet moves normal
+      gravity by 1000-4000 mGal. The message names the columns and the mix-up that explains it.
+    * IMU-GNSS time offset within ``max_time_offset_s`` (when measurable).
+    * The ``initial`` block within 1 km / 100 m of the GNSS track at the first IMU sample.
+
+    Raises
+    ------
+    DataError
+        Naming the file and column and what was expected.
+
+    Returns
+    -------
+    list of str
+        Notes (e.g. the measured offset, or that it could not be measured).
+    """
+    g = record.gnss
+    notes = []
+    if g is None or len(g.time) < 30:
+        return notes
+    h_c = names.column("gnss", "height")
+    latlon_c = names.column("gnss", "lat", "lon")
+    tm, _, speed = gnss_specific_force(g.time, g.lat, g.lon, g.height, KINEMATIC_WINDOW_S, ellipsoid)
+    if len(tm) == 0:
+        return notes
+    vmax = float(np.percentile(speed, 99))
+    if vmax > MAX_GROUND_SPEED_MPS:
+        raise DataError(f"{latlon_c}: the GNSS track moves at {vmax:.4g} m/s (99th percentile), "
+                        f"expected at most {MAX_GROUND_SPEED_MPS:g} m/s for an aircraft or ship: "
+                        "wrong unit (radians declared as degrees?) or jumps in the positions")
+    diff, n = gravity_mismatch(record, g.time, g.lat, g.lon, g.height, ellipsoid)
+    if np.isfinite(diff):
+        if abs(diff) > opts.max_gravity_mismatch_mgal * MGAL:
+            good = [name for name, res in sorted(mismatch_hints(record, ellipsoid), key=lambda x: x[1])
+                    if res < opts.max_gravity_mismatch_mgal * MGAL]
+            cols = names.column("gnss", "lat", "lon", "height")
+            if good:
+                cols = h_c if "height" in good[0] else latlon_c
+            raise DataError(
+                f"{cols}: the IMU measures a specific force {diff / MGAL:+.0f} mGal off the one the "
+                f"GNSS track and normal gravity imply (median over {n} epochs; expected within "
+                f"{opts.max_gravity_mismatch_mgal:g} mGal, checks.max_gravity_mismatch_mgal)"
+                + (f": {good[0]}?" if good else ": wrong latitude, height unit or accelerometer scale?"))
+        notes.append(f"gnss vs imu: median specific-force difference {diff / MGAL:+.1f} mGal "
+                     f"(limit {opts.max_gravity_mismatch_mgal:g})")
+    off, c = estimate_time_offset(record)
+    if off is None:
+        notes.append("imu-gnss time offset: not measurable (too little manoeuvring to correlate)")
+    else:
+        t0 = record.t0_unix_ns
+        a0, a1 = channel_spans(record)["imu"]
+        b0, b1 = channel_spans(record)["gnss"]
+        txt = (f"imu ({names.files.get('imu', 'imu')}) {span_text(t0, a0, a1)} runs {off:+.2f} s "
+               f"relative to gnss ({names.files.get('gnss', 'gnss')}) {span_text(t0, b0, b1)} "
+               f"(cross-correlation of specific force, r = {c:.2f})")
+        if abs(off) > opts.max_time_offset_s:
+            raise DataError(f"{txt}; expected within {opts.max_time_offset_s:g} s "
+                            "(checks.max_time_offset_s): clocks out of step")
+        notes.append(f"time offset: {txt}")
+    if initial_raw:
+        notes += check_initial(record, initial_raw, initial_key, ellipsoid)
+    return notes
+
+
+def check_initial(record, initial_raw: dict, key: str, ellipsoid=WGS84,
+                  max_horizontal_m: float = 1000.0, max_vertical_m: float = 100.0) -> list[str]:
+    """The configured ``initial`` position against GNSS at the first IMU sample.
+
+    Raises
+    ------
+    DataError
+        Naming ``<key>.lat_deg`` / ``lon_deg`` / ``height_m`` when it is more than
+        ``max_horizontal_m`` / ``max_vertical_m`` from the GNSS track.
+    """
+    g = record.gnss
+    t0 = float(record.imu.time[0])
+    if g is None or len(g.time) < 3 or not (g.time[0] - 10.0 <= t0 <= g.time[-1]):
+        return []
+    lat = float(np.interp(t0, g.time, g.lat))
+    lon = float(np.interp(t0, g.time, np.unwrap(g.lon)))
+    h = float(np.interp(t0, g.time, g.height))
+    try:
+        ilat, ilon, ih = (math.radians(float(initial_raw["lat_deg"])), math.radians(float(initial_raw["lon_deg"])),
+                          float(initial_raw["height_m"]))
+    except (KeyError, TypeError, ValueError):
+        return []
+    r = geodetic_to_ecef(np.array([lat, ilat]), np.array([lon, ilon]), np.array([h, h]), ellipsoid)
+    dist = float(np.linalg.norm(r[1] - r[0]))
+    if dist > max_horizontal_m:
+        bad = "lat_deg" if abs(ilat - lat) * 6.4e6 > max_horizontal_m / 2 else "lon_deg"
+        raise DataError(f"{key}.{bad}: the initial position ({math.degrees(ilat):.6f}, {math.degrees(ilon):.6f} "
+                        f"deg) is {dist / 1000:.3g} km from the GNSS track at the first IMU sample "
+                        f"({math.degrees(lat):.6f}, {math.degrees(lon):.6f} deg); expected within "
+                        f"{max_horizontal_m:g} m")
+    if abs(ih - h) > max_vertical_m:
+        raise DataError(f"{key}.height_m: {ih:g} m is {ih - h:+.1f} m from the GNSS height {h:.1f} m at the "
+                        f"first IMU sample; expected within {max_vertical_m:g} m")
+    return []
+
+
+# ----------------------------------------------------------------------------- gaps and segments
+def find_gaps(time, max_gap_s: float):
+    """Steps of a channel longer than ``max_gap_s``: list of ``(t_before, t_after)``, s."""
+    t = np.asarray(time, float)
+    if len(t) < 2:
+        return []
+    i = np.flatnonzero(np.diff(t) > max_gap_s)
+    return [(float(t[k]), float(t[k + 1])) for k in i]
+
+
+def _aiding_gaps(record, max_gap_s):
+    """Intervals longer than ``max_gap_s`` without any altimeter or GNSS sample."""
+    ts = [np.asarray(record.altimeter.time, float)]
+    if record.gnss is not None and len(record.gnss.time):
+        ts.append(np.asarray(record.gnss.time, float))
+    t = np.unique(np.concatenate(ts))
+    a0, a1 = float(record.imu.time[0]), float(record.imu.time[-1])
+    # no aiding at the start or end of the IMU span counts too
+    t = np.concatenate([[a0] if t[0] - a0 > max_gap_s else [], t, [a1] if a1 - t[-1] > max_gap_s else []])
+    return find_gaps(t, max_gap_s)
+
+
+def plan_segments(record, opts: CheckOptions, names: ChannelNames | None = None):
+    """Split a flight at long IMU gaps and long gaps of all vertical aiding.
+
+    Parameters
+    ----------
+    record : FlightRecord
+    opts : CheckOptions
+
+    Returns
+    -------
+    segments : list of (float, float)
+        ``(t_start, t_end)`` of each segment to estimate, s (inclusive IMU sample times).
+    notes : list of str
+        What was split or bridged, with channel names and UTC ranges.
+    dropped : list of str
+        Pieces too short to estimate (data lost: reported as a data problem).
+    """
+    t0 = record.t0_unix_ns
+    imu_t = np.asarray(record.imu.time, float)
+    cuts = []  # (gap start, gap end, what)
+    notes = []
+    fi = names.files.get("imu", "imu") if names else "imu"
+    for a, b in find_gaps(imu_t, opts.max_imu_gap_s):
+        cuts.append((a, b, f"imu gap ({fi}) {span_text(t0, a, b)}"))
+    for a, b in _aiding_gaps(record, opts.max_aiding_gap_s):
+        cuts.append((a, b, f"no altimeter or gnss samples {span_text(t0, a, b)}"))
+    # bridged gaps: longer than 5 nominal steps but within the limit
+    if len(imu_t) > 2:
+        nom = float(np.median(np.diff(imu_t)))
+        short = [(a, b) for a, b in find_gaps(imu_t, 5 * nom) if b - a <= opts.max_imu_gap_s]
+        if short:
+            notes.append(f"imu: {len(short)} gaps of {5 * nom:.3g}-{opts.max_imu_gap_s:g} s bridged by the "
+                         f"mechanization (longest {max(b - a for a, b in short):.2f} s)")
+    cuts.sort()
+    segs = []
+    start = imu_t[0]
+    for a, b, what in cuts:
+        a = max(a, start)
+        if a > start:
+            segs.append((start, a))
+        start = max(start, b)
+        notes.append(f"split at {what}")
+    segs.append((start, imu_t[-1]))
+    keep, dropped = [], []
+    for a, b in segs:
+        n = int(np.count_nonzero((imu_t >= a) & (imu_t <= b)))
+        if b - a >= MIN_SEGMENT_S and n >= 8:
+            keep.append((float(a), float(b)))
+        elif b > a or n:
+            dropped.append(f"segment {span_text(t0, a, b)} between gaps is shorter than {MIN_SEGMENT_S:g} s: "
+                           "not estimated")
+    if not keep:
+        raise DataError(f"{record.source or 'record'}: no piece of the flight between gaps is at least "
+                        f"{MIN_SEGMENT_S:g} s long ({'; '.join(n for n in notes if n.startswith('split'))})")
+    return keep, notes, dropped
+
+
+@dataclass
+class SegmentedSolution:
+    """The per-epoch arrays the pipeline reads, over all segments of a flight.
+
+    Segments are joined with one NaN epoch in the middle of each gap (so that plots, line
+    segmentation and post-processing never join across a gap). ``segment`` holds the segment
+    number of each epoch (-1 for the separators). Shapes ``(N,)`` (``vel_n``: ``(N, 3)``);
+    units as :class:`gravsurvey.inm.solve.InmSolution`.
+    """
+
+    time: np.ndarray
+    g_smooth: np.ndarray
+    sigma_smooth: np.ndarray
+    g_forward: np.ndarray
+    sigma_forward: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    height: np.ndarray
+    vel_n: np.ndarray
+    speed: np.ndarray
+    segment: np.ndarray
+    gnss_aided: bool = False
+    warnings: list = None
+
+
+_FIELDS_1D = ("g_smooth", "sigma_smooth", "g_forward", "sigma_forward", "lat", "lon", "height", "speed")
+
+
+def concatenate_solutions(sols) -> SegmentedSolution:
+    """Join per-segment solutions (objects with the InmSolution fields) in time order."""
+    parts = {k: [] for k in _FIELDS_1D + ("time", "vel_n", "segment")}
+    for i, s in enumerate(sols):
+        if i > 0:
+            tsep = 0.5 * (float(sols[i - 1].time[-1]) + float(s.time[0]))
+            parts["time"].append(np.array([tsep]))
+            for k in _FIELDS_1D:
+                parts[k].append(np.array([np.nan]))
+            parts["vel_n"].append(np.full((1, 3), np.nan))
+            parts["segment"].append(np.array([-1]))
+        parts["time"].append(np.asarray(s.time, float))
+        for k in _FIELDS_1D:
+            parts[k].append(np.asarray(getattr(s, k), float))
+        parts["vel_n"].append(np.asarray(s.vel_n, float))
+        parts["segment"].append(np.full(len(s.time), i))
+    out = {k: np.concatenate(v) for k, v in parts.items()}
+    return SegmentedSolution(**out, gnss_aided=any(getattr(s, "gnss_aided", False) for s in sols),
+                             warnings=[w for s in sols for w in (getattr(s, "warnings", None) or [])])
+
+
+# ----------------------------------------------------------------------------- result plausibility
+def track_deviation_m(sol, record, ellipsoid=WGS84):
+    """Horizontal distance of the navigation from the GNSS track at the solution epochs, m.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        NaN where GNSS has no sample within 2 s or the solution is NaN.
+    """
+    g = record.gnss
+    t = np.asarray(sol.time, float)
+    if g is None or len(g.time) < 2:
+        return np.full(len(t), np.nan)
+    glat, glon, gh = record.gnss_on(t, max_gap_s=2.0)
+    r_nav = geodetic_to_ecef(sol.lat, sol.lon, gh, ellipsoid)
+    r_gn = geodetic_to_ecef(glat, glon, gh, ellipsoid)
+    return np.linalg.norm(r_nav - r_gn, axis=1)
+
+
+def check_result(name: str, final_mps2, in_line, sol, record, opts: CheckOptions, n_lines: int,
+                 ellipsoid=WGS84) -> list[str]:
+    """Plausibility of a flight's product; DataError naming the cause unless allowed.
+
+    Parameters
+    ----------
+    name : str
+        Flight name (for messages).
+    final_mps2 : ndarray, shape (N,)
+        Post-processed disturbance, m/s^2 (NaN outside lines).
+    in_line : ndarray of bool, shape (N,)
+        Epochs on survey lines.
+    sol : SegmentedSolution or InmSolution
+    n_lines : int
+        Number of survey/tie lines found.
+
+    Returns
+    -------
+    list of str
+        Notes (e.g. the largest track deviation).
+    """
+    notes = []
+    if n_lines == 0 and not opts.allow_no_lines:
+        raise DataError(f"{name}: no survey lines found (straight, level, steady-speed pieces of at least "
+                        "the lines.min_line_s); nothing to deliver (set checks.allow_no_lines: true to accept)")
+    valid = np.asarray(getattr(sol, "segment", np.zeros(len(sol.time))) >= 0)
+    fin = np.asarray(final_mps2, float)
+    bad = in_line & ~np.isfinite(fin)
+    for label, arr in (("kalman estimate", sol.g_smooth), ("sigma", sol.sigma_smooth),
+                       ("latitude", sol.lat), ("longitude", sol.lon), ("height", sol.height)):
+        nb = int(np.count_nonzero(valid & ~np.isfinite(np.asarray(arr, float))))
+        if nb and not opts.allow_nonfinite:
+            raise DataError(f"{name}: the {label} has {nb} non-finite values of {int(valid.sum())} epochs "
+                            "(set checks.allow_nonfinite: true to accept)")
+    if bad.any() and not opts.allow_nonfinite:
+        raise DataError(f"{name}: the final disturbance has {int(bad.sum())} non-finite values on lines "
+                        "(set checks.allow_nonfinite: true to accept)")
+    if in_line.any():
+        vmax = float(np.nanmax(np.abs(fin[in_line]))) / MGAL if np.isfinite(fin[in_line]).any() else 0.0
+        if vmax > opts.max_abs_disturbance_mgal:
+            k = int(np.nanargmax(np.where(in_line, np.abs(fin), -np.inf)))
+            raise DataError(f"{name}: |disturbance| reaches {vmax:.4g} mGal at t = {sol.time[k]:.1f} s; "
+                            f"expected at most {opts.max_abs_disturbance_mgal:g} mGal "
+                            "(checks.max_abs_disturbance_mgal)")
+    if getattr(sol, "gnss_aided", False):
+        dev = track_deviation_m(sol, record, ellipsoid)
+        if np.isfinite(dev).any():
+            dmax = float(np.nanmax(dev))
+            if dmax > opts.max_track_deviation_m:
+                k = int(np.nanargmax(dev))
+                raise DataError(f"{name}: the navigation left the GNSS track by {dmax:.4g} m at t = "
+                                f"{sol.time[k]:.1f} s; expected within {opts.max_track_deviation_m:g} m "
+                                "(checks.max_track_deviation_m)")
+            notes.append(f"{name}: navigation within {dmax:.3g} m of the GNSS track")
+    return notes
