@@ -299,6 +299,12 @@ def _box(x, n):
     return (c[n:] - c[:-n]) / n
 
 
+def _near_samples(t, tg, max_step):
+    """True where ``tg`` lies in a step of ``t`` no longer than ``max_step`` (not in a gap)."""
+    j = np.clip(np.searchsorted(t, tg, side="right"), 1, len(t) - 1)
+    return (t[j] - t[j - 1]) <= max_step
+
+
 def gnss_specific_force(time, lat, lon, height, window_s: float = KINEMATIC_WINDOW_S,
                         ellipsoid=WGS84):
     """Specific-force magnitude implied by the GNSS track: ``|r'' + 2 w x r' - gamma(r)|``.
@@ -333,10 +339,12 @@ def gnss_specific_force(time, lat, lon, height, window_s: float = KINEMATIC_WIND
     n = max(2, int(round(window_s / dt)))
     if len(t) < 3 * n + 2:
         return np.zeros(0), np.zeros(0), np.zeros(0)
-    # uniform grid (GNSS may have small gaps; interpolate inside the record)
+    # uniform grid; grid points inside a gap (> 2 steps) are invalid, and so is every
+    # estimate whose window touches one (no kinematics across gaps)
     tg = np.arange(t[0], t[-1], dt)
     r = geodetic_to_ecef(np.interp(tg, t, lat), np.interp(tg, t, np.unwrap(lon)),
                          np.interp(tg, t, height), ellipsoid)
+    r[~_near_samples(t, tg, 2.0 * dt)] = np.nan
     rm = _box(r, n)  # mean over n samples, centred at tg[k] + (n - 1) dt / 2
     tm = tg[: len(rm)] + 0.5 * (n - 1) * dt
     h = n * dt
@@ -378,7 +386,8 @@ def imu_specific_force(time, specific_force_t, t_out, dt, window_s: float = KINE
     half = 0.5 * (len(kern) - 1) * dt
     tg = np.arange(t[0], t[-1], dt)
     fg = np.interp(tg, t, fm)
-    sm = np.convolve(fg, kern, mode="valid")
+    fg[~_near_samples(t, tg, max(2.0 * dt, 5.0 * float(np.median(np.diff(t)))))] = np.nan
+    sm = np.convolve(fg, kern, mode="valid")  # NaN spreads over every window touching a gap
     ts = tg[: len(sm)] + half
     return np.interp(np.asarray(t_out) + shift_s, ts, sm, left=np.nan, right=np.nan)
 
@@ -398,6 +407,8 @@ def estimate_time_offset(record, max_lag_s: float = 30.0, step_s: float = 0.05):
     if g is None or len(g.time) < 30:
         return None, float("nan")
     tm, fg, _ = gnss_specific_force(g.time, g.lat, g.lon, g.height)
+    good = np.isfinite(fg)
+    tm, fg = tm[good], fg[good]
     if len(tm) < 30 or np.std(fg) < MIN_OFFSET_SIGNAL_MPS2:
         return None, float("nan")
     dt = float(np.median(np.diff(g.time)))
@@ -452,7 +463,7 @@ def gravity_mismatch(record, time, lat, lon, height, ellipsoid=WGS84, window_s: 
         return float("nan"), 0
     dt = float(np.median(np.diff(time)))
     fi = imu_specific_force(record.imu.time, record.imu.specific_force_t, tm, dt, window_s)
-    ok = np.isfinite(fi)
+    ok = np.isfinite(fi) & np.isfinite(fg)
     if ok.sum() < 10:
         return float("nan"), int(ok.sum())
     return float(np.median(fi[ok] - fg[ok])), int(ok.sum())
@@ -513,7 +524,9 @@ def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, elli
     tm, _, speed = gnss_specific_force(g.time, g.lat, g.lon, g.height, KINEMATIC_WINDOW_S, ellipsoid)
     if len(tm) == 0:
         return notes
-    vmax = float(np.percentile(speed, 99))
+    if not np.isfinite(speed).any():
+        return notes
+    vmax = float(np.nanpercentile(speed, 99))
     if vmax > MAX_GROUND_SPEED_MPS:
         raise DataError(f"{latlon_c}: the GNSS track moves at {vmax:.4g} m/s (99th percentile), "
                         f"expected at most {MAX_GROUND_SPEED_MPS:g} m/s for an aircraft or ship: "
@@ -644,9 +657,15 @@ def plan_segments(record, opts: CheckOptions, names: ChannelNames | None = None)
             notes.append(f"imu: {len(short)} gaps of {5 * nom:.3g}-{opts.max_imu_gap_s:g} s bridged by the "
                          f"mechanization (longest {max(b - a for a, b in short):.2f} s)")
     cuts.sort()
+    merged = []  # overlapping gaps of several channels are one cut
+    for a, b, what in cuts:
+        if merged and a <= merged[-1][1]:
+            merged[-1] = (merged[-1][0], max(b, merged[-1][1]), merged[-1][2] + " and " + what)
+        else:
+            merged.append((a, b, what))
     segs = []
     start = imu_t[0]
-    for a, b, what in cuts:
+    for a, b, what in merged:
         a = max(a, start)
         if a > start:
             segs.append((start, a))
@@ -772,10 +791,11 @@ def check_result(name: str, final_mps2, in_line, sol, record, opts: CheckOptions
     if bad.any() and not opts.allow_nonfinite:
         raise DataError(f"{name}: the final disturbance has {int(bad.sum())} non-finite values on lines "
                         "(set checks.allow_nonfinite: true to accept)")
-    if in_line.any():
-        vmax = float(np.nanmax(np.abs(fin[in_line]))) / MGAL if np.isfinite(fin[in_line]).any() else 0.0
+    absf = np.where(in_line & np.isfinite(fin), np.abs(fin), -np.inf)
+    if np.isfinite(absf).any():
+        k = int(np.argmax(absf))
+        vmax = float(absf[k]) / MGAL
         if vmax > opts.max_abs_disturbance_mgal:
-            k = int(np.nanargmax(np.where(in_line, np.abs(fin), -np.inf)))
             raise DataError(f"{name}: |disturbance| reaches {vmax:.4g} mGal at t = {sol.time[k]:.1f} s; "
                             f"expected at most {opts.max_abs_disturbance_mgal:g} mGal "
                             "(checks.max_abs_disturbance_mgal)")
