@@ -44,6 +44,9 @@ KINEMATIC_WINDOW_S = 10.0
 #: noise gives ~70 mGal per estimate at 30 s (~1200 mGal at 10 s); the median over a flight
 #: then resolves a few tens of mGal.
 GRAVITY_WINDOW_S = 30.0
+#: Largest mean rotation rate of the triad over the kinematic kernel for the gravity check,
+#: rad/s (0.15 deg/s: the triad turns < 5 deg over the 30 s window).
+QUIET_RATE_RADPS = math.radians(0.15)
 #: Shortest segment worth estimating, s (the GNSS initialisation fits 10 s; the smoother
 #: needs a few of the anomaly's correlation times to settle).
 MIN_SEGMENT_S = 60.0
@@ -356,18 +359,26 @@ def gnss_specific_force(time, lat, lon, height, window_s: float = KINEMATIC_WIND
     return tm[n:-n], np.linalg.norm(f, axis=1), np.linalg.norm(vel, axis=1)
 
 
-def imu_specific_force(time, specific_force_t, t_out, dt, window_s: float = KINEMATIC_WINDOW_S, shift_s=0.0):
-    """IMU specific-force magnitude smoothed like :func:`gnss_specific_force`, at ``t_out``.
+def _kernel(dt, window_s):
+    """Kernel of :func:`gnss_specific_force` on the acceleration: box * triangle, on a ``dt`` grid."""
+    n = max(2, int(round(window_s / dt)))
+    box = np.full(n, 1.0 / n)
+    return np.convolve(box, np.convolve(box, box))
+
+
+def smooth_imu(time, values, t_out, dt, window_s: float = KINEMATIC_WINDOW_S, shift_s=0.0):
+    """An IMU quantity smoothed with the kernel of :func:`gnss_specific_force`, at ``t_out``.
 
     The GNSS estimate's kernel on the acceleration is a box of ``window_s`` convolved with a
-    triangle of half-width ``window_s``; the same kernel is applied to ``|f|``.
+    triangle of half-width ``window_s``; the same kernel is applied here. Outputs whose kernel
+    touches an IMU gap are NaN.
 
     Parameters
     ----------
     time : ndarray, shape (n,)
         IMU times, s.
-    specific_force_t : ndarray, shape (n, 3)
-        m/s^2, any triad (only the magnitude is used).
+    values : ndarray, shape (n,) or (n, k)
+        e.g. ``|f|`` or ``specific_force_t``.
     t_out : ndarray, shape (m,)
         Output times, s (+ ``shift_s``).
     dt : float
@@ -375,21 +386,29 @@ def imu_specific_force(time, specific_force_t, t_out, dt, window_s: float = KINE
 
     Returns
     -------
-    ndarray, shape (m,)
+    ndarray, shape (m,) or (m, k)
     """
     t = np.asarray(time, float)
-    fm = np.linalg.norm(np.asarray(specific_force_t, float), axis=1)
-    n = max(2, int(round(window_s / dt)))
-    box = np.full(n, 1.0 / n)
-    tri = np.convolve(np.full(n, 1.0 / n), np.full(n, 1.0 / n))
-    kern = np.convolve(box, tri)
+    v = np.asarray(values, float)
+    flat = v.reshape(len(t), -1)
+    kern = _kernel(dt, window_s)
     half = 0.5 * (len(kern) - 1) * dt
     tg = np.arange(t[0], t[-1], dt)
-    fg = np.interp(tg, t, fm)
-    fg[~_near_samples(t, tg, max(2.0 * dt, 5.0 * float(np.median(np.diff(t)))))] = np.nan
-    sm = np.convolve(fg, kern, mode="valid")  # NaN spreads over every window touching a gap
-    ts = tg[: len(sm)] + half
-    return np.interp(np.asarray(t_out) + shift_s, ts, sm, left=np.nan, right=np.nan)
+    near = _near_samples(t, tg, max(2.0 * dt, 5.0 * float(np.median(np.diff(t)))))
+    out = np.empty((len(np.atleast_1d(t_out)), flat.shape[1]))
+    for c in range(flat.shape[1]):
+        fg = np.interp(tg, t, flat[:, c])
+        fg[~near] = np.nan
+        sm = np.convolve(fg, kern, mode="valid")  # NaN spreads over every window touching a gap
+        ts = tg[: len(sm)] + half
+        out[:, c] = np.interp(np.asarray(t_out) + shift_s, ts, sm, left=np.nan, right=np.nan)
+    return out.reshape((len(out),) + v.shape[1:])
+
+
+def imu_specific_force(time, specific_force_t, t_out, dt, window_s: float = KINEMATIC_WINDOW_S, shift_s=0.0):
+    """Smoothed IMU specific-force magnitude ``kernel * |f|`` at ``t_out`` (:func:`smooth_imu`), m/s^2."""
+    fm = np.linalg.norm(np.asarray(specific_force_t, float), axis=1)
+    return smooth_imu(time, fm, t_out, dt, window_s, shift_s)
 
 
 def estimate_time_offset(record, max_lag_s: float = 30.0, step_s: float = 0.05):
@@ -462,8 +481,13 @@ def gravity_mismatch(record, time, lat, lon, height, ellipsoid=WGS84, window_s: 
     if len(tm) == 0:
         return float("nan"), 0
     dt = float(np.median(np.diff(time)))
-    fi = imu_specific_force(record.imu.time, record.imu.specific_force_t, tm, dt, window_s)
-    ok = np.isfinite(fi) & np.isfinite(fg)
+    imu = record.imu
+    # |kernel * f_t| equals the GNSS side's |kernel * f_n| while the triad does not rotate over
+    # the kernel: epochs where the mean rotation rate turns it by more than a few degrees
+    # (turns of a strapdown triad) are left out
+    fi = np.linalg.norm(smooth_imu(imu.time, imu.specific_force_t, tm, dt, window_s), axis=1)
+    wi = np.linalg.norm(smooth_imu(imu.time, imu.angular_rate_t, tm, dt, window_s), axis=1)
+    ok = np.isfinite(fi) & np.isfinite(fg) & (wi < QUIET_RATE_RADPS)
     if ok.sum() < 10:
         return float("nan"), int(ok.sum())
     return float(np.median(fi[ok] - fg[ok])), int(ok.sum())
