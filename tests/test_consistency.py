@@ -174,6 +174,13 @@ def test_gnss_column_mixups_name_the_column(tmp_path, case, prep, cols, hint):
     assert "gnss.csv " + cols in msg and hint in msg and "\n" not in msg
 
 
+def test_implausible_gnss_speed_names_the_columns(tmp_path):
+    # latitude steps 20x too large (e.g. a scale error): the track "flies" at ~1200 m/s
+    cfg, fl = _flight(tmp_path, lambda p: d.map_columns(p, "gnss", {"lat_deg": lambda x: x[0] + 20 * (x - x[0])}))
+    with pytest.raises(DataError, match=r"gnss\.csv columns lat_deg, lon_deg: the GNSS track moves at 1[12]\d\d m/s"):
+        process_flight(cfg, fl)
+
+
 def test_wrong_initial_position_names_the_key(tmp_path):
     cfg, fl = _flight(tmp_path, initial={"lat_deg": 60.5})
     with pytest.raises(DataError, match=r"flights\[0\]\.initial\.lat_deg: .* km from the GNSS track"):
