@@ -379,14 +379,15 @@ def smooth_imu(time, values, t_out, dt, window_s: float = KINEMATIC_WINDOW_S, sh
         IMU times, s.
     values : ndarray, shape (n,) or (n, k)
         e.g. ``|f|`` or ``specific_force_t``.
-    t_out : ndarray, shape (m,)
-        Output times, s (+ ``shift_s``).
+    t_out : ndarray, shape (m,), or None
+        Output times, s (+ ``shift_s``); None: return the series on its own grid.
     dt : float
         Grid step of the kernel, s.
 
     Returns
     -------
     ndarray, shape (m,) or (m, k)
+        With ``t_out=None``: ``(grid times, series)``.
     """
     t = np.asarray(time, float)
     v = np.asarray(values, float)
@@ -395,14 +396,21 @@ def smooth_imu(time, values, t_out, dt, window_s: float = KINEMATIC_WINDOW_S, sh
     half = 0.5 * (len(kern) - 1) * dt
     tg = np.arange(t[0], t[-1], dt)
     near = _near_samples(t, tg, max(2.0 * dt, 5.0 * float(np.median(np.diff(t)))))
-    out = np.empty((len(np.atleast_1d(t_out)), flat.shape[1]))
+    if t_out is None:  # the smoothed series on its own grid
+        out = np.empty((max(len(tg) - len(kern) + 1, 0), flat.shape[1]))
+    else:
+        out = np.empty((len(np.atleast_1d(t_out)), flat.shape[1]))
+    ts = tg[: len(out)] + half
     for c in range(flat.shape[1]):
         fg = np.interp(tg, t, flat[:, c])
         fg[~near] = np.nan
         sm = np.convolve(fg, kern, mode="valid")  # NaN spreads over every window touching a gap
-        ts = tg[: len(sm)] + half
-        out[:, c] = np.interp(np.asarray(t_out) + shift_s, ts, sm, left=np.nan, right=np.nan)
-    return out.reshape((len(out),) + v.shape[1:])
+        if t_out is None:
+            out[:, c] = sm
+        else:
+            out[:, c] = np.interp(np.asarray(t_out) + shift_s, tg[: len(sm)] + half, sm, left=np.nan, right=np.nan)
+    out = out.reshape((len(out),) + v.shape[1:])
+    return (ts, out) if t_out is None else out
 
 
 def imu_specific_force(time, specific_force_t, t_out, dt, window_s: float = KINEMATIC_WINDOW_S, shift_s=0.0):
@@ -433,8 +441,11 @@ def estimate_time_offset(record, max_lag_s: float = 30.0, step_s: float = 0.05):
     dt = float(np.median(np.diff(g.time)))
     imu = record.imu
 
+    # smoothed once; each lag only re-samples it (it is smooth on the scale of the grid)
+    ts, sm = smooth_imu(imu.time, np.linalg.norm(np.asarray(imu.specific_force_t, float), axis=1), None, dt)
+
     def corr(lag):
-        fi = imu_specific_force(imu.time, imu.specific_force_t, tm, dt, shift_s=lag)
+        fi = np.interp(tm + lag, ts, sm, left=np.nan, right=np.nan)
         ok = np.isfinite(fi)
         if ok.sum() < 30:
             return -np.inf
