@@ -180,10 +180,12 @@ def find_clock_restarts(time_ns, min_jump_s: float = 1.0):
     """Clock restarts in a channel's raw stamps (file order): backward jumps that re-sorting
     would interleave with earlier samples.
 
-    A backward step longer than ``min_jump_s`` starts a *block* (up to the next such step).
-    The block is a restart when its time range overlaps samples before it (re-sorting would
-    interleave two clocks) - an out-of-order chunk that fills a hole is not. Small backward
-    steps (message jitter) are left to the time repair.
+    The stamps are cut into runs at every step longer than ``min_jump_s`` (backward, or forward:
+    a gap). A run that starts with a backward step is a restart when its time range overlaps
+    samples kept before it (re-sorting would interleave two clocks); a block written out of order
+    that fills a hole is not. After a restart the channel's time base is unknown: later runs are
+    dropped too, until one starts with a forward step to after the last trusted stamp (the clock
+    is back in step). Sub-second backward steps (message jitter) are left to the time repair.
 
     Parameters
     ----------
@@ -195,7 +197,7 @@ def find_clock_restarts(time_ns, min_jump_s: float = 1.0):
     Returns
     -------
     keep : ndarray of bool, shape (n,)
-        False for the samples of restarted blocks (their true times are unknown).
+        False for the samples whose time is unknown.
     events : list of tuple
         ``(index, t_before_ns, t_after_ns, n_dropped)`` per restart.
     """
@@ -204,20 +206,36 @@ def find_clock_restarts(time_ns, min_jump_s: float = 1.0):
     events = []
     if len(t) < 3:
         return keep, events
-    jumps = np.flatnonzero(np.diff(t) < -int(min_jump_s * 1e9)) + 1
-    if not len(jumps):
+    jump = int(min_jump_s * 1e9)
+    d = np.diff(t)
+    if not np.any(d < -jump):
         return keep, events
-    bounds = list(jumps) + [len(t)]
-    for k, j in enumerate(jumps):
-        end = bounds[k + 1]
-        block = t[j:end]
-        before = np.sort(t[:j][keep[:j]])
-        lo, hi = int(block.min()), int(block.max())
-        inside = np.searchsorted(before, hi, side="right") - np.searchsorted(before, lo, side="left")
-        if inside > 0:
-            keep[j:end] = False
-            events.append((int(j), int(t[j - 1]), int(t[j]), int(end - j)))
-    return keep, events
+    cuts = np.flatnonzero((d < -jump) | (d > jump)) + 1
+    starts = np.concatenate([[0], cuts])
+    ends = np.concatenate([cuts, [len(t)]])
+    kept = np.sort(t[: ends[0]])  # the first run is trusted
+    t_max = int(kept[-1])
+    synced = True
+    for a, b in zip(starts[1:], ends[1:]):
+        run = t[a:b]
+        backward = t[a] < t[a - 1]
+        if synced and backward:
+            lo, hi = int(run.min()), int(run.max())
+            inside = np.searchsorted(kept, hi, side="right") - np.searchsorted(kept, lo, side="left")
+            if inside > 0:
+                synced = False
+                keep[a:b] = False
+                events.append([int(a), int(t[a - 1]), int(t[a]), int(b - a)])
+                continue
+        elif not synced:
+            if backward or t[a] <= t_max:
+                keep[a:b] = False
+                events[-1][3] += int(b - a)
+                continue
+            synced = True
+        kept = np.sort(np.concatenate([kept, run]))
+        t_max = max(t_max, int(run.max()))
+    return keep, [tuple(e) for e in events]
 
 
 def clock_restart_messages(role: str, source: str, t0_ns: int, events) -> list[str]:
@@ -227,7 +245,7 @@ def clock_restart_messages(role: str, source: str, t0_ns: int, events) -> list[s
         out.append(
             f"{role}: clock restart in {source} at sample {j}: time went back from "
             f"{utc(t0_ns, (tb - t0_ns) / 1e9)} to {utc(t0_ns, (ta - t0_ns) / 1e9)} "
-            f"({(tb - ta) / 1e9:.1f} s back); {n} samples after the restart dropped (their time "
+            f"({(tb - ta) / 1e9:.1f} s back); {n} samples from the restart on dropped (their time "
             "is unknown)")
     return out
 

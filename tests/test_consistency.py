@@ -127,7 +127,7 @@ def test_imu_clock_restart_is_dropped_and_reported_as_data_loss(tmp_path):
     assert len(r.data_loss) == 1
     msg = r.data_loss[0]
     assert "imu: clock restart" in msg and "imu.csv" in msg and "12:10:00" in msg and "12:05:00" in msg
-    assert "3600 samples" in msg
+    assert "3600 samples from the restart on dropped" in msg
     assert _rms_on_lines(r) < 4.5  # 3.45 mGal measured on the part before the restart
 
 
@@ -155,6 +155,14 @@ def test_find_clock_restarts_ignores_jitter_and_filled_holes():
     restart = np.concatenate([t[:60], t[:40] + 5 * 10**7])
     keep, ev = find_clock_restarts(restart)
     assert len(ev) == 1 and ev[0][0] == 60 and ev[0][3] == 40 and keep.sum() == 60
+    # two restarts: everything after the first is in an unknown time base
+    two = np.concatenate([t[:60], t[20:90], t[40:50]])
+    keep, ev = find_clock_restarts(two)
+    assert len(ev) == 1 and keep.sum() == 60 and ev[0][3] == 80
+    # a glitch burst: a few samples stamped too early, then the clock is back in step
+    burst = np.concatenate([t[:60], t[:5] + 10**7, t[60:]])
+    keep, ev = find_clock_restarts(burst)
+    assert len(ev) == 1 and ev[0][3] == 5 and keep.sum() == 100 and np.all(np.diff(burst[keep]) > 0)
 
 
 # ----------------------------------------------------------------------------- input consistency
