@@ -19,7 +19,7 @@ import damage_csv as d  # noqa: E402
 
 from gravsurvey.config import load_config  # noqa: E402
 from gravsurvey.consistency import (CheckOptions, check_result, concatenate_solutions,  # noqa: E402
-                                    find_clock_restarts, plan_segments)
+                                    find_clock_restarts, plan_segments, specific_force_fixed_frame)
 from gravsurvey.errors import ConfigError, DataError  # noqa: E402
 from gravsurvey.io.ingest import load_flight  # noqa: E402
 from gravsurvey.io.record import slice_record  # noqa: E402
@@ -235,6 +235,30 @@ def test_check_result_nonfinite(intact):
 
 
 # ----------------------------------------------------------------------------- pieces
+def test_specific_force_on_fixed_axes_undoes_the_triad_rotation():
+    """A triad spinning about z at 3 deg/s and wobbling about x: f = (1, 0, 9.8) on fixed axes."""
+    t = np.arange(0.0, 120.0, 0.01)
+    yaw = np.radians(3.0) * t
+    roll = np.radians(2.0) * np.sin(2 * np.pi * t / 7.0)
+    rate_roll = np.radians(2.0) * 2 * np.pi / 7.0 * np.cos(2 * np.pi * t / 7.0)
+    f_fixed = np.array([1.0, 0.0, 9.8])
+    f_t = np.empty((len(t), 3))
+    w_t = np.empty((len(t), 3))
+    for k in range(len(t)):  # mat_pt = Rz(yaw) Rx(roll); f_t = mat_pt^T f_fixed
+        cz, sz, cx, sx = np.cos(yaw[k]), np.sin(yaw[k]), np.cos(roll[k]), np.sin(roll[k])
+        rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+        rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+        f_t[k] = (rz @ rx).T @ f_fixed
+        # body rate of Rz(yaw) Rx(roll): rx^T [0, 0, yaw'] + [roll', 0, 0]
+        w_t[k] = rx.T @ np.array([0, 0, np.radians(3.0)]) + np.array([rate_roll[k], 0, 0])
+    tg, f_p = specific_force_fixed_frame(t, f_t, w_t, 0.2)
+    roll0 = np.array([[1, 0, 0], [0, np.cos(roll[0]), -np.sin(roll[0])], [0, np.sin(roll[0]), np.cos(roll[0])]])
+    expect = roll0.T @ f_fixed  # the fixed frame is the triad's first attitude
+    assert np.max(np.abs(f_p - expect)) < 2e-3
+    # the smoothed magnitude is the true one (what the gravity check relies on)
+    assert abs(np.linalg.norm(f_p.mean(axis=0)) - np.linalg.norm(f_fixed)) < 2e-4
+
+
 def test_slice_record_and_plan(tmp_path):
     cfg, fl = _flight(tmp_path, lambda p: d.drop_between(p, "imu", 400, 460))
     rec = load_flight(fl.ingest, cfg.base_dir)
