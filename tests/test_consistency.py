@@ -182,6 +182,19 @@ def test_gnss_column_mixups_name_the_column(tmp_path, case, prep, cols, hint):
     assert "gnss.csv " + cols in msg and hint in msg and "\n" not in msg
 
 
+def test_moderate_unexplained_mismatch_is_a_note_not_an_error(tmp_path):
+    """An accelerometer bias of 1000 mGal: no column mix-up explains it, below the gross limit."""
+    from gravsurvey.consistency import channel_names, check_gnss_consistency
+
+    cfg, fl = _flight(tmp_path, lambda p: d.map_columns(p, "imu", {"fz_mps2": lambda f: f + 0.01}))
+    rec = load_flight(fl.ingest, cfg.base_dir)
+    notes = check_gnss_consistency(rec, channel_names(fl.ingest, cfg.base_dir), CheckOptions())
+    note = next(n for n in notes if n.startswith("gnss vs imu"))
+    assert "no column mix-up explains it" in note and "+98" in note  # ~ +985 mGal
+    with pytest.raises(DataError, match="wrong latitude, height unit or accelerometer scale"):
+        check_gnss_consistency(rec, channel_names(fl.ingest, cfg.base_dir), CheckOptions(max_gravity_mismatch_mgal=150))
+
+
 def test_implausible_gnss_speed_names_the_columns(tmp_path):
     # latitude steps 20x too large (e.g. a scale error): the track "flies" at ~1200 m/s
     cfg, fl = _flight(tmp_path, lambda p: d.map_columns(p, "gnss", {"lat_deg": lambda x: x[0] + 20 * (x - x[0])}))
@@ -213,6 +226,19 @@ def test_disturbance_and_track_limits(tmp_path):
     cfg.checks = CheckOptions(max_track_deviation_m=0.5)
     with pytest.raises(DataError, match="navigation left the GNSS track"):
         process_flight(cfg, fl)
+
+
+def test_a_few_gnss_outliers_are_not_a_navigation_off_track(tmp_path):
+    t0 = 1741608000000000000
+
+    def prep(p):  # 3 s of GNSS latitude 222 m off (multipath)
+        d.edit(p, "gnss", lambda h, rows: [r if not (400 <= (int(r[0]) - t0) / 1e9 < 403)
+                                           else [r[0], repr(float(r[1]) + 0.002)] + r[2:] for r in rows])
+
+    cfg, fl = _flight(tmp_path, prep)
+    r = process_flight(cfg, fl)
+    note = next(n for n in r.notes if "navigation within" in n)
+    assert float(note.split("within ")[1].split(" m")[0]) < 20.0  # 7.4 m measured (running median)
 
 
 def test_check_result_nonfinite(intact):
