@@ -91,8 +91,8 @@ def splits():
     for name, prep in cases.items():
         _, _, _, r = _flight(prep)
         err = r.final / 1e-5 - r.truth
-        nseg = sum(1 for n in r.notes if "estimated in" in n)
-        segs = [n.split("estimated in ")[1].split(" segments")[0] for n in r.notes if "estimated in" in n]
+        segs = [n.split("estimated ")[1].split(" of")[0] for n in r.notes if " segments: " in n]
+        nseg = len(segs)
         print(f"| {name} | {segs[0] if nseg else 1} | {len(r.line_info)} | "
               f"{np.sqrt(np.nanmean(err[r.line != ''] ** 2)):.2f} |")
 

@@ -279,7 +279,7 @@ def _estimate_by_segment(cfg: SurveyConfig, fl: FlightConfig, record, initial, c
             loss.append(f"segment {span_text(record.t0_unix_ns, a, b)} not estimated: {exc}")
     if not sols:
         raise DataError(f"{record.source}: no segment of the flight could be estimated: {'; '.join(loss)}")
-    notes.append(f"estimated in {len(sols)} segments: "
+    notes.append(f"estimated {len(sols)} of {len(spans)} segments: "
                  + ", ".join(span_text(record.t0_unix_ns, s.time[0], s.time[-1]) for s in sols))
     return concatenate_solutions(sols), notes, loss
 

@@ -65,7 +65,7 @@ def test_30_minute_gap_splits_into_two_accurate_segments(tmp_path, intact):
     """Measured before: whole flight NaN / -2.6e6 mGal, exit 0."""
     cfg, fl = _flight(tmp_path, lambda p: d.shift_after(p, 480, 1800))
     r = process_flight(cfg, fl)
-    assert any("estimated in 2 segments" in n for n in r.notes)
+    assert any("estimated 2 of 2 segments" in n for n in r.notes)
     assert any("split at imu gap" in n and "imu.csv" in n and "1800" in n for n in r.notes)
     # a NaN epoch separates the segments; both sides have lines with finite, accurate output
     assert np.isnan(r.kalman).sum() == 1
@@ -83,8 +83,20 @@ def test_30_minute_gap_splits_into_two_accurate_segments(tmp_path, intact):
 def test_imu_gap_of_a_minute_splits_the_flight(tmp_path):
     cfg, fl = _flight(tmp_path, lambda p: d.drop_between(p, "imu", 400, 460))
     r = process_flight(cfg, fl)
-    assert any("estimated in 2 segments" in n for n in r.notes)
+    assert any("estimated 2 of 2 segments" in n for n in r.notes)
     assert _rms_on_lines(r) < 4.5  # 3.58 mGal measured
+
+
+def test_segment_that_cannot_be_reinitialised_is_data_loss(tmp_path):
+    def prep(p):  # GNSS ends before an IMU gap: the second segment has no GNSS to start from
+        d.drop_between(p, "gnss", 380, 2000)
+        d.drop_between(p, "imu", 400, 460)
+
+    cfg, fl = _flight(tmp_path, prep)
+    r = process_flight(cfg, fl)
+    assert any("estimated 1 of 2 segments" in n for n in r.notes)
+    assert len(r.data_loss) == 1 and "not estimated: initial: no GNSS channel" in r.data_loss[0]
+    assert np.isfinite(r.kalman).all()
 
 
 def test_short_imu_gap_is_bridged(tmp_path, intact):
@@ -305,7 +317,7 @@ def test_short_piece_between_gaps_is_data_loss(tmp_path):
 
     cfg, fl = _flight(tmp_path, prep)
     r = process_flight(cfg, fl)
-    assert any("estimated in 2 segments" in n for n in r.notes)
+    assert any("estimated 2 of 2 segments" in n for n in r.notes)
     assert len(r.data_loss) == 1 and "shorter than 60 s: not estimated" in r.data_loss[0]
     assert _rms_on_lines(r) < 7.0  # 5.5 mGal measured (two re-initialisations inside the line)
 
