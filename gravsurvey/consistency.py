@@ -49,6 +49,8 @@ TRACK_WINDOW = 31
 #: A gravity mismatch beyond this many times ``checks.max_gravity_mismatch_mgal`` fails the
 #: flight even when no column mix-up explains it (below: a note; the IMU may be the cause).
 GROSS_MISMATCH_FACTOR = 5.0
+#: Least correlation with GNSS that places a restarted IMU block in time.
+PLACE_MIN_CORRELATION = 0.8
 #: Shortest segment worth estimating, s (the GNSS initialisation fits 10 s; the smoother
 #: needs a few of the anomaly's correlation times to settle).
 MIN_SEGMENT_S = 60.0
@@ -253,31 +255,141 @@ def clock_restart_messages(role: str, source: str, t0_ns: int, events) -> list[s
     return out
 
 
-def drop_clock_restarts(raw: dict, min_jump_s: float = 1.0) -> list[str]:
-    """Find clock restarts in raw channels and drop the restarted blocks (in place).
+def place_by_gnss(block_ns, specific_force_t, gnss, kept_ns, min_corr: float = PLACE_MIN_CORRELATION):
+    """Time of a block of IMU samples with an unknown clock, by cross-correlation with GNSS.
+
+    The block's smoothed |f| is correlated with the specific force the GNSS track implies
+    (:func:`gnss_specific_force`) at every lag that puts the block inside the GNSS span without
+    covering IMU samples already kept (a restarted clock's samples come after the restart). The
+    best lag is accepted only when it correlates at least ``min_corr`` and every lag more than
+    ``2 * KINEMATIC_WINDOW_S`` away correlates at least 0.2 less (a unique match); it is refined
+    to ~0.05 s as in :func:`estimate_time_offset`.
+
+    Parameters
+    ----------
+    block_ns : ndarray of int64, shape (n,)
+        The block's stamps (strictly increasing, unknown origin), ns.
+    specific_force_t : ndarray, shape (n, 3)
+        m/s^2.
+    gnss : object
+        ``time_ns`` (int64) and ``values`` with ``lat_deg``, ``lon_deg``, ``height`` (a raw
+        ingest channel).
+    kept_ns : ndarray of int64
+        Stamps of the IMU samples already trusted, ns.
+
+    Returns
+    -------
+    shift_ns : int or None
+        Add to ``block_ns`` to get the block's times; None when no unique match.
+    corr : float
+        Correlation at the best lag (NaN when there was nothing to correlate).
+    """
+    nan = float("nan")
+    g_ns = np.asarray(gnss.time_ns, np.int64)
+    b_ns = np.asarray(block_ns, np.int64)
+    if len(g_ns) < 30 or len(b_ns) < 30:
+        return None, nan
+    ref = int(g_ns[0])
+    gt = (g_ns - ref) / 1e9
+    tm, fg, _ = gnss_specific_force(gt, np.radians(gnss.values["lat_deg"]), np.radians(gnss.values["lon_deg"]),
+                                    gnss.values["height"])
+    good = np.isfinite(fg)
+    tm, fg = tm[good], fg[good]
+    dt = float(np.median(np.diff(gt)))
+    tb = (b_ns - b_ns[0]) / 1e9
+    if len(tm) < 30 or tb[-1] < 3 * KINEMATIC_WINDOW_S:
+        return None, nan
+    ts, sm = smooth_imu(tb, np.linalg.norm(np.asarray(specific_force_t, float), axis=1), None, dt)
+    ok = np.isfinite(sm)
+    ts, sm = ts[ok], sm[ok]
+    if len(ts) < 30 or np.std(sm) < MIN_OFFSET_SIGNAL_MPS2:
+        return None, nan
+    kept = np.sort((np.asarray(kept_ns, np.int64) - ref) / 1e9)
+
+    def corr(lag):
+        lo, hi = tb[0] + lag, tb[-1] + lag
+        inside = np.searchsorted(kept, hi, side="right") - np.searchsorted(kept, lo, side="left")
+        if inside > 0.01 * len(tb):
+            return -np.inf
+        y = np.interp(ts + lag, tm, fg, left=np.nan, right=np.nan)
+        ok = np.isfinite(y)
+        if ok.sum() < 0.9 * len(y):  # the kernels trim both series' ends a little differently
+            return -np.inf
+        a, bb = sm[ok] - sm[ok].mean(), y[ok] - y[ok].mean()
+        den = math.sqrt(float(a @ a) * float(bb @ bb))
+        return float(a @ bb) / den if den > 0 else -np.inf
+
+    pad = 0.1 * (ts[-1] - ts[0])
+    lag_lo, lag_hi = tm[0] - ts[0] - pad, tm[-1] - ts[-1] + pad
+    if lag_hi <= lag_lo:
+        return None, nan
+    coarse = np.arange(lag_lo, lag_hi + 1e-9, max(dt, 0.5))
+    c = np.array([corr(x) for x in coarse])
+    k = int(np.argmax(c))
+    if not np.isfinite(c[k]) or c[k] < min_corr:
+        return None, float(c[k]) if np.isfinite(c[k]) else nan
+    far = np.abs(coarse - coarse[k]) > 2 * KINEMATIC_WINDOW_S
+    if far.any() and np.max(c[far]) > c[k] - 0.2:
+        return None, float(c[k])
+    fine = np.arange(coarse[k] - 1.0, coarse[k] + 1.0 + 1e-9, 0.05)
+    cf = np.array([corr(x) for x in fine])
+    j = int(np.argmax(cf))
+    best = float(fine[j])
+    if 0 < j < len(fine) - 1 and np.all(np.isfinite(cf[j - 1:j + 2])):
+        d = cf[j - 1] - 2 * cf[j] + cf[j + 1]
+        if d < 0:
+            best += 0.025 * (cf[j - 1] - cf[j + 1]) / d
+    return int(ref - b_ns[0] + round(best * 1e9)), float(cf[j])
+
+
+def drop_clock_restarts(raw: dict, min_jump_s: float = 1.0):
+    """Find clock restarts in raw channels; place restarted IMU blocks by GNSS or drop them.
+
+    Samples after a restart have an unknown time (:func:`find_clock_restarts`). An IMU block that
+    is one steady run can be placed by cross-correlation with GNSS (:func:`place_by_gnss`,
+    when the GNSS clock did not restart itself); everything else is dropped.
 
     Parameters
     ----------
     raw : dict
         role -> object with ``time_ns`` (int64, file order), ``values`` (dict of arrays with
-        the samples along axis 0) and ``source`` (``io.ingest.RawChannel``).
+        the samples along axis 0) and ``source`` (``io.ingest.RawChannel``); changed in place.
 
     Returns
     -------
-    list of str
-        One line per restart (:func:`clock_restart_messages`); samples were lost, so the
-        caller reports them as data loss.
+    notes : list of str
+        Restarts whose samples were placed in time (with the shift and correlation).
+    loss : list of str
+        Restarts whose samples were dropped (:func:`clock_restart_messages`): data loss.
     """
     starts = [int(ch.time_ns[0]) for ch in raw.values() if len(ch.time_ns)]
     t0 = min(starts) if starts else 0
-    out = []
+    found = {role: find_clock_restarts(ch.time_ns, min_jump_s) for role, ch in raw.items()}
+    notes, loss = [], []
     for role, ch in raw.items():
-        keep, events = find_clock_restarts(ch.time_ns, min_jump_s)
-        if events:
-            ch.time_ns = ch.time_ns[keep]
-            ch.values = {k: v[keep] for k, v in ch.values.items()}
-            out += clock_restart_messages(role, ch.source, t0, events)
-    return out
+        keep, events = found[role]
+        if not events:
+            continue
+        gn = raw.get("gnss")
+        drop = ~keep
+        tb = ch.time_ns[drop]
+        steady = len(tb) > 1 and np.all(np.diff(tb) > 0) and np.max(np.diff(tb)) <= int(min_jump_s * 1e9)
+        if role == "imu" and len(events) == 1 and steady and gn is not None and not found["gnss"][1]:
+            shift, c = place_by_gnss(tb, ch.values["specific_force"][drop], gn, ch.time_ns[keep])
+            if shift is not None:
+                ch.time_ns = ch.time_ns.copy()
+                ch.time_ns[drop] = tb + shift
+                j, tbf, taf, n = events[0]
+                notes.append(
+                    f"{role}: clock restart in {ch.source} at sample {j}: time went back from "
+                    f"{utc(t0, (tbf - t0) / 1e9)} to {utc(t0, (taf - t0) / 1e9)}; the {n} samples after it "
+                    f"placed at {utc(t0, (tb[0] + shift - t0) / 1e9)}..{utc(t0, (tb[-1] + shift - t0) / 1e9)} "
+                    f"by cross-correlation with GNSS (r = {c:.2f})")
+                continue
+        ch.time_ns = ch.time_ns[keep]
+        ch.values = {k: v[keep] for k, v in ch.values.items()}
+        loss += clock_restart_messages(role, ch.source, t0, events)
+    return notes, loss
 
 
 def check_overlap(record, names: ChannelNames | None = None, min_fraction: float = 0.5) -> list[str]:

@@ -132,15 +132,30 @@ def test_imu_clock_an_hour_out_of_step_is_an_error_naming_both_channels(tmp_path
         process_flight(cfg, fl)
 
 
-def test_imu_clock_restart_is_dropped_and_reported_as_data_loss(tmp_path):
-    """Measured before: 279 mGal error, exit 0."""
+def test_imu_clock_restart_is_placed_by_gnss(tmp_path):
+    """Measured before: 6.3 mGal here (279 mGal in the issue's case), exit 0, nothing said."""
     cfg, fl = _flight(tmp_path, lambda p: d.restart_clock(p, "imu", 600, 300))
+    r = process_flight(cfg, fl)
+    assert r.data_loss == []
+    msg = next(n for n in r.notes if "clock restart" in n)
+    assert "imu.csv at sample 6001" in msg and "12:10:00" in msg and "12:05:00" in msg
+    assert "3600 samples after it placed at 2025-03-10T12:10:00" in msg and "cross-correlation with GNSS" in msg
+    assert _rms_on_lines(r) < 4.0  # 3.35 mGal measured (intact 3.36)
+
+
+def test_unplaceable_clock_restarts_are_dropped_as_data_loss(tmp_path):
+    # two restarts: the samples after the first have no single clock to place
+    cfg, fl = _flight(tmp_path, lambda p: (d.restart_clock(p, "imu", 300, 100), d.restart_clock(p, "imu", 700, 200)))
     r = process_flight(cfg, fl)
     assert len(r.data_loss) == 1
     msg = r.data_loss[0]
-    assert "imu: clock restart" in msg and "imu.csv" in msg and "12:10:00" in msg and "12:05:00" in msg
-    assert "3600 samples from the restart on dropped" in msg
-    assert _rms_on_lines(r) < 4.5  # 3.45 mGal measured on the part before the restart
+    assert "imu: clock restart" in msg and "imu.csv at sample 3001" in msg and "12:05:00" in msg
+    assert "6600 samples from the restart on dropped" in msg
+    # a GNSS restart is never placed (GNSS is the reference)
+    cfg, fl = _flight(tmp_path / "g", lambda p: d.restart_clock(p, "gnss", 500, 400))
+    r = process_flight(cfg, fl)
+    assert len(r.data_loss) == 1 and "gnss: clock restart" in r.data_loss[0]
+    assert _rms_on_lines(r) < 4.0  # 3.43 mGal measured
 
 
 def test_imu_gnss_time_offset_is_measured_and_refused(tmp_path):

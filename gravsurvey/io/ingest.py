@@ -480,8 +480,8 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
         _drop_nonfinite(ch, notes)
     from gravsurvey.consistency import drop_clock_restarts  # restarts before the time repair
 
-    clock_loss = drop_clock_restarts(raw)
-    notes += clock_loss
+    clock_notes, clock_loss = drop_clock_restarts(raw)
+    notes += clock_notes + clock_loss
     for role in ("imu", "altimeter"):
         if role not in raw or len(raw[role].time_ns) == 0:
             src = raw[role].source if role in raw else (options.mcap_path or "")
