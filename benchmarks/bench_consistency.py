@@ -86,7 +86,9 @@ def splits():
         "IMU gap 1.1 s (bridged)": lambda p: d.drop_between(p, "imu", 400, 401.05),
         "IMU gap 60 s": lambda p: d.drop_between(p, "imu", 400, 460),
         "all channels: 30 min gap": lambda p: d.shift_after(p, 480, 1800),
-        "IMU clock restart at 600 s, 300 s back": lambda p: d.restart_clock(p, "imu", 600, 300),
+        "IMU clock restart at 600 s, 300 s back (placed)": lambda p: d.restart_clock(p, "imu", 600, 300),
+        "IMU clock restarts twice (dropped)": lambda p: (d.restart_clock(p, "imu", 300, 100),
+                                                     d.restart_clock(p, "imu", 700, 200)),
     }
     for name, prep in cases.items():
         _, _, _, r = _flight(prep)
