@@ -20,12 +20,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-import damage_csv as d  # noqa: E402
+import damage_csv as d
 
-from gravsurvey.config import load_config  # noqa: E402
-from gravsurvey.consistency import estimate_time_offset  # noqa: E402
-from gravsurvey.io.ingest import load_flight  # noqa: E402
-from gravsurvey.pipeline import process_flight  # noqa: E402
+from gravsurvey.config import load_config
+from gravsurvey.consistency import estimate_time_offset
+from gravsurvey.io.ingest import load_flight
+from gravsurvey.pipeline import process_flight
 
 
 def _flight(prep, extra=""):
@@ -62,7 +62,7 @@ def aiding_gaps():
     for gap in (0, 10, 30, 60, 120):
         a, b = 400.0, 400.0 + gap
 
-        def prep(p):
+        def prep(p, gap=gap, a=a, b=b):
             if gap:
                 d.drop_between(p, "altimeter", a, b)
                 d.drop_between(p, "gnss", a, b)

@@ -103,7 +103,7 @@ class CheckOptions:
     allow_nonfinite: bool = False
 
     @classmethod
-    def from_dict(cls, d, key_path: str = "checks") -> "CheckOptions":
+    def from_dict(cls, d, key_path: str = "checks") -> CheckOptions:
         """Validate the ``checks:`` mapping (None: defaults); ConfigError naming the key."""
         if d is None:
             d = {}
@@ -129,7 +129,7 @@ class CheckOptions:
 # ----------------------------------------------------------------------------- helpers
 def utc(t0_unix_ns: int, t_s: float) -> str:
     """``t_s`` seconds after ``t0_unix_ns`` as ISO UTC (to 0.1 s), for messages."""
-    ns = int(t0_unix_ns) + int(round(float(t_s) * 1e9))
+    ns = int(t0_unix_ns) + round(float(t_s) * 1e9)
     d = datetime.fromtimestamp(ns // 10**9, tz=timezone.utc)
     return d.strftime("%Y-%m-%dT%H:%M:%S") + f".{(ns % 10**9) // 10**8}Z"
 
@@ -159,8 +159,10 @@ def channel_names(ingest, base_dir=None) -> ChannelNames:
 
     files, cols = {}, {}
     if getattr(ingest, "kind", "csv") == "csv":
-        for role, p in ingest.csv_paths.items():
-            files[role] = str(ingest._resolve(p, base_dir)) if hasattr(ingest, "_resolve") else str(p)
+        # input_paths lists the CSVs in imu, altimeter, gnss order (those given)
+        roles = [r for r in ("imu", "altimeter", "gnss") if r in ingest.csv_paths]
+        for role, path in zip(roles, ingest.input_paths(base_dir)):
+            files[role] = str(path)
             cols[role] = {**DEFAULT_COLUMNS.get(role, {}), **ingest.csv_columns.get(role, {})}
     else:
         for role, topic in ingest.topics.items():
@@ -472,7 +474,7 @@ def gnss_specific_force(time, lat, lon, height, window_s: float = KINEMATIC_WIND
     if len(t) < 8:
         return np.zeros(0), np.zeros(0), np.zeros(0)
     dt = float(np.median(np.diff(t)))
-    n = max(2, int(round(window_s / dt)))
+    n = max(2, round(window_s / dt))
     if len(t) < 3 * n + 2:
         return np.zeros(0), np.zeros(0), np.zeros(0)
     # uniform grid; grid points inside a gap (> 2 steps) are invalid, and so is every
@@ -494,7 +496,7 @@ def gnss_specific_force(time, lat, lon, height, window_s: float = KINEMATIC_WIND
 
 def _kernel(dt, window_s):
     """Kernel of :func:`gnss_specific_force` on the acceleration: box * triangle, on a ``dt`` grid."""
-    n = max(2, int(round(window_s / dt)))
+    n = max(2, round(window_s / dt))
     box = np.full(n, 1.0 / n)
     return np.convolve(box, np.convolve(box, box))
 

@@ -15,15 +15,21 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import damage_csv as d  # noqa: E402
+import damage_csv as d
 
-from gravsurvey.config import load_config  # noqa: E402
-from gravsurvey.consistency import (CheckOptions, check_result, concatenate_solutions,  # noqa: E402
-                                    find_clock_restarts, plan_segments, specific_force_fixed_frame)
-from gravsurvey.errors import ConfigError, DataError  # noqa: E402
-from gravsurvey.io.ingest import load_flight  # noqa: E402
-from gravsurvey.io.record import slice_record  # noqa: E402
-from gravsurvey.pipeline import process_flight, run_survey  # noqa: E402
+from gravsurvey.config import load_config
+from gravsurvey.consistency import (
+    CheckOptions,
+    check_result,
+    concatenate_solutions,
+    find_clock_restarts,
+    plan_segments,
+    specific_force_fixed_frame,
+)
+from gravsurvey.errors import ConfigError, DataError
+from gravsurvey.io.ingest import load_flight
+from gravsurvey.io.record import slice_record
+from gravsurvey.pipeline import process_flight
 
 MGAL = 1e-5
 
@@ -304,7 +310,7 @@ def test_specific_force_on_fixed_axes_undoes_the_triad_rotation():
         f_t[k] = (rz @ rx).T @ f_fixed
         # body rate of Rz(yaw) Rx(roll): rx^T [0, 0, yaw'] + [roll', 0, 0]
         w_t[k] = rx.T @ np.array([0, 0, np.radians(3.0)]) + np.array([rate_roll[k], 0, 0])
-    tg, f_p = specific_force_fixed_frame(t, f_t, w_t, 0.2)
+    _, f_p = specific_force_fixed_frame(t, f_t, w_t, 0.2)
     roll0 = np.array([[1, 0, 0], [0, np.cos(roll[0]), -np.sin(roll[0])], [0, np.sin(roll[0]), np.cos(roll[0])]])
     expect = roll0.T @ f_fixed  # the fixed frame is the triad's first attitude
     assert np.max(np.abs(f_p - expect)) < 2e-3
@@ -315,7 +321,7 @@ def test_specific_force_on_fixed_axes_undoes_the_triad_rotation():
 def test_slice_record_and_plan(tmp_path):
     cfg, fl = _flight(tmp_path, lambda p: d.drop_between(p, "imu", 400, 460))
     rec = load_flight(fl.ingest, cfg.base_dir)
-    spans, notes, dropped = plan_segments(rec, CheckOptions())
+    spans, _, dropped = plan_segments(rec, CheckOptions())
     assert len(spans) == 2 and dropped == []
     assert spans[0][1] == pytest.approx(400.0) and spans[1][0] == pytest.approx(460.0)
     sub = slice_record(rec, *spans[1], margin_s=2.0)
@@ -371,12 +377,14 @@ def test_cli_exit_codes(tmp_path):
     cfg = d.copy_sample(tmp_path / "clock")
     d.shift_after(tmp_path / "clock", -1, 3600, names=("imu",))
     p = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg), "-o", str(tmp_path / "o1")],
-                       capture_output=True, text=True, env=env, timeout=600, stdin=subprocess.DEVNULL)
+                       check=False, capture_output=True, text=True, env=env, timeout=600,
+                       stdin=subprocess.DEVNULL)
     assert p.returncode == 1, p.stderr
     assert "do not overlap" in p.stderr and "Traceback" not in p.stderr
     cfg = d.copy_sample(tmp_path / "gap")
     d.shift_after(tmp_path / "gap", 480, 1800)
     p = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg), "-o", str(tmp_path / "o2")],
-                       capture_output=True, text=True, env=env, timeout=600, stdin=subprocess.DEVNULL)
+                       check=False, capture_output=True, text=True, env=env, timeout=600,
+                       stdin=subprocess.DEVNULL)
     assert p.returncode == 0, p.stderr
     assert (tmp_path / "o2" / "profiles.csv").is_file()
