@@ -31,7 +31,7 @@ from datetime import datetime, timezone
 
 import numpy as np
 
-from .errors import ConfigError, DataError, check_keys
+from .errors import ConfigError, DataError, GravsurveyError, check_keys
 from .geodesy import MGAL, WGS84, geodetic_to_ecef, normal_gravity_ecef
 
 #: Fastest plausible ground speed of a survey aircraft or ship, m/s (a jet at cruise is
@@ -834,14 +834,17 @@ def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, elli
 
 
 def check_initial(record, initial_raw: dict, key: str, ellipsoid=WGS84,
-                  max_horizontal_m: float = 1000.0, max_vertical_m: float = 100.0) -> list[str]:
+                  max_horizontal_m: float = 1000.0, max_vertical_m: float = 100.0,
+                  max_velocity_mps: float = 5.0) -> list[str]:
     """The configured ``initial`` position against GNSS at the first IMU sample.
 
     Raises
     ------
     DataError
         Naming ``<key>.lat_deg`` / ``lon_deg`` / ``height_m`` when it is more than
-        ``max_horizontal_m`` / ``max_vertical_m`` from the GNSS track.
+        ``max_horizontal_m`` / ``max_vertical_m`` from the GNSS track, or
+        ``<key>.velocity_enu_mps`` more than ``max_velocity_mps`` from the GNSS velocity (a
+        10 s fit, :func:`gravsurvey.inm.params.initial_state_from_gnss`).
     """
     g = record.gnss
     t0 = float(record.imu.time[0])
@@ -866,6 +869,19 @@ def check_initial(record, initial_raw: dict, key: str, ellipsoid=WGS84,
     if abs(ih - h) > max_vertical_m:
         raise DataError(f"{key}.height_m: {ih:g} m is {ih - h:+.1f} m from the GNSS height {h:.1f} m at the "
                         f"first IMU sample; expected within {max_vertical_m:g} m")
+    vel = initial_raw.get("velocity_enu_mps")
+    if vel is not None and g.time[0] <= t0 + 1.0:
+        from .inm.params import initial_state_from_gnss
+
+        try:
+            v_gnss = initial_state_from_gnss(record, "platform").vel_n
+            dv = float(np.linalg.norm(np.asarray(vel, float) - v_gnss))
+        except (GravsurveyError, ValueError, TypeError):
+            return []
+        if dv > max_velocity_mps:
+            raise DataError(f"{key}.velocity_enu_mps: {list(map(float, vel))} m/s is {dv:.3g} m/s from the GNSS "
+                            f"velocity [{v_gnss[0]:.2f}, {v_gnss[1]:.2f}, {v_gnss[2]:.2f}] m/s at the first IMU "
+                            f"sample (10 s fit); expected within {max_velocity_mps:g} m/s")
     return []
 
 

@@ -239,6 +239,12 @@ def test_wrong_initial_position_names_the_key(tmp_path):
     cfg, fl = _flight(tmp_path, initial={"lat_deg": 60.5})
     with pytest.raises(DataError, match=r"flights\[0\]\.initial\.lat_deg: .* km from the GNSS track"):
         process_flight(cfg, fl)
+    cfg, fl = _flight(tmp_path / "h", initial={"height_m": 1500.0 / 0.3048})
+    with pytest.raises(DataError, match=r"flights\[0\]\.initial\.height_m: 4921.26 m is \+3421.\d m from the GNSS"):
+        process_flight(cfg, fl)
+    cfg, fl = _flight(tmp_path / "v", initial={"velocity_enu_mps": "[0.0, 60.0, 0.0]"})
+    with pytest.raises(DataError, match=r"flights\[0\]\.initial\.velocity_enu_mps: \[0.0, 60.0, 0.0\] m/s is (59|60)"):
+        process_flight(cfg, fl)
 
 
 # ----------------------------------------------------------------------------- result plausibility
