@@ -18,7 +18,9 @@ notes) or raises :class:`~gravsurvey.errors.DataError` naming the channel, file 
    limit, a navigation that left the GNSS track, no survey lines.
 
 Clock restarts (a channel's time going back) are found on the raw int64 stamps before the
-time base is repaired (:func:`find_clock_restarts`, called by ``io.ingest.load_flight``).
+time base is repaired (:func:`drop_clock_restarts`, called by ``io.ingest.load_flight``): a
+restarted IMU block is placed in time by cross-correlation with GNSS when that is unique
+(:func:`place_by_gnss`), else dropped and reported as data loss.
 
 Limits and their derivation: docs/reliability.md, "Gaps, clocks, consistency".
 """
@@ -758,12 +760,14 @@ def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, elli
     """GNSS positions against themselves and the IMU motion.
 
     * Ground speed from the GNSS track at most ``MAX_GROUND_SPEED_MPS``.
-    * Median of (IMU |f| - GNSS-implied |f|) within ``max_gravity_mismatch_mgal``: the IMU
-      measures normal gravity at the true latitude and height (plus the anomaly and the
-      accelerometer bias); a swapped or radian latitude or a height in feet moves normal
-      gravity by 1000-4000 mGal. The message names the columns and the mix-up that explains it.
+    * Median of (IMU |f| - GNSS-implied |f|) (:func:`gravity_mismatch`) within
+      ``max_gravity_mismatch_mgal``: the IMU measures normal gravity at the true latitude and
+      height (plus the anomaly and the accelerometer bias); a swapped or radian latitude or a
+      height in feet moves normal gravity by 1000-4000 mGal. Beyond the limit it is an error
+      naming the columns when a mix-up explains it (:func:`mismatch_hints`) or when it exceeds
+      ``GROSS_MISMATCH_FACTOR`` times the limit; otherwise a note (the IMU may be the cause).
     * IMU-GNSS time offset within ``max_time_offset_s`` (when measurable).
-    * The ``initial`` block within 1 km / 100 m of the GNSS track at the first IMU sample.
+    * The ``initial`` block near the GNSS track at the first IMU sample (:func:`check_initial`).
 
     Raises
     ------
