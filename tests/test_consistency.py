@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import damage_csv as d
@@ -196,6 +198,30 @@ def test_find_clock_restarts_ignores_jitter_and_filled_holes():
     burst = np.concatenate([t[:60], t[:5] + 10**7, t[60:]])
     keep, ev = find_clock_restarts(burst)
     assert len(ev) == 1 and ev[0][3] == 5 and keep.sum() == 100 and np.all(np.diff(burst[keep]) > 0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(50, 400), frac=st.floats(0.2, 0.9), back_s=st.floats(1.5, 1e4),
+       jitter=st.lists(st.integers(1, 398), max_size=5))
+@example(n=100, frac=0.6, back_s=3.0, jitter=[])
+def test_generated_restarts_drop_exactly_the_restarted_samples(n, frac, back_s, jitter):
+    t = np.arange(n, dtype=np.int64) * 10**8
+    for i in jitter:  # sub-second jitter: adjacent stamps swapped
+        if i < n - 1:
+            t[[i, i + 1]] = t[[i + 1, i]]
+    keep, ev = find_clock_restarts(t)
+    assert ev == [] and keep.all()
+    j = int(frac * n)
+    back = min(int(back_s * 1e9), int(t[:j].max()))  # goes back into the span already recorded
+    r = t.copy()
+    r[j:] -= back
+    keep, ev = find_clock_restarts(r)
+    if r[j] < r[j - 1] - 10**9:  # a backward step of more than 1 s: a restart
+        assert len(ev) == 1 and ev[0][0] == j and keep[:j].all() and not keep[j:].any()
+        # no interleaving of two clocks among the kept samples
+        assert np.all(np.diff(np.sort(r[keep])) > 0)
+    else:  # shorter steps are jitter for the time repair (re-sort), not restarts
+        assert ev == []
 
 
 # ----------------------------------------------------------------------------- input consistency
