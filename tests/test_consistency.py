@@ -28,7 +28,7 @@ from gravsurvey.consistency import (
     plan_segments,
     specific_force_fixed_frame,
 )
-from gravsurvey.errors import ConfigError, DataError
+from gravsurvey.errors import ConfigError, DataError, DataWarning
 from gravsurvey.io.ingest import load_flight
 from gravsurvey.io.record import slice_record
 from gravsurvey.pipeline import process_flight
@@ -352,7 +352,8 @@ def test_specific_force_on_fixed_axes_undoes_the_triad_rotation():
 
 def test_slice_record_and_plan(tmp_path):
     cfg, fl = _flight(tmp_path, lambda p: d.drop_between(p, "imu", 400, 460))
-    rec = load_flight(fl.ingest, cfg.base_dir)
+    with pytest.warns(DataWarning, match="imu: 1 gaps longer than the threshold: 400.000-460.000 s"):
+        rec = load_flight(fl.ingest, cfg.base_dir)
     spans, _, dropped = plan_segments(rec, CheckOptions())
     assert len(spans) == 2 and dropped == []
     assert spans[0][1] == pytest.approx(400.0) and spans[1][0] == pytest.approx(460.0)
