@@ -25,7 +25,7 @@ import yaml
 from .errors import ConfigError, check_keys
 from .io.ingest import INGEST_KEYS as FLIGHT_INGEST_KEYS
 
-TOP_KEYS = ("survey", "ellipsoid", "flights", "model", "lines", "postprocess", "processing", "output")
+TOP_KEYS = ("survey", "ellipsoid", "flights", "model", "lines", "postprocess", "processing", "output", "checks")
 SURVEY_KEYS = ("name", "description")
 #: flight keys handled here; every other key of a flight goes to the ingestion options
 FLIGHT_OWN_KEYS = ("name", "triad", "initial", "truth", "lines")
@@ -83,11 +83,12 @@ class SurveyConfig:
     xyz: bool = True
     geojson: bool = True
     extra: dict = field(default_factory=dict)
+    checks: Any = None  # gravsurvey.consistency.CheckOptions (section ``checks``)
 
     def section_hash(self, flight: FlightConfig) -> str:
         """Hash of everything that determines one flight's result (for rerun skipping)."""
         h = hashlib.sha256()
-        sections = {k: self.raw.get(k) for k in ("ellipsoid", "model", "lines", "postprocess", "processing")}
+        sections = {k: self.raw.get(k) for k in ("ellipsoid", "model", "lines", "postprocess", "processing", "checks")}
         h.update(json.dumps(sections, sort_keys=True, default=str).encode())
         h.update(json.dumps(flight.raw, sort_keys=True, default=str).encode())
         return h.hexdigest()
@@ -275,6 +276,9 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
         expect_mapping(raw.get("postprocess"), "postprocess"), key_path="postprocess"
     )
 
+    from .consistency import CheckOptions
+
+    checks = CheckOptions.from_dict(expect_mapping(raw.get("checks"), "checks"), key_path="checks")
     proc = expect_mapping(raw.get("processing"), "processing")
     check_keys(proc, PROCESSING_KEYS, "processing")
     method = proc.get("method", "inm")
@@ -372,6 +376,7 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
         plots=flags["plots"],
         xyz=flags["xyz"],
         geojson=flags["geojson"],
+        checks=checks,
     )
     preflight_checks(cfg)
     return cfg

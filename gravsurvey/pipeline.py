@@ -152,17 +152,26 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
     notes += [f"{fl.name}: {n}" for n in record.notes]
     timings["ingest_s"] = time.perf_counter() - t
 
+    # input consistency (gravsurvey/consistency.py): clocks, overlap, GNSS vs IMU
+    from .consistency import CheckOptions, channel_names, check_gnss_consistency, check_overlap, check_result
+
+    checks = getattr(cfg, "checks", None) or CheckOptions()
+    names = channel_names(fl.ingest, cfg.base_dir)
+    notes += [f"{fl.name}: {n}" for n in check_overlap(record, names)]
+    notes += [f"{fl.name}: {n}" for n in check_gnss_consistency(
+        record, names, checks, cfg.ellipsoid, fl.initial_raw, f"flights[{fl.index}].initial")]
+    segment_loss: list[str] = []
+
     t = time.perf_counter()
     if cfg.processing_method == "classic":
         sol = _classic_solution(cfg, fl, record)
     else:
         from .inm.params import resolve_initial_state, solvability_warnings
-        from .inm.solve import estimate_anomaly
 
         initial = resolve_initial_state(record, fl.triad, cfg.model, cfg.ellipsoid, fl.initial_given,
                                         f"flights[{fl.index}].initial")
-        sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid,
-                               gnss_lever_arm_t=getattr(fl.ingest, "gnss_lever_arm_m", None))
+        sol, seg_notes, segment_loss = _estimate_by_segment(cfg, fl, record, initial, checks, names)
+        notes += [f"{fl.name}: {n}" for n in seg_notes]
     timings["estimate_s"] = time.perf_counter() - t
     gradio = None
     if cfg.raw.get("processing", {}).get("gradiometer", False):
@@ -198,6 +207,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
         line[a:b] = s.name
         line_info[s.name] = {**to_jsonable(info), "kind": s.kind, "speed_mps": speed, "samples": b - a}
     timings["postprocess_s"] = time.perf_counter() - t
+    notes += check_result(fl.name, final, line != "", sol, record, checks, len(line_info), cfg.ellipsoid)
 
     truth = None
     if fl.truth is not None:
@@ -223,7 +233,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
         truth=truth,
         notes=notes,
         timings=timings,
-        data_loss=[f"{fl.name}: {n}" for n in record.data_loss],
+        data_loss=[f"{fl.name}: {n}" for n in record.data_loss + segment_loss],
         estimator={
             **_attitude_report(sol),
             "method": cfg.processing_method,
@@ -269,6 +279,57 @@ def _gradiometer_products(fl, record, sol, notes):
         p.pop("horizontal_n")
         p["disturbance_rms_vs_estimate_mgal"] = float(np.sqrt(np.mean((d - est) ** 2)) / 1e-5)
     return p
+
+
+def _estimate_by_segment(cfg: SurveyConfig, fl: FlightConfig, record, initial, checks, names):
+    """3D-INM estimate of a flight split at long gaps (consistency.plan_segments).
+
+    The first segment starts from ``initial`` (state at the first IMU sample); every later one
+    is re-initialised from GNSS on its own slice of the record, with the initial velocity sigma
+    widened to what a 10 s GNSS fit gives in flight (``consistency.REINIT_VELOCITY_SIGMA_MPS``).
+    Segments are joined with a NaN epoch between them.
+
+    Returns
+    -------
+    sol : InmSolution or consistency.SegmentedSolution
+    notes : list of str
+    loss : list of str
+        Pieces not estimated (too short, or not re-initialisable): reported as data loss.
+    """
+    import dataclasses
+
+    from .consistency import REINIT_VELOCITY_SIGMA_MPS, concatenate_solutions, plan_segments, span_text
+    from .inm.params import resolve_initial_state
+    from .inm.solve import estimate_anomaly
+    from .io.record import slice_record
+
+    lever = getattr(fl.ingest, "gnss_lever_arm_m", None)
+    spans, notes, loss = plan_segments(record, checks, names)
+    imu_t0, imu_t1 = float(record.imu.time[0]), float(record.imu.time[-1])
+    if len(spans) == 1 and spans[0] == (imu_t0, imu_t1):
+        return (estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid, gnss_lever_arm_t=lever),
+                notes, loss)
+    reinit_model = dataclasses.replace(
+        cfg.model, initial_velocity_sigma_mps=max(cfg.model.initial_velocity_sigma_mps, REINIT_VELOCITY_SIGMA_MPS))
+    sols = []
+    for a, b in spans:
+        sub = slice_record(record, a, b, margin_s=2.0)
+        try:
+            if a == imu_t0:
+                sols.append(estimate_anomaly(sub, cfg.model, initial, fl.triad, cfg.ellipsoid,
+                                             gnss_lever_arm_t=lever))
+            else:
+                # from the data alone: GNSS position/velocity, attitude by in-motion alignment
+                init = resolve_initial_state(sub, fl.triad, reinit_model, cfg.ellipsoid)
+                sols.append(estimate_anomaly(sub, reinit_model, init, fl.triad, cfg.ellipsoid,
+                                             gnss_lever_arm_t=lever))
+        except GravsurveyError as exc:
+            loss.append(f"segment {span_text(record.t0_unix_ns, a, b)} not estimated: {exc}")
+    if not sols:
+        raise DataError(f"{record.source}: no segment of the flight could be estimated: {'; '.join(loss)}")
+    notes.append(f"estimated {len(sols)} of {len(spans)} segments: "
+                 + ", ".join(span_text(record.t0_unix_ns, s.time[0], s.time[-1]) for s in sols))
+    return concatenate_solutions(sols), notes, loss
 
 
 class _ClassicSolution:

@@ -65,14 +65,19 @@ __all__ = [
 IDENTIFIED_KEYS = ("anomaly_sigma_mps2", "anomaly_lambda_per_m", "gravimeter_white_mps2", "altimeter_sigma_m")
 
 #: Bounds of the fit (SI): anomaly sigma 0.02-1000 mGal, correlation time 5 s - 1 day,
-#: white vertical noise 0.001-1000 mGal in one second, height noise 0.1 mm - 50 m.
+#: white vertical noise 0.001-100 mGal in one second (a MEMS accelerometer's 100 ug/sqrt(Hz)), height noise 0.1 mm - 50 m.
 BOUNDS = {
     "anomaly_sigma_mps2": (2e-7, 1e-2),
     "anomaly_tau_s": (5.0, 86400.0),
-    "white_mps2": (1e-8, 1e-2),
+    "white_mps2": (1e-8, 1e-3),
     "height_sigma_m": (1e-4, 50.0),
 }
 _ORDER = ("anomaly_sigma_mps2", "anomaly_tau_s", "white_mps2", "height_sigma_m")
+
+#: The white level is used only when the likelihood pins it within this 1-sigma factor ...
+WHITE_MAX_FACTOR = 4.0
+#: ... else this one-second sigma (1 mGal/sqrt(Hz), a typical gravimeter datasheet figure), m/s^2.
+WHITE_DEFAULT_MPS2 = 1e-5
 
 #: Horizontal specific force (m/s^2) above which an epoch counts as manoeuvring (about 3 deg of
 #: bank); such epochs, dilated by :data:`MANOEUVRE_MARGIN_S`, are left out of the fit.
@@ -582,6 +587,14 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
                          "how": "config" if k in given else "default"}
         return params, report
     m = fit.model
+    white_how = "identified"
+    factor_w = fit.sigma_factor.get("white_mps2")
+    if "white_mps2" not in fixed and (factor_w is None or factor_w > WHITE_MAX_FACTOR):
+        # the white level hides under the height noise (f^4) above and the anomaly below; when
+        # the likelihood does not pin it, a typical gravimeter's figure is safer than a value
+        # that only absorbed the anomaly's flat part or a short flight's scatter
+        m = dataclasses.replace(m, white_mps2=WHITE_DEFAULT_MPS2)
+        white_how = "default (not resolved by the data)"
     if params.target_resolution_m is not None:
         m = prior_for_resolution(m, v, params.target_resolution_m, fit.dt_s)
     new = dataclasses.replace(
@@ -597,6 +610,8 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
         how = "config" if k in given else "identified"
         if k == "anomaly_sigma_mps2" and params.target_resolution_m is not None:
             how = "target_resolution_m"
+        if k == "gravimeter_white_mps2" and how == "identified":
+            how = white_how
         report[k] = {"value": getattr(new, k), "sigma_factor": fit.sigma_factor.get(src[k]), "how": how}
     for k in fit.at_bound:
         report["warnings"].append(f"model identification: {k} ended on its bound {BOUNDS[k]} (SI); "

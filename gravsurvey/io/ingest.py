@@ -636,6 +636,10 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
         # the sensor axes onto forward-left-up (imu_axes) before the checks, which expect +g on z at rest
         for q in ("specific_force", "angular_rate"):
             raw["imu"].values[q] = raw["imu"].values[q] @ options.mat_axes.T
+    from gravsurvey.consistency import drop_clock_restarts  # restarts before the time repair
+
+    clock_notes, clock_loss = drop_clock_restarts(raw)
+    notes += clock_notes + clock_loss
     for role in ("imu", "altimeter"):
         if role not in raw or len(raw[role].time_ns) == 0:
             src = raw[role].source if role in raw else (options.mcap_path or "")
@@ -674,8 +678,8 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
         imu=ImuChannel(rel(imu.time_ns), imu.values["specific_force"],
                        imu.values["angular_rate"]),
         altimeter=AltimeterChannel(rel(alt.time_ns), alt.values["height"]),
-        gnss=gnss, source=src, notes=notes, data_loss=_data_loss(options, base_dir, content),
-        gradient=gradient)
+        gnss=gnss, source=src, notes=notes,
+        data_loss=_data_loss(options, base_dir, content) + clock_loss, gradient=gradient)
 
 
 def _data_loss(options: IngestOptions, base_dir, content) -> list:

@@ -161,3 +161,42 @@ def interp_on_epochs(time, values, epochs, max_gap_s=None):
     for c in range(flat.shape[1]):
         out[inside, c] = np.interp(epochs[inside], time, flat[:, c])
     return out.reshape((len(epochs),) + values.shape[1:])
+
+
+def slice_record(record: FlightRecord, t0: float, t1: float, margin_s: float = 0.0) -> FlightRecord:
+    """The part of a flight between ``t0`` and ``t1`` (s after ``record.t0_unix_ns``, inclusive).
+
+    The IMU is cut to ``[t0, t1]``; the altimeter and GNSS to ``[t0 - margin_s, t1 + margin_s]``
+    (a margin lets interpolation reach the first and last IMU sample). The time base (``t0_unix_ns``)
+    is kept, so times of the slice and of the flight are directly comparable. Notes and data-loss
+    lines are not copied (they describe the whole flight).
+
+    Parameters
+    ----------
+    record : FlightRecord
+    t0, t1 : float
+        s, ``t0 <= t1``.
+    margin_s : float
+        Extra time of the aiding channels on both sides, s.
+
+    Returns
+    -------
+    FlightRecord
+        Arrays are copies.
+    """
+    def cut(time, lo, hi):
+        t = np.asarray(time, dtype=np.float64)
+        return (t >= lo) & (t <= hi)
+
+    m = cut(record.imu.time, t0, t1)
+    imu = ImuChannel(record.imu.time[m].copy(), record.imu.specific_force_t[m].copy(),
+                     record.imu.angular_rate_t[m].copy())
+    a = cut(record.altimeter.time, t0 - margin_s, t1 + margin_s)
+    alt = AltimeterChannel(record.altimeter.time[a].copy(), record.altimeter.height[a].copy())
+    gnss = None
+    if record.gnss is not None:
+        g = cut(record.gnss.time, t0 - margin_s, t1 + margin_s)
+        gnss = GnssChannel(record.gnss.time[g].copy(), record.gnss.lat[g].copy(),
+                           record.gnss.lon[g].copy(), record.gnss.height[g].copy())
+    return FlightRecord(t0_unix_ns=record.t0_unix_ns, imu=imu, altimeter=alt, gnss=gnss,
+                        source=record.source)

@@ -1,0 +1,1120 @@
+"""Gaps, clocks, input consistency and result plausibility of one flight (issue 14).
+
+Free functions over arrays. Each either returns findings (one-line strings for the flight's
+notes) or raises :class:`~gravsurvey.errors.DataError` naming the channel, file and column.
+``pipeline._process_flight`` calls them in this order:
+
+1. :func:`check_overlap` - channels that do not overlap in time (a clock out of step).
+2. :func:`check_gnss_consistency` - GNSS track against the IMU: speed plausibility, the
+   specific-force magnitude the GNSS kinematics imply vs the one the IMU measures (catches
+   lat/lon swapped, radians declared as degrees, a wrong height unit), and the IMU-GNSS time
+   offset by cross-correlating the two (:func:`estimate_time_offset`).
+3. :func:`plan_segments` - the flight is split at IMU gaps longer than
+   ``CheckOptions.max_imu_gap_s`` and at gaps of all vertical aiding (altimeter and GNSS)
+   longer than ``max_aiding_gap_s``; each segment is estimated on its own
+   (:func:`gravsurvey.io.record.slice_record`) and the results concatenated with a NaN epoch
+   between segments (:func:`concatenate_solutions`).
+4. :func:`check_result` - the final product: non-finite values, |disturbance| beyond a
+   limit, a navigation that left the GNSS track, no survey lines.
+
+Clock restarts (a channel's time going back) are found on the raw int64 stamps before the
+time base is repaired (:func:`drop_clock_restarts`, called by ``io.ingest.load_flight``): a
+restarted IMU block is placed in time by cross-correlation with GNSS when that is unique
+(:func:`place_by_gnss`), else dropped and reported as data loss.
+
+Limits and their derivation: docs/reliability.md, "Gaps, clocks, consistency".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from datetime import datetime, timezone
+
+import numpy as np
+
+from .errors import ConfigError, DataError, GravsurveyError, check_keys
+from .geodesy import MGAL, WGS84, geodetic_to_ecef, normal_gravity_ecef
+
+#: Fastest plausible ground speed of a survey aircraft or ship, m/s (a jet at cruise is
+#: ~250 m/s; survey aircraft fly 50-120 m/s).
+MAX_GROUND_SPEED_MPS = 350.0
+#: Window of the GNSS kinematics (position smoothing and differencing), s: long enough that
+#: 1 m GNSS noise gives < 0.01 m/s^2 acceleration noise (sigma sqrt(6) / (W^2 sqrt(W))).
+KINEMATIC_WINDOW_S = 10.0
+#: Window of the GNSS kinematics for the gravity-consistency check, s: 1.5 m vertical GNSS
+#: noise gives ~70 mGal per estimate at 30 s (~1200 mGal at 10 s); the median over a flight
+#: then resolves a few tens of mGal.
+GRAVITY_WINDOW_S = 30.0
+#: Epochs of the running median of the navigation's distance from the GNSS track (31 s at 1 Hz).
+TRACK_WINDOW = 31
+#: A gravity mismatch beyond this many times ``checks.max_gravity_mismatch_mgal`` fails the
+#: flight even when no column mix-up explains it (below: a note; the IMU may be the cause).
+GROSS_MISMATCH_FACTOR = 5.0
+#: Least correlation with GNSS that places a restarted IMU block in time.
+PLACE_MIN_CORRELATION = 0.8
+#: Shortest segment worth estimating, s (the GNSS initialisation fits 10 s; the smoother
+#: needs a few of the anomaly's correlation times to settle).
+MIN_SEGMENT_S = 60.0
+#: Initial velocity 1-sigma of a segment re-initialised from GNSS in flight, m/s: the 10 s
+#: quadratic fit of ``initial_state_from_gnss`` evaluated at the segment's first sample has a
+#: velocity error of a few tenths of a m/s with 1 m GNSS noise (docs/reliability.md).
+REINIT_VELOCITY_SIGMA_MPS = 0.5
+#: Least correlation of IMU and GNSS specific force that counts as a measured time offset.
+MIN_OFFSET_CORRELATION = 0.5
+#: Least standard deviation of the GNSS-derived specific force (m/s^2) for the offset search:
+#: without manoeuvres there is nothing to correlate.
+MIN_OFFSET_SIGNAL_MPS2 = 0.02
+
+
+@dataclass
+class CheckOptions:
+    """Settings of the consistency and plausibility checks (config section ``checks``).
+
+    Attributes
+    ----------
+    max_imu_gap_s : float
+        IMU gaps up to this long are bridged by the mechanization (it interpolates the
+        specific force across); longer ones split the flight into segments, s.
+    max_aiding_gap_s : float
+        Gaps with neither altimeter nor GNSS samples up to this long are bridged by the free
+        INS and the Markov model (the smoothed sigma grows across them); longer ones split the
+        flight, s.
+    max_time_offset_s : float
+        Largest tolerated IMU-GNSS clock offset found by cross-correlation, s.
+    max_gravity_mismatch_mgal : float
+        Largest tolerated median difference between the specific-force magnitude the IMU
+        measures and the one the GNSS kinematics and normal gravity imply, mGal (accelerometer
+        bias + anomaly; a wrong latitude or height unit gives thousands).
+    max_abs_disturbance_mgal : float
+        Largest plausible |gravity disturbance| of the final product, mGal.
+    max_track_deviation_m : float
+        Largest distance of the GNSS-aided navigation from the GNSS track (running median over
+        ``TRACK_WINDOW`` epochs), m.
+    allow_no_lines, allow_nonfinite : bool
+        Accept a flight without survey lines / with non-finite values in the product.
+    """
+
+    max_imu_gap_s: float = 2.0
+    max_aiding_gap_s: float = 120.0
+    max_time_offset_s: float = 0.5
+    max_gravity_mismatch_mgal: float = 500.0
+    max_abs_disturbance_mgal: float = 1000.0
+    max_track_deviation_m: float = 50.0
+    allow_no_lines: bool = False
+    allow_nonfinite: bool = False
+
+    @classmethod
+    def from_dict(cls, d, key_path: str = "checks") -> CheckOptions:
+        """Validate the ``checks:`` mapping (None: defaults); ConfigError naming the key."""
+        if d is None:
+            d = {}
+        if not isinstance(d, dict):
+            raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
+        check_keys(d, [f.name for f in fields(cls)], key_path)
+        obj = cls()
+        for f in fields(cls):
+            if f.name not in d:
+                continue
+            v = d[f.name]
+            if f.name.startswith("allow_"):
+                if not isinstance(v, bool):
+                    raise ConfigError(f"{key_path}.{f.name}: expected true or false, got {v!r}")
+            elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                raise ConfigError(f"{key_path}.{f.name}: expected a number > 0, got {v!r}")
+            else:
+                v = float(v)
+            setattr(obj, f.name, v)
+        return obj
+
+
+# ----------------------------------------------------------------------------- helpers
+def utc(t0_unix_ns: int, t_s: float) -> str:
+    """``t_s`` seconds after ``t0_unix_ns`` as ISO UTC (to 0.1 s), for messages."""
+    ns = int(t0_unix_ns) + round(float(t_s) * 1e9)
+    d = datetime.fromtimestamp(ns // 10**9, tz=timezone.utc)
+    return d.strftime("%Y-%m-%dT%H:%M:%S") + f".{(ns % 10**9) // 10**8}Z"
+
+
+def span_text(t0_unix_ns: int, a: float, b: float) -> str:
+    """A time range as UTC text with its length."""
+    return f"{utc(t0_unix_ns, a)}..{utc(t0_unix_ns, b)} ({b - a:.1f} s)"
+
+
+@dataclass
+class ChannelNames:
+    """Where a flight's channels come from, for messages: file and column names per role."""
+
+    files: dict  # role -> file (or file + topic)
+    columns: dict  # role -> {quantity: column or field name}
+
+    def column(self, role: str, *quantities: str) -> str:
+        """``"<file> column <name>"`` (``columns <a>, <b>``) for a role's quantities."""
+        cols = [str(self.columns.get(role, {}).get(q, q)) for q in quantities]
+        word = "column" if len(cols) == 1 else "columns"
+        return f"{self.files.get(role, role)} {word} {', '.join(cols)}"
+
+
+def channel_names(ingest, base_dir=None) -> ChannelNames:
+    """File and column names of each role from a flight's ingest options (IngestOptions)."""
+    from .io.csv import DEFAULT_COLUMNS
+
+    files, cols = {}, {}
+    if getattr(ingest, "kind", "csv") == "csv":
+        # input_paths lists the CSVs in imu, altimeter, gnss order (those given)
+        roles = [r for r in ("imu", "altimeter", "gnss") if r in ingest.csv_paths]
+        for role, path in zip(roles, ingest.input_paths(base_dir)):
+            files[role] = str(path)
+            cols[role] = {**DEFAULT_COLUMNS.get(role, {}), **ingest.csv_columns.get(role, {})}
+    else:
+        for role, topic in ingest.topics.items():
+            files[role] = f"{ingest.mcap_path} topic {topic}"
+            cols[role] = {k: (v if isinstance(v, str) else "/".join(v))
+                          for k, v in ingest.json_fields.get(role, {}).items()}
+    return ChannelNames(files, cols)
+
+
+def channel_spans(record) -> dict:
+    """First and last sample time (s after ``record.t0_unix_ns``) of each channel present."""
+    out = {"imu": (float(record.imu.time[0]), float(record.imu.time[-1]))}
+    if record.altimeter is not None and len(record.altimeter.time):
+        out["altimeter"] = (float(record.altimeter.time[0]), float(record.altimeter.time[-1]))
+    if record.gnss is not None and len(record.gnss.time):
+        out["gnss"] = (float(record.gnss.time[0]), float(record.gnss.time[-1]))
+    return out
+
+
+# ----------------------------------------------------------------------------- clocks
+def find_clock_restarts(time_ns, min_jump_s: float = 1.0):
+    """Clock restarts in a channel's raw stamps (file order): backward jumps that re-sorting
+    would interleave with earlier samples.
+
+    The stamps are cut into runs at every step longer than ``min_jump_s`` (backward, or forward:
+    a gap). A run that starts with a backward step is a restart when its time range overlaps
+    samples kept before it (re-sorting would interleave two clocks); a block written out of order
+    that fills a hole is not. After a restart the channel's time base is unknown: later runs are
+    dropped too, until one starts with a forward step to after the last trusted stamp (the clock
+    is back in step). Sub-second backward steps (message jitter) are left to the time repair.
+
+    Parameters
+    ----------
+    time_ns : ndarray of int64, shape (n,)
+        Stamps in file order, ns.
+    min_jump_s : float
+        Backward steps shorter than this are jitter, s.
+
+    Returns
+    -------
+    keep : ndarray of bool, shape (n,)
+        False for the samples whose time is unknown.
+    events : list of tuple
+        ``(index, t_before_ns, t_after_ns, n_dropped)`` per restart.
+    """
+    t = np.asarray(time_ns, dtype=np.int64)
+    keep = np.ones(len(t), bool)
+    events = []
+    if len(t) < 3:
+        return keep, events
+    jump = int(min_jump_s * 1e9)
+    d = np.diff(t)
+    if not np.any(d < -jump):
+        return keep, events
+    cuts = np.flatnonzero((d < -jump) | (d > jump)) + 1
+    starts = np.concatenate([[0], cuts])
+    ends = np.concatenate([cuts, [len(t)]])
+    kept = np.sort(t[: ends[0]])  # the first run is trusted
+    t_max = int(kept[-1])
+    synced = True
+    for a, b in zip(starts[1:], ends[1:]):
+        run = t[a:b]
+        backward = t[a] < t[a - 1]
+        if synced and backward:
+            lo, hi = int(run.min()), int(run.max())
+            inside = np.searchsorted(kept, hi, side="right") - np.searchsorted(kept, lo, side="left")
+            if inside > 0:
+                synced = False
+                keep[a:b] = False
+                events.append([int(a), int(t[a - 1]), int(t[a]), int(b - a)])
+                continue
+        elif not synced:
+            if backward or t[a] <= t_max:
+                keep[a:b] = False
+                events[-1][3] += int(b - a)
+                continue
+            synced = True
+        kept = np.sort(np.concatenate([kept, run]))
+        t_max = max(t_max, int(run.max()))
+    return keep, [tuple(e) for e in events]
+
+
+def clock_restart_messages(role: str, source: str, t0_ns: int, events) -> list[str]:
+    """One line per restart: channel, file, where the clock jumped and what was dropped."""
+    out = []
+    for j, tb, ta, n in events:
+        out.append(
+            f"{role}: clock restart in {source} at sample {j}: time went back from "
+            f"{utc(t0_ns, (tb - t0_ns) / 1e9)} to {utc(t0_ns, (ta - t0_ns) / 1e9)} "
+            f"({(tb - ta) / 1e9:.1f} s back); {n} samples from the restart on dropped (their time "
+            "is unknown)")
+    return out
+
+
+def place_by_gnss(block_ns, specific_force_t, gnss, kept_ns, min_corr: float = PLACE_MIN_CORRELATION):
+    """Time of a block of IMU samples with an unknown clock, by cross-correlation with GNSS.
+
+    The block's smoothed |f| is correlated with the specific force the GNSS track implies
+    (:func:`gnss_specific_force`) at every lag that puts the block inside the GNSS span without
+    covering IMU samples already kept (a restarted clock's samples come after the restart). The
+    best lag is accepted only when it correlates at least ``min_corr`` and every lag more than
+    ``2 * KINEMATIC_WINDOW_S`` away correlates at least 0.2 less (a unique match); it is refined
+    to ~0.05 s as in :func:`estimate_time_offset`.
+
+    Parameters
+    ----------
+    block_ns : ndarray of int64, shape (n,)
+        The block's stamps (strictly increasing, unknown origin), ns.
+    specific_force_t : ndarray, shape (n, 3)
+        m/s^2.
+    gnss : object
+        ``time_ns`` (int64) and ``values`` with ``lat_deg``, ``lon_deg``, ``height`` (a raw
+        ingest channel).
+    kept_ns : ndarray of int64
+        Stamps of the IMU samples already trusted, ns.
+
+    Returns
+    -------
+    shift_ns : int or None
+        Add to ``block_ns`` to get the block's times; None when no unique match.
+    corr : float
+        Correlation at the best lag (NaN when there was nothing to correlate).
+    """
+    nan = float("nan")
+    g_ns = np.asarray(gnss.time_ns, np.int64)
+    b_ns = np.asarray(block_ns, np.int64)
+    if len(g_ns) < 30 or len(b_ns) < 30:
+        return None, nan
+    ref = int(g_ns[0])
+    gt = (g_ns - ref) / 1e9
+    tm, fg, _ = gnss_specific_force(gt, np.radians(gnss.values["lat_deg"]), np.radians(gnss.values["lon_deg"]),
+                                    gnss.values["height"])
+    good = np.isfinite(fg)
+    tm, fg = tm[good], fg[good]
+    dt = float(np.median(np.diff(gt)))
+    tb = (b_ns - b_ns[0]) / 1e9
+    if len(tm) < 30 or tb[-1] < 3 * KINEMATIC_WINDOW_S:
+        return None, nan
+    ts, sm = smooth_imu(tb, np.linalg.norm(np.asarray(specific_force_t, float), axis=1), None, dt)
+    ok = np.isfinite(sm)
+    ts, sm = ts[ok], sm[ok]
+    if len(ts) < 30 or np.std(sm) < MIN_OFFSET_SIGNAL_MPS2:
+        return None, nan
+    kept = np.sort((np.asarray(kept_ns, np.int64) - ref) / 1e9)
+
+    def corr(lag):
+        lo, hi = tb[0] + lag, tb[-1] + lag
+        inside = np.searchsorted(kept, hi, side="right") - np.searchsorted(kept, lo, side="left")
+        if inside > 0.01 * len(tb):
+            return -np.inf
+        y = np.interp(ts + lag, tm, fg, left=np.nan, right=np.nan)
+        ok = np.isfinite(y)
+        if ok.sum() < 0.9 * len(y):  # the kernels trim both series' ends a little differently
+            return -np.inf
+        a, bb = sm[ok] - sm[ok].mean(), y[ok] - y[ok].mean()
+        den = math.sqrt(float(a @ a) * float(bb @ bb))
+        return float(a @ bb) / den if den > 0 else -np.inf
+
+    pad = 0.1 * (ts[-1] - ts[0])
+    lag_lo, lag_hi = tm[0] - ts[0] - pad, tm[-1] - ts[-1] + pad
+    if lag_hi <= lag_lo:
+        return None, nan
+    coarse = np.arange(lag_lo, lag_hi + 1e-9, max(dt, 0.5))
+    c = np.array([corr(x) for x in coarse])
+    k = int(np.argmax(c))
+    if not np.isfinite(c[k]) or c[k] < min_corr:
+        return None, float(c[k]) if np.isfinite(c[k]) else nan
+    far = np.abs(coarse - coarse[k]) > 2 * KINEMATIC_WINDOW_S
+    if far.any() and np.max(c[far]) > c[k] - 0.2:
+        return None, float(c[k])
+    fine = np.arange(coarse[k] - 1.0, coarse[k] + 1.0 + 1e-9, 0.05)
+    cf = np.array([corr(x) for x in fine])
+    j = int(np.argmax(cf))
+    best = float(fine[j])
+    if 0 < j < len(fine) - 1 and np.all(np.isfinite(cf[j - 1:j + 2])):
+        d = cf[j - 1] - 2 * cf[j] + cf[j + 1]
+        if d < 0:
+            best += 0.025 * (cf[j - 1] - cf[j + 1]) / d
+    return int(ref - b_ns[0] + round(best * 1e9)), float(cf[j])
+
+
+def drop_clock_restarts(raw: dict, min_jump_s: float = 1.0):
+    """Find clock restarts in raw channels; place restarted IMU blocks by GNSS or drop them.
+
+    Samples after a restart have an unknown time (:func:`find_clock_restarts`). An IMU block that
+    is one steady run can be placed by cross-correlation with GNSS (:func:`place_by_gnss`,
+    when the GNSS clock did not restart itself); everything else is dropped.
+
+    Parameters
+    ----------
+    raw : dict
+        role -> object with ``time_ns`` (int64, file order), ``values`` (dict of arrays with
+        the samples along axis 0) and ``source`` (``io.ingest.RawChannel``); changed in place.
+
+    Returns
+    -------
+    notes : list of str
+        Restarts whose samples were placed in time (with the shift and correlation).
+    loss : list of str
+        Restarts whose samples were dropped (:func:`clock_restart_messages`): data loss.
+    """
+    starts = [int(ch.time_ns[0]) for ch in raw.values() if len(ch.time_ns)]
+    t0 = min(starts) if starts else 0
+    found = {role: find_clock_restarts(ch.time_ns, min_jump_s) for role, ch in raw.items()}
+    notes, loss = [], []
+    for role, ch in raw.items():
+        keep, events = found[role]
+        if not events:
+            continue
+        gn = raw.get("gnss")
+        drop = ~keep
+        tb = ch.time_ns[drop]
+        steady = len(tb) > 1 and np.all(np.diff(tb) > 0) and np.max(np.diff(tb)) <= int(min_jump_s * 1e9)
+        if role == "imu" and len(events) == 1 and steady and gn is not None and not found["gnss"][1]:
+            shift, c = place_by_gnss(tb, ch.values["specific_force"][drop], gn, ch.time_ns[keep])
+            if shift is not None:
+                ch.time_ns = ch.time_ns.copy()
+                ch.time_ns[drop] = tb + shift
+                j, tbf, taf, n = events[0]
+                notes.append(
+                    f"{role}: clock restart in {ch.source} at sample {j}: time went back from "
+                    f"{utc(t0, (tbf - t0) / 1e9)} to {utc(t0, (taf - t0) / 1e9)}; the {n} samples after it "
+                    f"placed at {utc(t0, (tb[0] + shift - t0) / 1e9)}..{utc(t0, (tb[-1] + shift - t0) / 1e9)} "
+                    f"by cross-correlation with GNSS (r = {c:.2f})")
+                continue
+        ch.time_ns = ch.time_ns[keep]
+        ch.values = {k: v[keep] for k, v in ch.values.items()}
+        loss += clock_restart_messages(role, ch.source, t0, events)
+    return notes, loss
+
+
+def check_overlap(record, names: ChannelNames | None = None, min_fraction: float = 0.5) -> list[str]:
+    """Channels must overlap the IMU in time.
+
+    Raises
+    ------
+    DataError
+        The altimeter or GNSS channel does not overlap the IMU at all (e.g. the IMU clock an
+        hour out of step): names both channels, their files and their time ranges.
+
+    Returns
+    -------
+    list of str
+        Notes for channels overlapping less than ``min_fraction`` of the IMU span.
+    """
+    spans = channel_spans(record)
+    t0 = record.t0_unix_ns
+    a0, a1 = spans["imu"]
+    notes = []
+    for role in ("altimeter", "gnss"):
+        if role not in spans:
+            continue
+        b0, b1 = spans[role]
+        ov = min(a1, b1) - max(a0, b0)
+        fi = names.files.get("imu", "imu") if names else "imu"
+        fr = names.files.get(role, role) if names else role
+        if ov <= 0:
+            raise DataError(
+                f"imu ({fi}) {span_text(t0, a0, a1)} and {role} ({fr}) {span_text(t0, b0, b1)} "
+                f"do not overlap in time ({max(a0, b0) - min(a1, b1):.1f} s apart): a clock out of "
+                "step or files of different flights?")
+        if ov < min_fraction * (a1 - a0):
+            notes.append(f"{role} covers only {100 * ov / (a1 - a0):.0f} % of the IMU time span: imu "
+                         f"{span_text(t0, a0, a1)}, {role} {span_text(t0, b0, b1)}")
+    return notes
+
+
+# ----------------------------------------------------------------------------- kinematics
+def _box(x, n):
+    """Centred moving average over ``n`` samples along axis 0 (valid part only)."""
+    c = np.cumsum(np.concatenate([np.zeros((1,) + x.shape[1:]), x]), axis=0)
+    return (c[n:] - c[:-n]) / n
+
+
+def _near_samples(t, tg, max_step):
+    """True where ``tg`` lies in a step of ``t`` no longer than ``max_step`` (not in a gap)."""
+    j = np.clip(np.searchsorted(t, tg, side="right"), 1, len(t) - 1)
+    return (t[j] - t[j - 1]) <= max_step
+
+
+def gnss_specific_force(time, lat, lon, height, window_s: float = KINEMATIC_WINDOW_S,
+                        ellipsoid=WGS84):
+    """Specific-force magnitude implied by the GNSS track: ``|r'' + 2 w x r' - gamma(r)|``.
+
+    ECEF positions are averaged over ``window_s`` and twice differenced at a spacing of
+    ``window_s``; in the rotating Earth frame ``f = r'' + 2 omega x r' - gamma`` with gamma the
+    normal gravity vector (gravitation + centrifugal), so the Eotvos effect is included. The
+    result equals the true specific force smoothed by the kernel of :func:`imu_specific_force`.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        s, strictly increasing, roughly uniform.
+    lat, lon : ndarray, shape (n,)
+        rad.
+    height : ndarray, shape (n,)
+        Ellipsoidal height, m.
+
+    Returns
+    -------
+    t_mid : ndarray, shape (m,)
+        Times of the estimates, s.
+    f_mag : ndarray, shape (m,)
+        m/s^2.
+    speed : ndarray, shape (m,)
+        Ground speed (ECEF velocity magnitude), m/s.
+    """
+    t = np.asarray(time, float)
+    if len(t) < 8:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    dt = float(np.median(np.diff(t)))
+    n = max(2, round(window_s / dt))
+    if len(t) < 3 * n + 2:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    # uniform grid; grid points inside a gap (> 2 steps) are invalid, and so is every
+    # estimate whose window touches one (no kinematics across gaps)
+    tg = np.arange(t[0], t[-1], dt)
+    r = geodetic_to_ecef(np.interp(tg, t, lat), np.interp(tg, t, np.unwrap(lon)),
+                         np.interp(tg, t, height), ellipsoid)
+    r[~_near_samples(t, tg, 2.0 * dt)] = np.nan
+    rm = _box(r, n)  # mean over n samples, centred at tg[k] + (n - 1) dt / 2
+    tm = tg[: len(rm)] + 0.5 * (n - 1) * dt
+    h = n * dt
+    acc = (rm[2 * n:] - 2 * rm[n:-n] + rm[:-2 * n]) / h**2
+    vel = (rm[2 * n:] - rm[:-2 * n]) / (2 * h)
+    rc = rm[n:-n]
+    omega = np.array([0.0, 0.0, ellipsoid.omega])
+    f = acc + 2.0 * np.cross(omega, vel) - normal_gravity_ecef(rc, ellipsoid)
+    return tm[n:-n], np.linalg.norm(f, axis=1), np.linalg.norm(vel, axis=1)
+
+
+def _kernel(dt, window_s):
+    """Kernel of :func:`gnss_specific_force` on the acceleration: box * triangle, on a ``dt`` grid."""
+    n = max(2, round(window_s / dt))
+    box = np.full(n, 1.0 / n)
+    return np.convolve(box, np.convolve(box, box))
+
+
+def smooth_imu(time, values, t_out, dt, window_s: float = KINEMATIC_WINDOW_S, shift_s=0.0):
+    """An IMU quantity smoothed with the kernel of :func:`gnss_specific_force`, at ``t_out``.
+
+    The GNSS estimate's kernel on the acceleration is a box of ``window_s`` convolved with a
+    triangle of half-width ``window_s``; the same kernel is applied here. Outputs whose kernel
+    touches an IMU gap are NaN.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        IMU times, s.
+    values : ndarray, shape (n,) or (n, k)
+        e.g. ``|f|`` or ``specific_force_t``.
+    t_out : ndarray, shape (m,), or None
+        Output times, s (+ ``shift_s``); None: return the series on its own grid.
+    dt : float
+        Grid step of the kernel, s.
+
+    Returns
+    -------
+    ndarray, shape (m,) or (m, k)
+        With ``t_out=None``: ``(grid times, series)``.
+    """
+    t = np.asarray(time, float)
+    v = np.asarray(values, float)
+    flat = v.reshape(len(t), -1)
+    kern = _kernel(dt, window_s)
+    half = 0.5 * (len(kern) - 1) * dt
+    tg = np.arange(t[0], t[-1], dt)
+    near = _near_samples(t, tg, max(2.0 * dt, 5.0 * float(np.median(np.diff(t)))))
+    if t_out is None:  # the smoothed series on its own grid
+        out = np.empty((max(len(tg) - len(kern) + 1, 0), flat.shape[1]))
+    else:
+        out = np.empty((len(np.atleast_1d(t_out)), flat.shape[1]))
+    ts = tg[: len(out)] + half
+    for c in range(flat.shape[1]):
+        fg = np.interp(tg, t, flat[:, c])
+        fg[~near] = np.nan
+        sm = np.convolve(fg, kern, mode="valid")  # NaN spreads over every window touching a gap
+        if t_out is None:
+            out[:, c] = sm
+        else:
+            out[:, c] = np.interp(np.asarray(t_out) + shift_s, tg[: len(sm)] + half, sm, left=np.nan, right=np.nan)
+    out = out.reshape((len(out),) + v.shape[1:])
+    return (ts, out) if t_out is None else out
+
+
+def _quat_mul(a, b):
+    """Hamilton products of quaternions ``[w, x, y, z]``, ``(..., 4)`` each."""
+    w1, x1, y1, z1 = np.moveaxis(a, -1, 0)
+    w2, x2, y2, z2 = np.moveaxis(b, -1, 0)
+    return np.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=-1)
+
+
+def _quat_cumprod(d):
+    """Running products ``d[0] d[1] ... d[k]`` of quaternions ``(n, 4)`` (a log2(n)-pass scan)."""
+    q = d.copy()
+    shift = 1
+    while shift < len(q):
+        q[shift:] = _quat_mul(q[:-shift], q[shift:])
+        shift *= 2
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def _rotvec_quat(v):
+    """Quaternions of rotation vectors ``(n, 3)`` (rad)."""
+    ang = np.linalg.norm(v, axis=1)
+    sinc = np.where(ang > 0, np.sin(0.5 * ang) / np.where(ang > 0, ang, 1.0), 0.5)
+    return np.concatenate([np.cos(0.5 * ang)[:, None], sinc[:, None] * v], axis=1)
+
+
+def _quat_to_mat(q):
+    """Rotation matrices from unit quaternions, ``(n, 4)`` -> ``(n, 3, 3)``."""
+    w, x, y, z = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1)], axis=1)
+
+
+def _step_means(t, values, tg):
+    """Means of a sampled quantity over the steps ``[tg[k], tg[k+1]]`` (trapezoid), ``(m-1, k)``."""
+    v = np.asarray(values, float).reshape(len(t), -1)
+    cum = np.concatenate([np.zeros((1, v.shape[1])),
+                          np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t)[:, None], axis=0)])
+    at = np.stack([np.interp(tg, t, cum[:, c]) for c in range(v.shape[1])], axis=1)
+    return np.diff(at, axis=0) / np.diff(tg)[:, None]
+
+
+def specific_force_fixed_frame(time, specific_force_t, angular_rate_t, dt):
+    """IMU specific force on a frame that does not rotate with the triad, on a ``dt`` grid.
+
+    The gyros are integrated from the first sample (rotation per grid step from the mean rate,
+    quaternion products); ``f`` is resolved on that frame. It is fixed in inertial space up to
+    the gyro errors, so smoothing it over tens of seconds equals smoothing in the navigation
+    frame up to the Earth's rotation over the kernel (0.4 deg in 90 s: ~1 mGal in the magnitude),
+    whatever the triad does (turns, turbulence). Needs no initial attitude: only magnitudes
+    of the smoothed vector are used.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        s.
+    specific_force_t, angular_rate_t : ndarray, shape (n, 3)
+        m/s^2 and rad/s on the triad.
+    dt : float
+        Grid step, s.
+
+    Returns
+    -------
+    tg : ndarray, shape (m,)
+        Grid times (step midpoints), s.
+    f_p : ndarray, shape (m, 3)
+        m/s^2.
+    """
+    t = np.asarray(time, float)
+    edges = np.arange(t[0], t[-1], dt)
+    if len(edges) < 3:
+        return np.zeros(0), np.zeros((0, 3))
+    w = _step_means(t, angular_rate_t, edges) * dt  # rotation vector per step, rad
+    f = _step_means(t, specific_force_t, edges)
+    # attitude at each step's midpoint: all previous steps, then half of this one
+    full = _quat_cumprod(_rotvec_quat(w))
+    before = np.concatenate([[[1.0, 0.0, 0.0, 0.0]], full[:-1]])
+    q = _quat_mul(before, _rotvec_quat(0.5 * w))
+    f_p = np.einsum("nij,nj->ni", _quat_to_mat(q), f)
+    return edges[:-1] + 0.5 * dt, f_p
+
+
+def imu_specific_force(time, specific_force_t, t_out, dt, window_s: float = KINEMATIC_WINDOW_S, shift_s=0.0):
+    """Smoothed IMU specific-force magnitude ``kernel * |f|`` at ``t_out`` (:func:`smooth_imu`), m/s^2."""
+    fm = np.linalg.norm(np.asarray(specific_force_t, float), axis=1)
+    return smooth_imu(time, fm, t_out, dt, window_s, shift_s)
+
+
+def estimate_time_offset(record, max_lag_s: float = 30.0, step_s: float = 0.05):
+    """IMU-GNSS clock offset by cross-correlating the specific-force magnitudes.
+
+    Returns
+    -------
+    offset_s : float or None
+        IMU time minus GNSS time of the same instant, s (positive: IMU stamps late); None when
+        the flight has too little manoeuvring to measure it.
+    corr : float
+        Correlation at the best lag (NaN when not measured).
+    """
+    g = record.gnss
+    if g is None or len(g.time) < 30:
+        return None, float("nan")
+    tm, fg, _ = gnss_specific_force(g.time, g.lat, g.lon, g.height)
+    good = np.isfinite(fg)
+    tm, fg = tm[good], fg[good]
+    if len(tm) < 30 or np.std(fg) < MIN_OFFSET_SIGNAL_MPS2:
+        return None, float("nan")
+    dt = float(np.median(np.diff(g.time)))
+    imu = record.imu
+
+    # smoothed once; each lag only re-samples it (it is smooth on the scale of the grid)
+    ts, sm = smooth_imu(imu.time, np.linalg.norm(np.asarray(imu.specific_force_t, float), axis=1), None, dt)
+
+    def corr(lag):
+        fi = np.interp(tm + lag, ts, sm, left=np.nan, right=np.nan)
+        ok = np.isfinite(fi)
+        if ok.sum() < 30:
+            return -np.inf
+        a, b = fi[ok] - fi[ok].mean(), fg[ok] - fg[ok].mean()
+        den = math.sqrt(float(a @ a) * float(b @ b))
+        return float(a @ b) / den if den > 0 else -np.inf
+
+    coarse = np.arange(-max_lag_s, max_lag_s + 1e-9, max(dt / 2, 0.5))
+    c = np.array([corr(x) for x in coarse])
+    k = int(np.argmax(c))
+    fine = np.arange(coarse[k] - 1.0, coarse[k] + 1.0 + 1e-9, step_s)
+    cf = np.array([corr(x) for x in fine])
+    k = int(np.argmax(cf))
+    best, cbest = float(fine[k]), float(cf[k])
+    if 0 < k < len(fine) - 1:  # parabolic refinement
+        y0, y1, y2 = cf[k - 1], cf[k], cf[k + 1]
+        d = y0 - 2 * y1 + y2
+        if d < 0:
+            best += 0.5 * step_s * (y0 - y2) / d
+    if cbest < MIN_OFFSET_CORRELATION:
+        return None, cbest
+    return best, cbest
+
+
+# ----------------------------------------------------------------------------- input consistency
+def gravity_mismatch(record, time, lat, lon, height, ellipsoid=WGS84, window_s: float = GRAVITY_WINDOW_S):
+    """Median of the IMU specific-force magnitude minus the GNSS-implied one, m/s^2.
+
+    The GNSS side (:func:`gnss_specific_force`) is ``|kernel * f|`` of a vector on Earth-fixed
+    axes; the IMU's ``f`` is put on fixed axes by integrating its gyros
+    (:func:`specific_force_fixed_frame`) and smoothed alike. Smoothing the magnitude instead
+    (``kernel * |f|``) is biased high by turbulence (+6200 mGal on the simulated turbulent survey),
+    smoothing on the triad's axes biased low by its rotation (-150 mGal at 1 deg attitude wobble).
+    A large gyro bias smears the fixed axes (about -550 mGal at 2.7e-3 rad/s, a MEMS gyro): see
+    :func:`check_gnss_consistency` for how that is kept from failing a flight.
+
+    Parameters
+    ----------
+    record : FlightRecord
+        For the IMU.
+    time, lat, lon, height : ndarray, shape (n,)
+        A GNSS track (s, rad, rad, m) - the record's, or a hypothesis about its columns.
+
+    Returns
+    -------
+    diff : float
+        m/s^2; NaN when fewer than 10 epochs overlap.
+    n : int
+        Epochs used.
+    """
+    tm, fg, _ = gnss_specific_force(time, lat, lon, height, window_s, ellipsoid)
+    if len(tm) == 0:
+        return float("nan"), 0
+    dt = float(np.median(np.diff(time)))
+    imu = record.imu
+    tp, f_p = specific_force_fixed_frame(imu.time, imu.specific_force_t, imu.angular_rate_t, dt)
+    if len(tp) < 10:
+        return float("nan"), 0
+    fi = np.linalg.norm(smooth_imu(tp, f_p, tm, dt, window_s), axis=1)
+    ok = np.isfinite(fi) & np.isfinite(fg)
+    if ok.sum() < 10:
+        return float("nan"), int(ok.sum())
+    return float(np.median(fi[ok] - fg[ok])), int(ok.sum())
+
+
+def mismatch_hints(record, ellipsoid=WGS84):
+    """Column mix-ups of the GNSS channel that would make its track agree with the IMU.
+
+    Each hypothesis (lat/lon swapped, radians declared as degrees, feet <-> metres) is applied
+    to the track and :func:`gravity_mismatch` recomputed.
+
+    Returns
+    -------
+    list of (str, float)
+        Hypothesis and its |mismatch|, m/s^2.
+    """
+    g = record.gnss
+    t, lat, lon, h = (np.asarray(x, float) for x in (g.time, g.lat, g.lon, g.height))
+    cands = []
+    if np.all(np.abs(lon) <= math.pi / 2):
+        cands.append(("latitude and longitude swapped", (lon, lat, h)))
+    if np.all(np.abs(np.degrees(lat)) <= math.pi / 2):
+        cands.append(("latitude/longitude in radians but declared as degrees",
+                      (np.degrees(lat), np.degrees(lon), h)))
+    cands.append(("height in feet but declared as metres", (lat, lon, h * 0.3048)))
+    cands.append(("height in metres but declared as feet", (lat, lon, h / 0.3048)))
+    return [(name, abs(gravity_mismatch(record, t, *x, ellipsoid)[0])) for name, x in cands]
+
+
+def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, ellipsoid=WGS84,
+                           initial_raw: dict | None = None, initial_key: str = "initial") -> list[str]:
+    """GNSS positions against themselves and the IMU motion.
+
+    * Ground speed from the GNSS track at most ``MAX_GROUND_SPEED_MPS``.
+    * Median of (IMU |f| - GNSS-implied |f|) (:func:`gravity_mismatch`) within
+      ``max_gravity_mismatch_mgal``: the IMU measures normal gravity at the true latitude and
+      height (plus the anomaly and the accelerometer bias); a swapped or radian latitude or a
+      height in feet moves normal gravity by 1000-4000 mGal. Beyond the limit it is an error
+      naming the columns when a mix-up explains it (:func:`mismatch_hints`) or when it exceeds
+      ``GROSS_MISMATCH_FACTOR`` times the limit; otherwise a note (the IMU may be the cause).
+    * IMU-GNSS time offset within ``max_time_offset_s`` (when measurable).
+    * The ``initial`` block near the GNSS track at the first IMU sample (:func:`check_initial`).
+
+    Raises
+    ------
+    DataError
+        Naming the file and column and what was expected.
+
+    Returns
+    -------
+    list of str
+        Notes (e.g. the measured offset, or that it could not be measured).
+    """
+    g = record.gnss
+    notes = []
+    if g is None or len(g.time) < 30:
+        return notes
+    h_c = names.column("gnss", "height")
+    latlon_c = names.column("gnss", "lat", "lon")
+    tm, _, speed = gnss_specific_force(g.time, g.lat, g.lon, g.height, KINEMATIC_WINDOW_S, ellipsoid)
+    if len(tm) == 0:
+        return notes
+    if not np.isfinite(speed).any():
+        return notes
+    vmax = float(np.nanpercentile(speed, 99))
+    if vmax > MAX_GROUND_SPEED_MPS:
+        raise DataError(f"{latlon_c}: the GNSS track moves at {vmax:.4g} m/s (99th percentile), "
+                        f"expected at most {MAX_GROUND_SPEED_MPS:g} m/s for an aircraft or ship: "
+                        "wrong scale or unit of the positions, or jumps in them")
+    diff, n = gravity_mismatch(record, g.time, g.lat, g.lon, g.height, ellipsoid)
+    tol = opts.max_gravity_mismatch_mgal * MGAL
+    if np.isfinite(diff) and abs(diff) > tol:
+        # a column mix-up that explains the mismatch is an error naming it; so is a gross
+        # mismatch; a moderate one without an explanation may be the IMU (accelerometer bias or
+        # scale, a MEMS gyro smearing the axes) and is a note, not a failed flight
+        good = [name for name, res in sorted(mismatch_hints(record, ellipsoid), key=lambda x: x[1])
+                if res < max(tol, 0.3 * abs(diff))]
+        what = (f"the IMU measures a specific force {diff / MGAL:+.0f} mGal off the one the GNSS track and "
+                f"normal gravity imply (median over {n} epochs; expected within "
+                f"{opts.max_gravity_mismatch_mgal:g} mGal, checks.max_gravity_mismatch_mgal)")
+        if good:
+            cols = h_c if "height" in good[0] else latlon_c
+            raise DataError(f"{cols}: {what}: {good[0]}?")
+        if abs(diff) > GROSS_MISMATCH_FACTOR * tol:
+            raise DataError(f"{names.column('gnss', 'lat', 'lon', 'height')}: {what}: wrong latitude, height "
+                            "unit or accelerometer scale?")
+        notes.append(f"gnss vs imu: {what}; no column mix-up explains it and it is less than "
+                     f"{GROSS_MISMATCH_FACTOR:g} x the limit: accelerometer bias or scale, or a gyro too poor "
+                     "for the check?")
+    elif np.isfinite(diff):
+        notes.append(f"gnss vs imu: median specific-force difference {diff / MGAL:+.1f} mGal "
+                     f"(limit {opts.max_gravity_mismatch_mgal:g})")
+    off, c = estimate_time_offset(record)
+    if off is None:
+        notes.append("imu-gnss time offset: not measurable (too little manoeuvring to correlate)")
+    else:
+        t0 = record.t0_unix_ns
+        a0, a1 = channel_spans(record)["imu"]
+        b0, b1 = channel_spans(record)["gnss"]
+        txt = (f"imu ({names.files.get('imu', 'imu')}) {span_text(t0, a0, a1)} runs {off:+.2f} s "
+               f"relative to gnss ({names.files.get('gnss', 'gnss')}) {span_text(t0, b0, b1)} "
+               f"(cross-correlation of specific force, r = {c:.2f})")
+        if abs(off) > opts.max_time_offset_s:
+            raise DataError(f"{txt}; expected within {opts.max_time_offset_s:g} s "
+                            "(checks.max_time_offset_s): clocks out of step")
+        notes.append(f"time offset: {txt}")
+    if initial_raw:
+        notes += check_initial(record, initial_raw, initial_key, ellipsoid)
+    return notes
+
+
+def check_initial(record, initial_raw: dict, key: str, ellipsoid=WGS84,
+                  max_horizontal_m: float = 1000.0, max_vertical_m: float = 100.0,
+                  max_velocity_mps: float = 5.0) -> list[str]:
+    """The configured ``initial`` position against GNSS at the first IMU sample.
+
+    Raises
+    ------
+    DataError
+        Naming ``<key>.lat_deg`` / ``lon_deg`` / ``height_m`` when it is more than
+        ``max_horizontal_m`` / ``max_vertical_m`` from the GNSS track, or
+        ``<key>.velocity_enu_mps`` more than ``max_velocity_mps`` from the GNSS velocity (a
+        10 s fit, :func:`gravsurvey.inm.params.initial_state_from_gnss`).
+    """
+    g = record.gnss
+    t0 = float(record.imu.time[0])
+    if g is None or len(g.time) < 3 or not (g.time[0] - 10.0 <= t0 <= g.time[-1]):
+        return []
+    lat = float(np.interp(t0, g.time, g.lat))
+    lon = float(np.interp(t0, g.time, np.unwrap(g.lon)))
+    h = float(np.interp(t0, g.time, g.height))
+    try:
+        ilat, ilon, ih = (math.radians(float(initial_raw["lat_deg"])), math.radians(float(initial_raw["lon_deg"])),
+                          float(initial_raw["height_m"]))
+    except (KeyError, TypeError, ValueError):
+        return []
+    r = geodetic_to_ecef(np.array([lat, ilat]), np.array([lon, ilon]), np.array([h, h]), ellipsoid)
+    dist = float(np.linalg.norm(r[1] - r[0]))
+    if dist > max_horizontal_m:
+        bad = "lat_deg" if abs(ilat - lat) * 6.4e6 > max_horizontal_m / 2 else "lon_deg"
+        raise DataError(f"{key}.{bad}: the initial position ({math.degrees(ilat):.6f}, {math.degrees(ilon):.6f} "
+                        f"deg) is {dist / 1000:.3g} km from the GNSS track at the first IMU sample "
+                        f"({math.degrees(lat):.6f}, {math.degrees(lon):.6f} deg); expected within "
+                        f"{max_horizontal_m:g} m")
+    if abs(ih - h) > max_vertical_m:
+        raise DataError(f"{key}.height_m: {ih:g} m is {ih - h:+.1f} m from the GNSS height {h:.1f} m at the "
+                        f"first IMU sample; expected within {max_vertical_m:g} m")
+    vel = initial_raw.get("velocity_enu_mps")
+    if vel is not None and g.time[0] <= t0 + 1.0:
+        from .inm.params import initial_state_from_gnss
+
+        try:
+            v_gnss = initial_state_from_gnss(record, "platform").vel_n
+            dv = float(np.linalg.norm(np.asarray(vel, float) - v_gnss))
+        except (GravsurveyError, ValueError, TypeError):
+            return []
+        if dv > max_velocity_mps:
+            raise DataError(f"{key}.velocity_enu_mps: {list(map(float, vel))} m/s is {dv:.3g} m/s from the GNSS "
+                            f"velocity [{v_gnss[0]:.2f}, {v_gnss[1]:.2f}, {v_gnss[2]:.2f}] m/s at the first IMU "
+                            f"sample (10 s fit); expected within {max_velocity_mps:g} m/s")
+    return []
+
+
+# ----------------------------------------------------------------------------- gaps and segments
+def find_gaps(time, max_gap_s: float):
+    """Steps of a channel longer than ``max_gap_s``: list of ``(t_before, t_after)``, s."""
+    t = np.asarray(time, float)
+    if len(t) < 2:
+        return []
+    i = np.flatnonzero(np.diff(t) > max_gap_s)
+    return [(float(t[k]), float(t[k + 1])) for k in i]
+
+
+def _aiding_gaps(record, max_gap_s):
+    """Intervals longer than ``max_gap_s`` without any altimeter or GNSS sample."""
+    ts = [np.asarray(record.altimeter.time, float)]
+    if record.gnss is not None and len(record.gnss.time):
+        ts.append(np.asarray(record.gnss.time, float))
+    t = np.unique(np.concatenate(ts))
+    a0, a1 = float(record.imu.time[0]), float(record.imu.time[-1])
+    # no aiding at the start or end of the IMU span counts too
+    t = np.concatenate([[a0] if t[0] - a0 > max_gap_s else [], t, [a1] if a1 - t[-1] > max_gap_s else []])
+    return find_gaps(t, max_gap_s)
+
+
+def plan_segments(record, opts: CheckOptions, names: ChannelNames | None = None):
+    """Split a flight at long IMU gaps and long gaps of all vertical aiding.
+
+    Parameters
+    ----------
+    record : FlightRecord
+    opts : CheckOptions
+
+    Returns
+    -------
+    segments : list of (float, float)
+        ``(t_start, t_end)`` of each segment to estimate, s (inclusive IMU sample times).
+    notes : list of str
+        What was split or bridged, with channel names and UTC ranges.
+    dropped : list of str
+        Pieces too short to estimate (data lost: reported as a data problem).
+    """
+    t0 = record.t0_unix_ns
+    imu_t = np.asarray(record.imu.time, float)
+    cuts = []  # (gap start, gap end, what)
+    notes = []
+    fi = names.files.get("imu", "imu") if names else "imu"
+    for a, b in find_gaps(imu_t, opts.max_imu_gap_s):
+        cuts.append((a, b, f"imu gap ({fi}) {span_text(t0, a, b)}"))
+    for a, b in _aiding_gaps(record, opts.max_aiding_gap_s):
+        cuts.append((a, b, f"no altimeter or gnss samples {span_text(t0, a, b)}"))
+    # bridged gaps: longer than 5 nominal steps but within the limit
+    if len(imu_t) > 2:
+        nom = float(np.median(np.diff(imu_t)))
+        short = [(a, b) for a, b in find_gaps(imu_t, 5 * nom) if b - a <= opts.max_imu_gap_s]
+        if short:
+            notes.append(f"imu: {len(short)} gaps of {5 * nom:.3g}-{opts.max_imu_gap_s:g} s bridged by the "
+                         f"mechanization (longest {max(b - a for a, b in short):.2f} s)")
+    cuts.sort()
+    merged = []  # overlapping gaps of several channels are one cut
+    for a, b, what in cuts:
+        if merged and a <= merged[-1][1]:
+            merged[-1] = (merged[-1][0], max(b, merged[-1][1]), merged[-1][2] + " and " + what)
+        else:
+            merged.append((a, b, what))
+    segs = []
+    start = imu_t[0]
+    for a, b, what in merged:
+        a = max(a, start)
+        if a > start:
+            segs.append((start, a))
+        start = max(start, b)
+        notes.append(f"split at {what}")
+    segs.append((start, imu_t[-1]))
+    keep, dropped = [], []
+    for a, b in segs:
+        n = int(np.count_nonzero((imu_t >= a) & (imu_t <= b)))
+        if b - a >= MIN_SEGMENT_S and n >= 8:
+            keep.append((float(a), float(b)))
+        elif b > a or n:
+            dropped.append(f"segment {span_text(t0, a, b)} between gaps is shorter than {MIN_SEGMENT_S:g} s: "
+                           "not estimated")
+    if not keep:
+        raise DataError(f"{record.source or 'record'}: no piece of the flight between gaps is at least "
+                        f"{MIN_SEGMENT_S:g} s long ({'; '.join(n for n in notes if n.startswith('split'))})")
+    return keep, notes, dropped
+
+
+@dataclass
+class SegmentedSolution:
+    """The per-epoch arrays the pipeline reads, over all segments of a flight.
+
+    Segments are joined with one NaN epoch in the middle of each gap (so that plots, line
+    segmentation and post-processing never join across a gap). ``segment`` holds the segment
+    number of each epoch (-1 for the separators). Shapes ``(N,)`` (``vel_n``: ``(N, 3)``);
+    units as :class:`gravsurvey.inm.solve.InmSolution`.
+    """
+
+    time: np.ndarray
+    g_smooth: np.ndarray
+    sigma_smooth: np.ndarray
+    g_forward: np.ndarray
+    sigma_forward: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    height: np.ndarray
+    vel_n: np.ndarray
+    speed: np.ndarray
+    segment: np.ndarray
+    gnss_aided: bool = False
+    warnings: list = None
+    resolution_m: float = float("nan")
+    identification: dict = None
+
+
+_FIELDS_1D = ("g_smooth", "sigma_smooth", "g_forward", "sigma_forward", "lat", "lon", "height", "speed")
+
+
+def concatenate_solutions(sols) -> SegmentedSolution:
+    """Join per-segment solutions (objects with the InmSolution fields) in time order."""
+    parts = {k: [] for k in _FIELDS_1D + ("time", "vel_n", "segment")}
+    for i, s in enumerate(sols):
+        if i > 0:
+            tsep = 0.5 * (float(sols[i - 1].time[-1]) + float(s.time[0]))
+            parts["time"].append(np.array([tsep]))
+            for k in _FIELDS_1D:
+                parts[k].append(np.array([np.nan]))
+            parts["vel_n"].append(np.full((1, 3), np.nan))
+            parts["segment"].append(np.array([-1]))
+        parts["time"].append(np.asarray(s.time, float))
+        for k in _FIELDS_1D:
+            parts[k].append(np.asarray(getattr(s, k), float))
+        parts["vel_n"].append(np.asarray(s.vel_n, float))
+        parts["segment"].append(np.full(len(s.time), i))
+    out = {k: np.concatenate(v) for k, v in parts.items()}
+    res = [float(getattr(s, "resolution_m", np.nan)) for s in sols]
+    return SegmentedSolution(**out, gnss_aided=any(getattr(s, "gnss_aided", False) for s in sols),
+                             warnings=[w for s in sols for w in (getattr(s, "warnings", None) or [])],
+                             # the coarsest segment's: a statement that holds for every epoch
+                             resolution_m=float(np.nanmax(res)) if np.isfinite(res).any() else float("nan"),
+                             identification={"segments": [getattr(s, "identification", {}) for s in sols]})
+
+
+# ----------------------------------------------------------------------------- result plausibility
+def track_deviation_m(sol, record, ellipsoid=WGS84):
+    """Horizontal distance of the navigation from the GNSS track at the solution epochs, m.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        NaN where GNSS has no sample within 2 s or the solution is NaN.
+    """
+    g = record.gnss
+    t = np.asarray(sol.time, float)
+    if g is None or len(g.time) < 2:
+        return np.full(len(t), np.nan)
+    glat, glon, gh = record.gnss_on(t, max_gap_s=2.0)
+    r_nav = geodetic_to_ecef(sol.lat, sol.lon, gh, ellipsoid)
+    r_gn = geodetic_to_ecef(glat, glon, gh, ellipsoid)
+    return np.linalg.norm(r_nav - r_gn, axis=1)
+
+
+def check_result(name: str, final_mps2, in_line, sol, record, opts: CheckOptions, n_lines: int,
+                 ellipsoid=WGS84) -> list[str]:
+    """Plausibility of a flight's product; DataError naming the cause unless allowed.
+
+    Parameters
+    ----------
+    name : str
+        Flight name (for messages).
+    final_mps2 : ndarray, shape (N,)
+        Post-processed disturbance, m/s^2 (NaN outside lines).
+    in_line : ndarray of bool, shape (N,)
+        Epochs on survey lines.
+    sol : SegmentedSolution or InmSolution
+    n_lines : int
+        Number of survey/tie lines found.
+
+    Returns
+    -------
+    list of str
+        Notes (e.g. the largest track deviation).
+    """
+    notes = []
+    if n_lines == 0 and not opts.allow_no_lines:
+        raise DataError(f"{name}: no survey lines found (straight, level, steady-speed pieces of at least "
+                        "the lines.min_line_s); nothing to deliver (set checks.allow_no_lines: true to accept)")
+    valid = np.asarray(getattr(sol, "segment", np.zeros(len(sol.time))) >= 0)
+    fin = np.asarray(final_mps2, float)
+    bad = in_line & ~np.isfinite(fin)
+    for label, arr in (("kalman estimate", sol.g_smooth), ("sigma", sol.sigma_smooth),
+                       ("latitude", sol.lat), ("longitude", sol.lon), ("height", sol.height)):
+        arr = np.asarray(arr, float)
+        if label == "sigma" and not np.isfinite(arr).any():
+            continue  # a method without a sigma (classic) reports NaN throughout by design
+        nb = int(np.count_nonzero(valid & ~np.isfinite(arr)))
+        if nb and not opts.allow_nonfinite:
+            raise DataError(f"{name}: the {label} has {nb} non-finite values of {int(valid.sum())} epochs "
+                            "(set checks.allow_nonfinite: true to accept)")
+    if bad.any() and not opts.allow_nonfinite:
+        raise DataError(f"{name}: the final disturbance has {int(bad.sum())} non-finite values on lines "
+                        "(set checks.allow_nonfinite: true to accept)")
+    absf = np.where(in_line & np.isfinite(fin), np.abs(fin), -np.inf)
+    if np.isfinite(absf).any():
+        k = int(np.argmax(absf))
+        vmax = float(absf[k]) / MGAL
+        if vmax > opts.max_abs_disturbance_mgal:
+            raise DataError(f"{name}: |disturbance| reaches {vmax:.4g} mGal at t = {sol.time[k]:.1f} s; "
+                            f"expected at most {opts.max_abs_disturbance_mgal:g} mGal "
+                            "(checks.max_abs_disturbance_mgal)")
+    if getattr(sol, "gnss_aided", False):
+        # running median over TRACK_WINDOW epochs: a few GNSS outliers (multipath) are not a
+        # navigation that left the track
+        raw = track_deviation_m(sol, record, ellipsoid)
+        dev = np.full(len(raw), np.nan)
+        if len(raw) >= TRACK_WINDOW:
+            win = np.lib.stride_tricks.sliding_window_view(raw, TRACK_WINDOW)
+            with np.errstate(all="ignore"):
+                ok = np.isfinite(win).sum(axis=1) > TRACK_WINDOW // 2
+                med = np.full(len(win), np.nan)
+                if ok.any():
+                    med[ok] = np.nanmedian(win[ok], axis=1)
+            dev[TRACK_WINDOW // 2: TRACK_WINDOW // 2 + len(win)] = med
+        if np.isfinite(dev).any():
+            dmax = float(np.nanmax(dev))
+            if dmax > opts.max_track_deviation_m:
+                k = int(np.nanargmax(dev))
+                raise DataError(f"{name}: the navigation left the GNSS track by {dmax:.4g} m at t = "
+                                f"{sol.time[k]:.1f} s; expected within {opts.max_track_deviation_m:g} m "
+                                "(checks.max_track_deviation_m)")
+            notes.append(f"{name}: navigation within {dmax:.3g} m of the GNSS track")
+    return notes

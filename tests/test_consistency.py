@@ -1,0 +1,423 @@
+"""Gaps, clocks, input consistency and result plausibility (issue 14 items 2-4).
+
+Every case is a damaged copy of sample_data/markov_csv written into a tmp dir
+(tests/damage_csv.py); accuracy is checked against the simulator's truth.csv.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import damage_csv as d
+
+from gravsurvey.config import load_config
+from gravsurvey.consistency import (
+    CheckOptions,
+    check_result,
+    concatenate_solutions,
+    find_clock_restarts,
+    plan_segments,
+    specific_force_fixed_frame,
+)
+from gravsurvey.errors import ConfigError, DataError, DataWarning
+from gravsurvey.io.ingest import load_flight
+from gravsurvey.io.record import slice_record
+from gravsurvey.pipeline import process_flight
+
+MGAL = 1e-5
+
+
+def _flight(tmp_path, prep=None, extra="", initial=None):
+    cfg_path = d.copy_sample(tmp_path / "s", extra, initial)
+    if prep is not None:
+        prep(tmp_path / "s")
+    cfg = load_config(cfg_path, output_dir=tmp_path / "out")
+    return cfg, cfg.flights[0]
+
+
+def _rms_on_lines(r):
+    err = r.final / MGAL - r.truth
+    on = r.line != ""
+    assert np.all(np.isfinite(err[on]))
+    return float(np.sqrt(np.mean(err[on] ** 2)))
+
+
+@pytest.fixture(scope="module")
+def intact(tmp_path_factory):
+    cfg, fl = _flight(tmp_path_factory.mktemp("intact"))
+    return process_flight(cfg, fl)
+
+
+# ----------------------------------------------------------------------------- no false alarms
+def test_intact_sample_passes_every_check(intact):
+    r = intact
+    assert not any("split" in n or "restart" in n for n in r.notes)
+    assert r.data_loss == []
+    off = [n for n in r.notes if "time offset:" in n]
+    assert off and "+0.0" in off[0] or "-0.0" in off[0]
+    assert any("navigation within" in n for n in r.notes)
+    assert _rms_on_lines(r) < 4.0  # 3.36 mGal measured
+
+
+# ----------------------------------------------------------------------------- gaps
+def test_30_minute_gap_splits_into_two_accurate_segments(tmp_path, intact):
+    """Measured before: whole flight NaN / -2.6e6 mGal, exit 0."""
+    cfg, fl = _flight(tmp_path, lambda p: d.shift_after(p, 480, 1800))
+    r = process_flight(cfg, fl)
+    assert any("estimated 2 of 2 segments" in n for n in r.notes)
+    assert any("split at imu gap" in n and "imu.csv" in n and "1800" in n for n in r.notes)
+    # a NaN epoch separates the segments; both sides have lines with finite, accurate output
+    assert np.isnan(r.kalman).sum() == 1
+    assert len(r.line_info) == 2
+    early, late = r.time < 1000, r.time > 1000
+    for part in (early, late):
+        on = part & (r.line != "")
+        assert on.sum() > 200
+        err = r.final[on] / MGAL - r.truth[on]
+        assert np.all(np.isfinite(err))
+        assert np.sqrt(np.mean(err**2)) < 6.0  # 5.2 and 4.0 mGal measured (intact: 3.4)
+    assert np.nanmax(np.abs(r.kalman)) / MGAL < 200
+
+
+def test_imu_gap_of_a_minute_splits_the_flight(tmp_path):
+    cfg, fl = _flight(tmp_path, lambda p: d.drop_between(p, "imu", 400, 460))
+    r = process_flight(cfg, fl)
+    assert any("estimated 2 of 2 segments" in n for n in r.notes)
+    assert _rms_on_lines(r) < 4.5  # 3.58 mGal measured
+
+
+def test_segment_that_cannot_be_reinitialised_is_data_loss(tmp_path):
+    def prep(p):  # GNSS ends before an IMU gap: the second segment has no GNSS to start from
+        d.drop_between(p, "gnss", 380, 2000)
+        d.drop_between(p, "imu", 400, 460)
+
+    cfg, fl = _flight(tmp_path, prep)
+    r = process_flight(cfg, fl)
+    assert any("estimated 1 of 2 segments" in n for n in r.notes)
+    assert len(r.data_loss) == 1 and "not estimated: initial: no GNSS channel" in r.data_loss[0]
+    assert np.isfinite(r.kalman).all()
+
+
+def test_short_imu_gap_is_bridged(tmp_path, intact):
+    cfg, fl = _flight(tmp_path, lambda p: d.drop_between(p, "imu", 400, 401.05))
+    r = process_flight(cfg, fl)
+    assert any("bridged by the mechanization" in n for n in r.notes)
+    assert not any("segments" in n for n in r.notes)
+    assert abs(_rms_on_lines(r) - _rms_on_lines(intact)) < 0.2
+
+
+def test_aiding_gap_is_bridged_and_sigma_grows_across_it(tmp_path, intact):
+    def prep(p):
+        d.drop_between(p, "altimeter", 400, 460)
+        d.drop_between(p, "gnss", 400, 460)
+
+    cfg, fl = _flight(tmp_path, prep)
+    r = process_flight(cfg, fl)
+    assert not any("segments" in n for n in r.notes)
+    gap = (r.time > 400) & (r.time < 460)
+    far = (r.time > 250) & (r.time < 330)
+    assert r.sigma[gap].max() > 1.03 * np.median(r.sigma[far])  # +7 % measured
+    err = r.kalman / MGAL - r.truth
+    # the error inside the gap stays within the (grown) 3 sigma
+    assert np.all(np.abs(err[gap]) < 3 * r.sigma[gap] / MGAL + 1.0)
+
+
+# ----------------------------------------------------------------------------- clocks
+def test_imu_clock_an_hour_out_of_step_is_an_error_naming_both_channels(tmp_path):
+    """Measured before: a profile of 0.0000 mGal, exit 0."""
+    cfg, fl = _flight(tmp_path, lambda p: d.shift_after(p, -1, 3600, names=("imu",)))
+    with pytest.raises(DataError, match=r"imu \(.*imu\.csv\) 2025-03-10T13:00:00.*altimeter \(.*altimeter\.csv\) "
+                                        r"2025-03-10T12:00:00.*do not overlap"):
+        process_flight(cfg, fl)
+
+
+def test_imu_clock_restart_is_placed_by_gnss(tmp_path):
+    """Measured before: 6.3 mGal here (279 mGal in the issue's case), exit 0, nothing said."""
+    cfg, fl = _flight(tmp_path, lambda p: d.restart_clock(p, "imu", 600, 300))
+    r = process_flight(cfg, fl)
+    assert r.data_loss == []
+    msg = next(n for n in r.notes if "clock restart" in n)
+    assert "imu.csv at sample 6001" in msg and "12:10:00" in msg and "12:05:00" in msg
+    assert "3600 samples after it placed at 2025-03-10T12:10:00" in msg and "cross-correlation with GNSS" in msg
+    assert _rms_on_lines(r) < 4.0  # 3.35 mGal measured (intact 3.36)
+
+
+def test_unplaceable_clock_restarts_are_dropped_as_data_loss(tmp_path):
+    # two restarts: the samples after the first have no single clock to place
+    cfg, fl = _flight(tmp_path, lambda p: (d.restart_clock(p, "imu", 300, 100), d.restart_clock(p, "imu", 700, 200)))
+    r = process_flight(cfg, fl)
+    assert len(r.data_loss) == 1
+    msg = r.data_loss[0]
+    assert "imu: clock restart" in msg and "imu.csv at sample 3001" in msg and "12:05:00" in msg
+    assert "6600 samples from the restart on dropped" in msg
+    # a GNSS restart is never placed (GNSS is the reference)
+    cfg, fl = _flight(tmp_path / "g", lambda p: d.restart_clock(p, "gnss", 500, 400))
+    r = process_flight(cfg, fl)
+    assert len(r.data_loss) == 1 and "gnss: clock restart" in r.data_loss[0]
+    assert _rms_on_lines(r) < 4.0  # 3.43 mGal measured
+
+
+def test_imu_gnss_time_offset_is_measured_and_refused(tmp_path):
+    cfg, fl = _flight(tmp_path, lambda p: d.shift_after(p, -1, 5.0, names=("imu",)))
+    with pytest.raises(DataError, match=r"imu \(.*imu\.csv\).* runs \+5\.0\d s relative to gnss \(.*gnss\.csv\)"):
+        process_flight(cfg, fl)
+
+
+def test_time_offset_within_the_limit_is_reported(tmp_path):
+    cfg, fl = _flight(tmp_path, lambda p: d.shift_after(p, -1, 0.3, names=("imu",)))
+    r = process_flight(cfg, fl)
+    note = next(n for n in r.notes if "time offset:" in n)
+    est = float(note.split(" runs ")[1].split(" s ")[0])
+    assert abs(est - 0.3) < 0.1
+
+
+def test_find_clock_restarts_ignores_jitter_and_filled_holes():
+    t = np.arange(100, dtype=np.int64) * 10**8
+    jitter = t.copy()
+    jitter[[10, 11]] = jitter[[11, 10]]
+    assert find_clock_restarts(jitter)[1] == []
+    hole = np.concatenate([t[:30], t[60:], t[30:60]])  # a block written late fills its hole
+    assert find_clock_restarts(hole)[1] == []
+    restart = np.concatenate([t[:60], t[:40] + 5 * 10**7])
+    keep, ev = find_clock_restarts(restart)
+    assert len(ev) == 1 and ev[0][0] == 60 and ev[0][3] == 40 and keep.sum() == 60
+    # two restarts: everything after the first is in an unknown time base
+    two = np.concatenate([t[:60], t[20:90], t[40:50]])
+    keep, ev = find_clock_restarts(two)
+    assert len(ev) == 1 and keep.sum() == 60 and ev[0][3] == 80
+    # a glitch burst: a few samples stamped too early, then the clock is back in step
+    burst = np.concatenate([t[:60], t[:5] + 10**7, t[60:]])
+    keep, ev = find_clock_restarts(burst)
+    assert len(ev) == 1 and ev[0][3] == 5 and keep.sum() == 100 and np.all(np.diff(burst[keep]) > 0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(50, 400), frac=st.floats(0.2, 0.9), back_s=st.floats(1.5, 1e4),
+       jitter=st.lists(st.integers(1, 398), max_size=5))
+@example(n=100, frac=0.6, back_s=3.0, jitter=[])
+def test_generated_restarts_drop_exactly_the_restarted_samples(n, frac, back_s, jitter):
+    t = np.arange(n, dtype=np.int64) * 10**8
+    for i in jitter:  # sub-second jitter: adjacent stamps swapped
+        if i < n - 1:
+            t[[i, i + 1]] = t[[i + 1, i]]
+    keep, ev = find_clock_restarts(t)
+    assert ev == [] and keep.all()
+    j = int(frac * n)
+    back = min(int(back_s * 1e9), int(t[:j].max()))  # goes back into the span already recorded
+    r = t.copy()
+    r[j:] -= back
+    keep, ev = find_clock_restarts(r)
+    if r[j] < r[j - 1] - 10**9:  # a backward step of more than 1 s: a restart
+        assert len(ev) == 1 and ev[0][0] == j and keep[:j].all() and not keep[j:].any()
+        # no interleaving of two clocks among the kept samples
+        assert np.all(np.diff(np.sort(r[keep])) > 0)
+    else:  # shorter steps are jitter for the time repair (re-sort), not restarts
+        assert ev == []
+
+
+# ----------------------------------------------------------------------------- input consistency
+@pytest.mark.parametrize("case, prep, cols, hint", [
+    ("swapped", lambda p: d.swap_columns(p, "gnss", "lat_deg", "lon_deg"), "columns lat_deg, lon_deg",
+     "swapped"),
+    ("radians", lambda p: d.map_columns(p, "gnss", {"lat_deg": np.radians, "lon_deg": np.radians}),
+     "columns lat_deg, lon_deg", "radians"),
+    ("feet", lambda p: [d.map_columns(p, n, {"height_m": lambda h: h / 0.3048}) for n in ("gnss", "altimeter")],
+     "column height_m", "feet"),
+])
+def test_gnss_column_mixups_name_the_column(tmp_path, case, prep, cols, hint):
+    cfg, fl = _flight(tmp_path, prep)
+    with pytest.raises(DataError) as exc:
+        process_flight(cfg, fl)
+    msg = str(exc.value)
+    assert "gnss.csv " + cols in msg and hint in msg and "\n" not in msg
+
+
+def test_moderate_unexplained_mismatch_is_a_note_not_an_error(tmp_path):
+    """An accelerometer bias of 1000 mGal: no column mix-up explains it, below the gross limit."""
+    from gravsurvey.consistency import channel_names, check_gnss_consistency
+
+    cfg, fl = _flight(tmp_path, lambda p: d.map_columns(p, "imu", {"fz_mps2": lambda f: f + 0.01}))
+    rec = load_flight(fl.ingest, cfg.base_dir)
+    notes = check_gnss_consistency(rec, channel_names(fl.ingest, cfg.base_dir), CheckOptions())
+    note = next(n for n in notes if n.startswith("gnss vs imu"))
+    assert "no column mix-up explains it" in note and "+98" in note  # ~ +985 mGal
+    with pytest.raises(DataError, match="wrong latitude, height unit or accelerometer scale"):
+        check_gnss_consistency(rec, channel_names(fl.ingest, cfg.base_dir), CheckOptions(max_gravity_mismatch_mgal=150))
+
+
+def test_implausible_gnss_speed_names_the_columns(tmp_path):
+    # latitude steps 20x too large (e.g. a scale error): the track "flies" at ~1200 m/s
+    cfg, fl = _flight(tmp_path, lambda p: d.map_columns(p, "gnss", {"lat_deg": lambda x: x[0] + 20 * (x - x[0])}))
+    with pytest.raises(DataError, match=r"gnss\.csv columns lat_deg, lon_deg: the GNSS track moves at 1[12]\d\d m/s"):
+        process_flight(cfg, fl)
+
+
+def test_wrong_initial_position_names_the_key(tmp_path):
+    cfg, fl = _flight(tmp_path, initial={"lat_deg": 60.5})
+    with pytest.raises(DataError, match=r"flights\[0\]\.initial\.lat_deg: .* km from the GNSS track"):
+        process_flight(cfg, fl)
+    cfg, fl = _flight(tmp_path / "h", initial={"height_m": 1500.0 / 0.3048})
+    with pytest.raises(DataError, match=r"flights\[0\]\.initial\.height_m: 4921.26 m is \+3421.\d m from the GNSS"):
+        process_flight(cfg, fl)
+    cfg, fl = _flight(tmp_path / "v", initial={"velocity_enu_mps": "[0.0, 60.0, 0.0]"})
+    with pytest.raises(DataError, match=r"flights\[0\]\.initial\.velocity_enu_mps: \[0.0, 60.0, 0.0\] m/s is (59|60)"):
+        process_flight(cfg, fl)
+
+
+# ----------------------------------------------------------------------------- result plausibility
+def test_no_lines_is_an_error_unless_allowed(tmp_path):
+    cfg, fl = _flight(tmp_path, extra="checks: {}\n")
+    cfg.lines.min_line_s = 5000.0
+    with pytest.raises(DataError, match="no survey lines found"):
+        process_flight(cfg, fl)
+    cfg.checks = CheckOptions(allow_no_lines=True)
+    r = process_flight(cfg, fl)
+    assert r.line_info == {}
+
+
+def test_disturbance_and_track_limits(tmp_path):
+    cfg, fl = _flight(tmp_path, extra="checks: {max_abs_disturbance_mgal: 10}\n")
+    with pytest.raises(DataError, match=r"\|disturbance\| reaches .* expected at most 10 mGal"):
+        process_flight(cfg, fl)
+    cfg.checks = CheckOptions(max_track_deviation_m=0.5)
+    with pytest.raises(DataError, match="navigation left the GNSS track"):
+        process_flight(cfg, fl)
+
+
+def test_a_few_gnss_outliers_are_not_a_navigation_off_track(tmp_path):
+    t0 = 1741608000000000000
+
+    def prep(p):  # 3 s of GNSS latitude 222 m off (multipath)
+        d.edit(p, "gnss", lambda h, rows: [r if not (400 <= (int(r[0]) - t0) / 1e9 < 403)
+                                           else [r[0], repr(float(r[1]) + 0.002)] + r[2:] for r in rows])
+
+    cfg, fl = _flight(tmp_path, prep)
+    r = process_flight(cfg, fl)
+    note = next(n for n in r.notes if "navigation within" in n)
+    assert float(note.split("within ")[1].split(" m")[0]) < 20.0  # 7.4 m measured (running median)
+
+
+def test_check_result_nonfinite(intact):
+    r = intact
+
+    class Sol:
+        time, lat, lon, height = r.time, r.lat, r.lon, r.height
+        g_smooth, sigma_smooth = r.kalman.copy(), r.sigma
+        gnss_aided = False
+
+    on = r.line != ""
+    final = r.final.copy()
+    final[np.flatnonzero(on)[5]] = np.inf
+    with pytest.raises(DataError, match="final disturbance has 1 non-finite"):
+        check_result("F01", final, on, Sol, None, CheckOptions(), 1)
+    Sol.g_smooth[3] = np.nan
+    with pytest.raises(DataError, match="kalman estimate has 1 non-finite"):
+        check_result("F01", r.final, on, Sol, None, CheckOptions(), 1)
+    check_result("F01", final, on, Sol, None, CheckOptions(allow_nonfinite=True), 1)
+
+
+# ----------------------------------------------------------------------------- pieces
+def test_specific_force_on_fixed_axes_undoes_the_triad_rotation():
+    """A triad spinning about z at 3 deg/s and wobbling about x: f = (1, 0, 9.8) on fixed axes."""
+    t = np.arange(0.0, 120.0, 0.01)
+    yaw = np.radians(3.0) * t
+    roll = np.radians(2.0) * np.sin(2 * np.pi * t / 7.0)
+    rate_roll = np.radians(2.0) * 2 * np.pi / 7.0 * np.cos(2 * np.pi * t / 7.0)
+    f_fixed = np.array([1.0, 0.0, 9.8])
+    f_t = np.empty((len(t), 3))
+    w_t = np.empty((len(t), 3))
+    for k in range(len(t)):  # mat_pt = Rz(yaw) Rx(roll); f_t = mat_pt^T f_fixed
+        cz, sz, cx, sx = np.cos(yaw[k]), np.sin(yaw[k]), np.cos(roll[k]), np.sin(roll[k])
+        rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+        rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+        f_t[k] = (rz @ rx).T @ f_fixed
+        # body rate of Rz(yaw) Rx(roll): rx^T [0, 0, yaw'] + [roll', 0, 0]
+        w_t[k] = rx.T @ np.array([0, 0, np.radians(3.0)]) + np.array([rate_roll[k], 0, 0])
+    _, f_p = specific_force_fixed_frame(t, f_t, w_t, 0.2)
+    roll0 = np.array([[1, 0, 0], [0, np.cos(roll[0]), -np.sin(roll[0])], [0, np.sin(roll[0]), np.cos(roll[0])]])
+    expect = roll0.T @ f_fixed  # the fixed frame is the triad's first attitude
+    assert np.max(np.abs(f_p - expect)) < 2e-3
+    # the smoothed magnitude is the true one (what the gravity check relies on)
+    assert abs(np.linalg.norm(f_p.mean(axis=0)) - np.linalg.norm(f_fixed)) < 2e-4
+
+
+def test_slice_record_and_plan(tmp_path):
+    cfg, fl = _flight(tmp_path, lambda p: d.drop_between(p, "imu", 400, 460))
+    with pytest.warns(DataWarning, match="imu: 1 gaps longer than the threshold: 400.000-460.000 s"):
+        rec = load_flight(fl.ingest, cfg.base_dir)
+    spans, _, dropped = plan_segments(rec, CheckOptions())
+    assert len(spans) == 2 and dropped == []
+    assert spans[0][1] == pytest.approx(400.0) and spans[1][0] == pytest.approx(460.0)
+    sub = slice_record(rec, *spans[1], margin_s=2.0)
+    assert sub.imu.time[0] >= 460.0 and sub.t0_unix_ns == rec.t0_unix_ns
+    assert sub.gnss.time[0] >= 458.0 and sub.altimeter.time[-1] <= spans[1][1] + 2.0
+    with pytest.raises(DataError, match="no piece of the flight between gaps is at least 60 s"):
+        plan_segments(rec, CheckOptions(max_imu_gap_s=0.05))
+
+
+def test_short_piece_between_gaps_is_data_loss(tmp_path):
+    def prep(p):
+        d.drop_between(p, "imu", 300, 330)
+        d.drop_between(p, "imu", 360, 390)
+
+    cfg, fl = _flight(tmp_path, prep)
+    r = process_flight(cfg, fl)
+    assert any("estimated 2 of 2 segments" in n for n in r.notes)
+    assert len(r.data_loss) == 1 and "shorter than 60 s: not estimated" in r.data_loss[0]
+    assert _rms_on_lines(r) < 7.0  # 5.5 mGal measured (two re-initialisations inside the line)
+
+
+def test_concatenate_puts_a_nan_epoch_between_segments(intact):
+    class S:
+        pass
+
+    parts = []
+    for a, b in ((0, 100), (150, 300)):
+        s = S()
+        s.time = intact.time[a:b]
+        for k in ("g_smooth", "sigma_smooth", "g_forward", "sigma_forward"):
+            setattr(s, k, intact.kalman[a:b])
+        s.lat, s.lon, s.height, s.speed = (intact.lat[a:b], intact.lon[a:b], intact.height[a:b],
+                                           intact.speed[a:b])
+        s.vel_n = np.zeros((b - a, 3))
+        parts.append(s)
+    c = concatenate_solutions(parts)
+    assert len(c.time) == 251 and np.isnan(c.g_smooth[100]) and c.segment[100] == -1
+    assert np.all(np.diff(c.time) > 0)
+
+
+def test_checks_config_keys(tmp_path):
+    with pytest.raises(ConfigError, match=r"checks\.max_imu_gap: unknown key \(did you mean 'max_imu_gap_s'"):
+        _flight(tmp_path / "a", extra="checks: {max_imu_gap: 3}\n")
+    with pytest.raises(ConfigError, match=r"checks\.allow_no_lines: expected true or false"):
+        _flight(tmp_path / "b", extra="checks: {allow_no_lines: 1}\n")
+    with pytest.raises(ConfigError, match=r"checks\.max_time_offset_s: expected a number > 0"):
+        _flight(tmp_path / "c", extra="checks: {max_time_offset_s: -1}\n")
+
+
+# ----------------------------------------------------------------------------- the CLI
+def test_cli_exit_codes(tmp_path):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    cfg = d.copy_sample(tmp_path / "clock")
+    d.shift_after(tmp_path / "clock", -1, 3600, names=("imu",))
+    p = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg), "-o", str(tmp_path / "o1")],
+                       check=False, capture_output=True, text=True, env=env, timeout=600,
+                       stdin=subprocess.DEVNULL)
+    assert p.returncode == 1, p.stderr
+    assert "do not overlap" in p.stderr and "Traceback" not in p.stderr
+    cfg = d.copy_sample(tmp_path / "gap")
+    d.shift_after(tmp_path / "gap", 480, 1800)
+    p = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg), "-o", str(tmp_path / "o2")],
+                       check=False, capture_output=True, text=True, env=env, timeout=600,
+                       stdin=subprocess.DEVNULL)
+    assert p.returncode == 0, p.stderr
+    assert (tmp_path / "o2" / "profiles.csv").is_file()
