@@ -76,7 +76,7 @@ def real_estimate(kind, seed=None):
                            np.asarray(tr["vel_n"][0], float), np.eye(3))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        sol = estimate_anomaly(rec, InmParams(), initial, "platform")
+        sol = estimate_anomaly(rec, InmParams(identify=False), initial, "platform")  # the seed's own model
     truth = np.interp(sol.time, sim.truth["time"], sim.truth["disturbance"])
     return (np.asarray(sol.time, float), np.asarray(sol.g_smooth, float), truth,
             float(np.nanmean(sol.speed)), np.asarray(sol.sigma_smooth, float))

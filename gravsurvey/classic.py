@@ -60,7 +60,6 @@ from dataclasses import dataclass, field
 import boule
 import numpy as np
 from scipy.interpolate import CubicSpline
-from scipy.signal import fftconvolve
 
 from .errors import ConfigError, DataError, DataWarning, check_keys
 from .geodesy import MGAL, WGS84, Ellipsoid, radii_of_curvature
@@ -243,6 +242,8 @@ def lowpass_valid(x: np.ndarray, w: np.ndarray) -> np.ndarray:
             "flight too short for the filter length"
         )
     if w.shape[0] > 64:
+        from scipy.signal import fftconvolve  # lazily: scipy.signal costs ~0.9 s at start-up
+
         return fftconvolve(x, w, mode="valid")
     return np.convolve(x, w, mode="valid")
 

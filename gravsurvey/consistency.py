@@ -66,6 +66,9 @@ MIN_OFFSET_CORRELATION = 0.5
 #: without manoeuvres there is nothing to correlate.
 MIN_OFFSET_SIGNAL_MPS2 = 0.02
 
+#: Prefix of a note that records a check passed (a fact for summary.json, not a warning).
+PASSED = "passed: "
+
 
 @dataclass
 class CheckOptions:
@@ -816,11 +819,12 @@ def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, elli
                      f"{GROSS_MISMATCH_FACTOR:g} x the limit: accelerometer bias or scale, or a gyro too poor "
                      "for the check?")
     elif np.isfinite(diff):
-        notes.append(f"gnss vs imu: median specific-force difference {diff / MGAL:+.1f} mGal "
+        # a passed check is a fact for summary.json, not a warning: a good flight prints nothing
+        notes.append(f"{PASSED}gnss vs imu: median specific-force difference {diff / MGAL:+.1f} mGal "
                      f"(limit {opts.max_gravity_mismatch_mgal:g})")
     off, c = estimate_time_offset(record)
     if off is None:
-        notes.append("imu-gnss time offset: not measurable (too little manoeuvring to correlate)")
+        notes.append(f"{PASSED}imu-gnss time offset: not measurable (too little manoeuvring to correlate)")
     else:
         t0 = record.t0_unix_ns
         a0, a1 = channel_spans(record)["imu"]
@@ -831,7 +835,7 @@ def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, elli
         if abs(off) > opts.max_time_offset_s:
             raise DataError(f"{txt}; expected within {opts.max_time_offset_s:g} s "
                             "(checks.max_time_offset_s): clocks out of step")
-        notes.append(f"time offset: {txt}")
+        notes.append(f"{PASSED}time offset: {txt}")
     if initial_raw:
         notes += check_initial(record, initial_raw, initial_key, ellipsoid)
     return notes
@@ -1075,7 +1079,7 @@ def check_result(name: str, final_mps2, in_line, sol, record, opts: CheckOptions
                         "the lines.min_line_s); nothing to deliver (set checks.allow_no_lines: true to accept)")
     valid = np.asarray(getattr(sol, "segment", np.zeros(len(sol.time))) >= 0)
     fin = np.asarray(final_mps2, float)
-    bad = in_line & ~np.isfinite(fin)
+    bad = in_line & valid & ~np.isfinite(fin)
     for label, arr in (("kalman estimate", sol.g_smooth), ("sigma", sol.sigma_smooth),
                        ("latitude", sol.lat), ("longitude", sol.lon), ("height", sol.height)):
         arr = np.asarray(arr, float)
@@ -1116,5 +1120,5 @@ def check_result(name: str, final_mps2, in_line, sol, record, opts: CheckOptions
                 raise DataError(f"{name}: the navigation left the GNSS track by {dmax:.4g} m at t = "
                                 f"{sol.time[k]:.1f} s; expected within {opts.max_track_deviation_m:g} m "
                                 "(checks.max_track_deviation_m)")
-            notes.append(f"{name}: navigation within {dmax:.3g} m of the GNSS track")
+            notes.append(f"{PASSED}{name}: navigation within {dmax:.3g} m of the GNSS track")
     return notes

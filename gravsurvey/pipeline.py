@@ -208,6 +208,11 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
         line_info[s.name] = {**to_jsonable(info), "kind": s.kind, "speed_mps": speed, "samples": b - a}
     timings["postprocess_s"] = time.perf_counter() - t
     notes += check_result(fl.name, final, line != "", sol, record, checks, len(line_info), cfg.ellipsoid)
+    # checks that passed are facts for summary.json (estimator.checks_passed), not warnings
+    from .consistency import PASSED
+
+    passed = [n.replace(PASSED, "", 1) for n in notes if PASSED in n]
+    notes = [n for n in notes if PASSED not in n]
 
     truth = None
     if fl.truth is not None:
@@ -240,6 +245,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
             "triad": fl.triad,
             "gnss_aided": bool(getattr(sol, "gnss_aided", False)),
             "identification": getattr(sol, "identification", {}),
+            "checks_passed": passed,
             "kalman_resolution_m": float(getattr(sol, "resolution_m", float("nan"))),
             **({"gradiometer": gradio} if gradio is not None else {}),
         },
@@ -345,6 +351,12 @@ class _ClassicSolution:
         self.sigma_smooth = np.full(len(res.time), np.nan)
         self.final = res.disturbance
         self.info = res.info
+        # epochs inside a gap of the gravimeter or navigation log carry NaN by design (the
+        # readers leave them empty rather than interpolate): they are gap epochs, like the
+        # separators between the INS chain's segments (consistency.SegmentedSolution)
+        # (the product is also empty where its low-pass window reaches into a gap)
+        self.segment = np.where(np.isfinite(res.raw) & np.isfinite(res.disturbance), 0, -1)
+        self.resolution_m = float(res.info.get("resolution_m") or np.nan)
 
 
 def _classic_solution(cfg, fl, record):

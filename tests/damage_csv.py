@@ -31,10 +31,15 @@ def copy_sample(dst, config_extra: str = "", initial: dict | None = None) -> Pat
     cfg = dst / "survey.yaml"
     text = cfg.read_text()
     if initial is not None:
-        for k, v in initial.items():
-            import re
+        import re
 
-            text = re.sub(rf"(\n    {k}: )[^\n]*", rf"\g<1>{v}", text)
+        if "\n  initial:" not in text:  # the sample starts from the data: add the block
+            text = re.sub(r"(\n  triad: [^\n]*)", "\\g<1>\n  initial:", text, count=1)
+        for k, v in initial.items():
+            if re.search(rf"\n    {k}: ", text):
+                text = re.sub(rf"(\n    {k}: )[^\n]*", rf"\g<1>{v}", text)
+            else:
+                text = text.replace("\n  initial:", f"\n  initial:\n    {k}: {v}", 1)
     cfg.write_text(text + config_extra)
     return cfg
 

@@ -62,9 +62,11 @@ def test_intact_sample_passes_every_check(intact):
     r = intact
     assert not any("split" in n or "restart" in n for n in r.notes)
     assert r.data_loss == []
-    off = [n for n in r.notes if "time offset:" in n]
+    passed = r.estimator["checks_passed"]  # facts in summary.json, not warnings
+    assert not any("time offset" in n or "navigation within" in n for n in r.notes)
+    off = [n for n in passed if "time offset:" in n]
     assert off and "+0.0" in off[0] or "-0.0" in off[0]
-    assert any("navigation within" in n for n in r.notes)
+    assert any("navigation within" in n for n in passed)
     assert _rms_on_lines(r) < 4.0  # 3.36 mGal measured
 
 
@@ -92,7 +94,10 @@ def test_imu_gap_of_a_minute_splits_the_flight(tmp_path):
     cfg, fl = _flight(tmp_path, lambda p: d.drop_between(p, "imu", 400, 460))
     r = process_flight(cfg, fl)
     assert any("estimated 2 of 2 segments" in n for n in r.notes)
-    assert _rms_on_lines(r) < 4.5  # 3.58 mGal measured
+    # 6.1 mGal measured (3.58 with the earlier default: ti_cosphi after a fixed seed prior; the
+    # default product is now the smoothed estimate, and a 400 s first segment keeps the
+    # default anomaly prior: solve.MIN_REFINE_S); the point here is the split, not the level
+    assert _rms_on_lines(r) < 7.0
 
 
 def test_segment_that_cannot_be_reinitialised_is_data_loss(tmp_path):
@@ -103,7 +108,7 @@ def test_segment_that_cannot_be_reinitialised_is_data_loss(tmp_path):
     cfg, fl = _flight(tmp_path, prep)
     r = process_flight(cfg, fl)
     assert any("estimated 1 of 2 segments" in n for n in r.notes)
-    assert len(r.data_loss) == 1 and "not estimated: initial: no GNSS channel" in r.data_loss[0]
+    assert len(r.data_loss) == 1 and "not estimated: initial.lat_deg: missing; the record has no GNSS" in r.data_loss[0]
     assert np.isfinite(r.kalman).all()
 
 
@@ -175,7 +180,7 @@ def test_imu_gnss_time_offset_is_measured_and_refused(tmp_path):
 def test_time_offset_within_the_limit_is_reported(tmp_path):
     cfg, fl = _flight(tmp_path, lambda p: d.shift_after(p, -1, 0.3, names=("imu",)))
     r = process_flight(cfg, fl)
-    note = next(n for n in r.notes if "time offset:" in n)
+    note = next(n for n in r.estimator["checks_passed"] if "time offset:" in n)
     est = float(note.split(" runs ")[1].split(" s ")[0])
     assert abs(est - 0.3) < 0.1
 
@@ -262,14 +267,16 @@ def test_implausible_gnss_speed_names_the_columns(tmp_path):
 
 
 def test_wrong_initial_position_names_the_key(tmp_path):
+    """A configured ``initial`` that the data contradict is a config error naming the key (exit 2;
+    inm.params.resolve_initial_state checks it against GNSS before anything is processed)."""
     cfg, fl = _flight(tmp_path, initial={"lat_deg": 60.5})
-    with pytest.raises(DataError, match=r"flights\[0\]\.initial\.lat_deg: .* km from the GNSS track"):
+    with pytest.raises(ConfigError, match=r"flights\[0\]\.initial\.lat_deg: 60.5 deg is .* m from the GNSS"):
         process_flight(cfg, fl)
     cfg, fl = _flight(tmp_path / "h", initial={"height_m": 1500.0 / 0.3048})
-    with pytest.raises(DataError, match=r"flights\[0\]\.initial\.height_m: 4921.26 m is \+3421.\d m from the GNSS"):
+    with pytest.raises(ConfigError, match=r"flights\[0\]\.initial\.height_m: 4921.2\d* m differs from the GNSS"):
         process_flight(cfg, fl)
     cfg, fl = _flight(tmp_path / "v", initial={"velocity_enu_mps": "[0.0, 60.0, 0.0]"})
-    with pytest.raises(DataError, match=r"flights\[0\]\.initial\.velocity_enu_mps: \[0.0, 60.0, 0.0\] m/s is (59|60)"):
+    with pytest.raises(ConfigError, match=r"flights\[0\]\.initial\.velocity_enu_mps: \[0.000, 60.000, 0.000\]"):
         process_flight(cfg, fl)
 
 
@@ -302,7 +309,7 @@ def test_a_few_gnss_outliers_are_not_a_navigation_off_track(tmp_path):
 
     cfg, fl = _flight(tmp_path, prep)
     r = process_flight(cfg, fl)
-    note = next(n for n in r.notes if "navigation within" in n)
+    note = next(n for n in r.estimator["checks_passed"] if "navigation within" in n)
     assert float(note.split("within ")[1].split(" m")[0]) < 20.0  # 7.4 m measured (running median)
 
 

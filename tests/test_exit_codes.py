@@ -153,7 +153,7 @@ def test_exit_130_on_sigint_publishes_nothing(seed_run, tmp_path, jobs):
         two = tmp_path / "two"
         shutil.copytree(src, two)
         text = (two / "survey.yaml").read_text()
-        block = text.split("flights:\n", 1)[1].split("model:", 1)[0]
+        block = text.split("flights:\n", 1)[1].split("\nlines:", 1)[0] + "\n"
         (two / "survey.yaml").write_text(text.replace(block, block + block.replace("name: F01", "name: F02")))
         src = two
     out = tmp_path / "out"

@@ -215,7 +215,10 @@ def test_kalman_versus_asymptotic_filter():
     wcd = (q_acc / 9.0) ** (1.0 / 6.0)
     x_as, x_kf, k_last = G.run_channel_filters(t, z, 9.0, q_acc, wcd, (3.0, 1.0, 1e-3))
     tail = slice(1800, None)
-    rms = lambda e: float(np.sqrt(np.mean(e[tail] ** 2)))
+
+    def rms(e):
+        return float(np.sqrt(np.mean(e[tail] ** 2)))
+
     raw = rms(z - x)
     assert rms(x_kf[:, G.POS] - x) < 0.6 * raw and rms(x_as[:, G.POS] - x) < 0.6 * raw
     assert rms(x_kf[:, G.ACC] - b) <= 1.2 * rms(x_as[:, G.ACC] - b)

@@ -96,24 +96,20 @@ def test_source_peaks_are_what_the_spec_says():
 
 
 def test_survey_yaml_holds_no_oracle_values(tmp_path):
-    """survey.yaml: file layout, triad, a user's initial guess at most; oracle.yaml has the rest."""
+    """survey.yaml: file layout and triad only (position, velocity and attitude come from the data);
+    oracle.yaml has the rest."""
     sp = U.limit_spec(U.draw_flight_spec(1), max_duration_s=600.0, max_imu_hz=20.0)
     path = U.write_flight(sp, tmp_path)
     cfg = yaml.safe_load(path.read_text())
     assert "model" not in cfg and "processing" not in cfg
     f = cfg["flights"][0]
-    assert set(f) <= {"name", "inputs", "topics", "triad", "initial", "truth"}
+    assert set(f) <= {"name", "inputs", "topics", "triad", "truth"}
     text = path.read_text()
     for key in ("anomaly_", "gravimeter_", "accel_noise", "altimeter_sigma", "gnss_horizontal", "gyro_drift"):
         assert key not in text
     oracle = yaml.safe_load((tmp_path / "oracle.yaml").read_text())
     assert oracle["model"]["altimeter_sigma_m"] == pytest.approx(sp["sim"]["flights"][0]["sensors"]["altimeter"]["sigma_m"])
-    if f["triad"] == "strapdown":
-        ini, exact = f["initial"], oracle["flights"][0]["initial"]
-        assert ini["attitude_deg"][:2] == [0.0, 0.0] and float(ini["attitude_deg"][2]).is_integer()
-        assert ini != exact
-    else:
-        assert "initial" not in f
+    assert "initial" in oracle["flights"][0]
 
 
 def test_noise_psd_matches_the_simulated_errors():

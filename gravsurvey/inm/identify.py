@@ -57,6 +57,7 @@ __all__ = [
     "wide_prior_params",
     "refine_prior",
     "prior_risk",
+    "keep_default_prior",
     "prior_for_resolution",
     "model_resolution_m",
 ]
@@ -675,6 +676,28 @@ def prior_risk(f, s_signal, s_noise, sigma, tau, count=None) -> float:
     h = s_g / (s_g + s_noise)
     c = np.ones_like(f) if count is None else count
     return float(np.sum(c * ((1.0 - h) ** 2 * s_signal + h**2 * s_noise)))
+
+
+def keep_default_prior(params, report, speed_mps: float, min_s: float):
+    """The anomaly prior as configured or defaulted (a record too short to identify it).
+
+    The identified noise levels stay; ``report`` says why the prior was not identified.
+    """
+    defaults = type(params)()
+    given = set(getattr(params, "given", ()))
+    new = dataclasses.replace(params, **{k: getattr(params if k in given else defaults, k)
+                                         for k in ("anomaly_sigma_mps2", "anomaly_lambda_per_m")})
+    report = dict(report)
+    for k in ("anomaly_sigma_mps2", "anomaly_lambda_per_m"):
+        report[k] = {"value": getattr(new, k), "sigma_factor": None,
+                     "how": "config" if k in given else f"default (record shorter than {min_s:.0f} s)"}
+    if "spectral_model" in report:
+        v = max(float(speed_mps), 1.0)
+        m = dataclasses.replace(SpectralModel(**report["spectral_model"]), anomaly_sigma_mps2=new.anomaly_sigma_mps2,
+                                anomaly_tau_s=1.0 / (new.anomaly_lambda_per_m * v))
+        report["spectral_model"] = dataclasses.asdict(m)
+        report["resolution_m"] = wiener_resolution_m(m, v, report["height_dt_s"])
+    return new, report
 
 
 def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float):

@@ -11,7 +11,7 @@ from ..errors import ConfigError, DataError
 from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, mat_en, mat_ie
 from .errormodel import (DP, DQ, F3, G, N_STATE, N_STATE_AIDED, TH, AltimeterMeasurement, GnssMeasurement,
                          discretise, epoch_geometry, initial_covariance, initial_mean)
-from .identify import identify_params, model_resolution_m, refine_prior, wide_prior_params
+from .identify import identify_params, keep_default_prior, model_resolution_m, refine_prior, wide_prior_params
 from .kalman import filter_and_smooth
 from .mechanization import mechanize, navigation_to_geodetic, rodrigues
 from .params import InitialState, InmParams, initial_state_from_gnss, solvability_warnings
@@ -162,6 +162,9 @@ def stack_measurements(parts):
     return z, h, r
 
 
+#: Shortest record (s) whose anomaly prior is identified; shorter ones keep the default prior.
+MIN_REFINE_S = 900.0
+
 #: The passes stop once the initial-attitude correction is below this, rad (0.001 deg).
 ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
 
@@ -304,7 +307,11 @@ def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, l
     """
     alt_t, alt_h = _altimeter(record)
     params, ident = identify_params(params, nav, record.imu.specific_force_t, alt_t, alt_h, speed0, ellipsoid)
-    if ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
+    if nav.time[-1] - nav.time[0] < MIN_REFINE_S:
+        # too short to see the field's spectrum: the noise levels stay identified, the anomaly
+        # prior is the configured or default (broad) one
+        params, ident = keep_default_prior(params, ident, speed0, MIN_REFINE_S)
+    elif ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
         wide = wide_prior_params(params, ident, speed0)
         idx, _, _, _, first = _one_pass(record, wide, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t)
         params, ident = refine_prior(params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))),

@@ -576,32 +576,15 @@ def _initial_block(sim: FlightSimulation) -> dict:
 
 
 def user_initial_block(sim: FlightSimulation) -> dict | None:
-    """The survey.yaml ``initial`` block: only what a user knows at take-off.
+    """The survey.yaml ``initial`` block: none.
 
-    A platform flight gets none (the pipeline initialises it from the GNSS channel).  The
-    processing config requires one for a strapdown triad (GNSS gives no attitude), so it is
-    filled from what the crew knows, never from the truth: position = the first GNSS fix as
-    logged (with its noise), velocity = the flight plan's nominal one (0 during a static
-    start, else the plan speed along the plan heading, level), attitude = level with the plan
-    heading rounded to a whole degree (a compass / GNSS-track figure).  The true attitude at
-    the first sample differs by the turbulence and the rounding.
+    A user's config holds only what the user knows; the pipeline takes position, velocity and
+    start time from GNSS and a strapdown triad's attitude from its own alignment
+    (gravsurvey.inm.alignment), so no flight needs an ``initial`` block.  (The crew's guess
+    this once wrote - a level attitude at the plan heading to a whole degree - contradicts
+    the data by more than its stated sigma and is refused as it should be.)
     """
-    if sim.triad == "platform":
-        return None
-    plan = sim.flight["plan"]
-    if plan["kind"] == "grid":
-        heading = float(plan["lines"]["heading_deg"])
-    else:
-        heading = float(plan["heading_deg"])
-    speed = 0.0 if plan["static_start_s"] > 0 else float(plan["speed_mps"])
-    psi = math.radians(heading)
-    return {
-        "lat_deg": float(sim.gnss_lat_deg[0]),
-        "lon_deg": float(sim.gnss_lon_deg[0]),
-        "height_m": float(sim.gnss_height[0]),
-        "velocity_enu_mps": [speed * math.sin(psi) + 0.0, speed * math.cos(psi) + 0.0, 0.0],
-        "attitude_deg": [0.0, 0.0, float(round(heading % 360.0))],
-    }
+    return None
 
 
 def _comments(cfg: SimConfig, sim: FlightSimulation) -> list[str]:
