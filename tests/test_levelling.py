@@ -1,0 +1,180 @@
+"""Crossover levelling (gravsurvey.levelling) and base ties (gravsurvey.ties) on a simulated
+survey with known truth: several flights with per-flight offsets and drifts, per-line offsets,
+white noise, tie lines; the truth is an analytic field, so every check is against truth."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from gravsurvey.errors import ConfigError, DataError
+from gravsurvey.geodesy import MGAL, normal_gravity
+from gravsurvey.levelling import LevellingOptions, level_crossovers, level_survey
+from gravsurvey.survey import find_crossovers
+from gravsurvey.ties import TieConfig, tie_flight
+
+G_NEWTON = 6.674e-11
+
+
+def truth_field_mgal(e, n, h=800.0):
+    """Vertical attraction of three buried point masses at height h, mGal (analytic)."""
+    out = np.zeros_like(np.asarray(e, float))
+    for (e0, n0, d, m) in ((8e3, 12e3, 2500.0, 2e12), (20e3, 5e3, 3000.0, -1.5e12), (14e3, 20e3, 2000.0, 8e11)):
+        dz = h + d
+        r2 = (e - e0) ** 2 + (n - n0) ** 2 + dz**2
+        out += G_NEWTON * m * dz / r2**1.5 / MGAL
+    return out
+
+
+def simulated_survey(seed=1, noise_mgal=0.2, spacing_m=4000.0, speed=80.0, dt=2.0):
+    """3 flights: F1 and F2 fly 4 north-south lines each (24 km), F3 flies 4 east-west ties.
+
+    Each flight gets an offset (2 .. -3 mGal) and a drift (mGal/h); each line an extra offset of
+    0.5 mGal RMS; every sample white noise ``noise_mgal``. Returns lines (dicts for
+    find_crossovers), the per-flight (offset, drift), and the flights' still readings.
+    """
+    rng = np.random.default_rng(seed)
+    flights = {"F1": (2.0, 0.8), "F2": (-1.5, -0.6), "F3": (3.0, 0.4)}
+    lines = []
+    for f, (off, drift) in flights.items():
+        t_now = 600.0  # after a 10 min still reading at the base
+        for k in range(4):
+            if f == "F3":
+                n0 = 2000.0 + k * 6000.0
+                e = np.arange(0.0, 28000.0, speed * dt)
+                nn = np.full_like(e, n0)
+                name = f"T{k + 1:02d}"
+            else:
+                e0 = (k * 2 + (0 if f == "F1" else 1)) * spacing_m / 2 + 1000.0
+                nn = np.arange(0.0, 24000.0, speed * dt)
+                if k % 2:
+                    nn = nn[::-1]
+                e = np.full_like(nn, e0)
+                name = f"L{k + 1:02d}"
+            t = t_now + np.arange(e.size) * dt
+            t_now = t[-1] + 300.0  # a turn
+            tru = truth_field_mgal(e, nn)
+            err = off + drift * t / 3600.0 + rng.normal(0, 0.5) + rng.normal(0, noise_mgal, e.size)
+            lines.append({"flight": f, "line": name, "easting_m": e, "northing_m": nn, "time_s": t,
+                          "value_mgal": tru + err, "truth_mgal": tru, "sigma_mgal": np.full(e.size, noise_mgal)})
+        flights[f] = (off, drift, t_now + 300.0)
+    return lines, flights
+
+
+def test_levelling_recovers_relative_levels_and_noise():
+    lines, _ = simulated_survey()
+    xo = find_crossovers(lines)
+    assert xo.count == 4 * 8  # every tie crosses every line once
+    lev = level_survey(xo, lines, LevellingOptions(model="flight_trend"))
+    before, after = lev.before, lev.after
+    assert before["rms_mgal"] > 2.0
+    # after: RMS of differences ~ noise * sqrt(2) (fewer degrees of freedom lower it a bit)
+    assert after["rms_over_sqrt2_mgal"] < 0.3
+    # corrected line errors agree with each other: the spread of (value - correction - truth)
+    # over all lines is the noise plus the datum shift only
+    resid = []
+    for ln in lines:
+        c = lev.correction(ln["flight"], ln["line"], ln["time_s"])
+        resid.append(ln["value_mgal"] - c - ln["truth_mgal"])
+    means = np.array([r.mean() for r in resid])
+    assert np.std(means) < 0.3, means
+    # datum: mean constant zero
+    assert abs(lev.constant_mgal.mean()) < 1e-9
+
+
+def test_ties_and_levelling_give_absolute_level():
+    lines, flights = simulated_survey(seed=3)
+    # base ties: still readings of 10 min before (t = 0..600) and after each flight
+    rng = np.random.default_rng(7)
+    g_base = 980_812.43
+    lat_b, h_b = np.radians(47.0), 600.0
+    gamma = float(normal_gravity(np.array([lat_b]), np.array([h_b]))[0]) / MGAL
+    dist_base = g_base - gamma
+    tied = {}
+    for f, (off, drift, t_end) in flights.items():
+        tt = np.concatenate([np.arange(0, 600.0, 1.0), np.arange(t_end - 600.0, t_end, 1.0)])
+        z = dist_base + off + drift * tt / 3600.0 + rng.normal(0, 1.0, tt.size)
+        cfg = TieConfig.from_dict({"base_gravity_mgal": g_base,
+                                   "before": {"start_s": 0, "stop_s": 599},
+                                   "after": {"start_s": float(t_end - 600), "stop_s": float(t_end)}})
+        tie = tie_flight(cfg, tt, np.full(tt.size, lat_b), np.full(tt.size, h_b), z)
+        assert abs(tie.drift_mgal_per_h - drift) < 0.2
+        tied[f] = tie
+    tied_lines = []
+    for ln in lines:
+        ln = dict(ln)
+        ln["value_mgal"] = ln["value_mgal"] - tied[ln["flight"]].correction(ln["time_s"])
+        tied_lines.append(ln)
+    xo = find_crossovers(tied_lines)
+    lev = level_survey(xo, tied_lines, LevellingOptions(model="constant"), tied_flights=list(flights))
+    assert lev.datum == "tied flights"
+    err = np.concatenate([ln["value_mgal"] - lev.correction(ln["flight"], ln["line"], ln["time_s"]) - ln["truth_mgal"]
+                          for ln in tied_lines])
+    assert abs(err.mean()) < 0.3  # absolute level
+    assert lev.after["rms_over_sqrt2_mgal"] < 0.3  # per-line noise is 0.2 mGal
+    # without ties the level is off by the mean flight offset (~1.2 mGal here): the test can fail
+    raw = np.concatenate([ln["value_mgal"] - ln["truth_mgal"] for ln in lines])
+    assert abs(raw.mean()) > 0.5
+
+
+def test_robust_levelling_resists_an_outlier():
+    lines, _ = simulated_survey(seed=5, noise_mgal=0.1)
+    xo = find_crossovers(lines)
+    xo.diff_mgal[3] += 25.0  # a spike at one crossover
+    lev_r = level_survey(xo, lines, LevellingOptions(model="constant", robust=True))
+    lev_p = level_survey(xo, lines, LevellingOptions(model="constant", robust=False))
+    assert lev_r.weight[3] < 0.2
+    # with the outlier out, the other residuals are at the noise level; plain LS spreads it
+    good = np.arange(len(xo)) != 3
+    rr = np.sqrt(np.mean(lev_r.residual_mgal[good] ** 2))
+    rp = np.sqrt(np.mean(lev_p.residual_mgal[good] ** 2))
+    assert rr < 1.0 < rp
+
+
+def test_exact_constants_small_network():
+    # 2 lines x 2 ties, offsets known exactly, no noise: constants recovered (mean-zero datum)
+    off = np.array([1.0, -2.0, 0.5, 0.5])
+    pairs = [(0, 2), (0, 3), (1, 2), (1, 3)]
+    d = np.array([off[a] - off[b] for a, b in pairs])
+    lev = level_crossovers(d, [p[0] for p in pairs], [p[1] for p in pairs], np.zeros(4), np.zeros(4),
+                           [("F", f"L{i}") for i in range(4)], np.zeros(4), robust=False)
+    np.testing.assert_allclose(lev.constant_mgal, off - off.mean(), atol=1e-9)
+    assert lev.after["rms_mgal"] < 1e-9
+
+
+def test_unconnected_line_is_not_levelled():
+    d = np.array([1.0])
+    lev = level_crossovers(d, [0], [1], [0.0], [0.0], [("F", "L1"), ("F", "L2"), ("F", "L3")], np.zeros(3))
+    assert list(lev.levelled) == [True, True, False]
+    assert lev.constant_mgal[2] == 0.0
+    assert any("without crossovers" in n for n in lev.notes)
+
+
+def test_options_and_tie_config_errors():
+    with pytest.raises(ConfigError, match="levelling.model"):
+        LevellingOptions.from_dict({"model": "quadratic"})
+    with pytest.raises(ConfigError, match="levelling.huber_kk: unknown key"):
+        LevellingOptions.from_dict({"huber_kk": 1})
+    with pytest.raises(ConfigError, match=r"flights\[0\].tie.base_gravity_mgal: expected the base's absolute"):
+        TieConfig.from_dict({"base_gravity_mgal": 9.81, "before": {"reading_mgal": 980000.0}})
+    with pytest.raises(ConfigError, match="missing required key"):
+        TieConfig.from_dict({"before": {"reading_mgal": 980000.0}})
+    with pytest.raises(ConfigError, match="either reading_mgal"):
+        TieConfig.from_dict({"base_gravity_mgal": 980000.0, "before": {"reading_mgal": 980001.0, "start_s": 1}})
+    with pytest.raises(ConfigError, match="needs a base reading"):
+        TieConfig.from_dict({"base_gravity_mgal": 980000.0})
+    cfg = TieConfig.from_dict({"base_gravity_mgal": 980000.0, "before": {"start_s": 5000, "stop_s": 6000}})
+    with pytest.raises(DataError, match="holds no estimate"):
+        tie_flight(cfg, np.arange(100.0), np.zeros(100), np.zeros(100), np.zeros(100))
+
+
+def test_value_ties_linear_drift():
+    cfg = TieConfig.from_dict({"base_gravity_mgal": 980100.0, "before": {"reading_mgal": 980102.0, "time_s": 0},
+                               "after": {"reading_mgal": 980103.0, "time_s": 7200}})
+    t = np.array([0.0, 3600.0, 7200.0])
+    tie = tie_flight(cfg, t, np.zeros(3), np.zeros(3), np.zeros(3))
+    np.testing.assert_allclose(tie.correction(t), [2.0, 2.5, 3.0])
+    assert tie.drift_mgal_per_h == pytest.approx(0.5)
