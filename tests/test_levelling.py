@@ -4,9 +4,6 @@ white noise, tie lines; the truth is an analytic field, so every check is agains
 
 from __future__ import annotations
 
-import shutil
-import subprocess
-
 import numpy as np
 import pytest
 
@@ -15,54 +12,7 @@ from gravsurvey.geodesy import MGAL, normal_gravity
 from gravsurvey.levelling import LevellingOptions, level_crossovers, level_survey
 from gravsurvey.survey import find_crossovers
 from gravsurvey.ties import TieConfig, tie_flight
-
-G_NEWTON = 6.674e-11
-
-
-def truth_field_mgal(e, n, h=800.0):
-    """Vertical attraction of three buried point masses at height h, mGal (analytic)."""
-    out = np.zeros_like(np.asarray(e, float))
-    for (e0, n0, d, m) in ((8e3, 12e3, 2500.0, 2e12), (20e3, 5e3, 3000.0, -1.5e12), (14e3, 20e3, 2000.0, 8e11)):
-        dz = h + d
-        r2 = (e - e0) ** 2 + (n - n0) ** 2 + dz**2
-        out += G_NEWTON * m * dz / r2**1.5 / MGAL
-    return out
-
-
-def simulated_survey(seed=1, noise_mgal=0.2, spacing_m=4000.0, speed=80.0, dt=2.0):
-    """3 flights: F1 and F2 fly 4 north-south lines each (24 km), F3 flies 4 east-west ties.
-
-    Each flight gets an offset (2 .. -3 mGal) and a drift (mGal/h); each line an extra offset of
-    0.5 mGal RMS; every sample white noise ``noise_mgal``. Returns lines (dicts for
-    find_crossovers), the per-flight (offset, drift), and the flights' still readings.
-    """
-    rng = np.random.default_rng(seed)
-    flights = {"F1": (2.0, 0.8), "F2": (-1.5, -0.6), "F3": (3.0, 0.4)}
-    lines = []
-    for f, (off, drift) in flights.items():
-        t_now = 600.0  # after a 10 min still reading at the base
-        for k in range(4):
-            if f == "F3":
-                n0 = 2000.0 + k * 6000.0
-                e = np.arange(0.0, 28000.0, speed * dt)
-                nn = np.full_like(e, n0)
-                name = f"T{k + 1:02d}"
-            else:
-                e0 = (k * 2 + (0 if f == "F1" else 1)) * spacing_m / 2 + 1000.0
-                nn = np.arange(0.0, 24000.0, speed * dt)
-                if k % 2:
-                    nn = nn[::-1]
-                e = np.full_like(nn, e0)
-                name = f"L{k + 1:02d}"
-            t = t_now + np.arange(e.size) * dt
-            t_now = t[-1] + 300.0  # a turn
-            tru = truth_field_mgal(e, nn)
-            err = off + drift * t / 3600.0 + rng.normal(0, 0.5) + rng.normal(0, noise_mgal, e.size)
-            lines.append({"flight": f, "line": name, "easting_m": e, "northing_m": nn, "time_s": t,
-                          "value_mgal": tru + err, "truth_mgal": tru, "sigma_mgal": np.full(e.size, noise_mgal)})
-        flights[f] = (off, drift, t_now + 300.0)
-    return lines, flights
-
+from levelling_truth import simulated_survey
 
 def test_levelling_recovers_relative_levels_and_noise():
     lines, _ = simulated_survey()
@@ -178,3 +128,20 @@ def test_value_ties_linear_drift():
     tie = tie_flight(cfg, t, np.zeros(3), np.zeros(3), np.zeros(3))
     np.testing.assert_allclose(tie.correction(t), [2.0, 2.5, 3.0])
     assert tie.drift_mgal_per_h == pytest.approx(0.5)
+
+
+def test_against_gmt_x2sys():
+    """Crossovers and constant-per-line corrections agree with GMT x2sys_cross/x2sys_solve."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from benchmarks.bench_levelling_gmt import compare, gmt_available
+
+    if not gmt_available():
+        pytest.skip("GMT (gmt x2sys_*) not installed: the GMT comparison is skipped (Debian: apt-get install gmt)")
+    r = compare()
+    assert r["n_gravsurvey"] == r["n_gmt"] == r["n_matched"] == 32
+    assert r["max_position_m"] < 0.01  # text export rounds positions to 1 mm
+    assert r["max_value_mgal"] < 2e-4  # and values to 1e-4 mGal
+    assert r["max_correction_mgal"] < 2e-4
