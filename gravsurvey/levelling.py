@@ -197,6 +197,8 @@ class Levelling:
     before, after : dict
         :func:`crossover_statistics` of the differences before and after.
     iterations : int
+    diff_mgal : ndarray, shape (k,)
+        The crossover differences before levelling, mGal.
     datum : str
         ``"tied flights"`` or ``"mean of lines"`` (or ``"mixed"`` if groups differ).
     """
@@ -216,6 +218,7 @@ class Levelling:
     iterations: int = 0
     datum: str = "mean of lines"
     notes: list = field(default_factory=list)
+    diff_mgal: np.ndarray | None = None
 
     def correction(self, flight: str, line: str, time_s) -> np.ndarray:
         """The level error of one line at the given times, mGal: subtract it from the values.
@@ -478,6 +481,7 @@ def level_crossovers(
         iterations=it,
         datum=datums.pop() if len(datums) == 1 else ("mixed" if datums else "none"),
         notes=notes,
+        diff_mgal=x.copy(),
     )
 
 

@@ -13,7 +13,7 @@ G_NEWTON = 6.674e-11
 def truth_field_mgal(e, n, h=800.0):
     """Vertical attraction of three buried point masses at height h, mGal (analytic)."""
     out = np.zeros_like(np.asarray(e, float))
-    for (e0, n0, d, m) in ((8e3, 12e3, 2500.0, 2e12), (20e3, 5e3, 3000.0, -1.5e12), (14e3, 20e3, 2000.0, 8e11)):
+    for (e0, n0, d, m) in ((8e3, 12e3, 2500.0, 2e13), (20e3, 5e3, 3000.0, -1.5e13), (14e3, 20e3, 2000.0, 8e12)):
         dz = h + d
         r2 = (e - e0) ** 2 + (n - n0) ** 2 + dz**2
         out += G_NEWTON * m * dz / r2**1.5 / MGAL
