@@ -23,10 +23,11 @@ import yaml
 from .errors import ConfigError, check_keys
 from .io.ingest import INGEST_KEYS as FLIGHT_INGEST_KEYS
 
-TOP_KEYS = ("survey", "ellipsoid", "flights", "model", "lines", "postprocess", "processing", "output")
+TOP_KEYS = ("survey", "ellipsoid", "flights", "model", "lines", "postprocess", "processing", "output",
+            "levelling", "grid")
 SURVEY_KEYS = ("name", "description")
 #: flight keys handled here; every other key of a flight goes to the ingestion options
-FLIGHT_OWN_KEYS = ("name", "triad", "initial", "truth", "lines")
+FLIGHT_OWN_KEYS = ("name", "triad", "initial", "truth", "lines", "tie")
 OUTPUT_KEYS = ("dir", "epsg", "plots", "xyz", "geojson")
 PROCESSING_KEYS = ("method", "classic_resolution_m")
 TRIADS = ("platform", "strapdown")
@@ -55,6 +56,7 @@ class FlightConfig:
     initial_raw: dict | None
     truth: Path | None
     lines_windows: list | None
+    tie: Any = None  # gravsurvey.ties.TieConfig or None (no base tie)
 
 
 @dataclass
@@ -78,6 +80,8 @@ class SurveyConfig:
     xyz: bool = True
     geojson: bool = True
     extra: dict = field(default_factory=dict)
+    levelling: Any = None  # gravsurvey.levelling.LevellingOptions
+    grid: Any = None  # gravsurvey.grid.GridOptions
 
     def section_hash(self, flight: FlightConfig) -> str:
         """Hash of everything that determines one flight's result (for rerun skipping)."""
@@ -242,10 +246,20 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
             windows = fr["lines"]
             if not isinstance(windows, list):
                 raise ConfigError(f"{kp}.lines: expected a list of {{name, start_s, stop_s}} windows")
+        tie = None
+        if fr.get("tie") is not None:
+            from .ties import TieConfig
+
+            tie = TieConfig.from_dict(fr["tie"], key_path=f"{kp}.tie")
         flights.append(
-            FlightConfig(fname, i, triad, fr, ingest, initial, init_raw, truth, windows)
+            FlightConfig(fname, i, triad, fr, ingest, initial, init_raw, truth, windows, tie)
         )
 
+    from .grid import GridOptions
+    from .levelling import LevellingOptions
+
+    levelling = LevellingOptions.from_dict(expect_mapping(raw.get("levelling"), "levelling"), key_path="levelling")
+    grid = GridOptions.from_dict(expect_mapping(raw.get("grid"), "grid"), key_path="grid")
     return SurveyConfig(
         path=path,
         base_dir=base,
@@ -263,4 +277,6 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
         plots=flags["plots"],
         xyz=flags["xyz"],
         geojson=flags["geojson"],
+        levelling=levelling,
+        grid=grid,
     )
