@@ -34,6 +34,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.sparse import coo_matrix, diags, identity
+from scipy.sparse.linalg import spsolve
 
 from gravsurvey.errors import ConfigError, DataError, check_keys
 
@@ -294,7 +296,6 @@ class Levelling:
 
 def _components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Connected-component label of each of ``n`` nodes joined by edges (a, b)."""
-    from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     g = coo_matrix((np.ones(a.size), (a, b)), shape=(n, n))
@@ -385,7 +386,8 @@ def level_crossovers(
     k_ok = np.flatnonzero(ok)
 
     flights = list(dict.fromkeys(f for f, _ in keys))
-    fidx = np.array([flights.index(f) for f, _ in keys], int) if keys else np.zeros(0, int)
+    fpos = {f: j for j, f in enumerate(flights)}
+    fidx = np.array([fpos[f] for f, _ in keys], int) if keys else np.zeros(0, int)
     if flight_mid_s is None:
         flight_mid_s = {}
         for j, f in enumerate(flights):
@@ -394,65 +396,63 @@ def level_crossovers(
     fmid = np.array([float(flight_mid_s.get(f, 0.0)) for f in flights])
 
     # unknowns: constants [0, nl), then line trends or flight drifts
+    tied = set(str(f) for f in tied_flights)
     has_xo = np.zeros(nl, bool)
     has_xo[ia[k_ok]] = True
     has_xo[ib[k_ok]] = True
     n_extra = nl if model == "line_trend" else (len(flights) if model == "flight_trend" else 0)
     nu = nl + n_extra
     m = k_ok.size
-    A = np.zeros((m, nu))
+    # sparse design matrix: 2 (constant) or 4 (with trends) non-zeros per crossover
     r = np.arange(m)
-    A[r, ia[k_ok]] += 1.0
-    A[r, ib[k_ok]] -= 1.0
+    rr, cc, vv = [r, r], [ia[k_ok], ib[k_ok]], [np.ones(m), -np.ones(m)]
     if model == "line_trend":
-        A[r, nl + ia[k_ok]] += (ta[k_ok] - tm[ia[k_ok]]) / S_PER_H
-        A[r, nl + ib[k_ok]] -= (tb[k_ok] - tm[ib[k_ok]]) / S_PER_H
+        rr += [r, r]
+        cc += [nl + ia[k_ok], nl + ib[k_ok]]
+        vv += [(ta[k_ok] - tm[ia[k_ok]]) / S_PER_H, -(tb[k_ok] - tm[ib[k_ok]]) / S_PER_H]
     elif model == "flight_trend":
         fa, fb = fidx[ia[k_ok]], fidx[ib[k_ok]]
-        A[r, nl + fa] += (ta[k_ok] - fmid[fa]) / S_PER_H
-        A[r, nl + fb] -= (tb[k_ok] - fmid[fb]) / S_PER_H
+        rr += [r, r]
+        cc += [nl + fa, nl + fb]
+        vv += [(ta[k_ok] - fmid[fa]) / S_PER_H, -(tb[k_ok] - fmid[fb]) / S_PER_H]
+    A = coo_matrix((np.concatenate(vv), (np.concatenate(rr), np.concatenate(cc))), shape=(m, nu)).tocsr()
     y = x[k_ok]
     w0 = 1.0 / var[k_ok]
 
-    # datum: one constraint per connected group of lines (with crossovers)
-    comp = _components(nl, ia[k_ok], ib[k_ok]) if nl else np.zeros(0, int)
-    tied = set(str(f) for f in tied_flights)
-    C_rows, datums = [], set()
-    for g in np.unique(comp[has_xo]):
-        members = np.flatnonzero((comp == g) & has_xo)
-        tmem = [i for i in members if keys[i][0] in tied]
-        row = np.zeros(nu)
-        if tmem:
-            row[tmem] = 1.0 / len(tmem)
-            datums.add("tied flights")
-        else:
-            row[members] = 1.0 / len(members)
-            datums.add("mean of lines")
-        C_rows.append(row)
-    # unknowns no crossover touches: pinned to zero
+    # unknowns no crossover touches stay zero
     free = np.zeros(nu, bool)
     free[:nl] = has_xo
     if n_extra:
-        free[nl:] = np.abs(A[:, nl:]).sum(axis=0) > 0
+        free[nl:] = np.asarray(abs(A[:, nl:]).sum(axis=0)).ravel() > 0
     if model == "flight_trend":
         # a tied flight's drift is known from its base readings (gravsurvey.ties): not re-estimated
         free[nl:] &= np.array([f not in tied for f in flights], bool)
-    for j in np.flatnonzero(~free):
-        row = np.zeros(nu)
-        row[j] = 1.0
-        C_rows.append(row)
-    C = np.array(C_rows) if C_rows else np.zeros((0, nu))
+    cols = np.flatnonzero(free)
+    Af = A[:, cols]
+
+    # datum: per connected group of lines, shifting all its constants together changes no
+    # crossover difference; after the solve each group is shifted so that the mean constant of
+    # its tied lines (or of all its lines) is zero
+    comp = _components(nl, ia[k_ok], ib[k_ok]) if nl else np.zeros(0, int)
+    groups, datums = [], set()
+    for g in np.unique(comp[has_xo]):
+        members = np.flatnonzero((comp == g) & has_xo)
+        tmem = np.array([i for i in members if keys[i][0] in tied], int)
+        groups.append((members, tmem if tmem.size else members))
+        datums.add("tied flights" if tmem.size else "mean of lines")
 
     def solve(w):
-        N = A.T @ (w[:, None] * A)
-        rhs = A.T @ (w * y)
-        nc = C.shape[0]
-        K = np.zeros((nu + nc, nu + nc))
-        K[:nu, :nu] = N
-        K[:nu, nu:] = C.T
-        K[nu:, :nu] = C
-        sol = np.linalg.lstsq(K, np.concatenate([rhs, np.zeros(nc)]), rcond=1e-12)[0]
-        return sol[:nu]
+        # normal equations with a ridge 1e-10 of the largest diagonal: makes the group shifts
+        # (and trends no crossover can see) determinate at ~0 without changing the rest
+        N = (Af.T @ diags(w) @ Af).tocsc()
+        d = N.diagonal()
+        ridge = 1e-10 * (float(d.max()) if d.size and d.max() > 0 else 1.0)
+        uf = spsolve(N + ridge * identity(N.shape[0], format="csc"), Af.T @ (w * y)) if cols.size else np.zeros(0)
+        u = np.zeros(nu)
+        u[cols] = np.atleast_1d(uf)
+        for members, ref in groups:
+            u[members] -= u[ref].mean()
+        return u
 
     rw = np.ones(m)
     it = 0

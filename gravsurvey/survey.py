@@ -872,80 +872,92 @@ def find_crossovers(
     """
     tracks = []
     keys = []
+    seen = set()
     for i, ln in enumerate(lines):
         e, nn, v, t = _line_arrays(ln, i)
         key = (str(ln["flight"]), str(ln["line"]))
-        if key in keys:
+        if key in seen:
             raise DataError(f"crossovers: line {key[0]}/{key[1]} given twice")
+        seen.add(key)
         keys.append(key)
         tracks.append(_Track(e, nn, v, t, int(chunk)))
     sin_min = math.sin(math.radians(min_angle_deg))
     rows = {c: [] for c in Crossovers.COLUMNS}
-    for ia in range(len(tracks)):
-        A = tracks[ia]
-        if A.nchunk == 0:
-            continue
-        for ib in range(ia + 1, len(tracks)):
-            B = tracks[ib]
-            if B.nchunk == 0:
-                continue
-            ea0, ea1, na0, na1 = A.bbox
-            eb0, eb1, nb0, nb1 = B.bbox
-            if ea1 < eb0 or eb1 < ea0 or na1 < nb0 or nb1 < na0:
-                continue
+    # candidate pairs: overlapping bounding boxes, found vectorised (a Python loop over all
+    # pairs costs ~2 us each: 4 s for 2,000 lines)
+    live = [i for i, tr in enumerate(tracks) if tr.nchunk > 0]
+    pairs = []
+    if len(live) > 1:
+        bb = np.array([tracks[i].bbox for i in live])
+        li = np.array(live)
+        for lo in range(0, len(live), 512):
+            blk = bb[lo : lo + 512]
             ov = (
-                (A.emin[:, None] <= B.emax[None, :])
-                & (B.emin[None, :] <= A.emax[:, None])
-                & (A.nmin[:, None] <= B.nmax[None, :])
-                & (B.nmin[None, :] <= A.nmax[:, None])
+                (blk[:, None, 0] <= bb[None, :, 1])
+                & (bb[None, :, 0] <= blk[:, None, 1])
+                & (blk[:, None, 2] <= bb[None, :, 3])
+                & (bb[None, :, 2] <= blk[:, None, 3])
             )
-            ca, cb = np.nonzero(ov)
-            if ca.size == 0:
-                continue
-            k = np.arange(A.chunk)
-            sa = (ca[:, None, None] * A.chunk + k[None, :, None]) + 0 * k[None, None, :]
-            sb = (cb[:, None, None] * B.chunk + k[None, None, :]) + 0 * k[None, :, None]
-            sa = sa.ravel()
-            sb = sb.ravel()
-            keep = (sa < A.nseg) & (sb < B.nseg)
-            sa, sb = sa[keep], sb[keep]
-            keep = A.seg_ok[sa] & B.seg_ok[sb]
-            sa, sb = sa[keep], sb[keep]
+            a_, b_ = np.nonzero(ov)
+            keep = li[b_] > li[lo + a_]
+            pairs += list(zip(li[lo + a_][keep].tolist(), li[b_][keep].tolist()))
+        pairs.sort()
+    for ia, ib in pairs:
+        A = tracks[ia]
+        B = tracks[ib]
+        ov = (
+            (A.emin[:, None] <= B.emax[None, :])
+            & (B.emin[None, :] <= A.emax[:, None])
+            & (A.nmin[:, None] <= B.nmax[None, :])
+            & (B.nmin[None, :] <= A.nmax[:, None])
+        )
+        ca, cb = np.nonzero(ov)
+        if ca.size == 0:
+            continue
+        k = np.arange(A.chunk)
+        sa = (ca[:, None, None] * A.chunk + k[None, :, None]) + 0 * k[None, None, :]
+        sb = (cb[:, None, None] * B.chunk + k[None, None, :]) + 0 * k[None, :, None]
+        sa = sa.ravel()
+        sb = sb.ravel()
+        keep = (sa < A.nseg) & (sb < B.nseg)
+        sa, sb = sa[keep], sb[keep]
+        keep = A.seg_ok[sa] & B.seg_ok[sb]
+        sa, sb = sa[keep], sb[keep]
+        if sa.size == 0:
+            continue
+        pa0 = np.column_stack([A.e[sa], A.n[sa]])
+        pa1 = np.column_stack([A.e[sa + 1], A.n[sa + 1]])
+        pb0 = np.column_stack([B.e[sb], B.n[sb]])
+        pb1 = np.column_stack([B.e[sb + 1], B.n[sb + 1]])
+        tt, uu, sin, ok = _intersect(pa0, pa1, pb0, pb1, sa == A.nseg - 1, sb == B.nseg - 1)
+        ok &= sin >= sin_min - 1e-12
+        if not ok.any():
+            continue
+        sa, sb, tt, uu, sin = sa[ok], sb[ok], tt[ok], uu[ok], sin[ok]
+        ta = A.t[sa] + tt * (A.t[sa + 1] - A.t[sa])
+        tb = B.t[sb] + uu * (B.t[sb + 1] - B.t[sb])
+        if keys[ia][0] == keys[ib][0]:
+            far = np.abs(ta - tb) >= min_time_separation_s
+            sa, sb, tt, uu, sin, ta, tb = (x[far] for x in (sa, sb, tt, uu, sin, ta, tb))
             if sa.size == 0:
                 continue
-            pa0 = np.column_stack([A.e[sa], A.n[sa]])
-            pa1 = np.column_stack([A.e[sa + 1], A.n[sa + 1]])
-            pb0 = np.column_stack([B.e[sb], B.n[sb]])
-            pb1 = np.column_stack([B.e[sb + 1], B.n[sb + 1]])
-            tt, uu, sin, ok = _intersect(pa0, pa1, pb0, pb1, sa == A.nseg - 1, sb == B.nseg - 1)
-            ok &= sin >= sin_min - 1e-12
-            if not ok.any():
-                continue
-            sa, sb, tt, uu, sin = sa[ok], sb[ok], tt[ok], uu[ok], sin[ok]
-            ta = A.t[sa] + tt * (A.t[sa + 1] - A.t[sa])
-            tb = B.t[sb] + uu * (B.t[sb + 1] - B.t[sb])
-            if keys[ia][0] == keys[ib][0]:
-                far = np.abs(ta - tb) >= min_time_separation_s
-                sa, sb, tt, uu, sin, ta, tb = (x[far] for x in (sa, sb, tt, uu, sin, ta, tb))
-                if sa.size == 0:
-                    continue
-            order = np.lexsort((tt, sa))
-            sa, sb, tt, uu, sin, ta, tb = (x[order] for x in (sa, sb, tt, uu, sin, ta, tb))
-            va = A.v[sa] + tt * (A.v[sa + 1] - A.v[sa])
-            vb = B.v[sb] + uu * (B.v[sb + 1] - B.v[sb])
-            m = sa.size
-            rows["flight_a"].append(np.full(m, keys[ia][0], dtype=object))
-            rows["line_a"].append(np.full(m, keys[ia][1], dtype=object))
-            rows["flight_b"].append(np.full(m, keys[ib][0], dtype=object))
-            rows["line_b"].append(np.full(m, keys[ib][1], dtype=object))
-            rows["easting_m"].append(A.e[sa] + tt * (A.e[sa + 1] - A.e[sa]))
-            rows["northing_m"].append(A.n[sa] + tt * (A.n[sa + 1] - A.n[sa]))
-            rows["time_a_s"].append(ta)
-            rows["time_b_s"].append(tb)
-            rows["value_a_mgal"].append(va)
-            rows["value_b_mgal"].append(vb)
-            rows["diff_mgal"].append(va - vb)
-            rows["angle_deg"].append(np.degrees(np.arcsin(np.clip(sin, 0.0, 1.0))))
+        order = np.lexsort((tt, sa))
+        sa, sb, tt, uu, sin, ta, tb = (x[order] for x in (sa, sb, tt, uu, sin, ta, tb))
+        va = A.v[sa] + tt * (A.v[sa + 1] - A.v[sa])
+        vb = B.v[sb] + uu * (B.v[sb + 1] - B.v[sb])
+        m = sa.size
+        rows["flight_a"].append(np.full(m, keys[ia][0], dtype=object))
+        rows["line_a"].append(np.full(m, keys[ia][1], dtype=object))
+        rows["flight_b"].append(np.full(m, keys[ib][0], dtype=object))
+        rows["line_b"].append(np.full(m, keys[ib][1], dtype=object))
+        rows["easting_m"].append(A.e[sa] + tt * (A.e[sa + 1] - A.e[sa]))
+        rows["northing_m"].append(A.n[sa] + tt * (A.n[sa + 1] - A.n[sa]))
+        rows["time_a_s"].append(ta)
+        rows["time_b_s"].append(tb)
+        rows["value_a_mgal"].append(va)
+        rows["value_b_mgal"].append(vb)
+        rows["diff_mgal"].append(va - vb)
+        rows["angle_deg"].append(np.degrees(np.arcsin(np.clip(sin, 0.0, 1.0))))
     cols = {}
     for c, parts in rows.items():
         obj = c in ("flight_a", "line_a", "flight_b", "line_b")
@@ -956,23 +968,27 @@ def find_crossovers(
 
 
 def _per_line_stats(x: Crossovers, keys) -> list[dict]:
-    fa = x.flight_a.astype(str)
-    la = x.line_a.astype(str)
-    fb = x.flight_b.astype(str)
-    lb = x.line_b.astype(str)
+    """Per-line count, mean, RMS of (this line - other line); one pass over the crossovers."""
+    pos = {k: i for i, k in enumerate(keys)}
+    ia = np.array([pos[(f, ln)] for f, ln in zip(x.flight_a.astype(str), x.line_a.astype(str))], dtype=np.int64)
+    ib = np.array([pos[(f, ln)] for f, ln in zip(x.flight_b.astype(str), x.line_b.astype(str))], dtype=np.int64)
     good = x.valid
+    d = x.diff_mgal[good]
+    ia, ib = ia[good], ib[good]
+    nl = len(keys)
+    cnt = np.bincount(ia, minlength=nl) + np.bincount(ib, minlength=nl)
+    s1 = np.bincount(ia, d, minlength=nl) - np.bincount(ib, d, minlength=nl)
+    s2 = np.bincount(ia, d**2, minlength=nl) + np.bincount(ib, d**2, minlength=nl)
     out = []
-    for f, ln in keys:
-        da = x.diff_mgal[good & (fa == f) & (la == ln)]
-        db = -x.diff_mgal[good & (fb == f) & (lb == ln)]
-        d = np.concatenate([da, db])
-        rms = float(np.sqrt(np.mean(d**2))) if d.size else float("nan")
+    for i, (f, ln) in enumerate(keys):
+        c = int(cnt[i])
+        rms = math.sqrt(s2[i] / c) if c else float("nan")
         out.append(
             {
                 "flight": f,
                 "line": ln,
-                "count": int(d.size),
-                "mean_mgal": float(d.mean()) if d.size else float("nan"),
+                "count": c,
+                "mean_mgal": float(s1[i] / c) if c else float("nan"),
                 "rms_mgal": rms,
                 "rms_over_sqrt2_mgal": rms / math.sqrt(2.0),
             }

@@ -559,14 +559,22 @@ def write_geojson(path, lines_table: dict, line_stats=None, crs_epsg: int | None
         for d in line_stats:
             stats[(str(d["flight"]), str(d["line"]))] = {k: v for k, v in d.items() if k not in ("flight", "line")}
     feats = []
-    for (f, ln), idx in line_groups(flight, line).items():
+    groups = line_groups(flight, line)
+    ends = np.array([[idx[0], idx[-1]] for idx in groups.values()], dtype=np.int64).reshape(-1, 2)
+    utc_all = format_utc(tns[ends.ravel()]).reshape(-1, 2) if ends.size else np.zeros((0, 2), dtype=str)
+    for g, ((f, ln), idx) in enumerate(groups.items()):
         ok = idx[np.isfinite(lat[idx]) & np.isfinite(lon[idx])]
         if ok.size > max_vertices:
             ok = ok[np.unique(np.round(np.linspace(0, ok.size - 1, max_vertices)).astype(int))]
         geom = None
         if ok.size >= 2:
-            parts = _split_antimeridian(lon[ok], lat[ok])
-            parts = [[[round(float(x), 7), round(float(y), 7)] for x, y in p] for p in parts]
+            lo, la = lon[ok], lat[ok]
+            if np.all(np.abs(np.diff(((lo + 180.0) % 360.0) - 180.0)) <= 180.0):
+                # no antimeridian crossing (the usual case): vectorised
+                parts = [np.round(np.column_stack([((lo + 180.0) % 360.0) - 180.0, la]), 7).tolist()]
+            else:
+                parts = _split_antimeridian(lo, la)
+                parts = [[[round(float(x), 7), round(float(y), 7)] for x, y in p] for p in parts]
             geom = (
                 {"type": "LineString", "coordinates": parts[0]}
                 if len(parts) == 1
@@ -575,7 +583,7 @@ def write_geojson(path, lines_table: dict, line_stats=None, crs_epsg: int | None
         good = np.isfinite(e[idx]) & np.isfinite(nn[idx])
         ee, en = e[idx][good], nn[idx][good]
         length = float(np.sum(np.hypot(np.diff(ee), np.diff(en)))) / 1e3 if ee.size > 1 else 0.0
-        utc = format_utc(tns[idx[[0, -1]]])
+        utc = utc_all[g]
         props = {
             "flight": f,
             "line": ln,
@@ -586,11 +594,16 @@ def write_geojson(path, lines_table: dict, line_stats=None, crs_epsg: int | None
             "projected_crs": f"EPSG:{int(crs_epsg)}" if crs_epsg is not None else None,
         }
         props.update(stats.get((f, ln), {}))
-        feats.append({"type": "Feature", "geometry": geom, "properties": props})
+        # geometry is plain floats already: only the properties need converting
+        feats.append({"type": "Feature", "geometry": geom, "properties": to_jsonable(props)})
     doc = {"type": "FeatureCollection", "features": feats}
     if metadata:
-        doc = {"type": "FeatureCollection", "metadata": metadata, "features": feats}
-    atomic_write_text(path, json.dumps(to_jsonable(doc), allow_nan=False, indent=1) + "\n")
+        doc = {"type": "FeatureCollection", "metadata": to_jsonable(metadata), "features": feats}
+    # one feature per line, without indentation: the C encoder (10x faster than indent=...)
+    head = {k: v for k, v in doc.items() if k != "features"}
+    text = json.dumps(head, allow_nan=False)[:-1] + ', "features": [\n'
+    text += ",\n".join(json.dumps(ft, allow_nan=False) for ft in feats) + "\n]}\n"
+    atomic_write_text(path, text)
 
 
 # --------------------------------------------------------------------------------------------
