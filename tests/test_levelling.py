@@ -145,3 +145,53 @@ def test_against_gmt_x2sys():
     assert r["max_position_m"] < 0.01  # text export rounds positions to 1 mm
     assert r["max_value_mgal"] < 2e-4  # and values to 1e-4 mGal
     assert r["max_correction_mgal"] < 2e-4
+
+
+def test_survey_outputs_tie_level_grid_and_metadata(tmp_path):
+    """The output stage end to end on a synthetic processed flight: tie, levelling, grid, metadata."""
+    import json
+    import sys
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from benchmarks.bench_outputs import synthetic_flight
+    from gravsurvey.config import SurveyConfig
+    from gravsurvey.geodesy import WGS84
+    from gravsurvey.grid import GridOptions
+    from gravsurvey.io.writers import OutputTransaction, read_profiles_csv, read_xyz
+    from gravsurvey.pipeline import _write_outputs
+
+    r = synthetic_flight(0, n_main=8, n_tie=3)  # 24 crossovers for 10 unknowns: levelled
+    cfg_path = tmp_path / "survey.yaml"
+    cfg_path.write_text("survey: {name: t}\n")
+    tie = TieConfig.from_dict({"base_gravity_mgal": 980_800.0, "before": {"reading_mgal": 980_802.0},
+                               "after": {"reading_mgal": 980_802.0}})
+    cfg = SurveyConfig(path=cfg_path, base_dir=tmp_path, raw={"survey": {"name": "t"}}, name="t", ellipsoid=WGS84,
+                       flights=[SimpleNamespace(name=r.name, tie=tie, index=0)], model=None, lines=None,
+                       postprocess=None, plots=True, levelling=LevellingOptions(),
+                       grid=GridOptions(damping=1.0, cv_folds=2))  # one damping, 2 folds: fast
+    out = tmp_path / "out"
+    summary = _write_outputs(cfg, out, [r], [], OutputTransaction)
+    assert summary["level"]["state"] == "absolute"
+    assert summary["flights"][r.name]["tie"]["offset_before_mgal"] == pytest.approx(2.0)
+    assert summary["levelling"]["applied"] and summary["levelling"]["datum"] == "tied flights"
+    assert summary["levelling"]["after"]["rms_mgal"] < summary["levelling"]["before"]["rms_mgal"]
+    assert summary["grid"]["cv_rms_mgal"] > 0 and summary["grid"]["spacing_m"] == pytest.approx(750.0, rel=0.01)
+    for f in ("grid.nc", "grid_map.png", "levelling.png", "profiles.csv", "profiles.xyz", "lines.geojson"):
+        assert (out / f).is_file(), f
+    prof = read_profiles_csv(out / "profiles.csv")
+    line = prof["line"].astype(str) != ""
+    shift = prof["disturbance_mgal"][line] - prof["levelled_mgal"][line]
+    # the tie's 2 mGal plus levelling constants whose mean over the tied lines is zero
+    assert np.mean(shift) == pytest.approx(2.0, abs=0.15)
+    head = (out / "profiles.csv").read_text().splitlines()[:8]
+    assert "# survey: t" in head and any(h.startswith("# crs:") and "EPSG:" in h for h in head)
+    assert any(h.startswith("# software: gravsurvey") for h in head)
+    xyz = read_xyz(out / "profiles.xyz")
+    assert "levelled_mgal" in xyz.columns
+    assert any(c.startswith("crs:") and "UTM" in c for c in xyz.comments)
+    gj = json.loads((out / "lines.geojson").read_text())
+    assert gj["metadata"]["survey"] == "t" and gj["metadata"]["level"] == "absolute"
+    assert gj["metadata"]["crs"]["projected_epsg"] == summary["crs_epsg"]
+    assert "processing" in gj["metadata"] and "units" in gj["metadata"]
