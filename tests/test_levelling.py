@@ -195,3 +195,37 @@ def test_survey_outputs_tie_level_grid_and_metadata(tmp_path):
     assert gj["metadata"]["survey"] == "t" and gj["metadata"]["level"] == "absolute"
     assert gj["metadata"]["crs"]["projected_epsg"] == summary["crs_epsg"]
     assert "processing" in gj["metadata"] and "units" in gj["metadata"]
+
+
+def test_config_sections_validated_with_key_paths(tmp_path):
+    import yaml
+
+    from gravsurvey.config import load_config
+
+    root = __import__("pathlib").Path(__file__).resolve().parents[1] / "sample_data" / "seed_line"
+    base = yaml.safe_load((root / "survey.yaml").read_text())
+    for fl in base["flights"]:
+        for k, v in list(fl.get("inputs", {}).items()):
+            fl["inputs"][k] = str(root / v)
+        fl.pop("truth", None)
+
+    def load(**changes):
+        d = {**base, **{k: v for k, v in changes.items() if k != "tie"}}
+        if "tie" in changes:
+            d["flights"] = [dict(base["flights"][0], tie=changes["tie"])]
+        p = tmp_path / "s.yaml"
+        p.write_text(yaml.safe_dump(d))
+        return load_config(p)
+
+    cfg = load(levelling={"model": "flight_trend"}, grid={"spacing_m": 250},
+               tie={"base_gravity_mgal": 980500.0, "before": {"start_s": 0, "stop_s": 60}})
+    assert cfg.levelling.model == "flight_trend" and cfg.grid.spacing_m == 250.0
+    assert cfg.flights[0].tie.before.stop_s == 60.0
+    default = load()
+    assert default.levelling.enabled is None and default.grid.enabled is None and default.flights[0].tie is None
+    with pytest.raises(ConfigError, match=r"^levelling.modle: unknown key \(did you mean 'model'\?\)"):
+        load(levelling={"modle": "constant"})
+    with pytest.raises(ConfigError, match=r"^grid.cv_folds: expected an integer >= 2"):
+        load(grid={"cv_folds": 1})
+    with pytest.raises(ConfigError, match=r"^flights\[0\].tie.after: a window needs both start_s and stop_s"):
+        load(tie={"base_gravity_mgal": 980500.0, "after": {"start_s": 5}})
