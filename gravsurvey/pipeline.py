@@ -626,10 +626,13 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     xo_stats = xo.statistics()
 
     # 3. levelling of the tied values: the tie corrections at the crossover times, then the adjustment
+    from .levelling import LevellingOptions
+
+    lopt = cfg.levelling if cfg.levelling is not None else LevellingOptions()
     lev = None
     lev_skipped = None  # computed, but too few crossovers to apply (summary only)
     lev_corr = np.zeros_like(tie_corr)
-    want = cfg.levelling.enabled if cfg.levelling is not None else None
+    want = lopt.enabled
     if want is not False and xo.count > 0:
         tie_at = lambda f, t: ties[f].correction(t) if f in ties else np.zeros_like(t)  # noqa: E731
         fa, fb = xo.flight_a.astype(str), xo.flight_b.astype(str)
@@ -642,12 +645,12 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         xo_tied.value_a_mgal = xo.value_a_mgal - ca
         xo_tied.value_b_mgal = xo.value_b_mgal - cb
         xo_tied.diff_mgal = xo_tied.value_a_mgal - xo_tied.value_b_mgal
-        lev = level_survey(xo_tied, lines, cfg.levelling, tied_flights=list(ties))
-        need = cfg.levelling.min_crossovers_per_unknown * max(lev.n_unknowns, 1)
+        lev = level_survey(xo_tied, lines, lopt, tied_flights=list(ties))
+        need = lopt.min_crossovers_per_unknown * max(lev.n_unknowns, 1)
         if want is None and lev.n_observations < need:
             notes.append(
                 f"levelling: not applied: {lev.n_observations} crossovers for {lev.n_unknowns} unknowns "
-                f"(needs {cfg.levelling.min_crossovers_per_unknown:g} per unknown; levelling.enabled: true forces it)"
+                f"(needs {lopt.min_crossovers_per_unknown:g} per unknown; levelling.enabled: true forces it)"
             )
             lev_skipped = lev
             lev = None
@@ -677,9 +680,11 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     # 4. grid of the levelled line data
     grid = None
     grid_info = None
-    gopt = cfg.grid
+    from .grid import GridOptions
+
+    gopt = cfg.grid if cfg.grid is not None else GridOptions()
     n_lines = sum(1 for k in groups if kind_of.get(k, "line") in ("line", "tie"))
-    if gopt is not None and gopt.enabled is not False and n_lines >= 2:
+    if gopt.enabled is not False and n_lines >= 2:
         from .grid import grid_lines
 
         lab = np.where(in_line, table["flight"].astype(str), "")
@@ -691,7 +696,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         except (DataError, np.linalg.LinAlgError, ValueError) as exc:
             notes.append(f"grid: not computed: {exc}")
             grid_info = {"error": str(exc)}
-    elif gopt is not None and gopt.enabled is True:
+    elif gopt.enabled is True:
         notes.append(f"grid: needs >= 2 lines, the survey has {n_lines}")
 
     line_stats = []
