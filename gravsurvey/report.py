@@ -137,7 +137,12 @@ def figure_survey_map(easting_m, northing_m, value_mgal, line_ids, crossovers=No
     fin = np.isfinite(v)
     lim = float(np.percentile(np.abs(v[fin]), 98)) if fin.any() else 1.0
     lim = lim if lim > 0 else 1.0
-    sc = ax.scatter(e, n, c=v, s=4, cmap="RdBu_r", vmin=-lim, vmax=lim, linewidths=0, gid="tracks")
+    # the track itself in thin grey under the colour (visible where the value is near zero), and a
+    # diverging map whose centre is pale yellow, not white
+    cut = np.flatnonzero(ids[1:] != ids[:-1]) + 1
+    for a, b in zip(np.concatenate(([0], cut)), np.concatenate((cut, [e.size]))):
+        ax.plot(e[a:b], n[a:b], color="0.4", linewidth=0.5, zorder=1)
+    sc = ax.scatter(e, n, c=v, s=4, cmap="RdYlBu_r", vmin=-lim, vmax=lim, linewidths=0, gid="tracks", zorder=2)
     cb = fig.colorbar(sc, ax=ax, shrink=0.8)
     cb.set_label("gravity disturbance, mGal")
     for lid in dict.fromkeys(ids.tolist()):
@@ -152,6 +157,16 @@ def figure_survey_map(easting_m, northing_m, value_mgal, line_ids, crossovers=No
                    gid="crossovers", label=f"crossovers ({xe.size}); size ~ |difference|")
         ax.legend(loc="upper right", fontsize=8)
     ax.set_aspect("equal", adjustable="datalim")
+    if np.isfinite(e).any():
+        x0, x1 = float(np.nanmin(e)), float(np.nanmax(e))
+        if x1 > x0:
+            from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+            L = _nice_length_km(x1 - x0)
+            bar = AnchoredSizeBar(ax.transData, L, f"{L:g} km", "lower left", pad=0.5, frameon=False,
+                                  size_vertical=0.0, fontproperties={"size": 9})
+            bar.set_gid("scalebar")
+            ax.add_artist(bar)
     suffix = f" ({crs_label})" if crs_label else ""
     ax.set_xlabel(f"easting, km{suffix}")
     ax.set_ylabel(f"northing, km{suffix}")
