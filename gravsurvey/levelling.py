@@ -58,6 +58,8 @@ S_PER_H = 3600.0
 HUBER_K_DEFAULT = 1.345
 #: consistency factor of the median absolute deviation for a Gaussian
 MAD_TO_SIGMA = 1.4826
+#: IRLS stops when no unknown moves by more than this between iterations, mGal (mGal/h)
+IRLS_TOL_MGAL = 1e-4
 
 
 @dataclass
@@ -465,7 +467,7 @@ def level_crossovers(
                 break
             new = np.minimum(1.0, huber_k * s / np.maximum(np.abs(res), 1e-300))
             u_new = solve(w0 * new)
-            done = np.max(np.abs(u_new - u)) < 1e-6 if nu else True
+            done = np.max(np.abs(u_new - u)) < IRLS_TOL_MGAL if nu else True
             rw, u = new, u_new
             if done:
                 break
