@@ -330,8 +330,17 @@ def _grid_lines(easting_m, northing_m, height_m, value_mgal, line, options: Grid
     else:
         depths = [o.depth_m] if o.depth_m is not None else [DEPTH_FACTOR * ls]
         damps = [o.damping] if o.damping is not None else list(DAMPINGS)
-    folds = vd.BlockKFold(spacing=ls, n_splits=o.cv_folds, shuffle=True, random_state=random_state)
-    splits = list(folds.split(np.column_stack([e, n])))
+    # a small survey may have fewer line-spacing blocks than folds: use as many folds as it allows
+    splits = []
+    for k in range(o.cv_folds, 1, -1):
+        try:
+            folds = vd.BlockKFold(spacing=ls, n_splits=k, shuffle=True, random_state=random_state)
+            splits = list(folds.split(np.column_stack([e, n])))
+            break
+        except ValueError:
+            continue
+    if not splits:
+        raise DataError(f"grid: the data span less than 2 blocks of {ls:.0f} m: cannot cross-validate")
     cands = []
     for dep in depths:
         for dmp in damps:

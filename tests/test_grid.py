@@ -104,3 +104,12 @@ def test_grid_errors():
         GridOptions.from_dict({"cv_folds": 1})
     with pytest.raises(DataError, match="at least 2 lines"):
         grid_lines(np.arange(10.0), np.zeros(10), np.zeros(10), np.zeros(10), np.array(["F/L1"] * 10))
+
+
+def test_small_survey_uses_fewer_folds():
+    # two 3-km lines 1 km apart: fewer 1-km blocks than 5 folds; the grid is still made
+    e = np.concatenate([np.zeros(40), np.full(40, 1000.0)])
+    n = np.concatenate([np.linspace(0, 3000, 40)] * 2)
+    v = np.sin(n / 1000) + e / 1000
+    g = grid_lines(e, n, np.full(80, 500.0), v, np.array(["F/L1"] * 40 + ["F/L2"] * 40), GridOptions(cv_folds=5))
+    assert np.isfinite(g.value_mgal).sum() > 20 and np.isfinite(g.cv_rms_mgal)
