@@ -6,7 +6,7 @@ Usage::
     python benchmarks/bench_outputs.py [--quick] [--grid]
 
 Builds synthetic processed flights (no estimation: the benchmark times only what runs after
-the flights, ``pipeline._write_outputs``): flight k flies 16 north-south lines of 40 km and 4
+the flights, ``pipeline.write_survey_outputs``): flight k flies 16 north-south lines of 40 km and 4
 east-west tie lines over its own 48 x 40 km block (blocks side by side), at 80 m/s, 1 Hz, with
 turns between lines; so the rows, lines and crossovers all grow in proportion to the flights.
 Runs the output stage (profile table, crossovers, levelling, CSV, XYZ, GeoJSON, summary; plots
@@ -32,9 +32,8 @@ if str(REPO) not in sys.path:
 from gravsurvey.config import SurveyConfig  # noqa: E402
 from gravsurvey.geodesy import MGAL, WGS84  # noqa: E402
 from gravsurvey.grid import GridOptions  # noqa: E402
-from gravsurvey.io.writers import OutputTransaction  # noqa: E402
 from gravsurvey.levelling import LevellingOptions  # noqa: E402
-from gravsurvey.pipeline import FlightResult, _write_outputs  # noqa: E402
+from gravsurvey.pipeline import FlightResult, write_survey_outputs  # noqa: E402
 
 R_EARTH = 6_371_000.0
 LAT0, LON0 = np.radians(47.0), np.radians(11.0)
@@ -97,7 +96,7 @@ def run(sizes, grid: bool = False, repeats: int = 1):
             best = np.inf
             for _ in range(repeats):
                 t0 = time.perf_counter()
-                summary = _write_outputs(cfg, Path(tmp) / f"out{nf}", results, [], OutputTransaction)
+                summary = write_survey_outputs(cfg, Path(tmp) / f"out{nf}", results)
                 best = min(best, time.perf_counter() - t0)
             out.append({"flights": nf, "lines": sum(len(r.line_info) for r in results), "rows": rows,
                         "crossovers": summary["crossovers"]["count"], "seconds": best,

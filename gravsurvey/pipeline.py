@@ -590,6 +590,15 @@ def _output_metadata(cfg, epsg, level_state) -> dict:
     }
 
 
+def write_survey_outputs(cfg: SurveyConfig, out_dir, results: list[FlightResult], failed=()) -> dict:
+    """Write the survey deliverables for processed flights (ties, crossovers, levelling, grid,
+    files) into ``out_dir`` atomically; return the summary. The public entry of the output
+    stage (benchmarks/bench_outputs.py, tests); :func:`run_survey` calls the same code."""
+    from .io.writers import OutputTransaction
+
+    return _write_outputs(cfg, Path(out_dir), list(results), list(failed), OutputTransaction)
+
+
 def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     """Survey products: base ties -> crossovers -> levelling -> grid, then every deliverable.
 

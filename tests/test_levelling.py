@@ -159,8 +159,8 @@ def test_survey_outputs_tie_level_grid_and_metadata(tmp_path):
     from gravsurvey.config import SurveyConfig
     from gravsurvey.geodesy import WGS84
     from gravsurvey.grid import GridOptions
-    from gravsurvey.io.writers import OutputTransaction, read_profiles_csv, read_xyz
-    from gravsurvey.pipeline import _write_outputs
+    from gravsurvey.io.writers import read_profiles_csv, read_xyz
+    from gravsurvey.pipeline import write_survey_outputs
 
     r = synthetic_flight(0, n_main=8, n_tie=3)  # 24 crossovers for 10 unknowns: levelled
     cfg_path = tmp_path / "survey.yaml"
@@ -172,7 +172,7 @@ def test_survey_outputs_tie_level_grid_and_metadata(tmp_path):
                        postprocess=None, plots=True, levelling=LevellingOptions(),
                        grid=GridOptions(damping=1.0, cv_folds=2))  # one damping, 2 folds: fast
     out = tmp_path / "out"
-    summary = _write_outputs(cfg, out, [r], [], OutputTransaction)
+    summary = write_survey_outputs(cfg, out, [r])
     assert summary["level"]["state"] == "absolute"
     assert summary["flights"][r.name]["tie"]["offset_before_mgal"] == pytest.approx(2.0)
     assert summary["levelling"]["applied"] and summary["levelling"]["datum"] == "tied flights"
