@@ -15,6 +15,7 @@ Steps, all automatic from the data (nothing here knows the truth of a simulation
 1. Thin: each line is averaged in bins of ``spacing_m`` along track (block means of
    position, height and value): the grid cannot hold shorter wavelengths, and the fit size
    stays small (a 100-km line at 1 Hz and 80 m/s gives ~1,250 samples, 200 bins at 500 m).
+   Beyond :data:`MAX_FIT_POINTS` bins the bins are lengthened until the survey fits.
 2. Line spacing: the median distance from a line's bins to the nearest bin of another
    line of the same kind (``line`` names; ties are ignored); defaults derive from it:
    ``spacing_m`` = line spacing / 4, source depth 1.5 line spacings below the data,
@@ -52,6 +53,9 @@ THIN_PER_SPACING = 1.0
 #: cells farther from the data than this (in line spacings) are left empty: half a spacing is the
 #: farthest a cell between two lines can be; a little more keeps the cells next to the lines' ends
 MAX_DISTANCE_PER_LINE_SPACING = 0.6
+#: most thinned points fitted: the equivalent-source Jacobian is points x points float64
+#: (4,000 points: 128 MB); larger surveys are thinned more coarsely along the lines
+MAX_FIT_POINTS = 4000
 #: the grid is at least this fine relative to the line spacing
 SPACING_PER_LINE_SPACING = 0.25
 
@@ -136,6 +140,9 @@ class GridResult:
         Held-out RMS and R^2 of the chosen parameters.
     n_data : int
         Thinned data points fitted.
+    thinning_m : float
+        Along-line bin length of the thinning, m (one cell, or more for surveys beyond
+        :data:`MAX_FIT_POINTS` bins).
     candidates : list of dict
         Every (depth_m, damping, cv_rms_mgal) tried.
     """
@@ -154,6 +161,7 @@ class GridResult:
     cv_r2: float
     n_data: int
     candidates: list = field(default_factory=list)
+    thinning_m: float = float("nan")
 
     def summary(self) -> dict:
         """JSON-able facts for summary.json."""
@@ -170,6 +178,7 @@ class GridResult:
             "cv_rms_mgal": self.cv_rms_mgal,
             "cv_r2": self.cv_r2,
             "n_data": self.n_data,
+            "thinning_m": self.thinning_m,
             "filled_cells": int(v.size),
             "min_mgal": float(v.min()) if v.size else None,
             "max_mgal": float(v.max()) if v.size else None,
@@ -318,6 +327,11 @@ def _grid_lines(easting_m, northing_m, height_m, value_mgal, line, options: Grid
     spacing = o.spacing_m or SPACING_PER_LINE_SPACING * ls
     step = THIN_PER_SPACING * spacing
     e, n, h, v, lab = thin_lines(easting_m, northing_m, height_m, value_mgal, line, step)
+    if e.size > MAX_FIT_POINTS:
+        # the fit is a dense (points x sources) least-squares problem: a large survey is thinned
+        # more coarsely along the lines (never across them) so memory and time stay bounded
+        step *= e.size / MAX_FIT_POINTS
+        e, n, h, v, lab = thin_lines(easting_m, northing_m, height_m, value_mgal, line, step)
     if e.size < 10:
         raise DataError(f"grid: only {e.size} data points after thinning to {step:.0f} m; need >= 10")
     altitude = o.altitude_m if o.altitude_m is not None else float(np.median(h))
@@ -374,6 +388,7 @@ def _grid_lines(easting_m, northing_m, height_m, value_mgal, line, options: Grid
         cv_r2=best["cv_r2"],
         n_data=int(v.size),
         candidates=cands,
+        thinning_m=float(step),
     )
 
 
