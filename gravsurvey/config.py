@@ -25,10 +25,11 @@ import yaml
 from .errors import ConfigError, check_keys
 from .io.ingest import INGEST_KEYS as FLIGHT_INGEST_KEYS
 
-TOP_KEYS = ("survey", "ellipsoid", "flights", "model", "lines", "postprocess", "processing", "output", "checks")
+TOP_KEYS = ("survey", "ellipsoid", "flights", "model", "lines", "postprocess", "processing", "output", "checks",
+            "levelling", "grid")
 SURVEY_KEYS = ("name", "description")
 #: flight keys handled here; every other key of a flight goes to the ingestion options
-FLIGHT_OWN_KEYS = ("name", "triad", "initial", "truth", "lines")
+FLIGHT_OWN_KEYS = ("name", "triad", "initial", "truth", "lines", "tie")
 OUTPUT_KEYS = ("dir", "epsg", "plots", "xyz", "geojson")
 PROCESSING_KEYS = ("method", "classic_resolution_m", "normal_gravity", "gradiometer")
 TRIADS = ("platform", "strapdown")
@@ -59,6 +60,7 @@ class FlightConfig:
     lines_windows: list | None
     #: the ``initial`` keys given (all optional overrides of the data; inm.params.resolve_initial_state)
     initial_given: dict | None = None
+    tie: Any = None  # gravsurvey.ties.TieConfig or None (no base tie)
 
 
 @dataclass
@@ -84,6 +86,8 @@ class SurveyConfig:
     geojson: bool = True
     extra: dict = field(default_factory=dict)
     checks: Any = None  # gravsurvey.consistency.CheckOptions (section ``checks``)
+    levelling: Any = None  # gravsurvey.levelling.LevellingOptions
+    grid: Any = None  # gravsurvey.grid.GridOptions
 
     def section_hash(self, flight: FlightConfig) -> str:
         """Hash of everything that determines one flight's result (for rerun skipping)."""
@@ -354,10 +358,20 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
         if ingest.kind == "gravimeter" and method != "classic":
             raise ConfigError(f"{kp}.inputs.gravimeter: a gravimeter file is processed by the classic chain only; "
                               f"set processing.method: classic (got {method!r})")
+        tie = None
+        if fr.get("tie") is not None:
+            from .ties import TieConfig
+
+            tie = TieConfig.from_dict(fr["tie"], key_path=f"{kp}.tie")
         flights.append(
-            FlightConfig(fname, i, triad, fr, ingest, initial, init_raw, truth, windows, given)
+            FlightConfig(fname, i, triad, fr, ingest, initial, init_raw, truth, windows, given, tie)
         )
 
+    from .grid import GridOptions
+    from .levelling import LevellingOptions
+
+    levelling = LevellingOptions.from_dict(expect_mapping(raw.get("levelling"), "levelling"), key_path="levelling")
+    grid = GridOptions.from_dict(expect_mapping(raw.get("grid"), "grid"), key_path="grid")
     cfg = SurveyConfig(
         path=path,
         base_dir=base,
@@ -377,6 +391,8 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
         xyz=flags["xyz"],
         geojson=flags["geojson"],
         checks=checks,
+        levelling=levelling,
+        grid=grid,
     )
     preflight_checks(cfg)
     return cfg

@@ -635,22 +635,124 @@ def _rms(x):
     return float(np.sqrt(np.mean(x**2))) if x.size else None
 
 
+def _crs_name(epsg) -> str:
+    """``"EPSG:32632 WGS 84 / UTM zone 32N"`` (the code alone if pyproj does not know it)."""
+    try:
+        from pyproj import CRS
+
+        return f"EPSG:{int(epsg)} {CRS.from_epsg(int(epsg)).name}"
+    except Exception:
+        return f"EPSG:{epsg}"
+
+
+def _flight_rows(results) -> dict:
+    """flight -> slice of its rows in the profile table (flights are concatenated in order)."""
+    out, off = {}, 0
+    for r in results:
+        out[r.name] = slice(off, off + len(r.time))
+        off += len(r.time)
+    return out
+
+
+def _apply_ties(cfg, results, rows) -> tuple[dict, np.ndarray, list]:
+    """Base ties of the flights that have one (gravsurvey.ties).
+
+    Returns
+    -------
+    ties : dict
+        flight -> FlightTie.
+    correction_mgal : ndarray, shape (n_rows,)
+        Tie offset per row of the profile table (0 for untied flights), mGal.
+    notes : list of str
+        Ties that could not be made (bad window): the flight stays relative.
+    """
+    from .ties import tie_flight
+
+    corr = np.zeros(sum(len(r.time) for r in results))
+    ties, notes = {}, []
+    cfg_of = {f.name: f for f in cfg.flights}
+    for r in results:
+        fl = cfg_of.get(r.name)
+        if fl is None or fl.tie is None:
+            continue
+        try:
+            tie = tie_flight(fl.tie, r.time, r.lat, r.height, r.kalman / MGAL, ellipsoid=cfg.ellipsoid,
+                             key_path=f"flights[{fl.index}].tie")
+        except DataError as exc:
+            notes.append(f"{r.name}: base tie not applied, the flight stays on a relative level: {exc}")
+            continue
+        ties[r.name] = tie
+        corr[rows[r.name]] = tie.correction(r.time)
+        windows = [rd for rd in (fl.tie.before, fl.tie.after) if rd is not None and rd.reading_mgal is None]
+        if windows and cfg.processing_method == "inm":
+            # docs/survey.md: on the sample survey the parked INM estimate was 1.56 mGal below truth
+            # while the lines were 1.15 mGal above it
+            notes.append(
+                f"{r.name}: base tie read from a window of the 3D-INM estimate: at rest the filter cannot "
+                "tell the anomaly from the gravimeter bias, so the tie may be off by mGal; give the "
+                "gravimeter's still reading as reading_mgal where available"
+            )
+    return ties, corr, notes
+
+
+def _output_metadata(cfg, epsg, level_state) -> dict:
+    """What every deliverable carries about itself (docs/outputs.md, "Metadata")."""
+    return {
+        "survey": cfg.name,
+        "crs": {
+            "geographic": "EPSG:4326 WGS 84 (lat_deg, lon_deg)",
+            "projected": _crs_name(epsg),
+            "projected_epsg": int(epsg),
+            "height": f"ellipsoidal height above the {getattr(cfg.ellipsoid, 'name', 'WGS84')} ellipsoid, m",
+        },
+        "units": {"*_mgal": "mGal (1e-5 m/s^2)", "*_m": "m", "*_deg": "deg", "time_unix_ns": "ns since 1970-01-01 UTC",
+                  "time_s": "s"},
+        "software": f"gravsurvey {__version__}",
+        "level": level_state,
+        "processing": {
+            "method": cfg.processing_method,
+            "ellipsoid": getattr(cfg.ellipsoid, "name", None),
+            **{k: cfg.raw.get(k) for k in ("model", "lines", "postprocess", "levelling", "grid") if cfg.raw.get(k) is not None},
+        },
+    }
+
+
+def write_survey_outputs(cfg: SurveyConfig, out_dir, results: list[FlightResult], failed=()) -> dict:
+    """Write the survey deliverables for processed flights (ties, crossovers, levelling, grid,
+    files) into ``out_dir`` atomically; return the summary. The public entry of the output
+    stage (benchmarks/bench_outputs.py, tests); :func:`run_survey` calls the same code."""
+    from .io.writers import OutputTransaction
+
+    return _write_outputs(cfg, Path(out_dir), list(results), list(failed), OutputTransaction)
+
+
 def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
+    """Survey products: base ties -> crossovers -> levelling -> grid, then every deliverable.
+
+    Linear in the number of rows, lines and flights (rows of a line are found once by
+    :func:`gravsurvey.io.writers.line_groups`; no per-line mask over the whole table).
+    """
     from . import report
     from .io import writers
-    from .survey import find_crossovers
+    from .levelling import level_survey
+    from .survey import Crossovers, find_crossovers
 
     table, epsg = _profile_table(cfg, results)
     in_line = table["line"] != ""
+    rows = _flight_rows(results)
+    time_s = np.concatenate([np.asarray(r.time, float) for r in results])  # each flight's own time base
+    groups = writers.line_groups(table["flight"], table["line"])
+    kind_of = {(r.name, ln): info.get("kind", "line") for r in results for ln, info in r.line_info.items()}
+    notes = []
+
+    # 1. base ties: absolute level and drift per tied flight
+    ties, tie_corr, tie_notes = _apply_ties(cfg, results, rows)
+    notes += tie_notes
+    tied_value = table["disturbance_mgal"] - tie_corr
+
+    # 2. crossovers of the processed values (as before: crossovers.csv and summary "crossovers")
     lines = []
-    keys = list(zip(table["flight"], table["line"]))
-    order = {}
-    for i, k in enumerate(keys):
-        if k[1]:
-            order.setdefault(k, []).append(i)
-    t0_of = {r.name: r.t0_unix_ns for r in results}
-    for (fname, lname), idx in order.items():
-        idx = np.asarray(idx)
+    for (fname, lname), idx in groups.items():
         lines.append(
             {
                 "flight": fname,
@@ -660,40 +762,130 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                 "value_mgal": table["disturbance_mgal"][idx],
                 # the flight's common time base: find_crossovers tells a real crossing of two
                 # lines of one flight from a track touching itself by their time separation
-                "time_s": (table["time_unix_ns"][idx] - t0_of[fname]) / 1e9,
+                "time_s": time_s[idx],
+                "sigma_mgal": table["sigma_mgal"][idx],
                 "index": idx,
             }
         )
-    xo = find_crossovers([{k: v for k, v in ln.items() if k != "index"} for ln in lines])
+    xo = find_crossovers([{k: v for k, v in ln.items() if k not in ("index", "sigma_mgal")} for ln in lines])
     xo_stats = xo.statistics()
 
+    # 3. levelling of the tied values: the tie corrections at the crossover times, then the adjustment
+    from .levelling import LevellingOptions
+
+    lopt = cfg.levelling if cfg.levelling is not None else LevellingOptions()
+    lev = None
+    lev_skipped = None  # computed, but too few crossovers to apply (summary only)
+    lev_corr = np.zeros_like(tie_corr)
+    want = lopt.enabled
+    if want is not False and xo.count > 0:
+        tie_at = lambda f, t: ties[f].correction(t) if f in ties else np.zeros_like(t)  # noqa: E731
+        fa, fb = xo.flight_a.astype(str), xo.flight_b.astype(str)
+        ca = np.zeros(len(xo))
+        cb = np.zeros(len(xo))
+        for f in ties:
+            ca[fa == f] = tie_at(f, xo.time_a_s[fa == f])
+            cb[fb == f] = tie_at(f, xo.time_b_s[fb == f])
+        xo_tied = Crossovers(**{c: getattr(xo, c) for c in Crossovers.COLUMNS})
+        xo_tied.value_a_mgal = xo.value_a_mgal - ca
+        xo_tied.value_b_mgal = xo.value_b_mgal - cb
+        xo_tied.diff_mgal = xo_tied.value_a_mgal - xo_tied.value_b_mgal
+        lev = level_survey(xo_tied, lines, lopt, tied_flights=list(ties))
+        need = lopt.min_crossovers_per_unknown * max(lev.n_unknowns, 1)
+        if want is None and lev.n_observations < need:
+            notes.append(
+                f"levelling: not applied: {lev.n_observations} crossovers for {lev.n_unknowns} unknowns "
+                f"(needs {lopt.min_crossovers_per_unknown:g} per unknown; levelling.enabled: true forces it)"
+            )
+            lev_skipped = lev
+            lev = None
+        else:
+            for ln in lines:
+                lev_corr[ln["index"]] = lev.correction(ln["flight"], ln["line"], time_s[ln["index"]])
+            notes += [f"levelling: {n}" for n in lev.notes]
+    elif want is True:
+        notes.append("levelling: no crossovers between lines; nothing levelled")
+    table["levelled_mgal"] = np.where(in_line, tied_value - lev_corr, np.nan)
+
+    # level of every line: absolute if its flight is tied, or levelled to a datum of tied flights
+    absolute = {}
+    for ln in lines:
+        key = (ln["flight"], ln["line"])
+        j = lev.index_of(key) if lev is not None else None
+        via_lev = j is not None and lev.datum == "tied flights" and bool(lev.levelled[j])
+        absolute[key] = ln["flight"] in ties or via_lev
+    n_abs = sum(absolute.values())
+    level_state = ("absolute" if lines and n_abs == len(lines) else "relative" if n_abs == 0 else "partly absolute")
+    level_note = {
+        "absolute": "levelled_mgal is on an absolute level (base ties)",
+        "relative": "levelled_mgal is on a relative level: no base ties (flights[].tie); mean levelling correction zero",
+        "partly absolute": "levelled_mgal: lines of tied flights (and lines levelled to them) absolute, the others relative",
+    }[level_state]
+
+    # 4. grid of the levelled line data
+    grid = None
+    grid_info = None
+    from .grid import GridOptions
+
+    gopt = cfg.grid if cfg.grid is not None else GridOptions()
+    n_lines = sum(1 for k in groups if kind_of.get(k, "line") in ("line", "tie"))
+    if gopt.enabled is not False and n_lines >= 2:
+        from .grid import grid_lines
+
+        lab = np.where(in_line, table["flight"].astype(str), "")
+        lab = np.char.add(np.char.add(lab, "/"), table["line"].astype(str))
+        try:
+            grid = grid_lines(table["easting_m"][in_line], table["northing_m"][in_line], table["height_m"][in_line],
+                              table["levelled_mgal"][in_line], lab[in_line], gopt)
+            grid_info = grid.summary()
+        except (DataError, np.linalg.LinAlgError, ValueError) as exc:
+            notes.append(f"grid: not computed: {exc}")
+            grid_info = {"error": str(exc)}
+    elif gopt.enabled is True:
+        notes.append(f"grid: needs >= 2 lines, the survey has {n_lines}")
+
     line_stats = []
+    lines_of = {r.name: {} for r in results}
+    fl_err = {r.name: [] for r in results}
+    lev_stats = lev.statistics() if lev is not None else None
+    for r in results:
+        for name, info in r.line_info.items():
+            idx = groups.get((r.name, name))
+            if idx is None:
+                continue
+            st = {"flight": r.name, "line": name, **info}
+            d = table["disturbance_mgal"][idx]
+            st["mean_mgal"] = float(np.nanmean(d)) if np.isfinite(d).any() else None
+            st["std_mgal"] = float(np.nanstd(d)) if np.isfinite(d).any() else None
+            e, n = table["easting_m"][idx], table["northing_m"][idx]
+            st["length_km"] = float(np.nansum(np.hypot(np.diff(e), np.diff(n)))) / 1e3 if idx.size > 1 else 0.0
+            st["crossover"] = xo_stats.get("per_line", {}).get(f"{r.name}/{name}")
+            st["level"] = "absolute" if absolute.get((r.name, name)) else "relative"
+            if lev_stats is not None:
+                st["levelling"] = lev_stats["per_line"].get(f"{r.name}/{name}")
+            if "error_mgal" in table:
+                e_ = table["error_mgal"][idx]
+                st["rms_vs_truth_mgal"] = _rms(e_)
+                st["kalman_rms_vs_truth_mgal"] = _rms(table["kalman_mgal"][idx] - table["truth_mgal"][idx])
+                st["levelled_rms_vs_truth_mgal"] = _rms(table["levelled_mgal"][idx] - table["truth_mgal"][idx])
+                fl_err[r.name].append(e_)
+            line_stats.append(st)
+            lines_of[r.name][name] = st
     flights_summary = {}
     for r in results:
-        fl_err = []
-        for name, info in r.line_info.items():
-            m = (table["flight"] == r.name) & (table["line"] == name)
-            st = {"flight": r.name, "line": name, **info}
-            st["mean_mgal"] = float(np.nanmean(table["disturbance_mgal"][m]))
-            st["std_mgal"] = float(np.nanstd(table["disturbance_mgal"][m]))
-            st["crossover"] = xo_stats.get("per_line", {}).get(f"{r.name}/{name}")
-            if "error_mgal" in table:
-                e = table["error_mgal"][m]
-                st["rms_vs_truth_mgal"] = _rms(e)
-                st["kalman_rms_vs_truth_mgal"] = _rms(table["kalman_mgal"][m] - table["truth_mgal"][m])
-                fl_err.append(e)
-            line_stats.append(st)
         flights_summary[r.name] = {
             "segments": r.segments,
-            "lines": {s["line"]: s for s in line_stats if s["flight"] == r.name},
+            "lines": lines_of[r.name],
             "notes": r.notes,
             "estimator": r.estimator,
             "data_loss": r.data_loss,
             "timings_s": r.timings,
             "input_sha256": r.input_hashes,
-            "rms_vs_truth_mgal": _rms(np.concatenate(fl_err)) if fl_err else None,
+            "rms_vs_truth_mgal": _rms(np.concatenate(fl_err[r.name])) if fl_err[r.name] else None,
+            "tie": ties[r.name].summary() if r.name in ties else None,
         }
 
+    metadata = _output_metadata(cfg, epsg, level_state)
     summary = {
         "survey": cfg.name,
         "software": {"name": "gravsurvey", "version": __version__, "python": platform.python_version()},
@@ -701,42 +893,87 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         "config": {"path": str(cfg.path), "sha256": _file_sha256(cfg.path), "settings": cfg.raw},
         "processing_method": cfg.processing_method,
         "crs_epsg": epsg,
+        "crs": metadata["crs"],
+        "level": {"state": level_state, "note": level_note, "tied_flights": sorted(ties),
+                  "untied_flights": [r.name for r in results if r.name not in ties]},
         "flights": flights_summary,
         "failed_flights": [f.splitlines()[0] for f in failed],
         "crossovers": xo_stats,
+        "levelling": (
+            {"applied": True, **{k: v for k, v in lev_stats.items() if k != "per_line"}} if lev_stats
+            else {"applied": False, **{k: v for k, v in lev_skipped.statistics().items() if k != "per_line"}}
+            if lev_skipped is not None else None
+        ),
+        "grid": grid_info,
+        "notes": notes,
         "rms_vs_truth_mgal": _rms(table["error_mgal"][in_line]) if "error_mgal" in table else None,
     }
+    if "truth_mgal" in table:
+        err = table["levelled_mgal"][in_line] - table["truth_mgal"][in_line]
+        err = err[np.isfinite(err)]
+        summary["levelled_vs_truth"] = {
+            "rms_mgal": _rms(err),
+            "mean_mgal": float(err.mean()) if err.size else None,
+            "std_mgal": float(err.std()) if err.size else None,
+        }
     summary = to_jsonable(summary)
 
     with OutputTransaction(out_dir) as tx:
-        writers.write_profiles_csv(tx.path("profiles.csv"), table)
+        writers.write_profiles_csv(tx.path("profiles.csv"), table, metadata=metadata)
         if cfg.xyz:
-            writers.write_xyz(tx.path("profiles.xyz"), table)
+            writers.write_xyz(tx.path("profiles.xyz"), table, title=f"gravsurvey profiles: {cfg.name}", metadata=metadata)
         if cfg.geojson:
-            writers.write_geojson(tx.path("lines.geojson"), table, line_stats, epsg)
-        writers.write_crossovers_csv(tx.path("crossovers.csv"), xo)
+            writers.write_geojson(tx.path("lines.geojson"), table, line_stats, epsg, metadata=metadata)
+        writers.write_crossovers_csv(tx.path("crossovers.csv"), xo, metadata=metadata)
+        if grid is not None:
+            from .grid import write_grid_netcdf
+
+            write_grid_netcdf(tx.path("grid.nc"), grid, epsg, title=f"{cfg.name}: gravity disturbance (levelled_mgal)",
+                              attrs={"survey": cfg.name, "software": f"gravsurvey {__version__}",
+                                     "level": level_state, "source": "profiles.csv levelled_mgal"})
         if cfg.plots:
             for ln in lines:
                 idx = ln["index"]
+                e, n = table["easting_m"][idx], table["northing_m"][idx]
+                step = np.hypot(np.diff(e), np.diff(n))
+                dist_km = np.concatenate(([0.0], np.cumsum(np.where(np.isfinite(step), step, 0.0)))) / 1e3
                 report.plot_line_profile(
                     tx.path(f"profile_{ln['flight']}_{ln['line']}.png"),
-                    (table["time_unix_ns"][idx] - table["time_unix_ns"][idx][0]) / 1e9,
+                    dist_km,
                     table["kalman_mgal"][idx],
                     table["disturbance_mgal"][idx],
                     table["sigma_mgal"][idx],
                     truth_mgal=table["truth_mgal"][idx] if "truth_mgal" in table else None,
                     title=f"{cfg.name} {ln['flight']} {ln['line']}",
+                    x_label="distance along line, km",
                 )
             report.plot_survey_map(
                 tx.path("survey_map.png"),
                 table["easting_m"][in_line],
                 table["northing_m"][in_line],
                 table["disturbance_mgal"][in_line],
-                np.array([f"{a}/{b}" for a, b in zip(table["flight"][in_line], table["line"][in_line])]),
+                np.char.add(np.char.add(table["flight"][in_line].astype(str), "/"), table["line"][in_line].astype(str)),
                 crossovers=xo,
+                crs_label=_crs_name(epsg),
             )
             if xo_stats.get("count"):
                 report.plot_crossover_histogram(tx.path("crossovers.png"), xo)
+            if lev is not None:
+                report.plot_levelling(tx.path("levelling.png"), lev, title=f"{cfg.name}: crossover levelling")
+            if grid is not None:
+                report.plot_grid_map(
+                    tx.path("grid_map.png"), grid.easting_m, grid.northing_m, grid.value_mgal,
+                    table["easting_m"][in_line], table["northing_m"][in_line],
+                    track_ids=np.char.add(table["flight"][in_line].astype(str), table["line"][in_line].astype(str)),
+                    crs_label=_crs_name(epsg),
+                    title=(f"{cfg.name}: gravity disturbance, "
+                           + ("tied and levelled" if lev is not None and ties else "levelled" if lev is not None
+                              else "tied, not levelled" if ties else "not levelled")
+                           + f" ({level_state} level)"),
+                    note=(f"{grid.method.replace('_', ' ')}, {grid.spacing_m:.0f} m cells, "
+                          + (f"at {grid.altitude_m:.0f} m ellipsoidal height" if grid.altitude_m is not None else "at the flight heights")
+                          + f"; cross-validation RMS {grid.cv_rms_mgal:.2f} mGal"),
+                )
         summary["output_sha256"] = tx.file_hashes()
         writers.write_json(tx.path("summary.json"), summary)
     return summary

@@ -148,7 +148,12 @@ def figure_survey_map(easting_m, northing_m, value_mgal, line_ids, crossovers=No
     fin = np.isfinite(v)
     lim = float(np.percentile(np.abs(v[fin]), 98)) if fin.any() else 1.0
     lim = lim if lim > 0 else 1.0
-    sc = ax.scatter(e, n, c=v, s=4, cmap="RdBu_r", vmin=-lim, vmax=lim, linewidths=0, gid="tracks")
+    # the track itself in thin grey under the colour (visible where the value is near zero), and a
+    # diverging map whose centre is pale yellow, not white
+    cut = np.flatnonzero(ids[1:] != ids[:-1]) + 1
+    for a, b in zip(np.concatenate(([0], cut)), np.concatenate((cut, [e.size]))):
+        ax.plot(e[a:b], n[a:b], color="0.4", linewidth=0.5, zorder=1)
+    sc = ax.scatter(e, n, c=v, s=4, cmap="RdYlBu_r", vmin=-lim, vmax=lim, linewidths=0, gid="tracks", zorder=2)
     cb = fig.colorbar(sc, ax=ax, shrink=0.8)
     cb.set_label("gravity disturbance, mGal")
     for lid in dict.fromkeys(ids.tolist()):
@@ -163,6 +168,16 @@ def figure_survey_map(easting_m, northing_m, value_mgal, line_ids, crossovers=No
                    gid="crossovers", label=f"crossovers ({xe.size}); size ~ |difference|")
         ax.legend(loc="upper right", fontsize=8)
     ax.set_aspect("equal", adjustable="datalim")
+    if np.isfinite(e).any():
+        x0, x1 = float(np.nanmin(e)), float(np.nanmax(e))
+        if x1 > x0:
+            from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+            L = _nice_length_km(x1 - x0)
+            bar = AnchoredSizeBar(ax.transData, L, f"{L:g} km", "lower left", pad=0.5, frameon=False,
+                                  size_vertical=0.0, fontproperties={"size": 9})
+            bar.set_gid("scalebar")
+            ax.add_artist(bar)
     suffix = f" ({crs_label})" if crs_label else ""
     ax.set_xlabel(f"easting, km{suffix}")
     ax.set_ylabel(f"northing, km{suffix}")
@@ -210,3 +225,143 @@ def figure_crossover_histogram(crossovers, *, title: str = "") -> Figure:
 def plot_crossover_histogram(path, crossovers, *, title: str = "") -> None:
     """Write the crossover histogram as PNG (see :func:`figure_crossover_histogram`)."""
     _save(figure_crossover_histogram(crossovers, title=title), path)
+
+
+# --------------------------------------------------------------------------------------------
+# grid map and levelling statistics (matplotlib imported inside: importing report stays cheap)
+# --------------------------------------------------------------------------------------------
+def _nice_length_km(span_km: float) -> float:
+    """A 1, 2 or 5 x 10^k km length near a fifth of ``span_km``."""
+    target = max(span_km / 5.0, 1e-3)
+    k = math.floor(math.log10(target))
+    for m in (5.0, 2.0, 1.0):
+        if m * 10**k <= target:
+            return m * 10**k
+    return 10.0**k
+
+
+def figure_grid_map(easting_m, northing_m, value_mgal, track_easting_m=None, track_northing_m=None, *,
+                    track_ids=None, crs_label: str = "", title: str = "", note: str = ""):
+    """Map of a grid: colour in mGal, flight lines, scale bar, CRS label.
+
+    Parameters
+    ----------
+    easting_m : array_like, shape (nx,)
+    northing_m : array_like, shape (ny,)
+    value_mgal : array_like, shape (ny, nx)
+        NaN cells are drawn grey (no data).
+    track_easting_m, track_northing_m : array_like, shape (n,), optional
+        Flight-line samples, drawn as thin black lines (visible on every colour), split where
+        ``track_ids`` changes.
+    track_ids : array_like of str, shape (n,), optional
+    crs_label : str
+        E.g. ``"EPSG:32632 WGS 84 / UTM zone 32N"``: written on the map and the axes.
+    title, note : str
+        ``note`` (e.g. the grid altitude and cross-validation score) goes under the title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The grid image has gid ``grid``, the tracks ``tracks``, the scale bar ``scalebar``.
+    """
+    from matplotlib.figure import Figure
+
+    ge = np.asarray(easting_m, float) / 1e3
+    gn = np.asarray(northing_m, float) / 1e3
+    v = np.asarray(value_mgal, float)
+    fig = Figure(figsize=(9, 8))
+    ax = fig.add_subplot(1, 1, 1)
+    ax.set_facecolor("0.85")
+    fin = np.isfinite(v)
+    lim = float(np.percentile(np.abs(v[fin]), 99)) if fin.any() else 1.0
+    lim = lim if lim > 0 else 1.0
+    # diverging map whose centre is a pale yellow, not white; tracks are drawn in black on top
+    im = ax.pcolormesh(ge, gn, np.ma.masked_invalid(v), cmap="RdYlBu_r", vmin=-lim, vmax=lim, shading="nearest",
+                       gid="grid")
+    cb = fig.colorbar(im, ax=ax, shrink=0.8)
+    cb.set_label("gravity disturbance, mGal")
+    if track_easting_m is not None and track_northing_m is not None:
+        te = np.asarray(track_easting_m, float) / 1e3
+        tn = np.asarray(track_northing_m, float) / 1e3
+        ids = np.asarray(track_ids).astype(str) if track_ids is not None else np.zeros(te.size, dtype=str)
+        cut = np.flatnonzero(ids[1:] != ids[:-1]) + 1
+        first = True
+        for a, b in zip(np.concatenate(([0], cut)), np.concatenate((cut, [te.size]))):
+            ax.plot(te[a:b], tn[a:b], color="black", linewidth=0.6, gid="tracks",
+                    label="flight lines" if first else None)
+            first = False
+        ax.legend(loc="upper right", fontsize=8)
+    ax.set_aspect("equal", adjustable="datalim")
+    x0, x1 = float(np.nanmin(ge)), float(np.nanmax(ge))
+    y0, y1 = float(np.nanmin(gn)), float(np.nanmax(gn))
+    L = _nice_length_km(x1 - x0)
+    xs, ys = x0 + 0.05 * (x1 - x0), y0 + 0.04 * (y1 - y0)
+    ax.plot([xs, xs + L], [ys, ys], color="black", linewidth=4, solid_capstyle="butt", gid="scalebar")
+    ax.text(xs + L / 2, ys + 0.015 * (y1 - y0), f"{L:g} km", ha="center", va="bottom", fontsize=9)
+    if crs_label:
+        ax.text(0.99, 0.01, crs_label, transform=ax.transAxes, ha="right", va="bottom", fontsize=8,
+                bbox={"facecolor": "white", "alpha": 0.8, "linewidth": 0})
+    suffix = f" ({crs_label.split()[0]})" if crs_label else ""
+    ax.set_xlabel(f"easting, km{suffix}")
+    ax.set_ylabel(f"northing, km{suffix}")
+    head = "\n".join(s for s in (title, note) if s)
+    if head:
+        ax.set_title(head, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_grid_map(path, *args, **kwargs) -> None:
+    """Write the grid map as PNG (see :func:`figure_grid_map`)."""
+    _save(figure_grid_map(*args, **kwargs), path)
+
+
+def figure_levelling(levelling, *, title: str = ""):
+    """Levelling statistics: crossover differences before and after, and the corrections per line.
+
+    Parameters
+    ----------
+    levelling : gravsurvey.levelling.Levelling
+    """
+    from matplotlib.figure import Figure
+
+    b = levelling.before
+    a = levelling.after
+    d0 = np.asarray(levelling.residual_mgal, float)
+    fig = Figure(figsize=(10, 4.5))
+    ax1 = fig.add_subplot(1, 2, 1)
+    ax2 = fig.add_subplot(1, 2, 2)
+    # before: the raw differences are residual + model; rebuilt from the statistics' source
+    raw = np.asarray(getattr(levelling, "diff_mgal", np.full_like(d0, np.nan)), float)
+    both = np.concatenate([x[np.isfinite(x)] for x in (raw, d0)]) if np.isfinite(d0).any() else np.zeros(1)
+    lim = float(np.max(np.abs(both))) if both.size else 1.0
+    bins = np.linspace(-lim, lim, 31) if lim > 0 else 10
+    if np.isfinite(raw).any():
+        ax1.hist(raw[np.isfinite(raw)], bins=bins, color="tab:gray", alpha=0.6,
+                 label=f"before: RMS {b['rms_mgal']:.2f} mGal")
+    ax1.hist(d0[np.isfinite(d0)], bins=bins, color="tab:blue", alpha=0.7, label=f"after: RMS {a['rms_mgal']:.2f} mGal")
+    ax1.set_xlabel("crossover difference, mGal")
+    ax1.set_ylabel("count")
+    ax1.legend(fontsize=8)
+    ax1.set_title(f"{b['count']} crossovers ({levelling.model}, datum: {levelling.datum})", fontsize=9)
+    labels = [f"{f}/{ln}" for f, ln in levelling.line_keys]
+    y = np.arange(len(labels))
+    ax2.barh(y, levelling.constant_mgal, color=np.where(levelling.levelled, "tab:blue", "0.7"))
+    ax2.set_yticks(y)
+    ax2.set_yticklabels(labels, fontsize=7 if len(labels) < 40 else 4)
+    ax2.invert_yaxis()
+    ax2.set_xlabel("correction (constant), mGal")
+    ax2.axvline(0, color="black", linewidth=0.6)
+    ax2.set_title("per-line correction (subtracted)", fontsize=9)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_levelling(path, levelling, *, title: str = "") -> None:
+    """Write the levelling statistics figure as PNG (see :func:`figure_levelling`)."""
+    _save(figure_levelling(levelling, title=title), path)
+
+
+__all__ += ["figure_grid_map", "plot_grid_map", "figure_levelling", "plot_levelling"]

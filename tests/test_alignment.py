@@ -426,7 +426,7 @@ def _run_cli(cfg, tmp_path):
     assert r.returncode == 0, r.stderr
     out = cfg.parent / "out"
     with open(out / "profiles.csv", newline="") as fh:
-        rows = list(csv.DictReader(fh))
+        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))  # metadata lines
     return json.loads((out / "summary.json").read_text()), rows
 
 

@@ -122,7 +122,8 @@ def test_mgd77t_run_reproduces_ncei_free_air(tmp_path, normal_gravity):
     assert r.returncode == 0, r.stderr
     import csv
 
-    rows = list(csv.DictReader(open(tmp_path / "out" / "profiles.csv")))
+    with open(tmp_path / "out" / "profiles.csv") as fh:
+        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))  # metadata lines
     t = np.array([int(x["time_unix_ns"]) for x in rows])
     d = np.array([float(x["disturbance_mgal"]) for x in rows])
     assert len(rows) > 3500

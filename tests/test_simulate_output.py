@@ -275,11 +275,9 @@ def test_survey_yaml_and_truth_csv(tmp_path):
     f = cfg["flights"][0]
     assert f["inputs"] == {"csv": {"imu": "F01/imu.csv", "altimeter": "F01/altimeter.csv", "gnss": "F01/gnss.csv"}}
     assert f["triad"] == "strapdown" and f["truth"] == "F01/truth.csv"
-    assert f["initial"]["velocity_enu_mps"] == [0.0, 0.0, 0.0]  # the plan starts static
-    assert f["initial"]["attitude_deg"] == [0.0, 0.0, 90.0]  # level, plan heading
+    # no initial block: position/velocity come from GNSS and the attitude from alignment
+    assert "initial" not in f
     s = simulate_flight(sim)
-    # position: the first GNSS fix as logged (noisy), not the truth
-    assert f["initial"]["lat_deg"] == s.gnss_lat_deg[0] != np.degrees(s.truth["lat"][0])
     oracle = yaml.safe_load((tmp_path / "oracle.yaml").read_text())
     assert oracle["model"]["accel_noise_mps2"] == 1e-3 and oracle["model"]["altimeter_sigma_m"] == 1.0
     assert oracle["model"]["gnss_horizontal_sigma_m"] == 0.5

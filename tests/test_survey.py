@@ -208,13 +208,13 @@ def test_gust_does_not_split_a_line():
 
 
 def test_short_straights_and_slow_curves_are_turns():
-    legs = [("line", 0.0, 300.0), ("turn", 3.0, 90.0), ("line", 90.0, 60.0), ("turn", 0.3, 60.0), ("line", 150.0, 300.0)]
+    legs = [("line", 0.0, 300.0), ("turn", 3.0, 90.0), ("line", 90.0, 25.0), ("turn", 0.3, 60.0), ("line", 150.0, 300.0)]
     t, lat, lon, vel, lab = build_track(legs, heading_noise_deg=1.0)
     segs = segment_lines(t, lat, lon, vel)
     kinds = [s.kind for s in segs]
     assert kinds.count("turn") >= 1
-    straight = [s for s in segs if s.kind in ("line", "tie")]
-    assert len(straight) == 2  # 60 s straight and the 200 s slow curve are not lines
+    straight = [s for s in segs if s.kind in ("line", "tie", "transit")]
+    assert len(straight) == 2  # the 1.5-km straight (< min_line_m) and the 200 s slow curve are not lines
     curve = lab == "turn"
     curve[:400] = False
     # A line may take the end of the slow curve where the heading is within heading_tol_deg
@@ -399,3 +399,34 @@ def test_velocity_gap_splits_a_line():
     segs = segment_lines(t, 0.0, 0.0, v, min_line_s=60)
     assert [(s.name, s.start_index, s.stop_index) for s in segs] == [("L01", 0, 140), ("turn01", 140, 150), ("L02", 150, 300)]
     assert segs[0].heading_deg == pytest.approx(90.0)
+
+
+def test_line_length_is_by_distance_not_time():
+    # 100-s lines at 60 m/s (6 km) and a 90-s tie (5.4 km): a 120-s time limit dropped them all
+    legs = [("line", 0.0, 100.0), ("turn", 3.0, 180.0), ("line", 180.0, 100.0), ("turn", 3.0, 90.0),
+            ("tie", 90.0, 90.0), ("turn", 3.0, 90.0)]
+    t, lat, lon, vel, lab = build_track(legs, heading_noise_deg=1.0)
+    segs = segment_lines(t, lat, lon, vel)
+    assert [s.kind for s in segs if s.kind in ("line", "tie")] == ["line", "line", "tie"]
+    # a 1.5 km minimum length is kept; 7 km drops them
+    segs = segment_lines(t, lat, lon, vel, min_line_m=7000.0)
+    assert not [s for s in segs if s.kind in ("line", "tie")]
+    # the old time limit, when asked for, still applies
+    segs = segment_lines(t, lat, lon, vel, min_line_s=120.0)
+    assert not [s for s in segs if s.kind in ("line", "tie")]
+
+
+def test_transit_is_recognised_by_heading():
+    # two north-south lines, one east-west tie, and a straight transit at 45 deg
+    legs = [("line", 0.0, 300.0), ("turn", 3.0, 180.0), ("line", 180.0, 300.0), ("turn", 3.0, 90.0),
+            ("tie", 90.0, 200.0), ("turn", 3.0, 315.0), ("line", 45.0, 200.0)]
+    t, lat, lon, vel, lab = build_track(legs, heading_noise_deg=1.0)
+    segs = segment_lines(t, lat, lon, vel)
+    straight = [(s.name, s.kind) for s in segs if s.kind in ("line", "tie", "transit")]
+    assert straight == [("L01", "line"), ("L02", "line"), ("T01", "tie"), ("transit01", "transit")]
+    # with transit detection off, the 45-deg leg is a line or a tie again (tie_angle_deg rule)
+    segs = segment_lines(t, lat, lon, vel, transit_angle_deg=None)
+    assert [s.kind for s in segs if s.kind != "turn"][-1] in ("line", "tie")
+    with pytest.raises(ConfigError, match="lines.transit_angle_deg: must be in"):
+        SegmentationOptions.from_dict({"transit_angle_deg": 50})
+    assert SegmentationOptions.from_dict({"transit_angle_deg": None}).transit_angle_deg is None

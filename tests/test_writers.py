@@ -39,6 +39,7 @@ def make_table(truth=True, n1=5, n2=4):
         "disturbance_mgal": np.linspace(-3.0, 5.0, n),
         "kalman_mgal": np.linspace(-3.5, 5.5, n),
         "sigma_mgal": np.full(n, 0.75),
+        "levelled_mgal": np.linspace(-3.0, 5.0, n) - 0.5,
     }
     t["kalman_mgal"][2] = np.nan
     if truth:
@@ -66,7 +67,7 @@ def test_profiles_csv_columns_as_documented_and_values(tmp_path):
     with open(p, newline="") as fh:
         rows = list(csv.reader(fh))
     assert rows[0] == documented_columns("profiles.csv")
-    assert rows[0] == list(w.PROFILE_COLUMNS + w.TRUTH_COLUMNS)
+    assert rows[0] == list(w.PROFILE_COLUMNS + w.LEVEL_COLUMNS + w.TRUTH_COLUMNS)
     assert len(rows) == 1 + 9
     r = dict(zip(rows[0], rows[3]))
     # 10:00:02.123456789 -> nearest ms .123; independent check with datetime
@@ -84,7 +85,7 @@ def test_profiles_csv_columns_as_documented_and_values(tmp_path):
     # without truth: the two optional columns are absent
     t2 = make_table(truth=False)
     w.write_profiles_csv(p, t2)
-    assert p.read_text().splitlines()[0].split(",") == list(w.PROFILE_COLUMNS)
+    assert p.read_text().splitlines()[0].split(",") == list(w.PROFILE_COLUMNS + w.LEVEL_COLUMNS)
     with pytest.raises(ValueError, match="truth_mgal and error_mgal go together"):
         w.write_profiles_csv(p, dict(t2, truth_mgal=t["truth_mgal"]))
     with pytest.raises(ValueError, match="lacks columns"):
@@ -127,7 +128,7 @@ def test_xyz_round_trip_and_format(tmp_path):
     assert "/ Line 1001 = flight F01 line L01" in lines and "/ Tie 2001 = flight F02 line T01" in lines
     # every non-comment, non-header line has one field per column; the NaN is a '*'
     x = w.read_xyz(p)
-    assert x.columns == list(w.XYZ_COLUMNS + w.TRUTH_COLUMNS)
+    assert x.columns == list(w.XYZ_COLUMNS + w.LEVEL_COLUMNS + w.TRUTH_COLUMNS)
     data_lines = [ln for ln in lines if not ln.startswith("/") and not re.match(r"(Line|Tie) \d+$", ln)]
     assert all(len(ln.split()) == len(x.columns) for ln in data_lines)
     assert sum(ln.split().count("*") for ln in data_lines) == 2  # lat and kalman NaN
@@ -430,3 +431,41 @@ def test_lock_waiter_gets_it_when_holder_finishes(tmp_path):
         assert lk.held
     h.wait(timeout=30)
     assert h.returncode == 0
+
+
+def test_metadata_in_csv_xyz_geojson(tmp_path):
+    meta = {"survey": "S1", "crs": {"projected": "EPSG:32653 WGS 84 / UTM zone 53N", "projected_epsg": 32653},
+            "software": "gravsurvey 9.9", "processing": {"model": {"a": 1.5}}}
+    t = make_table()
+    w.write_profiles_csv(tmp_path / "p.csv", t, metadata=meta)
+    lines = (tmp_path / "p.csv").read_text().splitlines()
+    assert lines[0] == "# survey: S1"
+    assert lines[1].startswith("# crs: {") and "EPSG:32653" in lines[1]
+    assert lines[4].startswith("flight,line,")
+    back = w.read_profiles_csv(tmp_path / "p.csv")  # the reader skips the '#' lines
+    np.testing.assert_allclose(back["levelled_mgal"], t["levelled_mgal"], atol=5e-5)
+    w.write_xyz(tmp_path / "p.xyz", t, metadata=meta)
+    x = w.read_xyz(tmp_path / "p.xyz")
+    assert "survey: S1" in x.comments and "software: gravsurvey 9.9" in x.comments
+    assert x.columns[0] == "time_unix_s"  # metadata lines do not disturb the column-name line
+    w.write_geojson(tmp_path / "l.geojson", t, None, 32653, metadata=meta)
+    gj = json.loads((tmp_path / "l.geojson").read_text())
+    assert gj["metadata"]["processing"]["model"]["a"] == 1.5 and len(gj["features"]) == 2
+
+
+def test_line_groups_linear_and_complete():
+    f = np.array(["F1"] * 3 + ["F2"] * 4 + ["F1"] * 2, dtype=object)
+    ln = np.array(["L1", "L1", "", "L1", "L1", "T1", "T1", "L2", "L2"], dtype=object)
+    g = w.line_groups(f, ln)
+    assert list(g) == [("F1", "L1"), ("F2", "L1"), ("F2", "T1"), ("F1", "L2")]
+    assert g[("F2", "T1")].tolist() == [5, 6]
+    # a pair in two separate runs gets both
+    g2 = w.line_groups(np.array(["F"] * 5), np.array(["A", "A", "B", "A", "A"]))
+    assert g2[("F", "A")].tolist() == [0, 1, 3, 4]
+    # 20,000 lines of 50 rows: linear (well under a second; a per-line mask loop took minutes)
+    n_lines, m = 20_000, 50
+    ff = np.repeat(np.array([f"F{i // 20:03d}" for i in range(n_lines)], dtype=object), m)
+    ll = np.repeat(np.array([f"L{i % 20:02d}" for i in range(n_lines)], dtype=object), m)
+    t0 = time.perf_counter()
+    g3 = w.line_groups(ff, ll)
+    assert len(g3) == n_lines and time.perf_counter() - t0 < 5.0
