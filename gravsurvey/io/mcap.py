@@ -49,9 +49,11 @@ SCAN_BEYOND_END = 2  # a record's declared length runs past ``end``
 SCAN_BAD_MESSAGE = 3  # a message record shorter than its fixed 22-byte header
 SCAN_BAD_OPCODE = 4  # opcode 0; or > 0x0F inside a chunk (not forward-compatible there)
 SCAN_UNKNOWN_CHANNEL = 5  # a top-level message on a channel id no earlier record defined
+SCAN_EARLY_FOOTER = 6  # (reader only) a footer record that does not end the file
 # records that belong in the summary section only (a sign of damage before the data end)
 SUMMARY_ONLY_OPS = (OP_CHUNK_INDEX, OP_ATTACHMENT_INDEX, OP_STATISTICS, OP_METADATA_INDEX,
                     OP_SUMMARY_OFFSET)
+DAMAGED_START_MAX = 4096  # a file without closing magic is read only if records chain by here
 RESYNC_MIN_CHAIN = 4  # records that must chain up for a resynchronisation point to count
 
 # schema names by role, for topic auto-detection
@@ -235,9 +237,10 @@ def _chain_at(buf, p, end, known, min_chain):
     """Does a chain of plausible top-level records start at ``p``?
 
     Plausible: opcode 1..15, length inside ``end``, a message at least 22 bytes long on a
-    channel defined earlier (``known``).  The chain counts when ``min_chain`` records
-    follow one another, or at least one does and the chain ends exactly at ``end``, at a
-    footer, or with a record cut by ``end`` (a truncated file).
+    channel defined earlier (``known``), a footer only as the last record before the closing
+    magic.  The chain counts when ``min_chain`` records follow one another, or at least one
+    does and the chain ends exactly at ``end``, or with a record cut by ``end`` (a truncated
+    file), or at the footer.
     """
     count = 0
     while count < min_chain:
@@ -255,10 +258,10 @@ def _chain_at(buf, p, end, known, min_chain):
         if op == 5:
             if ln < 22 or not known[np.int64(buf[p + 9]) | (np.int64(buf[p + 10]) << 8)]:
                 return False
+        if op == 2:  # a footer: 20 bytes, then the closing magic ends the file
+            return ln == 20 and p + 9 + 20 + 8 == end and buf[p + 29] == 0x89
         count += 1
         p = p + 9 + ln
-        if op == 2:
-            return True
     return True
 
 
@@ -293,10 +296,10 @@ def _resync_reference(buf, start, end, known, min_chain, opcode):
             if op == OP_MESSAGE and (length < MESSAGE_HEADER_BYTES
                                      or struct.unpack_from("<H", b, p + 9)[0] not in ids):
                 return False
+            if op == OP_FOOTER:
+                return length == 20 and p + 9 + 20 + 8 == end and b[p + 29] == 0x89
             count += 1
             p += 9 + length
-            if op == OP_FOOTER:
-                return True
         return True
 
     for p in range(start, end - 8):
@@ -1341,15 +1344,26 @@ class _Reader:
         buf = self.buf
         size = len(buf)
         c = self.c
-        if size < 8 or bytes(buf[:8]) != MAGIC:
-            raise DataError(f"{self.path}: not an MCAP file (no MCAP magic at the start)")
         regions = []
         tail_status, tail_at = SCAN_OK, None
+        self._preload_definitions()
         pos = 8
+        if size < 8 or bytes(buf[:8]) != MAGIC:
+            # a damaged start: still MCAP if a chain of records follows soon, or the file
+            # ends with the MCAP magic and a chain of records is found at all
+            cand = find_resync(buf, 8, size, self.known, RESYNC_MIN_CHAIN) if size > 17 else -1
+            if cand == -1 or (cand > DAMAGED_START_MAX and bytes(buf[size - 8:]) != MAGIC):
+                raise DataError(f"{self.path}: not an MCAP file (no MCAP magic at the start)")
+            regions.append(SkippedRegion(0, cand, "damaged magic at the start of the file"))
+            pos = cand
         while pos < size:
             n, endpos, status, arrs = scan_records(buf, pos, size, stop_at_footer=True,
                                                    known=self.known)
             ops, rpos = arrs[0], arrs[1]
+            if status == SCAN_OK and n >= 1 and ops[n - 1] == OP_FOOTER and \
+                    (arrs[2][n - 1] != 20 or endpos + 8 != size):
+                # a footer must end the file (then the closing magic): a damaged opcode
+                status, n, endpos = SCAN_EARLY_FOOTER, n - 1, int(rpos[n - 1]) - 9
             # a wrong length in the record before a break would make the break itself: that
             # record is handled only once it is known to be sound
             lookback = status != SCAN_OK and n >= 1 and ops[n - 1] not in (OP_CHUNK, OP_HEADER)
@@ -1375,9 +1389,16 @@ class _Reader:
             damaged_chunk_end = None
             if kfail is not None:
                 dstart = int(rpos[kfail]) - 9
+                resume = -1
                 if ops[kfail] == OP_CHUNK:
                     damaged_chunk_end = int(rpos[kfail] + arrs[2][kfail])
-                resume = self._resync(dstart + 1, exclude=dstart)
+                    # its length is sound when records chain up right after it: resume there
+                    # (not inside it, where an uncompressed chunk's own records would chain)
+                    if damaged_chunk_end == size or _chain_at(buf, damaged_chunk_end, size,
+                                                              self.known, RESYNC_MIN_CHAIN):
+                        resume = damaged_chunk_end
+                if resume == -1:
+                    resume = self._resync(dstart + 1, exclude=dstart)
             elif look is not None:
                 dstart, resume = look
                 why = ("a record's declared length disagrees with the records that follow "
@@ -1429,6 +1450,26 @@ class _Reader:
             pos = resume
         self._finish(regions, tail_status, tail_at)
         return c
+
+    def _preload_definitions(self):
+        """Schemas and channels repeated in the summary section, if the file has one.
+
+        Ids are unique within a file, so these are the data section's definitions; knowing
+        them first keeps messages decodable when the record that first defined their channel
+        is damaged.
+        """
+        rec = _summary_records(self.buf)
+        if rec is None:
+            return
+        n, arrs = rec
+        for k in np.flatnonzero((arrs[0][:n] == OP_SCHEMA) | (arrs[0][:n] == OP_CHANNEL)):
+            try:
+                if arrs[0][k] == OP_SCHEMA:
+                    self._handle_schema(self.buf, int(arrs[1][k]), int(arrs[2][k]))
+                else:
+                    self._handle_channel(self.buf, int(arrs[1][k]), int(arrs[2][k]))
+            except _Damaged:
+                pass
 
     def _salvage_cut_chunk(self, at, region):
         """The file ends inside a chunk: keep the complete records its bytes decode to."""
@@ -1500,7 +1541,8 @@ _SCAN_REASONS = {SCAN_SHORT_HEADER: "file ends inside a record header",
                  SCAN_BEYOND_END: "a record's declared length runs past the end of the file",
                  SCAN_BAD_MESSAGE: "a message record shorter than its header",
                  SCAN_BAD_OPCODE: "record with opcode 0",
-                 SCAN_UNKNOWN_CHANNEL: "a message on a channel no earlier record defined"}
+                 SCAN_UNKNOWN_CHANNEL: "a message on a channel no earlier record defined",
+                 SCAN_EARLY_FOOTER: "a footer record before the end of the file"}
 
 
 def ops_at(buf, p):
