@@ -134,11 +134,14 @@ def test_bit_flips_never_crash_and_keep_messages_before_damage(kind, bits):
 
 
 @FUZZ
-@given(kind=st.sampled_from(KINDS), data=st.data())
-def test_random_garbage_overwrite_only_our_errors(kind, data):
+@given(kind=st.sampled_from(KINDS), frac=st.floats(0.0, 1.0),
+       junk=st.binary(min_size=1, max_size=64))
+# a ',' inside a JSON vector ("[1, 2, 3]" -> "[1, 2,, 3]"-like ragged arrays): numpy refused the
+# ragged column with ValueError in the bulk JSON decoder
+@example(kind="json_unchunked", frac=2216.5 / 160938, junk=b",")
+def test_random_garbage_overwrite_only_our_errors(kind, frac, junk):
     raw = bytearray(sample(kind))
-    pos = data.draw(st.integers(0, len(raw) - 1))
-    junk = data.draw(st.binary(min_size=1, max_size=64))
+    pos = int(frac * (len(raw) - 1))
     raw[pos:pos + len(junk)] = junk
     _, got = _recovered(bytes(raw))
     assert not (_expected_before(kind, pos) - got)

@@ -824,7 +824,10 @@ def _column(objs, spec):
         col = [_get_path(o, spec) for o in objs]
     else:
         col = [o[spec] for o in objs]
-    a = np.array(col)
+    try:
+        a = np.array(col)
+    except ValueError:  # ragged lists (numpy >= 1.24 refuses them): the per-message path
+        return None
     if a.dtype.kind not in "fi":  # strings, bools, None, ragged lists, huge ints: slow path
         return None
     return a
@@ -1087,6 +1090,9 @@ class _Reader:
         self.prev_op = -1
         self.unknown_records = 0
         self.chunk_content_end = None  # end offset of the last chunk's compressed records
+        self.cur_chunk = None  # (start, end, messages, t0, t1) of the chunk just read
+        self.cur_index_count = 0  # messages its message index records list
+        self.extra_regions = []  # chunks with fewer messages than their index lists
         self._index = None
 
     # which role would decode channel cid, and how ("ros2:imu", "json:imu", ...)
@@ -1243,6 +1249,7 @@ class _Reader:
         while k < n:
             op = ops[k]
             if op == OP_MESSAGE:
+                self._close_chunk()
                 i = np.searchsorted(other, k)
                 j = int(other[i]) if i < len(other) else n
                 self.verified = False  # top-level messages carry no CRC
@@ -1251,6 +1258,8 @@ class _Reader:
                 k = j
                 continue
             p, ln = int(pos[k]), int(lens[k])
+            if op != OP_MESSAGE_INDEX:
+                self._close_chunk()
             self.chunk_end_time = self.chunk_start_time = self.chunk_content_end = None
             prev = self.prev_op
             self.prev_op = op
@@ -1269,7 +1278,13 @@ class _Reader:
                 elif op == OP_CHANNEL:
                     self._handle_channel(buf, p, ln)
                 elif op == OP_CHUNK:
+                    before = self.n_msgs
                     self._inner(self._chunk(buf, p, ln, True), True)
+                    self.cur_chunk = (p - 9, p + ln, self.n_msgs - before,
+                                      self.chunk_start_time, self.chunk_end_time)
+                elif op == OP_MESSAGE_INDEX and self.cur_chunk is not None:
+                    cnt = _message_index_count(buf, p - 9)
+                    self.cur_index_count += cnt or 0
                 elif op == OP_STATISTICS and ln >= 42:
                     c.statistics = _parse_statistics(buf, p)
                 elif op == OP_DATA_END:
@@ -1280,6 +1295,20 @@ class _Reader:
                 return k, str(exc)
             k += 1
         return None, ""
+
+    def _close_chunk(self):
+        """After a chunk's message index records: fewer messages in the chunk than its index
+        lists means damage the chunk's checks did not see (no CRC); report the chunk."""
+        ch, idx = self.cur_chunk, self.cur_index_count
+        self.cur_chunk, self.cur_index_count = None, 0
+        if ch is None or idx <= ch[2]:
+            return
+        start, end, found, t0, t1 = ch
+        reg = SkippedRegion(start, end, f"chunk gave {found} messages, its message index "
+                                        f"records list {idx}", lost_messages=idx - found)
+        if t0 is not None and t1 is not None and t0 <= t1:
+            reg.lost_start_ns, reg.lost_end_ns = t0, t1
+        self.extra_regions.append(reg)
 
     def _chunk_index(self):
         if self._index is None:
@@ -1488,6 +1517,10 @@ class _Reader:
 
     def _finish(self, regions, tail_status, tail_at):
         buf, c, size = self.buf, self.c, len(self.buf)
+        self._close_chunk()
+        if self.extra_regions:
+            tail = [regions.pop()] if regions and not regions[-1].resumed else []
+            regions = sorted(regions + self.extra_regions, key=lambda r: r.start) + tail
         if self.unknown_records:
             c.notes.append(f"{self.path}: skipped {self.unknown_records} records with unknown "
                            "opcodes (16-255: reserved/private per the MCAP specification, or a "
