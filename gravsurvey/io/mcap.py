@@ -1093,6 +1093,7 @@ class _Reader:
         self.cur_chunk = None  # (start, end, messages, t0, t1) of the chunk just read
         self.cur_index_count = 0  # messages its message index records list
         self.extra_regions = []  # chunks with fewer messages than their index lists
+        self.cur_range = None  # byte range of the chunk being read
         self._index = None
 
     # which role would decode channel cid, and how ("ros2:imu", "json:imu", ...)
@@ -1178,6 +1179,13 @@ class _Reader:
             cid = int(cid)
             if cid not in self.c.channels:
                 self.c.orphan_messages += int(sel.sum())
+                if not self.verified and self.cur_range is not None:
+                    # no CRC: an undefined channel id is more likely a damaged one
+                    a, b = self.cur_range
+                    self.extra_regions.append(SkippedRegion(
+                        a, b, f"{int(sel.sum())} messages on undefined channel id {cid} in a "
+                              "chunk without CRC (damaged channel id?)",
+                        lost_messages=int(sel.sum())))
                 continue
             self.c.counts[cid] = self.c.counts.get(cid, 0) + int(sel.sum())
             self.lt_parts.setdefault(cid, []).append(mlt[sel])
@@ -1261,6 +1269,7 @@ class _Reader:
             if op != OP_MESSAGE_INDEX:
                 self._close_chunk()
             self.chunk_end_time = self.chunk_start_time = self.chunk_content_end = None
+            self.cur_range = None
             prev = self.prev_op
             self.prev_op = op
             try:
@@ -1279,6 +1288,7 @@ class _Reader:
                     self._handle_channel(buf, p, ln)
                 elif op == OP_CHUNK:
                     before = self.n_msgs
+                    self.cur_range = (p - 9, p + ln)
                     self._inner(self._chunk(buf, p, ln, True), True)
                     self.cur_chunk = (p - 9, p + ln, self.n_msgs - before,
                                       self.chunk_start_time, self.chunk_end_time)
@@ -1507,6 +1517,7 @@ class _Reader:
         if ln > self.max_record_bytes and ln > size:
             return
         region.reason = "file cut inside a chunk"
+        self.cur_range = (at, size)
         try:
             self.chunk_end_time = None
             cb = self._chunk(self.buf, at + 9, size - at - 9, False)
