@@ -263,19 +263,24 @@ def test_crcless_corrupted_values_dropped_and_counted(tmp_path):
     stamp = struct.pack("<iI", t // 10**9, t % 10**9)
     k2 = bytes(raw).index(stamp, bytes(raw).index(struct.pack("<d", d["f"][321, 2])) - 400)
     raw[k2] ^= 0x40
+    # the last sample's stamp: sec bit 27 (4 years later; an end sample has one neighbour)
+    t = int(d["imu_t"][599])
+    stamp = struct.pack("<iI", t // 10**9, t % 10**9)
+    k3 = bytes(raw).index(stamp, bytes(raw).index(struct.pack("<d", d["f"][599, 2])) - 400)
+    raw[k3 + 3] ^= 0x08
     (tmp_path / "v.mcap").write_bytes(bytes(raw))
     c = read_mcap(tmp_path / "v.mcap")
     assert c.salvage is None
     imu = next(b for cid, b in c.decoded.items() if c.channels[cid].topic == "/imu")
-    assert imu.value_check_dropped == 2 and len(imu.time_ns) == 598
-    keep = np.setdiff1d(np.arange(600), [123, 321])
+    assert imu.value_check_dropped == 3 and len(imu.time_ns) == 597
+    keep = np.setdiff1d(np.arange(600), [123, 321, 599])
     np.testing.assert_array_equal(imu.time_ns, d["imu_t"][keep])
     np.testing.assert_array_equal(imu.values["specific_force"], d["f"][keep])
     opts = ingest_options_from_dict({"inputs": {"mcap": "v.mcap"}}, "f")
-    with pytest.warns(DataWarning, match=r"imu: 2 messages .* dropped \(2 samples without a "
+    with pytest.warns(DataWarning, match=r"imu: 3 messages .* dropped \(3 samples without a "
                                          r"chunk CRC failed the damage checks"):
         rec = load_flight(opts, tmp_path)
-    assert len(rec.imu.time) == 598
+    assert len(rec.imu.time) == 597
     # with CRCs the same flips are caught by the CRC: the chunk is reported, not its values
     assert read_mcap(_write(tmp_path, "crc.mcap", _flip_like(sample("ros2_none"), raw,
                                                              sample("ros2_none_nocrc")))

@@ -370,7 +370,8 @@ def damaged_values(role, time_ns, log_time_ns, values, candidates):
 
     Checks: non-finite or absurd (> ``DAMAGE_ABS_MAX``) values; latitude/longitude outside
     [-90, 90] / [-180, 360] degrees; a measurement time out of order with both neighbours
-    while they are in order; a spike in (time - log time); an isolated value spike (see the
+    while they are in order (at the ends: with its one neighbour); a spike in (time - log
+    time), at the ends too; an isolated value spike (see the
     ``DAMAGE_SPIKE_*`` constants).  A spike test that flags more than ``DAMAGE_MAX_FRACTION``
     of the samples is ignored (that is a property of the signal, left to the plausibility
     checks).
@@ -422,6 +423,8 @@ def damaged_values(role, time_ns, log_time_ns, values, candidates):
         mid = t[1:-1]
         ooo = np.zeros(n, bool)
         ooo[1:-1] = (prev <= nxt) & ((mid < prev) | (mid > nxt))
+        ooo[0] = t[0] > t[1] and t[1] <= t[2]
+        ooo[-1] = t[-1] < t[-2] and t[-3] <= t[-2]
         add("time out of order", ooo, True)
         steps = np.diff(t)
         pos = steps[steps > 0]
@@ -432,6 +435,9 @@ def damaged_values(role, time_ns, log_time_ns, values, candidates):
         tol = max(DAMAGE_TIME_K * scale, DAMAGE_TIME_STEP_FRACTION * nominal)
         spike = np.zeros(n, bool)
         spike[1:-1] = (dd[:-1] > tol) & (dd[1:] > tol) & (np.abs(d[2:] - d[:-2]) <= tol)
+        # the first and last samples have one neighbour: off from it while the next pair agrees
+        spike[0] = dd[0] > tol and dd[1] <= tol
+        spike[-1] = dd[-1] > tol and dd[-2] <= tol
         add("time/log-time spike", spike, True)
         for x in cols:
             with np.errstate(invalid="ignore", over="ignore"):

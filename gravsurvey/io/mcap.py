@@ -54,6 +54,7 @@ SCAN_EARLY_FOOTER = 6  # (reader only) a footer record that does not end the fil
 SUMMARY_ONLY_OPS = (OP_CHUNK_INDEX, OP_ATTACHMENT_INDEX, OP_STATISTICS, OP_METADATA_INDEX,
                     OP_SUMMARY_OFFSET)
 DAMAGED_START_MAX = 4096  # a file without closing magic is read only if records chain by here
+DAMAGE_CHECK_PASSES = 4  # rounds of checks.damaged_values on CRC-less samples
 RESYNC_MIN_CHAIN = 4  # records that must chain up for a resynchronisation point to count
 
 # schema names by role, for topic auto-detection
@@ -955,18 +956,26 @@ def _check_values(blk, role):
     """
     if blk is None or blk.verified is None or blk.verified.all() or len(blk.time_ns) == 0:
         return blk
-    bad, why = damaged_values(role, blk.time_ns, blk.log_time_ns, blk.values, ~blk.verified)
-    nbad = int(bad.sum())
+    nbad, whys = 0, []
+    # again after each drop: a corrupted run leaves corrupted neighbours, and a spike is only
+    # recognised against neighbours that agree
+    for _ in range(DAMAGE_CHECK_PASSES):
+        bad, why = damaged_values(role, blk.time_ns, blk.log_time_ns, blk.values,
+                                  ~blk.verified)
+        if not bad.any():
+            break
+        nbad += int(bad.sum())
+        whys.append(why)
+        keep = ~bad
+        blk.time_ns, blk.log_time_ns, blk.verified = (blk.time_ns[keep], blk.log_time_ns[keep],
+                                                      blk.verified[keep])
+        blk.values = {k: v[keep] for k, v in blk.values.items()}
     if not nbad:
         return blk
-    keep = ~bad
-    blk.time_ns, blk.log_time_ns, blk.verified = (blk.time_ns[keep], blk.log_time_ns[keep],
-                                                  blk.verified[keep])
-    blk.values = {k: v[keep] for k, v in blk.values.items()}
     blk.value_check_dropped = nbad
     blk.undecodable += nbad
     blk.problems.insert(0, f"{nbad} samples without a chunk CRC failed the damage checks "
-                           f"({why})")
+                           f"({'; '.join(whys)})")
     return blk
 
 
