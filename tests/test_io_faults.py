@@ -28,7 +28,7 @@ from test_io_support import static_flight, write_json, write_ros2
 
 from gravsurvey.errors import DataError, DataWarning, GravsurveyError
 from gravsurvey.io.ingest import ingest_options_from_dict, load_flight
-from gravsurvey.io.mcap import MAGIC, OP_CHUNK, find_resync, read_mcap, scan_records
+from gravsurvey.io.mcap import OP_CHUNK, read_mcap, scan_records
 
 KINDS = ["ros2_zstd", "ros2_none", "json_lz4", "json_unchunked", "ros2_zstd_nocrc",
          "ros2_none_nocrc"]
@@ -318,6 +318,8 @@ def test_damage_checks_leave_clean_data_alone():
 
 
 def test_resync_kernel_matches_reference():
+    from gravsurvey.io.mcap import find_resync
+
     raw = bytearray(sample("json_unchunked"))
     raw[5000:5100] = bytes(100)
     buf = np.frombuffer(bytes(raw), np.uint8)
@@ -328,3 +330,30 @@ def test_resync_kernel_matches_reference():
         b = find_resync(buf, start, len(buf), known, 4, use_kernel=False)
         assert a == b and a >= start
     assert find_resync(buf, 5000, len(buf), np.zeros(65536, np.bool_), 4) > 5000
+
+
+def test_crcless_flip_that_crashed_mechanization(tmp_path):
+    """Issue 14: the sample bag with chunk CRCs zeroed and one bit flipped (byte 866968, bit 1,
+    inside zstd data) decoded an IMU value of 2.6e21 m/s^2 that was processed as data and ended
+    in ZeroDivisionError in mechanization.  The damage checks drop it; with CRCs the chunk is
+    refused instead."""
+    bag = Path(__file__).resolve().parents[1] / "sample_data" / "grid_ros2" / "F01" / "F01_ros2.mcap"
+    raw = bytearray(_zero_chunk_crcs(bag.read_bytes()))
+    raw[866968] ^= 0x02
+    (tmp_path / "d.mcap").write_bytes(bytes(raw))
+    opts = ingest_options_from_dict({"inputs": {"mcap": "d.mcap"},
+                                     "topics": {"imu": "/imu", "altimeter": "/altimeter",
+                                                "gnss": "/gnss"}}, "f")
+    with pytest.warns(DataWarning, match=r"1 samples without a chunk CRC failed the damage "
+                                         r"checks \(1 non-finite/absurd\)"):
+        rec = load_flight(opts, tmp_path)
+    assert np.abs(rec.imu.specific_force_t).max() < 50.0
+    assert np.abs(rec.imu.angular_rate_t).max() < 1.0
+    assert np.all(np.diff(rec.imu.time) > 0)
+    intact = read_mcap(bag)
+    imu_id = next(k for k, ch in intact.channels.items() if ch.topic == "/imu")
+    assert len(rec.imu.time) == intact.counts[imu_id] - 1
+    raw = bytearray(bag.read_bytes())
+    raw[866968] ^= 0x02
+    (tmp_path / "c.mcap").write_bytes(bytes(raw))
+    assert "CRC" in read_mcap(tmp_path / "c.mcap").salvage.reason
