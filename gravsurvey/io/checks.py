@@ -344,6 +344,7 @@ DAMAGE_SPIKE_NEIGHBOURS = 4.0  # ... and > this x the neighbours' own difference
 DAMAGE_TIME_K = 50.0  # time-offset spike > this x the median |step| of (time - log time) ...
 DAMAGE_TIME_STEP_FRACTION = 0.5  # ... and > this fraction of the nominal sample step
 DAMAGE_MAX_FRACTION = 0.01  # a spike test flagging more than 1 % of samples is not bit damage
+DAMAGE_RUN_MAX = 64  # longest run of corrupted samples between a jump and the jump back
 
 
 def _isolated_spikes(x, k_scale, floor):
@@ -365,14 +366,51 @@ def _isolated_spikes(x, k_scale, floor):
     return out
 
 
+def _corrupted_runs(x, k_scale, rel, max_len):
+    """Runs of up to ``max_len`` samples of ``x`` (n,) entered and left by a jump (> ``k_scale``
+    x the median |step| and > ``rel`` x the level) after which the series returns to the level
+    before the run (within ``rel`` x the jump): a corrupted stretch of a decompressed block, not
+    a signal (a real level change does not come back).
+
+    Returns
+    -------
+    mask : ndarray of bool, shape (n,)
+    runs : int
+        Number of runs found.
+    """
+    n = len(x)
+    out = np.zeros(n, bool)
+    if n < 3:
+        return out, 0
+    with np.errstate(invalid="ignore", over="ignore"):
+        dx = np.diff(x)
+        fin = np.isfinite(dx)
+        if not fin.any():
+            return out, 0
+        s = float(np.median(np.abs(dx[fin])))
+        level = np.maximum(np.abs(x[:-1]), np.abs(x[1:]))
+        big = np.flatnonzero(fin & (np.abs(dx) > k_scale * s) & (np.abs(dx) > rel * level))
+    a, runs = 0, 0
+    while a + 1 < len(big):
+        i, j = int(big[a]), int(big[a + 1])
+        if j - i <= max_len and abs(x[j + 1] - x[i]) < rel * abs(dx[i]):
+            out[i + 1:j + 1] = True
+            runs += 1
+            a += 2
+        else:
+            a += 1
+    return out, runs
+
+
 def damaged_values(role, time_ns, log_time_ns, values, candidates):
     """Samples that show the marks of corrupted bytes, among ``candidates``.
 
     Checks: non-finite or absurd (> ``DAMAGE_ABS_MAX``) values; latitude/longitude outside
     [-90, 90] / [-180, 360] degrees; a measurement time out of order with both neighbours
     while they are in order (at the ends: with its one neighbour); a spike in (time - log
-    time), at the ends too; an isolated value spike (see the
-    ``DAMAGE_SPIKE_*`` constants).  A spike test that flags more than ``DAMAGE_MAX_FRACTION``
+    time), at the ends too; an isolated value spike (see the ``DAMAGE_SPIKE_*`` constants);
+    a run of up to ``DAMAGE_RUN_MAX`` samples entered by such a jump and left by one back to
+    the level before it.  A spike test that flags more than ``DAMAGE_MAX_FRACTION``
     of the samples is ignored (that is a property of the signal, left to the plausibility
     checks).
 
@@ -443,4 +481,8 @@ def damaged_values(role, time_ns, log_time_ns, values, candidates):
             with np.errstate(invalid="ignore", over="ignore"):
                 mag = DAMAGE_SPIKE_REL * 0.5 * (np.abs(np.roll(x, 1)) + np.abs(np.roll(x, -1)))
             add("value spike", _isolated_spikes(x, DAMAGE_SPIKE_K, mag), True)
+            runs, nruns = _corrupted_runs(x, DAMAGE_SPIKE_K, DAMAGE_SPIKE_REL, DAMAGE_RUN_MAX)
+            # the 1 % limit counts runs here, not samples: one corrupted block is one event
+            if nruns <= max(1.0, DAMAGE_MAX_FRACTION * n):
+                add("corrupted run", runs, False)
     return bad, ", ".join(f"{v} {k}" for k, v in counts.items())
