@@ -115,7 +115,7 @@ def _scan_kernel(buf, start, end, stop_at_footer, known_in, check_chan, fill, op
     status : int
         ``SCAN_*`` code.
     """
-    known = known_in.copy()
+    known = known_in.copy() if check_chan else known_in
     pos = start
     n = 0
     status = 0
@@ -1264,7 +1264,7 @@ class _Reader:
         other = np.flatnonzero(ops != OP_MESSAGE)
         k = 0
         while k < n:
-            op = ops[k]
+            op = int(ops[k])
             if op == OP_MESSAGE:
                 self._close_chunk()
                 i = np.searchsorted(other, k)
@@ -1459,7 +1459,7 @@ class _Reader:
                     if ln > self.max_record_bytes and ln > size:
                         why = (f"record at byte {endpos} declares {ln} bytes, more than the "
                                f"file ({size}); garbage length or truncated file")
-                if status == SCAN_BEYOND_END and ops_at(buf, endpos) == OP_CHUNK and \
+                if status == SCAN_BEYOND_END and _opcode_at(buf, endpos) == OP_CHUNK and \
                         bytes(buf[size - 8:]) != MAGIC:
                     resume = -1  # a file cut inside a chunk: salvage the chunk's start below
                 else:
@@ -1477,7 +1477,7 @@ class _Reader:
             if resume == -1:
                 reg.resumed = False
                 if dstart == endpos and status == SCAN_BEYOND_END and \
-                        ops_at(buf, endpos) == OP_CHUNK:
+                        _opcode_at(buf, endpos) == OP_CHUNK:
                     self._salvage_cut_chunk(endpos, reg)
             else:
                 tail_status = SCAN_OK
@@ -1598,7 +1598,7 @@ _SCAN_REASONS = {SCAN_SHORT_HEADER: "file ends inside a record header",
                  SCAN_EARLY_FOOTER: "a footer record before the end of the file"}
 
 
-def ops_at(buf, p):
+def _opcode_at(buf, p):
     """Opcode byte at ``p`` (-1 beyond the buffer)."""
     return int(buf[p]) if 0 <= p < len(buf) else -1
 
