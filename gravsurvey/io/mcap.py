@@ -13,10 +13,13 @@ reader holds at most one decompressed chunk, and refuses any chunk whose declare
 size exceeds ``max_record_bytes`` (default 256 MiB) before allocating anything.  Top-level
 records are never copied, only sliced from the map.
 
-Salvage: reading stops at the first damaged record (length beyond end of file, absurd length,
-failed decompression, CRC mismatch, bad opcode inside a chunk); everything before it is kept; a
-chunk cut by the end of the file is decompressed as far as its bytes go and its complete
-message records are kept.  :class:`SalvageInfo` says what was recovered and lost.
+Salvage: a damaged record (length beyond end of file, absurd length, failed decompression, CRC
+mismatch, bad opcode, a message on an undefined channel, ...) is skipped and reading resumes at
+the next intact record (:func:`find_resync`: the next chain of plausible records, or the next
+chunk of the summary's chunk index); a chunk cut by the end of the file is decompressed as far
+as its bytes go and its complete message records are kept.  :class:`SalvageInfo` lists every
+skipped region (:class:`SkippedRegion`) with what was recovered and lost.  Samples not protected
+by a verified chunk CRC go through :func:`gravsurvey.io.checks.damaged_values`.
 """
 
 from __future__ import annotations
@@ -1402,7 +1405,8 @@ class _Reader:
             cand = find_resync(buf, 8, size, self.known, RESYNC_MIN_CHAIN) if size > 17 else -1
             if cand == -1 or (cand > DAMAGED_START_MAX and bytes(buf[size - 8:]) != MAGIC):
                 raise DataError(f"{self.path}: not an MCAP file (no MCAP magic at the start)")
-            regions.append(SkippedRegion(0, cand, "damaged magic at the start of the file"))
+            regions.append(SkippedRegion(0, cand, "damaged magic at the start of the file",
+                                         lost_messages=0 if cand == 8 else None))
             pos = cand
         while pos < size:
             n, endpos, status, arrs = scan_records(buf, pos, size, stop_at_footer=True,
