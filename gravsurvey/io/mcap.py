@@ -1241,11 +1241,41 @@ class _Reader:
         self.verified = False
         if complete and self.check_crc and ucrc != 0:
             if zlib.crc32(out) != ucrc:
+                self._rescue_definitions(np.frombuffer(out, np.uint8))
                 raise _Damaged("chunk CRC mismatch")
             self.verified = True
         self.c.compressions.add(comp or "none")
         self.c.chunks += 1
         return np.frombuffer(out, np.uint8)
+
+    def _rescue_definitions(self, cbuf):
+        """Schemas and channels of a chunk that failed its CRC, for ids nothing else defines.
+
+        Its messages are dropped, but the messages of later, intact chunks may need these
+        definitions (when the summary does not repeat them); a definition that does not parse
+        is ignored.
+        """
+        n, _, _, arrs = scan_records(cbuf, 0, len(cbuf))
+        got = []
+        for k in np.flatnonzero((arrs[0][:n] == OP_SCHEMA) | (arrs[0][:n] == OP_CHANNEL)):
+            p, ln = int(arrs[1][k]), int(arrs[2][k])
+            try:
+                if arrs[0][k] == OP_SCHEMA:
+                    sch = _parse_schema(cbuf, p, ln)
+                    if sch.id != 0 and sch.id not in self.c.schemas:
+                        self.c.schemas[sch.id] = sch
+                        got.append(f"schema {sch.id} ({sch.name})")
+                else:
+                    ch = _parse_channel(cbuf, p, ln)
+                    if ch.id not in self.c.channels:
+                        self.c.channels[ch.id] = ch
+                        self.known[ch.id] = True
+                        got.append(f"channel {ch.id} ({ch.topic})")
+            except _Damaged:
+                continue
+        if got:
+            self.c.notes.append(f"{self.path}: definitions taken from a chunk that failed its "
+                                f"CRC (its messages dropped): {', '.join(got)}")
 
     def _inner(self, cbuf, complete):
         n, _, status, arrs = scan_records(cbuf, 0, len(cbuf))
