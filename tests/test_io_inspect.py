@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 from test_io_faults import records, sample
@@ -90,3 +91,38 @@ def test_inspect_config_applies_csv_columns_and_units(tmp_path):
     assert acc["level"] == "ok"  # g converted to m/s^2 by the flight's units
     r = gs("inspect", "--config", tmp_path / "nope.yaml", tmp_path / "F1" / "imu.csv")
     assert r.returncode == 2 and "nope.yaml" in r.stderr
+
+
+def test_run_with_a_damaged_middle_chunk_reads_on_and_says_so(tmp_path):
+    """The whole CLI on the sample flight with its middle chunk zeroed: the run reads the chunks
+    after it, writes the deliverables, and exits 1 with one line naming the file, the skipped
+    bytes, the lost log-time span and message count.  (The product across the resulting gap is
+    not judged here: flights are not yet split at gaps.)"""
+    import shutil
+
+    from gravsurvey.io.mcap import OP_CHUNK, read_mcap, scan_records
+
+    src = tmp_path / "s"
+    shutil.copytree(Path(__file__).resolve().parents[1] / "sample_data" / "seed_line", src)
+    f = src / "F01" / "F01_json.mcap"
+    intact = read_mcap(f)
+    raw = bytearray(f.read_bytes())
+    buf = np.frombuffer(bytes(raw), np.uint8)
+    _, _, _, a = scan_records(buf, 8, len(buf), stop_at_footer=True)
+    chunks = np.flatnonzero(a[0] == OP_CHUNK)
+    k = chunks[len(chunks) // 2]
+    p, ln = int(a[1][k]), int(a[2][k])
+    raw[p + 60:p + ln - 8] = bytes(ln - 68)
+    f.write_bytes(bytes(raw))
+    c = read_mcap(f)
+    (reg,) = c.salvage.regions
+    assert reg.start == p - 9 and reg.end == p + ln and reg.resumed
+    assert c.salvage.recovered + reg.lost_messages == sum(intact.counts.values())
+    r = gs("run", src / "survey.yaml", "-o", tmp_path / "out")
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    line = next(x for x in r.stderr.splitlines() if "F01_json.mcap" in x)
+    assert f"bytes {p - 9}-{p + ln} skipped" in line and "reading resumed" in line
+    assert f"{reg.lost_messages} messages lost" in line
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["flights"]["F01"]["data_loss"]
+    assert (tmp_path / "out" / "profiles.csv").exists()
