@@ -346,7 +346,8 @@ def test_crcless_flip_that_crashed_mechanization(tmp_path):
     inside zstd data) decoded an IMU value of 2.6e21 m/s^2 that was processed as data and ended
     in ZeroDivisionError in mechanization.  The damage checks drop it; with CRCs the chunk is
     refused instead."""
-    bag = Path(__file__).resolve().parents[1] / "sample_data" / "grid_ros2" / "F01" / "F01_ros2.mcap"
+    bag = (Path(__file__).resolve().parents[1] / "sample_data" / "grid_ros2" / "F01"
+           / "F01_ros2.mcap")
     raw = bytearray(_zero_chunk_crcs(bag.read_bytes()))
     raw[866968] ^= 0x02
     (tmp_path / "d.mcap").write_bytes(bytes(raw))
