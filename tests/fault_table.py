@@ -17,9 +17,12 @@ import warnings
 from collections import Counter
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from test_io_faults import KINDS, everything, intact, records, sample  # noqa: E402
+from test_io_faults import FLIGHT_S, KINDS, everything, intact, records, sample  # noqa: E402
+from test_io_support import static_flight  # noqa: E402
 
 from gravsurvey.errors import DataError, DataWarning, GravsurveyError  # noqa: E402
 from gravsurvey.io.ingest import ingest_options_from_dict, load_flight  # noqa: E402
@@ -72,6 +75,27 @@ def one(kind, data, dmg):
             pass
         except Exception as e:  # noqa: BLE001
             exc = exc or type(e).__name__
+    # decoded IMU samples against the truth: corrupted ones kept (time and values not a
+    # true sample) and the largest value error among samples kept at a true time
+    corrupt, worst, dropped = 0, 0.0, 0
+    if c is not None:
+        d = static_flight(seconds=FLIGHT_S)
+        truth = {int(t): k for k, t in enumerate(d["imu_t"])}
+        for cid, blk in c.decoded.items():
+            if c.channels[cid].topic != "/imu":
+                continue
+            dropped += getattr(blk, "value_check_dropped", 0)
+            for j, t in enumerate(blk.time_ns):
+                k = truth.get(int(t))
+                f, w = blk.values["specific_force"][j], blk.values["angular_rate"][j]
+                if k is None:
+                    corrupt += 1
+                    continue
+                err = max(float(np.max(np.abs(f - d["f"][k]))),
+                          float(np.max(np.abs(w - d["w"][k]))))
+                if not err == 0.0:
+                    corrupt += 1
+                    worst = max(worst, err) if np.isfinite(err) else float("inf")
     want = intact(kind, dmg)
     recs = records(kind)
     before = Counter(m for s, e, ms in recs if e <= first for m in ms) & want
@@ -83,7 +107,7 @@ def one(kind, data, dmg):
         "unknown opcodes" in n or "no footer" in n for n in c.notes)
     return dict(intact_after=sum(after.values()), lost_before=lost_before,
                 lost_after=lost_after, unreported=int(total_lost > 0 and not said),
-                exc=exc)
+                corrupt_kept=corrupt, dropped=dropped, worst=worst, exc=exc)
 
 
 def main(per_cell=50, seed=0):
@@ -95,16 +119,19 @@ def main(per_cell=50, seed=0):
             excs = Counter()
             for _ in range(per_cell):
                 r = one(kind, *damage(kind, fault, rng))
-                agg.update({k: v for k, v in r.items() if k != "exc"})
+                agg.update({k: v for k, v in r.items() if k not in ("exc", "worst")})
+                agg["worst"] = max(agg["worst"], r["worst"])
                 if r["exc"]:
                     excs[r["exc"]] += 1
             rows.append((fault, kind, per_cell, agg, excs))
     print("| fault | file | cases | intact messages after the damage | lost before | "
-          "lost after | losses not reported | other exceptions |")
-    print("|---|---|---:|---:|---:|---:|---:|---|")
+          "lost after | losses not reported | other exceptions | IMU samples dropped by "
+          "damage checks | corrupted IMU samples kept | their largest error |")
+    print("|---|---|---:|---:|---:|---:|---:|---|---:|---:|---:|")
     for fault, kind, n, a, e in rows:
         print(f"| {fault} | {kind} | {n} | {a['intact_after']} | {a['lost_before']} | "
-              f"{a['lost_after']} | {a['unreported']} | {dict(e) or 0} |")
+              f"{a['lost_after']} | {a['unreported']} | {dict(e) or 0} | {a['dropped']} | "
+              f"{a['corrupt_kept']} | {a['worst']:.3g} |")
 
 
 if __name__ == "__main__":
