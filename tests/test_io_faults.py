@@ -367,3 +367,32 @@ def test_crcless_flip_that_crashed_mechanization(tmp_path):
     raw[866968] ^= 0x02
     (tmp_path / "c.mcap").write_bytes(bytes(raw))
     assert "CRC" in read_mcap(tmp_path / "c.mcap").salvage.reason
+
+
+def test_damaged_opcode_posing_as_data_end_does_not_hide_later_damage(tmp_path):
+    """A message index record's opcode 7 -> 15 (one bit) reads as the data end; damage after
+    it used to be taken for a damaged summary (a note, no data lost).  Messages read after it
+    show it was not the end: the later damaged chunk is reported as lost data."""
+    kind = "ros2_zstd"
+    recs = records(kind)
+    raw = bytearray(sample(kind))
+    mi = [s for s, _, _ in recs if raw[s] == 7]
+    chunks = [(s, e, m) for s, e, m in recs if len(m) > 1]
+    raw[mi[3]] ^= 0x08
+    s, e, lost = chunks[10]
+    raw[s + 80:e - 8] = bytes(e - 8 - s - 80)
+    c, got = read_damaged(bytes(raw))
+    check_outcome(kind, [(mi[3], mi[3] + 1), (s + 80, e - 8)], c, got)
+    assert any(r.start == s and r.lost_messages == len(lost) for r in c.salvage.regions)
+    assert not any("summary section damaged" in n for n in c.notes)
+
+
+def test_damaged_summary_alone_is_a_note_not_data_loss(tmp_path):
+    kind = "ros2_zstd"
+    raw = bytearray(sample(kind))
+    data_end = [s for s, _, _ in records(kind) if raw[s] == 15][0]
+    raw[data_end + 13 + 8] ^= 0x80  # top bit of the first summary record's length
+    c, got = read_damaged(bytes(raw))
+    assert c.salvage is None and got == everything(kind)
+    assert any("summary section damaged" in n and "all data records were read" in n
+               for n in c.notes)

@@ -1097,6 +1097,7 @@ class _Reader:
         self.known = np.zeros(65536, np.bool_)  # channel ids defined so far
         self.verified = False  # the records being handled passed a chunk CRC check
         self.data_end_seen = False
+        self.summary_regions = []  # (region, messages read by then) after the data end
         self.footer_seen = False
         self.waiting = []  # regions waiting for the first log time read after them
         self.prev_op = -1
@@ -1502,12 +1503,11 @@ class _Reader:
                 tail_status, tail_at = status, endpos
             else:
                 break
-            if self.data_end_seen:
-                # only the summary section is damaged: every data record has been read
-                c.notes.append(f"{self.path}: summary section damaged at byte {dstart} ({why}); "
-                               "all data records were read")
-                break
             reg = SkippedRegion(dstart, resume if resume != -1 else size, why, self.last_lt)
+            if self.data_end_seen:
+                # after the data end record: the summary section (a note in _finish unless
+                # messages turn up after it, i.e. the data end record was a damaged opcode)
+                self.summary_regions.append((reg, self.n_msgs))
             if resume == -1:
                 reg.resumed = False
                 if dstart == endpos and status == SCAN_BEYOND_END and \
@@ -1516,7 +1516,9 @@ class _Reader:
             else:
                 tail_status = SCAN_OK
             self._lost_in(reg, damaged_chunk_end)
-            if regions and regions[-1].end == reg.start:  # one stretch, found in two steps
+            if self.data_end_seen:
+                pass
+            elif regions and regions[-1].end == reg.start:  # one stretch, found in two steps
                 prev = regions[-1]
                 prev.end, prev.resumed = reg.end, reg.resumed
                 prev.lost_messages = (None if prev.lost_messages is None or reg.lost_messages
@@ -1572,6 +1574,13 @@ class _Reader:
     def _finish(self, regions, tail_status, tail_at):
         buf, c, size = self.buf, self.c, len(self.buf)
         self._close_chunk()
+        for r, n_then in self.summary_regions:
+            if self.n_msgs == n_then:
+                # only the summary section is damaged: every data record has been read
+                c.notes.append(f"{self.path}: summary section damaged at byte {r.start} "
+                               f"({r.reason}); all data records were read")
+            else:  # messages after it: the "data end" record was a damaged opcode
+                regions.append(r)
         if self.extra_regions:
             tail = [regions.pop()] if regions and not regions[-1].resumed else []
             regions = sorted(regions + self.extra_regions, key=lambda r: r.start) + tail
