@@ -1098,6 +1098,7 @@ class _Reader:
         self.verified = False  # the records being handled passed a chunk CRC check
         self.data_end_seen = False
         self.summary_regions = []  # (region, messages read by then) after the data end
+        self.preloaded_schemas, self.preloaded_channels = set(), set()  # from the summary
         self.footer_seen = False
         self.waiting = []  # regions waiting for the first log time read after them
         self.prev_op = -1
@@ -1138,23 +1139,44 @@ class _Reader:
             return (role, "json")
         return None
 
-    def _handle_schema(self, b, pos, ln):
+    def _handle_schema(self, b, pos, ln, preload=False):
         s = _parse_schema(b, pos, ln)
         if s.id == 0:
             raise _Damaged("schema record with reserved id 0")
         old = self.c.schemas.get(s.id)
+        if old is not None and s.id in self.preloaded_schemas and not preload:
+            # the data section's own definition wins over the summary's copy
+            self.preloaded_schemas.discard(s.id)
+            if (old.name, old.encoding, old.data) != (s.name, s.encoding, s.data):
+                self.c.notes.append(f"{self.path}: schema id {s.id}: the summary's copy "
+                                    "differs from the data section's; the data section's kept")
+            self.c.schemas[s.id] = s
+            return
         if old is not None and (old.name, old.encoding, old.data) != (s.name, s.encoding, s.data):
             self.c.notes.append(f"{self.path}: schema id {s.id} redefined; first kept")
             return
+        if old is None and preload:
+            self.preloaded_schemas.add(s.id)
         self.c.schemas.setdefault(s.id, s)
 
-    def _handle_channel(self, b, pos, ln):
+    def _handle_channel(self, b, pos, ln, preload=False):
         ch = _parse_channel(b, pos, ln)
         old = self.c.channels.get(ch.id)
+        if old is not None and ch.id in self.preloaded_channels and not preload:
+            # the data section's own definition wins over the summary's copy
+            self.preloaded_channels.discard(ch.id)
+            if (old.topic, old.schema_id, old.message_encoding) != (
+                    ch.topic, ch.schema_id, ch.message_encoding):
+                self.c.notes.append(f"{self.path}: channel id {ch.id}: the summary's copy "
+                                    "differs from the data section's; the data section's kept")
+            self.c.channels[ch.id] = ch
+            return
         if old is not None and (old.topic, old.schema_id, old.message_encoding) != (
                 ch.topic, ch.schema_id, ch.message_encoding):
             self.c.notes.append(f"{self.path}: channel id {ch.id} redefined; first kept")
             return
+        if old is None and preload:
+            self.preloaded_channels.add(ch.id)
         self.c.channels.setdefault(ch.id, ch)
         self.known[ch.id] = True
 
@@ -1549,9 +1571,9 @@ class _Reader:
         for k in np.flatnonzero((arrs[0][:n] == OP_SCHEMA) | (arrs[0][:n] == OP_CHANNEL)):
             try:
                 if arrs[0][k] == OP_SCHEMA:
-                    self._handle_schema(self.buf, int(arrs[1][k]), int(arrs[2][k]))
+                    self._handle_schema(self.buf, int(arrs[1][k]), int(arrs[2][k]), True)
                 else:
-                    self._handle_channel(self.buf, int(arrs[1][k]), int(arrs[2][k]))
+                    self._handle_channel(self.buf, int(arrs[1][k]), int(arrs[2][k]), True)
             except _Damaged:
                 pass
 
