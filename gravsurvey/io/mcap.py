@@ -366,6 +366,11 @@ def _bytes32(b, pos, end):
     return bytes(b[pos + 4:pos + 4 + n]), pos + 4 + n
 
 
+def _plausible_name(s):
+    """A topic/schema name/encoding that could be real: non-empty, printable."""
+    return bool(s) and s.isprintable()
+
+
 def _parse_schema(b, pos, ln):
     end = pos + ln
     if ln < 2:
@@ -1145,12 +1150,17 @@ class _Reader:
             raise _Damaged("schema record with reserved id 0")
         old = self.c.schemas.get(s.id)
         if old is not None and s.id in self.preloaded_schemas and not preload:
-            # the data section's own definition wins over the summary's copy
             self.preloaded_schemas.discard(s.id)
             if (old.name, old.encoding, old.data) != (s.name, s.encoding, s.data):
-                self.c.notes.append(f"{self.path}: schema id {s.id}: the summary's copy "
-                                    "differs from the data section's; the data section's kept")
-            self.c.schemas[s.id] = s
+                # two copies disagree: one is damaged; a CRC-checked or the only plausible
+                # copy wins, else the summary's (first) copy stays
+                take = self.verified or (_plausible_name(s.name) and not
+                                         _plausible_name(old.name))
+                self.c.notes.append(f"{self.path}: schema id {s.id}: the summary's copy differs "
+                                    f"from the data section's; the "
+                                    f"{'data section' if take else 'summary'}'s kept")
+                if take:
+                    self.c.schemas[s.id] = s
             return
         if old is not None and (old.name, old.encoding, old.data) != (s.name, s.encoding, s.data):
             self.c.notes.append(f"{self.path}: schema id {s.id} redefined; first kept")
@@ -1163,13 +1173,20 @@ class _Reader:
         ch = _parse_channel(b, pos, ln)
         old = self.c.channels.get(ch.id)
         if old is not None and ch.id in self.preloaded_channels and not preload:
-            # the data section's own definition wins over the summary's copy
             self.preloaded_channels.discard(ch.id)
             if (old.topic, old.schema_id, old.message_encoding) != (
                     ch.topic, ch.schema_id, ch.message_encoding):
+                # two copies disagree: one is damaged; a CRC-checked or the only plausible
+                # copy wins, else the summary's (first) copy stays
+                take = self.verified or (
+                    _plausible_name(ch.topic) and _plausible_name(ch.message_encoding)
+                    and not (_plausible_name(old.topic)
+                             and _plausible_name(old.message_encoding)))
                 self.c.notes.append(f"{self.path}: channel id {ch.id}: the summary's copy "
-                                    "differs from the data section's; the data section's kept")
-            self.c.channels[ch.id] = ch
+                                    "differs from the data section's; the "
+                                    f"{'data section' if take else 'summary'}'s kept")
+                if take:
+                    self.c.channels[ch.id] = ch
             return
         if old is not None and (old.topic, old.schema_id, old.message_encoding) != (
                 ch.topic, ch.schema_id, ch.message_encoding):
@@ -1344,6 +1361,7 @@ class _Reader:
                     raise _Damaged("message index record not after a chunk")
                 if op > OP_DATA_END:
                     self.unknown_records += 1
+                self.verified = False  # top-level records carry no CRC
                 if op == OP_HEADER:
                     c.profile, q = _str(buf, p, p + ln)
                     c.library, _ = _str(buf, q, p + ln)
@@ -1471,7 +1489,7 @@ class _Reader:
                 status, n, endpos = SCAN_EARLY_FOOTER, n - 1, int(rpos[n - 1]) - 9
             # a wrong length in the record before a break would make the break itself: that
             # record is handled only once it is known to be sound
-            lookback = status != SCAN_OK and n >= 1 and ops[n - 1] not in (OP_CHUNK, OP_HEADER)
+            lookback = status != SCAN_OK and n >= 1 and ops[n - 1] != OP_CHUNK
             kfail, why = self._process(arrs, n - 1 if lookback else n)
             look, later = None, None
             if kfail is None and lookback:
