@@ -212,22 +212,36 @@ def simulate(sim_config, output_dir, oracle):
 @cli.command()
 @click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable JSON output.")
-def inspect(files, as_json):
+@click.option("--config", "config", type=click.Path(dir_okay=False), default=None,
+              help="Survey config: each file is read with the topics, JSON fields, CSV "
+                   "columns, time format and units of the flight that names it.")
+def inspect(files, as_json, config):
     """Describe sensor logs (MCAP or CSV): channels, counts, spans, rates, gaps, unit checks.
+
+    Exit 1 when a file is damaged (what and where is said) or cannot be read.
 
     \b
     Example:
       gravsurvey inspect flight.mcap
+      gravsurvey inspect --config survey.yaml logs/imu.csv
       gravsurvey inspect --json flight.mcap > flight.json
     """
     from .io.inspect import format_inspect, inspect_files
 
-    reports = inspect_files(list(files))
+    cfg = None
+    if config is not None:
+        from .config import load_config
+
+        cfg = load_config(config)
+    reports = inspect_files(list(files), config=cfg)
     if as_json:
         click.echo(json.dumps(reports, indent=2, default=str))
     else:
         click.echo(format_inspect(reports))
-    if any(r.get("error") for r in reports):
+    damaged = [d for r in reports for d in r.get("damage", [])]
+    for d in damaged:
+        click.echo(f"inspect: {d}", err=True)
+    if damaged:
         sys.exit(1)
 
 

@@ -119,7 +119,12 @@ def _segments(cfg: SurveyConfig, fl: FlightConfig, sol) -> list:
     if mode == "whole":
         from .survey import Segment
 
-        return [Segment("L01", "line", 0, len(sol.time))]
+        # the whole flight, but never across the NaN epoch between separately estimated
+        # segments (a flight split at a gap: consistency.SegmentedSolution)
+        seg = np.asarray(getattr(sol, "segment", np.zeros(len(sol.time))))
+        edge = np.diff(np.concatenate([[0], (seg >= 0).astype(np.int8), [0]]))
+        runs = list(zip(np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)))
+        return [Segment(f"L{i + 1:02d}", "line", int(a), int(b)) for i, (a, b) in enumerate(runs)]
     return segment_lines(sol.time, sol.lat, sol.lon, sol.vel_n, options=cfg.lines)
 
 

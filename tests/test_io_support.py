@@ -14,7 +14,8 @@ from mcap.writer import CompressionType, Writer
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
-EXTERNAL = Path(__file__).resolve().parents[2] / "shared" / "external"
+# outside data copied into the repository with their licences (tests/data/*/LICENSE)
+EXTERNAL = Path(__file__).resolve().parent / "data"
 OMEGA_E = 7.292115e-5
 START_NS = 1_750_000_000_123_456_789
 

@@ -747,6 +747,19 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float):
     s_g1 = _markov_psd(f, wide.anomaly_sigma_mps2, tau1)
     h1 = s_g1 / (s_g1 + s_n)
     valid = h1 >= 0.5
+    # calibrate the noise level on the first pass itself: in the top octave of its band (half
+    # to full wide resolution, ~1-2 km) an airborne field is weak, so there P / H1^2 is the
+    # noise the filter really passes - the vertical-channel fit can miss parts of it (turbulence
+    # coupled through attitude errors, GNSS, the gravimeter's slow error).  Only raised, never
+    # lowered: a strong short-wavelength field then errs on the side of smoothing.
+    top = valid & (f >= 0.5 * float(f[valid].max())) if valid.any() else valid
+    if top.sum() >= 8:
+        k_noise = float(np.median(p[top] / (h1[top] ** 2 * s_n[top])))
+        # the median of a chi-square(2)/2 periodogram is ln 2 of its mean
+        k_noise /= math.log(2.0)
+        if k_noise > 1.0:
+            s_n = s_n * k_noise
+            report["noise_scale"] = k_noise
     # bands of >= 8 bins, log-spaced: the periodogram's scatter (100 % per bin) averages down
     s_sig = np.zeros_like(f)
     edges = np.unique(np.concatenate([[0], np.geomspace(8, max(valid.sum(), 9), 24).astype(int)]))

@@ -360,3 +360,160 @@ def check_epoch(channel, time_ns):
                         f"{channel}: time stamps start at {time_ns[0] * 1e-9:.3f} s after "
                         "1970-01-01, before 2000: simulation clock or unset time?")]
     return []
+
+
+# ----------------------------------------------------------------------------- damage checks
+# Values read without a chunk CRC (unchunked files, chunks with CRC 0, check_crc: false) can
+# carry flipped bits.  A flipped exponent bit multiplies a float64 by 2**(+-2**k) and a flipped
+# time-stamp bit moves a sample by 2**k ns; these checks catch such isolated corruptions and
+# leave real signals alone: a sample is dropped only when it disagrees with BOTH neighbours
+# while the neighbours agree with each other (a clock restart or a gap is a step, not a spike).
+DAMAGE_ABS_MAX = 1e9  # |value| above this is no measurement in any supported unit
+DAMAGE_SPIKE_K = 1000.0  # spike > this x the channel's median |second difference| ...
+DAMAGE_SPIKE_REL = 0.25  # ... and > this fraction of the neighbours' magnitude
+DAMAGE_SPIKE_NEIGHBOURS = 4.0  # ... and > this x the neighbours' own difference
+DAMAGE_TIME_K = 50.0  # time-offset spike > this x the median |step| of (time - log time) ...
+DAMAGE_TIME_STEP_FRACTION = 0.5  # ... and > this fraction of the nominal sample step
+DAMAGE_MAX_FRACTION = 0.01  # a spike test flagging more than 1 % of samples is not bit damage
+DAMAGE_RUN_MAX = 64  # longest run of corrupted samples between a jump and the jump back
+
+
+def _isolated_spikes(x, k_scale, floor):
+    """Interior samples of ``x`` (n,) that jump away from both neighbours while the neighbours
+    agree: |x[k] - mean(x[k-1], x[k+1])| above ``k_scale`` x its median over the series, above
+    ``floor`` (n,) and above DAMAGE_SPIKE_NEIGHBOURS x |x[k+1] - x[k-1]|."""
+    n = len(x)
+    out = np.zeros(n, bool)
+    if n < 3:
+        return out
+    with np.errstate(invalid="ignore", over="ignore"):
+        e = np.abs(x[1:-1] - 0.5 * (x[:-2] + x[2:]))
+        c = np.abs(x[2:] - x[:-2])
+        fin = np.isfinite(e)
+        if not fin.any():
+            return out
+        s = float(np.median(e[fin]))
+        out[1:-1] = fin & (e > k_scale * s) & (e > floor[1:-1]) & (e > DAMAGE_SPIKE_NEIGHBOURS * c)
+    return out
+
+
+def _corrupted_runs(x, k_scale, rel, max_len):
+    """Runs of up to ``max_len`` samples of ``x`` (n,) entered and left by a jump (> ``k_scale``
+    x the median |step| and > ``rel`` x the level) after which the series returns to the level
+    before the run (within ``rel`` x the jump): a corrupted stretch of a decompressed block, not
+    a signal (a real level change does not come back).
+
+    Returns
+    -------
+    mask : ndarray of bool, shape (n,)
+    runs : int
+        Number of runs found.
+    """
+    n = len(x)
+    out = np.zeros(n, bool)
+    if n < 3:
+        return out, 0
+    with np.errstate(invalid="ignore", over="ignore"):
+        dx = np.diff(x)
+        fin = np.isfinite(dx)
+        if not fin.any():
+            return out, 0
+        s = float(np.median(np.abs(dx[fin])))
+        level = np.maximum(np.abs(x[:-1]), np.abs(x[1:]))
+        big = np.flatnonzero(fin & (np.abs(dx) > k_scale * s) & (np.abs(dx) > rel * level))
+    a, runs = 0, 0
+    while a + 1 < len(big):
+        i, j = int(big[a]), int(big[a + 1])
+        if j - i <= max_len and abs(x[j + 1] - x[i]) < rel * abs(dx[i]):
+            out[i + 1:j + 1] = True
+            runs += 1
+            a += 2
+        else:
+            a += 1
+    return out, runs
+
+
+def damaged_values(role, time_ns, log_time_ns, values, candidates):
+    """Samples that show the marks of corrupted bytes, among ``candidates``.
+
+    Checks: non-finite or absurd (> ``DAMAGE_ABS_MAX``) values; latitude/longitude outside
+    [-90, 90] / [-180, 360] degrees; a measurement time out of order with both neighbours
+    while they are in order (at the ends: with its one neighbour); a spike in (time - log
+    time), at the ends too; an isolated value spike (see the ``DAMAGE_SPIKE_*`` constants);
+    a run of up to ``DAMAGE_RUN_MAX`` samples entered by such a jump and left by one back to
+    the level before it.  A spike test that flags more than ``DAMAGE_MAX_FRACTION``
+    of the samples is ignored (that is a property of the signal, left to the plausibility
+    checks).
+
+    Parameters
+    ----------
+    role : str
+        ``imu``, ``altimeter`` or ``gnss``.
+    time_ns, log_time_ns : ndarray of int64, shape (n,)
+        Measurement and MCAP log times, file order.
+    values : dict of ndarray, each shape (n,) or (n, 3)
+        Decoded values (units as recorded).
+    candidates : ndarray of bool, shape (n,)
+        Samples that may be dropped (those not protected by a CRC).
+
+    Returns
+    -------
+    bad : ndarray of bool, shape (n,)
+    why : str
+        Counts per check, e.g. ``"2 non-finite/absurd, 1 time out of order"``.
+    """
+    n = len(time_ns)
+    cand = np.asarray(candidates, bool)
+    counts = {}
+    bad = np.zeros(n, bool)
+
+    def add(name, mask, guarded):
+        mask = mask & cand & ~bad
+        if guarded and mask.sum() > DAMAGE_MAX_FRACTION * n:
+            return
+        if mask.any():
+            counts[name] = counts.get(name, 0) + int(mask.sum())
+            bad[:] |= mask
+
+    cols = []
+    for k, v in values.items():
+        v2 = np.asarray(v, np.float64).reshape(n, -1)
+        with np.errstate(invalid="ignore"):
+            add("non-finite/absurd", ~np.isfinite(v2).all(axis=1)
+                | (np.abs(v2) > DAMAGE_ABS_MAX).any(axis=1), False)
+        if k == "lat_deg":
+            add("latitude out of range", (np.abs(v2[:, 0]) > 90.0), True)
+        elif k == "lon_deg":
+            add("longitude out of range", (v2[:, 0] < -180.0) | (v2[:, 0] > 360.0), True)
+        cols += [v2[:, j] for j in range(v2.shape[1])]
+    if n >= 3:
+        t = np.asarray(time_ns, np.int64)
+        prev, nxt = t[:-2], t[2:]
+        mid = t[1:-1]
+        ooo = np.zeros(n, bool)
+        ooo[1:-1] = (prev <= nxt) & ((mid < prev) | (mid > nxt))
+        ooo[0] = t[0] > t[1] and t[1] <= t[2]
+        ooo[-1] = t[-1] < t[-2] and t[-3] <= t[-2]
+        add("time out of order", ooo, True)
+        steps = np.diff(t)
+        pos = steps[steps > 0]
+        nominal = float(np.median(pos)) if len(pos) else 0.0
+        d = t.astype(np.float64) - np.asarray(log_time_ns, np.int64).astype(np.float64)
+        dd = np.abs(np.diff(d))
+        scale = float(np.median(dd)) if len(dd) else 0.0
+        tol = max(DAMAGE_TIME_K * scale, DAMAGE_TIME_STEP_FRACTION * nominal)
+        spike = np.zeros(n, bool)
+        spike[1:-1] = (dd[:-1] > tol) & (dd[1:] > tol) & (np.abs(d[2:] - d[:-2]) <= tol)
+        # the first and last samples have one neighbour: off from it while the next pair agrees
+        spike[0] = dd[0] > tol and dd[1] <= tol
+        spike[-1] = dd[-1] > tol and dd[-2] <= tol
+        add("time/log-time spike", spike, True)
+        for x in cols:
+            with np.errstate(invalid="ignore", over="ignore"):
+                mag = DAMAGE_SPIKE_REL * 0.5 * (np.abs(np.roll(x, 1)) + np.abs(np.roll(x, -1)))
+            add("value spike", _isolated_spikes(x, DAMAGE_SPIKE_K, mag), True)
+            runs, nruns = _corrupted_runs(x, DAMAGE_SPIKE_K, DAMAGE_SPIKE_REL, DAMAGE_RUN_MAX)
+            # the 1 % limit counts runs here, not samples: one corrupted block is one event
+            if nruns <= max(1.0, DAMAGE_MAX_FRACTION * n):
+                add("corrupted run", runs, False)
+    return bad, ", ".join(f"{v} {k}" for k, v in counts.items())

@@ -151,7 +151,7 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
     cols.update(columns or {})
     units = dict(units or {})
     try:
-        with open(path, encoding="utf-8", newline="") as fh:
+        with open(path, encoding="utf-8-sig", newline="") as fh:
             text = fh.read()
     except OSError as exc:
         raise DataError(f"{path}: cannot open ({exc.strerror})") from None
@@ -277,7 +277,7 @@ def sniff_csv_role(path):
     """Guess a CSV file's channel from its header (for ``inspect``): role, "truth" (the
     simulator's truth.csv) or None."""
     try:
-        with open(path, encoding="utf-8", errors="replace") as fh:
+        with open(path, encoding="utf-8-sig", errors="replace") as fh:
             for ln in fh:
                 s = ln.strip()
                 if s and not s.startswith("#"):

@@ -66,7 +66,53 @@ def _channel_report(role, time_ns, values, units):
     }
 
 
-def inspect_files(paths, options: IngestOptions | None = None) -> list[dict]:
+def options_for(path, config):
+    """The ingestion settings a survey config gives a file: those of the flight that names
+    it (same resolved path, else same file name), else the first flight's.
+
+    Parameters
+    ----------
+    path : path
+    config : gravsurvey.config.SurveyConfig
+
+    Returns
+    -------
+    options : IngestOptions
+    note : str or None
+        Which flight's settings were used, or why none matched.
+    """
+    p = Path(path).resolve()
+    flights = list(config.flights)
+    if not flights:
+        return IngestOptions(), f"{config.path}: no flights; default settings used"
+    for fl in flights:
+        if any(Path(q).resolve() == p for q in fl.ingest.input_paths(config.base_dir)):
+            return fl.ingest, f"settings of flights[{fl.index}] ({fl.name}) in {config.path}"
+    for fl in flights:
+        if any(Path(q).name == p.name for q in fl.ingest.input_paths(config.base_dir)):
+            return fl.ingest, (f"settings of flights[{fl.index}] ({fl.name}) in {config.path} "
+                               "(matched by file name)")
+    fl = flights[0]
+    return fl.ingest, (f"not an input of {config.path}; settings of flights[{fl.index}] "
+                       f"({fl.name}) used")
+
+
+def damage_lines(rep) -> list[str]:
+    """What was damaged in one file's report (empty: nothing); ``inspect`` exits 1 if any."""
+    out = []
+    if rep.get("error"):
+        out.append(rep["error"])
+    if rep.get("salvage"):
+        out.append(rep["salvage"]["summary"])
+    out += [n for n in rep.get("notes", []) if "damaged" in n]
+    for ch in rep.get("channels", []):
+        if ch.get("value_check_dropped"):
+            out.append(f"{ch['topic']}: {ch['value_check_dropped']} samples without a chunk CRC "
+                       "failed the damage checks (corrupted values or time stamps)")
+    return out
+
+
+def inspect_files(paths, options: IngestOptions | None = None, config=None) -> list[dict]:
     """Inspect MCAP and CSV log files.
 
     Parameters
@@ -76,6 +122,9 @@ def inspect_files(paths, options: IngestOptions | None = None) -> list[dict]:
         columns, or from ``options.csv_paths`` when the file is named there).
     options : IngestOptions, optional
         Topics, JSON fields, CSV columns/time format/units; defaults when None.
+    config : gravsurvey.config.SurveyConfig, optional
+        A survey config: each file is inspected with the settings of the flight that names it
+        (:func:`options_for`); overrides ``options``.
 
     Returns
     -------
@@ -84,13 +133,16 @@ def inspect_files(paths, options: IngestOptions | None = None) -> list[dict]:
         MCAP ``profile``, ``library``, ``chunks``, ``compression``, ``salvage``, ``notes``,
         ``channels`` (per channel: ``topic``, ``schema``, ``encoding``, ``messages``,
         ``log_time`` span, and for sensor channels the :func:`_channel_report` entries);
-        ``error`` instead when the file could not be read.
+        ``error`` instead when the file could not be read; ``damage``: the lines of
+        :func:`damage_lines` (empty when the file is sound); ``settings`` with ``config``.
     """
-    o = options or IngestOptions()
     out = []
     for p in paths:
         p = os.fspath(p)
         rep = {"file": p}
+        o = options or IngestOptions()
+        if config is not None:
+            o, rep["settings"] = options_for(p, config)
         try:
             rep["size_bytes"] = os.path.getsize(p)
             if p.lower().endswith(".mcap"):
@@ -101,6 +153,7 @@ def inspect_files(paths, options: IngestOptions | None = None) -> list[dict]:
             rep["error"] = str(exc)
         except OSError as exc:
             rep["error"] = f"{p}: cannot read ({exc.strerror})"
+        rep["damage"] = damage_lines(rep)
         out.append(rep)
     return out
 
@@ -115,7 +168,8 @@ def _inspect_mcap(path, o):
         s = c.salvage
         rep["salvage"] = {"damaged_at_byte": s.offset, "reason": s.reason,
                           "recovered_messages": s.recovered,
-                          "lost_messages": s.lost_messages, "summary": s.describe(path)}
+                          "lost_messages": s.lost_messages, "summary": s.describe(path),
+                          "regions": [r.as_dict() for r in s.regions]}
     if c.orphan_messages:
         rep["notes"].append(f"{c.orphan_messages} messages on undefined channels")
     for cid in sorted(c.channels):
@@ -138,6 +192,7 @@ def _inspect_mcap(path, o):
             if blk.log_time_used:
                 entry["time_source"] += f" ({blk.log_time_used} fell back to log_time)"
             entry["undecodable"] = blk.undecodable
+            entry["value_check_dropped"] = blk.value_check_dropped
         rep["channels"].append(entry)
     return rep
 
@@ -174,11 +229,13 @@ def format_inspect(reports) -> str:
                          f"({', '.join(rep.get('compression', [])) or 'unchunked'})")
             head += f", {rep.get('size_bytes', 0)} bytes]"
         lines.append(head)
+        if rep.get("settings"):
+            lines.append(f"  using {rep['settings']}")
         if "error" in rep:
             lines.append(f"  ERROR: {rep['error']}")
             continue
-        if rep.get("salvage"):
-            lines.append(f"  DAMAGED: {rep['salvage']['summary']}")
+        for d in rep.get("damage", []):
+            lines.append(f"  DAMAGED: {d}")
         for n in rep.get("notes", []):
             lines.append(f"  note: {n}")
         if not rep.get("channels"):
