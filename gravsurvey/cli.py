@@ -323,10 +323,36 @@ def check(result_dir, reference_dir, tol_mgal, tol_rms_mgal):
         click.echo("check: outputs agree with the reference within tolerance")
 
 
+def _install_sigint_flag():
+    """Ctrl-C raises KeyboardInterrupt as usual and also sets :data:`errors.INTERRUPT`."""
+    import signal
+
+    from .errors import INTERRUPT
+
+    INTERRUPT.clear()
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        return  # ignored (a background job) or someone else's handler: leave it
+
+    def on_sigint(signum, frame):
+        INTERRUPT.set()
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, on_sigint)
+    previous = sys.unraisablehook
+
+    def quiet_interrupt(unraisable):
+        # the swallowed Ctrl-C would print a traceback; the run reports it once, as exit 130
+        if not isinstance(unraisable.exc_value, KeyboardInterrupt):
+            previous(unraisable)
+
+    sys.unraisablehook = quiet_interrupt
+
+
 def main(argv=None):
     """Console entry point: runs the click group and maps every outcome to an exit code."""
     TALLY.count = 0
     warnings.showwarning = TALLY.show
+    _install_sigint_flag()
     if not log.handlers:  # outside a run (no log file) logging must not print to stderr itself
         log.addHandler(logging.NullHandler())
     warnings.simplefilter("default", DataWarning)

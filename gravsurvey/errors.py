@@ -5,6 +5,7 @@ and a one-line message (table :data:`EXIT_CODES`, also in the README and
 ``gravsurvey --help``).
 """
 
+import threading
 import os
 
 #: exit code -> meaning; the one table of exit codes (README, ``--help`` and tests use it)
@@ -108,3 +109,9 @@ def check_keys(d, valid, path: str, required=()) -> None:
         if k not in d:
             where = f"{path}.{k}" if path else str(k)
             raise ConfigError(f"{where}: missing required key")
+
+
+#: Set by the CLI's SIGINT handler.  A Ctrl-C that lands inside a C callback (numba's LLVM
+#: object-cache hook, say) is swallowed there; output transactions check this flag before they
+#: publish, so such a run still ends as interrupted with nothing published.
+INTERRUPT = threading.Event()

@@ -862,8 +862,12 @@ class OutputTransaction:
             self.staging = None
 
     def __exit__(self, exc_type, exc, tb) -> bool:
+        from ..errors import INTERRUPT
+
         try:
             if exc_type is None:
+                if INTERRUPT.is_set():  # a Ctrl-C swallowed on the way: publish nothing
+                    raise KeyboardInterrupt
                 self.commit()
         finally:
             self._cleanup()
