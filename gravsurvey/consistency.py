@@ -66,6 +66,9 @@ MIN_OFFSET_CORRELATION = 0.5
 #: without manoeuvres there is nothing to correlate.
 MIN_OFFSET_SIGNAL_MPS2 = 0.02
 
+#: Correlation an IMU-GNSS offset estimate needs before an offset beyond the limit fails a flight.
+OFFSET_VERDICT_CORRELATION = 0.9
+
 #: Prefix of a note that records a check passed (a fact for summary.json, not a warning).
 PASSED = "passed: "
 
@@ -832,10 +835,16 @@ def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, elli
         txt = (f"imu ({names.files.get('imu', 'imu')}) {span_text(t0, a0, a1)} runs {off:+.2f} s "
                f"relative to gnss ({names.files.get('gnss', 'gnss')}) {span_text(t0, b0, b1)} "
                f"(cross-correlation of specific force, r = {c:.2f})")
-        if abs(off) > opts.max_time_offset_s:
+        if abs(off) > opts.max_time_offset_s and c >= OFFSET_VERDICT_CORRELATION:
             raise DataError(f"{txt}; expected within {opts.max_time_offset_s:g} s "
                             "(checks.max_time_offset_s): clocks out of step")
-        notes.append(f"{PASSED}time offset: {txt}")
+        if abs(off) > opts.max_time_offset_s:
+            # a weak correlation (turbulence on a strapdown triad) can place the peak a few
+            # tenths off on a flight with no offset at all (measured -0.63 s, r = 0.81): say it
+            notes.append(f"time offset: {txt}; beyond {opts.max_time_offset_s:g} s but the correlation is "
+                         f"below {OFFSET_VERDICT_CORRELATION:g}: not a verdict, check the clocks")
+        else:
+            notes.append(f"{PASSED}time offset: {txt}")
     if initial_raw:
         notes += check_initial(record, initial_raw, initial_key, ellipsoid)
     return notes

@@ -62,7 +62,8 @@ def test_simulated_flight_passes_and_unit_mistakes_fail(triad):
 
 
 def test_unit_mistakes_stop_load_flight_with_channel_named(tmp_path):
-    d = static_flight(seconds=10.0)
+    # a static period of 40 s: the gyro-unit verdict needs checks.REST_MIN_VERDICT_S (30 s) of rest
+    d = static_flight(seconds=40.0)
     _write_flight_csv(tmp_path, d, gyro_scale=180 / np.pi)  # deg/s in a rad/s column
     opts = ingest_options_from_dict({"inputs": CSV_IN}, "flights[0]")
     with pytest.raises(DataError, match=r"imu.csv: implausible data: imu: at rest .* "
@@ -82,6 +83,15 @@ def test_unit_mistakes_stop_load_flight_with_channel_named(tmp_path):
     with pytest.warns(DataWarning, match="values are in g"):
         rec = load_flight(warn, tmp_path)
     assert any("values are in g" in n for n in rec.notes)
+
+
+def test_a_short_quiet_period_gives_no_gyro_unit_verdict():
+    """A few seconds of steady |F| (level flight in turbulence) are not a rest: a rate that
+    would read as a unit mistake is reported, not an error (unseen flight U004: 2 s, 41.6x)."""
+    d = static_flight(seconds=5.0)
+    fs = ck.check_imu(d["imu_t"], d["f"], d["w"] * 180 / np.pi, 1e7)
+    r = next(x for x in fs if x.check == "gyro at rest")
+    assert r.level == "info" and "shorter than 30 s" in r.message
 
 
 def test_rest_rate_consistent_with_earth_rate_in_static_data():

@@ -57,6 +57,7 @@ __all__ = [
     "wide_prior_params",
     "refine_prior",
     "prior_risk",
+    "straight_weight",
     "keep_default_prior",
     "prior_for_resolution",
     "model_resolution_m",
@@ -86,8 +87,6 @@ MANOEUVRE_MPS2 = 0.5
 #: Averaging window of the horizontal specific force, s.
 MANOEUVRE_WINDOW_S = 20.0
 MANOEUVRE_MARGIN_S = 30.0
-#: Upper frequency (Hz) of the band in which the attitude-error leak is regressed out.
-REGRESSION_MAX_HZ = 0.05
 #: Order of the polynomial removed from each stretch before its periodogram.
 DETREND_ORDER = 2
 #: Shortest straight stretch used, s.
@@ -185,32 +184,18 @@ def _running_mean(x, w):
 
 
 def _horizontal_specific_force(nav, f_t, times):
-    """Horizontal specific force at ``times``: manoeuvre indicator and leak regressors.
+    """Horizontal part of the specific force averaged over :data:`MANOEUVRE_WINDOW_S`, m/s^2 (k,).
 
-    Returns
-    -------
-    magnitude : ndarray (k,)
-        Horizontal part of the specific force averaged over :data:`MANOEUVRE_WINDOW_S`, m/s^2.
-        The vector is averaged before its magnitude is taken: turbulence (seconds, zero mean)
-        averages out, a turn or a speed change (tens of seconds, one direction) does not.
-    horizontal : ndarray (k, 2)
-        East and north components (m/s^2) averaged with the triangle of a second difference
-        at the spacing of ``times`` (what ``y`` sees of them).
+    The vector is averaged before its magnitude is taken: turbulence (seconds, zero mean)
+    averages out, a turn or a speed change (tens of seconds, one direction) does not.
     """
     f_i = np.einsum("nij,nj->ni", nav.mat_it, np.asarray(f_t, float))
     dt = float(np.median(np.diff(nav.time)))
+    f_i = _running_mean(f_i, max(1, int(round(MANOEUVRE_WINDOW_S / dt))))
     up = nav.r_i / np.linalg.norm(nav.r_i, axis=1)[:, None]
-    east = np.cross([0.0, 0.0, 1.0], up)
-    east /= np.linalg.norm(east, axis=1)[:, None]
-    north = np.cross(up, east)
-    f_w = _running_mean(f_i, max(1, int(round(MANOEUVRE_WINDOW_S / dt))))
-    f_up = np.einsum("ni,ni->n", f_w, up)
-    mag = np.sqrt(np.maximum(np.einsum("ni,ni->n", f_w, f_w) - f_up**2, 0.0))
-    step = float(np.median(np.diff(times))) if len(times) > 1 else dt
-    box = max(1, int(round(step / dt)))
-    f_tri = _running_mean(_running_mean(f_i, box), box)
-    hor = [np.interp(times, nav.time, np.einsum("ni,ni->n", f_tri, axis)) for axis in (east, north)]
-    return np.interp(times, nav.time, mag), np.stack(hor, axis=1)
+    f_up = np.einsum("ni,ni->n", f_i, up)
+    f_h = np.sqrt(np.maximum(np.einsum("ni,ni->n", f_i, f_i) - f_up**2, 0.0))
+    return np.interp(times, nav.time, f_h)
 
 
 def straight_runs(time, manoeuvring, *, min_run_s: float = MIN_RUN_S,
@@ -285,7 +270,7 @@ class VerticalFit:
     unresolved: tuple = ()
 
 
-def _periodograms(y_runs, dt, x_runs=None):
+def _periodograms(y_runs, dt):
     """Hann-tapered periodograms of the stretches, concatenated.
 
     Parameters
@@ -294,10 +279,6 @@ def _periodograms(y_runs, dt, x_runs=None):
         Second-differenced height residual of each stretch, m/s^2.
     dt : float
         Sample spacing, s.
-    x_runs : list of ndarray (n_i, 2) or None
-        Horizontal specific force (m/s^2) of each stretch; its leak into the vertical through
-        a slowly varying attitude error (``theta x f``, theta linear in time over a stretch) is
-        regressed out below :data:`REGRESSION_MAX_HZ`, where the height noise is small.
 
     Returns
     -------
@@ -306,7 +287,7 @@ def _periodograms(y_runs, dt, x_runs=None):
         sum over bins into a variance averaged over the stretches.
     """
     out = []
-    for j, y in enumerate(y_runs):
+    for y in y_runs:
         n = y.size
         k = np.linspace(-1.0, 1.0, n)
         w = np.hanning(n)
@@ -319,18 +300,6 @@ def _periodograms(y_runs, dt, x_runs=None):
         spec = np.fft.rfft(w * y)
         f = np.fft.rfftfreq(n, dt)
         sel = slice(3, n // 2 if n % 2 == 0 else n // 2 + 1)
-        if x_runs is not None and x_runs[j] is not None:
-            x = np.asarray(x_runs[j], float)
-            cols = np.stack([x[:, 0], x[:, 1], x[:, 0] * k, x[:, 1] * k], axis=1)
-            xs = np.fft.rfft(w[:, None] * cols, axis=0)
-            band = np.zeros(f.size, bool)
-            band[sel] = True
-            band &= f <= REGRESSION_MAX_HZ
-            if band.sum() > 2 * cols.shape[1]:
-                a_mat = np.concatenate([xs[band].real, xs[band].imag])
-                rhs = np.concatenate([spec[band].real, spec[band].imag])
-                beta, *_ = np.linalg.lstsq(a_mat, rhs, rcond=None)
-                spec = spec - xs @ beta
         i_f = dt * np.abs(spec) ** 2 / np.sum(w**2)
         # DC and the first bins carry the removed polynomial and the taper's leak; no Nyquist
         out.append((f[sel], i_f[sel], np.full(f[sel].size, 2.0 / (n * dt * len(y_runs)))))
@@ -346,7 +315,7 @@ def _nll(v, f, i_f, dt, fixed_mask, fixed_v):
     return float(np.sum(np.log(s) + i_f / s))
 
 
-def fit_vertical_spectrum(time, residual_m, manoeuvring=None, horizontal_force=None, *,
+def fit_vertical_spectrum(time, residual_m, manoeuvring=None, *,
                           fixed: dict | None = None,
                           start: SpectralModel | None = None) -> VerticalFit | None:
     """Whittle fit of the vertical-channel spectrum (module docstring).
@@ -359,8 +328,6 @@ def fit_vertical_spectrum(time, residual_m, manoeuvring=None, horizontal_force=N
         Mechanized minus measured height, m (:func:`vertical_residual`).
     manoeuvring : ndarray of bool (k,), optional
         Epochs to leave out (turns).
-    horizontal_force : ndarray (k, 2), optional
-        Horizontal specific force, m/s^2 (its leak through attitude errors is regressed out).
     fixed : dict, optional
         Parameters of :class:`SpectralModel` held at a given value (user overrides).
     start : SpectralModel, optional
@@ -384,8 +351,7 @@ def fit_vertical_spectrum(time, residual_m, manoeuvring=None, horizontal_force=N
         return None
     runs = [(a, b) for a, b in runs if b - a >= 16]
     y_runs = [np.diff(e[a:b], 2) / dt**2 for a, b in runs]
-    x_runs = None if horizontal_force is None else [np.asarray(horizontal_force)[a + 1:b - 1] for a, b in runs]
-    f, i_f, weight = _periodograms(y_runs, dt, x_runs)
+    f, i_f, weight = _periodograms(y_runs, dt)
     if f.size < 16:
         return None
     fixed = dict(fixed or {})
@@ -555,8 +521,7 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
     v = max(float(speed_mps), 1.0)
     given = set(getattr(params, "given", ()))
     t, e = vertical_residual(nav, alt_time, alt_height, ellipsoid)
-    f_mag, f_hor = _horizontal_specific_force(nav, f_t, t)
-    man = f_mag > MANOEUVRE_MPS2
+    man = _horizontal_specific_force(nav, f_t, t) > MANOEUVRE_MPS2
     fixed = {}
     if "anomaly_sigma_mps2" in given:
         fixed["anomaly_sigma_mps2"] = params.anomaly_sigma_mps2
@@ -568,12 +533,12 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
         fixed["height_sigma_m"] = params.altimeter_sigma_m
     fixed = {k: min(max(val, BOUNDS[k][0]), BOUNDS[k][1]) for k, val in fixed.items()}
     report: dict = {"method": "whittle-vertical-spectrum", "warnings": []}
-    fit = fit_vertical_spectrum(t, e, man, None, fixed=fixed)
+    fit = fit_vertical_spectrum(t, e, man, fixed=fixed)
     if fit is None:
         # no straight stretch long enough (short lines, a flight of turns): the noise levels
         # from the whole flight; the turns' attitude-error leak then counts as noise, which
         # errs on the side of smoothing
-        fit = fit_vertical_spectrum(t, e, None, None, fixed=fixed)
+        fit = fit_vertical_spectrum(t, e, None, fixed=fixed)
         if fit is not None:
             report["warnings"].append(
                 f"model identification: no straight stretch of {MIN_RUN_S:.0f} s; noise levels "
@@ -700,7 +665,31 @@ def keep_default_prior(params, report, speed_mps: float, min_s: float):
     return new, report
 
 
-def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float):
+def straight_weight(nav, f_t, times) -> np.ndarray:
+    """Weight in [0, 1] at ``times``: 1 on straight flight, 0 in turns, cosine ramps between.
+
+    Turns (horizontal specific force above :data:`MANOEUVRE_MPS2`, dilated by
+    :data:`MANOEUVRE_MARGIN_S`) carry a strapdown system's largest errors; the ramps
+    (:data:`MANOEUVRE_MARGIN_S` long) keep a window built on this weight free of the leakage
+    a hard cut would bring.
+    """
+    t = np.asarray(times, float)
+    bad = _horizontal_specific_force(nav, f_t, t) > MANOEUVRE_MPS2
+    if t.size < 2:
+        return (~bad).astype(float)
+    dt = float(np.median(np.diff(t)))
+    m = max(1, int(round(MANOEUVRE_MARGIN_S / dt)))
+    ramp = np.hanning(2 * m + 1)
+    ramp /= ramp.sum()
+    # dilate by m, then smooth with a kernel of the same half width: 0 inside the dilated turn's
+    # core, rising to 1 over m samples
+    c = np.concatenate([[0], np.cumsum(bad.astype(np.int64))])
+    i = np.arange(t.size)
+    dil = (c[np.clip(i + m + 1, 0, t.size)] - c[np.clip(i - m, 0, t.size)]) > 0
+    return np.clip(np.convolve((~dil).astype(float), ramp, mode="same"), 0.0, 1.0)
+
+
+def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, weight=None):
     """Choose the anomaly prior from the spectrum of a first, wide estimate.
 
     The first estimate ``g1 = H1 (s + n)`` (``H1`` the wide prior's transfer) has the
@@ -724,20 +713,26 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float):
     wide : InmParams
         The first pass's settings (:func:`wide_prior_params`).
     speed_mps : float
+    weight : ndarray (N,), optional
+        :func:`straight_weight`: the periodogram's window is the Hann taper times this, so the
+        spectrum is that of the straight stretches (turns carry non-field errors), at the
+        whole flight's frequency resolution.
     """
     v = max(float(speed_mps), 1.0)
     g = np.asarray(g_first, float)
-    g = g[np.isfinite(g)]
+    wt = np.ones(g.size) if weight is None else np.asarray(weight, float)
+    ok = np.isfinite(g)
+    g, wt = g[ok], wt[ok]
     report = dict(report)
-    if g.size < 64:
+    if g.size < 64 or wt.sum() < 64:
         return params, report
     noise = _model_of(report)
     dt_h = report["height_dt_s"]
     given = set(getattr(params, "given", ()))
     n = g.size
     k = np.linspace(-1.0, 1.0, n)
-    w = np.hanning(n)
-    g = g - np.polyval(np.polyfit(k, g, DETREND_ORDER, w=np.sqrt(w)), k)
+    w = np.hanning(n) * wt
+    g = g - np.polyval(np.polyfit(k, g, DETREND_ORDER, w=np.sqrt(w) + 1e-12), k)
     p = dt_s * np.abs(np.fft.rfft(w * g)) ** 2 / np.sum(w**2)
     f = np.fft.rfftfreq(n, dt_s)
     sel = slice(3, n // 2)
@@ -769,7 +764,7 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float):
         if ii.size == 0:
             continue
         est = np.mean(p[ii] / h1[ii] ** 2) - np.mean(s_n[ii]) * (1.0 + 2.0 / math.sqrt(ii.size))
-        s_sig[ii] = max(est, 0.0) * s_n[ii] / np.mean(s_n[ii]) if False else max(est, 0.0)
+        s_sig[ii] = max(est, 0.0)
     # candidates
     tau_fixed = 1.0 / (params.anomaly_lambda_per_m * v) if "anomaly_lambda_per_m" in given else None
     sig_fixed = params.anomaly_sigma_mps2 if "anomaly_sigma_mps2" in given else None

@@ -11,7 +11,8 @@ from ..errors import ConfigError, DataError
 from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, mat_en, mat_ie
 from .errormodel import (DP, DQ, F3, G, N_STATE, N_STATE_AIDED, TH, AltimeterMeasurement, GnssMeasurement,
                          discretise, epoch_geometry, initial_covariance, initial_mean)
-from .identify import identify_params, keep_default_prior, model_resolution_m, refine_prior, wide_prior_params
+from .identify import (identify_params, keep_default_prior, model_resolution_m, refine_prior, straight_weight,
+                       wide_prior_params)
 from .kalman import filter_and_smooth
 from .mechanization import mechanize, navigation_to_geodetic, rodrigues
 from .params import InitialState, InmParams, initial_state_from_gnss, solvability_warnings
@@ -314,8 +315,9 @@ def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, l
     elif ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
         wide = wide_prior_params(params, ident, speed0)
         idx, _, _, _, first = _one_pass(record, wide, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t)
+        weight = straight_weight(nav, record.imu.specific_force_t, nav.time[idx])
         params, ident = refine_prior(params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))),
-                                     wide, speed0)
+                                     wide, speed0, weight)
     return params, ident
 
 

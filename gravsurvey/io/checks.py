@@ -28,6 +28,8 @@ REST_RATE_STEADY_REL = 0.1
 # ... and at least this fraction of the quiet windows must be steady for the unit check to run
 REST_STEADY_MIN_FRACTION = 0.5
 # rest detection: windows where |F| scatters less than this and sits within ACCEL_OK
+#: Shortest quiet period (s) on which the gyro-unit check may fail a flight.
+REST_MIN_VERDICT_S = 30.0
 REST_WINDOW_S = 2.0
 REST_ACCEL_STD = 0.05  # m/s^2
 # sample-rate stability: steps off nominal by more than this fraction count as irregular
@@ -295,6 +297,12 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
                                "check the unit against Earth rate", ratio))
         elif 0.5 < ratio < 2.0:
             out.append(Finding("imu", "gyro at rest", "ok", msg + " (expected ~1)", ratio))
+        elif name and rest.sum() * nominal_step_ns * 1e-9 < REST_MIN_VERDICT_S:
+            # a few seconds of steady |F| in flight (turbulence, a gentle turn) are not a rest;
+            # an error needs a quiet period a real static start gives
+            out.append(Finding("imu", "gyro at rest", "info",
+                               msg + f": would read as {name}, but the quiet period is shorter than "
+                               f"{REST_MIN_VERDICT_S:g} s; gyro unit checked by range only", ratio))
         elif name:
             out.append(Finding("imu", "gyro at rest", "error",
                                msg + f" after converting from {gyro_unit}: {name}?", ratio))
