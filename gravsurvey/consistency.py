@@ -852,7 +852,7 @@ def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, elli
 
 def check_initial(record, initial_raw: dict, key: str, ellipsoid=WGS84,
                   max_horizontal_m: float = 1000.0, max_vertical_m: float = 100.0,
-                  max_velocity_mps: float = 5.0) -> list[str]:
+                  max_velocity_mps: float = 10.0) -> list[str]:
     """The configured ``initial`` position against GNSS at the first IMU sample.
 
     Raises
