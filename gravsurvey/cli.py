@@ -378,6 +378,13 @@ def main(argv=None):
     except SystemExit:
         raise
     except Exception as exc:  # a bug: still one line, never a traceback on the user's screen
+        from .errors import INTERRUPT
+
+        if INTERRUPT.is_set():
+            # Ctrl-C landed inside library code that turned it into another error (a process
+            # pool interrupted while starting raises RuntimeError): it is still an interrupt
+            click.echo("gravsurvey: interrupted; no output of this run was published", err=True)
+            sys.exit(EXIT_INTERRUPTED)
         log.exception("internal error")  # to the run's log file when one is open
         click.echo(f"gravsurvey: internal error: {type(exc).__name__}: {exc}", err=True)
         sys.exit(EXIT_INTERNAL)
