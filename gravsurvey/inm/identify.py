@@ -399,7 +399,7 @@ def fit_vertical_spectrum(time, residual_m, manoeuvring=None, *,
     model = SpectralModel.from_vector(v)
     unresolved = ()
     tau_max = 1.0 / (2.0 * math.pi * float(f.min()))
-    if "anomaly_tau_s" not in fixed and model.anomaly_tau_s > tau_max:
+    if "anomaly_tau_s" not in fixed and "anomaly_sigma_mps2" not in fixed and model.anomaly_tau_s > tau_max:
         # the anomaly's corner lies below the lowest frequency the straight stretches show:
         # only the level of its f^-2 tail, sigma^2 / tau, is measured.  Keep that level and put
         # the corner at the lowest observed frequency (the shortest correlation time the data
@@ -563,13 +563,12 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
         white_how = "default (not resolved by the data)"
     if params.target_resolution_m is not None:
         m = prior_for_resolution(m, v, params.target_resolution_m, fit.dt_s)
-    new = dataclasses.replace(
-        params,
-        anomaly_sigma_mps2=m.anomaly_sigma_mps2,
-        anomaly_lambda_per_m=1.0 / (m.anomaly_tau_s * v),
-        gravimeter_white_mps2=m.white_mps2,
-        altimeter_sigma_m=m.height_sigma_m,
-    )
+    found = {"anomaly_sigma_mps2": m.anomaly_sigma_mps2, "anomaly_lambda_per_m": 1.0 / (m.anomaly_tau_s * v),
+             "gravimeter_white_mps2": m.white_mps2, "altimeter_sigma_m": m.height_sigma_m}
+    if params.target_resolution_m is None:
+        # a configured value is used exactly as written (the fit held it, up to rounding)
+        found.update({k: getattr(params, k) for k in IDENTIFIED_KEYS if k in given})
+    new = dataclasses.replace(params, **found)
     src = {"anomaly_sigma_mps2": "anomaly_sigma_mps2", "anomaly_lambda_per_m": "anomaly_tau_s",
            "gravimeter_white_mps2": "white_mps2", "altimeter_sigma_m": "height_sigma_m"}
     for k in IDENTIFIED_KEYS:
@@ -765,6 +764,10 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
             continue
         est = np.mean(p[ii] / h1[ii] ** 2) - np.mean(s_n[ii]) * (1.0 + 2.0 / math.sqrt(ii.size))
         s_sig[ii] = max(est, 0.0)
+    # a field seen from the air has a spectrum that falls with frequency (upward continuation):
+    # a band above one without signal cannot hold any; this keeps a chance excess of noise
+    # near the top of the band (P / H1^2 amplifies it there) from widening the smoother
+    s_sig = np.minimum.accumulate(s_sig)
     # candidates
     tau_fixed = 1.0 / (params.anomaly_lambda_per_m * v) if "anomaly_lambda_per_m" in given else None
     sig_fixed = params.anomaly_sigma_mps2 if "anomaly_sigma_mps2" in given else None

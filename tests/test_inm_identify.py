@@ -1,0 +1,167 @@
+"""Identification of the estimator's model from the flight itself (gravsurvey/inm/identify.py).
+
+Synthetic vertical channels with known noise, and simulated flights (the simulator shares no
+code with the estimator but geodesy), checked against the values they were made with.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from gravsurvey.geodesy import MGAL
+from gravsurvey.inm import identify as I
+from gravsurvey.inm.params import InitialState, InmParams
+from gravsurvey.inm.solve import estimate_anomaly
+from gravsurvey.io.record import AltimeterChannel, FlightRecord, ImuChannel
+from gravsurvey.simulate.run import quick_sim, simulate_flight
+
+
+def _synthetic_channel(seed, height_sigma, white, sigma_g, tau, dt=0.2, seconds=4000.0):
+    """e = double integral of (Markov anomaly + white acceleration) + white height noise."""
+    rng = np.random.default_rng(seed)
+    n = int(seconds / dt)
+    phi = math.exp(-dt / tau)
+    g = np.zeros(n)
+    drive = rng.standard_normal(n) * sigma_g * math.sqrt(1 - phi**2)
+    for k in range(1, n):
+        g[k] = phi * g[k - 1] + drive[k]
+    a = g + rng.standard_normal(n) * white / math.sqrt(dt)  # one-second sigma -> per sample
+    h = np.cumsum(np.cumsum(a) * dt) * dt
+    t = np.arange(n) * dt
+    return t, h + rng.standard_normal(n) * height_sigma
+
+
+@pytest.mark.parametrize("height_sigma", [0.02, 0.1, 1.0])
+def test_whittle_fit_recovers_the_height_noise(height_sigma):
+    t, e = _synthetic_channel(1, height_sigma, 2e-5, 5e-5, 200.0)
+    fit = I.fit_vertical_spectrum(t, e)
+    assert fit is not None and fit.n_runs == 1
+    # measured within 1 %; its own 1-sigma factor says ~0.5 %
+    assert fit.model.height_sigma_m == pytest.approx(height_sigma, rel=0.03)
+    assert fit.sigma_factor["height_sigma_m"] < 1.02
+
+
+def test_whittle_fit_recovers_white_noise_where_it_shows():
+    """White acceleration above the height noise's f^4 over a decade: identified within 30 %."""
+    t, e = _synthetic_channel(2, 0.005, 3e-4, 2e-5, 100.0)
+    fit = I.fit_vertical_spectrum(t, e)
+    assert fit.model.white_mps2 == pytest.approx(3e-4, rel=0.3)
+    assert fit.sigma_factor["white_mps2"] is not None and fit.sigma_factor["white_mps2"] < 1.3
+
+
+def test_fit_is_bounded_and_robust_to_its_start():
+    t, e = _synthetic_channel(3, 0.05, 1e-5, 1e-4, 300.0)
+    a = I.fit_vertical_spectrum(t, e)
+    b = I.fit_vertical_spectrum(t, e, start=I.SpectralModel(1e-2, 80000.0, 1e-3, 40.0))
+    for k in ("height_sigma_m", "anomaly_sigma_mps2"):
+        assert getattr(a.model, k) == pytest.approx(getattr(b.model, k), rel=1e-3)
+    for k, (lo, hi) in I.BOUNDS.items():
+        assert lo <= getattr(a.model, k) <= hi
+
+
+def test_target_resolution_puts_the_half_power_point_there():
+    m = I.SpectralModel(5e-5, 300.0, 1e-5, 0.05)
+    for res in (2000.0, 5000.0, 12000.0):
+        p = I.prior_for_resolution(m, 80.0, res, 0.2)
+        assert I.wiener_resolution_m(p, 80.0, 0.2) == pytest.approx(res, rel=1e-6)
+    # finer = a wider prior (more noise passed), coarser = a narrower one
+    assert (I.prior_for_resolution(m, 80.0, 2000.0, 0.2).anomaly_sigma_mps2
+            > I.prior_for_resolution(m, 80.0, 5000.0, 0.2).anomaly_sigma_mps2)
+
+
+def test_prior_risk_prefers_the_matched_prior():
+    """For a signal that IS a Markov process the least-risk prior on a grid is close to it."""
+    f = np.linspace(1e-4, 0.5, 4000)
+    noise = I.SpectralModel(0.0, 1.0, 1e-5, 0.05)
+    s_n = 1e-10 + 0.05**2 * 0.2 * (2 * np.pi * f) ** 4
+    truth = 2 * (3e-5) ** 2 * (1 / 400.0) / ((1 / 400.0) ** 2 + (2 * np.pi * f) ** 2)
+    grid = [(sg, tau) for sg in np.geomspace(3e-6, 3e-4, 21) for tau in np.geomspace(40, 4000, 21)]
+    best = min(grid, key=lambda st: I.prior_risk(f, truth, s_n, *st))
+    assert best[0] == pytest.approx(3e-5, rel=0.6) and best[1] == pytest.approx(400.0, rel=0.6)
+    assert noise.white_mps2 == 1e-5
+
+
+@pytest.fixture(scope="module")
+def noisy_flight():
+    """1 h straight platform flight over point masses and a dipole (3-10 km deep, 3-30 km
+    wavelengths), 5 cm height noise at 5 Hz, gravimeter white 1 mGal/sqrt(Hz) plus a Markov
+    error: the sensor values are NOT given to the estimator."""
+    sensors = {"accelerometer": {"white_sigma_mps2": 5e-4},
+               "gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 3e-6, "markov_lambda_per_s": 0.002},
+               "gyro": {"white_drift_degph": 0.01}, "altimeter": {"sigma_m": 0.05},
+               "gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0}}
+    field = {"type": "model",
+             "point_masses": [{"lat_deg": 45.01, "lon_deg": 135.0 + 0.35 * k, "depth_m": 3000.0 + 700.0 * (k % 4),
+                               "mass_kg": (4e13 if k % 2 else -3e13) * (1 + 0.3 * (k % 3))} for k in range(1, 9)],
+             "dipoles": [{"lat_deg": 44.99, "lon_deg": 136.1, "depth_m": 2500.0, "mass_kg": 1.5e13,
+                          "separation_m": 5000.0, "azimuth_deg": 60.0}]}
+    s = simulate_flight(quick_sim(duration_s=3600, speed_mps=70.0, altimeter_hz=5.0, field=field,
+                                  noise=sensors, seed=7))
+    rec = FlightRecord(s.start_unix_ns, ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
+                       AltimeterChannel(s.alt_time, s.alt_height), None, source="sim")
+    tr = s.truth
+    init = InitialState(tr["lat"][0], tr["lon"][0], tr["height"][0], tr["vel_n"][0].copy(), tr["mat_nt"][0].copy())
+    return s, rec, init
+
+
+def _rms_mid(sol, s):
+    g = np.interp(sol.time, s.truth["time"], s.truth["disturbance"])
+    keep = (sol.time > sol.time[0] + 600) & (sol.time < sol.time[-1] - 600)
+    e = (sol.g_smooth - g)[keep]
+    return float(np.sqrt(np.mean((e - e.mean()) ** 2))) / MGAL
+
+
+def test_identified_flight_beats_the_seed_defaults_and_reports_itself(noisy_flight):
+    s, rec, init = noisy_flight
+    ident = estimate_anomaly(rec, InmParams(), init, "platform")
+    seed = estimate_anomaly(rec, InmParams(identify=False), init, "platform")
+    rep = ident.identification
+    # the height noise comes back within 5 % (simulated: 0.05 m); reported with how and a factor
+    assert rep["altimeter_sigma_m"]["value"] == pytest.approx(0.05, rel=0.05)
+    assert rep["altimeter_sigma_m"]["how"] == "identified" and rep["altimeter_sigma_m"]["sigma_factor"] < 1.05
+    assert ident.params.altimeter_sigma_m == rep["altimeter_sigma_m"]["value"]
+    assert math.isfinite(ident.resolution_m) and 500.0 < ident.resolution_m < 1e5
+    # the seed's prior with its 1 m height noise is what a user got before; identification wins
+    assert _rms_mid(ident, s) < _rms_mid(seed, s)
+
+
+def test_config_values_are_held_fixed(noisy_flight):
+    s, rec, init = noisy_flight
+    p = InmParams.from_dict({"altimeter_sigma_m": 0.3, "anomaly_sigma_mps2": 2e-4})
+    assert {"altimeter_sigma_m", "anomaly_sigma_mps2"} <= p.given
+    sol = estimate_anomaly(rec, p, init, "platform")
+    assert sol.params.altimeter_sigma_m == 0.3 and sol.params.anomaly_sigma_mps2 == 2e-4
+    rep = sol.identification
+    assert rep["altimeter_sigma_m"]["how"] == "config" and rep["anomaly_sigma_mps2"]["how"] == "config"
+    # and the rest is still identified
+    assert rep["anomaly_lambda_per_m"]["how"] != "config"
+
+
+def test_target_resolution_on_a_flight(noisy_flight):
+    s, rec, init = noisy_flight
+    fine = estimate_anomaly(rec, InmParams.from_dict({"target_resolution_m": 3000.0}), init, "platform")
+    coarse = estimate_anomaly(rec, InmParams.from_dict({"target_resolution_m": 15000.0}), init, "platform")
+    assert fine.resolution_m == pytest.approx(3000.0, rel=0.02)
+    assert coarse.resolution_m == pytest.approx(15000.0, rel=0.02)
+    assert fine.identification["anomaly_sigma_mps2"]["how"] == "target_resolution_m"
+    # a finer resolution passes more noise: larger stated sigma
+    assert np.median(fine.sigma_smooth) > np.median(coarse.sigma_smooth)
+
+
+def test_short_record_keeps_the_default_prior(noisy_flight):
+    s, rec, init = noisy_flight
+    from gravsurvey.io.record import slice_record
+
+    short = slice_record(rec, 0.0, 600.0)
+    sol = estimate_anomaly(short, InmParams(), init, "platform")
+    rep = sol.identification
+    assert rep["anomaly_sigma_mps2"]["how"].startswith("default (record shorter than")
+    assert sol.params.anomaly_sigma_mps2 == InmParams().anomaly_sigma_mps2
+    assert rep["altimeter_sigma_m"]["how"] == "identified"
+
+
+def test_identify_false_uses_the_values_as_given():
+    p = dataclasses.replace(InmParams(identify=False), altimeter_sigma_m=0.2)
+    assert p.identify is False and p.altimeter_sigma_m == 0.2
