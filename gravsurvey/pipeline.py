@@ -106,6 +106,8 @@ class FlightResult:
     input_hashes: dict = field(default_factory=dict)
     estimator: dict = field(default_factory=dict)  # method, triad, GNSS aiding used
     data_loss: list = field(default_factory=list)  # input damage: processed, but exit code 1
+    attitude: np.ndarray | None = None  # (N, 3) rad roll, pitch, heading (strapdown), else None
+    attitude_sigma: np.ndarray | None = None  # (N, 3) rad 1-sigma of the same
 
 
 def _segments(cfg: SurveyConfig, fl: FlightConfig, sol) -> list:
@@ -244,6 +246,8 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
         notes=notes,
         timings=timings,
         data_loss=[f"{fl.name}: {n}" for n in record.data_loss + segment_loss],
+        attitude=_per_epoch(getattr(sol, "attitude", None), len(sol.time)),
+        attitude_sigma=_per_epoch(getattr(sol, "attitude_sigma", None), len(sol.time)),
         estimator={
             **_attitude_report(sol),
             "method": cfg.processing_method,
@@ -255,6 +259,14 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
             **({"gradiometer": gradio} if gradio is not None else {}),
         },
     )
+
+
+def _per_epoch(arr, n):
+    """An (n, 3) array of the solution, or None (platform, classic, or segments without it)."""
+    if arr is None:
+        return None
+    a = np.asarray(arr, float)
+    return a if a.shape == (n, 3) and np.isfinite(a).any() else None
 
 
 def _attitude_report(sol) -> dict:
@@ -628,6 +640,15 @@ def _profile_table(cfg: SurveyConfig, results: list[FlightResult]):
         "kalman_mgal": np.concatenate([r.kalman for r in results]) / MGAL,
         "sigma_mgal": np.concatenate([r.sigma for r in results]) / MGAL,
     }
+    if any(r.attitude is not None for r in results):
+        # strapdown attitude and its 1-sigma per epoch (NaN for flights without it)
+        att = np.concatenate([np.degrees(r.attitude) if r.attitude is not None else np.full((len(r.time), 3), np.nan)
+                              for r in results])
+        sig = np.concatenate([np.degrees(r.attitude_sigma) if r.attitude_sigma is not None
+                              else np.full((len(r.time), 3), np.nan) for r in results])
+        for j, name in enumerate(("roll", "pitch", "heading")):
+            table[f"{name}_deg"] = att[:, j]
+            table[f"{name}_sigma_deg"] = sig[:, j]
     if all(r.truth is not None for r in results):
         table["truth_mgal"] = np.concatenate([r.truth for r in results])
         table["error_mgal"] = table["disturbance_mgal"] - table["truth_mgal"]

@@ -459,6 +459,11 @@ def test_strapdown_sample_without_initial_block(tmp_path):
     est = summary["flights"]["F01"]["estimator"]
     assert est["alignment_method"].endswith("velocity-matching") and est["attitude_passes"] >= 2
     assert est["alignment_sigma_heading_deg"] < 0.1 and est["gnss_residual_rms_m"] < 2.0
+    # the attitude and its sigma per epoch in the deliverable (issue 13 item 5)
+    heading = np.array([float(r["heading_deg"]) for r in rows])
+    h_sig = np.array([float(r["heading_sigma_deg"]) for r in rows])
+    assert np.isfinite(heading).all() and (0 <= heading).all() and (heading < 360).all()
+    assert np.isfinite(h_sig).all() and np.median(h_sig) < 0.1
     err = np.array([float(r["error_mgal"]) for r in rows if r["error_mgal"] not in ("", "nan")])
     err = err[np.isfinite(err)]
     assert err.size > 100 and _rms(err) < 2.2

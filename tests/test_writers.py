@@ -66,7 +66,10 @@ def test_profiles_csv_columns_as_documented_and_values(tmp_path):
     w.write_profiles_csv(p, t)
     with open(p, newline="") as fh:
         rows = list(csv.reader(fh))
-    assert rows[0] == documented_columns("profiles.csv")
+    documented = documented_columns("profiles.csv")
+    # the attitude columns are documented, in this order, and written only for strapdown surveys
+    assert [c for c in documented if c in w.ATTITUDE_COLUMNS] == list(w.ATTITUDE_COLUMNS)
+    assert rows[0] == [c for c in documented if c not in w.ATTITUDE_COLUMNS]
     assert rows[0] == list(w.PROFILE_COLUMNS + w.LEVEL_COLUMNS + w.TRUTH_COLUMNS)
     assert len(rows) == 1 + 9
     r = dict(zip(rows[0], rows[3]))

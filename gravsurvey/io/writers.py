@@ -77,6 +77,9 @@ PROFILE_COLUMNS = (
 TRUTH_COLUMNS = ("truth_mgal", "error_mgal")
 #: optional: the disturbance after base ties and crossover levelling (docs/outputs.md)
 LEVEL_COLUMNS = ("levelled_mgal",)
+#: optional: a strapdown triad's estimated attitude and its 1-sigma, deg (NaN for other flights)
+ATTITUDE_COLUMNS = ("roll_deg", "pitch_deg", "heading_deg", "roll_sigma_deg", "pitch_sigma_deg",
+                    "heading_sigma_deg")
 _STRING_COLUMNS = ("flight", "line", "time_utc")
 # decimals written per float column (see docs/outputs.md for the resolution this gives)
 _DECIMALS = {
@@ -92,6 +95,12 @@ _DECIMALS = {
     "truth_mgal": 4,
     "error_mgal": 4,
     "time_unix_s": 3,
+    "roll_deg": 4,
+    "pitch_deg": 4,
+    "heading_deg": 4,
+    "roll_sigma_deg": 5,
+    "pitch_sigma_deg": 5,
+    "heading_sigma_deg": 5,
 }
 XYZ_COLUMNS = ("time_unix_s",) + PROFILE_COLUMNS[4:]
 #: crossovers.csv columns: the fields of :class:`gravsurvey.survey.Crossovers`, in order
@@ -166,7 +175,8 @@ def profile_columns(table: dict) -> tuple[str, ...]:
     if any(has_truth) and not all(has_truth):
         raise ValueError("profile table: truth_mgal and error_mgal go together")
     level = tuple(c for c in LEVEL_COLUMNS if c in table)
-    cols = PROFILE_COLUMNS + level + (TRUTH_COLUMNS if all(has_truth) else ())
+    attitude = tuple(c for c in ATTITUDE_COLUMNS if c in table)
+    cols = PROFILE_COLUMNS + level + attitude + (TRUTH_COLUMNS if all(has_truth) else ())
     n = None
     for c in cols:
         if c == "time_utc" and c not in table:
