@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .io.writers import to_jsonable
+
 #: bump when the on-disk layout changes; part of every entry
 CACHE_FORMAT = "gravsurvey-flight-cache/1"
 
@@ -35,25 +37,6 @@ def _sha256(path: Path) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
-
-
-def _plain(obj):
-    """JSON-ready copy of ``obj`` keeping NaN/inf (Python's json writes them as NaN/Infinity)."""
-    if obj is None or isinstance(obj, (bool, str)):
-        return obj
-    if isinstance(obj, (np.bool_,)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj)
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, os.PathLike):
-        return os.fspath(obj)
-    raise TypeError(f"flight cache: cannot store {type(obj).__name__}")
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
@@ -94,7 +77,7 @@ def save_result(cache_dir, name: str, key: str, result) -> None:
                 arrays[f.name] = v
             dtypes[f.name] = str(v.dtype)
         else:
-            fields[f.name] = _plain(v)
+            fields[f.name] = to_jsonable(v, keep_nonfinite=True)
     import io
 
     buf = io.BytesIO()

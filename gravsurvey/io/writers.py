@@ -619,8 +619,11 @@ def write_geojson(path, lines_table: dict, line_stats=None, crs_epsg: int | None
 # --------------------------------------------------------------------------------------------
 # JSON
 # --------------------------------------------------------------------------------------------
-def to_jsonable(obj):
+def to_jsonable(obj, keep_nonfinite: bool = False):
     """Convert numpy scalars/arrays, tuples, sets, paths to JSON types; NaN/inf -> None.
+
+    With ``keep_nonfinite`` NaN and inf stay floats (Python's json writes them as
+    NaN/Infinity: the result cache, which must give back what it stored).
 
     Raises
     ------
@@ -635,13 +638,13 @@ def to_jsonable(obj):
         return int(obj)
     if isinstance(obj, (float, np.floating)):
         x = float(obj)
-        return x if math.isfinite(x) else None
+        return x if keep_nonfinite or math.isfinite(x) else None
     if isinstance(obj, dict):
-        return {str(k) if not isinstance(k, str) else k: to_jsonable(v) for k, v in obj.items()}
+        return {str(k): to_jsonable(v, keep_nonfinite) for k, v in obj.items()}
     if isinstance(obj, (list, tuple, set, frozenset)):
-        return [to_jsonable(v) for v in obj]
+        return [to_jsonable(v, keep_nonfinite) for v in obj]
     if isinstance(obj, np.ndarray):
-        return [to_jsonable(v) for v in obj.tolist()]
+        return [to_jsonable(v, keep_nonfinite) for v in obj.tolist()]
     if isinstance(obj, os.PathLike):
         return os.fspath(obj)
     if isinstance(obj, np.datetime64):
