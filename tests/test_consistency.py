@@ -428,3 +428,16 @@ def test_cli_exit_codes(tmp_path):
                        stdin=subprocess.DEVNULL)
     assert p.returncode == 0, p.stderr
     assert (tmp_path / "o2" / "profiles.csv").is_file()
+
+
+def test_one_absurd_csv_value_is_dropped_and_the_flight_processes(tmp_path, intact):
+    """Measured before: one specific force of 2.6e21 m/s^2 in markov_csv's imu.csv gave
+    'internal error ZeroDivisionError' in the mechanization."""
+    def prep(p):
+        d.edit(p, "imu", lambda h, rows: [r if i != 5000 else [r[0], "2.6e21"] + r[2:] for i, r in enumerate(rows)])
+
+    cfg, fl = _flight(tmp_path, prep)
+    r = process_flight(cfg, fl)
+    assert any("imu: dropped 1 samples with NaN/inf or absurd" in n for n in r.notes)
+    assert abs(_rms_on_lines(r) - _rms_on_lines(intact)) < 0.2
+

@@ -542,12 +542,19 @@ def read_raw_channels(options: IngestOptions, base_dir, notes: list):
 
 
 def _drop_nonfinite(ch: RawChannel, notes):
+    """Drop samples holding NaN/inf or a magnitude no supported unit can mean
+    (``checks.DAMAGE_ABS_MAX``: a corrupted digit in a CSV, say 2.6e21 m/s^2, would otherwise
+    reach the mechanization); say how many."""
+    from .checks import DAMAGE_ABS_MAX
+
     ok = np.ones(len(ch.time_ns), bool)
     for v in ch.values.values():
-        ok &= np.isfinite(v).reshape(len(ok), -1).all(axis=1) if len(ok) else ok
+        if len(ok):
+            v2 = np.asarray(v, float).reshape(len(ok), -1)
+            ok &= (np.isfinite(v2) & (np.abs(v2) <= DAMAGE_ABS_MAX)).all(axis=1)
     if not ok.all():
-        notes.append(f"{ch.role}: dropped {int((~ok).sum())} samples with NaN/inf values "
-                     f"({ch.source})")
+        notes.append(f"{ch.role}: dropped {int((~ok).sum())} samples with NaN/inf or absurd "
+                     f"(> {DAMAGE_ABS_MAX:g}) values ({ch.source})")
         ch.time_ns = ch.time_ns[ok]
         ch.values = {k: v[ok] for k, v in ch.values.items()}
 
