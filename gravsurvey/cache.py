@@ -20,12 +20,11 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
-from .io.writers import to_jsonable
+from .io.writers import atomic_write_bytes, to_jsonable
 
 #: bump when the on-disk layout changes; part of every entry
 CACHE_FORMAT = "gravsurvey-flight-cache/1"
@@ -37,19 +36,6 @@ def _sha256(path: Path) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
-
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        with open(tmp, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 def cache_paths(cache_dir, name: str) -> tuple[Path, Path]:
@@ -82,7 +68,7 @@ def save_result(cache_dir, name: str, key: str, result) -> None:
 
     buf = io.BytesIO()
     np.savez(buf, **arrays)  # type: ignore[arg-type]  # numpy's stub types **kwds too narrowly
-    _atomic_write(npath, buf.getvalue())
+    atomic_write_bytes(npath, buf.getvalue())
     entry = {
         "format": CACHE_FORMAT,
         "key": key,
@@ -90,7 +76,7 @@ def save_result(cache_dir, name: str, key: str, result) -> None:
         "dtypes": dtypes,
         "fields": fields,
     }
-    _atomic_write(jpath, json.dumps(entry, allow_nan=True).encode())
+    atomic_write_bytes(jpath, json.dumps(entry, allow_nan=True).encode())
 
 
 def load_result(cache_dir, name: str, key: str, cls):

@@ -629,17 +629,16 @@ def _markov_psd(f, sigma, tau):
     return 2.0 * sigma**2 * lam / (lam**2 + (2.0 * math.pi * f) ** 2)
 
 
-def prior_risk(f, s_signal, s_noise, sigma, tau, count=None) -> float:
+def prior_risk(f, s_signal, s_noise, sigma, tau) -> float:
     """Expected error variance (up to a constant factor) of the smoother with prior (sigma, tau).
 
-    ``sum_k count_k [(1 - H_k)^2 S_s,k + H_k^2 S_n,k]`` with ``H = S_g / (S_g + S_n)``, the
+    ``sum_k [(1 - H_k)^2 S_s,k + H_k^2 S_n,k]`` with ``H = S_g / (S_g + S_n)``, the
     steady-state transfer of the RTS smoother built on the Markov prior ``S_g`` - applied to a
     signal of spectrum ``S_s``, whatever its shape.
     """
     s_g = _markov_psd(f, sigma, tau)
     h = s_g / (s_g + s_noise)
-    c = np.ones_like(f) if count is None else count
-    return float(np.sum(c * ((1.0 - h) ** 2 * s_signal + h**2 * s_noise)))
+    return float(np.sum((1.0 - h) ** 2 * s_signal + h**2 * s_noise))
 
 
 def keep_default_prior(params, report, speed_mps: float, min_s: float):

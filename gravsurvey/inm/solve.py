@@ -61,8 +61,6 @@ class InmSolution:
     identification : dict
         What :func:`gravsurvey.inm.identify.identify_params` found (empty when
         ``params.identify`` is false).
-    log_likelihood : float
-        :func:`innovation_log_likelihood` of the run (compares models on the same data).
     resolution_m : float
         Half-wavelength resolution of ``g_smooth``, m: the half-power point of the smoother's
         steady-state transfer function for the model it ran with
@@ -113,7 +111,6 @@ class InmSolution:
     gnss_aided: bool = False
     params: InmParams | None = None
     identification: dict = field(default_factory=dict)
-    log_likelihood: float = float("nan")
     resolution_m: float = float("nan")
     attitude: np.ndarray | None = None
     attitude_sigma: np.ndarray | None = None
@@ -240,7 +237,6 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     sol.params = params
     sol.identification = ident
     sol.warnings = sol.warnings + list(ident.get("warnings", []))
-    sol.log_likelihood = innovation_log_likelihood(out["x_p"], out["p_p"], out["z"], out["h"], out["r"])
     alt_t = np.asarray(record.altimeter.time, float)
     sol.resolution_m = float(ident["resolution_m"]) if ident.get("resolution_m") else model_resolution_m(
         params, speed0, float(np.median(np.diff(alt_t))) if alt_t.size > 1 else 1.0)
@@ -325,7 +321,7 @@ def _one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, l
     """Discretise, filter and smooth once about the mechanization ``nav``.
 
     Returns ``idx`` (IMU indices of the epochs), ``c`` (triad -> inertial at the epochs),
-    ``gnss_used``, ``n_state`` and the :func:`filter_and_smooth` dict (plus ``z, h, r``).
+    ``gnss_used``, ``n_state`` and the :func:`filter_and_smooth` dict.
     """
     t = nav.time
     alt_t, alt_h = _altimeter(record)
@@ -358,7 +354,6 @@ def _one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, l
         p0 = initial_covariance(params)
         x0 = np.zeros(n_state)
     out = filter_and_smooth(x0, p0, phi, q, z, h, r, reference=reference)
-    out.update(z=z, h=h, r=r)
     return idx, c, gnss_used, n_state, out
 
 def _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, passes, corrections):
@@ -476,35 +471,6 @@ def _heading_converge_s(time, c, p_f, lat, lon, ellipsoid):
         return 0.0
     k = min(bad[-1] + 1, time.size - 1)
     return float(time[k] - time[0])
-
-
-def innovation_log_likelihood(x_p, p_p, z, h, r) -> float:
-    """Gaussian log-likelihood of the measurements given the model (prediction-error form).
-
-    ``sum_k -0.5 [nu_k^T S_k^-1 nu_k + log det S_k + m_k log 2 pi]`` with the innovation
-    ``nu_k = z_k - H_k x_p[k]`` and ``S_k = H_k P_p[k] H_k^T + R_k`` over the finite components
-    of each epoch (the sequential scalar updates of the filter give the same value).
-
-    Parameters
-    ----------
-    x_p, p_p : ndarray (N, n), (N, n, n)
-        Predicted state and covariance.
-    z, h, r : ndarray (N, m), (N, m, n), (N, m, m)
-        Measurements (NaN where missing), their matrices and noise covariances.
-    """
-    ok = np.isfinite(z)
-    zz = np.where(ok, z, 0.0)
-    nu = zz - np.einsum("kmn,kn->km", h, x_p)
-    s = np.einsum("kmn,knj,kij->kmi", h, p_p, h) + r
-    # missing components: decouple them with unit variance and zero innovation
-    miss = ~ok
-    s = np.where(miss[:, :, None] | miss[:, None, :], 0.0, s)
-    idx = np.arange(z.shape[1])
-    s[:, idx, idx] = np.where(miss, 1.0, s[:, idx, idx])
-    nu = np.where(ok, nu, 0.0)
-    sign, logdet = np.linalg.slogdet(s)
-    quad = np.einsum("km,km->k", nu, np.linalg.solve(s, nu[:, :, None])[:, :, 0])
-    return float(-0.5 * np.sum(quad + logdet + ok.sum(axis=1) * np.log(2.0 * np.pi)))
 
 
 def _typical_speed(record, nav, ellipsoid):
