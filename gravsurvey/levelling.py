@@ -31,7 +31,7 @@ Units: mGal for values and corrections, s for times (mGal/h for trends in the re
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.sparse import coo_matrix, diags, identity
@@ -47,11 +47,16 @@ __all__ = [
     "level_crossovers",
     "crossover_statistics",
     "level_survey",
+    "choose_levelling",
+    "significance_test",
 ]
 
-LEVELLING_MODELS = ("constant", "line_trend", "flight_trend")
+LEVELLING_MODELS = ("constant", "line_trend", "flight_trend", "flight_constant")
 LEVELLING_KEYS = ("enabled", "model", "robust", "huber_k", "sigma_floor_mgal", "max_iterations",
-                  "min_crossovers_per_unknown")
+                  "min_crossovers_per_unknown", "significance")
+#: Models tried, in this order after the configured one, when the configured one has too few
+#: crossovers (``enabled: null``): each has fewer unknowns than the one before.
+FALLBACK_MODELS = ("constant", "flight_constant")
 #: trends are solved in mGal/h: times scaled from s to h keep the normal matrix well conditioned
 S_PER_H = 3600.0
 #: Huber constant: 95 % efficiency for Gaussian residuals
@@ -73,7 +78,8 @@ class LevellingOptions:
         True: whenever it has crossovers; False: never.
     model : str
         ``constant`` (one offset per line), ``line_trend`` (offset and trend per line) or
-        ``flight_trend`` (offset per line and a drift per flight).
+        ``flight_trend`` (offset per line and a drift per flight) or ``flight_constant`` (one
+        offset shared by all lines of a flight: the reduced model for surveys with few crossovers).
     robust : bool
         Huber IRLS (default True).
     huber_k : float
@@ -83,10 +89,13 @@ class LevellingOptions:
     max_iterations : int
         IRLS iterations at most.
     min_crossovers_per_unknown : float
-        With ``enabled`` None, the corrections are applied only when the usable crossovers number
-        at least this many per estimated unknown (the unknowns minus one datum per group of
-        lines): with fewer, the adjustment fits the crossovers' noise (on the 6-line sample
-        survey, 5 crossovers for 4 unknowns moved one line's mean error from 1.8 to -1.3 mGal).
+        With ``enabled`` None, a model is used only when the usable crossovers number at least
+        this many per estimated unknown (the unknowns minus one datum per group of lines): with
+        fewer, the adjustment fits the crossovers' noise (on the former 6-line sample survey,
+        5 crossovers for 4 unknowns moved one line's mean error from 1.8 to -1.3 mGal).
+    significance : float
+        With ``enabled`` None, the corrections are applied only when the F-test of "no level
+        errors" against the model rejects it at this level (:func:`significance_test`).
     """
 
     enabled: bool | None = None
@@ -96,6 +105,7 @@ class LevellingOptions:
     sigma_floor_mgal: float = 0.1
     max_iterations: int = 30
     min_crossovers_per_unknown: float = 2.0
+    significance: float = 0.05
 
     @classmethod
     def from_dict(cls, d, key_path: str = "levelling") -> "LevellingOptions":
@@ -132,6 +142,11 @@ class LevellingOptions:
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                     raise ConfigError(f"{key_path}.{k}: expected a positive number, got {v!r}")
                 setattr(o, k, float(v))
+        if "significance" in d:
+            v = d["significance"]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 1:
+                raise ConfigError(f"{key_path}.significance: expected a probability in (0, 1), e.g. 0.05, got {v!r}")
+            o.significance = float(v)
         if "max_iterations" in d:
             v = d["max_iterations"]
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -216,6 +231,12 @@ class Levelling:
         per connected group of lines).
     datum : str
         ``"tied flights"`` or ``"mean of lines"`` (or ``"mixed"`` if groups differ).
+    fit_weight : ndarray, shape (k,)
+        Final weight of each crossover in the fit, ``weight / (sigma_a^2 + sigma_b^2)``, 1/mGal^2
+        (NaN for crossovers not used).
+    decision : dict or None
+        Set by :func:`choose_levelling`: whether the corrections are applied, by which rule, and
+        the statistics of every model tried.
     """
 
     model: str
@@ -236,6 +257,8 @@ class Levelling:
     diff_mgal: np.ndarray | None = None
     n_observations: int = 0
     n_unknowns: int = 0
+    fit_weight: np.ndarray | None = None
+    decision: dict | None = None
 
     def correction(self, flight: str, line: str, time_s) -> np.ndarray:
         """The level error of one line at the given times, mGal: subtract it from the values.
@@ -291,6 +314,8 @@ class Levelling:
             "before": strip(self.before),
             "after": strip(self.after),
             "flight_drift_mgal_per_h": dict(self.flight_drift_mgal_per_h),
+            "test": significance_test(self),
+            "decision": self.decision,
             "per_line": per_line,
             "notes": list(self.notes),
         }
@@ -397,25 +422,36 @@ def level_crossovers(
             flight_mid_s[f] = float(tt.mean()) if tt.size else 0.0
     fmid = np.array([float(flight_mid_s.get(f, 0.0)) for f in flights])
 
-    # unknowns: constants [0, nl), then line trends or flight drifts
+    # unknowns: constants [0, nc) (one per line, or one per flight for flight_constant), then
+    # line trends or flight drifts
     tied = set(str(f) for f in tied_flights)
+    per_flight = model == "flight_constant"
+    cidx = fidx if per_flight else np.arange(nl)
+    nc = len(flights) if per_flight else nl
+    col_flight = flights if per_flight else [f for f, _ in keys]
+    if per_flight:
+        # a crossover within one flight says nothing about the flight's constant
+        ok &= cidx[ia] != cidx[ib]
+        k_ok = np.flatnonzero(ok)
     has_xo = np.zeros(nl, bool)
     has_xo[ia[k_ok]] = True
     has_xo[ib[k_ok]] = True
+    col_xo = np.zeros(nc, bool)
+    col_xo[cidx[has_xo]] = True
     n_extra = nl if model == "line_trend" else (len(flights) if model == "flight_trend" else 0)
-    nu = nl + n_extra
+    nu = nc + n_extra
     m = k_ok.size
     # sparse design matrix: 2 (constant) or 4 (with trends) non-zeros per crossover
     r = np.arange(m)
-    rr, cc, vv = [r, r], [ia[k_ok], ib[k_ok]], [np.ones(m), -np.ones(m)]
+    rr, cc, vv = [r, r], [cidx[ia[k_ok]], cidx[ib[k_ok]]], [np.ones(m), -np.ones(m)]
     if model == "line_trend":
         rr += [r, r]
-        cc += [nl + ia[k_ok], nl + ib[k_ok]]
+        cc += [nc + ia[k_ok], nc + ib[k_ok]]
         vv += [(ta[k_ok] - tm[ia[k_ok]]) / S_PER_H, -(tb[k_ok] - tm[ib[k_ok]]) / S_PER_H]
     elif model == "flight_trend":
         fa, fb = fidx[ia[k_ok]], fidx[ib[k_ok]]
         rr += [r, r]
-        cc += [nl + fa, nl + fb]
+        cc += [nc + fa, nc + fb]
         vv += [(ta[k_ok] - fmid[fa]) / S_PER_H, -(tb[k_ok] - fmid[fb]) / S_PER_H]
     A = coo_matrix((np.concatenate(vv), (np.concatenate(rr), np.concatenate(cc))), shape=(m, nu)).tocsr()
     y = x[k_ok]
@@ -423,23 +459,23 @@ def level_crossovers(
 
     # unknowns no crossover touches stay zero
     free = np.zeros(nu, bool)
-    free[:nl] = has_xo
+    free[:nc] = col_xo
     if n_extra:
-        free[nl:] = np.asarray(abs(A[:, nl:]).sum(axis=0)).ravel() > 0
+        free[nc:] = np.asarray(abs(A[:, nc:]).sum(axis=0)).ravel() > 0
     if model == "flight_trend":
         # a tied flight's drift is known from its base readings (gravsurvey.ties): not re-estimated
-        free[nl:] &= np.array([f not in tied for f in flights], bool)
+        free[nc:] &= np.array([f not in tied for f in flights], bool)
     cols = np.flatnonzero(free)
     Af = A[:, cols]
 
     # datum: per connected group of lines, shifting all its constants together changes no
     # crossover difference; after the solve each group is shifted so that the mean constant of
     # its tied lines (or of all its lines) is zero
-    comp = _components(nl, ia[k_ok], ib[k_ok]) if nl else np.zeros(0, int)
+    comp = _components(nc, cidx[ia[k_ok]], cidx[ib[k_ok]]) if nc else np.zeros(0, int)
     groups, datums = [], set()
-    for g in np.unique(comp[has_xo]):
-        members = np.flatnonzero((comp == g) & has_xo)
-        tmem = np.array([i for i in members if keys[i][0] in tied], int)
+    for g in np.unique(comp[col_xo]):
+        members = np.flatnonzero((comp == g) & col_xo)
+        tmem = np.array([i for i in members if col_flight[i] in tied], int)
         groups.append((members, tmem if tmem.size else members))
         datums.add("tied flights" if tmem.size else "mean of lines")
 
@@ -477,21 +513,26 @@ def level_crossovers(
     resid = np.full(x.size, np.nan)
     resid[k_ok] = y - A @ u
     after = crossover_statistics(resid, ia, ib, labels)
-    trend = u[nl:] if model == "line_trend" else np.zeros(nl)
-    drift = {f: float(u[nl + j]) for j, f in enumerate(flights)} if model == "flight_trend" else {}
+    fit_w = np.full(x.size, np.nan)
+    fit_w[k_ok] = w0 * rw
+    trend = u[nc:] if model == "line_trend" else np.zeros(nl)
+    drift = {f: float(u[nc + j]) for j, f in enumerate(flights)} if model == "flight_trend" else {}
+    if per_flight:
+        # every line of a levelled flight carries its flight's constant
+        has_xo = col_xo[cidx]
     notes = []
     if (~has_xo).any():
         notes.append(
             f"{int((~has_xo).sum())} line(s) without crossovers not levelled: "
             + ", ".join(labels[i] for i in np.flatnonzero(~has_xo)[:10])
         )
-    ngroups = len(np.unique(comp[has_xo])) if has_xo.any() else 0
+    ngroups = len(np.unique(comp[col_xo])) if col_xo.any() else 0
     if ngroups > 1:
         notes.append(f"the crossovers split the lines into {ngroups} unconnected groups, each levelled to its own datum")
     return Levelling(
         model=model,
         line_keys=keys,
-        constant_mgal=u[:nl].copy(),
+        constant_mgal=u[cidx].copy(),
         trend_mgal_per_h=np.asarray(trend, float).copy(),
         line_mid_s=tm.copy(),
         flight_drift_mgal_per_h=drift,
@@ -507,6 +548,7 @@ def level_crossovers(
         diff_mgal=x.copy(),
         n_observations=int(m),
         n_unknowns=int(free.sum()) - int(ngroups),
+        fit_weight=fit_w,
     )
 
 
@@ -569,6 +611,118 @@ def level_survey(crossovers, lines, options: LevellingOptions | None = None, *, 
         max_iterations=o.max_iterations, tied_flights=tied_flights,
         flight_mid_s={f: 0.5 * (a + b) for f, (a, b) in fmid.items()},
     )
+
+
+def significance_test(lev: Levelling) -> dict:
+    """F-test of "the lines have no level errors" against the fitted model.
+
+    With ``S0 = sum_k w_k x_k^2`` (the weighted crossover misfit without corrections),
+    ``S1 = sum_k w_k r_k^2`` (after), ``u`` the estimated unknowns and ``n`` the crossovers
+    used, ``F = ((S0 - S1) / u) / (S1 / (n - u))`` follows Fisher's F(u, n - u) when the lines
+    have no level errors and the crossover errors are independent and Gaussian (the general
+    linear hypothesis test of least squares). The ratio does not depend on the scale of the
+    sigmas, so optimistic or pessimistic Kalman sigmas do not bias it. ``w_k`` are the final
+    (robust) weights of the fit.
+
+    Parameters
+    ----------
+    lev : Levelling
+
+    Returns
+    -------
+    dict
+        ``redundancy`` (n - u), ``f_statistic``, ``p_value`` (NaN when n <= u or nothing
+        was estimated) and ``sigma0_before``, ``sigma0_after`` (the square roots of S0 / n and
+        S1 / (n - u): unit-weight standard deviations, 1 for sigmas that are right).
+    """
+    n, u = int(lev.n_observations), int(lev.n_unknowns)
+    out = {"redundancy": n - u, "f_statistic": float("nan"), "p_value": float("nan"),
+           "sigma0_before": float("nan"), "sigma0_after": float("nan")}
+    w = lev.fit_weight
+    if w is None or n == 0:
+        return out
+    use = np.isfinite(w)
+    s0 = float(np.sum(w[use] * lev.diff_mgal[use] ** 2))
+    s1 = float(np.sum(w[use] * lev.residual_mgal[use] ** 2))
+    out["sigma0_before"] = math.sqrt(s0 / n)
+    if u <= 0 or n <= u:
+        return out
+    from scipy.stats import f as fisher_f
+
+    out["sigma0_after"] = math.sqrt(s1 / (n - u))
+    if s1 <= 0:
+        out["f_statistic"], out["p_value"] = float("inf"), 0.0
+        return out
+    fstat = max(s0 - s1, 0.0) / u / (s1 / (n - u))
+    out["f_statistic"] = fstat
+    out["p_value"] = float(fisher_f.sf(fstat, u, n - u))
+    return out
+
+
+def choose_levelling(crossovers, lines, options: LevellingOptions | None = None, *,
+                     tied_flights=()) -> Levelling:
+    """Level a survey and decide whether its corrections are applied (``levelling.enabled``).
+
+    ``enabled: false``: nothing is fitted; returns None. ``enabled: true``: the configured
+    model, applied whenever there are crossovers. ``enabled: null`` (default): the configured
+    model, then the :data:`FALLBACK_MODELS` with fewer unknowns (a constant per line, then one
+    per flight), are tried in turn; the first with at least ``min_crossovers_per_unknown``
+    crossovers per estimated unknown is fitted, and its corrections are applied only when
+    :func:`significance_test` rejects "no level errors" at ``significance`` (p < 0.05 by
+    default): the crossovers must show level errors larger than their own noise. Otherwise the
+    lines keep their values and the summary says why.
+
+    Parameters
+    ----------
+    crossovers, lines, options, tied_flights
+        As for :func:`level_survey`.
+
+    Returns
+    -------
+    Levelling or None
+        The fitted model with :attr:`Levelling.decision` ``{"applied", "model", "rule",
+        "reason", "tried": [...]}`` (every model tried, with its counts and test); None when
+        ``enabled`` is false.
+    """
+    o = options or LevellingOptions()
+    if o.enabled is False:
+        return None
+    flights = {str(ln["flight"]) for ln in lines}
+    order = [o.model] + [m for m in FALLBACK_MODELS if m != o.model
+                         and not (m == "flight_constant" and len(flights) < 2)]
+    if o.enabled:
+        order = order[:1]
+    tried, fits, pick = [], [], 0
+    for model in order:
+        lev = level_survey(crossovers, lines, replace(o, model=model), tied_flights=tied_flights)
+        test = significance_test(lev)
+        enough = lev.n_unknowns > 0 and lev.n_observations >= o.min_crossovers_per_unknown * lev.n_unknowns
+        tried.append({"model": model, "n_observations": lev.n_observations, "n_unknowns": lev.n_unknowns,
+                      "enough_crossovers": bool(enough), **test})
+        fits.append(lev)
+        if enough:
+            pick = len(fits) - 1
+            break
+    # without a model that has enough crossovers, the configured one is reported
+    lev, last = fits[pick], tried[pick]
+    if o.enabled:
+        applied, rule = lev.n_observations > 0, "forced (levelling.enabled: true)"
+        reason = "" if applied else "no usable crossovers"
+    elif not last["enough_crossovers"]:
+        applied, rule = False, f"at least {o.min_crossovers_per_unknown:g} crossovers per unknown"
+        reason = ("too few crossovers for every model: "
+                  + "; ".join(f"{t['model']} {t['n_observations']} for {t['n_unknowns']} unknowns" for t in tried))
+    else:
+        p = last["p_value"]
+        applied = bool(np.isfinite(p) and p < o.significance)
+        rule = (f"at least {o.min_crossovers_per_unknown:g} crossovers per unknown and the F-test of "
+                f"'no level errors' rejected at {o.significance:g}")
+        reason = "" if applied else (
+            f"{lev.model}: the crossovers show no significant level errors (F = {last['f_statistic']:.3g}, "
+            f"p = {p:.3g} >= {o.significance:g}): the corrections would fit noise")
+    lev.decision = {"applied": bool(applied), "model": lev.model, "rule": rule, "reason": reason,
+                    "tried": tried}
+    return lev
 
 
 #: GMT x2sys definition of the track text files written by :func:`write_gmt_tracks`

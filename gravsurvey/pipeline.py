@@ -760,7 +760,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     """
     from . import report
     from .io import writers
-    from .levelling import level_survey
+    from .levelling import choose_levelling
     from .survey import Crossovers, find_crossovers
 
     table, epsg = _profile_table(cfg, results)
@@ -816,13 +816,9 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         xo_tied.value_a_mgal = xo.value_a_mgal - ca
         xo_tied.value_b_mgal = xo.value_b_mgal - cb
         xo_tied.diff_mgal = xo_tied.value_a_mgal - xo_tied.value_b_mgal
-        lev = level_survey(xo_tied, lines, lopt, tied_flights=list(ties))
-        need = lopt.min_crossovers_per_unknown * max(lev.n_unknowns, 1)
-        if want is None and lev.n_observations < need:
-            notes.append(
-                f"levelling: not applied: {lev.n_observations} crossovers for {lev.n_unknowns} unknowns "
-                f"(needs {lopt.min_crossovers_per_unknown:g} per unknown; levelling.enabled: true forces it)"
-            )
+        lev = choose_levelling(xo_tied, lines, lopt, tied_flights=list(ties))
+        if not lev.decision["applied"]:
+            notes.append(f"levelling: not applied: {lev.decision['reason']} (levelling.enabled: true forces it)")
             lev_skipped = lev
             lev = None
         else:

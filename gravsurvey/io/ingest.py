@@ -83,6 +83,9 @@ class IngestOptions:
     key_path: str = "flight"
     base_dir: str | None = None  # relative input paths refer to it
     gravimeter: object = None  # io.formats.flight.GravimeterOptions for kind "gravimeter"
+    #: ``{format: nmea | trajectory, file, ...}``: a navigation file that is the flight's GNSS
+    #: (``inputs.nav``, validated by io.formats.flight.nav_options_from_dict)
+    nav: dict | None = None
 
     def _resolve(self, p, base_dir=None):
         base = base_dir if base_dir is not None else self.base_dir
@@ -91,12 +94,11 @@ class IngestOptions:
     def input_paths(self, base_dir=None) -> list:
         """The input files (MCAP, or the CSVs in imu, altimeter, gnss order), resolved against
         ``base_dir`` (default: the one given to :func:`ingest_options_from_dict`)."""
-        if self.kind == "mcap":
-            return [self._resolve(self.mcap_path, base_dir)]
         if self.kind == "gravimeter":
             return self.gravimeter.paths(base_dir if base_dir is not None else self.base_dir)
-        return [self._resolve(self.csv_paths[r], base_dir) for r in ROLES + OPTIONAL_ROLES
-                if r in self.csv_paths]
+        paths = [self._resolve(self.csv_paths[r], base_dir) for r in ROLES + OPTIONAL_ROLES
+                 if r in self.csv_paths] if self.kind == "csv" else [self._resolve(self.mcap_path, base_dir)]
+        return paths + ([self._resolve(self.nav["file"], base_dir)] if self.nav else [])
 
 
 # ----------------------------------------------------------------------------- config parsing
@@ -167,7 +169,15 @@ def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
                           "{csv: {imu: FILE, altimeter: FILE, gnss: FILE}}")
     p = f"{key_path}.inputs"
     inputs = _mapping(cfg["inputs"], p)
-    check_keys(inputs, ("mcap", "csv", "gravimeter"), p)
+    check_keys(inputs, ("mcap", "csv", "gravimeter", "nav"), p)
+    if "nav" in inputs:
+        # a navigation file (NMEA, GNSS trajectory text) as the GNSS of an IMU flight
+        from gravsurvey.io.formats.flight import nav_options_from_dict
+
+        if "gravimeter" in inputs:
+            raise ConfigError(f"{p}.nav: only next to mcap or csv; a gravimeter's navigation is {p}.gravimeter.nav")
+        o.nav = nav_options_from_dict(inputs["nav"], f"{p}.nav")
+        inputs = {k: v for k, v in inputs.items() if k != "nav"}
     if len(inputs) != 1:
         raise ConfigError(f"{p}: expected exactly one of mcap, csv, gravimeter, got "
                           f"{', '.join(inputs) or 'none'}")
@@ -531,6 +541,8 @@ def read_raw_channels(options: IngestOptions, base_dir, notes: list):
                              f"dropped" + (f" ({probs})" if probs else ""))
             vals = _apply_units(role, vals, options.mcap_units)
             raw[role] = RawChannel(role, t, vals, src, content.schema_name(ids[0]), enc, tsrc)
+        if options.nav:
+            raw["gnss"] = read_gnss_file(options, base_dir, notes, replaces=raw.get("gnss"))
         return raw, content
     for role, rel in options.csv_paths.items():
         path = options._resolve(rel, base_dir)
@@ -538,7 +550,42 @@ def read_raw_channels(options: IngestOptions, base_dir, notes: list):
                                    options.csv_time_format, options.csv_units,
                                    options.csv_delimiter, options.gps_leap_seconds)
         raw[role] = RawChannel(role, t, vals, str(path), "csv", "csv", options.csv_time_format)
+    if options.nav:
+        raw["gnss"] = read_gnss_file(options, base_dir, notes, replaces=raw.get("gnss"))
     return raw, None
+
+
+def read_gnss_file(options: IngestOptions, base_dir, notes: list, replaces=None) -> RawChannel:
+    """The GNSS channel from a navigation file (``inputs.nav``: NMEA or trajectory text).
+
+    Heights must be ellipsoidal (NMEA: GGA altitude + geoid separation; trajectory: an
+    ellipsoidal-height column): the INS and normal gravity refer to the ellipsoid, and a geoid
+    height of tens of metres would bias the anomaly by 0.3 mGal per metre.
+
+    Raises
+    ------
+    DataError
+        Missing or unreadable file, no position, or no ellipsoidal height (names the file).
+    """
+    from gravsurvey.io.formats.flight import read_navigation
+
+    fmt = options.nav["format"]
+    path = options._resolve(options.nav["file"], base_dir)
+    tab = read_navigation({**options.nav, "file": os.fspath(path)})
+    # the reader's remarks on damage and missing values are findings; its time-source line is not
+    notes.extend(f"gnss: {n}" for n in tab.notes if ": time from the " not in n and "no RMC/VTG speed" not in n)
+    h = np.asarray(tab.columns["height"], float)
+    if not np.isfinite(h).any():
+        what = ("GGA sentences with the geoid separation (field 11)" if fmt == "nmea"
+                else "an ellipsoidal height column (ell_ht, h_ell, ...)")
+        raise DataError(f"{path}: no ellipsoidal heights; expected {what}: the INS needs heights above "
+                        f"the ellipsoid (orthometric heights would bias the anomaly by 0.3 mGal/m)")
+    if replaces is not None and len(replaces.time_ns):
+        notes.append(f"gnss: {path} ({fmt}) used instead of the GNSS channel of {replaces.source}")
+    vals = {"lat_deg": np.degrees(np.asarray(tab.columns["lat"], float)),
+            "lon_deg": np.degrees(np.asarray(tab.columns["lon"], float)), "height": h}
+    tsrc = str(tab.meta.get("time_source", tab.meta.get("time_system", "file")))
+    return RawChannel("gnss", np.asarray(tab.time_ns, np.int64), vals, f"{path} ({fmt})", fmt, "text", tsrc)
 
 
 def _drop_nonfinite(ch: RawChannel, notes):

@@ -138,6 +138,29 @@ def _str(v, path):
     return v
 
 
+def nav_options_from_dict(nav, key_path: str) -> dict:
+    """Validate a navigation-file mapping ``{format: nmea|trajectory, file, [time_source |
+    time_system]}`` (``inputs.gravimeter.nav`` and ``inputs.nav``).
+
+    Raises
+    ------
+    ConfigError
+        Not a mapping, unknown key, unknown format, option of the other format; names the key path.
+    """
+    p = key_path
+    if not isinstance(nav, dict):
+        raise ConfigError(f"{p}: expected a mapping with format and file")
+    check_keys(nav, NAV_KEYS, p, required=("format", "file"))
+    if nav["format"] not in NAV_FORMATS:
+        raise ConfigError(f"{p}.format: expected one of {', '.join(NAV_FORMATS)}, got {nav['format']!r}{suggest(nav['format'], NAV_FORMATS)}")
+    _str(nav["file"], f"{p}.file")
+    if "time_source" in nav and (nav["format"] != "nmea" or nav["time_source"] not in ("auto", "fix", "logger")):
+        raise ConfigError(f"{p}.time_source: nmea only, one of auto, fix, logger; got {nav['time_source']!r}")
+    if "time_system" in nav and (nav["format"] != "trajectory" or nav["time_system"] not in ("auto", "gps", "utc")):
+        raise ConfigError(f"{p}.time_system: trajectory only, one of auto, gps, utc; got {nav['time_system']!r}")
+    return dict(nav)
+
+
 def gravimeter_options_from_dict(d, key_path: str = "flights[0].inputs.gravimeter") -> GravimeterOptions:
     """Validate ``inputs.gravimeter``.
 
@@ -194,19 +217,7 @@ def gravimeter_options_from_dict(d, key_path: str = "flights[0].inputs.gravimete
         if not ck.HEIGHT_OK[0] <= o.height_m <= ck.HEIGHT_OK[1]:
             raise ConfigError(f"{key_path}.height_m: {o.height_m:g} m outside {ck.HEIGHT_OK[0]:g}..{ck.HEIGHT_OK[1]:g} m")
     if "nav" in d:
-        p = f"{key_path}.nav"
-        nav = d["nav"]
-        if not isinstance(nav, dict):
-            raise ConfigError(f"{p}: expected a mapping with format and file")
-        check_keys(nav, NAV_KEYS, p, required=("format", "file"))
-        if nav["format"] not in NAV_FORMATS:
-            raise ConfigError(f"{p}.format: expected one of {', '.join(NAV_FORMATS)}, got {nav['format']!r}{suggest(nav['format'], NAV_FORMATS)}")
-        _str(nav["file"], f"{p}.file")
-        if "time_source" in nav and (nav["format"] != "nmea" or nav["time_source"] not in ("auto", "fix", "logger")):
-            raise ConfigError(f"{p}.time_source: nmea only, one of auto, fix, logger; got {nav['time_source']!r}")
-        if "time_system" in nav and (nav["format"] != "trajectory" or nav["time_system"] not in ("auto", "gps", "utc")):
-            raise ConfigError(f"{p}.time_system: trajectory only, one of auto, gps, utc; got {nav['time_system']!r}")
-        o.nav = dict(nav)
+        o.nav = nav_options_from_dict(d["nav"], f"{key_path}.nav")
     elif not info["positions"]:
         raise ConfigError(f"{key_path}.nav: missing; {fmt} files hold no positions: give nav: {{format: nmea|trajectory, file: ...}}")
     return o
