@@ -234,6 +234,9 @@ class Levelling:
     fit_weight : ndarray, shape (k,)
         Final weight of each crossover in the fit, ``weight / (sigma_a^2 + sigma_b^2)``, 1/mGal^2
         (NaN for crossovers not used).
+    ls_misfit : (float, float)
+        ``sum w x^2`` and ``sum w r^2`` of the plain weighted least-squares fit (``w`` the sigma
+        weights, no robust reweighting): the sums of squares of :func:`significance_test`.
     decision : dict or None
         Set by :func:`choose_levelling`: whether the corrections are applied, by which rule, and
         the statistics of every model tried.
@@ -258,6 +261,7 @@ class Levelling:
     n_observations: int = 0
     n_unknowns: int = 0
     fit_weight: np.ndarray | None = None
+    ls_misfit: tuple = (0.0, 0.0)
     decision: dict | None = None
 
     def correction(self, flight: str, line: str, time_s) -> np.ndarray:
@@ -495,6 +499,9 @@ def level_crossovers(
     rw = np.ones(m)
     it = 0
     u = solve(w0) if m else np.zeros(nu)
+    # weighted misfit before and after the plain (non-robust) fit: the F-test's sums of squares
+    # (robust reweighting would shrink the after-sum more than the before-sum and inflate F)
+    ls_misfit = (float(np.sum(w0 * y**2)), float(np.sum(w0 * (y - A @ u) ** 2))) if m else (0.0, 0.0)
     if robust and m > 2:
         for it in range(1, max_iterations + 1):
             res = (y - A @ u) * np.sqrt(w0)
@@ -549,6 +556,7 @@ def level_crossovers(
         n_observations=int(m),
         n_unknowns=int(free.sum()) - int(ngroups),
         fit_weight=fit_w,
+        ls_misfit=ls_misfit,
     )
 
 
@@ -617,12 +625,14 @@ def significance_test(lev: Levelling) -> dict:
     """F-test of "the lines have no level errors" against the fitted model.
 
     With ``S0 = sum_k w_k x_k^2`` (the weighted crossover misfit without corrections),
-    ``S1 = sum_k w_k r_k^2`` (after), ``u`` the estimated unknowns and ``n`` the crossovers
-    used, ``F = ((S0 - S1) / u) / (S1 / (n - u))`` follows Fisher's F(u, n - u) when the lines
-    have no level errors and the crossover errors are independent and Gaussian (the general
-    linear hypothesis test of least squares). The ratio does not depend on the scale of the
-    sigmas, so optimistic or pessimistic Kalman sigmas do not bias it. ``w_k`` are the final
-    (robust) weights of the fit.
+    ``S1 = sum_k w_k r_k^2`` (after the weighted least-squares fit), ``u`` the estimated unknowns
+    and ``n`` the crossovers used, ``F = ((S0 - S1) / u) / (S1 / (n - u))`` follows Fisher's
+    F(u, n - u) when the lines have no level errors and the crossover errors are independent
+    and Gaussian (the general linear hypothesis test of least squares). The ratio does not
+    depend on the scale of the sigmas, so optimistic or pessimistic Kalman sigmas do not bias
+    it. ``w_k = 1 / (sigma_a^2 + sigma_b^2)`` without the robust reweighting, which would shrink
+    ``S1`` more than ``S0`` and inflate ``F`` (measured: 18 % false alarms instead of 5 % on
+    noise-only 4 x 4 grids, ``tests/test_levelling.py``).
 
     Parameters
     ----------
@@ -638,12 +648,9 @@ def significance_test(lev: Levelling) -> dict:
     n, u = int(lev.n_observations), int(lev.n_unknowns)
     out = {"redundancy": n - u, "f_statistic": float("nan"), "p_value": float("nan"),
            "sigma0_before": float("nan"), "sigma0_after": float("nan")}
-    w = lev.fit_weight
-    if w is None or n == 0:
+    if n == 0:
         return out
-    use = np.isfinite(w)
-    s0 = float(np.sum(w[use] * lev.diff_mgal[use] ** 2))
-    s1 = float(np.sum(w[use] * lev.residual_mgal[use] ** 2))
+    s0, s1 = lev.ls_misfit
     out["sigma0_before"] = math.sqrt(s0 / n)
     if u <= 0 or n <= u:
         return out

@@ -1,45 +1,70 @@
-"""The commented example config written by ``gravsurvey init`` (kept valid by a test)."""
+"""The commented example config written by ``gravsurvey init``.
+
+Kept valid by tests: ``tests/test_templates.py`` runs it end to end on the sample survey
+``sample_data/grid_ros2`` with only its file paths edited.
+"""
 
 EXAMPLE_CONFIG = """\
-# gravsurvey processing config. Every key: docs/config.md. Paths are relative to this file.
+# gravsurvey processing config, written by `gravsurvey init`. Every key: docs/config.md.
+# Paths are relative to this file. Edit the input paths; every other value is a default, and
+# what the defaults leave open (noise levels, anomaly prior, initial state, attitude, grid
+# spacing) comes from each flight's own data. Optional keys are commented out.
 survey:
-  name: my_survey                  # used in outputs
+  name: my_survey                  # in every output and its metadata
 
-ellipsoid: WGS84                   # WGS84 | GRS80 (heights and normal gravity refer to it)
+ellipsoid: WGS84                   # WGS84 | GRS80: heights and normal gravity refer to it
 
-flights:
-  - name: F01                      # unique; letters, digits, _ . -
+flights:                           # one entry per flight; names unique (letters, digits, _ . -)
+  - name: F01
     inputs:
-      mcap: F01/F01_json.mcap      # one MCAP with IMU, altimeter (and GNSS) topics
+      mcap: F01/F01_ros2.mcap      # one MCAP with IMU, altimeter and GNSS topics, or:
       # csv: {imu: F01/imu.csv, altimeter: F01/altimeter.csv, gnss: F01/gnss.csv}
-    topics: {imu: /imu, altimeter: /altimeter, gnss: /gnss}
-    triad: platform                # platform (ENU-stabilised) | strapdown (body axes)
-    # imu_axes: FLU                # strapdown sensor axes: FLU | FRD (VectorNav, Xsens, iMAR, NovAtel) | RFU | 3x3
-    # gnss_lever_arm_m: [0, 0, 0]  # antenna from the IMU, m, forward-left-up (strapdown)
-    # initial:                     # optional: the first state comes from the data (GNSS position and
-    #   attitude_deg: [r, p, h]    # velocity, attitude from the alignment); any key given here
-    #                              # (lat_deg, lon_deg, height_m, velocity_enu_mps, attitude_deg)
-    #                              # overrides it and is checked against the data
+      # nav: {format: nmea, file: F01/gnss.nmea}  # GNSS from an NMEA or trajectory text file
+    # topics: {imu: /imu, altimeter: /altimeter, gnss: /gnss}  # default; else found by schema
+    triad: strapdown               # strapdown (body-fixed IMU) | platform (ENU-stabilised)
+    # imu_axes: FLU                # FLU | FRD (VectorNav, Xsens, iMAR, NovAtel) | RFU | 3x3 matrix
+    # gnss_lever_arm_m: [0, 0, 0]  # antenna from the IMU, m, forward-left-up
+    # initial:                     # optional overrides of the state from the data (GNSS
+    #   attitude_deg: [...]        # position and velocity, attitude from the alignment):
+    #                              # lat_deg, lon_deg, height_m, velocity_enu_mps, attitude_deg
+    # tie:                         # base tie: puts the flight on an absolute level, removes drift
+    #   base_gravity_mgal: ...     # the base station's absolute gravity, mGal
+    #   before: {reading_mgal: ..., time_s: ...}   # still reading at the base, or a window
+    #   after: {start_s: ..., stop_s: ...}         # of the log parked there (docs/survey.md)
     # truth: F01/truth.csv         # simulator truth: adds truth_mgal / error_mgal columns
+  - name: F02
+    inputs:
+      mcap: F02/F02_ros2.mcap
+    triad: strapdown
 
-model:                             # 3D-INM Kalman filter; defaults are seed 004's values
-  filter_rate_hz: 1.0              # Kalman epochs per second (decimated from the IMU rate)
-  accel_noise_mps2: 1.0e-3         # horizontal accelerometer white noise, 1 sigma
-  gyro_drift_degph: 0.01           # gyro white drift, 1 sigma, deg/h
-  gravimeter_lambda_per_s: 0.025   # gravimeter error correlation rate lambda_f3, 1/s
-  gravimeter_sigma_mps2: 1.0e-6    # gravimeter error sigma_f3, m/s^2
-  anomaly_lambda_per_m: 1.0e-5     # anomaly correlation rate in space lambda_s, 1/m
-  anomaly_sigma_mps2: 1.0e-3       # anomaly sigma_s, m/s^2
-  altimeter_sigma_m: 1.0           # radial (height) measurement noise, m
-  radius_source: altimeter         # altimeter | computed: |q| used in the gravity model
+model:                             # 3D-INM Kalman/RTS filter (docs/method.md)
+  identify: true                   # noise levels and anomaly prior from each flight's data
+  filter_rate_hz: 1.0              # Kalman epochs per second (the IMU decimated)
+  # target_resolution_m: ...       # ask for a resolution instead of the least-error one
 
-lines:
-  mode: auto                       # auto (straight-line detection) | windows | whole
+lines:                             # line segmentation (docs/outputs.md)
+  mode: auto                       # auto (straight, level legs) | windows | whole
+  # min_line_m: 2000               # shortest line, m; lines/ties/transits by heading
 
 postprocess:
-  method: default                  # see docs/wavelet.md for methods and measured accuracy
+  method: default                  # the smoothed estimate; docs/wavelet.md for the others
+
+# checks:                          # gaps, clocks, GNSS vs IMU, plausibility (docs/reliability.md)
+#   max_imu_gap_s: 2.0
+#   max_track_deviation_m: 50
+
+levelling:                         # crossover levelling (docs/survey.md)
+  enabled: null                    # null: applied when the crossovers over-determine it and show
+                                   # significant level errors (F-test); true: always; false: never
+  model: constant                  # constant per line | line_trend | flight_trend | flight_constant
+
+grid:                              # levelled lines to a grid (docs/survey.md)
+  enabled: null                    # null: when there are >= 2 lines
+  method: equivalent_sources       # equivalent_sources (continued to altitude_m) | spline
+  # spacing_m: ...                 # default: a quarter of the line spacing
+  # altitude_m: ...                # default: the median flight height
 
 output:
-  dir: out                         # deliverables: profiles.csv, .xyz, .geojson, summary.json, PNGs
-  # epsg: 32653                    # projected CRS for easting/northing; default: UTM zone of the data
+  dir: out                         # profiles.csv, .xyz, lines.geojson, grid.nc, summary.json, PNGs
+  # epsg: ...                      # projected CRS; default: the UTM zone of the data
 """

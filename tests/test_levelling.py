@@ -229,3 +229,82 @@ def test_config_sections_validated_with_key_paths(tmp_path):
         load(grid={"cv_folds": 1})
     with pytest.raises(ConfigError, match=r"^flights\[0\].tie.after: a window needs both start_s and stop_s"):
         load(tie={"base_gravity_mgal": 980500.0, "after": {"start_s": 5}})
+
+
+# ---------------------------------------------------------------- the automatic decision (enabled: null)
+def _grid_crossovers(n_lines, n_ties, line_off, tie_off, noise, rng, flights=None):
+    """Crossover differences of ``n_lines`` x ``n_ties`` crossing lines with known offsets."""
+    keys = [(flights[0] if flights else "F", f"L{i}") for i in range(n_lines)]
+    keys += [(flights[1] if flights else "F", f"T{j}") for j in range(n_ties)]
+    off = np.concatenate([line_off, tie_off])
+    a = np.repeat(np.arange(n_lines), n_ties)
+    b = n_lines + np.tile(np.arange(n_ties), n_lines)
+    d = off[a] - off[b] + rng.normal(0.0, noise, a.size)
+    t = np.zeros(a.size)
+    return d, a, b, t, keys, off
+
+
+def _decide(d, a, b, t, keys, **opt):
+    """choose_levelling on raw crossover arrays (a tiny Crossovers look-alike)."""
+    from types import SimpleNamespace
+
+    from gravsurvey.levelling import choose_levelling
+
+    xo = SimpleNamespace(flight_a=np.array([keys[i][0] for i in a]), line_a=np.array([keys[i][1] for i in a]),
+                         flight_b=np.array([keys[i][0] for i in b]), line_b=np.array([keys[i][1] for i in b]),
+                         time_a_s=t, time_b_s=t, diff_mgal=d)
+    lines = [{"flight": f, "line": ln, "time_s": np.array([0.0, 1.0]), "sigma_mgal": np.array([0.2, 0.2])}
+             for f, ln in keys]
+    return choose_levelling(xo, lines, LevellingOptions(**opt))
+
+
+def test_decision_applies_real_level_errors_and_declines_noise():
+    rng = np.random.default_rng(7)
+    # 4 lines x 4 ties (16 crossovers, 7 unknowns): line offsets of 1 mGal RMS, 0.3 mGal noise
+    d, a, b, t, keys, off = _grid_crossovers(4, 4, rng.normal(0, 1.0, 4), rng.normal(0, 1.0, 4), 0.3, rng)
+    lev = _decide(d, a, b, t, keys)
+    dec = lev.decision
+    assert dec["applied"] and dec["model"] == "constant", dec
+    assert dec["tried"][0]["p_value"] < 1e-3 and dec["tried"][0]["redundancy"] == 16 - 7
+    # the corrections recover the offsets (datum: mean zero) to about the noise
+    assert np.abs(lev.constant_mgal - (off - off.mean())).max() < 0.5
+    # the same survey without level errors: the F-test declines at the 5 % level in about 5 %
+    # of surveys (the test's size): count over 200 noise-only surveys
+    declined = 0
+    for k in range(200):
+        d, a, b, t, keys, _ = _grid_crossovers(4, 4, np.zeros(4), np.zeros(4), 0.3, rng)
+        declined += not _decide(d, a, b, t, keys).decision["applied"]
+    # binomial(200, 0.95): mean 190, sd 3.1
+    assert 180 <= declined <= 199, declined
+    lev = _decide(d, a, b, t, keys, enabled=True)
+    assert lev.decision["applied"] and lev.decision["rule"].startswith("forced")
+
+
+def test_too_few_crossovers_fall_back_to_one_constant_per_flight():
+    rng = np.random.default_rng(3)
+    # flight A flies 3 lines, flight B 2 ties: 6 crossovers for 4 line unknowns (too few);
+    # the flights differ by 2.5 mGal, lines by 0.1 mGal, noise 0.3 mGal
+    d, a, b, t, keys, off = _grid_crossovers(3, 2, 1.0 + rng.normal(0, 0.1, 3), -1.5 + rng.normal(0, 0.1, 2), 0.3,
+                                             rng, flights=("A", "B"))
+    lev = _decide(d, a, b, t, keys)
+    dec = lev.decision
+    assert [x["model"] for x in dec["tried"]] == ["constant", "flight_constant"]
+    assert not dec["tried"][0]["enough_crossovers"] and dec["tried"][1]["n_unknowns"] == 1
+    assert dec["applied"] and dec["model"] == "flight_constant", dec
+    # one constant per flight, mean zero: +1.25 and -1.25 within the noise / sqrt(6)
+    ca = lev.constant_mgal[[i for i, k in enumerate(keys) if k[0] == "A"]]
+    cb = lev.constant_mgal[[i for i, k in enumerate(keys) if k[0] == "B"]]
+    assert np.ptp(ca) == 0 and np.ptp(cb) == 0
+    assert abs((ca[0] - cb[0]) - 2.5) < 0.4
+    # a single flight has no flight-level fallback: too few crossovers, nothing applied
+    d, a, b, t, keys, _ = _grid_crossovers(3, 2, rng.normal(0, 1, 3), rng.normal(0, 1, 2), 0.3, rng)
+    dec = _decide(d, a, b, t, keys).decision
+    assert not dec["applied"] and "too few crossovers" in dec["reason"]
+    assert [x["model"] for x in dec["tried"]] == ["constant"]
+
+
+def test_significance_option_validated():
+    assert LevellingOptions.from_dict({"significance": 0.01}).significance == 0.01
+    with pytest.raises(ConfigError, match=r"^levelling\.significance: expected a probability in \(0, 1\)"):
+        LevellingOptions.from_dict({"significance": 5})
+    assert LevellingOptions.from_dict({"model": "flight_constant"}).model == "flight_constant"
