@@ -80,13 +80,17 @@ def test_sample_survey_end_to_end(sample_run):
     assert summary["software"]["version"]
     assert summary["config"]["sha256"]
     if name == "grid_ros2":
-        # tie T01 crosses the three survey lines, T02 (which ends the flight) the first two
-        # (configs/sample_grid_ros2.yaml); lines are kept by length, so neither tie is dropped
-        assert summary["crossovers"]["count"] == 5
+        # F01: tie T01 crosses the three survey lines, T02 (which ends the flight) the first two
+        # (configs/sample_grid_ros2.yaml); lines are kept by length, so neither tie is dropped.
+        # F02's four east-west lines cross F01's three survey lines (and its connecting leg L04)
         with open(out / "crossovers.csv", newline="") as fh:
             rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
-        assert sorted(r["line_a"] for r in rows) == ["L01", "L01", "L02", "L02", "L03"]
-        assert sorted(r["line_b"] for r in rows) == ["T01", "T01", "T01", "T02", "T02"]
+        f01 = [r for r in rows if r["flight_a"] == r["flight_b"] == "F01"]
+        assert sorted(r["line_a"] for r in f01) == ["L01", "L01", "L02", "L02", "L03"]
+        assert sorted(r["line_b"] for r in f01) == ["T01", "T01", "T01", "T02", "T02"]
+        across = [r for r in rows if r["flight_a"] != r["flight_b"]]
+        assert len(across) >= 12 and summary["crossovers"]["count"] == len(rows)
+        assert summary["levelling"]["decision"]["applied"]  # docs/survey.md, "The sample survey"
     bound = _bounds_from_docs()[name]
     assert summary["rms_vs_truth_mgal"] is not None
     assert summary["rms_vs_truth_mgal"] <= bound, (name, summary["rms_vs_truth_mgal"], bound)
