@@ -137,3 +137,24 @@ def test_nav_config_and_data_errors(tmp_path, flight):
                                  base_dir=tmp_path)
     with pytest.raises(DataError, match=r"none\.txt: navigation file not found"):
         load_flight(o)
+
+
+def test_trajectory_text_is_the_gnss_of_an_ins_flight(flight, tmp_path):
+    """A GrafNav-style export (GPS date/time, ellipsoidal height) from the simulator's GNSS."""
+    from gravsurvey.io.formats.common import gps_leap_seconds
+
+    d, rows = flight
+    lines = ["GPSDate, GPSTime, Latitude, Longitude, H-Ell, NS, PDOP"]
+    for t_ns, lat, lon, h in rows:
+        t_gps = int(t_ns) // 10**9 + gps_leap_seconds(int(t_ns) / 1e9)  # UTC -> GPS time
+        tm = datetime.fromtimestamp(t_gps, tz=timezone.utc)
+        lines.append(f"{tm:%m/%d/%Y}, {tm:%H:%M:%S}.{int(t_ns) % 10**9 // 10**6:03d}, {lat:.9f}, {lon:.9f}, {h:.3f}, 12, 1.4")
+    (tmp_path / "traj.txt").write_text("\n".join(lines) + "\n")
+    o = ingest_options_from_dict({"inputs": {"csv": {"imu": str(d / "F01" / "imu.csv"),
+                                                     "altimeter": str(d / "F01" / "altimeter.csv")},
+                                             "nav": {"format": "trajectory", "file": str(tmp_path / "traj.txt")}}})
+    rec = load_flight(o)
+    t = rec.t0_unix_ns + np.round(rec.gnss.time * 1e9).astype(np.int64)
+    assert np.array_equal(t, rows[:, 0].astype(np.int64))  # GPS time back to UTC exactly
+    assert np.abs(np.degrees(rec.gnss.lat) - rows[:, 1]).max() < 1e-9
+    assert np.abs(rec.gnss.height - rows[:, 3]).max() <= 0.0005 + 1e-9

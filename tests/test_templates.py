@@ -61,6 +61,15 @@ def test_init_template_runs_on_the_sample_survey_with_only_paths_edited(tmp_path
         assert len([ln for ln in f["lines"].values() if ln["kind"] == "line"]) >= 3
     for f in ("grid.nc", "grid_map.png", "profiles.csv", "profiles.xyz", "lines.geojson", "crossovers.csv"):
         assert (out / f).is_file(), f
+    # no base ties in the template: every deliverable says the level is relative (issue 15 item 2)
+    assert summary["level"]["state"] == "relative" and summary["level"]["tied_flights"] == []
+    for f in ("profiles.csv", "profiles.xyz"):
+        head = [ln for ln in (out / f).read_text().splitlines()[:12] if "level" in ln]
+        assert any("relative" in ln for ln in head), (f, head)
+    import xarray as xr
+
+    with xr.open_dataset(out / "grid.nc") as ds:
+        assert ds.attrs["level"] == "relative"
     lev = summary["levelling"]
     assert lev["decision"]["rule"] and lev["test"]["redundancy"] > 0
     assert summary["grid"]["cv_rms_mgal"] > 0

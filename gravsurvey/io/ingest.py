@@ -573,7 +573,8 @@ def read_gnss_file(options: IngestOptions, base_dir, notes: list, replaces=None)
     path = options._resolve(options.nav["file"], base_dir)
     tab = read_navigation({**options.nav, "file": os.fspath(path)})
     # the reader's remarks on damage and missing values are findings; its time-source line is not
-    notes.extend(f"gnss: {n}" for n in tab.notes if ": time from the " not in n and "no RMC/VTG speed" not in n)
+    info = (": time from the ", ": time scale ", "no RMC/VTG speed")
+    notes.extend(f"gnss: {n}" for n in tab.notes if not any(k in n for k in info))
     h = np.asarray(tab.columns["height"], float)
     if not np.isfinite(h).any():
         what = ("GGA sentences with the geoid separation (field 11)" if fmt == "nmea"
