@@ -308,3 +308,14 @@ def test_significance_option_validated():
     with pytest.raises(ConfigError, match=r"^levelling\.significance: expected a probability in \(0, 1\)"):
         LevellingOptions.from_dict({"significance": 5})
     assert LevellingOptions.from_dict({"model": "flight_constant"}).model == "flight_constant"
+
+
+def test_decision_on_the_simulated_survey_applies_constant():
+    """The multi-flight survey with per-flight offsets and drifts: the rule levels it."""
+    from gravsurvey.levelling import choose_levelling
+
+    lines, _ = simulated_survey(seed=3)
+    lev = choose_levelling(find_crossovers(lines), lines)
+    t = lev.decision["tried"][0]
+    assert lev.decision["applied"] and lev.decision["model"] == "constant"
+    assert (t["n_observations"], t["n_unknowns"]) == (32, 11) and t["p_value"] < 1e-10
