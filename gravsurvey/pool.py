@@ -83,9 +83,9 @@ class WorkerPool:
     def __enter__(self) -> WorkerPool:
         self.children_before = set(mp.active_children())
         with sigint_deferred():
-            self.executor = ProcessPoolExecutor(max_workers=self.max_workers,
-                                                mp_context=mp.get_context("spawn"),
-                                                initializer=ignore_sigint)
+            self.executor = ProcessPoolExecutor(
+                max_workers=self.max_workers, mp_context=mp.get_context("spawn"), initializer=ignore_sigint
+            )
         return self
 
     def submit_all(self, fn, calls) -> list[Future]:

@@ -197,16 +197,27 @@ def _children(pid: int) -> list[str]:
 
 # runs gravsurvey as `python -m gravsurvey` does, after saying (one byte on stdout) that the
 # interpreter's own start-up is over: a Ctrl-C before that is Python's, not ours
-_MAIN_AFTER_READY = ("import runpy, sys; sys.stdout.write('R'); sys.stdout.flush(); "
-                     "sys.argv[0] = 'gravsurvey'; runpy.run_module('gravsurvey', run_name='__main__')")
+_MAIN_AFTER_READY = (
+    "import runpy, sys; sys.stdout.write('R'); sys.stdout.flush(); "
+    "sys.argv[0] = 'gravsurvey'; runpy.run_module('gravsurvey', run_name='__main__')"
+)
 
 
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux /proc to see the pool start")
 @pytest.mark.parametrize(
     "moment, delay_s, group",
-    [("start", 0.1, False), ("start", 0.5, False), ("start", 1.0, True),
-     ("spawn", 0.0, False), ("spawn", 0.05, False), ("spawn", 0.5, False),
-     ("spawn", 0.0, True), ("spawn", 0.02, True), ("spawn", 0.5, True), ("spawn", 1.0, True)],
+    [
+        ("start", 0.1, False),
+        ("start", 0.5, False),
+        ("start", 1.0, True),
+        ("spawn", 0.0, False),
+        ("spawn", 0.05, False),
+        ("spawn", 0.5, False),
+        ("spawn", 0.0, True),
+        ("spawn", 0.02, True),
+        ("spawn", 0.5, True),
+        ("spawn", 1.0, True),
+    ],
 )
 def test_sigint_at_any_moment_of_a_parallel_run(seed_run, tmp_path, moment, delay_s, group):
     """Ctrl-C during `run --jobs 2` at a given moment: ``start`` = after the interpreter has
