@@ -294,6 +294,27 @@ def test_warnings_reach_stderr_and_log_with_a_count(tmp_path, quiet):
     assert _nonblank(r2.stderr)[-1] == "1 warning"
 
 
+def test_csv_cut_inside_its_last_line_is_processed_and_exit_1(tmp_path):
+    """An IMU CSV cut 20 bytes into its last line (a logger stopped mid-write): the flight is
+    processed from the complete lines, the damage is one line on stderr naming the file, the
+    line and the bytes, the deliverables are written, exit 1 (a damaged input, as for MCAP)."""
+    src = tmp_path / "mc"
+    shutil.copytree(SAMPLES / "markov_csv", src)
+    imu = src / "F01" / "imu.csv"
+    raw = imu.read_bytes()
+    last_start = raw.rstrip(b"\n").rindex(b"\n") + 1
+    imu.write_bytes(raw[: last_start + 20])
+    n_line = raw[:last_start].count(b"\n") + 1
+    out = tmp_path / "out"
+    r = gs("run", src / "survey.yaml", "-o", out, "-q")
+    assert r.returncode == 1, r.stderr
+    assert "Traceback" not in r.stderr
+    msg = f"F01: {imu}: last line (line {n_line}) cut after 20 bytes, 1 row dropped"
+    assert f"gravsurvey: input damaged, processed what was salvaged: {msg}" in _nonblank(r.stderr), r.stderr
+    assert (out / "profiles.csv").is_file() and (out / "summary.json").is_file()
+    assert msg in json.loads((out / "summary.json").read_text())["flights"]["F01"]["data_loss"]
+
+
 def test_check_exit_codes(seed_run, tmp_path):
     """check: 0 agree, 4 differ (a file of the reference missing from the result), 1 when the
     reference is not a complete output (no summary.json, or a listed file missing)."""

@@ -153,8 +153,9 @@ def test_unterminated_complete_last_line_dropped_with_a_warning(tmp_path):
 
 @FUZZ
 @given(rows=st.lists(st.integers(0, 299), min_size=1, max_size=5, unique=True),
-       bad=st.sampled_from(["nan", "inf", "-inf", "NaN", "2.6e21", "-1e300"]))
+       bad=st.sampled_from(["nan", "inf", "-inf", "NaN", "2.6e21", "-1e300", "1e308"]))
 @example(rows=[150], bad="2.6e21")  # one corrupted digit: crashed the mechanization (ZeroDivisionError)
+@example(rows=[7], bad="1e308")  # issue 14: 1e308 values ended in exit 3
 def test_nonfinite_values_dropped_and_counted(rows, bad):
     lines = texts()["imu"].split("\n")
     for r in rows:
