@@ -196,9 +196,10 @@ def _children(pid: int) -> list[str]:
 
 
 # runs gravsurvey as `python -m gravsurvey` does, after saying (one byte on stdout) that the
-# interpreter's own start-up is over: a Ctrl-C before that is Python's, not ours
+# interpreter's start-up and the package's (`import gravsurvey`: numba cache folder) are over;
+# a Ctrl-C before that prints the interpreter's traceback (docs/reliability.md, Known and open)
 _MAIN_AFTER_READY = (
-    "import runpy, sys; sys.stdout.write('R'); sys.stdout.flush(); "
+    "import runpy, sys, gravsurvey; sys.stdout.write('R'); sys.stdout.flush(); "
     "sys.argv[0] = 'gravsurvey'; runpy.run_module('gravsurvey', run_name='__main__')"
 )
 
