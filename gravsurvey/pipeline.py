@@ -15,7 +15,7 @@ import platform
 import time
 import traceback
 import warnings
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -573,11 +573,11 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
         bar.__enter__()
     try:
         if jobs > 1 and len(todo) > 1:
-            import multiprocessing as mp
+            from .pool import WorkerPool  # workers ignore Ctrl-C; interrupted: terminated
 
-            ctx = mp.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=min(jobs, len(todo)), mp_context=ctx) as pool:
-                futs = {pool.submit(_worker, str(cfg.path), str(out_dir), fl.index): fl for fl in todo}
+            with WorkerPool(min(jobs, len(todo))) as pool:
+                futs = dict(zip(pool.submit_all(_worker, [(str(cfg.path), str(out_dir), fl.index)
+                                                          for fl in todo]), todo))
                 for fut in as_completed(futs):
                     fl = futs[fut]
                     try:

@@ -1,6 +1,7 @@
-"""Measure the input-fault table of docs/reliability.md (not a test: a script).
+"""Measure the input-fault tables of docs/reliability.md (not a test: a script).
 
     python tests/fault_table.py [cases_per_cell] [seed]
+    python tests/fault_table.py csv [cases] [seed]      (CSV cut anywhere; doc: 400 14)
 
 Same faults and oracle as tests/test_io_faults.py (the ``mcap`` package's streaming reader on
 the undamaged file says which records, and so which messages, the damage left intact), many more
@@ -134,5 +135,52 @@ def main(per_cell=50, seed=0):
               f"{a['corrupt_kept']} | {a['worst']:.3g} |")
 
 
+def csv_cut_table(cases=400, seed=14):
+    """The IMU CSV of tests/test_io_csv_faults.py cut at ``cases`` random bytes: how each cut
+    was read, against the values the file was written from."""
+    from test_io_csv_faults import texts
+
+    from gravsurvey.io.csv import read_csv_channel
+
+    full = texts()["imu"].encode()
+    d = static_flight(seconds=3.0)
+    out = Counter()
+    rng = np.random.default_rng(seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        p = Path(tmp) / "imu.csv"
+        for frac in rng.random(cases):
+            cut = int(frac * len(full))
+            p.write_bytes(full[:cut])
+            complete = max(0, full[:cut].count(b"\n") - 1)
+            notes, loss = [], []
+            try:
+                t, v = read_csv_channel(p, "imu", notes=notes, data_loss=loss)
+            except DataError:
+                out["refused (DataError naming file and line)"] += 1
+                continue
+            n = len(t)
+            exact = (n <= complete + 1 and np.array_equal(t, d["imu_t"][:n])
+                     and np.array_equal(v["specific_force"], d["f"][:n])
+                     and np.array_equal(v["angular_rate"], d["w"][:n]))
+            if not exact:
+                out["WRONG: a value read that the file was not written with"] += 1
+            elif n < complete:
+                out["complete lines lost"] += 1
+            elif n > complete:
+                out["complete lines + the cut line, read exactly"] += 1
+            elif loss:
+                out["complete lines exact; cut line dropped, reported as damage"] += 1
+            elif notes:
+                out["complete lines exact; cut line dropped with a warning"] += 1
+            else:
+                out["complete lines exact; cut at a line end, nothing to say"] += 1
+    print(f"| outcome ({cases} cuts, seed {seed}) | cases |\n|---|---:|")
+    for k, n in sorted(out.items()):
+        print(f"| {k} | {n} |")
+
+
 if __name__ == "__main__":
-    main(*(int(x) for x in sys.argv[1:3]))
+    if sys.argv[1:2] == ["csv"]:
+        csv_cut_table(*(int(x) for x in sys.argv[2:4]))
+    else:
+        main(*(int(x) for x in sys.argv[1:3]))

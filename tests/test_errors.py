@@ -1,4 +1,5 @@
-"""The one unknown-key helper every configuration section uses."""
+"""The one unknown-key helper every configuration section uses; exit codes of the error types
+and the one-line OS-fault message."""
 
 import pytest
 
@@ -21,3 +22,27 @@ def test_check_keys_names_the_key_path_and_the_valid_keys():
         check_keys({"zzz": 1}, ("a", "b"), "")
     with pytest.raises(ConfigError, match=r"^x\.b: missing required key$"):
         check_keys({"a": 1}, ("a", "b"), "x", required=("a", "b"))
+
+
+def test_each_error_type_has_its_documented_exit_code():
+    import errno
+
+    from gravsurvey.errors import (
+        EXIT_CODES,
+        DataError,
+        EnvironmentFault,
+        GravsurveyError,
+        RegressionFailure,
+        os_fault,
+    )
+
+    got = {t.__name__: t.exit_code for t in (DataError, ConfigError, EnvironmentFault, RegressionFailure)}
+    assert got == {"DataError": 1, "ConfigError": 2, "EnvironmentFault": 3, "RegressionFailure": 4}
+    assert all(issubclass(t, GravsurveyError) for t in (DataError, ConfigError, EnvironmentFault))
+    assert set(got.values()) <= set(EXIT_CODES)
+    f = os_fault(OSError(errno.ENOSPC, "No space left on device", "out/profiles.csv"), "write")
+    assert isinstance(f, EnvironmentFault) and f.exit_code == 3
+    assert str(f) == "out/profiles.csv: cannot write: No space left on device"
+    f = os_fault(OSError(errno.EXDEV, "Invalid cross-device link", "a/.staging", None, "a/out"))
+    assert str(f) == "a/.staging -> a/out: Invalid cross-device link"
+    assert str(os_fault(OSError(errno.EACCES, None))) == "?: Permission denied"

@@ -150,12 +150,7 @@ def test_exit_130_on_sigint_publishes_nothing(seed_run, tmp_path, jobs):
     --jobs 2 (two flights, a process pool) as well."""
     src, _ = seed_run
     if jobs > 1:
-        two = tmp_path / "two"
-        shutil.copytree(src, two)
-        text = (two / "survey.yaml").read_text()
-        block = text.split("flights:\n", 1)[1].split("\nlines:", 1)[0] + "\n"
-        (two / "survey.yaml").write_text(text.replace(block, block + block.replace("name: F01", "name: F02")))
-        src = two
+        src = _two_flights(src, tmp_path / "two").parent
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     # a shell's background job ignores SIGINT; the child must have the default disposition
@@ -174,14 +169,102 @@ def test_exit_130_on_sigint_publishes_nothing(seed_run, tmp_path, jobs):
             break
         time.sleep(0.02)
     if jobs > 1:
-        # in the middle of the run, not while the pool spawns its workers: a Ctrl-C in that
-        # window lets a half-started worker print an EOFError traceback (known; docs/reliability.md)
-        time.sleep(1.0)
+        time.sleep(1.0)  # in the middle of the run (spawning: test_sigint_at_any_moment_...)
     p.send_signal(signal.SIGINT)
     _, stderr = p.communicate(timeout=120)
     assert p.returncode == 130, stderr
     assert _nonblank(stderr) == ["gravsurvey: interrupted; no output of this run was published"]
     left = sorted(x.name for x in out.iterdir())
+    assert not [n for n in left if not n.startswith(".") and n != "gravsurvey.log"], left
+    assert not [n for n in left if n.startswith(".staging")], left
+
+
+def _two_flights(src: Path, dst: Path) -> Path:
+    """A copy of ``src`` (one flight F01) with the same flight again as F02; its config."""
+    shutil.copytree(src, dst)
+    text = (dst / "survey.yaml").read_text()
+    block = text.split("flights:\n", 1)[1].split("\nlines:", 1)[0] + "\n"
+    (dst / "survey.yaml").write_text(text.replace(block, block + block.replace("name: F01", "name: F02")))
+    return dst / "survey.yaml"
+
+
+def _children(pid: int) -> list[str]:
+    try:
+        return Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+    except OSError:
+        return []
+
+
+# runs gravsurvey as `python -m gravsurvey` does, after saying (one byte on stdout) that the
+# interpreter's start-up and the package's (`import gravsurvey`: numba cache folder) are over;
+# a Ctrl-C before that prints the interpreter's traceback (docs/reliability.md, Known and open)
+_MAIN_AFTER_READY = (
+    "import runpy, sys, gravsurvey; sys.stdout.write('R'); sys.stdout.flush(); "
+    "sys.argv[0] = 'gravsurvey'; runpy.run_module('gravsurvey', run_name='__main__')"
+)
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux /proc to see the pool start")
+@pytest.mark.parametrize(
+    "moment, delay_s, group",
+    [
+        ("start", 0.1, False),
+        ("start", 0.5, False),
+        ("start", 1.0, True),
+        ("spawn", 0.0, False),
+        ("spawn", 0.05, False),
+        ("spawn", 0.5, False),
+        ("spawn", 0.0, True),
+        ("spawn", 0.02, True),
+        ("spawn", 0.5, True),
+        ("spawn", 1.0, True),
+    ],
+)
+def test_sigint_at_any_moment_of_a_parallel_run(seed_run, tmp_path, moment, delay_s, group):
+    """Ctrl-C during `run --jobs 2` at a given moment: ``start`` = after the interpreter has
+    started (while gravsurvey loads), ``spawn`` = after the pool's first process appears (the
+    workers are being spawned and start up). ``group``: SIGINT to the whole process group, as
+    a terminal's Ctrl-C does (workers too), else to the parent alone. Always exit 130, the one
+    line, no traceback from any process, nothing published, and within seconds (before: a
+    worker's EOFError or KeyboardInterrupt traceback, or a run that never ended)."""
+    src, _ = seed_run
+    cfg = _two_flights(src, tmp_path / "two")
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    p = subprocess.Popen(
+        [sys.executable, "-c", _MAIN_AFTER_READY, "run", str(cfg), "-o", str(out), "--force", "--jobs", "2"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+        start_new_session=group,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    try:
+        assert p.stdout.read(1) == b"R"
+        if moment == "spawn":
+            t0 = time.monotonic()
+            while not _children(p.pid) and p.poll() is None and time.monotonic() - t0 < 300:
+                time.sleep(0.002)
+            assert _children(p.pid), "the pool never started"
+        time.sleep(delay_s)
+        if group:
+            os.killpg(p.pid, signal.SIGINT)
+        else:
+            p.send_signal(signal.SIGINT)
+        t_sig = time.monotonic()
+        _, stderr = p.communicate(timeout=60)
+        took = time.monotonic() - t_sig
+    finally:
+        if p.poll() is None:  # hung: end it and its workers (they are ours) before failing
+            for c in _children(p.pid):
+                os.kill(int(c), signal.SIGKILL)
+            p.kill()
+            p.communicate()
+    stderr = stderr.decode()
+    assert p.returncode == 130, stderr
+    assert _nonblank(stderr) == ["gravsurvey: interrupted; no output of this run was published"], stderr
+    assert took < 30, took  # workers are stopped, not waited for (a flight takes longer)
+    left = sorted(x.name for x in out.iterdir()) if out.exists() else []
     assert not [n for n in left if not n.startswith(".") and n != "gravsurvey.log"], left
     assert not [n for n in left if n.startswith(".staging")], left
 
@@ -210,6 +293,27 @@ def test_warnings_reach_stderr_and_log_with_a_count(tmp_path, quiet):
     # a rerun reuses the cached flight and still reports its warning
     r2 = gs("run", src / "survey.yaml", "-o", out)
     assert _nonblank(r2.stderr)[-1] == "1 warning"
+
+
+def test_csv_cut_inside_its_last_line_is_processed_and_exit_1(tmp_path):
+    """An IMU CSV cut 20 bytes into its last line (a logger stopped mid-write): the flight is
+    processed from the complete lines, the damage is one line on stderr naming the file, the
+    line and the bytes, the deliverables are written, exit 1 (a damaged input, as for MCAP)."""
+    src = tmp_path / "mc"
+    shutil.copytree(SAMPLES / "markov_csv", src)
+    imu = src / "F01" / "imu.csv"
+    raw = imu.read_bytes()
+    last_start = raw.rstrip(b"\n").rindex(b"\n") + 1
+    imu.write_bytes(raw[: last_start + 20])
+    n_line = raw[:last_start].count(b"\n") + 1
+    out = tmp_path / "out"
+    r = gs("run", src / "survey.yaml", "-o", out, "-q")
+    assert r.returncode == 1, r.stderr
+    assert "Traceback" not in r.stderr
+    msg = f"F01: {imu}: last line (line {n_line}) cut after 20 bytes, 1 row dropped"
+    assert f"gravsurvey: input damaged, processed what was salvaged: {msg}" in _nonblank(r.stderr), r.stderr
+    assert (out / "profiles.csv").is_file() and (out / "summary.json").is_file()
+    assert msg in json.loads((out / "summary.json").read_text())["flights"]["F01"]["data_loss"]
 
 
 def test_check_exit_codes(seed_run, tmp_path):

@@ -66,33 +66,96 @@ FUZZ = settings(max_examples=40, deadline=None, derandomize=True,
 @FUZZ
 @given(frac=st.floats(0.0, 1.0))
 @example(frac=0.5)
-def test_cut_imu_csv_same_prefix_or_named_error(frac):
-    """A file cut anywhere: either every complete line is read exactly as in the clean file
-    (cut at a line end, or inside the last number), or DataError names the file and line."""
+@example(frac=0.9981)  # cut after a comma of the last line: fewer fields
+@example(frac=0.999624)  # inside the last number of the last line: 5.1687...e-05 cut to 5.151 parses
+def test_cut_imu_csv_keeps_every_complete_line(frac):
+    """A file cut anywhere after its header: every complete line is read exactly as in the
+    clean file, and a cut last line is dropped and reported (as damage when it is evidently
+    cut). Cut inside the header: DataError naming the file and line."""
     full = texts()["imu"].encode()
     cut = int(frac * len(full))
+    head_end = full.index(b"\n") + 1
     with tempfile.TemporaryDirectory() as tmp:
         p = Path(tmp) / "imu.csv"
         p.write_bytes(full[:cut])
+        notes, loss = [], []
         try:
-            t, v = read_csv_channel(p, "imu")
+            t, v = read_csv_channel(p, "imu", notes=notes, data_loss=loss)
         except DataError as exc:
             msg = str(exc)
-            assert str(p) in msg and ("line" in msg or "no header" in msg), msg
+            assert cut < head_end, msg  # only a cut header is refused
+            assert str(p) in msg and ("line 1" in msg or "no header" in msg), msg
             return
+    assert cut >= head_end
     d = static_flight(seconds=3.0)
-    # lines ending in a newline, less the header; a last line cut inside its last number
-    # still has every field and is read (its value cut short: see docs/reliability.md)
-    complete = max(0, full[:cut].count(b"\n") - 1)
-    assert len(t) in (complete, complete + 1)
-    np.testing.assert_array_equal(t[:complete], d["imu_t"][:complete])
-    np.testing.assert_array_equal(v["specific_force"][:complete], d["f"][:complete])
+    complete = full[:cut].count(b"\n") - 1  # lines ending in a newline, less the header
+    assert len(t) == complete
+    np.testing.assert_array_equal(t, d["imu_t"][:complete])
+    np.testing.assert_array_equal(v["specific_force"], d["f"][:complete])
+    np.testing.assert_array_equal(v["angular_rate"], d["w"][:complete])
+    partial = full[:cut].rsplit(b"\n", 1)[-1] if b"\n" in full[:cut] else b""
+    if not partial:
+        assert notes == [] and loss == []
+        return
+    assert len(notes) == 1 and f"{p}: last line (line {complete + 2}" in notes[0], notes
+    assert notes[0].endswith("1 row dropped"), notes
+    assert f"{len(partial)} byte" in notes[0], notes
+    fields = partial.decode().split(",")
+    evident = len(fields) < 7 or not fields[0].isdigit() or not all(map(_parses, fields[1:]))
+    if evident:
+        assert loss == notes and "cut after" in loss[0]
+    else:  # all 7 fields present and parsable: it may be cut inside its last number
+        assert loss == [] and "has no line end" in notes[0]
+
+
+def _parses(s):
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def test_cut_last_line_through_load_flight_is_data_loss(tmp_path):
+    """Through ingestion: the complete lines read, the cut row dropped, the damage in
+    ``data_loss`` (so the run exits 1) and as a warning."""
+    full = texts()["imu"].encode()
+    last = full.rstrip(b"\n").rsplit(b"\n", 1)[0] + b"\n"  # without its last line
+    cut_at = len(last) + 30  # 30 bytes into the last line (inside its 2nd or 3rd field)
+    _write(tmp_path, full[:cut_at])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DataWarning)
+        rec = load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+    msg = f"{tmp_path / 'imu.csv'}: last line (line 301) cut after 30 bytes, 1 row dropped"
+    assert rec.data_loss == [msg]
+    assert [str(w.message) for w in caught].count(msg) == 1
+    d = static_flight(seconds=3.0)
+    np.testing.assert_array_equal(rec.imu.specific_force_t, d["f"][:299])
+    (rep,) = inspect_files([tmp_path / "imu.csv"])
+    assert rep["damage"] == [msg] and rep["channels"][0]["messages"] == 299
+
+
+def test_unterminated_complete_last_line_dropped_with_a_warning(tmp_path):
+    """No line end after a complete-looking last line: dropped (its last value may be cut
+    short), a warning but not data loss; inspect exits 0 on it."""
+    full = texts()["imu"].encode()
+    _write(tmp_path, full.rstrip(b"\n"))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DataWarning)
+        rec = load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+    assert rec.data_loss == []
+    assert any("imu.csv: last line (line 301" in str(w.message) and "has no line end" in
+               str(w.message) for w in caught)
+    assert len(rec.imu.time) == 299
+    (rep,) = inspect_files([tmp_path / "imu.csv"])
+    assert rep["damage"] == [] and rep["channels"][0]["messages"] == 299
 
 
 @FUZZ
 @given(rows=st.lists(st.integers(0, 299), min_size=1, max_size=5, unique=True),
-       bad=st.sampled_from(["nan", "inf", "-inf", "NaN", "2.6e21", "-1e300"]))
+       bad=st.sampled_from(["nan", "inf", "-inf", "NaN", "2.6e21", "-1e300", "1e308"]))
 @example(rows=[150], bad="2.6e21")  # one corrupted digit: crashed the mechanization (ZeroDivisionError)
+@example(rows=[7], bad="1e308")  # issue 14: 1e308 values ended in exit 3
 def test_nonfinite_values_dropped_and_counted(rows, bad):
     lines = texts()["imu"].split("\n")
     for r in rows:

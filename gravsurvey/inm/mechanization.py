@@ -42,6 +42,14 @@ external radius in the denominator, so the error is
 ``dG = -w0^2 dr + 3 w0^2 r0 eps`` and every channel is a Schuler oscillator.
 With ``use_ext = False`` the computed position is used (vertical channel
 unstable, ``dG = -w0^2 (dr - 3 r0 r0.dr)``).
+
+Finite-state guard: :func:`mechanize` refuses inputs no IMU or altimeter can give
+(:func:`check_mechanization_inputs`) and a navigation state no flight can have
+(:func:`check_navigation_state`) with a :class:`~gravsurvey.errors.DataError` naming the
+channel, the sample and its time, instead of letting NaN or a run-away state reach the
+filter.  Both are vectorised numpy checks over the whole block, not per sample in Python: on a
+2 h flight at 50 Hz (360,001 samples) 0.08-0.10 s of the mechanization's 1.2-1.5 s (loaded
+2-core machine).
 """
 
 from __future__ import annotations
@@ -52,6 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..errors import DataError
 from ..geodesy import (
     WGS84,
     Ellipsoid,
@@ -63,6 +72,111 @@ from ..geodesy import (
     normal_gravitation_ecef,
     normal_gravitation_ecef_scalar,
 )
+
+
+#: Limits of the finite-state guard.  Inputs beyond them come from no airborne or marine
+#: IMU (accelerometers span +-50 g at most, gyros +-4000 deg/s = 70 rad/s) or altimeter:
+#: damaged data that passed the ingestion checks, not a manoeuvre.
+MAX_SPECIFIC_FORCE_MPS2 = 2000.0  # ~200 g
+MAX_ANGULAR_RATE_RADPS = 100.0
+EXT_HEIGHT_RANGE_M = (-1.0e5, 1.0e6)
+#: A navigated point outside this band of geocentric radius (100 km below the poles' surface
+#: to 1000 km above the equator's) or faster than this in inertial space is no flight; it
+#: also keeps the gravity model's radius away from zero (a division by zero in the kernel).
+RADIUS_RANGE_M = (WGS84.a * (1.0 - WGS84.f) - 1.0e5, WGS84.a + 1.0e6)
+MAX_INERTIAL_SPEED_MPS = 1.2e4
+
+
+# --------------------------------------------------------------------------
+# Finite-state guard
+# --------------------------------------------------------------------------
+
+
+def _first_bad(bad_n) -> int:
+    return int(np.flatnonzero(bad_n)[0])
+
+
+def check_mechanization_inputs(time, f_t, w_t, h_ext, use_ext: bool) -> None:
+    """Refuse IMU or altimeter samples the mechanization must not integrate.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        IMU times, s.
+    f_t, w_t : ndarray, shape (n, 3)
+        Specific force (m/s^2) and angular rate (rad/s) on the triad.
+    h_ext : ndarray, shape (n,)
+        External heights at the IMU times, m (checked only when ``use_ext``).
+    use_ext : bool
+
+    Raises
+    ------
+    DataError
+        ``imu specific_force: sample k at t = ... s is [...] m/s^2: expected finite values
+        within +-2000 m/s^2 ...``, likewise for ``imu angular_rate`` and ``altimeter height``.
+    """
+    if time.size and not np.isfinite(time).all():
+        k = _first_bad(~np.isfinite(time))
+        raise DataError(f"imu time: sample {k} is {time[k]!r}: expected finite times "
+                        "(damaged input that passed the ingestion checks)")
+    for name, v_n3, limit, unit in (("imu specific_force", f_t, MAX_SPECIFIC_FORCE_MPS2, "m/s^2"),
+                                    ("imu angular_rate", w_t, MAX_ANGULAR_RATE_RADPS, "rad/s")):
+        # NaN fails the comparison too: one pass finds both
+        ok_n = (np.abs(v_n3) <= limit).all(axis=1)
+        if not ok_n.all():
+            k = _first_bad(~ok_n)
+            raise DataError(f"{name}: sample {k} at t = {time[k]:.3f} s is "
+                            f"[{', '.join(f'{x:.6g}' for x in v_n3[k])}] {unit}: expected finite "
+                            f"values within +-{limit:g} {unit} (damaged input that passed the "
+                            "ingestion checks); the mechanization stops")
+    if use_ext:
+        lo, hi = EXT_HEIGHT_RANGE_M
+        ok_n = (h_ext >= lo) & (h_ext <= hi)
+        if not ok_n.all():
+            k = _first_bad(~ok_n)
+            raise DataError(f"altimeter height: {h_ext[k]:.6g} m at t = {time[k]:.3f} s "
+                            f"(interpolated to IMU sample {k}): expected finite heights within "
+                            f"{lo:g}..{hi:g} m (damaged input that passed the ingestion checks); "
+                            "the mechanization stops")
+
+
+def check_navigation_state(time, r_i, v_i, mat_it) -> None:
+    """Refuse a navigation that became non-finite or left every possible flight.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        s.
+    r_i, v_i : ndarray, shape (n, 3)
+        Inertial position (m) and velocity (m/s).
+    mat_it : ndarray, shape (n, 3, 3)
+        Triad -> inertial.
+
+    Raises
+    ------
+    DataError
+        Naming the first bad sample, its time and the quantity (position radius, inertial
+        speed, attitude), e.g. ``navigation position: geocentric radius 9.1e+06 m at t =
+        812.300 s (IMU sample 8123): expected 6.26e+06..7.38e+06 m ...``.
+    """
+    lo, hi = RADIUS_RANGE_M
+    radius_n = np.sqrt(np.einsum("ni,ni->n", r_i, r_i))
+    speed_n = np.sqrt(np.einsum("ni,ni->n", v_i, v_i))
+    att_ok_n = np.isfinite(mat_it.reshape(len(mat_it), 9)).all(axis=1)
+    checks = (("navigation position", "geocentric radius", radius_n, "m",
+               (radius_n >= lo) & (radius_n <= hi), f"{lo:.3g}..{hi:.3g} m"),
+              ("navigation velocity", "inertial speed", speed_n, "m/s",
+               speed_n <= MAX_INERTIAL_SPEED_MPS, f"at most {MAX_INERTIAL_SPEED_MPS:g} m/s"),
+              ("navigation attitude", "triad->inertial matrix", None, "", att_ok_n,
+               "finite"))
+    first = [(_first_bad(~ok_n), c) for c in checks for ok_n in [c[4]] if not ok_n.all()]
+    if not first:
+        return
+    k, (name, what, val_n, unit, _, expected) = min(first, key=lambda x: x[0])
+    value = f" {val_n[k]:.6g} {unit}" if val_n is not None else " non-finite"
+    raise DataError(f"{name}: {what}{value} at t = {time[k]:.3f} s (IMU sample {k}): "
+                    f"expected {expected}; damaged or inconsistent input (imu, altimeter or "
+                    "initial state) made the mechanization run away")
 
 
 # --------------------------------------------------------------------------
@@ -454,6 +568,12 @@ def mechanize(time, f_t, w_t, initial, alt_time=None, alt_height=None, use_ext=T
         Gravity model with the altimeter radius (default) or with the computed one.
     reference : bool
         Use the pure-numpy reference path.
+
+    Raises
+    ------
+    DataError
+        Inputs or a navigation state beyond the guard's limits (module docstring), naming the
+        channel, the IMU sample and its time.
     """
     t = np.ascontiguousarray(time, dtype=float)
     f_t = np.ascontiguousarray(f_t, dtype=float)
@@ -466,12 +586,23 @@ def mechanize(time, f_t, w_t, initial, alt_time=None, alt_height=None, use_ext=T
             raise ValueError("use_ext needs altimeter data")
         h_ext = np.zeros_like(t)
         h_mid = np.zeros(max(t.size - 1, 0))
+    check_mechanization_inputs(t, f_t, w_t, h_ext, bool(use_ext))
     r0, v0, c0 = initial_inertial_state(t[0], initial.lat, initial.lon, initial.height,
                                         initial.vel_n, initial.mat_nt, ellipsoid)
-    if reference:
-        r, v, c = mechanize_reference(t, f_t, w_t, h_ext, h_mid, use_ext, r0, v0, c0, ellipsoid)
-    else:
-        r, v, c = mechanize_kernel(t, f_t, w_t, h_ext, h_mid, bool(use_ext), r0, v0, c0, *ellipsoid.params())
+    check_navigation_state(t[:1], r0[None], v0[None], c0[None])
+    try:
+        if reference:
+            r, v, c = mechanize_reference(t, f_t, w_t, h_ext, h_mid, use_ext, r0, v0, c0, ellipsoid)
+        else:
+            r, v, c = mechanize_kernel(t, f_t, w_t, h_ext, h_mid, bool(use_ext), r0, v0, c0,
+                                       *ellipsoid.params())
+    except ZeroDivisionError:
+        # only a state far outside any flight divides by zero (the guard's limits keep the
+        # inputs in range, but a long run-away can still get there): say so, as for the rest
+        raise DataError("navigation state: the mechanization divided by zero (a run-away "
+                        "state from damaged or inconsistent input: imu, altimeter or initial "
+                        "state)") from None
+    check_navigation_state(t, r, v, c)
     return Navigation(t, r, v, c, h_ext)
 
 

@@ -5,15 +5,19 @@ Lines are split in Python (line numbers kept), each column is converted by numpy
 integers, never through float64).  If a column fails to convert, a pass over that column finds
 the first bad value and raises a one-line :class:`~gravsurvey.errors.DataError` naming file,
 line and column.
+
+A last line without a line end is what a logger that was stopped mid-write leaves: it is
+dropped and reported (see :func:`read_csv_channel`), never read with a value cut short.
 """
 
 from __future__ import annotations
 
 import os
+import warnings
 
 import numpy as np
 
-from gravsurvey.errors import DataError
+from gravsurvey.errors import DataError, DataWarning
 
 GPS_EPOCH_UNIX_S = 315964800  # 1980-01-06T00:00:00 UTC
 WEEK_NS = 604800 * 10**9
@@ -108,7 +112,7 @@ def _iso(strs, path, lines, col):
 
 
 def read_csv_channel(path, role, columns=None, time_format="ns", units=None, delimiter=",",
-                     gps_leap_seconds=18):
+                     gps_leap_seconds=18, *, notes=None, data_loss=None):
     """Read one channel's CSV file.
 
     Parameters
@@ -128,6 +132,11 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
     delimiter : str
     gps_leap_seconds : int
         GPS - UTC in s (18 since 2017-01-01).
+    notes : list of str, optional
+        Receives one line per repair (the dropped last line, below).  When both ``notes`` and
+        ``data_loss`` are None the line is issued as a :class:`~gravsurvey.errors.DataWarning`.
+    data_loss : list of str, optional
+        Receives the line again when the file is evidently damaged (a last line cut short).
 
     Returns
     -------
@@ -143,6 +152,14 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
     ------
     DataError
         Missing file or column, unparsable value (names file, line, column).
+
+    Notes
+    -----
+    A last data line with no line end (the file cut while it was written) is dropped: with
+    fewer fields than the header or a value that does not parse it is cut for sure
+    (``"<file>: last line (line L) cut after N bytes, 1 row dropped"``, in ``notes`` and
+    ``data_loss``); with every field it may still be cut inside its last number (``5.17e-05``
+    cut to ``5.1`` parses), so it is dropped as well, in ``notes`` only.
     """
     path = os.fspath(path)
     cols = dict(DEFAULT_COLUMNS[role])
@@ -170,6 +187,10 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
             continue
         data_lines.append(ln)
         line_no.append(i)
+    cut = None  # the unterminated last data line: (line number, its text)
+    if data_lines and line_no[-1] == len(all_lines) and not text.endswith(("\n", "\r")):
+        if header is not None and len(data_lines[-1].split(delimiter)) <= len(header):
+            cut = (line_no.pop(), data_lines.pop())
     if header is None:
         raise DataError(f"{path}: no header row (expected columns "
                         f"{', '.join(_flat(cols.values()))})")
@@ -180,6 +201,8 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
                             f"header (has {', '.join(header)}); set csv.columns.{role}")
         index[name] = header.index(name)
     ncol = len(header)
+    if cut is not None:
+        _report_cut_line(path, cut, ncol, cols, index, time_format, delimiter, notes, data_loss)
     n = len(data_lines)
     # split; count fields per line first so a short/long line is reported exactly
     rows = [ln.split(delimiter) for ln in data_lines]
@@ -256,6 +279,38 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
     else:
         values = {"lat_deg": vals["lat"], "lon_deg": vals["lon"], "height": vals["height"]}
     return t, values
+
+
+def _report_cut_line(path, cut, ncol, cols, index, time_format, delimiter, notes, data_loss):
+    """Say that the unterminated last line was dropped, and whether it is surely cut."""
+    line, text = cut
+    nbytes = len(text.encode("utf-8"))
+    fields = text.split(delimiter)
+    sure = len(fields) < ncol
+    if not sure:
+        # every field present: cut for sure only if one of them does not parse
+        tcols = cols["time"] if isinstance(cols["time"], list) else [cols["time"]]
+        for c in _flat(cols.values()):
+            s = fields[index[c]].strip()
+            if c in tcols and time_format == "ns":
+                ok = s.lstrip("+-").isdigit()
+            elif c in tcols:
+                ok = bool(s)
+            else:
+                ok = _is_float(s)
+            sure |= not ok
+    if sure:
+        unit = "byte" if nbytes == 1 else "bytes"
+        msg = f"{path}: last line (line {line}) cut after {nbytes} {unit}, 1 row dropped"
+    else:
+        msg = (f"{path}: last line (line {line}, {nbytes} bytes) has no line end, so its last "
+               f"value may be cut short: 1 row dropped")
+    if notes is None and data_loss is None:
+        warnings.warn(msg, DataWarning, stacklevel=3)
+    if notes is not None:
+        notes.append(msg)
+    if sure and data_loss is not None:
+        data_loss.append(msg)
 
 
 def _is_float(s):

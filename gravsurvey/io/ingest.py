@@ -490,10 +490,11 @@ def select_channels(content: McapContent, options: IngestOptions, notes: list):
     return out
 
 
-def read_raw_channels(options: IngestOptions, base_dir, notes: list):
+def read_raw_channels(options: IngestOptions, base_dir, notes: list, data_loss: list | None = None):
     """Read the files named by ``options``: role -> :class:`RawChannel` (GNSS may be absent).
 
-    Also returns the MCAP content (or None for CSV) for ``inspect``.
+    Also returns the MCAP content (or None for CSV) for ``inspect``.  ``data_loss`` receives
+    the damage of CSV inputs (a last line cut short); the MCAP's is in its content.
     """
     raw = {}
     if options.kind == "mcap":
@@ -548,7 +549,8 @@ def read_raw_channels(options: IngestOptions, base_dir, notes: list):
         path = options._resolve(rel, base_dir)
         t, vals = read_csv_channel(path, role, options.csv_columns.get(role),
                                    options.csv_time_format, options.csv_units,
-                                   options.csv_delimiter, options.gps_leap_seconds)
+                                   options.csv_delimiter, options.gps_leap_seconds, notes=notes,
+                                   data_loss=data_loss if data_loss is not None else [])
         raw[role] = RawChannel(role, t, vals, str(path), "csv", "csv", options.csv_time_format)
     if options.nav:
         raw["gnss"] = read_gnss_file(options, base_dir, notes, replaces=raw.get("gnss"))
@@ -683,8 +685,8 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
 
         return gravimeter_record(options.gravimeter, base_dir if base_dir is not None else options.base_dir,
                                  gap_factor=options.gap_factor, plausibility=options.plausibility)
-    notes = []
-    raw, content = read_raw_channels(options, base_dir, notes)
+    notes, csv_loss = [], []
+    raw, content = read_raw_channels(options, base_dir, notes, csv_loss)
     for ch in raw.values():
         _drop_nonfinite(ch, notes)
     if "imu" in raw and not np.array_equal(options.mat_axes, np.eye(3)):
@@ -734,7 +736,8 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
                        imu.values["angular_rate"]),
         altimeter=AltimeterChannel(rel(alt.time_ns), alt.values["height"]),
         gnss=gnss, source=src, notes=notes,
-        data_loss=_data_loss(options, base_dir, content) + clock_loss, gradient=gradient)
+        data_loss=_data_loss(options, base_dir, content) + csv_loss + clock_loss,
+        gradient=gradient)
 
 
 def _data_loss(options: IngestOptions, base_dir, content) -> list:

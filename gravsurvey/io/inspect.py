@@ -105,6 +105,7 @@ def damage_lines(rep) -> list[str]:
     if rep.get("salvage"):
         out.append(rep["salvage"]["summary"])
     out += [n for n in rep.get("notes", []) if "damaged" in n]
+    out += rep.get("csv_damage", [])  # a CSV's last line cut short
     for ch in rep.get("channels", []):
         if ch.get("value_check_dropped"):
             out.append(f"{ch['topic']}: {ch['value_check_dropped']} samples without a chunk CRC "
@@ -133,6 +134,7 @@ def inspect_files(paths, options: IngestOptions | None = None, config=None) -> l
         MCAP ``profile``, ``library``, ``chunks``, ``compression``, ``salvage``, ``notes``,
         ``channels`` (per channel: ``topic``, ``schema``, ``encoding``, ``messages``,
         ``log_time`` span, and for sensor channels the :func:`_channel_report` entries);
+        for CSV ``csv_damage`` (a last line cut short), ``notes``;
         ``error`` instead when the file could not be read; ``damage``: the lines of
         :func:`damage_lines` (empty when the file is sound); ``settings`` with ``config``.
     """
@@ -209,12 +211,15 @@ def _inspect_csv(path, o):
     if role is None:
         return {"format": "csv", "error": f"{path}: header matches no channel (imu, altimeter, "
                                           "gnss columns of docs/input-formats.md)"}
+    notes, damage = [], []
     t, vals = read_csv_channel(path, role, o.csv_columns.get(role), o.csv_time_format,
-                               o.csv_units, o.csv_delimiter, o.gps_leap_seconds)
+                               o.csv_units, o.csv_delimiter, o.gps_leap_seconds, notes=notes,
+                               data_loss=damage)
     entry = {"topic": None, "schema": "csv", "encoding": "csv", "messages": len(t),
              "time_source": f"column ({o.csv_time_format})"}
     entry.update(_channel_report(role, t, vals, o.csv_units))
-    return {"format": "csv", "channels": [entry]}
+    return {"format": "csv", "channels": [entry], "csv_damage": damage,
+            "notes": [n for n in notes if n not in damage]}
 
 
 def format_inspect(reports) -> str:
