@@ -60,6 +60,7 @@ __all__ = [
     "atomic_write_text",
 ]
 
+#: required columns of profiles.csv, in order (docs/outputs.md)
 PROFILE_COLUMNS = (
     "flight",
     "line",
@@ -71,15 +72,22 @@ PROFILE_COLUMNS = (
     "easting_m",
     "northing_m",
     "disturbance_mgal",
-    "kalman_mgal",
     "sigma_mgal",
 )
+#: optional, written between disturbance_mgal and sigma_mgal: the estimate the product was made
+#: from, named for what it is: the Kalman/RTS smoothed estimate (3D-INM) or the classic
+#: reduction before its low-pass (no Kalman filter involved)
+ESTIMATE_COLUMNS = ("kalman_mgal", "unfiltered_mgal")
 TRUTH_COLUMNS = ("truth_mgal", "error_mgal")
 #: optional: the disturbance after base ties and crossover levelling (docs/outputs.md)
 LEVEL_COLUMNS = ("levelled_mgal",)
 #: optional: a strapdown triad's estimated attitude and its 1-sigma, deg (NaN for other flights)
 ATTITUDE_COLUMNS = ("roll_deg", "pitch_deg", "heading_deg", "roll_sigma_deg", "pitch_sigma_deg",
                     "heading_sigma_deg")
+#: optional: horizontal disturbance components, the deflections of the vertical they give
+#: (xi = -dg_north / gamma, eta = -dg_east / gamma) and their 1-sigma; NaN where not observable
+HORIZONTAL_COLUMNS = ("dg_north_mgal", "dg_east_mgal", "xi_arcsec", "eta_arcsec", "dg_north_sigma_mgal",
+                      "dg_east_sigma_mgal", "xi_sigma_arcsec", "eta_sigma_arcsec")
 _STRING_COLUMNS = ("flight", "line", "time_utc")
 # decimals written per float column (see docs/outputs.md for the resolution this gives)
 _DECIMALS = {
@@ -91,6 +99,7 @@ _DECIMALS = {
     "disturbance_mgal": 4,
     "levelled_mgal": 4,
     "kalman_mgal": 4,
+    "unfiltered_mgal": 4,
     "sigma_mgal": 4,
     "truth_mgal": 4,
     "error_mgal": 4,
@@ -101,7 +110,16 @@ _DECIMALS = {
     "roll_sigma_deg": 5,
     "pitch_sigma_deg": 5,
     "heading_sigma_deg": 5,
+    "dg_north_mgal": 4,
+    "dg_east_mgal": 4,
+    "dg_north_sigma_mgal": 4,
+    "dg_east_sigma_mgal": 4,
+    "xi_arcsec": 4,
+    "eta_arcsec": 4,
+    "xi_sigma_arcsec": 4,
+    "eta_sigma_arcsec": 4,
 }
+#: required XYZ columns (the optional estimate, level, horizontal and truth columns follow when present)
 XYZ_COLUMNS = ("time_unix_s",) + PROFILE_COLUMNS[4:]
 #: crossovers.csv columns: the fields of :class:`gravsurvey.survey.Crossovers`, in order
 CROSSOVER_COLUMNS = Crossovers.COLUMNS
@@ -174,9 +192,14 @@ def profile_columns(table: dict) -> tuple[str, ...]:
     has_truth = [c in table for c in TRUTH_COLUMNS]
     if any(has_truth) and not all(has_truth):
         raise ValueError("profile table: truth_mgal and error_mgal go together")
+    horizontal = [c in table for c in HORIZONTAL_COLUMNS]
+    if any(horizontal) and not all(horizontal):
+        raise ValueError(f"profile table: the horizontal columns {HORIZONTAL_COLUMNS} go together")
+    estimate = tuple(c for c in ESTIMATE_COLUMNS if c in table)
     level = tuple(c for c in LEVEL_COLUMNS if c in table)
     attitude = tuple(c for c in ATTITUDE_COLUMNS if c in table)
-    cols = PROFILE_COLUMNS + level + attitude + (TRUTH_COLUMNS if all(has_truth) else ())
+    cols = (PROFILE_COLUMNS[:10] + estimate + PROFILE_COLUMNS[10:] + level + attitude
+            + (HORIZONTAL_COLUMNS if all(horizontal) else ()) + (TRUTH_COLUMNS if all(has_truth) else ()))
     n = None
     for c in cols:
         if c == "time_utc" and c not in table:
@@ -383,8 +406,9 @@ def write_xyz(path, table: dict, *, title: str = "gravsurvey profiles", metadata
 
     Layout: ``/`` comment lines (title, units, the line-number map ``/ Line 1001 = F01 L01``),
     then a ``/`` comment naming the columns, then per line a ``Line <n>`` (or ``Tie <n>``)
-    header followed by whitespace-separated rows of :data:`XYZ_COLUMNS` (plus ``truth_mgal
-    error_mgal`` when present) in fixed-width fields; NaN is the Geosoft dummy ``*``. Rows keep
+    header followed by whitespace-separated rows of :data:`XYZ_COLUMNS` with the optional
+    columns of the table in profiles.csv order (estimate, level, horizontal, truth; not the
+    attitude) in fixed-width fields; NaN is the Geosoft dummy ``*``. Rows keep
     the table's order; a line's rows must be contiguous in the table.
 
     Parameters
@@ -398,7 +422,7 @@ def write_xyz(path, table: dict, *, title: str = "gravsurvey profiles", metadata
         ``/ key: value`` comment lines after the title (:func:`metadata_lines`).
     """
     cols = profile_columns(table)
-    numeric = XYZ_COLUMNS + tuple(c for c in cols if c in LEVEL_COLUMNS + TRUTH_COLUMNS)
+    numeric = ("time_unix_s",) + tuple(c for c in cols[4:] if c not in ATTITUDE_COLUMNS)
     keep = np.asarray(table["line"]).astype(str) != ""
     if not keep.all():  # epochs outside lines (empty line name) are not line data
         table = {c: np.asarray(table[c])[keep] for c in cols if c in table}
@@ -426,6 +450,8 @@ def write_xyz(path, table: dict, *, title: str = "gravsurvey profiles", metadata
     out = [f"/ {title}"] + [f"/ {m}" for m in metadata_lines(metadata)]
     out += ["/ units: time_unix_s s since 1970-01-01T00:00:00Z (UTC); lat_deg lon_deg WGS84 deg;",
            "/ height_m ellipsoidal m; easting_m northing_m projected m; *_mgal mGal; '*' = no value"]
+    if any(c.endswith("_arcsec") for c in numeric):
+        out.append("/ *_arcsec: deflection of the vertical, arcsec (xi north, eta east)")
     for h in headers:
         f, ln = mapping[h]
         out.append(f"/ {h} = flight {f} line {ln}")
