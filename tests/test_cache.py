@@ -70,9 +70,27 @@ def test_round_trip_is_exact(tmp_path):
     r = _result()
     save_result(tmp_path, "F01", "k1", r)
     back = load_result(tmp_path, "F01", "k1", FlightResult)
-    for f in ("time", "lat", "lon", "height", "vel_n", "speed", "heading", "smoothed", "forward", "sigma",
-              "disturbance", "segment", "attitude", "attitude_sigma", "dg_north", "dg_east", "sigma_north",
-              "sigma_east", "horizontal_observable"):
+    for f in (
+        "time",
+        "lat",
+        "lon",
+        "height",
+        "vel_n",
+        "speed",
+        "heading",
+        "smoothed",
+        "forward",
+        "sigma",
+        "disturbance",
+        "segment",
+        "attitude",
+        "attitude_sigma",
+        "dg_north",
+        "dg_east",
+        "sigma_north",
+        "sigma_east",
+        "horizontal_observable",
+    ):
         np.testing.assert_array_equal(getattr(back, f), getattr(r, f))
     assert back.horizontal_observable.dtype == bool
     assert back.line.dtype == object and list(back.line) == list(r.line)
