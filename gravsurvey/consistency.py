@@ -13,7 +13,7 @@ notes) or raises :class:`~gravsurvey.errors.DataError` naming the channel, file 
    ``CheckOptions.max_imu_gap_s`` and at gaps of all vertical aiding (altimeter and GNSS)
    longer than ``max_aiding_gap_s``; each segment is estimated on its own
    (:func:`gravsurvey.io.record.slice_record`) and the results concatenated with a NaN epoch
-   between segments (:func:`concatenate_solutions`).
+   between segments (:func:`gravsurvey.estimate.concatenate_estimates`).
 4. :func:`check_result` - the final product: non-finite values, |disturbance| beyond a
    limit, a navigation that left the GNSS track, no survey lines.
 
