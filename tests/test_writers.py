@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gravsurvey.errors import GravsurveyError
+from gravsurvey.errors import DataError, GravsurveyError
 from gravsurvey.io import writers as w
 from gravsurvey.survey import find_crossovers
 
@@ -179,10 +179,10 @@ def test_xyz_line_numbers():
 def test_xyz_reader_rejects_damaged_files(tmp_path):
     p = tmp_path / "bad.xyz"
     p.write_text("/ a b\n1 2\n")
-    with pytest.raises(w.DataError, match=r"bad\.xyz:2: data before the first Line header"):
+    with pytest.raises(DataError, match=r"bad\.xyz:2: data before the first Line header"):
         w.read_xyz(p)
     p.write_text("/ a b\nLine 1\n1 2 3\n")
-    with pytest.raises(w.DataError, match=r"bad\.xyz:3: 3 fields, expected 2"):
+    with pytest.raises(DataError, match=r"bad\.xyz:3: 3 fields, expected 2"):
         w.read_xyz(p)
 
 
