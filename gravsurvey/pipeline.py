@@ -1,7 +1,8 @@
 """One flight, then a survey of flights.
 
 ``process_flight`` runs one flight through ingest -> 3D-INM Kalman/RTS (or the classic
-reduction) -> line segmentation -> post-processing per line, and returns plain arrays.
+reduction; :func:`estimate_flight` is the only place the method matters) -> line segmentation
+-> post-processing per line, and returns the flight's :class:`gravsurvey.estimate.FlightEstimate`.
 ``run_survey`` runs every flight (in parallel with ``jobs > 1``), projects, finds crossovers
 and writes the deliverables atomically into the output directory under a lock.
 """

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from gravsurvey.cache import cache_paths, load_result, save_result
-from gravsurvey.estimate import FlightEstimate as FlightResult
+from gravsurvey.estimate import FlightEstimate
 
 ROOT = Path(__file__).resolve().parents[1]
 EXE = [sys.executable, "-m", "gravsurvey"]
@@ -34,7 +34,7 @@ def _result(n=50):
     rng = np.random.default_rng(0)
     line = np.full(n, "", dtype=object)
     line[10:40] = "L01"
-    return FlightResult(
+    return FlightEstimate(
         name="F01",
         method="inm",
         t0_unix_ns=1_700_000_000_000_000_000,
@@ -69,7 +69,7 @@ def _result(n=50):
 def test_round_trip_is_exact(tmp_path):
     r = _result()
     save_result(tmp_path, "F01", "k1", r)
-    back = load_result(tmp_path, "F01", "k1", FlightResult)
+    back = load_result(tmp_path, "F01", "k1", FlightEstimate)
     for f in (
         "time",
         "lat",
@@ -116,15 +116,15 @@ def test_round_trip_is_exact(tmp_path):
 def test_wrong_key_altered_or_missing_arrays_are_ignored(tmp_path):
     save_result(tmp_path, "F01", "k1", _result())
     jpath, npath = cache_paths(tmp_path, "F01")
-    assert load_result(tmp_path, "F01", "other-key", FlightResult) is None
+    assert load_result(tmp_path, "F01", "other-key", FlightEstimate) is None
     data = bytearray(npath.read_bytes())
     data[len(data) // 2] ^= 0xFF
     npath.write_bytes(bytes(data))
-    assert load_result(tmp_path, "F01", "k1", FlightResult) is None
+    assert load_result(tmp_path, "F01", "k1", FlightEstimate) is None
     npath.unlink()
-    assert load_result(tmp_path, "F01", "k1", FlightResult) is None
+    assert load_result(tmp_path, "F01", "k1", FlightEstimate) is None
     jpath.write_text("{not json")
-    assert load_result(tmp_path, "F01", "k1", FlightResult) is None
+    assert load_result(tmp_path, "F01", "k1", FlightEstimate) is None
 
 
 def test_planted_pickle_in_npz_with_a_matching_json_does_not_run(tmp_path):
@@ -143,7 +143,7 @@ def test_planted_pickle_in_npz_with_a_matching_json_does_not_run(tmp_path):
     entry = json.loads(jpath.read_text())
     entry["npz_sha256"] = hashlib.sha256(npath.read_bytes()).hexdigest()
     jpath.write_text(json.dumps(entry))
-    assert load_result(tmp_path, "F01", "k1", FlightResult) is None
+    assert load_result(tmp_path, "F01", "k1", FlightEstimate) is None
     assert not marker.exists()
 
 

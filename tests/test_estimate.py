@@ -174,3 +174,28 @@ def test_classic_columns_are_named_for_what_they_hold(tmp_path):
     np.testing.assert_allclose([float(v) for v in p["disturbance_mgal"]], low / MGAL, atol=6e-5)
     assert "kalman_mgal" not in read_xyz(tmp_path / "out" / "profiles.xyz").columns
     assert summary["flights"]["F01"]["estimator"] == {"gnss_aided": False, "resolution_m": 4000.0}
+
+
+def classic_estimate(raw_scale=1.0):
+    t, lat, lon, h, vel = _track()
+    res = ClassicResult(time=t, disturbance=10 * MGAL * np.sin(t / 60.0), lat=lat, lon=lon, height=h,
+                        speed=np.full(N, 80.0), vel_n=vel, raw=raw_scale * 2.8e6 * MGAL * np.sin(t * 1.3),
+                        info={"method": "classic", "resolution_m": 4000.0})
+    return with_lines(from_classic(res, name="F01", t0_unix_ns=1_700_000_000 * 10**9))
+
+
+def test_regression_check_compares_the_renamed_columns(tmp_path):
+    """`gravsurvey check` compares unfiltered_mgal like kalman_mgal, and a column of the reference
+    missing from the result (e.g. a reference from another method) is a difference."""
+    from gravsurvey.regression import compare_runs
+
+    cfg = survey_cfg(tmp_path)
+    write_survey_outputs(cfg, tmp_path / "a", [classic_estimate()])
+    write_survey_outputs(cfg, tmp_path / "b", [classic_estimate(raw_scale=1.001)])
+    inm = with_lines(from_inm_solution(inm_like(horizontal=False), name="F01", t0_unix_ns=1_700_000_000 * 10**9))
+    write_survey_outputs(cfg, tmp_path / "c", [inm])
+    assert compare_runs(tmp_path / "a", tmp_path / "a") == []
+    d = compare_runs(tmp_path / "b", tmp_path / "a")
+    assert len(d) == 1 and d[0].startswith("profiles.csv unfiltered_mgal: ")
+    d = compare_runs(tmp_path / "c", tmp_path / "a")
+    assert "profiles.csv: column unfiltered_mgal of the reference missing from the result" in d
