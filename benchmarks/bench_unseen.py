@@ -208,6 +208,7 @@ def wiener_bound(f, s_s, s_n, speed_mps):
 
 
 def median_resolution_km(summary, key="resolution_m"):
+    """Median over a run's lines (summary.json) of the per-line ``key`` (m), in km; None if none."""
     vals = [ln.get(key) for fl in summary.get("flights", {}).values() for ln in fl.get("lines", {}).values()]
     vals = [v for v in vals if isinstance(v, (int, float)) and v > 0]
     return float(np.median(vals)) / 1000.0 if vals else None
@@ -251,6 +252,7 @@ def evaluate_flight(spec, folder: Path) -> dict:
 
 
 def truth_lines(path):
+    """The simulator's line label per row of a truth.csv (``line`` column), as a list of str."""
     with open(path, newline="") as fh:
         rows = list(csv.reader(line for line in fh if not line.startswith("#")))
     i = rows[0].index("line")
