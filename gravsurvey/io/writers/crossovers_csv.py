@@ -1,5 +1,4 @@
-"""``crossovers.csv``: one row per line intersection (docs/outputs.md).
-"""
+"""``crossovers.csv``: one row per line intersection (docs/outputs.md)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""``lines.geojson``: one RFC 7946 Feature per survey line with its statistics.
-"""
+"""``lines.geojson``: one RFC 7946 Feature per survey line with its statistics."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""JSON deliverables: numpy-aware conversion (:func:`to_jsonable`) and ``summary.json`` writing.
-"""
+"""JSON deliverables: numpy-aware conversion (:func:`to_jsonable`) and ``summary.json`` writing."""
 
 from __future__ import annotations
 

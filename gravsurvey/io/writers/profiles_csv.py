@@ -1,5 +1,4 @@
-"""``profiles.csv``: one row per epoch, metadata as ``#`` comment lines (docs/outputs.md).
-"""
+"""``profiles.csv``: one row per epoch, metadata as ``#`` comment lines (docs/outputs.md)."""
 
 from __future__ import annotations
 

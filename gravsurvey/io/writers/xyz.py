@@ -1,5 +1,4 @@
-"""Geosoft XYZ line data (``profiles.xyz``, Oasis montaj "Import XYZ"; docs/outputs.md).
-"""
+"""Geosoft XYZ line data (``profiles.xyz``, Oasis montaj "Import XYZ"; docs/outputs.md)."""
 
 from __future__ import annotations
 
