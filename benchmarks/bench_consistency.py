@@ -68,7 +68,7 @@ def aiding_gaps():
                 d.drop_between(p, "gnss", a, b)
 
         _, _, _, r = _flight(prep, "checks: {max_aiding_gap_s: 130}\n")
-        err = r.kalman / 1e-5 - r.truth
+        err = r.smoothed / 1e-5 - r.truth_mgal
         on = np.isfinite(err) & (r.time > 200) & (r.time < 760)
         ing = on & (r.time >= a) & (r.time <= b)
         out = on & ~((r.time >= a - 60) & (r.time <= b + 60))
@@ -92,7 +92,7 @@ def splits():
     }
     for name, prep in cases.items():
         _, _, _, r = _flight(prep)
-        err = r.final / 1e-5 - r.truth
+        err = r.disturbance / 1e-5 - r.truth_mgal
         segs = [n.split("estimated ")[1].split(" of")[0] for n in r.notes if " segments: " in n]
         nseg = len(segs)
         print(f"| {name} | {segs[0] if nseg else 1} | {len(r.line_info)} | "

@@ -33,13 +33,14 @@ from gravsurvey.config import SurveyConfig  # noqa: E402
 from gravsurvey.geodesy import MGAL, WGS84  # noqa: E402
 from gravsurvey.grid import GridOptions  # noqa: E402
 from gravsurvey.levelling import LevellingOptions  # noqa: E402
-from gravsurvey.pipeline import FlightResult, write_survey_outputs  # noqa: E402
+from gravsurvey.estimate import FlightEstimate  # noqa: E402
+from gravsurvey.pipeline import write_survey_outputs  # noqa: E402
 
 R_EARTH = 6_371_000.0
 LAT0, LON0 = np.radians(47.0), np.radians(11.0)
 
 
-def synthetic_flight(k: int, n_main: int = 16, n_tie: int = 4, speed: float = 80.0, rng=None) -> FlightResult:
+def synthetic_flight(k: int, n_main: int = 16, n_tie: int = 4, speed: float = 80.0, rng=None) -> FlightEstimate:
     """One processed flight over block k (see the module docstring)."""
     rng = rng or np.random.default_rng(k)
     bx, by = (k % 10) * 50_000.0, (k // 10) * 45_000.0
@@ -72,10 +73,11 @@ def synthetic_flight(k: int, n_main: int = 16, n_tie: int = 4, speed: float = 80
     final = np.where(line != "", val, np.nan)
     info = {ln: {"kind": kind, "method": "synthetic", "speed_mps": speed, "samples": int((line == ln).sum())}
             for ln, kind, _e, _n in legs}
-    return FlightResult(
-        name=f"F{k + 1:03d}", t0_unix_ns=1_700_000_000_000_000_000 + k * 86_400 * 10**9, time=t, lat=lat, lon=lon,
-        height=np.full(m, 800.0), speed=np.full(m, speed), kalman=val, forward=val, sigma=np.full(m, 0.5 * MGAL),
-        final=final, line=line, segments=[], line_info=info, truth=None,
+    return FlightEstimate(
+        name=f"F{k + 1:03d}", method="inm", t0_unix_ns=1_700_000_000_000_000_000 + k * 86_400 * 10**9, time=t,
+        lat=lat, lon=lon, height=np.full(m, 800.0), vel_n=np.zeros((m, 3)), speed=np.full(m, speed),
+        heading=np.zeros(m), smoothed=val, forward=val, sigma=np.full(m, 0.5 * MGAL), disturbance=final, line=line,
+        line_info=info,
     )
 
 

@@ -19,7 +19,7 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_unseen import CACHE, _median_resolution_km, _truth_lines, prepare_flight, read_profiles, rms_after_bias, scored_mask
+from bench_unseen import CACHE, median_resolution_km, truth_lines, prepare_flight, read_profiles, rms_after_bias, scored_mask
 
 from gravsurvey.pipeline import read_truth_csv, run_survey
 from gravsurvey.simulate.unseen import draw_flight_spec, limit_spec
@@ -40,7 +40,7 @@ def main(argv=None):
             spec = limit_spec(spec, max_duration_s=2400.0, max_imu_hz=50.0)
         folder = prepare_flight(spec, a.cache)
         truth = read_truth_csv(folder / "F01" / "truth.csv")
-        truth["line"] = np.array(_truth_lines(folder / "F01" / "truth.csv"), dtype=object)
+        truth["line"] = np.array(truth_lines(folder / "F01" / "truth.csv"), dtype=object)
         base = yaml.safe_load((folder / "survey.yaml").read_text())
         row = {"name": spec["name"]}
         for m in METHODS:
@@ -54,7 +54,7 @@ def main(argv=None):
             p = read_profiles(folder / f"out_pp_{m}" / "profiles.csv")
             mask = scored_mask(p["time_unix_ns"], truth)
             rms, _ = rms_after_bias((p["disturbance_mgal"] - p["truth_mgal"])[mask])
-            row[m] = (rms, _median_resolution_km(res.summary))
+            row[m] = (rms, median_resolution_km(res.summary))
         rows.append(row)
         print(row["name"], " ".join(f"{m} {_f(row[m][0])} @ {_f(row[m][1], 1)} km" for m in METHODS), flush=True)
     print()

@@ -207,7 +207,8 @@ def wiener_bound(f, s_s, s_n, speed_mps):
     return math.sqrt(mse) / MGAL, speed_mps / (2.0 * f_half) / 1000.0
 
 
-def _median_resolution_km(summary, key="resolution_m"):
+def median_resolution_km(summary, key="resolution_m"):
+    """Median over a run's lines (summary.json) of the per-line ``key`` (m), in km; None if none."""
     vals = [ln.get(key) for fl in summary.get("flights", {}).values() for ln in fl.get("lines", {}).values()]
     vals = [v for v in vals if isinstance(v, (int, float)) and v > 0]
     return float(np.median(vals)) / 1000.0 if vals else None
@@ -216,7 +217,7 @@ def _median_resolution_km(summary, key="resolution_m"):
 def evaluate_flight(spec, folder: Path) -> dict:
     """Run default / oracle / classic on one prepared flight and score them against truth."""
     truth = read_truth_csv(folder / "F01" / "truth.csv")
-    truth["line"] = np.array(_truth_lines(folder / "F01" / "truth.csv"), dtype=object)
+    truth["line"] = np.array(truth_lines(folder / "F01" / "truth.csv"), dtype=object)
     row = {"name": spec["name"], "seed": spec["seed"], "summary": spec_summary(spec)}
     prof = {}
     for tag, cfg in (("default", "survey.yaml"), ("oracle", "oracle.yaml"), ("classic", "classic.yaml")):
@@ -227,7 +228,7 @@ def evaluate_flight(spec, folder: Path) -> dict:
             row[f"{tag}_error"] = res.failed[0].splitlines()[0]
             continue
         prof[tag] = read_profiles(folder / f"out_{tag}" / "profiles.csv")
-        row[f"{tag}_resolution_km"] = _median_resolution_km(res.summary)
+        row[f"{tag}_resolution_km"] = median_resolution_km(res.summary)
     if "default" not in prof:
         return row
     p = prof["default"]
@@ -250,7 +251,8 @@ def evaluate_flight(spec, folder: Path) -> dict:
     return row
 
 
-def _truth_lines(path):
+def truth_lines(path):
+    """The simulator's line label per row of a truth.csv (``line`` column), as a list of str."""
     with open(path, newline="") as fh:
         rows = list(csv.reader(line for line in fh if not line.startswith("#")))
     i = rows[0].index("line")

@@ -255,7 +255,8 @@ def evaluate_flight(cfg, fl, methods, edge_s: float):
     from gravsurvey.inm.params import initial_state_from_gnss
     from gravsurvey.inm.solve import estimate_anomaly
     from gravsurvey.io.ingest import load_flight
-    from gravsurvey.pipeline import _segments, _truth_at, read_truth_csv
+    from gravsurvey.estimate import from_inm_solution
+    from gravsurvey.pipeline import line_segments, read_truth_csv, truth_at
     from gravsurvey.wavelet import postprocess
 
     timings = {}
@@ -270,10 +271,10 @@ def evaluate_flight(cfg, fl, methods, edge_s: float):
     timings["estimate_s"] = time.perf_counter() - t
     time_s = np.asarray(sol.time, float)
     unix = record.t0_unix_ns + np.round(time_s * 1e9).astype(np.int64)
-    truth = _truth_at(read_truth_csv(fl.truth), unix) * MGAL
+    truth = truth_at(read_truth_csv(fl.truth), unix) * MGAL
     n = time_s.size
     dt = float(np.median(np.diff(time_s)))
-    segs = [s for s in _segments(cfg, fl, sol) if s.kind in ("line", "tie") and s.stop_index - s.start_index >= 8]
+    segs = [s for s in line_segments(cfg, fl, from_inm_solution(sol)) if s.kind in ("line", "tie") and s.stop_index - s.start_index >= 8]
     in_line = np.zeros(n, bool)
     for s in segs:
         in_line[s.start_index : s.stop_index] = True
@@ -520,7 +521,7 @@ def scenario_list(quick: bool) -> list[dict]:
             {
                 "name": f"survey_{triad}",
                 "description": f"realistic survey, {triad} triad",
-                "sim": (lambda tr=triad: _survey_sim(tr, quick)),
+                "sim": (lambda tr=triad: survey_sim(tr, quick)),
                 "edge_s": 0.0,
                 "crossovers": True,
                 # lines of 200-500 s cannot resolve a transfer function at ~10 km half-wavelength
@@ -546,7 +547,7 @@ QUICK_SURVEY_PLAN = {
 }
 
 
-def _survey_sim(triad: str, quick: bool) -> dict:
+def survey_sim(triad: str, quick: bool) -> dict:
     """configs/realistic_survey.yaml reduced to its flight with the given triad."""
     sim = copy.deepcopy(load_sim_yaml("realistic_survey.yaml"))
     flights = [f for f in sim["flights"] if f.get("triad") == triad]

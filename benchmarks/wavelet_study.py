@@ -259,7 +259,8 @@ def survey_line_estimates(which):
     from gravsurvey.inm.params import initial_state_from_gnss
     from gravsurvey.inm.solve import estimate_anomaly
     from gravsurvey.io.ingest import load_flight
-    from gravsurvey.pipeline import _segments, _truth_at, read_truth_csv
+    from gravsurvey.estimate import from_inm_solution
+    from gravsurvey.pipeline import line_segments, read_truth_csv, truth_at
 
     tmp = None
     if which == "grid_ros2":
@@ -268,7 +269,7 @@ def survey_line_estimates(which):
         import run as bench_run
 
         tmp = tempfile.TemporaryDirectory()
-        cfg_path = bench_run.simulate(bench_run._survey_sim(which, False), Path(tmp.name), which)
+        cfg_path = bench_run.simulate(bench_run.survey_sim(which, False), Path(tmp.name), which)
     cfg = load_config(cfg_path)
     for fl in cfg.flights:
         with warnings.catch_warnings():
@@ -279,8 +280,8 @@ def survey_line_estimates(which):
             sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid)
         t = np.asarray(sol.time, float)
         unix = record.t0_unix_ns + np.round(t * 1e9).astype(np.int64)
-        truth = _truth_at(read_truth_csv(fl.truth), unix)
-        segs = [(s.name, int(s.start_index), int(s.stop_index)) for s in _segments(cfg, fl, sol)
+        truth = truth_at(read_truth_csv(fl.truth), unix)
+        segs = [(s.name, int(s.start_index), int(s.stop_index)) for s in line_segments(cfg, fl, from_inm_solution(sol))
                 if s.kind in ("line", "tie") and s.stop_index - s.start_index >= 8]
         yield (f"{which} {fl.name}", np.asarray(sol.g_smooth, float),
                np.asarray(sol.sigma_smooth, float), np.asarray(sol.speed, float), truth, segs)

@@ -13,7 +13,7 @@ notes) or raises :class:`~gravsurvey.errors.DataError` naming the channel, file 
    ``CheckOptions.max_imu_gap_s`` and at gaps of all vertical aiding (altimeter and GNSS)
    longer than ``max_aiding_gap_s``; each segment is estimated on its own
    (:func:`gravsurvey.io.record.slice_record`) and the results concatenated with a NaN epoch
-   between segments (:func:`concatenate_solutions`).
+   between segments (:func:`gravsurvey.estimate.concatenate_estimates`).
 4. :func:`check_result` - the final product: non-finite values, |disturbance| beyond a
    limit, a navigation that left the GNSS track, no survey lines.
 
@@ -987,61 +987,6 @@ def plan_segments(record, opts: CheckOptions, names: ChannelNames | None = None)
     return keep, notes, dropped
 
 
-@dataclass
-class SegmentedSolution:
-    """The per-epoch arrays the pipeline reads, over all segments of a flight.
-
-    Segments are joined with one NaN epoch in the middle of each gap (so that plots, line
-    segmentation and post-processing never join across a gap). ``segment`` holds the segment
-    number of each epoch (-1 for the separators). Shapes ``(N,)`` (``vel_n``: ``(N, 3)``);
-    units as :class:`gravsurvey.inm.solve.InmSolution`.
-    """
-
-    time: np.ndarray
-    g_smooth: np.ndarray
-    sigma_smooth: np.ndarray
-    g_forward: np.ndarray
-    sigma_forward: np.ndarray
-    lat: np.ndarray
-    lon: np.ndarray
-    height: np.ndarray
-    vel_n: np.ndarray
-    speed: np.ndarray
-    segment: np.ndarray
-    gnss_aided: bool = False
-    warnings: list = None
-    resolution_m: float = float("nan")
-    identification: dict = None
-
-
-_FIELDS_1D = ("g_smooth", "sigma_smooth", "g_forward", "sigma_forward", "lat", "lon", "height", "speed")
-
-
-def concatenate_solutions(sols) -> SegmentedSolution:
-    """Join per-segment solutions (objects with the InmSolution fields) in time order."""
-    parts = {k: [] for k in _FIELDS_1D + ("time", "vel_n", "segment")}
-    for i, s in enumerate(sols):
-        if i > 0:
-            tsep = 0.5 * (float(sols[i - 1].time[-1]) + float(s.time[0]))
-            parts["time"].append(np.array([tsep]))
-            for k in _FIELDS_1D:
-                parts[k].append(np.array([np.nan]))
-            parts["vel_n"].append(np.full((1, 3), np.nan))
-            parts["segment"].append(np.array([-1]))
-        parts["time"].append(np.asarray(s.time, float))
-        for k in _FIELDS_1D:
-            parts[k].append(np.asarray(getattr(s, k), float))
-        parts["vel_n"].append(np.asarray(s.vel_n, float))
-        parts["segment"].append(np.full(len(s.time), i))
-    out = {k: np.concatenate(v) for k, v in parts.items()}
-    res = [float(getattr(s, "resolution_m", np.nan)) for s in sols]
-    return SegmentedSolution(**out, gnss_aided=any(getattr(s, "gnss_aided", False) for s in sols),
-                             warnings=[w for s in sols for w in (getattr(s, "warnings", None) or [])],
-                             # the coarsest segment's: a statement that holds for every epoch
-                             resolution_m=float(np.nanmax(res)) if np.isfinite(res).any() else float("nan"),
-                             identification={"segments": [getattr(s, "identification", {}) for s in sols]})
-
-
 # ----------------------------------------------------------------------------- result plausibility
 def track_deviation_m(sol, record, ellipsoid=WGS84):
     """Horizontal distance of the navigation from the GNSS track at the solution epochs, m.
@@ -1073,7 +1018,8 @@ def check_result(name: str, final_mps2, in_line, sol, record, opts: CheckOptions
         Post-processed disturbance, m/s^2 (NaN outside lines).
     in_line : ndarray of bool, shape (N,)
         Epochs on survey lines.
-    sol : SegmentedSolution or InmSolution
+    sol : gravsurvey.estimate.FlightEstimate
+        The flight's estimate (epochs with ``segment`` -1 are gaps and not checked).
     n_lines : int
         Number of survey/tie lines found.
 
@@ -1086,11 +1032,12 @@ def check_result(name: str, final_mps2, in_line, sol, record, opts: CheckOptions
     if n_lines == 0 and not opts.allow_no_lines:
         raise DataError(f"{name}: no survey lines found (straight, level, steady-speed pieces of at least "
                         "the lines.min_line_s); nothing to deliver (set checks.allow_no_lines: true to accept)")
-    valid = np.asarray(getattr(sol, "segment", np.zeros(len(sol.time))) >= 0)
+    valid = np.asarray(sol.segment) >= 0
     fin = np.asarray(final_mps2, float)
     bad = in_line & valid & ~np.isfinite(fin)
-    for label, arr in (("kalman estimate", sol.g_smooth), ("sigma", sol.sigma_smooth),
-                       ("latitude", sol.lat), ("longitude", sol.lon), ("height", sol.height)):
+    series = [("kalman estimate", sol.smoothed), ("unfiltered reduction", sol.unfiltered), ("sigma", sol.sigma),
+              ("latitude", sol.lat), ("longitude", sol.lon), ("height", sol.height)]
+    for label, arr in ((lb, a) for lb, a in series if a is not None):
         arr = np.asarray(arr, float)
         if label == "sigma" and not np.isfinite(arr).any():
             continue  # a method without a sigma (classic) reports NaN throughout by design
@@ -1109,7 +1056,7 @@ def check_result(name: str, final_mps2, in_line, sol, record, opts: CheckOptions
             raise DataError(f"{name}: |disturbance| reaches {vmax:.4g} mGal at t = {sol.time[k]:.1f} s; "
                             f"expected at most {opts.max_abs_disturbance_mgal:g} mGal "
                             "(checks.max_abs_disturbance_mgal)")
-    if getattr(sol, "gnss_aided", False):
+    if sol.estimator.get("gnss_aided", False):
         # running median over TRACK_WINDOW epochs: a few GNSS outliers (multipath) are not a
         # navigation that left the track
         raw = track_deviation_m(sol, record, ellipsoid)

@@ -1,7 +1,8 @@
 """One flight, then a survey of flights.
 
 ``process_flight`` runs one flight through ingest -> 3D-INM Kalman/RTS (or the classic
-reduction) -> line segmentation -> post-processing per line, and returns plain arrays.
+reduction; :func:`estimate_flight` is the only place the method matters) -> line segmentation
+-> post-processing per line, and returns the flight's :class:`gravsurvey.estimate.FlightEstimate`.
 ``run_survey`` runs every flight (in parallel with ``jobs > 1``), projects, finds crossovers
 and writes the deliverables atomically into the output directory under a lock.
 """
@@ -25,12 +26,13 @@ import numpy as np
 from . import __version__
 from .config import FlightConfig, SurveyConfig, load_config
 from .errors import DataError, GravsurveyError, os_fault
+from .estimate import FlightEstimate, concatenate_estimates, from_classic, from_inm_solution
 from .geodesy import MGAL
 from .io.writers import to_jsonable
 
 log = logging.getLogger("gravsurvey")
 
-CACHE_VERSION = 3
+CACHE_VERSION = 4
 
 
 # --------------------------------------------------------------------------
@@ -69,8 +71,21 @@ def read_truth_csv(path: Path) -> dict:
     return out
 
 
-def _truth_at(truth: dict, unix_ns: np.ndarray) -> np.ndarray:
-    """Truth disturbance (mGal) interpolated to the given Unix ns; NaN outside the truth span."""
+def truth_at(truth: dict, unix_ns: np.ndarray) -> np.ndarray:
+    """Truth disturbance interpolated to the given epochs.
+
+    Parameters
+    ----------
+    truth : dict
+        As :func:`read_truth_csv` returns: ``time_ns`` (int64) and ``disturbance_mgal``.
+    unix_ns : ndarray of int64, shape (N,)
+        Unix ns of the epochs.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        mGal; NaN outside the truth span.
+    """
     t_ref = truth["time_ns"][0]
     tt = (truth["time_ns"] - t_ref).astype(float)
     x = (unix_ns - t_ref).astype(float)
@@ -81,59 +96,41 @@ def _truth_at(truth: dict, unix_ns: np.ndarray) -> np.ndarray:
 # one flight
 # --------------------------------------------------------------------------
 
-
-@dataclass
-class FlightResult:
-    """Arrays and facts about one processed flight (picklable; cached between runs)."""
-
-    name: str
-    t0_unix_ns: int
-    time: np.ndarray  # s after t0, filter epochs
-    lat: np.ndarray  # rad
-    lon: np.ndarray  # rad
-    height: np.ndarray  # m
-    speed: np.ndarray  # m/s
-    kalman: np.ndarray  # m/s^2 smoothed estimate (before post-processing)
-    forward: np.ndarray  # m/s^2 forward filter
-    sigma: np.ndarray  # m/s^2 1-sigma of the smoothed estimate
-    final: np.ndarray  # m/s^2 after post-processing, NaN outside lines
-    line: np.ndarray  # object array of line names ('' outside lines)
-    segments: list  # dicts: name, kind, start_s, stop_s, n
-    line_info: dict  # line -> post-processor info
-    truth: np.ndarray | None  # mGal at epochs, or None
-    notes: list[str] = field(default_factory=list)
-    timings: dict = field(default_factory=dict)
-    input_hashes: dict = field(default_factory=dict)
-    estimator: dict = field(default_factory=dict)  # method, triad, GNSS aiding used
-    data_loss: list = field(default_factory=list)  # input damage: processed, but exit code 1
-    attitude: np.ndarray | None = None  # (N, 3) rad roll, pitch, heading (strapdown), else None
-    attitude_sigma: np.ndarray | None = None  # (N, 3) rad 1-sigma of the same
+#: the per-flight result is the flight's :class:`gravsurvey.estimate.FlightEstimate` (this name
+#: is kept for callers written before the estimate type existed)
+FlightResult = FlightEstimate
 
 
-def _segments(cfg: SurveyConfig, fl: FlightConfig, sol) -> list:
+def line_segments(cfg: SurveyConfig, fl: FlightConfig, est: FlightEstimate) -> list:
+    """The flight's lines (``survey.Segment`` list) by the configured ``lines`` mode.
+
+    Windows from the flight (``flights[].lines``) or the survey (``lines.windows``), the whole
+    flight (``whole``: one line per run of estimated epochs, never across a gap epoch), or
+    automatic segmentation of the track (``auto``).
+    """
     from .survey import segment_lines, segments_from_windows
 
     mode = getattr(cfg.lines, "mode", "auto")
     if fl.lines_windows is not None:
-        return segments_from_windows(sol.time, fl.lines_windows, key_path=f"flights[{fl.index}].lines")
+        return segments_from_windows(est.time, fl.lines_windows, key_path=f"flights[{fl.index}].lines")
     if mode == "windows":
-        return segments_from_windows(sol.time, cfg.lines.windows, key_path="lines.windows")
+        return segments_from_windows(est.time, cfg.lines.windows, key_path="lines.windows")
     if mode == "whole":
         from .survey import Segment
 
-        # the whole flight, but never across the NaN epoch between separately estimated
-        # segments (a flight split at a gap: consistency.SegmentedSolution)
-        seg = np.asarray(getattr(sol, "segment", np.zeros(len(sol.time))))
+        # the whole flight, but never across a gap epoch (segment -1: the separator between
+        # separately estimated pieces, or epochs a chain left empty)
+        seg = np.asarray(est.segment)
         edge = np.diff(np.concatenate([[0], (seg >= 0).astype(np.int8), [0]]))
         runs = list(zip(np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)))
         return [Segment(f"L{i + 1:02d}", "line", int(a), int(b)) for i, (a, b) in enumerate(runs)]
-    return segment_lines(sol.time, sol.lat, sol.lon, sol.vel_n, options=cfg.lines)
+    return segment_lines(est.time, est.lat, est.lon, est.vel_n, options=cfg.lines)
 
 
-def process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
+def process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
     """Process one flight. Raises GravsurveyError subclasses for data/config problems.
 
-    Warnings raised by any stage become lines of ``FlightResult.notes`` (and of the log and
+    Warnings raised by any stage become lines of ``FlightEstimate.notes`` (and of the log and
     summary.json) instead of being printed: a cron run that succeeds prints nothing.
     """
     with warnings.catch_warnings(record=True) as caught:
@@ -148,9 +145,79 @@ def process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
     return result
 
 
-def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
-    from .io.ingest import load_flight
+def estimate_flight(cfg: SurveyConfig, fl: FlightConfig, record, checks, names) -> tuple[FlightEstimate, list, list]:
+    """The flight's estimate by the configured ``processing.method``.
+
+    Returns
+    -------
+    est : FlightEstimate
+        The chain's product at every epoch (not yet cut into lines).
+    notes : list of str
+        Findings of the estimation (without the flight name).
+    loss : list of str
+        Pieces of the flight not estimated (data loss).
+    """
+    if cfg.processing_method == "classic":
+        return classic_estimate(cfg, fl, record), [], []
+    return inm_estimate(cfg, fl, record, checks, names)
+
+
+def line_products(est: FlightEstimate, segs, postprocess_options, model=None) -> tuple[list, dict, list]:
+    """Cut the estimate into lines and make each line's product, in place.
+
+    A chain with a smoothed estimate (3D-INM) has it post-processed per line
+    (:func:`gravsurvey.wavelet.postprocess`, default: none, i.e. the smoothed estimate with
+    the smoother's resolution); a chain that delivers its product already (classic) keeps it.
+    ``est.disturbance`` becomes the product on lines and tie lines of >= 8 epochs, NaN
+    elsewhere; ``est.line`` the line name of each epoch.
+
+    Returns
+    -------
+    seg_out : list of dict
+        ``name, kind, start_s, stop_s, n`` of every segment.
+    line_info : dict
+        Line -> post-processor facts, ``kind``, ``speed_mps``, ``samples``.
+    notes : list of str
+        Per-line warnings (e.g. the model's solvability at the line's speed).
+    """
+    from .inm.params import solvability_warnings
     from .wavelet import postprocess
+
+    n = len(est.time)
+    product = est.disturbance
+    final = np.full(n, np.nan)
+    line = np.full(n, "", dtype=object)
+    seg_out, line_info, notes = [], {}, []
+    dt = float(np.median(np.diff(est.time))) if n > 1 else 1.0
+    for s in segs:
+        a, b = int(s.start_index), int(s.stop_index)
+        seg_out.append(
+            {"name": s.name, "kind": s.kind, "start_s": float(est.time[a]), "stop_s": float(est.time[b - 1]), "n": b - a}
+        )
+        if s.kind not in ("line", "tie") or b - a < 8:
+            continue
+        speed = float(np.nanmean(est.speed[a:b]))
+        if est.smoothed is None:
+            # the chain's own product (the classic low-pass), as the chain stated it
+            z, info = product[a:b], {"method": est.method, **est.product_info}
+        else:
+            if model is not None:
+                notes += [f"{est.name} {s.name}: {w}" for w in solvability_warnings(model, speed)]
+            z, info = postprocess(est.smoothed[a:b], dt, speed, options=postprocess_options,
+                                  sigma=est.sigma[a:b], context=(est.smoothed, a, b))
+            if info.get("method") == "none":
+                # the product is the smoother's own estimate: state the smoother's resolution
+                info["resolution_m"] = float(est.resolution_m)
+        final[a:b] = z
+        line[a:b] = s.name
+        line_info[s.name] = {**to_jsonable(info), "kind": s.kind, "speed_mps": speed, "samples": b - a}
+    est.disturbance = final
+    est.line = line
+    return seg_out, line_info, notes
+
+
+def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
+    from .io.ingest import load_flight
 
     timings = {}
     notes: list[str] = []
@@ -167,221 +234,128 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
     notes += [f"{fl.name}: {n}" for n in check_overlap(record, names)]
     notes += [f"{fl.name}: {n}" for n in check_gnss_consistency(
         record, names, checks, cfg.ellipsoid, fl.initial_raw, f"flights[{fl.index}].initial")]
-    segment_loss: list[str] = []
 
     t = time.perf_counter()
-    if cfg.processing_method == "classic":
-        sol = _classic_solution(cfg, fl, record)
-    else:
-        from .inm.params import resolve_initial_state, solvability_warnings
-
-        initial = resolve_initial_state(record, fl.triad, cfg.model, cfg.ellipsoid, fl.initial_given,
-                                        f"flights[{fl.index}].initial")
-        sol, seg_notes, segment_loss = _estimate_by_segment(cfg, fl, record, initial, checks, names)
-        notes += [f"{fl.name}: {n}" for n in seg_notes]
+    est, seg_notes, segment_loss = estimate_flight(cfg, fl, record, checks, names)
+    notes += [f"{fl.name}: {n}" for n in seg_notes]
     timings["estimate_s"] = time.perf_counter() - t
     gradio = None
     if cfg.raw.get("processing", {}).get("gradiometer", False):
-        gradio = _gradiometer_products(fl, record, sol, notes)
+        gradio = _gradiometer_products(fl, record, est, notes)
 
     t = time.perf_counter()
-    segs = _segments(cfg, fl, sol)
-    n = len(sol.time)
-    final = np.full(n, np.nan)
-    line = np.full(n, "", dtype=object)
-    seg_out, line_info = [], {}
-    dt = float(np.median(np.diff(sol.time))) if n > 1 else 1.0
-    for s in segs:
-        a, b = int(s.start_index), int(s.stop_index)
-        seg_out.append(
-            {"name": s.name, "kind": s.kind, "start_s": float(sol.time[a]), "stop_s": float(sol.time[b - 1]), "n": b - a}
-        )
-        if s.kind not in ("line", "tie") or b - a < 8:
-            continue
-        speed = float(np.nanmean(sol.speed[a:b]))
-        if cfg.processing_method == "classic":
-            z, info = sol.final[a:b], dict(sol.info)
-        else:
-            if cfg.processing_method == "inm":
-                for w in solvability_warnings(cfg.model, speed):
-                    notes.append(f"{fl.name} {s.name}: {w}")
-            z, info = postprocess(sol.g_smooth[a:b], dt, speed, options=cfg.postprocess,
-                                  sigma=sol.sigma_smooth[a:b], context=(sol.g_smooth, a, b))
-            if info.get("method") == "none":
-                # the product is the smoother's own estimate: state the smoother's resolution
-                info["resolution_m"] = float(sol.resolution_m)
-        final[a:b] = z
-        line[a:b] = s.name
-        line_info[s.name] = {**to_jsonable(info), "kind": s.kind, "speed_mps": speed, "samples": b - a}
+    segs = line_segments(cfg, fl, est)
+    est.line_segments, est.line_info, line_notes = line_products(est, segs, cfg.postprocess, cfg.model)
+    notes += line_notes
     timings["postprocess_s"] = time.perf_counter() - t
-    notes += check_result(fl.name, final, line != "", sol, record, checks, len(line_info), cfg.ellipsoid)
+    notes += check_result(fl.name, est.disturbance, est.line != "", est, record, checks, len(est.line_info),
+                          cfg.ellipsoid)
     # checks that passed are facts for summary.json (estimator.checks_passed), not warnings
     from .consistency import PASSED
 
     passed = [n.replace(PASSED, "", 1) for n in notes if PASSED in n]
     notes = [n for n in notes if PASSED not in n]
 
-    truth = None
     if fl.truth is not None:
         tr = read_truth_csv(fl.truth)
-        unix = record.t0_unix_ns + np.round(sol.time * 1e9).astype(np.int64)
-        truth = _truth_at(tr, unix)
+        unix = record.t0_unix_ns + np.round(est.time * 1e9).astype(np.int64)
+        est.truth_mgal = truth_at(tr, unix)
 
-    return FlightResult(
-        name=fl.name,
-        t0_unix_ns=int(record.t0_unix_ns),
-        time=np.asarray(sol.time, float),
-        lat=np.asarray(sol.lat, float),
-        lon=np.asarray(sol.lon, float),
-        height=np.asarray(sol.height, float),
-        speed=np.asarray(sol.speed, float),
-        kalman=np.asarray(sol.g_smooth, float),
-        forward=np.asarray(sol.g_forward, float),
-        sigma=np.asarray(sol.sigma_smooth, float),
-        final=final,
-        line=line,
-        segments=seg_out,
-        line_info=line_info,
-        truth=truth,
-        notes=notes,
-        timings=timings,
-        data_loss=[f"{fl.name}: {n}" for n in record.data_loss + segment_loss],
-        attitude=_per_epoch(getattr(sol, "attitude", None), len(sol.time)),
-        attitude_sigma=_per_epoch(getattr(sol, "attitude_sigma", None), len(sol.time)),
-        estimator={
-            **_attitude_report(sol),
-            "method": cfg.processing_method,
-            "triad": fl.triad,
-            "gnss_aided": bool(getattr(sol, "gnss_aided", False)),
-            "identification": getattr(sol, "identification", {}),
-            "checks_passed": passed,
-            "kalman_resolution_m": float(getattr(sol, "resolution_m", float("nan"))),
-            **({"gradiometer": gradio} if gradio is not None else {}),
-        },
-    )
+    est.name = fl.name
+    est.t0_unix_ns = int(record.t0_unix_ns)
+    est.notes = est.notes + notes
+    est.timings = timings
+    est.data_loss = [f"{fl.name}: {n}" for n in record.data_loss + segment_loss]
+    est.estimator = {
+        **est.estimator,
+        "method": cfg.processing_method,
+        "triad": fl.triad,
+        "checks_passed": passed,
+        **({"gradiometer": gradio} if gradio is not None else {}),
+    }
+    return est
 
 
-def _per_epoch(arr, n):
-    """An (n, 3) array of the solution, or None (platform, classic, or segments without it)."""
-    if arr is None:
-        return None
-    a = np.asarray(arr, float)
-    return a if a.shape == (n, 3) and np.isfinite(a).any() else None
-
-
-def _attitude_report(sol) -> dict:
-    """Alignment and attitude-estimation summary for the flight's ``estimator`` (summary.json)."""
-    out = {}
-    al = getattr(sol, "alignment", None)
-    if al is not None:
-        out.update(al.to_dict())
-        for w in al.warnings:
-            warnings.warn(f"alignment: {w}")
-    att_sig = getattr(sol, "attitude_sigma", None)
-    if att_sig is not None and np.isfinite(att_sig).any():
-        med = np.degrees(np.nanmedian(att_sig, axis=0))
-        out["attitude_sigma_median_deg"] = {"roll": float(med[0]), "pitch": float(med[1]), "heading": float(med[2])}
-        out["attitude_passes"] = int(sol.passes)
-        out["attitude_corrections_deg"] = [float(np.degrees(c)) for c in sol.attitude_corrections]
-        out["attitude_converge_s"] = float(sol.attitude_converge_s)
-        out["gnss_residual_rms_m"] = float(sol.gnss_residual_rms_m)
-    return out
-def _gradiometer_products(fl, record, sol, notes):
+def _gradiometer_products(fl, record, est: FlightEstimate, notes):
     """processing.gradiometer: seed-000 products of the flight's gradient channel (summary.json)."""
     from .gradiometer import flight_products
 
     if record.gradient is None:
         notes.append(f"{fl.name}: processing.gradiometer is on but the flight has no gravity-gradient channel")
         return None
-    p = flight_products(record.gradient.time, record.gradient.gamma_t, sol.time, sol.lat, sol.lon, sol.height,
-                        sol.vel_n, float(sol.g_smooth[0]), fl.triad)
+    series = est.unprocessed
+    p = flight_products(record.gradient.time, record.gradient.gamma_t, est.time, est.lat, est.lon, est.height,
+                        est.vel_n, float(series[0]), fl.triad)
     if "disturbance" in p:
         # the gradient-propagated disturbance against the scalar estimate at the gradient epochs
         d = p.pop("disturbance")
-        est = np.interp(p.pop("time"), sol.time, sol.g_smooth)
+        e = np.interp(p.pop("time"), est.time, series)
         p.pop("horizontal_n")
-        p["disturbance_rms_vs_estimate_mgal"] = float(np.sqrt(np.mean((d - est) ** 2)) / 1e-5)
+        p["disturbance_rms_vs_estimate_mgal"] = float(np.sqrt(np.mean((d - e) ** 2)) / 1e-5)
     return p
 
 
-def _estimate_by_segment(cfg: SurveyConfig, fl: FlightConfig, record, initial, checks, names):
-    """3D-INM estimate of a flight split at long gaps (consistency.plan_segments).
+def inm_estimate(cfg: SurveyConfig, fl: FlightConfig, record, checks, names) -> tuple[FlightEstimate, list, list]:
+    """3D-INM estimate of a flight, split at long gaps (consistency.plan_segments).
 
-    The first segment starts from ``initial`` (state at the first IMU sample); every later one
-    is re-initialised from GNSS on its own slice of the record, with the initial velocity sigma
+    The first piece starts from the initial state at the first IMU sample (given or from the
+    data: :func:`gravsurvey.inm.params.resolve_initial_state`); every later one is
+    re-initialised from GNSS on its own slice of the record, with the initial velocity sigma
     widened to what a 10 s GNSS fit gives in flight (``consistency.REINIT_VELOCITY_SIGMA_MPS``).
-    Segments are joined with a NaN epoch between them.
+    Pieces are joined by :func:`gravsurvey.estimate.concatenate_estimates`.
 
     Returns
     -------
-    sol : InmSolution or consistency.SegmentedSolution
+    est : FlightEstimate
     notes : list of str
     loss : list of str
         Pieces not estimated (too short, or not re-initialisable): reported as data loss.
     """
     import dataclasses
 
-    from .consistency import REINIT_VELOCITY_SIGMA_MPS, concatenate_solutions, plan_segments, span_text
+    from .consistency import REINIT_VELOCITY_SIGMA_MPS, plan_segments, span_text
     from .inm.params import resolve_initial_state
     from .inm.solve import estimate_anomaly
     from .io.record import slice_record
 
+    initial = resolve_initial_state(record, fl.triad, cfg.model, cfg.ellipsoid, fl.initial_given,
+                                    f"flights[{fl.index}].initial")
     lever = getattr(fl.ingest, "gnss_lever_arm_m", None)
+    t0 = int(record.t0_unix_ns)
     spans, notes, loss = plan_segments(record, checks, names)
     imu_t0, imu_t1 = float(record.imu.time[0]), float(record.imu.time[-1])
     if len(spans) == 1 and spans[0] == (imu_t0, imu_t1):
-        return (estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid, gnss_lever_arm_t=lever),
-                notes, loss)
+        sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid, gnss_lever_arm_t=lever)
+        return from_inm_solution(sol, name=fl.name, t0_unix_ns=t0), notes, loss
     reinit_model = dataclasses.replace(
         cfg.model, initial_velocity_sigma_mps=max(cfg.model.initial_velocity_sigma_mps, REINIT_VELOCITY_SIGMA_MPS))
-    sols = []
+    parts = []
     for a, b in spans:
         sub = slice_record(record, a, b, margin_s=2.0)
         try:
             if a == imu_t0:
-                sols.append(estimate_anomaly(sub, cfg.model, initial, fl.triad, cfg.ellipsoid,
-                                             gnss_lever_arm_t=lever))
+                sol = estimate_anomaly(sub, cfg.model, initial, fl.triad, cfg.ellipsoid, gnss_lever_arm_t=lever)
             else:
                 # from the data alone: GNSS position/velocity, attitude by in-motion alignment
                 init = resolve_initial_state(sub, fl.triad, reinit_model, cfg.ellipsoid)
-                sols.append(estimate_anomaly(sub, reinit_model, init, fl.triad, cfg.ellipsoid,
-                                             gnss_lever_arm_t=lever))
+                sol = estimate_anomaly(sub, reinit_model, init, fl.triad, cfg.ellipsoid, gnss_lever_arm_t=lever)
+            parts.append(from_inm_solution(sol, name=fl.name, t0_unix_ns=t0))
         except GravsurveyError as exc:
             loss.append(f"segment {span_text(record.t0_unix_ns, a, b)} not estimated: {exc}")
-    if not sols:
+    if not parts:
         raise DataError(f"{record.source}: no segment of the flight could be estimated: {'; '.join(loss)}")
-    notes.append(f"estimated {len(sols)} of {len(spans)} segments: "
-                 + ", ".join(span_text(record.t0_unix_ns, s.time[0], s.time[-1]) for s in sols))
-    return concatenate_solutions(sols), notes, loss
+    notes.append(f"estimated {len(parts)} of {len(spans)} segments: "
+                 + ", ".join(span_text(record.t0_unix_ns, p.time[0], p.time[-1]) for p in parts))
+    return concatenate_estimates(parts), notes, loss
 
 
-class _ClassicSolution:
-    """Adapter giving the classic reduction the fields the pipeline reads."""
-
-    def __init__(self, res, record):
-        self.time = res.time
-        self.lat, self.lon, self.height = res.lat, res.lon, res.height
-        self.vel_n = res.vel_n
-        self.speed = np.linalg.norm(res.vel_n[:, :2], axis=1)
-        self.g_smooth = res.raw
-        self.g_forward = res.raw
-        self.sigma_smooth = np.full(len(res.time), np.nan)
-        self.final = res.disturbance
-        self.info = res.info
-        # epochs inside a gap of the gravimeter or navigation log carry NaN by design (the
-        # readers leave them empty rather than interpolate): they are gap epochs, like the
-        # separators between the INS chain's segments (consistency.SegmentedSolution)
-        # (the product is also empty where its low-pass window reaches into a gap)
-        self.segment = np.where(np.isfinite(res.raw) & np.isfinite(res.disturbance), 0, -1)
-        self.resolution_m = float(res.info.get("resolution_m") or np.nan)
-
-
-def _classic_solution(cfg, fl, record):
+def classic_estimate(cfg: SurveyConfig, fl: FlightConfig, record) -> FlightEstimate:
     """The conventional scalar reduction, on the same radial information as the 3D-INM.
 
     A strapdown triad needs its attitude to find the vertical: it comes from the 3D-INM
-    mechanization of the same record (``classic.strapdown_attitude``). Without GNSS the
-    position track for the Eotvos correction also comes from the mechanization.
+    mechanization of the same record (:func:`gravsurvey.classic.strapdown_attitude`). Without
+    GNSS the position track for the Eotvos correction comes from the 3D-INM estimate. Both
+    through the INS chain's public functions only.
     """
     from .classic import classic_reduction, strapdown_attitude
     from .inm.params import resolve_initial_state
@@ -415,8 +389,7 @@ def _classic_solution(cfg, fl, record):
         from .io.formats.flight import blank_gaps
 
         blank_gaps(res, record, fl.ingest.gap_factor)
-    return _ClassicSolution(res, record)
-
+    return from_classic(res, name=fl.name, t0_unix_ns=int(record.t0_unix_ns))
 
 # --------------------------------------------------------------------------
 # survey
@@ -538,7 +511,7 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
 
     cache_dir = out_dir / ".cache"
     cache_dir.mkdir(exist_ok=True)
-    results: dict[str, FlightResult] = {}
+    results: dict[str, FlightEstimate] = {}
     failed, skipped, processed, notes = [], [], [], []
     keys = {}
     todo = []
@@ -546,7 +519,7 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
         key, hashes = _flight_key(cfg, fl)
         keys[fl.name] = (key, hashes)
         # no pickle: JSON checked against the key before the arrays are read (gravsurvey.cache)
-        cached = None if force else load_result(cache_dir, fl.name, key, FlightResult)
+        cached = None if force else load_result(cache_dir, fl.name, key, FlightEstimate)
         if cached is not None:
             results[fl.name] = cached
             skipped.append(fl.name)
@@ -620,7 +593,7 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
     return RunResult(out_dir, processed, skipped, failed, notes, summary, data_loss)
 
 
-def _profile_table(cfg: SurveyConfig, results: list[FlightResult]):
+def _profile_table(cfg: SurveyConfig, results: list[FlightEstimate]):
     from .georef import project
 
     lat = np.concatenate([r.lat for r in results])
@@ -636,23 +609,91 @@ def _profile_table(cfg: SurveyConfig, results: list[FlightResult]):
         "height_m": np.concatenate([r.height for r in results]),
         "easting_m": east,
         "northing_m": north,
-        "disturbance_mgal": np.concatenate([r.final for r in results]) / MGAL,
-        "kalman_mgal": np.concatenate([r.kalman for r in results]) / MGAL,
-        "sigma_mgal": np.concatenate([r.sigma for r in results]) / MGAL,
+        "disturbance_mgal": np.concatenate([r.disturbance for r in results]) / MGAL,
     }
-    if any(r.attitude is not None for r in results):
+    # the estimate the product was made from, named for what it holds (docs/outputs.md)
+    for col, attr in (("kalman_mgal", "smoothed"), ("unfiltered_mgal", "unfiltered")):
+        if any(getattr(r, attr) is not None for r in results):
+            table[col] = np.concatenate([getattr(r, attr) if getattr(r, attr) is not None
+                                         else np.full(len(r.time), np.nan) for r in results]) / MGAL
+    table["sigma_mgal"] = np.concatenate([r.sigma for r in results]) / MGAL
+    if any(r.has_attitude for r in results):
         # strapdown attitude and its 1-sigma per epoch (NaN for flights without it)
-        att = np.concatenate([np.degrees(r.attitude) if r.attitude is not None else np.full((len(r.time), 3), np.nan)
-                              for r in results])
-        sig = np.concatenate([np.degrees(r.attitude_sigma) if r.attitude_sigma is not None
-                              else np.full((len(r.time), 3), np.nan) for r in results])
+        att = np.degrees(np.concatenate([r.attitude for r in results]))
+        sig = np.degrees(np.concatenate([r.attitude_sigma for r in results]))
         for j, name in enumerate(("roll", "pitch", "heading")):
             table[f"{name}_deg"] = att[:, j]
             table[f"{name}_sigma_deg"] = sig[:, j]
-    if all(r.truth is not None for r in results):
-        table["truth_mgal"] = np.concatenate([r.truth for r in results])
+    if any(r.has_horizontal for r in results):
+        table.update(horizontal_columns(results, cfg.ellipsoid))
+    if all(r.truth_mgal is not None for r in results):
+        table["truth_mgal"] = np.concatenate([r.truth_mgal for r in results])
         table["error_mgal"] = table["disturbance_mgal"] - table["truth_mgal"]
     return table, epsg
+
+
+def horizontal_columns(results: list[FlightEstimate], ellipsoid=None) -> dict:
+    """The horizontal-disturbance columns of the profile table (writers.HORIZONTAL_COLUMNS).
+
+    ``dg_north_mgal, dg_east_mgal`` and their ``_sigma_`` columns in mGal, the deflections
+    ``xi_arcsec = -dg_north / gamma``, ``eta_arcsec = -dg_east / gamma`` (gamma: normal
+    gravity at the point) and their 1-sigma in arcsec; NaN where ``horizontal_observable`` is
+    false and for flights without horizontal components.
+
+    Returns
+    -------
+    dict
+        column -> ndarray, shape (sum of the flights' epochs,).
+    """
+    from .estimate import deflection_arcsec
+    from .geodesy import WGS84
+
+    ell = ellipsoid if ellipsoid is not None else WGS84
+    cols: dict = {c: [] for c in ("dg_north_mgal", "dg_east_mgal", "xi_arcsec", "eta_arcsec", "dg_north_sigma_mgal",
+                                  "dg_east_sigma_mgal", "xi_sigma_arcsec", "eta_sigma_arcsec")}
+    for r in results:
+        n = len(r.time)
+        if not r.has_horizontal:
+            for v in cols.values():
+                v.append(np.full(n, np.nan))
+            continue
+        obs = (np.asarray(r.horizontal_observable, bool) if r.horizontal_observable is not None
+               else np.ones(n, bool))
+        blank = lambda a: np.where(obs, np.asarray(a, float), np.nan) if a is not None else np.full(n, np.nan)  # noqa: E731
+        dn, de, sn, se = blank(r.dg_north), blank(r.dg_east), blank(r.sigma_north), blank(r.sigma_east)
+        cols["dg_north_mgal"].append(dn / MGAL)
+        cols["dg_east_mgal"].append(de / MGAL)
+        cols["dg_north_sigma_mgal"].append(sn / MGAL)
+        cols["dg_east_sigma_mgal"].append(se / MGAL)
+        cols["xi_arcsec"].append(deflection_arcsec(dn, r.lat, r.height, ell))
+        cols["eta_arcsec"].append(deflection_arcsec(de, r.lat, r.height, ell))
+        cols["xi_sigma_arcsec"].append(np.abs(deflection_arcsec(sn, r.lat, r.height, ell)))
+        cols["eta_sigma_arcsec"].append(np.abs(deflection_arcsec(se, r.lat, r.height, ell)))
+    return {k: np.concatenate(v) for k, v in cols.items()}
+
+
+#: a line's horizontal components are meaningful when at least this share of its epochs is observable
+HORIZONTAL_MEANINGFUL_FRACTION = 0.5
+
+
+def horizontal_line_stats(table: dict, idx) -> dict:
+    """summary.json facts of one line's horizontal components (rows ``idx`` of the table).
+
+    ``horizontal_meaningful``: at least :data:`HORIZONTAL_MEANINGFUL_FRACTION` of the line's
+    epochs observable (finite ``dg_north_mgal``); ``horizontal_observable_fraction``; means
+    of ``dg_north_mgal``, ``dg_east_mgal``, ``xi_arcsec``, ``eta_arcsec`` over the observable
+    epochs (None when none).
+    """
+    dn = np.asarray(table["dg_north_mgal"], float)[idx]
+    obs = np.isfinite(dn)
+    frac = float(obs.mean()) if obs.size else 0.0
+    out = {"horizontal_meaningful": bool(obs.size) and frac >= HORIZONTAL_MEANINGFUL_FRACTION,
+           "horizontal_observable_fraction": frac}
+    for c in ("dg_north_mgal", "dg_east_mgal", "xi_arcsec", "eta_arcsec"):
+        v = np.asarray(table[c], float)[idx]
+        v = v[np.isfinite(v)]
+        out[f"mean_{c}"] = float(v.mean()) if v.size else None
+    return out
 
 
 def _rms(x):
@@ -702,7 +743,7 @@ def _apply_ties(cfg, results, rows) -> tuple[dict, np.ndarray, list]:
         if fl is None or fl.tie is None:
             continue
         try:
-            tie = tie_flight(fl.tie, r.time, r.lat, r.height, r.kalman / MGAL, ellipsoid=cfg.ellipsoid,
+            tie = tie_flight(fl.tie, r.time, r.lat, r.height, r.unprocessed / MGAL, ellipsoid=cfg.ellipsoid,
                              key_path=f"flights[{fl.index}].tie")
         except DataError as exc:
             notes.append(f"{r.name}: base tie not applied, the flight stays on a relative level: {exc}")
@@ -710,7 +751,7 @@ def _apply_ties(cfg, results, rows) -> tuple[dict, np.ndarray, list]:
         ties[r.name] = tie
         corr[rows[r.name]] = tie.correction(r.time)
         windows = [rd for rd in (fl.tie.before, fl.tie.after) if rd is not None and rd.reading_mgal is None]
-        if windows and cfg.processing_method == "inm":
+        if windows and r.method == "inm":
             # docs/survey.md: on the sample survey the parked INM estimate was 1.56 mGal below truth
             # while the lines were 1.15 mGal above it
             notes.append(
@@ -743,7 +784,7 @@ def _output_metadata(cfg, epsg, level_state) -> dict:
     }
 
 
-def write_survey_outputs(cfg: SurveyConfig, out_dir, results: list[FlightResult], failed=()) -> dict:
+def write_survey_outputs(cfg: SurveyConfig, out_dir, results: list[FlightEstimate], failed=()) -> dict:
     """Write the survey deliverables for processed flights (ties, crossovers, levelling, grid,
     files) into ``out_dir`` atomically; return the summary. The public entry of the output
     stage (benchmarks/bench_outputs.py, tests); :func:`run_survey` calls the same code."""
@@ -888,15 +929,19 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
             if "error_mgal" in table:
                 e_ = table["error_mgal"][idx]
                 st["rms_vs_truth_mgal"] = _rms(e_)
-                st["kalman_rms_vs_truth_mgal"] = _rms(table["kalman_mgal"][idx] - table["truth_mgal"][idx])
+                for col in ("kalman_mgal", "unfiltered_mgal"):
+                    if col in table:
+                        st[f"{col[:-5]}_rms_vs_truth_mgal"] = _rms(table[col][idx] - table["truth_mgal"][idx])
                 st["levelled_rms_vs_truth_mgal"] = _rms(table["levelled_mgal"][idx] - table["truth_mgal"][idx])
                 fl_err[r.name].append(e_)
+            if "dg_north_mgal" in table:
+                st.update(horizontal_line_stats(table, idx))
             line_stats.append(st)
             lines_of[r.name][name] = st
     flights_summary = {}
     for r in results:
         flights_summary[r.name] = {
-            "segments": r.segments,
+            "segments": r.line_segments,
             "lines": lines_of[r.name],
             "notes": r.notes,
             "estimator": r.estimator,
@@ -962,12 +1007,17 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                 report.plot_line_profile(
                     tx.path(f"profile_{ln['flight']}_{ln['line']}.png"),
                     dist_km,
-                    table["kalman_mgal"][idx],
+                    # a chain without a Kalman estimate (classic) plots its product alone: its
+                    # unfiltered reduction (+-1e6 mGal) would hide it
+                    table["kalman_mgal"][idx] if "kalman_mgal" in table else None,
                     table["disturbance_mgal"][idx],
                     table["sigma_mgal"][idx],
                     truth_mgal=table["truth_mgal"][idx] if "truth_mgal" in table else None,
                     title=f"{cfg.name} {ln['flight']} {ln['line']}",
                     x_label="distance along line, km",
+                    horizontal=({c: table[c][idx] for c in ("dg_north_mgal", "dg_east_mgal", "dg_north_sigma_mgal",
+                                                           "dg_east_sigma_mgal")}
+                                if "dg_north_mgal" in table else None),
                 )
             report.plot_survey_map(
                 tx.path("survey_map.png"),

@@ -11,7 +11,9 @@ import numpy as np
 from .errors import DataError
 
 _KEY_COLS = ("flight", "line", "time_unix_ns")
-_VALUE_COLS = ("disturbance_mgal", "kalman_mgal", "lat_deg", "lon_deg", "height_m")
+#: compared when in the reference; a column of the reference missing from the result is a difference
+#: (``kalman_mgal``: 3D-INM smoothed estimate; ``unfiltered_mgal``: classic reduction before its low-pass)
+_VALUE_COLS = ("disturbance_mgal", "kalman_mgal", "unfiltered_mgal", "lat_deg", "lon_deg", "height_m")
 #: per-column tolerance scale relative to --tol-mgal (positions: degrees ~ 1e-7 = 1 cm, height 1 cm)
 _ABS_TOL = {"lat_deg": 1e-7, "lon_deg": 1e-7, "height_m": 0.01}
 
@@ -82,7 +84,8 @@ def compare_runs(result_dir, reference_dir, *, tol_mgal: float = 0.05, tol_rms_m
 
     An empty list means the result agrees with the reference: every output file of the
     reference exists in the result; same flights, lines and epochs in ``profiles.csv``; every
-    ``disturbance_mgal`` and ``kalman_mgal`` within ``tol_mgal``; positions within 1 cm;
+    ``disturbance_mgal`` and ``kalman_mgal`` or ``unfiltered_mgal`` (whichever the reference
+    has; a reference column missing from the result is a difference) within ``tol_mgal``; positions within 1 cm;
     per-line RMS vs truth and the crossover RMS in ``summary.json`` within ``tol_rms_mgal``.
 
     Raises
@@ -111,7 +114,10 @@ def compare_runs(result_dir, reference_dir, *, tol_mgal: float = 0.05, tol_rms_m
         )
         return diffs
     for col in _VALUE_COLS:
-        if col not in a or col not in b:
+        if col in b and col not in a:
+            diffs.append(f"profiles.csv: column {col} of the reference missing from the result")
+            continue
+        if col not in b:
             continue
         va, vb = _floats(a[col]), _floats(b[col])
         tol = _ABS_TOL.get(col, tol_mgal)

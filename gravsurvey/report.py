@@ -51,38 +51,45 @@ def _save(fig: Figure, path) -> None:
 
 
 def figure_line_profile(x, kalman_mgal, final_mgal, sigma_mgal, truth_mgal=None, *, title: str = "",
-                        x_label: str = "time, s") -> Figure:
+                        x_label: str = "time, s", horizontal=None) -> Figure:
     """Figure of one line's profile.
 
     Parameters
     ----------
     x : array_like, shape (n,)
         Abscissa: time (s) or distance along the line (km); say which with ``x_label``.
-    kalman_mgal : array_like, shape (n,)
-        Kalman/RTS estimate before the wavelet post-processor, mGal.
+    kalman_mgal : array_like, shape (n,), or None
+        Kalman/RTS estimate before the post-processor, mGal; None for a chain without one
+        (classic): then neither it nor the sigma band is drawn.
     final_mgal : array_like, shape (n,)
         Final (post-processed) gravity disturbance, mGal.
-    sigma_mgal : array_like, shape (n,)
+    sigma_mgal : array_like, shape (n,), or None
         Posterior standard deviation of the Kalman estimate, mGal; drawn as a band
         ``kalman_mgal +- sigma_mgal`` (1 sigma).
     truth_mgal : array_like, shape (n,), optional
         Simulator truth, mGal; when given, the RMS of ``final - truth`` is in the title.
     title : str
     x_label : str
+    horizontal : dict, optional
+        ``dg_north_mgal, dg_east_mgal, dg_north_sigma_mgal, dg_east_sigma_mgal`` arrays of shape
+        (n,) (NaN where not observable): drawn in a second panel below, with 1-sigma bands.
 
     Returns
     -------
     matplotlib.figure.Figure
-        Artists labelled ``kalman``, ``final``, ``truth`` (lines) and ``sigma`` (band).
+        Artists labelled ``kalman``, ``final``, ``truth`` (lines) and ``sigma`` (band) in the
+        first axes; ``dg_north``, ``dg_east`` (lines) and their bands in the second.
     """
     x = np.asarray(x, float)
-    k = np.asarray(kalman_mgal, float)
     f = np.asarray(final_mgal, float)
-    s = np.asarray(sigma_mgal, float)
-    fig = _new_figure((10, 4.5))
-    ax = fig.add_subplot(1, 1, 1)
-    ax.fill_between(x, k - s, k + s, color="tab:blue", alpha=0.2, linewidth=0, label="sigma")
-    ax.plot(x, k, color="tab:blue", linewidth=0.8, label="kalman")
+    fig = _new_figure((10, 4.5) if horizontal is None else (10, 7.5))
+    ax = fig.add_subplot(1, 1, 1) if horizontal is None else fig.add_subplot(2, 1, 1)
+    if kalman_mgal is not None:
+        k = np.asarray(kalman_mgal, float)
+        if sigma_mgal is not None:
+            s = np.asarray(sigma_mgal, float)
+            ax.fill_between(x, k - s, k + s, color="tab:blue", alpha=0.2, linewidth=0, label="sigma")
+        ax.plot(x, k, color="tab:blue", linewidth=0.8, label="kalman")
     ax.plot(x, f, color="tab:red", linewidth=1.4, label="final")
     full_title = title
     if truth_mgal is not None:
@@ -101,14 +108,27 @@ def figure_line_profile(x, kalman_mgal, final_mgal, sigma_mgal, truth_mgal=None,
     ax.grid(True, alpha=0.3)
     if full_title:
         ax.set_title(full_title, fontsize=10)
+    if horizontal is not None:
+        ax2 = fig.add_subplot(2, 1, 2, sharex=ax)
+        for comp, color in (("north", "tab:green"), ("east", "tab:purple")):
+            v = np.asarray(horizontal[f"dg_{comp}_mgal"], float)
+            sg = np.asarray(horizontal[f"dg_{comp}_sigma_mgal"], float)
+            ax2.fill_between(x, v - sg, v + sg, color=color, alpha=0.2, linewidth=0, label=f"dg_{comp}_sigma")
+            ax2.plot(x, v, color=color, linewidth=1.0, label=f"dg_{comp}")
+        ax2.legend(loc="best", fontsize=8)
+        ax2.set_xlabel(x_label)
+        ax2.set_ylabel("horizontal disturbance, mGal")
+        ax2.set_title("horizontal components ± 1σ (blank where not observable)", fontsize=9)
+        ax2.grid(True, alpha=0.3)
     fig.tight_layout()
     return fig
 
 
 def plot_line_profile(path, x, kalman_mgal, final_mgal, sigma_mgal, truth_mgal=None, *, title: str = "",
-                      x_label: str = "time, s") -> None:
+                      x_label: str = "time, s", horizontal=None) -> None:
     """Write a line's profile plot as PNG (see :func:`figure_line_profile`)."""
-    _save(figure_line_profile(x, kalman_mgal, final_mgal, sigma_mgal, truth_mgal, title=title, x_label=x_label), path)
+    _save(figure_line_profile(x, kalman_mgal, final_mgal, sigma_mgal, truth_mgal, title=title, x_label=x_label,
+                              horizontal=horizontal), path)
 
 
 def _crossover_arrays(crossovers):

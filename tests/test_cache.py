@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from gravsurvey.cache import cache_paths, load_result, save_result
-from gravsurvey.pipeline import FlightResult
+from gravsurvey.estimate import FlightEstimate
 
 ROOT = Path(__file__).resolve().parents[1]
 EXE = [sys.executable, "-m", "gravsurvey"]
@@ -34,22 +34,30 @@ def _result(n=50):
     rng = np.random.default_rng(0)
     line = np.full(n, "", dtype=object)
     line[10:40] = "L01"
-    return FlightResult(
+    return FlightEstimate(
         name="F01",
+        method="inm",
         t0_unix_ns=1_700_000_000_000_000_000,
         time=np.arange(n, dtype=float),
         lat=rng.random(n),
         lon=rng.random(n),
         height=rng.random(n),
+        vel_n=rng.random((n, 3)),
         speed=rng.random(n),
-        kalman=rng.random(n),
+        heading=rng.random(n),
+        smoothed=rng.random(n),
         forward=rng.random(n),
         sigma=rng.random(n),
-        final=np.where(line != "", rng.random(n), np.nan),
+        disturbance=np.where(line != "", rng.random(n), np.nan),
+        dg_north=rng.random(n),
+        dg_east=rng.random(n),
+        sigma_north=rng.random(n),
+        sigma_east=rng.random(n),
+        horizontal_observable=rng.random(n) > 0.3,
         line=line,
-        segments=[{"name": "L01", "kind": "line", "start_s": 10.0, "stop_s": 39.0, "n": 30}],
+        line_segments=[{"name": "L01", "kind": "line", "start_s": 10.0, "stop_s": 39.0, "n": 30}],
         line_info={"L01": {"method": "ti_cosphi", "Phi": 0.1, "p": [1e-5, 2e-5]}},
-        truth=None,
+        truth_mgal=None,
         notes=["F01: imu: dropped 1 duplicate samples"],
         timings={"ingest_s": 0.5},
         input_hashes={"a.mcap": "00ff"},
@@ -61,15 +69,37 @@ def _result(n=50):
 def test_round_trip_is_exact(tmp_path):
     r = _result()
     save_result(tmp_path, "F01", "k1", r)
-    back = load_result(tmp_path, "F01", "k1", FlightResult)
-    for f in ("time", "lat", "lon", "height", "speed", "kalman", "forward", "sigma", "final"):
+    back = load_result(tmp_path, "F01", "k1", FlightEstimate)
+    for f in (
+        "time",
+        "lat",
+        "lon",
+        "height",
+        "vel_n",
+        "speed",
+        "heading",
+        "smoothed",
+        "forward",
+        "sigma",
+        "disturbance",
+        "segment",
+        "attitude",
+        "attitude_sigma",
+        "dg_north",
+        "dg_east",
+        "sigma_north",
+        "sigma_east",
+        "horizontal_observable",
+    ):
         np.testing.assert_array_equal(getattr(back, f), getattr(r, f))
+    assert back.horizontal_observable.dtype == bool
     assert back.line.dtype == object and list(back.line) == list(r.line)
-    assert back.truth is None
+    assert back.truth_mgal is None and back.unfiltered is None and back.forward_sigma is None
     for f in (
         "name",
         "t0_unix_ns",
-        "segments",
+        "method",
+        "line_segments",
         "line_info",
         "notes",
         "timings",
@@ -86,15 +116,15 @@ def test_round_trip_is_exact(tmp_path):
 def test_wrong_key_altered_or_missing_arrays_are_ignored(tmp_path):
     save_result(tmp_path, "F01", "k1", _result())
     jpath, npath = cache_paths(tmp_path, "F01")
-    assert load_result(tmp_path, "F01", "other-key", FlightResult) is None
+    assert load_result(tmp_path, "F01", "other-key", FlightEstimate) is None
     data = bytearray(npath.read_bytes())
     data[len(data) // 2] ^= 0xFF
     npath.write_bytes(bytes(data))
-    assert load_result(tmp_path, "F01", "k1", FlightResult) is None
+    assert load_result(tmp_path, "F01", "k1", FlightEstimate) is None
     npath.unlink()
-    assert load_result(tmp_path, "F01", "k1", FlightResult) is None
+    assert load_result(tmp_path, "F01", "k1", FlightEstimate) is None
     jpath.write_text("{not json")
-    assert load_result(tmp_path, "F01", "k1", FlightResult) is None
+    assert load_result(tmp_path, "F01", "k1", FlightEstimate) is None
 
 
 def test_planted_pickle_in_npz_with_a_matching_json_does_not_run(tmp_path):
@@ -113,7 +143,7 @@ def test_planted_pickle_in_npz_with_a_matching_json_does_not_run(tmp_path):
     entry = json.loads(jpath.read_text())
     entry["npz_sha256"] = hashlib.sha256(npath.read_bytes()).hexdigest()
     jpath.write_text(json.dumps(entry))
-    assert load_result(tmp_path, "F01", "k1", FlightResult) is None
+    assert load_result(tmp_path, "F01", "k1", FlightEstimate) is None
     assert not marker.exists()
 
 

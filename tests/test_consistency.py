@@ -23,12 +23,12 @@ from gravsurvey.config import load_config
 from gravsurvey.consistency import (
     CheckOptions,
     check_result,
-    concatenate_solutions,
     find_clock_restarts,
     plan_segments,
     specific_force_fixed_frame,
 )
 from gravsurvey.errors import ConfigError, DataError, DataWarning
+from gravsurvey.estimate import FlightEstimate, concatenate_estimates
 from gravsurvey.io.ingest import load_flight
 from gravsurvey.io.record import slice_record
 from gravsurvey.pipeline import process_flight
@@ -45,7 +45,7 @@ def _flight(tmp_path, prep=None, extra="", initial=None):
 
 
 def _rms_on_lines(r):
-    err = r.final / MGAL - r.truth
+    err = r.disturbance / MGAL - r.truth_mgal
     on = r.line != ""
     assert np.all(np.isfinite(err[on]))
     return float(np.sqrt(np.mean(err[on] ** 2)))
@@ -78,16 +78,16 @@ def test_30_minute_gap_splits_into_two_accurate_segments(tmp_path, intact):
     assert any("estimated 2 of 2 segments" in n for n in r.notes)
     assert any("split at imu gap" in n and "imu.csv" in n and "1800" in n for n in r.notes)
     # a NaN epoch separates the segments; both sides have lines with finite, accurate output
-    assert np.isnan(r.kalman).sum() == 1
+    assert np.isnan(r.smoothed).sum() == 1
     assert len(r.line_info) == 2
     early, late = r.time < 1000, r.time > 1000
     for part in (early, late):
         on = part & (r.line != "")
         assert on.sum() > 200
-        err = r.final[on] / MGAL - r.truth[on]
+        err = r.disturbance[on] / MGAL - r.truth_mgal[on]
         assert np.all(np.isfinite(err))
         assert np.sqrt(np.mean(err**2)) < 6.0  # 5.2 and 4.0 mGal measured (intact: 3.4)
-    assert np.nanmax(np.abs(r.kalman)) / MGAL < 200
+    assert np.nanmax(np.abs(r.smoothed)) / MGAL < 200
 
 
 def test_imu_gap_of_a_minute_splits_the_flight(tmp_path):
@@ -109,7 +109,7 @@ def test_segment_that_cannot_be_reinitialised_is_data_loss(tmp_path):
     r = process_flight(cfg, fl)
     assert any("estimated 1 of 2 segments" in n for n in r.notes)
     assert len(r.data_loss) == 1 and "not estimated: initial.lat_deg: missing; the record has no GNSS" in r.data_loss[0]
-    assert np.isfinite(r.kalman).all()
+    assert np.isfinite(r.smoothed).all()
 
 
 def test_short_imu_gap_is_bridged(tmp_path, intact):
@@ -131,7 +131,7 @@ def test_aiding_gap_is_bridged_and_sigma_grows_across_it(tmp_path, intact):
     gap = (r.time > 400) & (r.time < 460)
     far = (r.time > 250) & (r.time < 330)
     assert r.sigma[gap].max() > 1.03 * np.median(r.sigma[far])  # +7 % measured
-    err = r.kalman / MGAL - r.truth
+    err = r.smoothed / MGAL - r.truth_mgal
     # the error inside the gap stays within the (grown) 3 sigma
     assert np.all(np.abs(err[gap]) < 3 * r.sigma[gap] / MGAL + 1.0)
 
@@ -314,22 +314,25 @@ def test_a_few_gnss_outliers_are_not_a_navigation_off_track(tmp_path):
 
 
 def test_check_result_nonfinite(intact):
+    import dataclasses
+
     r = intact
-
-    class Sol:
-        time, lat, lon, height = r.time, r.lat, r.lon, r.height
-        g_smooth, sigma_smooth = r.kalman.copy(), r.sigma
-        gnss_aided = False
-
+    est = dataclasses.replace(r, smoothed=r.smoothed.copy(), estimator={"gnss_aided": False})
     on = r.line != ""
-    final = r.final.copy()
+    final = r.disturbance.copy()
     final[np.flatnonzero(on)[5]] = np.inf
     with pytest.raises(DataError, match="final disturbance has 1 non-finite"):
-        check_result("F01", final, on, Sol, None, CheckOptions(), 1)
-    Sol.g_smooth[3] = np.nan
+        check_result("F01", final, on, est, None, CheckOptions(), 1)
+    est.smoothed[3] = np.nan
     with pytest.raises(DataError, match="kalman estimate has 1 non-finite"):
-        check_result("F01", r.final, on, Sol, None, CheckOptions(), 1)
-    check_result("F01", final, on, Sol, None, CheckOptions(allow_nonfinite=True), 1)
+        check_result("F01", r.disturbance, on, est, None, CheckOptions(), 1)
+    check_result("F01", final, on, est, None, CheckOptions(allow_nonfinite=True), 1)
+    # a classic estimate names its series for what it is (no Kalman filter involved)
+    cl = dataclasses.replace(r, method="classic", smoothed=None, forward=None, unfiltered=r.smoothed.copy(),
+                             sigma=np.full(len(r.time), np.nan), estimator={"gnss_aided": False})
+    cl.unfiltered[4] = np.nan
+    with pytest.raises(DataError, match="unfiltered reduction has 1 non-finite"):
+        check_result("F01", r.disturbance, on, cl, None, CheckOptions(), 1)
 
 
 # ----------------------------------------------------------------------------- pieces
@@ -384,22 +387,27 @@ def test_short_piece_between_gaps_is_data_loss(tmp_path):
 
 
 def test_concatenate_puts_a_nan_epoch_between_segments(intact):
-    class S:
-        pass
-
     parts = []
     for a, b in ((0, 100), (150, 300)):
-        s = S()
-        s.time = intact.time[a:b]
-        for k in ("g_smooth", "sigma_smooth", "g_forward", "sigma_forward"):
-            setattr(s, k, intact.kalman[a:b])
-        s.lat, s.lon, s.height, s.speed = (intact.lat[a:b], intact.lon[a:b], intact.height[a:b],
-                                           intact.speed[a:b])
-        s.vel_n = np.zeros((b - a, 3))
-        parts.append(s)
-    c = concatenate_solutions(parts)
-    assert len(c.time) == 251 and np.isnan(c.g_smooth[100]) and c.segment[100] == -1
+        n = b - a
+        parts.append(FlightEstimate(
+            name="F01", method="inm", t0_unix_ns=intact.t0_unix_ns, time=intact.time[a:b], lat=intact.lat[a:b],
+            lon=intact.lon[a:b], height=intact.height[a:b], vel_n=np.zeros((n, 3)), speed=intact.speed[a:b],
+            heading=np.zeros(n), disturbance=intact.smoothed[a:b], sigma=intact.sigma[a:b],
+            smoothed=intact.smoothed[a:b], resolution_m=1000.0 * (1 + a),
+            estimator={"gnss_aided": a == 0, "identification": {"k": a}}))
+    c = concatenate_estimates(parts)
+    assert len(c.time) == 251 and np.isnan(c.smoothed[100]) and c.segment[100] == -1
+    assert np.isnan(c.disturbance[100]) and np.isnan(c.vel_n[100]).all()
+    np.testing.assert_array_equal(c.segment[:100], 0)
+    np.testing.assert_array_equal(c.segment[101:], 1)
+    np.testing.assert_array_equal(c.smoothed[101:], intact.smoothed[150:300])
     assert np.all(np.diff(c.time) > 0)
+    # no piece had a forward filter or horizontal components: still absent
+    assert c.forward is None and c.dg_north is None and c.horizontal_observable is None
+    assert c.resolution_m == 151000.0  # the coarsest piece's
+    assert c.estimator["gnss_aided"] is True
+    assert c.estimator["identification"] == {"segments": [{"k": 0}, {"k": 150}]}
 
 
 def test_checks_config_keys(tmp_path):

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gravsurvey.errors import GravsurveyError
+from gravsurvey.errors import DataError, GravsurveyError
 from gravsurvey.io import writers as w
 from gravsurvey.survey import find_crossovers
 
@@ -67,10 +67,16 @@ def test_profiles_csv_columns_as_documented_and_values(tmp_path):
     with open(p, newline="") as fh:
         rows = list(csv.reader(fh))
     documented = documented_columns("profiles.csv")
-    # the attitude columns are documented, in this order, and written only for strapdown surveys
+    # the optional columns are documented, in this order, and written only when estimated:
+    # attitude for strapdown surveys, horizontal components when the model has them, the
+    # estimate column named for what it holds (kalman_mgal: 3D-INM, unfiltered_mgal: classic)
     assert [c for c in documented if c in w.ATTITUDE_COLUMNS] == list(w.ATTITUDE_COLUMNS)
-    assert rows[0] == [c for c in documented if c not in w.ATTITUDE_COLUMNS]
-    assert rows[0] == list(w.PROFILE_COLUMNS + w.LEVEL_COLUMNS + w.TRUTH_COLUMNS)
+    assert [c for c in documented if c in w.HORIZONTAL_COLUMNS] == list(w.HORIZONTAL_COLUMNS)
+    assert [c for c in documented if c in w.ESTIMATE_COLUMNS] == list(w.ESTIMATE_COLUMNS)
+    optional = w.ATTITUDE_COLUMNS + w.HORIZONTAL_COLUMNS + ("unfiltered_mgal",)
+    assert rows[0] == [c for c in documented if c not in optional]
+    assert rows[0] == list(w.PROFILE_COLUMNS[:10] + ("kalman_mgal",) + w.PROFILE_COLUMNS[10:] + w.LEVEL_COLUMNS
+                           + w.TRUTH_COLUMNS)
     assert len(rows) == 1 + 9
     r = dict(zip(rows[0], rows[3]))
     # 10:00:02.123456789 -> nearest ms .123; independent check with datetime
@@ -88,7 +94,8 @@ def test_profiles_csv_columns_as_documented_and_values(tmp_path):
     # without truth: the two optional columns are absent
     t2 = make_table(truth=False)
     w.write_profiles_csv(p, t2)
-    assert p.read_text().splitlines()[0].split(",") == list(w.PROFILE_COLUMNS + w.LEVEL_COLUMNS)
+    assert p.read_text().splitlines()[0].split(",") == list(w.PROFILE_COLUMNS[:10] + ("kalman_mgal",)
+                                                             + w.PROFILE_COLUMNS[10:] + w.LEVEL_COLUMNS)
     with pytest.raises(ValueError, match="truth_mgal and error_mgal go together"):
         w.write_profiles_csv(p, dict(t2, truth_mgal=t["truth_mgal"]))
     with pytest.raises(ValueError, match="lacks columns"):
@@ -131,7 +138,8 @@ def test_xyz_round_trip_and_format(tmp_path):
     assert "/ Line 1001 = flight F01 line L01" in lines and "/ Tie 2001 = flight F02 line T01" in lines
     # every non-comment, non-header line has one field per column; the NaN is a '*'
     x = w.read_xyz(p)
-    assert x.columns == list(w.XYZ_COLUMNS + w.LEVEL_COLUMNS + w.TRUTH_COLUMNS)
+    assert x.columns == list(w.XYZ_COLUMNS[:7] + ("kalman_mgal",) + w.XYZ_COLUMNS[7:] + w.LEVEL_COLUMNS
+                             + w.TRUTH_COLUMNS)
     data_lines = [ln for ln in lines if not ln.startswith("/") and not re.match(r"(Line|Tie) \d+$", ln)]
     assert all(len(ln.split()) == len(x.columns) for ln in data_lines)
     assert sum(ln.split().count("*") for ln in data_lines) == 2  # lat and kalman NaN
@@ -171,10 +179,10 @@ def test_xyz_line_numbers():
 def test_xyz_reader_rejects_damaged_files(tmp_path):
     p = tmp_path / "bad.xyz"
     p.write_text("/ a b\n1 2\n")
-    with pytest.raises(w.DataError, match=r"bad\.xyz:2: data before the first Line header"):
+    with pytest.raises(DataError, match=r"bad\.xyz:2: data before the first Line header"):
         w.read_xyz(p)
     p.write_text("/ a b\nLine 1\n1 2 3\n")
-    with pytest.raises(w.DataError, match=r"bad\.xyz:3: 3 fields, expected 2"):
+    with pytest.raises(DataError, match=r"bad\.xyz:3: 3 fields, expected 2"):
         w.read_xyz(p)
 
 

@@ -349,7 +349,24 @@ def _unit_factors(units):
     return {k: UNITS[k][units.get(k, next(iter(UNITS[k])))] for k in UNITS}
 
 
-def _apply_units(role, values, units):
+def apply_units(role, values, units):
+    """Channel values of ``role`` converted to SI by the declared ``units`` (``inputs.units``).
+
+    Parameters
+    ----------
+    role : str
+        ``"imu"`` (``specific_force``, ``angular_rate``), ``"gradient"`` (``gradient``) or a
+        height channel (``height``).
+    values : dict of ndarray
+        The channel's decoded arrays.
+    units : dict or None
+        Declared units (e.g. ``{"gyro": "deg/s"}``); missing entries are SI.
+
+    Returns
+    -------
+    dict of ndarray
+        A copy of ``values`` with the scaled arrays replaced.
+    """
     f = _unit_factors(units)
     out = dict(values)
     if role == "imu":
@@ -540,7 +557,7 @@ def read_raw_channels(options: IngestOptions, base_dir, notes: list, data_loss: 
                 probs = "; ".join(p for b in blocks for p in b.problems[:1])
                 notes.append(f"{role}: {bad} messages of {src} could not be decoded and were "
                              f"dropped" + (f" ({probs})" if probs else ""))
-            vals = _apply_units(role, vals, options.mcap_units)
+            vals = apply_units(role, vals, options.mcap_units)
             raw[role] = RawChannel(role, t, vals, src, content.schema_name(ids[0]), enc, tsrc)
         if options.nav:
             raw["gnss"] = read_gnss_file(options, base_dir, notes, replaces=raw.get("gnss"))

@@ -16,7 +16,7 @@ import numpy as np
 from gravsurvey.errors import GravsurveyError
 from gravsurvey.io import checks as ck
 from gravsurvey.io.csv import read_csv_channel, sniff_csv_role
-from gravsurvey.io.ingest import IngestOptions, _apply_units
+from gravsurvey.io.ingest import IngestOptions, apply_units
 from gravsurvey.io.mcap import read_mcap
 
 
@@ -187,7 +187,7 @@ def _inspect_mcap(path, o):
             vals = dict(blk.values)
             if role == "altimeter":
                 vals = {"height": vals["height"]}
-            vals = _apply_units(role, vals, o.mcap_units)
+            vals = apply_units(role, vals, o.mcap_units)
             entry.update(_channel_report(role, blk.time_ns, vals, o.mcap_units))
             entry["time_source"] = ("header.stamp" if ch.message_encoding == "cdr"
                                     else "JSON field")

@@ -1,0 +1,201 @@
+"""The per-flight result type (gravsurvey/estimate.py, issue 17 item 1) and what the deliverables
+write from it: horizontal components when estimated, columns named for what they hold (issue 14
+item 10)."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import boule
+import numpy as np
+import pytest
+
+from gravsurvey.classic import ClassicResult
+from gravsurvey.config import SurveyConfig
+from gravsurvey.estimate import FlightEstimate, from_classic, from_inm_solution
+from gravsurvey.geodesy import MGAL, WGS84
+from gravsurvey.grid import GridOptions
+from gravsurvey.io.writers import read_xyz
+from gravsurvey.levelling import LevellingOptions
+from gravsurvey.pipeline import write_survey_outputs
+
+R_EARTH = 6_371_000.0
+N = 400
+
+
+def _track():
+    t = np.arange(N, dtype=float)
+    lat = np.radians(47.0) + 80.0 * t / R_EARTH  # due north at 80 m/s
+    lon = np.full(N, np.radians(11.0))
+    h = np.full(N, 900.0) + 0.01 * t
+    vel = np.column_stack([np.zeros(N), np.full(N, 80.0), np.zeros(N)])
+    return t, lat, lon, h, vel
+
+
+def inm_like(horizontal: bool):
+    """An object with the InmSolution fields (and the horizontal ones of the h-vector interface)."""
+    t, lat, lon, h, vel = _track()
+    g = 20 * MGAL * np.sin(t / 60.0)
+    s = SimpleNamespace(time=t, lat=lat, lon=lon, height=h, vel_n=vel, speed=np.full(N, 80.0), heading=np.zeros(N),
+                        g_smooth=g, sigma_smooth=np.full(N, 0.8 * MGAL), g_forward=g + 1 * MGAL,
+                        sigma_forward=np.full(N, 1.5 * MGAL), resolution_m=2500.0, gnss_aided=True,
+                        identification={"q": 1.0}, attitude=None, attitude_sigma=None, alignment=None)
+    if horizontal:
+        s.dg_horizontal = np.column_stack([30 * MGAL * np.cos(t / 50.0), -12 * MGAL + 0 * t])
+        s.dg_horizontal_sigma = np.column_stack([np.full(N, 4 * MGAL), np.full(N, 5 * MGAL)])
+        obs = np.ones(N, bool)
+        obs[:150] = False  # line L01 (epochs 0-199): 50 of 200 observable; L02: 140 of 200
+        obs[200:260] = False
+        s.horizontal_observable = obs
+    return s
+
+
+def with_lines(est: FlightEstimate) -> FlightEstimate:
+    """Two lines (0-199, 200-399), product = the estimate on lines (no post-processing)."""
+    est.line = np.array(["L01"] * 200 + ["L02"] * 200, dtype=object)
+    est.line_info = {ln: {"kind": "line", "method": "none", "samples": 200} for ln in ("L01", "L02")}
+    return est
+
+
+def survey_cfg(tmp_path: Path) -> SurveyConfig:
+    p = tmp_path / "survey.yaml"
+    p.write_text("survey: {name: t}\n")
+    return SurveyConfig(path=p, base_dir=tmp_path, raw={"survey": {"name": "t"}}, name="t", ellipsoid=WGS84,
+                        flights=[], model=None, lines=None, postprocess=None, plots=False,
+                        levelling=LevellingOptions(enabled=False), grid=GridOptions(enabled=False))
+
+
+def read_csv(path):
+    rows = list(csv.reader(line for line in open(path, newline="") if not line.startswith("#")))
+    return {h: [r[i] for r in rows[1:]] for i, h in enumerate(rows[0])}
+
+
+def test_from_inm_solution_maps_every_field():
+    s = inm_like(horizontal=True)
+    e = from_inm_solution(s, name="F01", t0_unix_ns=1_700_000_000 * 10**9)
+    assert e.method == "inm" and e.name == "F01"
+    np.testing.assert_array_equal(e.smoothed, s.g_smooth)
+    np.testing.assert_array_equal(e.disturbance, s.g_smooth)
+    np.testing.assert_array_equal(e.forward_sigma, s.sigma_forward)
+    np.testing.assert_array_equal(e.dg_north, s.dg_horizontal[:, 0])
+    np.testing.assert_array_equal(e.dg_east, s.dg_horizontal[:, 1])
+    np.testing.assert_array_equal(e.sigma_east, s.dg_horizontal_sigma[:, 1])
+    np.testing.assert_array_equal(e.horizontal_observable, s.horizontal_observable)
+    assert e.unfiltered is None and e.resolution_m == 2500.0
+    assert e.attitude.shape == (N, 3) and not e.has_attitude
+    assert e.estimator["gnss_aided"] is True and e.estimator["kalman_resolution_m"] == 2500.0
+    # without the horizontal states: every horizontal field None
+    e2 = from_inm_solution(inm_like(horizontal=False))
+    assert e2.dg_north is None and e2.horizontal_observable is None and not e2.has_horizontal
+
+
+def test_horizontal_components_in_every_deliverable(tmp_path):
+    s = inm_like(horizontal=True)
+    est = with_lines(from_inm_solution(s, name="F01", t0_unix_ns=1_700_000_000 * 10**9))
+    cfg = survey_cfg(tmp_path)
+    out = tmp_path / "out"
+    summary = write_survey_outputs(cfg, out, [est])
+    p = read_csv(out / "profiles.csv")
+    f = lambda c: np.array([float(v) for v in p[c]])  # noqa: E731
+    obs = s.horizontal_observable
+    # mGal, blank where not observable
+    np.testing.assert_allclose(f("dg_north_mgal")[obs], s.dg_horizontal[obs, 0] / MGAL, atol=6e-5)
+    np.testing.assert_allclose(f("dg_east_sigma_mgal")[obs], 5.0, atol=6e-5)
+    for c in ("dg_north_mgal", "dg_east_mgal", "xi_arcsec", "eta_arcsec", "xi_sigma_arcsec", "eta_sigma_arcsec"):
+        assert np.isnan(f(c)[~obs]).all(), c
+    # xi = -dg_north / gamma, eta = -dg_east / gamma, gamma from boule (independent of our geodesy)
+    gamma = boule.WGS84.normal_gravity((np.zeros(N), np.degrees(s.lat), s.height), si_units=True)
+    arcsec = 180 * 3600 / np.pi
+    np.testing.assert_allclose(f("xi_arcsec")[obs], -s.dg_horizontal[obs, 0] / gamma[obs] * arcsec, atol=6e-5)
+    np.testing.assert_allclose(f("eta_arcsec")[obs], 12 * MGAL / gamma[obs] * arcsec, atol=6e-5)
+    np.testing.assert_allclose(f("eta_sigma_arcsec")[obs], 5 * MGAL / gamma[obs] * arcsec, atol=6e-5)
+    assert abs(f("eta_arcsec")[obs][0] - 2.52) < 0.01  # 12 mGal / 9.81 m/s^2 = 2.52 arcsec
+    # summary per line: L01 has 50 of 200 epochs observable, L02 140 of 200
+    lines = summary["flights"]["F01"]["lines"]
+    assert lines["L01"]["horizontal_meaningful"] is False and lines["L01"]["horizontal_observable_fraction"] == 0.25
+    assert lines["L02"]["horizontal_meaningful"] is True and lines["L02"]["horizontal_observable_fraction"] == 0.7
+    assert lines["L02"]["mean_dg_east_mgal"] == pytest.approx(-12.0, abs=1e-9)
+    # XYZ and GeoJSON carry them too
+    x = read_xyz(out / "profiles.xyz")
+    for c in ("dg_north_mgal", "xi_arcsec", "eta_sigma_arcsec"):
+        assert c in x.columns
+    l2 = x.lines["Line 1002"]
+    np.testing.assert_allclose(l2["dg_east_mgal"][60:], -12.0, atol=6e-5)
+    assert np.isnan(l2["dg_east_mgal"][:60]).all()
+    gj = json.loads((out / "lines.geojson").read_text())
+    props = {ft["properties"]["line"]: ft["properties"] for ft in gj["features"]}
+    assert props["L02"]["horizontal_meaningful"] is True and props["L01"]["horizontal_meaningful"] is False
+    assert props["L02"]["mean_eta_arcsec"] == pytest.approx(float(np.mean(f("eta_arcsec")[200:][obs[200:]])), abs=1e-4)
+
+
+def test_profile_plot_has_a_horizontal_panel(tmp_path):
+    from gravsurvey import report
+
+    s = inm_like(horizontal=True)
+    x = np.arange(N) * 0.08
+    h = {"dg_north_mgal": s.dg_horizontal[:, 0] / MGAL, "dg_east_mgal": s.dg_horizontal[:, 1] / MGAL,
+         "dg_north_sigma_mgal": np.full(N, 4.0), "dg_east_sigma_mgal": np.full(N, 5.0)}
+    fig = report.figure_line_profile(x, s.g_smooth / MGAL, s.g_smooth / MGAL, np.full(N, 0.8), horizontal=h)
+    assert len(fig.axes) == 2
+    lines = {ln.get_label(): ln for ln in fig.axes[1].get_lines()}
+    np.testing.assert_array_equal(lines["dg_east"].get_ydata(), h["dg_east_mgal"])
+    assert len(report.figure_line_profile(x, s.g_smooth / MGAL, s.g_smooth / MGAL, np.full(N, 0.8)).axes) == 1
+
+
+def test_no_horizontal_columns_when_not_estimated(tmp_path):
+    est = with_lines(from_inm_solution(inm_like(horizontal=False), name="F01"))
+    summary = write_survey_outputs(survey_cfg(tmp_path), tmp_path / "out", [est])
+    head = read_csv(tmp_path / "out" / "profiles.csv")
+    assert not [c for c in head if c.startswith(("dg_", "xi_", "eta_"))]
+    assert "kalman_mgal" in head and "unfiltered_mgal" not in head
+    assert "horizontal_meaningful" not in summary["flights"]["F01"]["lines"]["L01"]
+
+
+def test_classic_columns_are_named_for_what_they_hold(tmp_path):
+    """Issue 14.10: the classic chain has no Kalman filter; its unfiltered reduction (values of
+    +-1e6 mGal) is written as unfiltered_mgal, and no kalman_mgal column exists."""
+    t, lat, lon, h, vel = _track()
+    raw = 2.8e6 * MGAL * np.sin(t * 1.3)  # the size of the classic unfiltered reduction
+    low = 10 * MGAL * np.sin(t / 60.0)
+    res = ClassicResult(time=t, disturbance=low, lat=lat, lon=lon, height=h, speed=np.full(N, 80.0), vel_n=vel,
+                        raw=raw, info={"method": "classic", "filter": "gaussian", "resolution_m": 4000.0})
+    est = from_classic(res, name="F01", t0_unix_ns=1_700_000_000 * 10**9)
+    assert est.method == "classic" and est.smoothed is None and est.forward is None
+    assert np.isnan(est.sigma).all() and est.product_info["filter"] == "gaussian"
+    np.testing.assert_array_equal(est.unprocessed, raw)
+    np.testing.assert_allclose(est.heading, 0.0, atol=1e-12)  # due north
+    summary = write_survey_outputs(survey_cfg(tmp_path), tmp_path / "out", [with_lines(est)])
+    p = read_csv(tmp_path / "out" / "profiles.csv")
+    assert "kalman_mgal" not in p and "unfiltered_mgal" in p
+    np.testing.assert_allclose([float(v) for v in p["unfiltered_mgal"]], raw / MGAL, atol=6e-5)
+    np.testing.assert_allclose([float(v) for v in p["disturbance_mgal"]], low / MGAL, atol=6e-5)
+    assert "kalman_mgal" not in read_xyz(tmp_path / "out" / "profiles.xyz").columns
+    assert summary["flights"]["F01"]["estimator"] == {"gnss_aided": False, "resolution_m": 4000.0}
+
+
+def classic_estimate(raw_scale=1.0):
+    t, lat, lon, h, vel = _track()
+    res = ClassicResult(time=t, disturbance=10 * MGAL * np.sin(t / 60.0), lat=lat, lon=lon, height=h,
+                        speed=np.full(N, 80.0), vel_n=vel, raw=raw_scale * 2.8e6 * MGAL * np.sin(t * 1.3),
+                        info={"method": "classic", "resolution_m": 4000.0})
+    return with_lines(from_classic(res, name="F01", t0_unix_ns=1_700_000_000 * 10**9))
+
+
+def test_regression_check_compares_the_renamed_columns(tmp_path):
+    """`gravsurvey check` compares unfiltered_mgal like kalman_mgal, and a column of the reference
+    missing from the result (e.g. a reference from another method) is a difference."""
+    from gravsurvey.regression import compare_runs
+
+    cfg = survey_cfg(tmp_path)
+    write_survey_outputs(cfg, tmp_path / "a", [classic_estimate()])
+    write_survey_outputs(cfg, tmp_path / "b", [classic_estimate(raw_scale=1.001)])
+    inm = with_lines(from_inm_solution(inm_like(horizontal=False), name="F01", t0_unix_ns=1_700_000_000 * 10**9))
+    write_survey_outputs(cfg, tmp_path / "c", [inm])
+    assert compare_runs(tmp_path / "a", tmp_path / "a") == []
+    d = compare_runs(tmp_path / "b", tmp_path / "a")
+    assert len(d) == 1 and d[0].startswith("profiles.csv unfiltered_mgal: ")
+    d = compare_runs(tmp_path / "c", tmp_path / "a")
+    assert "profiles.csv: column unfiltered_mgal of the reference missing from the result" in d
