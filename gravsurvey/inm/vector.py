@@ -1,0 +1,82 @@
+"""Vector gravimetry (seed 003): the horizontal gravity disturbance from the 18-state filter.
+
+The states ``GN, GE`` (:mod:`gravsurvey.inm.errormodel`) are the horizontal components of the
+gravity disturbance ``dg = g_true - gamma`` on local ENU axes, m/s^2; this module turns the
+smoothed states into the products and says where they are determined by the data.
+
+Sign convention: ``dg_north > 0`` pulls north (excess mass to the north).  The deflections of
+the vertical (plumb line against the ellipsoid normal) are ``xi = -dg_north / gamma`` (meridian)
+and ``eta = -dg_east / gamma`` (prime vertical), radians; ``gamma`` is normal gravity.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..geodesy import WGS84, Ellipsoid, normal_gravity
+from .errormodel import GH
+
+__all__ = ["OBSERVABLE_SIGMA_RATIO", "horizontal_outputs", "deflections_rad", "ARCSEC"]
+
+#: The horizontal components count as determined by the data where both posterior sigmas are
+#: below this fraction of the prior's (the data removed at least 75 % of the prior variance).
+#: On a straight constant-heading line the posterior stays near the prior (attitude and
+#: accelerometer errors absorb the field); heading changes bring it down (docs/method.md).
+OBSERVABLE_SIGMA_RATIO = 0.5
+
+#: One arcsecond, rad.
+ARCSEC = math.pi / (180.0 * 3600.0)
+
+
+def horizontal_outputs(x_s, p_s, sigma_prior_mps2: float):
+    """Horizontal disturbance, its 1-sigma and the observability flag from the smoothed states.
+
+    Parameters
+    ----------
+    x_s : ndarray (N, 18)
+        Smoothed 18-state estimate (seed order, errormodel).
+    p_s : ndarray (N, 18, 18)
+        Its covariance.
+    sigma_prior_mps2 : float
+        Stationary prior sigma of each component, m/s^2
+        (:func:`gravsurvey.inm.identify.horizontal_prior`).
+
+    Returns
+    -------
+    dg_horizontal : ndarray (N, 2)
+        ``[north, east]``, m/s^2.
+    dg_horizontal_sigma : ndarray (N, 2)
+        1-sigma, m/s^2.
+    observable : ndarray of bool (N,)
+        Both sigmas below :data:`OBSERVABLE_SIGMA_RATIO` times the prior sigma.
+    """
+    dg = np.ascontiguousarray(x_s[:, GH])
+    sig = np.sqrt(np.stack([p_s[:, GH[0], GH[0]], p_s[:, GH[1], GH[1]]], axis=1))
+    observable = np.all(sig < OBSERVABLE_SIGMA_RATIO * sigma_prior_mps2, axis=1)
+    return dg, sig, observable
+
+
+def deflections_rad(dg_horizontal, lat, height, ellipsoid: Ellipsoid = WGS84):
+    """Deflections of the vertical from the horizontal disturbance.
+
+    Parameters
+    ----------
+    dg_horizontal : ndarray (N, 2)
+        ``[north, east]`` disturbance, m/s^2 (or their sigmas: the map is linear).
+    lat : ndarray (N,)
+        Geodetic latitude, rad.
+    height : ndarray (N,)
+        Ellipsoidal height, m.
+    ellipsoid : Ellipsoid
+
+    Returns
+    -------
+    xi, eta : ndarray (N,)
+        ``xi = -dg_north / gamma`` (north-south), ``eta = -dg_east / gamma`` (east-west), rad;
+        divide by :data:`ARCSEC` for arcseconds.
+    """
+    dg = np.asarray(dg_horizontal, float)
+    gamma = normal_gravity(np.asarray(lat, float), np.asarray(height, float), ellipsoid)
+    return -dg[:, 0] / gamma, -dg[:, 1] / gamma
