@@ -31,7 +31,7 @@ G_NEWTON = 6.67430e-11
 
 def test_point_mass_horizontal_truth_analytic_and_finite_differences():
     """dg_north/dg_east of a point mass: the analytic attraction, the potential's gradient, symmetry."""
-    lat0, lon0, depth, mass, h = 45.0, 135.0, 2000.0, 1.0e13, 1000.0
+    lat0, depth, mass = 45.0, 2000.0, 1.0e13
     line = simulate_flight(quick_sim(duration_s=400.0))
     lon_src = math.degrees(line.truth["lon"][2000])
     fld = {"type": "model", "point_masses": [{"lat_deg": lat0, "lon_deg": lon_src, "depth_m": depth, "mass_kg": mass}]}
