@@ -28,6 +28,9 @@ gravitation has the extra ``-g Up``, so the computed inertial velocity gains
 With GNSS position aiding the state is extended to 14 (attitude error ``theta`` and gyro
 bias ``b`` on the triad, :func:`continuous_model_n`), because GNSS sees the true position
 error ``C (dq + q x theta)`` while the seed's ``dq`` carries the attitude error as position.
+Vector gravimetry (``model.horizontal``) adds four more, 18: the horizontal disturbance
+``GN, GE`` (north, east, Markov in distance) and the biases ``BA1, BA2`` of accelerometers 1
+and 2 (``d(dp)/dt += -C^T (g_n N + g_e E) + (ba1, ba2, 0)``; docs/method.md section 8).
 
 Exact discretisation: with ``y = (C dq, C dp, g, f3)`` (``C`` the computed
 triad->inertial matrix) the ``w x`` terms cancel, and the model becomes

@@ -18,8 +18,9 @@ Speed notes (measured on the 8-state model, 14,401 epochs): no fastmath anywhere
 bit-for-bit reproducible across machines); for n = 8 and a diagonal R each epoch is one call of
 a generated step (:mod:`gravsurvey.inm._unrolled`) that keeps every covariance row in an
 8-wide vector (:mod:`gravsurvey.inm.simd`): 0.6 us per epoch for filter + smoother against
-1.4 us for the generic loops below, and the same numbers to the last bit (tested).  Not for
-the 14-state GNSS-aided model: its generated steps took ~27 s to compile (once per machine) to
+1.4 us for the generic loops below, and the same numbers to the last bit (tested).  Every
+other size (14 GNSS-aided, 18 with the horizontal disturbance) takes the generic loops.  Not
+for the 14-state GNSS-aided model: its generated steps took ~27 s to compile (once per machine) to
 save ~0.01 s per flight-hour (:mod:`gravsurvey.inm.codegen`).  The generic
 loops (any n, any R): scalar measurement updates in O(n^2); small products in
 scalar-accumulator column blocks (:func:`_matmul`).  Both: outputs allocated by numpy, not
