@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -192,6 +191,11 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     (``C_true = C Exp(theta)``) and the flight is mechanized and filtered again about it.
     The prior is kept (the alignment's): its mean becomes the old attitude seen from the new
     one (:func:`gravsurvey.inm.errormodel.initial_mean`), an iterated (Gauss-Newton) smoother.
+    With ``params.horizontal`` (and GNSS) one more pass follows about the last linearisation
+    point with the 18-state model (horizontal disturbance and accelerometer biases; its prior
+    from the vertical estimate, :func:`gravsurvey.inm.identify.horizontal_prior`), and the
+    solution is that pass's (``dg_horizontal``, ``dg_horizontal_sigma``,
+    ``horizontal_observable``).
 
     Parameters
     ----------
@@ -339,8 +343,7 @@ def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, l
         # prior is the configured or default (broad) one
         params, ident = keep_default_prior(params, ident, speed0, MIN_REFINE_S)
     elif ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
-        # the vertical model is identified with the vertical filter alone (model.horizontal or not)
-        wide = dataclasses.replace(wide_prior_params(params, ident, speed0), horizontal=False)
+        wide = wide_prior_params(params, ident, speed0)
         idx, _, _, _, first = _one_pass(record, wide, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t)
         weight = straight_weight(nav, record.imu.specific_force_t, nav.time[idx])
         params, ident = refine_prior(params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))),
