@@ -65,7 +65,8 @@ def deflections_rad(dg_horizontal, lat, height, ellipsoid: Ellipsoid = WGS84):
     Parameters
     ----------
     dg_horizontal : ndarray (N, 2)
-        ``[north, east]`` disturbance, m/s^2 (or their sigmas: the map is linear).
+        ``[north, east]`` disturbance, m/s^2 (or their sigmas: the map is linear; take the
+        absolute value of the result for sigmas).
     lat : ndarray (N,)
         Geodetic latitude, rad.
     height : ndarray (N,)
