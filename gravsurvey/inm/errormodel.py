@@ -186,7 +186,8 @@ def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
     error, ``b`` the gyro bias on the triad, ``g_n, g_e`` the horizontal disturbance (north,
     east; ``d(dv)/dt`` gains ``-(g_n N + g_e E)``: the mechanization leaves the anomalous
     gravitation out, so the computed velocity lacks it) and ``ba1, ba2`` the constant biases
-    of accelerometers 1 and 2 (``d(dv)/dt`` gains ``ba1 e1 + ba2 e2``).  ``c`` = noise parameter vector from
+    of accelerometers 1 and 2 (``d(dv)/dt`` gains ``ba1 e1 + ba2 e2``).
+    ``c`` = noise parameter vector from
     :func:`_noise_params`; ``e1, e2, e3`` are the columns of ``C`` at the interval midpoint.
 
     With ``theta`` defined by ``C_true = C (I + [theta x])`` the seed's ``dq`` is
