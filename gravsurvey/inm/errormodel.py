@@ -28,6 +28,9 @@ gravitation has the extra ``-g Up``, so the computed inertial velocity gains
 With GNSS position aiding the state is extended to 14 (attitude error ``theta`` and gyro
 bias ``b`` on the triad, :func:`continuous_model_n`), because GNSS sees the true position
 error ``C (dq + q x theta)`` while the seed's ``dq`` carries the attitude error as position.
+Vector gravimetry (``model.horizontal``) adds four more, 18: the horizontal disturbance
+``GN, GE`` (north, east, Markov in distance) and the biases ``BA1, BA2`` of accelerometers 1
+and 2 (``d(dp)/dt += -C^T (g_n N + g_e E) + (ba1, ba2, 0)``; docs/method.md section 8).
 
 Exact discretisation: with ``y = (C dq, C dp, g, f3)`` (``C`` the computed
 triad->inertial matrix) the ``w x`` terms cancel, and the model becomes
@@ -48,7 +51,8 @@ import scipy.linalg
 from numba import njit
 
 from ..geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef, mat_en, mat_ie, normal_gravitation_ecef
-from .kalman import _mm, _transpose, van_loan
+from .identify import horizontal_prior
+from .kalman import matmul_into, transpose_into, van_loan
 
 #: State indices (seed 004 order).
 DQ1, DP1, DQ2, DP2, DQ3, DP3, G, F3 = range(8)
@@ -67,6 +71,17 @@ BG = np.array([BG1, BG2, BG3])
 #: ``model.initial_attitude_sigma_deg`` is not set.
 GIVEN_ATTITUDE_SIGMA_DEG = 0.05
 _PERM_AIDED = np.array([0, 3, 1, 4, 2, 5, 6, 7, 8, 9, 10, 11, 12, 13])
+#: Vector gravimetry (``model.horizontal``, seed 003): the horizontal gravity disturbance
+#: north and east (m/s^2, ``dg = g_true - gamma`` on local ENU) and the constant biases of
+#: accelerometers 1 and 2 (m/s^2, triad axes), after the 14 aided states.
+GN, GE, BA1, BA2 = range(14, 18)
+N_STATE_VECTOR = 18
+GH = np.array([GN, GE])
+BA = np.array([BA1, BA2])
+_PERM_VECTOR = np.array([0, 3, 1, 4, 2, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17])
+#: Prior 1-sigma of each horizontal accelerometer bias, m/s^2 (~50 micro-g, the alignment's
+#: figure: a navigation-grade accelerometer's datasheet bias after calibration).
+ACCEL_BIAS_SIGMA_MPS2 = 5.0e-4
 
 
 @dataclass
@@ -125,8 +140,14 @@ def epoch_geometry(nav, idx, use_ext: bool = True, ellipsoid: Ellipsoid = WGS84)
                          w02, speed, np.ascontiguousarray(nav.mat_it[idx]))
 
 
-def _noise_params(params, alt_dt):
-    """Vector of the scalar coefficients passed to the kernels."""
+def _noise_params(params, alt_dt, hprior=None):
+    """Vector of the scalar coefficients passed to the kernels.
+
+    ``hprior``: (sigma m/s^2, lambda 1/m) of the horizontal disturbance; None: from the
+    vertical prior (:func:`gravsurvey.inm.identify.horizontal_prior`).
+    """
+    sig_h, lam_h = hprior if hprior is not None else horizontal_prior(params.anomaly_sigma_mps2,
+                                                                      params.anomaly_lambda_per_m)
     return np.array([
         params.gyro_drift_radps**2,  # gyro PSD, rad^2/s
         params.accel_noise_mps2**2,  # accel PSD, (m/s^2)^2 s
@@ -138,6 +159,8 @@ def _noise_params(params, alt_dt):
         params.altimeter_sigma_m**2 * alt_dt,  # altimeter error as a white noise in the dynamics
         1.0 if params.radius_source == "altimeter" else 0.0,
         0.0,  # gyro-bias random walk PSD (the bias is a constant)
+        lam_h,  # horizontal disturbance: spatial rate, 1/m (18 states only)
+        sig_h,  # ... and stationary sigma, m/s^2
     ])
 
 
@@ -155,11 +178,16 @@ def _skew(v):
 
 @njit(cache=True)
 def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
-    """``A_y`` and noise density ``Qc_y`` (n, n) in block order, ``n`` = 8 or 14.
+    """``A_y`` and noise density ``Qc_y`` (n, n) in block order, ``n`` = 8, 14 or 18.
 
-    Block order ``(dr, dv, g, f3)`` (n = 8, the seed) or ``(dr, dv, g, f3, theta, b)``
-    (n = 14): ``dr = C dq``, ``dv = C dp``, ``theta`` (C theta on inertial axes) the attitude
-    error and ``b`` the gyro bias on the triad.  ``c`` = noise parameter vector from
+    Block order ``(dr, dv, g, f3)`` (n = 8, the seed), ``(dr, dv, g, f3, theta, b)``
+    (n = 14) or ``(dr, dv, g, f3, theta, b, g_n, g_e, ba1, ba2)`` (n = 18, vector
+    gravimetry): ``dr = C dq``, ``dv = C dp``, ``theta`` (C theta on inertial axes) the attitude
+    error, ``b`` the gyro bias on the triad, ``g_n, g_e`` the horizontal disturbance (north,
+    east; ``d(dv)/dt`` gains ``-(g_n N + g_e E)``: the mechanization leaves the anomalous
+    gravitation out, so the computed velocity lacks it) and ``ba1, ba2`` the constant biases
+    of accelerometers 1 and 2 (``d(dv)/dt`` gains ``ba1 e1 + ba2 e2``).
+    ``c`` = noise parameter vector from
     :func:`_noise_params`; ``e1, e2, e3`` are the columns of ``C`` at the interval midpoint.
 
     With ``theta`` defined by ``C_true = C (I + [theta x])`` the seed's ``dq`` is
@@ -180,7 +208,7 @@ def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
         a[3 + i, i] = -w02
         a[3 + i, 6] = up[i]
         a[3 + i, 7] = e3[i]
-    aided = n == 14
+    aided = n >= 14
     if ext == 0.0:
         for i in range(3):
             for j in range(3):
@@ -239,6 +267,25 @@ def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
     if aided:
         for i in range(3):
             qc[11 + i, 11 + i] = c[9]
+    if n == 18:
+        # local East and North on inertial axes: the inertial z axis is the Earth's axis
+        ex = -up[1]
+        ey = up[0]
+        en = math.sqrt(ex * ex + ey * ey)
+        ex /= en
+        ey /= en
+        east = np.array([ex, ey, 0.0])
+        north = np.array([-up[2] * ey, up[2] * ex, up[0] * ey - up[1] * ex])
+        lam_h = c[10] * speed
+        for i in range(3):
+            a[3 + i, 14] = -north[i]
+            a[3 + i, 15] = -east[i]
+            a[3 + i, 16] = e1[i]
+            a[3 + i, 17] = e2[i]
+        a[14, 14] = -lam_h
+        a[15, 15] = -lam_h
+        qc[14, 14] = 2.0 * lam_h * c[11] * c[11]
+        qc[15, 15] = 2.0 * lam_h * c[11] * c[11]
     return a, qc
 
 
@@ -265,7 +312,8 @@ def _to_seed(m_blk, perm):
 def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     """Transition and process noise of every epoch, seed order (see module docstring).
 
-    The state size is ``perm.shape[0]`` (8, or 14 with attitude and gyro-bias states).
+    The state size is ``perm.shape[0]`` (8; 14 with attitude and gyro-bias states; 18 with
+    the horizontal disturbance and accelerometer biases as well).
 
     Returns
     -------
@@ -283,7 +331,7 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     w = np.empty((n, n))
     phx = np.empty((n, n))
     qx = np.empty((n, n))
-    nblk = 3 if n == 14 else 2
+    nblk = 3 if n >= 14 else 2
     for k in range(1, nep):
         a, qc = continuous_model_n(r[k], v[k], up[k], e1[k], e2[k], e3[k], w02[k], speed[k], c, n)
         phy, qy = van_loan(a, qc, dt[k])
@@ -294,18 +342,19 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
                     t_prev[o + i, o + j] = mat_it[k - 1, i, j]
                     t_cur[o + i, o + j] = mat_it[k, i, j]
         # phx = t_cur^T phy t_prev, qx = t_cur^T qy t_cur (small fixed-size products, no BLAS)
-        _transpose(t_cur, t_cur_t)
-        _mm(t_cur_t, phy, w)
-        _mm(w, t_prev, phx)
-        _mm(t_cur_t, qy, w)
-        _mm(w, t_cur, qx)
+        transpose_into(t_cur, t_cur_t)
+        matmul_into(t_cur_t, phy, w)
+        matmul_into(w, t_prev, phx)
+        matmul_into(t_cur_t, qy, w)
+        matmul_into(w, t_cur, qx)
         phi[k] = _to_seed(phx, perm)
         qs = _to_seed(qx, perm)
         q[k] = 0.5 * (qs + qs.T)
     return phi, q
 
 
-def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = False, aided: bool = False):
+def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = False, aided: bool = False,
+               horizontal: bool = False, hprior=None):
     """Phi, Q sequences ``(N, n, n)`` for the filter (seed state order).
 
     Parameters
@@ -319,9 +368,15 @@ def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = Fal
     aided : bool
         14 states: the seed's 8 plus attitude error and gyro bias (position aiding);
         otherwise n = 8.
+    horizontal : bool
+        With ``aided``: 18 states, the horizontal disturbance (``GN, GE``) and accelerometer
+        biases (``BA1, BA2``) appended (vector gravimetry).
+    hprior : tuple of 2 floats, optional
+        Horizontal disturbance prior (sigma m/s^2, lambda 1/m); None: from the vertical one
+        (:func:`gravsurvey.inm.identify.horizontal_prior`).
     """
-    c = _noise_params(params, alt_dt)
-    perm = _PERM_AIDED if aided else _PERM
+    c = _noise_params(params, alt_dt, hprior)
+    perm = (_PERM_VECTOR if horizontal else _PERM_AIDED) if aided else _PERM
     n = perm.size
     args = (geom.dt, geom.r_i, geom.v_i, geom.up_i, geom.e1_i, geom.e2_i, geom.e3_i, geom.w02,
             geom.speed, geom.mat_it)
@@ -345,6 +400,9 @@ def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = Fal
         if aided:
             blocks_p += [geom.mat_it[k - 1], np.eye(3)]
             blocks_c += [geom.mat_it[k], np.eye(3)]
+        if n == N_STATE_VECTOR:
+            blocks_p.append(np.eye(4))
+            blocks_c.append(np.eye(4))
         tp = scipy.linalg.block_diag(*blocks_p)
         tc = scipy.linalg.block_diag(*blocks_c)
         phi[k] = (tc.T @ phy @ tp)[np.ix_(perm, perm)]
@@ -353,7 +411,8 @@ def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = Fal
     return phi, q
 
 
-def initial_covariance(params, q_t=None, p_t=None, attitude_cov_t=None) -> np.ndarray:
+def initial_covariance(params, q_t=None, p_t=None, attitude_cov_t=None, horizontal: bool = False,
+                       hprior=None) -> np.ndarray:
     """Prior covariance at the first epoch (zero prior mean).
 
     Parameters
@@ -369,6 +428,12 @@ def initial_covariance(params, q_t=None, p_t=None, attitude_cov_t=None) -> np.nd
         Covariance of ``theta`` on the triad axes, rad^2 (e.g. from the coarse alignment,
         :attr:`gravsurvey.inm.alignment.Alignment.cov_t`); replaces the isotropic
         ``initial_attitude_sigma_deg``.
+    horizontal : bool
+        With ``q_t, p_t``: the 18-state prior, the horizontal disturbance at its stationary
+        sigma (:func:`gravsurvey.inm.identify.horizontal_prior`) and the accelerometer biases
+        at :data:`ACCEL_BIAS_SIGMA_MPS2`, independent of the rest.
+    hprior : tuple of 2 floats, optional
+        As in :func:`discretise`.
     """
     if q_t is None or p_t is None:
         d = np.empty(8)
@@ -400,11 +465,19 @@ def initial_covariance(params, q_t=None, p_t=None, attitude_cov_t=None) -> np.nd
     for i in range(11, 14):
         blk[i, i] = sb**2
     p = blk[np.ix_(_PERM_AIDED, _PERM_AIDED)]
+    if horizontal:
+        sig_h = hprior[0] if hprior is not None else horizontal_prior(params.anomaly_sigma_mps2,
+                                                                      params.anomaly_lambda_per_m)[0]
+        big = np.zeros((N_STATE_VECTOR, N_STATE_VECTOR))
+        big[:N_STATE_AIDED, :N_STATE_AIDED] = p
+        big[GN, GN] = big[GE, GE] = sig_h**2
+        big[BA1, BA1] = big[BA2, BA2] = ACCEL_BIAS_SIGMA_MPS2**2
+        p = big
     return 0.5 * (p + p.T)
 
 
-def initial_mean(theta_t, q_t, p_t) -> np.ndarray:
-    """Prior mean (14,) of the aided state for an attitude error ``theta_t`` (rad, triad axes).
+def initial_mean(theta_t, q_t, p_t, n_state: int = N_STATE_AIDED) -> np.ndarray:
+    """Prior mean (n_state,) of the aided state for an attitude error ``theta_t`` (rad, triad axes).
 
     With the position and velocity errors ``dr``, ``dv`` of zero mean the seed's states carry
     the attitude: ``dq = -q x theta`` and ``dp = -p x theta`` (:func:`continuous_model_n`).
@@ -412,7 +485,7 @@ def initial_mean(theta_t, q_t, p_t) -> np.ndarray:
     alignment's (the prior mean is then the old attitude seen from the new one).
     """
     th = np.asarray(theta_t, float)
-    x = np.zeros(N_STATE_AIDED)
+    x = np.zeros(n_state)
     x[DQ] = -np.cross(np.asarray(q_t, float), th)
     x[DP] = -np.cross(np.asarray(p_t, float), th)
     x[TH] = th
@@ -501,7 +574,7 @@ class AltimeterMeasurement:
         n_i = np.einsum("nij,nj->ni", mat_ie(nav.time[idx], self.ellipsoid.omega), n_e)
         n_t = np.einsum("nji,nj->ni", nav.mat_it[idx], n_i)
         q0_t = n_t * cosa[:, None]
-        if n_state == N_STATE_AIDED:
+        if n_state >= N_STATE_AIDED:
             q_t = np.einsum("nji,nj->ni", nav.mat_it[idx], r_ep)
             h_th = np.cross(n_t, q_t) * cosa[:, None]
         for j in range(k.size):
@@ -511,7 +584,7 @@ class AltimeterMeasurement:
             z[kk, s] = zval[j]
             h[kk, s, DQ] = q0_t[kk]
             h[kk, s, DP] = d[j] * q0_t[kk]
-            if n_state == N_STATE_AIDED:
+            if n_state >= N_STATE_AIDED:
                 h[kk, s, TH] = h_th[kk]
         return z, h, r
 
@@ -612,7 +685,7 @@ class GnssMeasurement:
         hblk = np.zeros((ts.size, 3, n_state))
         hblk[:, :, DQ] = hq
         hblk[:, :, DP] = d[:, None, None] * hq
-        if n_state == N_STATE_AIDED:
+        if n_state >= N_STATE_AIDED:
             # q x theta = [q x] theta with q = C^T r on the triad at the epoch
             q_t = np.einsum("nji,nj->ni", c_k, nav.r_i[idx][k])
             sk = np.zeros((ts.size, 3, 3))

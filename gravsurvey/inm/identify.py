@@ -61,6 +61,7 @@ __all__ = [
     "keep_default_prior",
     "prior_for_resolution",
     "model_resolution_m",
+    "horizontal_prior",
 ]
 
 #: ``model:`` keys this module identifies (a key given in the config is held fixed instead).
@@ -812,3 +813,75 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     report["expected_error_mgal"] = math.sqrt(max(expected, 0.0)) / 1e-5
     report["signal_seen_to_m"] = (v / (2.0 * float(f[s_sig > 0].max()))) if np.any(s_sig > 0) else None
     return new, report
+
+
+def horizontal_prior(anomaly_sigma_mps2: float, anomaly_lambda_per_m: float,
+                     g_vertical=None, spacing_m: float | None = None) -> tuple[float, float]:
+    """Gauss-Markov prior of each horizontal disturbance component, from the vertical one.
+
+    A field that is harmonic above its sources (point masses, dipoles, prisms, real terrain
+    seen from the air) has, per plane wave of horizontal wavenumber ``k = (k_e, k_n)``,
+    disturbance components ``(i k_e, i k_n, |k|) T_k`` (east, north, up) of the disturbing
+    potential's amplitude ``T_k``.  Along a track (wavenumber ``k_a`` along, ``k_c`` across)
+    the 1-D spectra are integrals over ``k_c``, and since ``k_a^2 + k_c^2 = |k|^2``::
+
+        S_along(k_a) + S_across(k_a) = S_up(k_a)          (exact, every along-track frequency)
+
+    The two horizontal components together carry exactly the vertical's power at every
+    along-track frequency (seed 003 reads the horizontal spectrum off the along-track FFT of a
+    point-mass "dipole" field; this is that spectrum, from the vertical one).  With an
+    isotropic field, or headings that change, north and east take half each:
+    ``S_N = S_E = S_up / 2``: the vertical Markov prior with ``sigma / sqrt(2)`` and the same
+    correlation.
+
+    Which vertical spectrum: the prior chosen for least expected error
+    (:func:`refine_prior`) is right where the data speak, but its stationary sigma and
+    correlation can be far from the field's (a long correlation with a large sigma is how a
+    Markov process puts a given level into the band).  The vertical channel does not care
+    (the altimeter fixes the level); the horizontal one does, because a constant horizontal
+    disturbance cannot be told from a constant tilt and only the prior decides it
+    (docs/method.md, "Vector gravimetry").  So given the smoothed vertical estimate along the
+    flight, the Markov process matched to it is used instead: its variance (the field's
+    variance along the flight) and its integral correlation length ``L = int rho(s) ds``
+    (autocorrelation up to its first zero), then ``sigma_h = sigma_g / sqrt(2)``,
+    ``lambda_h = 1 / L``; never above the vertical prior's sigma / sqrt(2), never below the
+    identification's lower bound (0.02 mGal).
+
+    Parameters
+    ----------
+    anomaly_sigma_mps2 : float
+        Sigma of the vertical disturbance prior, m/s^2.
+    anomaly_lambda_per_m : float
+        Its spatial correlation rate, 1/m.
+    g_vertical : ndarray (N,), optional
+        Smoothed vertical disturbance along the flight, m/s^2, at spacing ``spacing_m``.
+    spacing_m : float, optional
+        Along-track distance between its samples, m.
+
+    Returns
+    -------
+    sigma_mps2 : float
+        Stationary sigma of each horizontal component (north, east), m/s^2.
+    lambda_per_m : float
+        Spatial correlation rate of each, 1/m.
+    """
+    sig_v, lam_v = float(anomaly_sigma_mps2), float(anomaly_lambda_per_m)
+    sig_h = sig_v / math.sqrt(2.0)
+    g = None if g_vertical is None else np.asarray(g_vertical, float)
+    if g is None or spacing_m is None or not spacing_m > 0:
+        return sig_h, lam_v
+    g = g[np.isfinite(g)]
+    if g.size < 16:
+        return sig_h, lam_v
+    g = g - g.mean()
+    var = float(np.mean(g * g))
+    if not var > 0:
+        return BOUNDS["anomaly_sigma_mps2"][0], lam_v
+    n = g.size
+    spec = np.fft.rfft(g, 2 * n)
+    acf = np.fft.irfft(np.abs(spec) ** 2)[:n] / (var * np.arange(n, 0, -1))
+    zero = np.flatnonzero(acf <= 0.0)
+    k = int(zero[0]) if zero.size else n
+    length = max(float(np.sum(acf[:k])) * spacing_m, spacing_m)
+    sig_g = min(max(math.sqrt(var / 2.0), BOUNDS["anomaly_sigma_mps2"][0]), sig_h)
+    return sig_g, 1.0 / length

@@ -18,8 +18,9 @@ Speed notes (measured on the 8-state model, 14,401 epochs): no fastmath anywhere
 bit-for-bit reproducible across machines); for n = 8 and a diagonal R each epoch is one call of
 a generated step (:mod:`gravsurvey.inm._unrolled`) that keeps every covariance row in an
 8-wide vector (:mod:`gravsurvey.inm.simd`): 0.6 us per epoch for filter + smoother against
-1.4 us for the generic loops below, and the same numbers to the last bit (tested).  Not for
-the 14-state GNSS-aided model: its generated steps took ~27 s to compile (once per machine) to
+1.4 us for the generic loops below, and the same numbers to the last bit (tested).  Every
+other size (14 GNSS-aided, 18 with the horizontal disturbance) takes the generic loops.  Not
+for the 14-state GNSS-aided model: its generated steps took ~27 s to compile (once per machine) to
 save ~0.01 s per flight-hour (:mod:`gravsurvey.inm.codegen`).  The generic
 loops (any n, any R): scalar measurement updates in O(n^2); small products in
 scalar-accumulator column blocks (:func:`_matmul`).  Both: outputs allocated by numpy, not
@@ -86,9 +87,19 @@ def expm(a):
 
 
 @njit(cache=True)
-def _mm(a, b, out):
-    """``out = a @ b`` (square, C-contiguous, not aliased): generated vector code for n = 8 and
-    14, :func:`_matmul` otherwise; the same rounding either way."""
+def matmul_into(a, b, out):
+    """``out = a @ b`` for square matrices, no allocation (public: the error model uses it).
+
+    Parameters
+    ----------
+    a, b : ndarray (n, n)
+        C-contiguous float64.
+    out : ndarray (n, n)
+        Written in place; must not alias ``a`` or ``b``.
+
+    Generated vector code for n = 8 and 14, :func:`_matmul` otherwise; the same rounding
+    either way.
+    """
     n = a.shape[0]
     if n == 8:
         matmul8(a, b, out)
@@ -108,7 +119,7 @@ def van_loan(a, qc, dt):
     (``s = 2^-j`` scales the 1-norm of ``M`` to <= 0.25), ``M^k = [[X^k, Y_k], [0, (-X^T)^k]]``
     and ``Y_k = X^(k-1) Q + Y_(k-1) (-X^T)``, so one power sequence of ``X`` gives both
     diagonal blocks (``expm(A dt) = sum (-1)^k X^k / k!``) and each term costs three n x n
-    products instead of one (2n x 2n) product (8 n^3); the products are :func:`_mm` (BLAS
+    products instead of one (2n x 2n) product (8 n^3); the products are :func:`matmul_into` (BLAS
     calls cost more than the arithmetic at this size).
     Thirteen terms: the first omitted is below ``0.25^13 / 13! = 2.4e-18`` relative.
 
@@ -149,9 +160,9 @@ def van_loan(a, qc, dt):
     f -= t
     for k in range(2, 14):
         # U_k = (T_(k-1) Q - U_(k-1) X^T) / k;  T_k = T_(k-1) X / k
-        _mm(t, qs, u_new)
-        _mm(u, xt, tmp)
-        _mm(t, x, t_new)
+        matmul_into(t, qs, u_new)
+        matmul_into(u, xt, tmp)
+        matmul_into(t, x, t_new)
         sign = 1.0 if k % 2 == 0 else -1.0
         rk = 1.0 / k  # a multiply per element, not a division (those dominated this loop)
         for i in range(n):  # one fused pass (numba's array expressions would be seven)
@@ -167,19 +178,19 @@ def van_loan(a, qc, dt):
         u, u_new = u_new, u
     # squaring: [[E11, E12], [0, F^T]]^2 = [[E11^2, E11 E12 + E12 F^T], [0, (F^2)^T]]
     for _ in range(sq):
-        _mm(e11, e12, tmp)
-        _transpose(f, ft)
-        _mm(e12, ft, u_new)
+        matmul_into(e11, e12, tmp)
+        transpose_into(f, ft)
+        matmul_into(e12, ft, u_new)
         for i in range(n):
             for j in range(n):
                 e12[i, j] = tmp[i, j] + u_new[i, j]
-        _mm(e11, e11, t_new)
+        matmul_into(e11, e11, t_new)
         e11, t_new = t_new, e11
-        _mm(f, f, t_new)
+        matmul_into(f, f, t_new)
         f, t_new = t_new, f
     phi = f
     qd = np.empty((n, n))
-    _mm(phi, e12, qd)
+    matmul_into(phi, e12, qd)
     qd = 0.5 * (qd + qd.T)
     return phi, qd
 
@@ -375,7 +386,15 @@ def _tri_solve_rows(lch, idg, b, forward):
 
 
 @njit(cache=True)
-def _transpose(a, out):
+def transpose_into(a, out):
+    """``out = a.T`` for a square matrix, no allocation (public: the error model uses it).
+
+    Parameters
+    ----------
+    a : ndarray (n, n)
+    out : ndarray (n, n)
+        Written in place; must not alias ``a``.
+    """
     n = a.shape[0]
     for i in range(n):
         for j in range(n):
@@ -396,7 +415,7 @@ def _predict_into(phi, q, x, p, tmp, phit, xout, pout, xout2, pout2):
         xout[i] = acc
         xout2[i] = acc
     _matmul(phi, p, tmp, False)
-    _transpose(phi, phit)
+    transpose_into(phi, phit)
     _matmul(tmp, phit, pout, True)
     for i in range(n):
         for j in range(i, n):
@@ -686,7 +705,7 @@ def _rts_step(k, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg,
     for i in range(n):
         for j in range(n):
             dp[i, j] = p_s[k + 1, i, j] - pp[i, j]
-    _transpose(b, bt)
+    transpose_into(b, bt)
     _matmul(bt, dp, tmp, False)
     _matmul(tmp, b, dp, True)  # symmetric: the upper triangle is used
     for i in range(n):

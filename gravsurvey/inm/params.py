@@ -35,7 +35,7 @@ _INT_KEYS = ("attitude_passes",)
 
 RADIUS_SOURCES = ("altimeter", "computed")
 #: Boolean settings (everything else but ``radius_source`` is a number).
-_BOOL_KEYS = ("gnss_aiding", "identify")
+_BOOL_KEYS = ("gnss_aiding", "identify", "horizontal")
 #: Settings that may be null (``None``: not set).
 _OPTIONAL_KEYS = ("target_resolution_m",)
 #: Attributes that are not config keys.
@@ -103,6 +103,10 @@ class InmParams:
         Half-wavelength resolution (m) the smoother should have; the anomaly sigma is chosen
         to put the smoother's half-power point there (more noise for a finer resolution).
         ``None``: the identified model's own optimum (least expected error).
+    horizontal : bool
+        Also estimate the horizontal components of the gravity disturbance (north, east) as
+        states, with horizontal accelerometer biases (vector gravimetry, seed 003; needs GNSS
+        aiding; docs/method.md "Vector gravimetry").  Off by default.
     given : frozenset of str
         The keys held fixed by identification: those written in the config
         (:meth:`from_dict`) or, when constructed directly and not given, every key whose value
@@ -131,6 +135,7 @@ class InmParams:
     gyro_bias_sigma_degph: float = 0.05
     identify: bool = True
     target_resolution_m: float | None = None
+    horizontal: bool = False
     given: frozenset | None = None
 
     def __post_init__(self):

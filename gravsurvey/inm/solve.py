@@ -9,13 +9,14 @@ import numpy as np
 
 from ..errors import ConfigError, DataError
 from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, mat_en, mat_ie
-from .errormodel import (DP, DQ, F3, G, N_STATE, N_STATE_AIDED, TH, AltimeterMeasurement, GnssMeasurement,
-                         discretise, epoch_geometry, initial_covariance, initial_mean)
-from .identify import (identify_params, keep_default_prior, model_resolution_m, refine_prior, straight_weight,
-                       wide_prior_params)
+from .errormodel import (DP, DQ, F3, G, N_STATE, N_STATE_AIDED, N_STATE_VECTOR, TH, AltimeterMeasurement,
+                         GnssMeasurement, discretise, epoch_geometry, initial_covariance, initial_mean)
+from .identify import (horizontal_prior, identify_params, keep_default_prior, model_resolution_m, refine_prior,
+                       straight_weight, wide_prior_params)
 from .kalman import filter_and_smooth
 from .mechanization import mechanize, navigation_to_geodetic, rodrigues
 from .params import InitialState, InmParams, initial_state_from_gnss, solvability_warnings
+from .vector import horizontal_outputs
 
 __all__ = ["InmSolution", "estimate_anomaly", "solvability_warnings", "initial_state_from_gnss"]
 
@@ -85,6 +86,16 @@ class InmSolution:
         within twice its median over the flight, s (GNSS-aided strapdown; NaN otherwise).
     gnss_residual_rms_m : float
         RMS horizontal distance of the corrected track from the GNSS positions, m.
+    dg_horizontal : ndarray (N, 2) or None
+        Smoothed horizontal gravity disturbance ``[north, east]``, m/s^2 (``dg = g_true -
+        gamma`` on local ENU; deflections ``xi = -dg_north / gamma``, ``eta = -dg_east /
+        gamma``).  None unless ``model.horizontal`` and GNSS aiding.
+    dg_horizontal_sigma : ndarray (N, 2) or None
+        Its smoothed 1-sigma, m/s^2.
+    horizontal_observable : ndarray of bool (N,) or None
+        Whether the data determine the horizontal components at that epoch: both posterior
+        sigmas below :data:`gravsurvey.inm.vector.OBSERVABLE_SIGMA_RATIO` times the prior's
+        (docs/method.md, "Vector gravimetry").
     """
 
     time: np.ndarray
@@ -119,6 +130,9 @@ class InmSolution:
     alignment: object | None = None
     attitude_converge_s: float = float("nan")
     gnss_residual_rms_m: float = float("nan")
+    dg_horizontal: np.ndarray | None = None
+    dg_horizontal_sigma: np.ndarray | None = None
+    horizontal_observable: np.ndarray | None = None
 
 
 def _check_record(record):
@@ -177,6 +191,11 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     (``C_true = C Exp(theta)``) and the flight is mechanized and filtered again about it.
     The prior is kept (the alignment's): its mean becomes the old attitude seen from the new
     one (:func:`gravsurvey.inm.errormodel.initial_mean`), an iterated (Gauss-Newton) smoother.
+    With ``params.horizontal`` (and GNSS) one more pass follows about the last linearisation
+    point with the 18-state model (horizontal disturbance and accelerometer biases; its prior
+    from the vertical estimate, :func:`gravsurvey.inm.identify.horizontal_prior`), and the
+    solution is that pass's (``dg_horizontal``, ``dg_horizontal_sigma``,
+    ``horizontal_observable``).
 
     Parameters
     ----------
@@ -232,7 +251,22 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
         mat_nt0 = mat_nt0 @ rot
         # prior attitude (old point) seen from the new point: C_old = C_new Exp(-th0)
         theta_prior = theta_prior - th0
+    hsol = None
+    if params.horizontal:
+        if gnss_used:
+            hsol = _horizontal_pass(record, params, cur, nav, ellipsoid, reference, theta_prior, gnss_lever_arm_t,
+                                    out["x_s"][:, G])
+            idx, c, gnss_used, n_state, out, hprior = hsol
+        else:
+            ident.setdefault("warnings", []).append(
+                "model.horizontal: the horizontal disturbance needs GNSS position aiding (model.gnss_aiding and "
+                "a GNSS channel); not estimated")
     sol = _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, k + 1, corrections)
+    if hsol is not None:
+        sol.dg_horizontal, sol.dg_horizontal_sigma, sol.horizontal_observable = horizontal_outputs(
+            out["x_s"], out["p_s"], hprior[0])
+        ident["horizontal_prior"] = {"sigma_mps2": hprior[0], "lambda_per_m": hprior[1],
+                                     "observable_fraction": float(np.mean(sol.horizontal_observable))}
     sol.alignment = initial.alignment
     sol.params = params
     sol.identification = ident
@@ -317,11 +351,26 @@ def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, l
     return params, ident
 
 
-def _one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t=None):
+def _horizontal_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, g_vertical):
+    """The 18-state pass (vector gravimetry) about the last vertical pass's linearisation point.
+
+    Its horizontal prior is the Markov process matched to the vertical estimate ``g_vertical``
+    (m/s^2, per epoch) through the harmonic relation (:func:`horizontal_prior`).  Returns
+    :func:`_one_pass`'s tuple and the prior (sigma m/s^2, lambda 1/m) used.
+    """
+    t = nav.time
+    step = max(1, int(round((t.size - 1) / (t[-1] - t[0]) / params.filter_rate_hz)))
+    spacing = _typical_speed(record, nav, ellipsoid) * float(t[min(step, t.size - 1)] - t[0])
+    hprior = horizontal_prior(params.anomaly_sigma_mps2, params.anomaly_lambda_per_m, g_vertical, spacing)
+    return (*_one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, hprior), hprior)
+
+
+def _one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t=None, hprior=None):
     """Discretise, filter and smooth once about the mechanization ``nav``.
 
     Returns ``idx`` (IMU indices of the epochs), ``c`` (triad -> inertial at the epochs),
-    ``gnss_used``, ``n_state`` and the :func:`filter_and_smooth` dict.
+    ``gnss_used``, ``n_state`` and the :func:`filter_and_smooth` dict.  ``hprior``: the
+    horizontal disturbance prior (sigma, lambda) when ``params.horizontal``.
     """
     t = nav.time
     alt_t, alt_h = _altimeter(record)
@@ -336,7 +385,11 @@ def _one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, l
     # position aiding needs the attitude error explicitly (the seed's dq merges it into the
     # position): 14 states (errormodel.continuous_model_n)
     n_state = N_STATE_AIDED if gnss_used else N_STATE
-    phi, q = discretise(geom, params, alt_dt, reference=reference, aided=gnss_used)
+    horizontal = gnss_used and hprior is not None
+    if horizontal:
+        n_state = N_STATE_VECTOR
+    phi, q = discretise(geom, params, alt_dt, reference=reference, aided=gnss_used, horizontal=horizontal,
+                        hprior=hprior)
     meas = [AltimeterMeasurement(alt_t, alt_h, params.altimeter_sigma_m, ellipsoid)]
     if gnss_used:
         gn = record.gnss
@@ -348,8 +401,8 @@ def _one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, l
     if gnss_used:
         q_t0 = c[0].T @ nav.r_i[idx[0]]
         p_t0 = c[0].T @ nav.v_i[idx[0]]
-        p0 = initial_covariance(params, q_t0, p_t0, attitude_cov_t=att_cov)
-        x0 = initial_mean(theta_prior, q_t0, p_t0)
+        p0 = initial_covariance(params, q_t0, p_t0, attitude_cov_t=att_cov, horizontal=horizontal, hprior=hprior)
+        x0 = initial_mean(theta_prior, q_t0, p_t0, n_state)
     else:
         p0 = initial_covariance(params)
         x0 = np.zeros(n_state)

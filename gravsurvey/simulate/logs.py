@@ -59,6 +59,8 @@ TRUTH_COLUMNS = (
     "anomaly_e_mgal",
     "anomaly_n_mgal",
     "anomaly_u_mgal",
+    "dg_north_mgal",
+    "dg_east_mgal",
 )
 
 _LIBRARY = f"gravsurvey/{_GRAVSURVEY_VERSION} mcap-python/{_MCAP_VERSION}"
@@ -1073,6 +1075,7 @@ def write_truth_csv(
         "# time_ns: Unix ns (UTC); line: flight-plan segment; lat_deg, lon_deg, height_m: WGS84 geodetic;",
         "# v*_mps: velocity relative to the Earth, ENU; roll/pitch/heading_deg: body attitude w.r.t. ENU;",
         "# disturbance_mgal = -(anomalous gravitation . Up); anomaly_*_mgal: anomalous gravitation, ENU",
+        "# dg_north_mgal, dg_east_mgal: horizontal disturbance g_true - gamma (= anomaly_n, anomaly_e)",
         *_comment_lines(comments),
     ]
     data = _csv_bytes(header, names, cells)

@@ -73,7 +73,9 @@ class FlightSimulation:
         on ENU, m/s^2, ``mat_nt`` (n, 3, 3) triad -> ENU, ``mat_nb`` body ->
         ENU, ``roll``, ``pitch``, ``heading`` (rad), ``anomaly_n`` (n, 3)
         anomalous gravitation on ENU (m/s^2), ``disturbance`` (n,) m/s^2
-        (``-anomaly_n[:, 2]``), ``gravitation_n`` (n, 3) total gravitation,
+        (``-anomaly_n[:, 2]``), ``dg_north``, ``dg_east`` (n,) the horizontal disturbance
+        ``g_true - gamma`` north and east, m/s^2 (``anomaly_n[:, 1]``, ``anomaly_n[:, 0]``:
+        exact for a ``model`` field, zero for the along-track field types), ``gravitation_n`` (n, 3) total gravitation,
         ``line`` (n,) segment names, ``distance`` (n,) along-track ground
         distance (m); sensor-error truth ``accel_error_t`` (n, 3) m/s^2,
         ``gravimeter_error`` (n,) (= ``accel_error_t[:, 2]``),
@@ -257,7 +259,8 @@ def _truth_table(plan, t_rel, start_ns, t_ns, anomaly: _Anomaly):
     """truth.csv columns (docs/formats.md) at the times ``t_rel`` (s)."""
     cols = {k: np.empty(t_rel.shape[0]) for k in (
         "lat_deg", "lon_deg", "height_m", "ve_mps", "vn_mps", "vu_mps", "roll_deg", "pitch_deg", "heading_deg",
-        "disturbance_mgal", "anomaly_e_mgal", "anomaly_n_mgal", "anomaly_u_mgal")}
+        "disturbance_mgal", "anomaly_e_mgal", "anomaly_n_mgal", "anomaly_u_mgal", "dg_north_mgal",
+        "dg_east_mgal")}
     line = np.empty(t_rel.shape[0], dtype=object)
     for sl in _chunks(t_rel.shape[0]):
         kin = kinematics(plan, t_rel[sl])
@@ -274,6 +277,8 @@ def _truth_table(plan, t_rel, start_ns, t_ns, anomaly: _Anomaly):
         cols["anomaly_e_mgal"][sl] = an[:, 0] / MGAL
         cols["anomaly_n_mgal"][sl] = an[:, 1] / MGAL
         cols["anomaly_u_mgal"][sl] = an[:, 2] / MGAL
+        cols["dg_north_mgal"][sl] = an[:, 1] / MGAL + 0.0
+        cols["dg_east_mgal"][sl] = an[:, 0] / MGAL + 0.0
     out = {"time_ns": t_ns + start_ns, "line": line.astype(str)}
     out.update(cols)
     return out
@@ -329,6 +334,8 @@ def simulate_flight(sim, flight_index: int = 0) -> FlightSimulation:
         "heading": tru["heading"],
         "anomaly_n": tru["anomaly_n"],
         "disturbance": -tru["anomaly_n"][:, 2] + 0.0,
+        "dg_north": tru["anomaly_n"][:, 1] + 0.0,
+        "dg_east": tru["anomaly_n"][:, 0] + 0.0,
         "gravitation_n": tru["gravitation_n"],
         "specific_force_n": tru["specific_force_n"],
         "line": tru["line"],
