@@ -61,7 +61,7 @@ import boule
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from .errors import ConfigError, DataError, DataWarning, check_keys
+from .errors import ConfigError, DataError, DataWarning
 from .geodesy import MGAL, WGS84, Ellipsoid, radii_of_curvature
 from .io.record import FlightRecord
 
@@ -123,77 +123,6 @@ class ClassicResult:
     raw: np.ndarray
     terms: dict = field(default_factory=dict)
     info: dict = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class ClassicOptions:
-    """Settings of the classic reduction (config block ``postprocess.classic``).
-
-    Attributes
-    ----------
-    filter_length_s : float or None
-        Gaussian filter length L (full wavelength at -6 dB), s.  None: ``resolution_m`` or the
-        default 400 s.
-    resolution_m : float or None
-        Wanted half-wavelength resolution, m; sets ``L = 2 * resolution_m / speed``.
-    height_source : str
-        'auto' (GNSS height when present, else altimeter), 'gnss' or 'altimeter'.
-    """
-
-    filter_length_s: float | None = None
-    resolution_m: float | None = None
-    height_source: str = "auto"
-
-    def kwargs(self) -> dict:
-        """Keyword arguments for :func:`classic_reduction`."""
-        return {
-            "filter_length_s": self.filter_length_s,
-            "resolution_m": self.resolution_m,
-            "height_source": self.height_source,
-        }
-
-
-_OPTION_KEYS = ("filter_length_s", "resolution_m", "height_source")
-
-
-def classic_options_from_dict(d, key_path: str = "postprocess.classic") -> ClassicOptions:
-    """Validate a config mapping into :class:`ClassicOptions`.
-
-    Parameters
-    ----------
-    d : dict or None
-        The mapping (None or {} -> defaults).
-    key_path : str
-        Where the mapping sits in the config file, for error messages.
-
-    Raises
-    ------
-    ConfigError
-        Unknown key (with the nearest valid name), wrong type, non-positive number, both
-        ``filter_length_s`` and ``resolution_m`` given, or an unknown ``height_source``.
-    """
-    if d is None:
-        return ClassicOptions()
-    if not isinstance(d, dict):
-        raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-    check_keys(d, _OPTION_KEYS, key_path)
-    vals = {}
-    for k in ("filter_length_s", "resolution_m"):
-        v = d.get(k)
-        if v is None:
-            vals[k] = None
-            continue
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise ConfigError(f"{key_path}.{k}: expected a positive number, got {v!r}")
-        if not math.isfinite(v) or v <= 0:
-            raise ConfigError(f"{key_path}.{k}: expected a positive number, got {v!r}")
-        vals[k] = float(v)
-    if vals["filter_length_s"] is not None and vals["resolution_m"] is not None:
-        raise ConfigError(f"{key_path}: give filter_length_s or resolution_m, not both")
-    hs = d.get("height_source", "auto")
-    if hs not in HEIGHT_SOURCES:
-        raise ConfigError(f"{key_path}.height_source: expected one of {', '.join(HEIGHT_SOURCES)}, got {hs!r}")
-    return ClassicOptions(vals["filter_length_s"], vals["resolution_m"], hs)
 
 
 # --------------------------------------------------------------------------

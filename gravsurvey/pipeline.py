@@ -111,7 +111,7 @@ class FlightResult:
 
 
 def _segments(cfg: SurveyConfig, fl: FlightConfig, sol) -> list:
-    from .survey import segment_lines, segments_from_windows
+    from .segmentation import segment_lines, segments_from_windows
 
     mode = getattr(cfg.lines, "mode", "auto")
     if fl.lines_windows is not None:
@@ -119,7 +119,7 @@ def _segments(cfg: SurveyConfig, fl: FlightConfig, sol) -> list:
     if mode == "windows":
         return segments_from_windows(sol.time, cfg.lines.windows, key_path="lines.windows")
     if mode == "whole":
-        from .survey import Segment
+        from .segmentation import Segment
 
         # the whole flight, but never across the NaN epoch between separately estimated
         # segments (a flight split at a gap: consistency.SegmentedSolution)
@@ -761,7 +761,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     from . import report
     from .io import writers
     from .levelling import level_survey
-    from .survey import Crossovers, find_crossovers
+    from .crossovers import Crossovers, find_crossovers
 
     table, epsg = _profile_table(cfg, results)
     in_line = table["line"] != ""

@@ -19,8 +19,8 @@ This module holds
 * the baselines: VisuShrink, SURE and BayesShrink soft thresholding, and the zero-phase
   low-pass filters used in airborne gravimetry (Butterworth forward-backward, Gaussian),
   parameterised by their half-wavelength resolution at the line's speed;
-* :func:`postprocess`, the entry point the pipeline calls once per survey line, and
-  :func:`options_from_dict`, which validates the configuration's ``postprocess:`` block.
+* :func:`postprocess`, the entry point the pipeline calls once per survey line (its
+  ``postprocess:`` settings are validated by :func:`gravsurvey.settings.postprocess_options`).
 
 Everything works in SI units (m/s^2 for the anomaly, s, m, m/s); every method is
 scale-equivariant (scaling ``z`` and ``sigma`` scales the output), so any consistent unit works.
@@ -46,7 +46,7 @@ import pywt
 from numba import njit
 from scipy import fft as _sfft
 
-from gravsurvey.errors import ConfigError, DataError, suggest
+from gravsurvey.errors import ConfigError, DataError
 
 __all__ = [
     "METHODS",
@@ -73,7 +73,6 @@ __all__ = [
     "gaussian_lowpass",
     "lowpass_resolution_m",
     "postprocess",
-    "options_from_dict",
 ]
 
 #: Method names accepted by :func:`postprocess` (plus ``"default"``).
@@ -173,86 +172,6 @@ class PostprocessOptions:
     threshold_steps: int = 8
     max_level: int | None = None
     min_level: int = 1
-
-
-_OPTION_KEYS = tuple(PostprocessOptions.__dataclass_fields__)
-
-
-def options_from_dict(d, key_path="postprocess"):
-    """Validate the configuration's ``postprocess:`` block.
-
-    Parameters
-    ----------
-    d : dict or None
-        The block as loaded from YAML; ``None`` or ``{}`` gives the defaults.
-    key_path : str
-        Where the block sits in the configuration, used in error messages.
-
-    Returns
-    -------
-    PostprocessOptions
-
-    Raises
-    ------
-    ConfigError
-        Naming the offending key (``postprocess.method`` ...) and the allowed values.
-    """
-    if d is None:
-        d = {}
-    if not isinstance(d, dict):
-        raise ConfigError(f"{key_path}: expected a mapping of settings, got {type(d).__name__}")
-    for key in d:
-        if key not in _OPTION_KEYS:
-            raise ConfigError(
-                f"{key_path}.{key}: unknown key{suggest(key, _OPTION_KEYS)}; "
-                f"allowed: {', '.join(_OPTION_KEYS)}"
-            )
-
-    def choice(key, allowed, default):
-        v = d.get(key, default)
-        if not isinstance(v, str) or v not in allowed:
-            raise ConfigError(
-                f"{key_path}.{key}: {v!r} is not allowed{suggest(v, allowed)}; "
-                f"expected one of {', '.join(allowed)}"
-            )
-        return v
-
-    def positive_float(key):
-        v = d.get(key)
-        if v is None:
-            return None
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-            raise ConfigError(f"{key_path}.{key}: expected a positive number, got {v!r}")
-        return float(v)
-
-    def int_in(key, default, lo, hi, allow_none=False):
-        v = d.get(key, default)
-        if v is None and allow_none:
-            return None
-        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-            raise ConfigError(f"{key_path}.{key}: expected an integer in [{lo}, {hi}], got {v!r}")
-        return v
-
-    method = choice("method", ("default",) + METHODS, "default")
-    opts = PostprocessOptions(
-        method=method,
-        wavelet=choice("wavelet", WAVELETS, "auto"),
-        thresholding=choice("thresholding", THRESHOLDINGS, "soft"),
-        boundary=choice("boundary", BOUNDARY_MODES, "symmetric"),
-        resolution_m=positive_float("resolution_m"),
-        filter_length_s=positive_float("filter_length_s"),
-        butterworth_order=int_in("butterworth_order", 4, 1, 12),
-        threshold_steps=int_in("threshold_steps", 8, 1, 100),
-        max_level=int_in("max_level", None, 1, 64, allow_none=True),
-        min_level=int_in("min_level", 1, 1, 64),
-    )
-    if opts.resolution_m is not None and opts.filter_length_s is not None:
-        raise ConfigError(
-            f"{key_path}: give at most one of resolution_m and filter_length_s, not both"
-        )
-    if opts.max_level is not None and opts.max_level < opts.min_level:
-        raise ConfigError(f"{key_path}.max_level: must be >= min_level ({opts.min_level})")
-    return opts
 
 
 # --------------------------------------------------------------------------------------------
@@ -1164,7 +1083,7 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
         ``"default"`` or one of :data:`METHODS`.  When ``options`` is given and ``method`` is
         ``"default"``, ``options.method`` is used.
     options : PostprocessOptions, optional
-        As returned by :func:`options_from_dict`.
+        As returned by :func:`gravsurvey.settings.postprocess_options`.
     sigma : float or ndarray, shape (N,), optional
         The estimator's own 1-sigma of ``z`` (e.g. ``InmSolution.sigma_smooth``), same unit.
         ``ti_cosphi`` then never removes more (RMS) than the RMS of ``sigma``: see
@@ -1183,7 +1102,7 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
         Otherwise, any key of the ``postprocess:`` block except ``method`` (``wavelet``,
         ``thresholding``, ``boundary``, ``resolution_m``, ``filter_length_s``,
         ``butterworth_order``, ``threshold_steps``, ``max_level``, ``min_level``), validated by
-        :func:`options_from_dict`.
+        :func:`gravsurvey.settings.postprocess_options`.
 
     Returns
     -------
@@ -1209,7 +1128,9 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
         if method == "default":
             method = opts.method
     else:
-        opts = options_from_dict(dict(kwargs, method=method))
+        from gravsurvey.settings import postprocess_options
+
+        opts = postprocess_options(dict(kwargs, method=method))
     if method == "default":
         method = DEFAULT_METHOD
     if method not in METHODS:

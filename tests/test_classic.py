@@ -299,22 +299,6 @@ def test_non_finite_heights_are_dropped_and_noted():
     assert err < 0.05, err
 
 
-def test_options_from_dict():
-    o = cl.classic_options_from_dict({"resolution_m": 3000, "height_source": "altimeter"}, "postprocess.classic")
-    assert o.resolution_m == 3000.0 and o.height_source == "altimeter" and o.filter_length_s is None
-    assert cl.classic_options_from_dict(None) == cl.ClassicOptions()
-    with pytest.raises(ConfigError, match=r"^postprocess\.classic\.filter_lenght_s: unknown key \(did you mean 'filter_length_s'\?\); valid keys here: filter_length_s, "):
-        cl.classic_options_from_dict({"filter_lenght_s": 100})
-    with pytest.raises(ConfigError, match=r"postprocess\.classic\.resolution_m: expected a positive number"):
-        cl.classic_options_from_dict({"resolution_m": -5})
-    with pytest.raises(ConfigError, match=r"resolution_m: expected a positive number, got 'x'"):
-        cl.classic_options_from_dict({"resolution_m": "x"})
-    with pytest.raises(ConfigError, match="height_source: expected one of auto, gnss, altimeter"):
-        cl.classic_options_from_dict({"height_source": "baro"})
-    with pytest.raises(ConfigError, match="not both"):
-        cl.classic_options_from_dict({"resolution_m": 1.0, "filter_length_s": 2.0})
-
-
 # --------------------------------------------------------------------------
 # against the simulator's truth (independent physics: 3D kinematics, rotating Earth)
 # --------------------------------------------------------------------------

@@ -17,8 +17,9 @@ from test_io_support import static_flight
 
 from gravsurvey.errors import DataError, DataWarning
 from gravsurvey.io.csv import read_csv_channel, sniff_csv_role
-from gravsurvey.io.ingest import ingest_options_from_dict, load_flight
+from gravsurvey.io.ingest import load_flight
 from gravsurvey.io.inspect import inspect_files
+from gravsurvey.settings import ingest_options
 
 CSV_IN = {"csv": {"imu": "imu.csv", "altimeter": "altimeter.csv", "gnss": "gnss.csv"}}
 
@@ -46,12 +47,12 @@ def _write(tmp, imu_bytes=None):
 
 def test_bom_accepted_same_data(tmp_path):
     _write(tmp_path)
-    clean = load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+    clean = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
     for role in ("imu", "altimeter", "gnss"):
         p = tmp_path / f"{role}.csv"
         p.write_bytes(b"\xef\xbb\xbf" + p.read_bytes())
     assert sniff_csv_role(tmp_path / "imu.csv") == "imu"
-    rec = load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+    rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
     np.testing.assert_array_equal(rec.imu.time, clean.imu.time)
     np.testing.assert_array_equal(rec.imu.specific_force_t, clean.imu.specific_force_t)
     np.testing.assert_array_equal(rec.gnss.lat, clean.gnss.lat)
@@ -103,7 +104,7 @@ def test_nonfinite_values_dropped_and_counted(rows, bad):
         _write(tmp, "\n".join(lines).encode())
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", DataWarning)
-            rec = load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp)
+            rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp)
     msgs = [str(w.message) for w in caught]
     assert any(f"imu: dropped {len(rows)} samples with NaN/inf or absurd" in m for m in msgs), msgs
     d = static_flight(seconds=3.0)
@@ -116,4 +117,4 @@ def test_short_line_in_the_middle_names_file_and_line(tmp_path):
     lines[101] = lines[101][: len(lines[101]) // 2]
     _write(tmp_path, "\n".join(lines).encode())
     with pytest.raises(DataError, match=r"imu.csv: line 102: \d fields, header has 7"):
-        load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+        load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)

@@ -10,6 +10,7 @@ from scipy import signal as sps
 
 from gravsurvey import wavelet as W
 from gravsurvey.errors import ConfigError, DataError, DataWarning
+from gravsurvey.settings import postprocess_options
 
 MGAL = 1e-5
 
@@ -434,22 +435,22 @@ def test_cosphi_faithful_runs_and_reports():
 # Options and bad input
 # ---------------------------------------------------------------------------------------------
 def test_options_defaults_and_validation():
-    o = W.options_from_dict(None)
+    o = postprocess_options(None)
     assert o.method == "default" and o.wavelet == "auto" and o.boundary == "symmetric"
-    o = W.options_from_dict({"method": "butterworth", "resolution_m": 5000})
+    o = postprocess_options({"method": "butterworth", "resolution_m": 5000})
     assert o.resolution_m == 5000.0
     with pytest.raises(ConfigError, match=r"postprocess\.method: 'wavelets'.*expected one of"):
-        W.options_from_dict({"method": "wavelets"})
+        postprocess_options({"method": "wavelets"})
     with pytest.raises(ConfigError, match=r"postprocess\.wavelet.*db10, coif4, auto"):
-        W.options_from_dict({"wavelet": "db4"})
+        postprocess_options({"wavelet": "db4"})
     with pytest.raises(ConfigError, match=r"postprocess\.resolution: unknown key.*resolution_m"):
-        W.options_from_dict({"resolution": 5000})
+        postprocess_options({"resolution": 5000})
     with pytest.raises(ConfigError, match=r"pp\.resolution_m: expected a positive number"):
-        W.options_from_dict({"resolution_m": -1}, key_path="pp")
+        postprocess_options({"resolution_m": -1}, key_path="pp")
     with pytest.raises(ConfigError, match=r"not both"):
-        W.options_from_dict({"resolution_m": 1.0, "filter_length_s": 2.0})
+        postprocess_options({"resolution_m": 1.0, "filter_length_s": 2.0})
     with pytest.raises(ConfigError, match=r"postprocess\.boundary.*periodization"):
-        W.options_from_dict({"boundary": "mirror"})
+        postprocess_options({"boundary": "mirror"})
     with pytest.raises(ConfigError, match=r"resolution_m: required"):
         W.postprocess(np.zeros(100) + 1.0, 1.0, 50.0, "gaussian")
 

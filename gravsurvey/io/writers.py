@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from gravsurvey.errors import DataError, GravsurveyError
-from gravsurvey.survey import Crossovers
+from gravsurvey.crossovers import Crossovers
 
 __all__ = [
     "PROFILE_COLUMNS",
@@ -103,7 +103,7 @@ _DECIMALS = {
     "heading_sigma_deg": 5,
 }
 XYZ_COLUMNS = ("time_unix_s",) + PROFILE_COLUMNS[4:]
-#: crossovers.csv columns: the fields of :class:`gravsurvey.survey.Crossovers`, in order
+#: crossovers.csv columns: the fields of :class:`gravsurvey.crossovers.Crossovers`, in order
 CROSSOVER_COLUMNS = Crossovers.COLUMNS
 SUMMARY_NAME = "summary.json"
 
@@ -666,7 +666,7 @@ def write_crossovers_csv(path, crossovers, metadata: dict | None = None) -> None
 
     Parameters
     ----------
-    crossovers : gravsurvey.survey.Crossovers
+    crossovers : gravsurvey.crossovers.Crossovers
     """
     dec = {"easting_m": 3, "northing_m": 3, "time_a_s": 3, "time_b_s": 3, "value_a_mgal": 4,
            "value_b_mgal": 4, "diff_mgal": 4, "angle_deg": 2}

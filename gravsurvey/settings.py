@@ -1,0 +1,1058 @@
+"""The configuration schema: every key, type, unit, default and description in one place.
+
+One pydantic (v2) model per section of the processing config (docs/config.md is generated from
+these models: ``python -m gravsurvey.settings --doc``).  :func:`parse_survey` validates a whole
+loaded YAML mapping; :func:`config_error` turns any validation failure into one
+:class:`~gravsurvey.errors.ConfigError` line naming the full key path, so ``validate`` and
+``run`` refuse the same configs with the same words.
+
+Stage modules never see raw mappings: the builders here (:func:`inm_params`,
+:func:`segmentation_options`, :func:`postprocess_options`, :func:`check_options`,
+:func:`levelling_options`, :func:`grid_options`, :func:`tie_config`, :func:`ingest_options`,
+:func:`initial_overrides`, :func:`initial_state`) return the typed settings each stage takes.
+Those settings classes keep their defaults (a notebook user writes ``InmParams()``); the
+schema's defaults are read from them, so a default is written once.
+
+Adding a key: one line in the section's model below (plus the attribute of the stage's settings
+class, whose default the schema reads through :func:`stage_default`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import re
+import sys
+from typing import Annotated, Any, Literal, Optional
+
+import numpy as np
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator, model_validator
+from pydantic_core import PydanticCustomError
+
+from .consistency import CheckOptions
+from .errors import ConfigError, suggest
+from .grid import GRID_METHODS, GridOptions
+from .inm.params import RADIUS_SOURCES, InitialState, InmParams, mat_nb_from_attitude
+from .io.csv import DEFAULT_COLUMNS, TIME_FORMATS, UNITS
+from .io.ingest import OPTIONAL_ROLES, ROLES, IngestOptions, imu_axes_matrix
+from .io.mcap import DEFAULT_JSON_FIELDS, DEFAULT_MAX_RECORD_BYTES
+from .levelling import LEVELLING_MODELS, LevellingOptions
+from .marine import NORMAL_GRAVITY_CHOICES
+from .segmentation import SEGMENTATION_MODES, SegmentationOptions
+from .ties import G_ABS_RANGE_MGAL, TieConfig, TieReading
+from .wavelet import BOUNDARY_MODES, METHODS, THRESHOLDINGS, WAVELETS, PostprocessOptions
+
+__all__ = [
+    "Section", "SurveyFile", "FlightSection", "ModelSection", "LinesSection", "PostprocessSection",
+    "ProcessingSection", "OutputSection", "ChecksSection", "LevellingSection", "GridSection",
+    "TieSection", "InitialSection", "config_error", "validate_section", "parse_survey",
+    "inm_params", "segmentation_options", "postprocess_options", "check_options",
+    "levelling_options", "grid_options", "tie_config", "ingest_options", "initial_overrides",
+    "initial_state", "check_inm_params", "reference_markdown", "FLIGHT_NAME_PATTERN",
+    "INGEST_KEYS", "TRIADS", "PROCESSING_METHODS", "ELLIPSOIDS",
+]
+
+#: flight names: safe in file names and XYZ line labels
+FLIGHT_NAME_PATTERN = r"^[A-Za-z0-9_.-]{1,64}$"
+TRIADS = ("platform", "strapdown")
+PROCESSING_METHODS = ("inm", "classic")
+ELLIPSOIDS = ("WGS84", "GRS80")
+#: most a GNSS lever arm component may be, m (a larger one is a unit mistake: mm or cm)
+MAX_LEVER_ARM_M = 100.0
+
+
+def stage_default(cls, name: str):
+    """Default of attribute ``name`` of the stage settings dataclass ``cls`` (the one source)."""
+    for f in dataclasses.fields(cls):
+        if f.name == name:
+            if f.default is not dataclasses.MISSING:
+                return f.default
+            return f.default_factory()  # type: ignore[misc]
+    raise KeyError(f"{cls.__name__} has no attribute {name!r}")
+
+
+def fail(message: str, key: tuple = ()) -> PydanticCustomError:
+    """A validation failure whose text is ``message``, at ``key`` below the current model."""
+    return PydanticCustomError("gravsurvey", "{message}", {"message": message, "key": tuple(key)})
+
+
+def _keys_of(cls) -> list[str]:
+    return [f.alias or n for n, f in cls.model_fields.items()]
+
+
+class Section(BaseModel):
+    """Base of every config section: strict types (no ``"1"`` for 1), finite numbers, unknown
+    keys refused with the nearest valid one, an empty (null) section meaning the defaults."""
+
+    model_config = ConfigDict(strict=True, extra="forbid", allow_inf_nan=False, populate_by_name=True)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _mapping_with_known_keys(cls, data: Any) -> Any:
+        if data is None:
+            return {}
+        if isinstance(data, BaseModel):
+            return data
+        if not isinstance(data, dict):
+            raise PydanticCustomError("mapping", "expected a mapping", {"kind": type(data).__name__})
+        valid = _keys_of(cls)
+        for k in data:
+            if str(k) not in valid:
+                raise PydanticCustomError("unknown_key", "unknown key", {"key": str(k), "valid": valid})
+        return data
+
+    def given(self) -> set[str]:
+        """The keys written in the config (not defaulted)."""
+        return set(self.model_fields_set)
+
+
+def _num(desc: str, default: Any = ..., **limits) -> Any:
+    return Field(default, description=desc, **limits)
+
+
+# ============================================================================ model (3D-INM)
+def _m(name: str, desc: str, **limits) -> Any:
+    return Field(stage_default(InmParams, name), description=desc, **limits)
+
+
+class ModelSection(Section):
+    """``model``: 3D-INM Kalman filter (docs/method.md)."""
+
+    identify: bool = _m("identify", "identify the anomaly prior (`anomaly_sigma_mps2`, `anomaly_lambda_per_m`), "
+                        "`gravimeter_white_mps2` and `altimeter_sigma_m` from the flight (those written in "
+                        "the config are held fixed); `false`: the configured values or the defaults as they are")
+    target_resolution_m: Optional[float] = _m(
+        "target_resolution_m", "half-wavelength resolution the smoother should have, m (the anomaly sigma is "
+        "chosen to put its half-power point there: finer = noisier); null: the resolution of least expected "
+        "error for the flight", gt=0)
+    filter_rate_hz: float = _m("filter_rate_hz", "Kalman epoch rate, Hz (the IMU rate is decimated)", gt=0)
+    accel_noise_mps2: float = _m("accel_noise_mps2", "sigma_f1 = sigma_f2, horizontal accelerometer white "
+                                 "noise, m/s^2 (one-second sigma)", ge=0)
+    gyro_drift_degph: float = _m("gyro_drift_degph", "sigma_nu, white gyro drift, deg/h (one-second sigma)", ge=0)
+    gravimeter_lambda_per_s: float = _m("gravimeter_lambda_per_s", "lambda_f3, gravimeter error correlation "
+                                        "rate, 1/s", ge=0)
+    gravimeter_sigma_mps2: float = _m("gravimeter_sigma_mps2", "sigma_f3, gravimeter Markov error, m/s^2", ge=0)
+    gravimeter_white_mps2: float = _m("gravimeter_white_mps2", "gravimeter white noise on top of the Markov "
+                                      "error, m/s^2 (one-second sigma)", ge=0)
+    anomaly_lambda_per_m: float = _m("anomaly_lambda_per_m", "lambda_s, spatial correlation rate of the anomaly, "
+                                     "1/m (lambda_g = lambda_s * speed)", ge=0)
+    anomaly_sigma_mps2: float = _m("anomaly_sigma_mps2", "sigma_s, anomaly sigma, m/s^2", ge=0)
+    altimeter_sigma_m: float = _m("altimeter_sigma_m", "sigma_eps, radial (height) measurement noise, m", ge=0)
+    radius_source: Literal[RADIUS_SOURCES] = _m(  # type: ignore[valid-type]
+        "radius_source", "|q| of the gravity model: `altimeter` (Andreev: stable in all channels) or `computed` "
+        "(the navigation solution)")
+    initial_position_sigma_m: float = _m("initial_position_sigma_m", "initial sigma of each dq component, m", ge=0)
+    initial_velocity_sigma_mps: float = _m("initial_velocity_sigma_mps", "initial sigma of each dp component, "
+                                           "m/s", ge=0)
+    initial_anomaly_sigma_mps2: float = _m("initial_anomaly_sigma_mps2", "initial sigma of g, m/s^2", ge=0)
+    initial_gravimeter_sigma_mps2: float = _m("initial_gravimeter_sigma_mps2", "initial sigma of f3, m/s^2", ge=0)
+    gnss_aiding: bool = _m("gnss_aiding", "use the record's GNSS positions (when it has a GNSS channel) as a "
+                           "position measurement; the filter then carries 14 states: the seed's 8 plus attitude "
+                           "error and gyro bias (docs/method.md, \"GNSS position aiding\"); `false`: the seed's "
+                           "altimeter-only filter")
+    gnss_horizontal_sigma_m: float = _m("gnss_horizontal_sigma_m", "sigma of each GNSS sample's east and north "
+                                        "error, m", gt=0)
+    gnss_vertical_sigma_m: float = _m("gnss_vertical_sigma_m", "sigma of each GNSS sample's height error, m", gt=0)
+    initial_attitude_sigma_deg: Optional[float] = _m(
+        "initial_attitude_sigma_deg", "initial sigma of each attitude-error component, deg (GNSS-aided filter "
+        "only); null: the alignment's own covariance when the attitude comes from the alignment, 0.05 deg when "
+        "it was given", ge=0)
+    attitude_passes: int = _m("attitude_passes", "most filter/smoother passes of a GNSS-aided strapdown flight: "
+                              "each re-mechanizes about the smoothed initial-attitude correction; stops below "
+                              "0.001 deg", ge=1, le=5)
+    gyro_bias_sigma_degph: float = _m("gyro_bias_sigma_degph", "sigma of each gyro's constant bias, deg/h "
+                                      "(GNSS-aided filter only)", ge=0)
+
+
+# ============================================================================ lines
+def _ln(name: str, desc: str, **limits) -> Any:
+    return Field(stage_default(SegmentationOptions, name), description=desc, **limits)
+
+
+class WindowSection(Section):
+    """One time window ``{name, start_s, stop_s[, kind]}`` (s after the flight's first sample)."""
+
+    name: str = Field(..., description="line name, unique in the flight", min_length=1)
+    start_s: float = Field(..., description="start, s after the flight's first sample")
+    stop_s: float = Field(..., description="end, s after the flight's first sample")
+    kind: Optional[Literal["line", "tie"]] = Field(None, description="`line` or `tie`; default: `tie` for "
+                                                   "names `T<digit>...`, else `line`")
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if self.stop_s <= self.start_s:
+            raise fail(f"expected finite start_s < stop_s, got {self.start_s:g} .. {self.stop_s:g}")
+        return self
+
+
+class LinesSection(Section):
+    """``lines``: line segmentation (docs/outputs.md)."""
+
+    mode: Literal[SEGMENTATION_MODES] = _ln(  # type: ignore[valid-type]
+        "mode", "`auto` (straight-line detection from heading and speed), `windows` (the `windows` below), "
+        "`whole` (the whole flight is line L01)")
+    min_line_m: float = _ln("min_line_m", "shortest line kept, along-track length, m", gt=0)
+    min_line_s: Optional[float] = _ln("min_line_s", "optional additional time limit, s (null: none; lines are "
+                                      "specified by length)", gt=0)
+    heading_tol_deg: float = _ln("heading_tol_deg", "heading deviation allowed on a line, deg", gt=0)
+    min_speed_mps: float = _ln("min_speed_mps", "slower epochs are not line (stationary, taxi), m/s", ge=0)
+    max_turn_rate_degps: float = _ln("max_turn_rate_degps", "faster heading change is a turn, deg/s", gt=0)
+    max_vertical_speed_mps: Optional[float] = _ln("max_vertical_speed_mps", "faster climb/descent is not line, "
+                                                  "m/s (null: no limit)", gt=0)
+    speed_tol_mps: float = _ln("speed_tol_mps", "speed change allowed on a line, m/s", gt=0)
+    smooth_s: float = _ln("smooth_s", "smoothing of heading/speed before detection, s", gt=0)
+    merge_gap_s: float = _ln("merge_gap_s", "line pieces separated by less are merged, s", ge=0)
+    transit_angle_deg: Optional[float] = _ln(
+        "transit_angle_deg", "straight legs within this of the dominant direction are lines, within this of its "
+        "perpendicular tie lines, in between transits (not lines), deg; null: no transits, `tie_angle_deg` "
+        "decides", gt=0, lt=45)
+    tie_angle_deg: float = _ln("tie_angle_deg", "with `transit_angle_deg: null`: lines more than this from the "
+                               "dominant direction are tie lines, deg", gt=0, lt=90)
+    windows: list[WindowSection] = Field(default_factory=list, description="`mode: windows`: "
+                                         "`{name, start_s, stop_s[, kind]}` for every flight (s after its first "
+                                         "sample)")
+
+    @model_validator(mode="after")
+    def _windows_given(self):
+        if self.mode == "windows" and not self.windows:
+            raise fail("required (a non-empty list) when mode is 'windows'", ("windows",))
+        return self
+
+
+# ============================================================================ postprocess
+def _pp(name: str, desc: str, **limits) -> Any:
+    return Field(stage_default(PostprocessOptions, name), description=desc, **limits)
+
+
+class PostprocessSection(Section):
+    """``postprocess``: per-line post-processor (docs/wavelet.md)."""
+
+    method: Literal[("default",) + METHODS] = _pp(  # type: ignore[valid-type]
+        "method", "`default` (= `none`: the smoothed Kalman estimate, at the resolution stated in summary.json), "
+        "`ti_cosphi`, `cosphi` (the seed's rule, faithful), `visushrink`, `sure`, `bayes`, `butterworth`, "
+        "`gaussian`, `none`")
+    wavelet: Literal[WAVELETS] = _pp("wavelet", "`db10`, `coif4`, `auto` (the smaller Phi)")  # type: ignore[valid-type]
+    thresholding: Literal[THRESHOLDINGS] = _pp(  # type: ignore[valid-type]
+        "thresholding", "`soft` or `hard` (`cosphi`, `visushrink`)")
+    boundary: Literal[BOUNDARY_MODES] = _pp(  # type: ignore[valid-type]
+        "boundary", "PyWavelets extension mode of the decimated pyramid")
+    resolution_m: Optional[float] = _pp("resolution_m", "half-wavelength resolution of `butterworth`/`gaussian`, "
+                                        "m (required by them unless `filter_length_s` is given)", gt=0)
+    filter_length_s: Optional[float] = _pp("filter_length_s", "alternative to `resolution_m`: full filter "
+                                           "wavelength, s", gt=0)
+    butterworth_order: int = _pp("butterworth_order", "Butterworth prototype order (applied forward-backward)",
+                                 ge=1, le=12)
+    threshold_steps: int = _pp("threshold_steps", "thresholds tried per level by `cosphi`", ge=1, le=100)
+    max_level: Optional[int] = _pp("max_level", "highest level searched (null: 1 + floor(log2 N))", ge=1, le=64)
+    min_level: int = _pp("min_level", "lowest level searched by `ti_cosphi`", ge=1, le=64)
+
+    @model_validator(mode="after")
+    def _one_length(self):
+        if self.resolution_m is not None and self.filter_length_s is not None:
+            raise fail("give at most one of resolution_m and filter_length_s, not both")
+        if self.max_level is not None and self.max_level < self.min_level:
+            raise fail(f"must be >= min_level ({self.min_level})", ("max_level",))
+        return self
+
+
+# ============================================================================ checks (survey level)
+def _ck(name: str, desc: str, **limits) -> Any:
+    return Field(stage_default(CheckOptions, name), description=desc, **limits)
+
+
+class ChecksSection(Section):
+    """``checks``: gaps, clocks, input consistency and result plausibility (docs/reliability.md)."""
+
+    max_imu_gap_s: float = _ck("max_imu_gap_s", "IMU gaps up to this long are bridged by the mechanization; "
+                               "longer ones split the flight into separately estimated segments, s", gt=0)
+    max_aiding_gap_s: float = _ck("max_aiding_gap_s", "gaps with neither altimeter nor GNSS samples up to this "
+                                  "long are bridged (the smoothed sigma grows across them); longer ones split "
+                                  "the flight, s", gt=0)
+    max_time_offset_s: float = _ck("max_time_offset_s", "largest IMU-GNSS clock offset (measured by "
+                                   "cross-correlating specific force) accepted, s", gt=0)
+    max_gravity_mismatch_mgal: float = _ck(
+        "max_gravity_mismatch_mgal", "largest median difference between the specific-force magnitude the IMU "
+        "measures and the one the GNSS track and normal gravity imply, mGal; beyond it an error when a GNSS "
+        "column mix-up explains it or it exceeds 5x this, else a note", gt=0)
+    max_abs_disturbance_mgal: float = _ck("max_abs_disturbance_mgal", "largest absolute disturbance of the final "
+                                          "product on lines, mGal", gt=0)
+    max_track_deviation_m: float = _ck("max_track_deviation_m", "largest horizontal distance of the GNSS-aided "
+                                       "navigation from the GNSS track (31-epoch running median), m", gt=0)
+    allow_no_lines: bool = _ck("allow_no_lines", "accept a flight in which no survey line is found")
+    allow_nonfinite: bool = _ck("allow_nonfinite", "accept non-finite values in the estimate or product")
+
+
+# ============================================================================ levelling, grid
+def _lv(name: str, desc: str, **limits) -> Any:
+    return Field(stage_default(LevellingOptions, name), description=desc, **limits)
+
+
+class LevellingSection(Section):
+    """``levelling``: crossover levelling (gravsurvey/levelling.py, docs/survey.md)."""
+
+    enabled: Optional[bool] = _lv("enabled", "null: level when there are at least `min_crossovers_per_unknown` "
+                                  "crossovers per unknown; true: whenever there are crossovers; false: never")
+    model: Literal[LEVELLING_MODELS] = _lv(  # type: ignore[valid-type]
+        "model", "`constant` per line, `line_trend` (constant + trend per line), `flight_trend` (constant per "
+        "line + drift per untied flight)")
+    robust: bool = _lv("robust", "Huber IRLS (outlying crossovers lose weight)")
+    huber_k: float = _lv("huber_k", "Huber constant, robust standard deviations", gt=0)
+    sigma_floor_mgal: float = _lv("sigma_floor_mgal", "smallest line sigma in the weights "
+                                  "`1/(sigma_a^2 + sigma_b^2)`, mGal", gt=0)
+    max_iterations: int = _lv("max_iterations", "IRLS iterations at most", ge=1)
+    min_crossovers_per_unknown: float = _lv("min_crossovers_per_unknown", "redundancy needed for automatic "
+                                            "levelling (below it the adjustment fits noise)", gt=0)
+
+
+def _gr(name: str, desc: str, **limits) -> Any:
+    return Field(stage_default(GridOptions, name), description=desc, **limits)
+
+
+class GridSection(Section):
+    """``grid``: gridding of the levelled lines (gravsurvey/grid.py, docs/survey.md)."""
+
+    enabled: Optional[bool] = _gr("enabled", "null: grid when the survey has >= 2 lines; false: never")
+    method: Literal[GRID_METHODS] = _gr(  # type: ignore[valid-type]
+        "method", "harmonica `equivalent_sources` (continued to `altitude_m`) or verde `spline` (2-D, at the "
+        "flight heights)")
+    spacing_m: Optional[float] = _gr("spacing_m", "grid cell size, m (null: line spacing / 4)", gt=0)
+    altitude_m: Optional[float] = _gr("altitude_m", "ellipsoidal height of the grid, m (null: median flight "
+                                      "height)")
+    max_distance_m: Optional[float] = _gr("max_distance_m", "cells farther from the data are empty, m (null: 0.6 "
+                                          "line spacing)", gt=0)
+    depth_m: Optional[float] = _gr("depth_m", "equivalent-source depth below the data, m (null: 1.5 line "
+                                   "spacing)", gt=0)
+    damping: Optional[float] = _gr("damping", "damping of the source coefficients (null: from 0.01, 1, 100 by "
+                                   "block k-fold cross-validation)", gt=0)
+    cv_folds: int = _gr("cv_folds", "cross-validation folds", ge=2)
+
+
+# ============================================================================ flights
+NonEmptyStr = Field(min_length=1)
+
+
+class TieReadingSection(Section):
+    """A still reading at the base: ``{reading_mgal[, time_s]}`` or ``{start_s, stop_s}``."""
+
+    reading_mgal: Optional[float] = Field(None, description="absolute gravity the processed data read at the "
+                                          "base, mGal", ge=G_ABS_RANGE_MGAL[0], le=G_ABS_RANGE_MGAL[1])
+    time_s: Optional[float] = Field(None, description="when, s after the flight's first sample (default: the "
+                                    "flight's first/last epoch)")
+    start_s: Optional[float] = Field(None, description="still window start, s after the flight's first sample")
+    stop_s: Optional[float] = Field(None, description="still window end, s after the flight's first sample")
+
+    @model_validator(mode="after")
+    def _one_form(self):
+        value_form = self.reading_mgal is not None
+        window_form = self.start_s is not None or self.stop_s is not None
+        if value_form == window_form:
+            raise fail("give either reading_mgal (with time_s) or start_s and stop_s, not "
+                       f"{'both' if value_form else 'neither'}")
+        if window_form:
+            if self.start_s is None or self.stop_s is None:
+                raise fail("a window needs both start_s and stop_s (s after the flight's first sample)")
+            if self.stop_s <= self.start_s:
+                raise fail(f"expected start_s < stop_s, got {self.start_s:g} .. {self.stop_s:g}")
+            if self.time_s is not None:
+                raise fail("only with reading_mgal (a window has its own times)", ("time_s",))
+        return self
+
+
+class TieSection(Section):
+    """``flights[i].tie``: base tie, absolute level and linear drift of a flight (docs/survey.md)."""
+
+    base_gravity_mgal: float = Field(..., description="absolute gravity at the base station, mGal",
+                                     ge=G_ABS_RANGE_MGAL[0], le=G_ABS_RANGE_MGAL[1])
+    before: Optional[TieReadingSection] = Field(None, description="base reading before the flight: "
+                                                "`{reading_mgal, time_s}` or a still window `{start_s, stop_s}`")
+    after: Optional[TieReadingSection] = Field(None, description="base reading after the flight (as `before`)")
+    base_lat_deg: Optional[float] = Field(None, description="base latitude for its normal gravity, deg "
+                                          "(null: median position in the window)", ge=-90, le=90)
+    base_height_m: Optional[float] = Field(None, description="base ellipsoidal height, m (null: median in the "
+                                           "window)")
+
+    @model_validator(mode="after")
+    def _a_reading(self):
+        if self.before is None and self.after is None:
+            raise fail("needs a base reading before and/or after the flight (before:, after:)")
+        return self
+
+
+def _three(v: list[float]) -> list[float]:
+    if len(v) != 3:
+        raise fail(f"expected a list of 3 numbers, got {v!r:.60}")
+    return v
+
+
+#: a vector of 3 numbers (the meaning of each is in the key's description)
+Vector3 = Annotated[list[float], AfterValidator(_three)]
+
+
+class InitialSection(Section):
+    """``flights[i].initial``: optional overrides of the first state (checked against the data)."""
+
+    lat_deg: Optional[float] = Field(None, description="geodetic latitude, deg", gt=-90, lt=90)
+    lon_deg: Optional[float] = Field(None, description="longitude, deg")
+    height_m: Optional[float] = Field(None, description="ellipsoidal height, m")
+    velocity_enu_mps: Optional[Vector3] = Field(None, description="[E, N, U] velocity relative to the Earth, m/s")
+    attitude_deg: Optional[Vector3] = Field(None, description="[roll, pitch, heading] of the triad w.r.t. ENU, deg "
+                                            "(strapdown only; used instead of the alignment when its sigma "
+                                            "`model.initial_attitude_sigma_deg` is smaller)")
+
+
+def _role_model(name: str, table: dict, desc: str, vector_keys=()) -> type:
+    """A section whose keys are the roles, each a mapping of quantity -> name(s) (from ``table``)."""
+    roles = {}
+    for role, names in table.items():
+        fields = {q: (Optional[Any], Field(None, description=f"default `{v}`")) for q, v in names.items()}
+        roles[role] = (Optional[create_model(f"{name}_{role}", __base__=Section, **fields)],  # type: ignore[call-overload]
+                       Field(None, description=f"{role} channel"))
+    return create_model(name, __base__=Section, __doc__=desc, **roles)  # type: ignore[call-overload]
+
+
+def _names(v, allowed_lengths, what: str):
+    if isinstance(v, str) and v:
+        return v
+    if isinstance(v, list) and len(v) in allowed_lengths and all(isinstance(x, str) and x for x in v):
+        return list(v)
+    raise fail(f"expected {what}, got {v!r:.60}")
+
+
+JsonFields = _role_model("JsonFields", DEFAULT_JSON_FIELDS, "MCAP JSON field names per channel")
+CsvColumns = _role_model("CsvColumns", DEFAULT_COLUMNS, "CSV column names per channel")
+UnitsSection = create_model(
+    "UnitsSection", __base__=Section, __doc__="units of the channels as written",
+    **{k: (Literal[tuple(v)], Field(next(iter(v)), description=f"unit of {k}: {', '.join(v)}"))  # type: ignore[misc]
+       for k, v in UNITS.items()})
+
+
+class McapSection(Section):
+    """``flights[i].mcap``: MCAP reading options (docs/input-formats.md)."""
+
+    json_fields: JsonFields = Field(default_factory=JsonFields, description="JSON field names per channel; "  # type: ignore[valid-type]
+                                    "`specific_force`/`angular_rate`: one array field or 3 scalar fields")
+    units: UnitsSection = Field(default_factory=UnitsSection, description="units of accel, gyro, height, "  # type: ignore[valid-type]
+                                "gradient")
+    time_source: Literal["auto", "log_time"] = Field(
+        "auto", description="`auto` (header.stamp / JSON time, else log_time) or `log_time`")
+    check_crc: bool = Field(True, description="verify chunk CRCs")
+    max_record_mib: int = Field(DEFAULT_MAX_RECORD_BYTES // 2**20, description="largest record read, MiB "
+                                "(a larger length field is damage)", ge=1, le=65536)
+
+    @field_validator("json_fields", mode="after")
+    @classmethod
+    def _field_names(cls, v):
+        for role, names in v:
+            if names is None:
+                continue
+            for q, x in names:
+                if x is not None:
+                    try:
+                        _names(x, (3,) if q in ("specific_force", "angular_rate") else (), "a field name"
+                               + (" or a list of 3 field names" if q in ("specific_force", "angular_rate") else ""))
+                    except PydanticCustomError as exc:
+                        raise fail(exc.context["message"], (role, q)) from None  # type: ignore[index]
+        return v
+
+
+class CsvSection(Section):
+    """``flights[i].csv``: CSV layout (docs/input-formats.md)."""
+
+    columns: CsvColumns = Field(default_factory=CsvColumns, description="column names per channel")  # type: ignore[valid-type]
+    time_format: Literal[TIME_FORMATS] = Field("ns", description="`ns`, `s`, `gps_week_sow` or `iso`")  # type: ignore[valid-type]
+    units: UnitsSection = Field(default_factory=UnitsSection, description="units of accel, gyro, height, "  # type: ignore[valid-type]
+                                "gradient")
+    delimiter: str = Field(",", description="one character such as `,` `;` or a tab")
+    gps_leap_seconds: int = Field(18, description="GPS - UTC, s (time_format `iso`)", ge=0, le=100)
+
+    @field_validator("delimiter")
+    @classmethod
+    def _one_char(cls, d):
+        if len(d) != 1 or d in "#\"\r\n0123456789.-+eE":
+            raise fail(f"expected one character such as ',' ';' or a tab, got {d!r}")
+        return d
+
+    @model_validator(mode="after")
+    def _time_columns(self):
+        for role, cm in self.columns:
+            if cm is None:
+                continue
+            for q, v in cm:
+                if v is None:
+                    continue
+                if q == "time":
+                    v = _names_at(v, (2, 3), "a column name, or [week, seconds_of_week] or [cycle, week, "
+                                  "seconds_of_week] columns", ("columns", role, q))
+                    if isinstance(v, list) != (self.time_format == "gps_week_sow"):
+                        raise fail(f"time_format {self.time_format} needs "
+                                   f"{'two columns' if isinstance(v, str) else 'one column'}, got {v!r}",
+                                   ("columns", role, q))
+                else:
+                    _names_at(v, (), "a column name", ("columns", role, q))
+        return self
+
+
+def _names_at(v, lengths, what, key):
+    try:
+        return _names(v, lengths, what)
+    except PydanticCustomError as exc:
+        raise fail(exc.context["message"], key) from None  # type: ignore[index]
+
+
+class FlightChecksSection(Section):
+    """``flights[i].checks``: gap detection and plausibility of the inputs (docs/input-formats.md)."""
+
+    gap_factor: float = Field(5.0, description="a sample step longer than this many nominal steps is a gap",
+                              ge=1.5, le=1e6)
+    plausibility: Literal["error", "warn"] = Field("error", description="implausible inputs: `error` or `warn`")
+
+
+class CsvInputs(Section):
+    """``inputs.csv``: one CSV file per channel."""
+
+    imu: str = Field(..., description="IMU CSV file", min_length=1)
+    altimeter: str = Field(..., description="altimeter CSV file", min_length=1)
+    gnss: Optional[str] = Field(None, description="GNSS CSV file", min_length=1)
+    gradient: Optional[str] = Field(None, description="gravity-gradient CSV file", min_length=1)
+
+
+class InputsSection(Section):
+    """``flights[i].inputs``: exactly one of ``mcap``, ``csv``, ``gravimeter``."""
+
+    mcap: Optional[str] = Field(None, description="one MCAP file with the channels", min_length=1)
+    csv: Optional[CsvInputs] = Field(None, description="`{imu: f, altimeter: f, gnss: f}`")
+    gravimeter: Optional[dict] = Field(None, description="`{format: f, file: f, ...}`: a vendor gravimeter file + "
+                                       "navigation, classic chain only (docs/input-formats.md)")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _exactly_one(cls, data):
+        # before the fields: with two inputs, naming the choice helps more than a key inside one
+        if isinstance(data, dict) and set(data) <= set(cls.model_fields):
+            given = [k for k in ("mcap", "csv", "gravimeter") if data.get(k) is not None]
+            if len(given) != 1:
+                raise fail(f"expected exactly one of mcap, csv, gravimeter, got {', '.join(given) or 'none'}")
+        return data
+
+
+class TopicsSection(Section):
+    """``flights[i].topics``: MCAP topic per channel (else found by schema)."""
+
+    imu: str = Field(stage_default(IngestOptions, "topics")["imu"], description="IMU topic", min_length=1)
+    altimeter: str = Field(stage_default(IngestOptions, "topics")["altimeter"], description="altimeter topic",
+                           min_length=1)
+    gnss: str = Field(stage_default(IngestOptions, "topics")["gnss"], description="GNSS topic", min_length=1)
+    gradient: Optional[str] = Field(None, description="gravity-gradient topic (default `/gradient`, else found "
+                                    "by its schema)", min_length=1)
+
+
+#: Flight-level keys handed to ingestion (io/ingest.py)
+INGEST_KEYS = ("inputs", "topics", "mcap", "csv", "checks", "imu_axes", "gnss_lever_arm_m")
+
+
+class FlightSection(Section):
+    """``flights[i]``: one flight."""
+
+    name: Optional[str] = Field(None, description="unique flight name, `[A-Za-z0-9_.-]{1,64}` (default `F01`, "
+                                "`F02`, ...)")
+    inputs: InputsSection = Field(..., description="`{mcap: file}` or `{csv: {imu: f, altimeter: f, gnss: f}}` "
+                                  "or `{gravimeter: {format: f, file: f, ...}}` (vendor gravimeter file + "
+                                  "navigation, classic chain only: docs/input-formats.md)")
+    topics: TopicsSection = Field(default_factory=TopicsSection, description="MCAP topic per channel")
+    mcap: McapSection = Field(default_factory=McapSection, description="JSON field names, units, time source, "
+                              "CRC check, record size bound (docs/input-formats.md)")
+    csv: CsvSection = Field(default_factory=CsvSection, description="column names, time format, units, "
+                            "delimiter (docs/input-formats.md)")
+    checks: FlightChecksSection = Field(default_factory=FlightChecksSection, description="gap detection and "
+                                        "plausibility checks of the inputs (docs/input-formats.md)")
+    triad: Literal[TRIADS] = Field("platform", description="`platform` (ENU-stabilised) or `strapdown` "  # type: ignore[valid-type]
+                                   "(body-fixed triad; docs/conventions.md)")
+    imu_axes: Any = Field("FLU", description="the IMU's axis convention: `FLU` forward-left-up (gravsurvey's "
+                          "own), `FRD` forward-right-down (VectorNav, Xsens, iMAR, NovAtel), `RFU` "
+                          "right-forward-up, or a 3x3 proper rotation `M` with `vec_flu = M vec_sensor`")
+    gnss_lever_arm_m: Vector3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="[forward, left, up] "
+                                      "GNSS antenna position from the IMU on its (FLU) axes, m (strapdown GNSS "
+                                      "aiding)")
+    initial: Optional[InitialSection] = Field(None, description="optional overrides of the state at the first IMU "
+                                              "sample (`initial` below); null: from the data")
+    truth: Optional[str] = Field(None, description="simulator truth CSV (docs/formats.md): adds `truth_mgal`, "
+                                 "`error_mgal`", min_length=1)
+    lines: Optional[list[WindowSection]] = Field(None, description="explicit line windows for this flight, "
+                                                 "`{name, start_s, stop_s[, kind]}`")
+    tie: Optional[TieSection] = Field(None, description="base tie (`flights[].tie` below, docs/survey.md)")
+
+    @field_validator("name")
+    @classmethod
+    def _safe_name(cls, v):
+        if not re.match(FLIGHT_NAME_PATTERN, v):
+            raise fail(f"expected 1-64 characters of A-Z a-z 0-9 _ . -, got {v!r}")
+        return v
+
+    @field_validator("imu_axes")
+    @classmethod
+    def _axes(cls, v):
+        try:
+            imu_axes_matrix(v, "")
+        except ConfigError as exc:
+            raise fail(str(exc).split(": ", 1)[1]) from None
+        return v
+
+    @field_validator("gnss_lever_arm_m")
+    @classmethod
+    def _arm(cls, v):
+        if max(abs(x) for x in v) > MAX_LEVER_ARM_M:
+            raise fail(f"expected [forward, left, up] in m within {MAX_LEVER_ARM_M:g} m, got {v!r}")
+        return v
+
+
+# ============================================================================ top level
+class SurveySection(Section):
+    """``survey``: name and description."""
+
+    name: Optional[str] = Field(None, description="survey name in outputs (default: the config file's name)",
+                                min_length=1)
+    description: Optional[str] = Field(None, description="free text")
+
+    @field_validator("name")
+    @classmethod
+    def _not_blank(cls, v):
+        if not v.strip():
+            raise fail(f"expected a non-empty string, got {v!r}")
+        return v
+
+
+class ProcessingSection(Section):
+    """``processing``: the estimation chain."""
+
+    method: Literal[PROCESSING_METHODS] = Field("inm", description="`inm` (3D-INM Kalman/RTS) or `classic` (the "  # type: ignore[valid-type]
+                                                "conventional scalar reduction, docs/benchmarks.md)")
+    classic_resolution_m: Optional[float] = Field(None, description="half-wavelength resolution of the classic "
+                                                  "method's low-pass, m (null: classic's default)", gt=0)
+    normal_gravity: Literal[NORMAL_GRAVITY_CHOICES] = Field(  # type: ignore[valid-type]
+        "exact", description="classic only: normal gravity subtracted: `exact` (the field of `ellipsoid`) or a "
+        "closed-form formula (IGF1967 for comparisons with NCEI/MGD77 archives; docs/input-formats.md)")
+    gradiometer: bool = Field(False, description="seed-000 products of a flight's gravity-gradient channel in "
+                              "summary.json `flights.<F>.estimator.gradiometer` (docs/method.md section 7)")
+
+    @model_validator(mode="after")
+    def _classic_formula(self):
+        if self.normal_gravity != "exact" and self.method != "classic":
+            raise fail(f"{self.normal_gravity} applies to processing.method classic only (the 3D-INM uses the "
+                       "exact normal gravity field)", ("normal_gravity",))
+        return self
+
+
+class OutputSection(Section):
+    """``output``: deliverables."""
+
+    dir: str = Field("out", description="output directory (relative to the config file; `-o` overrides)",
+                     min_length=1)
+    epsg: Optional[int] = Field(None, description="projected CRS of `easting_m`/`northing_m` (null: the UTM zone "
+                                "of the data)", gt=0)
+    plots: bool = Field(True, description="write PNG plots")
+    xyz: bool = Field(True, description="write Geosoft XYZ")
+    geojson: bool = Field(True, description="write GeoJSON lines")
+
+
+class SurveyFile(Section):
+    """The whole processing config."""
+
+    survey: SurveySection = Field(default_factory=SurveySection, description="`name`, `description`")
+    ellipsoid: Literal[ELLIPSOIDS] = Field("WGS84", description="reference of heights, positions and normal "  # type: ignore[valid-type]
+                                           "gravity")
+    flights: list[FlightSection] = Field(..., description="one mapping per flight", min_length=1)
+    model: ModelSection = Field(default_factory=ModelSection, description="3D-INM filter parameters")
+    lines: LinesSection = Field(default_factory=LinesSection, description="line segmentation")
+    postprocess: PostprocessSection = Field(default_factory=PostprocessSection, description="per-line "
+                                            "post-processor (docs/wavelet.md)")
+    processing: ProcessingSection = Field(default_factory=ProcessingSection, description="estimation chain")
+    output: OutputSection = Field(default_factory=OutputSection, description="deliverables")
+    checks: ChecksSection = Field(default_factory=ChecksSection, description="gaps, clocks, input consistency "
+                                  "and result plausibility; not the flight-level `checks` of ingestion")
+    levelling: LevellingSection = Field(default_factory=LevellingSection, description="crossover levelling")
+    grid: GridSection = Field(default_factory=GridSection, description="gridding of the levelled lines")
+
+    @field_validator("ellipsoid", mode="before")
+    @classmethod
+    def _upper(cls, v):
+        return v.upper() if isinstance(v, str) and v.upper() in ELLIPSOIDS else v
+
+    @model_validator(mode="after")
+    def _across_sections(self):
+        names = set()
+        for i, fl in enumerate(self.flights):
+            name = fl.name or f"F{i + 1:02d}"
+            if name in names:
+                raise fail(f"flight name {name!r} is used twice", ("flights", i, "name"))
+            names.add(name)
+            if fl.inputs.gravimeter is not None and self.processing.method != "classic":
+                raise fail("a gravimeter file is processed by the classic chain only; set processing.method: "
+                           f"classic (got {self.processing.method!r})", ("flights", i, "inputs", "gravimeter"))
+        return self
+
+
+# ============================================================================ errors
+def _path(prefix: str, loc) -> str:
+    out = prefix
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out = f"{out}.{part}" if out else str(part)
+    return out
+
+
+def _got(v) -> str:
+    return f"{v!r:.60}"
+
+
+def _choices(expected: str) -> list[str]:
+    return [c.strip().strip("'\"") for c in re.split(r",| or ", expected) if c.strip()]
+
+
+def _message(err: dict) -> tuple[tuple, str]:
+    """(extra key path, text) of one pydantic error in gravsurvey's words."""
+    t, ctx, v = err["type"], err.get("ctx") or {}, err.get("input")
+    if t == "gravsurvey":
+        return tuple(ctx.get("key", ())), ctx["message"]
+    if t == "unknown_key":
+        valid = ctx["valid"]
+        return (ctx["key"],), f"unknown key{suggest(ctx['key'], valid)}; valid keys here: {', '.join(valid)}"
+    if t in ("mapping", "model_type", "dict_type"):
+        return (), f"expected a mapping, got {type(v).__name__} {_got(v)}"
+    if t == "missing":
+        return (), "missing required key"
+    if t == "literal_error":
+        ch = _choices(ctx.get("expected", ""))
+        return (), f"expected one of {', '.join(ch)}, got {_got(v)}{suggest(v, ch)}"
+    if t in ("float_type", "float_parsing"):
+        return (), f"expected a number, got {_got(v)}"
+    if t == "finite_number":
+        return (), f"expected a finite number, got {_got(v)}"
+    if t in ("int_type", "int_parsing", "int_from_float"):
+        return (), f"expected an integer, got {_got(v)}"
+    if t == "bool_type":
+        return (), f"expected true or false, got {_got(v)}"
+    if t == "string_type":
+        return (), f"expected a string, got {_got(v)}"
+    if t == "string_too_short":
+        return (), f"expected a non-empty string, got {_got(v)}"
+    if t == "list_type":
+        return (), f"expected a list, got {_got(v)}"
+    if t in ("too_short", "too_long"):
+        lo, hi = ctx.get("min_length"), ctx.get("max_length")
+        n = ctx.get("actual_length")
+        if lo == hi:
+            return (), f"expected a list of {lo}, got {_got(v)}"
+        want = f"at least {lo}" if t == "too_short" else f"at most {hi}"
+        return (), f"expected {want} item(s), got {n}: {_got(v)}"
+    bounds = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<", "less_than_equal": "<="}
+    if t in bounds:
+        lim = next(iter(ctx.values()))
+        kind = "an integer" if isinstance(v, int) and not isinstance(v, bool) and isinstance(lim, int) else "a number"
+        return (), f"expected {kind} {bounds[t]} {lim:g}, got {_got(v)}"
+    return (), f"{err['msg']}, got {_got(v)}"
+
+
+def config_error(exc: ValidationError, key_path: str = "") -> ConfigError:
+    """The first problem of ``exc`` as a one-line :class:`ConfigError` naming the full key path.
+
+    ``<key path>: <what was expected>, got <value>``; an unknown key gets the nearest valid name
+    (:func:`gravsurvey.errors.suggest`) and the valid keys of its mapping.
+    """
+    err = exc.errors(include_url=False)[0]
+    extra, text = _message(err)
+    return ConfigError(f"{_path(key_path, tuple(err['loc']) + extra) or key_path or 'config'}: {text}")
+
+
+def validate_section(model: type[Section], data: Any, key_path: str = "") -> Any:
+    """``model`` validated from ``data`` (None: the defaults); :class:`ConfigError` otherwise."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        raise config_error(exc, key_path) from None
+
+
+def parse_survey(raw: dict) -> SurveyFile:
+    """The whole loaded YAML mapping validated against :class:`SurveyFile`."""
+    return validate_section(SurveyFile, raw, "")
+
+
+# ============================================================================ builders
+def _as_dict(section: Section) -> dict:
+    return {k: getattr(section, k) for k in type(section).model_fields}
+
+
+def inm_params(section: ModelSection | dict | None = None, key_path: str = "model") -> InmParams:
+    """:class:`~gravsurvey.inm.params.InmParams` from the ``model`` section; the keys written in
+    it are the ones identification holds fixed (``given``)."""
+    s = section if isinstance(section, ModelSection) else validate_section(ModelSection, section, key_path)
+    return InmParams(**_as_dict(s), given=frozenset(s.given()))
+
+
+def check_inm_params(params: InmParams, key_path: str = "model") -> None:
+    """Raise :class:`ConfigError` naming the key when an :class:`InmParams` built in Python holds a
+    value the ``model`` section would refuse."""
+    validate_section(ModelSection, {k: getattr(params, k) for k in ModelSection.model_fields}, key_path)
+
+
+def segmentation_options(section: LinesSection | dict | None = None, key_path: str = "lines") -> SegmentationOptions:
+    """:class:`~gravsurvey.segmentation.SegmentationOptions` from the ``lines`` section."""
+    s = section if isinstance(section, LinesSection) else validate_section(LinesSection, section, key_path)
+    d = _as_dict(s)
+    d["windows"] = [w.model_dump(exclude_none=True) for w in s.windows]
+    return SegmentationOptions(**d)
+
+
+def postprocess_options(section: PostprocessSection | dict | None = None,
+                        key_path: str = "postprocess") -> PostprocessOptions:
+    """:class:`~gravsurvey.wavelet.PostprocessOptions` from the ``postprocess`` section."""
+    s = section if isinstance(section, PostprocessSection) else validate_section(PostprocessSection, section,
+                                                                                 key_path)
+    return PostprocessOptions(**_as_dict(s))
+
+
+def check_options(section: ChecksSection | dict | None = None, key_path: str = "checks") -> CheckOptions:
+    """:class:`~gravsurvey.consistency.CheckOptions` from the ``checks`` section."""
+    s = section if isinstance(section, ChecksSection) else validate_section(ChecksSection, section, key_path)
+    return CheckOptions(**_as_dict(s))
+
+
+def levelling_options(section: LevellingSection | dict | None = None,
+                      key_path: str = "levelling") -> LevellingOptions:
+    """:class:`~gravsurvey.levelling.LevellingOptions` from the ``levelling`` section."""
+    s = section if isinstance(section, LevellingSection) else validate_section(LevellingSection, section, key_path)
+    return LevellingOptions(**_as_dict(s))
+
+
+def grid_options(section: GridSection | dict | None = None, key_path: str = "grid") -> GridOptions:
+    """:class:`~gravsurvey.grid.GridOptions` from the ``grid`` section."""
+    s = section if isinstance(section, GridSection) else validate_section(GridSection, section, key_path)
+    return GridOptions(**_as_dict(s))
+
+
+def tie_config(section: TieSection | dict, key_path: str = "flights[0].tie") -> TieConfig:
+    """:class:`~gravsurvey.ties.TieConfig` from a flight's ``tie`` section."""
+    s = section if isinstance(section, TieSection) else validate_section(TieSection, section, key_path)
+
+    def reading(r):
+        return None if r is None else TieReading(r.reading_mgal, r.time_s, r.start_s, r.stop_s)
+
+    return TieConfig(s.base_gravity_mgal, reading(s.before), reading(s.after), s.base_lat_deg, s.base_height_m)
+
+
+def initial_overrides(section: InitialSection | dict, key_path: str = "initial") -> dict:
+    """The ``initial`` keys given, as floats (``velocity_enu_mps``, ``attitude_deg``: ndarray (3,)),
+    for :func:`gravsurvey.inm.params.resolve_initial_state`."""
+    s = section if isinstance(section, InitialSection) else validate_section(InitialSection, section, key_path)
+    out: dict = {}
+    for k in ("lat_deg", "lon_deg", "height_m"):
+        if getattr(s, k) is not None:
+            out[k] = float(getattr(s, k))
+    for k in ("velocity_enu_mps", "attitude_deg"):
+        if getattr(s, k) is not None:
+            out[k] = np.asarray(getattr(s, k), dtype=float)
+    return out
+
+
+def initial_state(section: InitialSection | dict, triad: str, key_path: str = "initial") -> InitialState:
+    """A complete initial state from an ``initial`` block: position, velocity and, for a strapdown
+    triad, ``attitude_deg`` (a platform's triad is ENU)."""
+    given = initial_overrides(section, key_path)
+    need = ["lat_deg", "lon_deg", "height_m", "velocity_enu_mps"] + (["attitude_deg"] if triad == "strapdown" else [])
+    for k in need:
+        if k not in given:
+            raise ConfigError(f"{key_path}.{k}: missing required key")
+    mat_nt = np.eye(3)
+    if triad == "strapdown":
+        mat_nt = mat_nb_from_attitude(*np.radians(given["attitude_deg"]))
+    return InitialState(math.radians(given["lat_deg"]), math.radians(given["lon_deg"]), given["height_m"],
+                        given["velocity_enu_mps"], mat_nt)
+
+
+def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", base_dir=None) -> IngestOptions:
+    """:class:`~gravsurvey.io.ingest.IngestOptions` from a flight's ingestion keys
+    (:data:`INGEST_KEYS`; a mapping with only these keys, or a validated :class:`FlightSection`)."""
+    if not isinstance(flight, FlightSection):
+        if isinstance(flight, dict):
+            extra = [k for k in flight if k not in INGEST_KEYS]
+            if extra:
+                raise ConfigError(f"{key_path}.{extra[0]}: unknown key{suggest(extra[0], INGEST_KEYS)}; "
+                                  f"valid keys here: {', '.join(INGEST_KEYS)}")
+        flight = validate_section(FlightSection, flight, key_path)
+    f = flight
+    o = IngestOptions(key_path=key_path, base_dir=os.fspath(base_dir) if base_dir is not None else None)
+    if f.inputs.gravimeter is not None:
+        from .io.formats.flight import gravimeter_options_from_dict
+
+        o.kind = "gravimeter"
+        o.gravimeter = gravimeter_options_from_dict(f.inputs.gravimeter, f"{key_path}.inputs.gravimeter")
+    elif f.inputs.mcap is not None:
+        o.kind, o.mcap_path = "mcap", f.inputs.mcap
+    else:
+        o.kind = "csv"
+        o.csv_paths = {r: p for r, p in _as_dict(f.inputs.csv).items() if p is not None}
+    given_topics = f.topics.given()
+    o.topics.update({r: getattr(f.topics, r) for r in ROLES + OPTIONAL_ROLES if r in given_topics})
+    o.topics_explicit = tuple(r for r in ROLES + OPTIONAL_ROLES if r in given_topics)
+    for role, names in f.mcap.json_fields:
+        if names is not None:
+            o.json_fields[role].update({q: v for q, v in names if v is not None})
+    if "units" in f.mcap.given():
+        o.mcap_units = _as_dict(f.mcap.units)
+    o.time_source = f.mcap.time_source
+    o.check_crc = f.mcap.check_crc
+    o.max_record_bytes = f.mcap.max_record_mib * 2**20
+    o.csv_time_format = f.csv.time_format
+    for role, names in f.csv.columns:
+        if names is not None:
+            o.csv_columns[role] = {q: v for q, v in names if v is not None}
+    if "units" in f.csv.given():
+        o.csv_units = _as_dict(f.csv.units)
+    o.csv_delimiter = f.csv.delimiter
+    o.gps_leap_seconds = f.csv.gps_leap_seconds
+    o.mat_axes = imu_axes_matrix(f.imu_axes, f"{key_path}.imu_axes")
+    o.gnss_lever_arm_m = np.asarray(f.gnss_lever_arm_m, dtype=float)
+    o.gap_factor = float(f.checks.gap_factor)
+    o.plausibility = f.checks.plausibility
+    return o
+
+
+# ============================================================================ docs/config.md
+#: sections of the generated reference: (heading, key prefix, model)
+DOC_SECTIONS: list[tuple[str, str, type]] = [
+    ("Top level", "", SurveyFile),
+    ("`survey`", "survey.", SurveySection),
+    ("`processing`", "processing.", ProcessingSection),
+    ("Flights (`flights[i]`)", "", FlightSection),
+    ("`flights[i].inputs`", "inputs.", InputsSection),
+    ("`flights[i].inputs.csv`", "inputs.csv.", CsvInputs),
+    ("`flights[i].topics`", "topics.", TopicsSection),
+    ("`flights[i].mcap`", "mcap.", McapSection),
+    ("`flights[i].csv`", "csv.", CsvSection),
+    ("`flights[i].mcap.units`, `flights[i].csv.units`", "units.", UnitsSection),
+    ("`flights[i].checks`", "checks.", FlightChecksSection),
+    ("`flights[i].initial`", "initial.", InitialSection),
+    ("`flights[i].lines`, `lines.windows[j]`", "", WindowSection),
+    ("`flights[i].tie`", "tie.", TieSection),
+    ("`flights[i].tie.before`, `flights[i].tie.after`", "", TieReadingSection),
+    ("`model`: 3D-INM Kalman filter (docs/method.md)", "", ModelSection),
+    ("`lines`: line segmentation (docs/outputs.md)", "", LinesSection),
+    ("`postprocess`: per-line post-processor (docs/wavelet.md)", "", PostprocessSection),
+    ("`output`", "", OutputSection),
+    ("`checks`: gaps, clocks, consistency, plausibility (docs/reliability.md)", "", ChecksSection),
+    ("`levelling`: crossover levelling (gravsurvey/levelling.py)", "", LevellingSection),
+    ("`grid`: gridding (gravsurvey/grid.py)", "", GridSection),
+]
+GENERATED_BEGIN = "<!-- BEGIN GENERATED REFERENCE: python -m gravsurvey.settings --doc; do not edit by hand -->"
+GENERATED_END = "<!-- END GENERATED REFERENCE -->"
+
+
+def _type_text(ann, field) -> str:
+    text = repr(ann).replace("typing.", "")
+    lit = re.findall(r"Literal\[(.*)\]", text)
+    if lit:
+        t = " \\| ".join(f"`{c}`" for c in _choices(lit[0]))
+    elif "bool" in text:
+        t = "bool"
+    elif "_three" in text:
+        t = "list of 3 numbers"
+    elif "list[float]" in text:
+        t = "list of numbers"
+    elif "list[" in text:
+        t = "list"
+    elif "float" in text:
+        t = "number"
+    elif "int" in text:
+        t = "integer"
+    elif "str" in text:
+        t = "string"
+    elif "Section" in text or "JsonFields" in text or "CsvColumns" in text or "dict" in text:
+        t = "mapping"
+    else:
+        t = "see meaning"
+    limits = []
+    for m in field.metadata:
+        for attr, op in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<=")):
+            if getattr(m, attr, None) is not None:
+                limits.append(f"{op} {getattr(m, attr):g}")
+    if limits:
+        t += " " + ", ".join(limits)
+    if "Optional" in text or "None" in text:
+        t += " or null"
+    return t
+
+
+def _default_text(field) -> str:
+    if field.is_required():
+        return "required"
+    if field.default_factory is not None:
+        v = field.default_factory()
+        if isinstance(v, BaseModel):
+            return "below"
+    else:
+        v = field.default
+    if v is None:
+        return "null"
+    if isinstance(v, bool):
+        return f"`{str(v).lower()}`"
+    if isinstance(v, str):
+        return f"`{v}`"
+    if isinstance(v, float):
+        return f"{v:g}"
+    return f"`{v}`" if isinstance(v, list) and v else (f"{v}" if v != [] else "[]")
+
+
+def reference_markdown() -> str:
+    """The generated key reference of docs/config.md (between the GENERATED markers)."""
+    out = [GENERATED_BEGIN, ""]
+    for heading, prefix, model in DOC_SECTIONS:
+        out += [f"### {heading}", "", (model.__doc__ or "").strip().split("\n")[0], "",
+                "| key | type | default | meaning |", "|---|---|---|---|"]
+        for name, field in model.model_fields.items():
+            key = f"{prefix}{field.alias or name}"
+            desc = (field.description or "").replace("|", "\\|")
+            out.append(f"| `{key}` | {_type_text(field.annotation, field)} | {_default_text(field)} | {desc} |")
+        out.append("")
+    out.append(GENERATED_END)
+    return "\n".join(out)
+
+
+def splice_reference(doc_text: str) -> str:
+    """``doc_text`` with its generated section replaced by :func:`reference_markdown`."""
+    a, b = doc_text.find(GENERATED_BEGIN), doc_text.find(GENERATED_END)
+    if a < 0 or b < a:
+        raise ValueError("docs/config.md has no generated reference markers")
+    return doc_text[:a] + reference_markdown() + doc_text[b + len(GENERATED_END):]
+
+
+def main(argv=None) -> int:
+    """``python -m gravsurvey.settings --doc [docs/config.md]``: rewrite the generated reference;
+    ``--check``: exit 1 when the file's reference differs from the schema."""
+    import argparse
+    from pathlib import Path
+
+    ap = argparse.ArgumentParser(prog="python -m gravsurvey.settings")
+    ap.add_argument("--doc", action="store_true", help="rewrite the generated reference in the file")
+    ap.add_argument("--check", action="store_true", help="exit 1 if the file's reference is out of date")
+    ap.add_argument("path", nargs="?", default="docs/config.md")
+    a = ap.parse_args(argv)
+    p = Path(a.path)
+    text = p.read_text(encoding="utf-8")
+    new = splice_reference(text)
+    if a.check:
+        if new != text:
+            print(f"{p}: generated reference differs from gravsurvey/settings.py; run python -m "
+                  "gravsurvey.settings --doc", file=sys.stderr)
+            return 1
+        return 0
+    if a.doc:
+        p.write_text(new, encoding="utf-8")
+        return 0
+    print(reference_markdown())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
