@@ -24,7 +24,7 @@ import math
 import os
 import re
 import sys
-from typing import Annotated, Any, Literal, Optional
+from typing import Annotated, Any, Literal, Optional, get_args, get_origin
 
 import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator, model_validator
@@ -405,8 +405,11 @@ def _role_model(name: str, table: dict, desc: str, vector_keys=()) -> type:
     """A section whose keys are the roles, each a mapping of quantity -> name(s) (from ``table``)."""
     roles = {}
     for role, names in table.items():
-        fields = {q: (Optional[Any], Field(None, description=f"default `{v}`")) for q, v in names.items()}
-        roles[role] = (Optional[create_model(f"{name}_{role}", __base__=Section, **fields)],  # type: ignore[call-overload]
+        fields = {q: (Optional[Any], Field(None, description=f"{desc} for {q} (default `{v}`)",
+                                           json_schema_extra={"type_text": "string" + (" or list" if q in vector_keys else "")}))
+                  for q, v in names.items()}
+        sub = create_model(f"{name}_{role}", __base__=Section, __doc__=f"{desc}: {role} channel", **fields)  # type: ignore[call-overload]
+        roles[role] = (Optional[sub],
                        Field(None, description=f"{role} channel"))
     return create_model(name, __base__=Section, __doc__=desc, **roles)  # type: ignore[call-overload]
 
@@ -419,8 +422,9 @@ def _names(v, allowed_lengths, what: str):
     raise fail(f"expected {what}, got {v!r:.60}")
 
 
-JsonFields = _role_model("JsonFields", DEFAULT_JSON_FIELDS, "MCAP JSON field names per channel")
-CsvColumns = _role_model("CsvColumns", DEFAULT_COLUMNS, "CSV column names per channel")
+JsonFields = _role_model("JsonFields", DEFAULT_JSON_FIELDS, "MCAP JSON field name",
+                         ("specific_force", "angular_rate"))
+CsvColumns = _role_model("CsvColumns", DEFAULT_COLUMNS, "CSV column name", ("time",))
 UnitsSection = create_model(
     "UnitsSection", __base__=Section, __doc__="units of the channels as written",
     **{k: (Literal[tuple(v)], Field(next(iter(v)), description=f"unit of {k}: {', '.join(v)}"))  # type: ignore[misc]
@@ -568,7 +572,8 @@ class FlightSection(Section):
                                         "plausibility checks of the inputs (docs/input-formats.md)")
     triad: Literal[TRIADS] = Field("platform", description="`platform` (ENU-stabilised) or `strapdown` "  # type: ignore[valid-type]
                                    "(body-fixed triad; docs/conventions.md)")
-    imu_axes: Any = Field("FLU", description="the IMU's axis convention: `FLU` forward-left-up (gravsurvey's "
+    imu_axes: Any = Field("FLU", json_schema_extra={"type_text": "`FLU` \\| `FRD` \\| `RFU` \\| 3x3 matrix"},
+                          description="the IMU's axis convention: `FLU` forward-left-up (gravsurvey's "
                           "own), `FRD` forward-right-down (VectorNav, Xsens, iMAR, NovAtel), `RFU` "
                           "right-forward-up, or a 3x3 proper rotation `M` with `vec_flu = M vec_sensor`")
     gnss_lever_arm_m: Vector3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="[forward, left, up] "
@@ -711,8 +716,9 @@ def _choices(expected: str) -> list[str]:
     return [c.strip().strip("'\"") for c in re.split(r",| or ", expected) if c.strip()]
 
 
-def _message(err: dict) -> tuple[tuple, str]:
-    """(extra key path, text) of one pydantic error in gravsurvey's words."""
+def _message(err: dict, field=None) -> tuple[tuple, str]:
+    """(extra key path, text) of one pydantic error in gravsurvey's words (``field``: the
+    schema field at the error's location, for its limits and description)."""
     t, ctx, v = err["type"], err.get("ctx") or {}, err.get("input")
     if t == "gravsurvey":
         return tuple(ctx.get("key", ())), ctx["message"]
@@ -722,7 +728,8 @@ def _message(err: dict) -> tuple[tuple, str]:
     if t in ("mapping", "model_type", "dict_type"):
         return (), f"expected a mapping, got {type(v).__name__} {_got(v)}"
     if t == "missing":
-        return (), "missing required key"
+        hint = f" ({field.description})" if field is not None and field.description else ""
+        return (), f"missing required key{hint}"
     if t == "literal_error":
         ch = _choices(ctx.get("expected", ""))
         return (), f"expected one of {', '.join(ch)}, got {_got(v)}{suggest(v, ch)}"
@@ -743,26 +750,58 @@ def _message(err: dict) -> tuple[tuple, str]:
     if t in ("too_short", "too_long"):
         lo, hi = ctx.get("min_length"), ctx.get("max_length")
         n = ctx.get("actual_length")
-        if lo == hi:
-            return (), f"expected a list of {lo}, got {_got(v)}"
+        if t == "too_short" and lo == 1:
+            return (), f"expected a non-empty list, got {_got(v)}"
         want = f"at least {lo}" if t == "too_short" else f"at most {hi}"
         return (), f"expected {want} item(s), got {n}: {_got(v)}"
-    bounds = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<", "less_than_equal": "<="}
+    bounds = ("greater_than", "greater_than_equal", "less_than", "less_than_equal")
     if t in bounds:
-        lim = next(iter(ctx.values()))
-        kind = "an integer" if isinstance(v, int) and not isinstance(v, bool) and isinstance(lim, int) else "a number"
-        return (), f"expected {kind} {bounds[t]} {lim:g}, got {_got(v)}"
+        ann = field.annotation if field is not None else type(v)
+        kind = "an integer" if ann is int or int in get_args(ann) else "a number"
+        lim = {a: getattr(m, a) for m in (field.metadata if field is not None else ())
+               for a in ("gt", "ge", "lt", "le") if getattr(m, a, None) is not None} or dict(ctx)
+        lo = [(a, x) for a, x in lim.items() if a in ("gt", "ge")]
+        hi = [(a, x) for a, x in lim.items() if a in ("lt", "le")]
+        if lo and hi:
+            (la, lx), (ha, hx) = lo[0], hi[0]
+            rng = f"{'(' if la == 'gt' else '['}{lx:g}, {hx:g}{')' if ha == 'lt' else ']'}"
+            return (), f"expected {kind} in {rng}, got {_got(v)}"
+        a, x = next(iter(lim.items()))
+        op = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}[a]
+        return (), f"expected {kind} {op} {x:g}, got {_got(v)}"
     return (), f"{err['msg']}, got {_got(v)}"
 
 
-def config_error(exc: ValidationError, key_path: str = "") -> ConfigError:
+def _field_at(model: type, loc) -> Any:
+    """The schema field at ``loc`` below ``model`` (None when the path leaves the schema)."""
+    field, cur = None, model
+    for part in loc:
+        if isinstance(part, int):
+            args = [a for a in get_args(cur) if a is not type(None)] if cur is not None else []
+            cur = args[0] if args else None
+            continue
+        while cur is not None and not (isinstance(cur, type) and issubclass(cur, BaseModel)):
+            args = [a for a in get_args(cur) if a is not type(None)]
+            cur = args[0] if len(args) == 1 and get_origin(cur) is not list else (
+                args[0] if get_origin(cur) is list else None)
+            if get_origin(cur) is list:
+                break
+        if not (isinstance(cur, type) and issubclass(cur, BaseModel)) or part not in cur.model_fields:
+            return None
+        field = cur.model_fields[part]
+        cur = field.annotation
+    return field
+
+
+def config_error(exc: ValidationError, key_path: str = "", model: type | None = None) -> ConfigError:
     """The first problem of ``exc`` as a one-line :class:`ConfigError` naming the full key path.
 
     ``<key path>: <what was expected>, got <value>``; an unknown key gets the nearest valid name
     (:func:`gravsurvey.errors.suggest`) and the valid keys of its mapping.
     """
     err = exc.errors(include_url=False)[0]
-    extra, text = _message(err)
+    field = _field_at(model, err["loc"]) if model is not None else None
+    extra, text = _message(err, field)
     return ConfigError(f"{_path(key_path, tuple(err['loc']) + extra) or key_path or 'config'}: {text}")
 
 
@@ -771,7 +810,7 @@ def validate_section(model: type[Section], data: Any, key_path: str = "") -> Any
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        raise config_error(exc, key_path) from None
+        raise config_error(exc, key_path, model) from None
 
 
 def parse_survey(raw: dict) -> SurveyFile:
@@ -920,6 +959,10 @@ def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", b
 
 
 # ============================================================================ docs/config.md
+def _role_section(model: type, role: str) -> type:
+    return next(a for a in get_args(model.model_fields[role].annotation) if a is not type(None))
+
+
 #: sections of the generated reference: (heading, key prefix, model)
 DOC_SECTIONS: list[tuple[str, str, type]] = [
     ("Top level", "", SurveyFile),
@@ -932,6 +975,10 @@ DOC_SECTIONS: list[tuple[str, str, type]] = [
     ("`flights[i].mcap`", "mcap.", McapSection),
     ("`flights[i].csv`", "csv.", CsvSection),
     ("`flights[i].mcap.units`, `flights[i].csv.units`", "units.", UnitsSection),
+    *[(f"`flights[i].mcap.json_fields.{role}`", f"mcap.json_fields.{role}.", _role_section(JsonFields, role))
+      for role in DEFAULT_JSON_FIELDS],
+    *[(f"`flights[i].csv.columns.{role}`", f"csv.columns.{role}.", _role_section(CsvColumns, role))
+      for role in DEFAULT_COLUMNS],
     ("`flights[i].checks`", "checks.", FlightChecksSection),
     ("`flights[i].initial`", "initial.", InitialSection),
     ("`flights[i].lines`, `lines.windows[j]`", "", WindowSection),
@@ -950,25 +997,28 @@ GENERATED_END = "<!-- END GENERATED REFERENCE -->"
 
 
 def _type_text(ann, field) -> str:
-    text = repr(ann).replace("typing.", "")
-    lit = re.findall(r"Literal\[(.*)\]", text)
-    if lit:
-        t = " \\| ".join(f"`{c}`" for c in _choices(lit[0]))
-    elif "bool" in text:
+    """Markdown type of a field: choices, number/integer/bool/string/mapping/list, limits, null."""
+    if isinstance(field.json_schema_extra, dict) and "type_text" in field.json_schema_extra:
+        return str(field.json_schema_extra["type_text"])
+    args = [a for a in get_args(ann) if a is not type(None)] if get_origin(ann) is not None else []
+    nullable = type(None) in get_args(ann)
+    base = args[0] if nullable and len(args) == 1 else ann
+    if get_origin(base) is Literal:
+        t = " \\| ".join(f"`{c}`" for c in get_args(base))
+    elif base is bool:
         t = "bool"
-    elif "_three" in text:
-        t = "list of 3 numbers"
-    elif "list[float]" in text:
-        t = "list of numbers"
-    elif "list[" in text:
-        t = "list"
-    elif "float" in text:
+    elif base is float:
         t = "number"
-    elif "int" in text:
+    elif base is int:
         t = "integer"
-    elif "str" in text:
+    elif base is str:
         t = "string"
-    elif "Section" in text or "JsonFields" in text or "CsvColumns" in text or "dict" in text:
+    elif any(getattr(m, "func", None) is _three for m in field.metadata) or (
+            get_origin(base) is Annotated and any(getattr(m, "func", None) is _three for m in get_args(base)[1:])):
+        t = "list of 3 numbers"
+    elif get_origin(base) is list:
+        t = "list"
+    elif base is dict or (isinstance(base, type) and issubclass(base, BaseModel)):
         t = "mapping"
     else:
         t = "see meaning"
@@ -979,9 +1029,7 @@ def _type_text(ann, field) -> str:
                 limits.append(f"{op} {getattr(m, attr):g}")
     if limits:
         t += " " + ", ".join(limits)
-    if "Optional" in text or "None" in text:
-        t += " or null"
-    return t
+    return t + (" or null" if nullable else "")
 
 
 def _default_text(field) -> str:

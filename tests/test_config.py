@@ -8,10 +8,7 @@ import pytest
 
 from gravsurvey import config as C
 from gravsurvey.errors import ConfigError
-from gravsurvey.inm.params import InmParams
-from gravsurvey.io.ingest import INGEST_KEYS
-from gravsurvey.survey import SegmentationOptions
-from gravsurvey.wavelet import PostprocessOptions
+from gravsurvey import settings as S
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_data" / "seed_line" / "survey.yaml"
@@ -21,16 +18,42 @@ def _documented():
     return set(re.findall(r"^\| `([\w.]+)` \|", (ROOT / "docs" / "config.md").read_text(), re.M))
 
 
+def _schema_keys(model, prefix=""):
+    """Every key path of a schema section, nested sections included (``flights[i]`` -> ``flights.``)."""
+    out = set()
+    for name, field in model.model_fields.items():
+        out.add(prefix + name)
+        for sub in (field.annotation, *getattr(field.annotation, "__args__", ())):
+            inner = getattr(sub, "__args__", ())
+            for cand in (sub, *inner):
+                if isinstance(cand, type) and issubclass(cand, S.Section):
+                    out |= _schema_keys(cand, prefix + name + ".")
+    return out
+
+
 def test_every_key_is_documented():
     doc = _documented()
-    keys = set(C.TOP_KEYS) | set(C.FLIGHT_OWN_KEYS) | set(INGEST_KEYS) | set(C.OUTPUT_KEYS)
-    keys |= {f.name for f in dataclasses.fields(InmParams) if f.name != "given"}  # given: not a key
-    keys |= set(SegmentationOptions.keys())
-    keys |= set(PostprocessOptions.__dataclass_fields__)
-    keys |= {f"survey.{k}" for k in C.SURVEY_KEYS} | {f"processing.{k}" for k in C.PROCESSING_KEYS}
-    keys -= {"survey", "processing"}
-    missing = sorted(k for k in keys if k not in doc)
+    keys = {k.split(".")[-1] for k in _schema_keys(S.SurveyFile)}
+    documented_leaves = {d.split(".")[-1] for d in doc}
+    missing = sorted(k for k in keys if k not in documented_leaves)
     assert not missing, f"undocumented config keys: {missing}"
+    # and the top-level sections by their full name
+    assert set(S.SurveyFile.model_fields) <= doc
+
+
+def test_generated_reference_matches_the_schema():
+    """docs/config.md's reference section is exactly what the schema generates
+    (`python -m gravsurvey.settings --doc` rewrites it)."""
+    text = (ROOT / "docs" / "config.md").read_text()
+    assert S.GENERATED_BEGIN in text and S.GENERATED_END in text
+    assert S.splice_reference(text) == text, "docs/config.md is out of date: python -m gravsurvey.settings --doc"
+    # the check can fail: a changed description is noticed
+    S.ModelSection.model_fields["filter_rate_hz"].description += " (changed)"
+    try:
+        assert S.splice_reference(text) != text
+    finally:
+        S.ModelSection.model_fields["filter_rate_hz"].description = \
+            S.ModelSection.model_fields["filter_rate_hz"].description[:-len(" (changed)")]
 
 
 def _sample_with(tmp_path, old, new):
@@ -55,7 +78,7 @@ def test_sample_config_loads_with_paths_relative_to_file():
         ("lines: {mode: whole}", "line: {mode: whole}", r"^line: unknown key \(did you mean 'lines'\?\)"),
         ("triad: platform", "triad: gimbal", r"flights\[0\]\.triad: expected one of platform, strapdown"),
         ("triad: platform", "triad: platform\n  colour: red", r"flights\[0\]\.colour: unknown key"),
-        ("output: {dir: out}", "output: {dir: out, epsg: -3}", r"output\.epsg: expected a positive integer"),
+        ("output: {dir: out}", "output: {dir: out, epsg: -3}", r"^output\.epsg: expected an integer > 0, got -3$"),
         ("output: {dir: out}", "output: {dirr: out}", r"output\.dirr: unknown key \(did you mean 'dir'\?\)"),
         ("ellipsoid: WGS84", "ellipsoid: Krassowsky", r"ellipsoid: expected one of WGS84, GRS80"),
         ("lines: {mode: whole}", "model: {altimeter_sigma_m: -1}\nlines: {mode: whole}", r"model\.altimeter_sigma_m"),
@@ -124,7 +147,7 @@ def test_example_config_from_init_is_documented_and_valid_apart_from_inputs(tmp_
         ("truth: ", "truth: nope/", r"^flights\[0\]\.truth: truth file not found"),
         ("truth.csv", "F01_json.mcap", r"^flights\[0\]\.truth: .* not a text CSV"),
         ("lines: {mode: whole}", "lines: {mode: windows, windows: [{name: A, start_s: 10}]}",
-         r"^lines\.windows\[0\]: missing key 'stop_s'"),
+         r"^lines\.windows\[0\]\.stop_s: missing required key$"),
         ("  truth: ", "  lines: [{name: A, start_s: 500, stop_s: 10}]\n  truth: ",
          r"^flights\[0\]\.lines\[0\]: expected finite start_s < stop_s"),
         ("ellipsoid: WGS84", "ellipsoid: WGS84\nellipsoid: GRS80", r"key 'ellipsoid' given twice"),

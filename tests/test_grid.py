@@ -99,7 +99,7 @@ def test_thinning_and_spacing():
 def test_grid_errors():
     with pytest.raises(ConfigError, match="grid.method"):
         grid_options({"method": "kriging"})
-    with pytest.raises(ConfigError, match="grid.spacing_m: must be > 0"):
+    with pytest.raises(ConfigError, match=r"^grid\.spacing_m: expected a number > 0, got -5$"):
         grid_options({"spacing_m": -5})
     with pytest.raises(ConfigError, match="grid.cv_folds"):
         grid_options({"cv_folds": 1})

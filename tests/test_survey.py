@@ -252,7 +252,7 @@ def test_windows():
 def test_options_validation():
     o = segmentation_options({"min_line_s": 200, "heading_tol_deg": 8.0, "max_vertical_speed_mps": None})
     assert o.min_line_s == 200.0 and o.heading_tol_deg == 8.0 and o.max_vertical_speed_mps is None
-    with pytest.raises(ConfigError, match=r"^lines\.min_lin_s: unknown key \(did you mean 'min_line_s'\?\); valid keys here: mode, min_line_s, "):
+    with pytest.raises(ConfigError, match=r"^lines\.min_lin_s: unknown key \(did you mean 'min_line_s'\?\); valid keys here: mode, min_line_m, min_line_s, "):
         segmentation_options({"min_lin_s": 3})
     with pytest.raises(ConfigError, match=r"lines\.mode: expected one of auto, windows, whole, got 'bogus'"):
         segmentation_options({"mode": "bogus"})
@@ -428,6 +428,6 @@ def test_transit_is_recognised_by_heading():
     # with transit detection off, the 45-deg leg is a line or a tie again (tie_angle_deg rule)
     segs = segment_lines(t, lat, lon, vel, transit_angle_deg=None)
     assert [s.kind for s in segs if s.kind != "turn"][-1] in ("line", "tie")
-    with pytest.raises(ConfigError, match=r"^lines\.transit_angle_deg: expected a number < 45, got 50$"):
+    with pytest.raises(ConfigError, match=r"^lines\.transit_angle_deg: expected a number in \(0, 45\), got 50$"):
         segmentation_options({"transit_angle_deg": 50})
     assert segmentation_options({"transit_angle_deg": None}).transit_angle_deg is None
