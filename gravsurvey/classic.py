@@ -63,14 +63,11 @@ from scipy.interpolate import CubicSpline
 
 from .errors import ConfigError, DataError, DataWarning
 from .geodesy import MGAL, WGS84, Ellipsoid, radii_of_curvature
+from .filters import SIGMA_PER_LENGTH, gaussian_fir, lowpass_valid
 from .io.record import FlightRecord
 
 #: Default filter length (full wavelength at -6 dB), s.  model.md: ~400 s reaches ~1 mGal.
 DEFAULT_FILTER_LENGTH_S = 400.0
-#: Gaussian kernel truncated at this many standard deviations.
-KERNEL_HALF_WIDTH_SIGMAS = 4.0
-#: sigma / L for the Gaussian whose transfer function is 0.5 at period L.
-SIGMA_PER_LENGTH = math.sqrt(math.log(2.0) / 2.0) / math.pi
 
 _BOULE = {"WGS84": boule.WGS84, "GRS80": boule.GRS80}
 
@@ -128,53 +125,6 @@ class ClassicResult:
 # --------------------------------------------------------------------------
 # Building blocks (public: tests pass truth through the very same filter)
 # --------------------------------------------------------------------------
-
-
-def gaussian_fir(filter_length_s: float, dt_s: float) -> np.ndarray:
-    """Zero-phase Gaussian FIR kernel.
-
-    Parameters
-    ----------
-    filter_length_s : float
-        L, the full wavelength (in time, s) at which the transfer function is 0.5.
-    dt_s : float
-        Sample step, s.
-
-    Returns
-    -------
-    w : ndarray, shape (2K+1,)
-        Symmetric weights summing to 1; ``K = ceil(4 s / dt)``, ``s = 0.1874 L``.
-    """
-    s = SIGMA_PER_LENGTH * filter_length_s
-    k = max(1, math.ceil(KERNEL_HALF_WIDTH_SIGMAS * s / dt_s))
-    t = np.arange(-k, k + 1) * dt_s
-    w = np.exp(-0.5 * (t / s) ** 2)
-    return w / w.sum()
-
-
-def gaussian_transfer(freq_hz, filter_length_s: float):
-    """Transfer function of the (untruncated) Gaussian filter: ``exp(-2 pi^2 s^2 f^2)``; 0.5 at f = 1/L."""
-    s = SIGMA_PER_LENGTH * filter_length_s
-    f = np.asarray(freq_hz, dtype=float)
-    return np.exp(-2.0 * math.pi**2 * s**2 * f**2)
-
-
-def lowpass_valid(x: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Apply a symmetric FIR ``w`` (length 2K+1) once, forward: the ``valid`` part, shape (m - 2K,).
-
-    Output sample ``j`` is centred on input sample ``j + K``: no phase shift.
-    """
-    x = np.asarray(x, dtype=float)
-    if x.shape[0] < w.shape[0]:
-        raise DataError(
-            f"classic: {x.shape[0]} epochs are fewer than the low-pass kernel's {w.shape[0]}; "
-            "flight too short for the filter length"
-        )
-    if w.shape[0] > 64:
-        from scipy.signal import fftconvolve  # lazily: scipy.signal costs ~0.9 s at start-up
-
-        return fftconvolve(x, w, mode="valid")
-    return np.convolve(x, w, mode="valid")
 
 
 def interval_mean(t: np.ndarray, y: np.ndarray, t_out: np.ndarray, dt_s: float) -> np.ndarray:

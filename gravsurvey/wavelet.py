@@ -16,9 +16,10 @@ This module holds
   linear operator that is *not* an orthogonal projector, so that Phi measures the real overlap
   between the kept and the removed parts (see docs/wavelet.md for the investigation); given the
   estimator's own sigma it never removes more than that sigma (RMS);
-* the baselines: VisuShrink, SURE and BayesShrink soft thresholding, and the zero-phase
-  low-pass filters used in airborne gravimetry (Butterworth forward-backward, Gaussian),
-  parameterised by their half-wavelength resolution at the line's speed;
+* the baselines: VisuShrink, SURE and BayesShrink soft thresholding, and (from
+  :mod:`gravsurvey.filters`) the zero-phase low-pass filters used in airborne gravimetry
+  (Butterworth forward-backward, Gaussian), parameterised by their half-wavelength resolution at
+  the line's speed;
 * :func:`postprocess`, the entry point the pipeline calls once per survey line (its
   ``postprocess:`` settings are validated by :func:`gravsurvey.settings.postprocess_options`).
 
@@ -47,6 +48,7 @@ from numba import njit
 from scipy import fft as _sfft
 
 from gravsurvey.errors import ConfigError, DataError
+from gravsurvey.filters import butterworth_lowpass, gaussian_lowpass, lowpass_period_s, lowpass_resolution_m
 
 __all__ = [
     "METHODS",
@@ -69,9 +71,6 @@ __all__ = [
     "visushrink",
     "sure_shrink",
     "bayes_shrink",
-    "butterworth_lowpass",
-    "gaussian_lowpass",
-    "lowpass_resolution_m",
     "postprocess",
 ]
 
@@ -890,79 +889,6 @@ def bayes_shrink(z, wavelet="db10", mode="symmetric", levels=None):
 
 
 # --------------------------------------------------------------------------------------------
-# Baselines: zero-phase low-pass filters
-# --------------------------------------------------------------------------------------------
-def _period_s(dt_s, speed_mps, resolution_m, filter_length_s):
-    if filter_length_s is not None:
-        return float(filter_length_s)
-    if resolution_m is None:
-        raise ConfigError("postprocess.resolution_m: required by the low-pass filters "
-                          "(or give postprocess.filter_length_s)")
-    if not speed_mps > 0:
-        raise DataError(f"wavelet post-processor: line speed {speed_mps!r} m/s, expected > 0 "
-                        "to convert resolution_m to a filter length")
-    return 2.0 * float(resolution_m) / float(speed_mps)
-
-
-def butterworth_lowpass(z, dt_s, period_s, order=4):
-    """Zero-phase Butterworth low-pass: the forward-backward response, mirror extension.
-
-    Applies ``|H(f)|^2 = 1 / (1 + (f / fc)^(2 order))`` (the squared magnitude of the order-
-    ``order`` Butterworth prototype, i.e. what forward-backward filtering applies in the steady
-    state) on the DCT-II grid, which is exact circular filtering of the mirror extension of the
-    line: real response, no phase, no time shift, no start-up transient, any ``N``.
-
-    Parameters
-    ----------
-    z : ndarray, shape (N,)
-    dt_s : float
-        Sample spacing, s.
-    period_s : float
-        Filter length: the period (s) at which the amplitude response is 0.5 (the prototype's
-        -3 dB point, ``fc = 1 / period_s``).  Half-wavelength resolution = speed * period_s / 2.
-    order : int
-
-    Returns
-    -------
-    ndarray, shape (N,)
-    """
-    z = np.asarray(z, dtype=float)
-    n = z.size
-    f = np.arange(n) / (2.0 * n * dt_s)  # DCT-II grid, Hz
-    resp = 1.0 / (1.0 + (f * period_s) ** (2 * int(order)))
-    return _sfft.idct(_sfft.dct(z, 2, norm="ortho") * resp, 2, norm="ortho")
-
-
-def gaussian_lowpass(z, dt_s, period_s):
-    """Zero-phase Gaussian low-pass, mirror extension, response ``exp(-2 pi^2 s^2 f^2)``.
-
-    Parameters
-    ----------
-    z : ndarray, shape (N,)
-    dt_s : float
-        Sample spacing, s.
-    period_s : float
-        Period (s) at which the amplitude response is 0.5.
-
-    Returns
-    -------
-    ndarray, shape (N,)
-    """
-    z = np.asarray(z, dtype=float)
-    n = z.size
-    f = np.arange(n) / (2.0 * n * dt_s)  # DCT-II grid, Hz
-    fc = 1.0 / period_s
-    # exp(-a f^2) = 0.5 at f = fc; DCT filtering = circular filtering of the mirror extension
-    a = math.log(2.0) / fc ** 2
-    return _sfft.idct(_sfft.dct(z, 2, norm="ortho") * np.exp(-a * f ** 2), 2, norm="ortho")
-
-
-def lowpass_resolution_m(period_s, speed_mps):
-    """Half-wavelength resolution (m) of a filter of length ``period_s`` at ``speed_mps``."""
-    return 0.5 * float(speed_mps) * float(period_s)
-
-
-# --------------------------------------------------------------------------------------------
 # Entry point
 # --------------------------------------------------------------------------------------------
 def _wavelet_candidates(name):
@@ -1164,7 +1090,7 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
     if method == "none":
         return z.copy(), info
     if method in _LOWPASS_METHODS:
-        period = _period_s(dt_s, speed_mps, opts.resolution_m, opts.filter_length_s)
+        period = lowpass_period_s(dt_s, speed_mps, opts.resolution_m, opts.filter_length_s)
         if method == "butterworth":
             out = butterworth_lowpass(z, dt_s, period, opts.butterworth_order)
         else:

@@ -1,6 +1,5 @@
 """Config validation: every key documented, errors name the key path, paths relative to the file."""
 
-import dataclasses
 import re
 from pathlib import Path
 

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gravsurvey.classic import classic_reduction, eotvos_exact, gaussian_fir, lowpass_valid
+from gravsurvey.classic import classic_reduction, eotvos_exact
+from gravsurvey.filters import gaussian_fir, lowpass_valid
 from gravsurvey.config import load_config
 from gravsurvey.errors import ConfigError, DataError
 from gravsurvey.geodesy import GRS80, normal_gravity, radii_of_curvature
