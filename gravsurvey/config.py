@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -289,7 +288,6 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
 
 #: columns a truth file must have (docs/formats.md)
 TRUTH_COLUMNS = ("time_ns", "disturbance_mgal")
-_LOWPASS_METHODS = ("butterworth", "gaussian")
 
 
 def preflight_checks(cfg: SurveyConfig) -> None:
@@ -298,29 +296,20 @@ def preflight_checks(cfg: SurveyConfig) -> None:
 
     - ``output.epsg``: known to PROJ and projected (metre coordinates), via the same
       :func:`gravsurvey.georef.project` the writers use;
-    - ``postprocess``: a low-pass method has ``resolution_m`` or ``filter_length_s``;
     - ``flights[i].truth``: an existing text CSV whose header has :data:`TRUTH_COLUMNS`
       (only the header is read);
-    - time windows (``lines.windows`` with ``mode: windows``, ``flights[i].lines``): well
-      formed, by :func:`gravsurvey.segmentation.segments_from_windows` itself on a time axis made of
-      the windows' own ends (whether each window holds samples is checked with the data).
+
+    Everything that needs no file or PROJ (types, ranges, unknown keys, cross-field rules such as
+    a low-pass post-processor's length or unique window names) is the schema's
+    (:mod:`gravsurvey.settings`), checked before these.
     """
     if cfg.epsg is not None:
         from .georef import project
 
         project(np.zeros(1), np.zeros(1), cfg.epsg, key="output.epsg")
-    post = cfg.postprocess
-    if (getattr(post, "method", None) in _LOWPASS_METHODS
-            and post.resolution_m is None and post.filter_length_s is None):
-        raise ConfigError(f"postprocess.resolution_m: required by method {post.method!r} "
-                          "(or give postprocess.filter_length_s)")
     for fl in cfg.flights:
         if fl.truth is not None:
             check_truth_header(fl.truth, f"flights[{fl.index}].truth")
-        if fl.lines_windows is not None:
-            check_windows(fl.lines_windows, f"flights[{fl.index}].lines")
-    if getattr(cfg.lines, "mode", None) == "windows" and getattr(cfg.lines, "windows", None):
-        check_windows(cfg.lines.windows, "lines.windows")
 
 
 def check_truth_header(path: Path, key: str) -> None:
@@ -344,20 +333,3 @@ def check_truth_header(path: Path, key: str) -> None:
     if missing:
         raise ConfigError(f"{key}: {path}: truth file lacks column(s) {', '.join(missing)}; "
                           f"header has {', '.join(h for h in head if h) or 'nothing'}")
-
-
-def check_windows(windows, key: str) -> None:
-    """Structure of time windows, checked by the segmentation's own parser."""
-    from .segmentation import segments_from_windows
-
-    ends = []
-    if isinstance(windows, (list, tuple)):
-        for w in windows:
-            if isinstance(w, dict):
-                for k in ("start_s", "stop_s"):
-                    v = w.get(k)
-                    if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
-                        ends.append(float(v))
-    # every well-formed window (start < stop) holds its own two ends on this axis
-    segments_from_windows(np.unique(np.asarray(ends, float)) if ends else np.zeros(0), windows,
-                          key_path=key)

@@ -41,7 +41,7 @@ from .levelling import LEVELLING_MODELS, LevellingOptions
 from .marine import NORMAL_GRAVITY_CHOICES
 from .segmentation import SEGMENTATION_MODES, SegmentationOptions
 from .ties import G_ABS_RANGE_MGAL, TieConfig, TieReading
-from .wavelet import BOUNDARY_MODES, METHODS, THRESHOLDINGS, WAVELETS, PostprocessOptions
+from .wavelet import BOUNDARY_MODES, LOWPASS_METHODS, METHODS, THRESHOLDINGS, WAVELETS, PostprocessOptions
 
 __all__ = [
     "Section", "SurveyFile", "FlightSection", "ModelSection", "LinesSection", "PostprocessSection",
@@ -186,6 +186,14 @@ class WindowSection(Section):
         return self
 
 
+def _unique_windows(windows: list[WindowSection], key: tuple) -> None:
+    seen = set()
+    for i, w in enumerate(windows):
+        if w.name in seen:
+            raise fail(f"'{w.name}' appears twice", key + (i, "name"))
+        seen.add(w.name)
+
+
 class LinesSection(Section):
     """``lines``: line segmentation (docs/outputs.md)."""
 
@@ -217,6 +225,7 @@ class LinesSection(Section):
     def _windows_given(self):
         if self.mode == "windows" and not self.windows:
             raise fail("required (a non-empty list) when mode is 'windows'", ("windows",))
+        _unique_windows(self.windows, ("windows",))
         return self
 
 
@@ -251,6 +260,8 @@ class PostprocessSection(Section):
     def _one_length(self):
         if self.resolution_m is not None and self.filter_length_s is not None:
             raise fail("give at most one of resolution_m and filter_length_s, not both")
+        if self.method in LOWPASS_METHODS and self.resolution_m is None and self.filter_length_s is None:
+            raise fail(f"required by method {self.method!r} (or give filter_length_s)", ("resolution_m",))
         if self.max_level is not None and self.max_level < self.min_level:
             raise fail(f"must be >= min_level ({self.min_level})", ("max_level",))
         return self
@@ -576,7 +587,9 @@ class FlightSection(Section):
                           description="the IMU's axis convention: `FLU` forward-left-up (gravsurvey's "
                           "own), `FRD` forward-right-down (VectorNav, Xsens, iMAR, NovAtel), `RFU` "
                           "right-forward-up, or a 3x3 proper rotation `M` with `vec_flu = M vec_sensor`")
-    gnss_lever_arm_m: Vector3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="[forward, left, up] "
+    gnss_lever_arm_m: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0],
+                                          json_schema_extra={"type_text": "[forward, left, up], numbers"},
+                                          description="[forward, left, up] "
                                       "GNSS antenna position from the IMU on its (FLU) axes, m (strapdown GNSS "
                                       "aiding)")
     initial: Optional[InitialSection] = Field(None, description="optional overrides of the state at the first IMU "
@@ -586,6 +599,13 @@ class FlightSection(Section):
     lines: Optional[list[WindowSection]] = Field(None, description="explicit line windows for this flight, "
                                                  "`{name, start_s, stop_s[, kind]}`")
     tie: Optional[TieSection] = Field(None, description="base tie (`flights[].tie` below, docs/survey.md)")
+
+    @field_validator("lines")
+    @classmethod
+    def _window_names(cls, v):
+        if v is not None:
+            _unique_windows(v, ())
+        return v
 
     @field_validator("name")
     @classmethod
@@ -606,6 +626,8 @@ class FlightSection(Section):
     @field_validator("gnss_lever_arm_m")
     @classmethod
     def _arm(cls, v):
+        if len(v) != 3:
+            raise fail(f"expected [forward, left, up] in m on the IMU's (FLU) axes, got {v!r:.60}")
         if max(abs(x) for x in v) > MAX_LEVER_ARM_M:
             raise fail(f"expected [forward, left, up] in m within {MAX_LEVER_ARM_M:g} m, got {v!r}")
         return v

@@ -55,6 +55,7 @@ __all__ = [
     "DEFAULT_METHOD",
     "WAVELETS",
     "BOUNDARY_MODES",
+    "LOWPASS_METHODS",
     "PostprocessOptions",
     "n_levels",
     "phi_criterion",
@@ -122,7 +123,8 @@ CONTEXT_GATE_RATIO = 1.25
 DEGENERATE_ENERGY_FRACTION = 1e-12
 
 _WAVELET_METHODS = ("ti_cosphi", "cosphi", "visushrink", "sure", "bayes")
-_LOWPASS_METHODS = ("butterworth", "gaussian")
+#: post-processors that are low-pass filters (:mod:`gravsurvey.filters`): need a length
+LOWPASS_METHODS = ("butterworth", "gaussian")
 
 
 # --------------------------------------------------------------------------------------------
@@ -1089,7 +1091,7 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
             "phi_deg": None, "resolution_m": None}
     if method == "none":
         return z.copy(), info
-    if method in _LOWPASS_METHODS:
+    if method in LOWPASS_METHODS:
         period = lowpass_period_s(dt_s, speed_mps, opts.resolution_m, opts.filter_length_s)
         if method == "butterworth":
             out = butterworth_lowpass(z, dt_s, period, opts.butterworth_order)

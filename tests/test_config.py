@@ -146,7 +146,7 @@ def test_example_config_from_init_is_documented_and_valid_apart_from_inputs(tmp_
         ("truth: ", "truth: nope/", r"^flights\[0\]\.truth: truth file not found"),
         ("truth.csv", "F01_json.mcap", r"^flights\[0\]\.truth: .* not a text CSV"),
         ("lines: {mode: whole}", "lines: {mode: windows, windows: [{name: A, start_s: 10}]}",
-         r"^lines\.windows\[0\]\.stop_s: missing required key$"),
+         r"^lines\.windows\[0\]\.stop_s: missing required key \(end, s after the flight's first sample\)$"),
         ("  truth: ", "  lines: [{name: A, start_s: 500, stop_s: 10}]\n  truth: ",
          r"^flights\[0\]\.lines\[0\]: expected finite start_s < stop_s"),
         ("ellipsoid: WGS84", "ellipsoid: WGS84\nellipsoid: GRS80", r"key 'ellipsoid' given twice"),
@@ -218,3 +218,95 @@ def test_utf8_bom_is_accepted(tmp_path):
     p = tmp_path / "bom.yaml"
     p.write_bytes(b"\xef\xbb\xbf" + text.encode())
     assert C.load_config(p).name == "sample_seed_line"
+
+
+# ---------------------------------------------------------------- issue 17: one schema, one error form
+SECOND_FLIGHT = "- name: F02\n  inputs: {mcap: F01/F01_json.mcap}\n  truth: F01/truth.csv\nlines: {mode: whole}"
+
+
+@pytest.mark.parametrize(
+    "old,new,message",
+    [
+        ("lines: {mode: whole}", "model: {filter_rate_hz: abc}\nlines: {mode: whole}",
+         "model.filter_rate_hz: expected a number, got 'abc'"),
+        ("lines: {mode: whole}", "model: {gnss_aiding: 'yes'}\nlines: {mode: whole}",
+         "model.gnss_aiding: expected true or false, got 'yes'"),
+        ("lines: {mode: whole}", "model: {attitude_passes: 2.5}\nlines: {mode: whole}",
+         "model.attitude_passes: expected an integer, got 2.5"),
+        ("lines: {mode: whole}", "model: {anomaly_sigma_mps2: .nan}\nlines: {mode: whole}",
+         "model.anomaly_sigma_mps2: expected a finite number, got nan"),
+        ("lines: {mode: whole}", "model: [1, 2]\nlines: {mode: whole}",
+         "model: expected a mapping, got list [1, 2]"),
+        ("lines: {mode: whole}", SECOND_FLIGHT.replace("mcap: F01/F01_json.mcap", "csv: {imu: i.csv}"),
+         "flights[1].inputs.csv.altimeter: missing required key (altimeter CSV file)"),
+        ("lines: {mode: whole}", SECOND_FLIGHT.replace("{mcap: F01/F01_json.mcap}",
+                                                       "{mcap: F01/F01_json.mcap}\n  mcap: {max_record_mib: 0}"),
+         "flights[1].mcap.max_record_mib: expected an integer in [1, 65536], got 0"),
+        ("lines: {mode: whole}", SECOND_FLIGHT.replace("{mcap: F01/F01_json.mcap}",
+                                                       "{mcap: F01/F01_json.mcap}\n  mcap: {unit: {}}"),
+         "flights[1].mcap.unit: unknown key (did you mean 'units'?); valid keys here: json_fields, units, "
+         "time_source, check_crc, max_record_mib"),
+        ("lines: {mode: whole}", SECOND_FLIGHT.replace("name: F02", "name: F01"),
+         "flights[1].name: flight name 'F01' is used twice"),
+        ("lines: {mode: whole}", SECOND_FLIGHT.replace("{mcap: F01/F01_json.mcap}", "{mcap: a.mcap, csv: {}}"),
+         "flights[1].inputs: expected exactly one of mcap, csv, gravimeter, got mcap, csv"),
+        ("lines: {mode: whole}", SECOND_FLIGHT.replace("truth: F01/truth.csv", "tie: {base_gravity_mgal: 9.81, "
+                                                       "before: {reading_mgal: 980000}}"),
+         "flights[1].tie.base_gravity_mgal: expected a number in [970000, 990000], got 9.81"),
+        ("lines: {mode: whole}", SECOND_FLIGHT.replace("truth: F01/truth.csv", "initial: {velocity_enu_mps: [1, 2]}"),
+         "flights[1].initial.velocity_enu_mps: expected a list of 3 numbers, got [1.0, 2.0]"),
+        ("lines: {mode: whole}", "lines: {mode: windows, windows: [{name: A, start_s: 0, stop_s: 9}, "
+                                 "{name: A, start_s: 10, stop_s: 20}]}",
+         "lines.windows[1].name: 'A' appears twice"),
+        ("postprocess: {method: default}", "postprocess: {method: gausian}",
+         "postprocess.method: expected one of default, ti_cosphi, cosphi, visushrink, sure, bayes, butterworth, "
+         "gaussian, none, got 'gausian' (did you mean 'gaussian'?)"),
+        ("output: {dir: out}", "output: {dir: out}\nprocessing: {normal_gravity: IGF1967}",
+         "processing.normal_gravity: IGF1967 applies to processing.method classic only (the 3D-INM uses the exact "
+         "normal gravity field)"),
+        ("output: {dir: out}", "output: {dir: out}\nlevelling: {max_iterations: 0}",
+         "levelling.max_iterations: expected an integer >= 1, got 0"),
+        ("output: {dir: out}", "output: {dir: out}\ngrid: {cv_folds: true}",
+         "grid.cv_folds: expected an integer, got True"),
+        ("output: {dir: out}", "output: {dir: out}\nchecks: {max_imu_gap_s: -1}",
+         "checks.max_imu_gap_s: expected a number > 0, got -1"),
+    ],
+)
+def test_schema_errors_are_one_line_with_the_full_key_path(tmp_path, old, new, message):
+    p = _sample_with(tmp_path, old, new)
+    with pytest.raises(ConfigError) as e:
+        C.load_config(p)
+    assert str(e.value) == message
+
+
+def test_empty_sections_mean_the_defaults(tmp_path):
+    p = _sample_with(tmp_path, "lines: {mode: whole}", "lines:\nmodel:\ngrid:\nlevelling:\nchecks:")
+    cfg = C.load_config(p)
+    assert cfg.lines.mode == "auto" and cfg.model == S.inm_params({}) and cfg.grid == S.grid_options({})
+
+
+def test_the_typed_settings_equal_the_stage_defaults():
+    """Every schema default is the stage settings class's own default (one source)."""
+    from gravsurvey.consistency import CheckOptions
+    from gravsurvey.grid import GridOptions
+    from gravsurvey.inm.params import InmParams
+    from gravsurvey.levelling import LevellingOptions
+    from gravsurvey.segmentation import SegmentationOptions
+    from gravsurvey.wavelet import PostprocessOptions
+
+    assert S.inm_params({}) == InmParams()
+    assert S.segmentation_options({}) == SegmentationOptions()
+    assert S.postprocess_options({}) == PostprocessOptions()
+    assert S.check_options({}) == CheckOptions()
+    assert S.levelling_options({}) == LevellingOptions()
+    assert S.grid_options({}) == GridOptions()
+
+
+def test_settings_module_doc_check_command(tmp_path):
+    """`python -m gravsurvey.settings --check` fails on a stale reference, `--doc` repairs it."""
+    stale = tmp_path / "config.md"
+    stale.write_text(f"# prose\n\n{S.GENERATED_BEGIN}\n| `old` | stale |\n{S.GENERATED_END}\n")
+    assert S.main(["--check", str(stale)]) == 1
+    assert S.main(["--doc", str(stale)]) == 0
+    assert S.main(["--check", str(stale)]) == 0
+    assert stale.read_text().startswith("# prose\n\n") and "`filter_rate_hz`" in stale.read_text()
