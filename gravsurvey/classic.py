@@ -33,7 +33,8 @@ This is what most airborne processors do (DGP, shipgrav and their relatives), ke
   (GNSS latitude/longitude differentiated on the grid, ``v_N = (M + h) dlat/dt``,
   ``v_E = (N + h) cos(lat) dlon/dt``, second-order central differences) or from a supplied
   navigation solution (``track=``).
-* ``gamma`` -- normal gravity magnitude at the point, closed form (``boule``, Li & Goetze 2001).
+* ``gamma`` -- normal gravity magnitude at the point, exact (:func:`gravsurvey.geodesy.normal_gravity`,
+  checked against ``boule``, Li & Goetze 2001).
   The normal gravity vector at flight height leans from the ellipsoid normal by < 1e-5 rad,
   which changes its Up component by < 1e-9 m/s^2: negligible.
 
@@ -57,19 +58,18 @@ import math
 import warnings
 from dataclasses import dataclass, field
 
-import boule
 import numpy as np
 from scipy.interpolate import CubicSpline
 
 from .errors import ConfigError, DataError, DataWarning
-from .geodesy import MGAL, WGS84, Ellipsoid, radii_of_curvature
+from .geodesy import MGAL, WGS84, Ellipsoid, normal_gravity, radii_of_curvature
 from .filters import SIGMA_PER_LENGTH, gaussian_fir, lowpass_valid
+from .inm.params import TRIADS
 from .io.record import FlightRecord
 
 #: Default filter length (full wavelength at -6 dB), s.  model.md: ~400 s reaches ~1 mGal.
 DEFAULT_FILTER_LENGTH_S = 400.0
 
-_BOULE = {"WGS84": boule.WGS84, "GRS80": boule.GRS80}
 
 HEIGHT_SOURCES = ("auto", "gnss", "altimeter")
 
@@ -249,16 +249,6 @@ def eotvos_harlan(lat, height, ground_speed, track, ellipsoid: Ellipsoid = WGS84
     ) * np.sin(track) * (1.0 + height / a)
 
 
-def normal_gravity_boule(lat, height, ellipsoid: Ellipsoid = WGS84):
-    """Normal gravity magnitude (m/s^2) at geodetic ``lat`` (rad), ellipsoidal ``height`` (m), via boule."""
-    try:
-        ell = _BOULE[ellipsoid.name.upper()]
-    except KeyError:
-        raise ConfigError(f"ellipsoid: classic needs WGS84 or GRS80, got {ellipsoid.name!r}") from None
-    lat = np.asarray(lat, dtype=float)
-    return ell.normal_gravity((np.zeros_like(lat), np.degrees(lat), np.asarray(height, dtype=float)), si_units=True)
-
-
 def second_difference(h: np.ndarray, dt_s: float) -> np.ndarray:
     """``(h[k+1] - 2h[k] + h[k-1]) / dt^2`` with NaN at both ends, shape (m,)."""
     out = np.full(h.shape, np.nan)
@@ -335,7 +325,7 @@ def classic_reduction(
         than the filter, channels that do not overlap.
     """
     notes: list[str] = []
-    if triad not in ("platform", "strapdown"):
+    if triad not in TRIADS:
         raise ConfigError(f"triad: expected platform or strapdown, got {triad!r}")
     if height_source not in HEIGHT_SOURCES:
         raise ConfigError(f"height_source: expected one of {', '.join(HEIGHT_SOURCES)}, got {height_source!r}")
@@ -462,7 +452,7 @@ def classic_reduction(
     f_up = triangle_mean(t_imu, f_up_imu, grid, dt)
     hdd = second_difference(h, dt)
     eot = eotvos_exact(lat, h, ve, vn, ellipsoid)
-    gam = normal_gravity_boule(lat, h, ellipsoid)
+    gam = normal_gravity(lat, h, ellipsoid)
     raw = f_up - hdd + eot - gam
 
     # drop the two ends where hdd is undefined, then filter

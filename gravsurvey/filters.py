@@ -29,6 +29,7 @@ __all__ = [
     "gaussian_transfer",
     "gaussian_fir",
     "lowpass_valid",
+    "dct_filter",
     "gaussian_lowpass",
     "butterworth_lowpass",
     "lowpass_period_s",
@@ -110,6 +111,30 @@ def lowpass_period_s(dt_s, speed_mps, resolution_m=None, filter_length_s=None):
     return 2.0 * float(resolution_m) / float(speed_mps)
 
 
+def dct_filter(z, dt_s, response):
+    """Apply a real, zero-phase frequency response on the DCT-II grid.
+
+    DCT-II filtering is exact circular filtering of the mirror extension of the line: no phase,
+    no time shift, no start-up transient, any length.
+
+    Parameters
+    ----------
+    z : ndarray, shape (N,)
+    dt_s : float
+        Sample spacing, s.
+    response : callable
+        ``response(f_hz)`` -> gain, for an ndarray of frequencies (Hz), shape (N,).
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    z = np.asarray(z, dtype=float)
+    n = z.size
+    f = np.arange(n) / (2.0 * n * dt_s)
+    return _sfft.idct(_sfft.dct(z, 2, norm="ortho") * response(f), 2, norm="ortho")
+
+
 def butterworth_lowpass(z, dt_s, period_s, order=4):
     """Zero-phase Butterworth low-pass: the forward-backward response, mirror extension.
 
@@ -132,11 +157,7 @@ def butterworth_lowpass(z, dt_s, period_s, order=4):
     -------
     ndarray, shape (N,)
     """
-    z = np.asarray(z, dtype=float)
-    n = z.size
-    f = np.arange(n) / (2.0 * n * dt_s)  # DCT-II grid, Hz
-    resp = 1.0 / (1.0 + (f * period_s) ** (2 * int(order)))
-    return _sfft.idct(_sfft.dct(z, 2, norm="ortho") * resp, 2, norm="ortho")
+    return dct_filter(z, dt_s, lambda f: 1.0 / (1.0 + (f * period_s) ** (2 * int(order))))
 
 
 def gaussian_lowpass(z, dt_s, period_s):
@@ -154,11 +175,7 @@ def gaussian_lowpass(z, dt_s, period_s):
     -------
     ndarray, shape (N,)
     """
-    z = np.asarray(z, dtype=float)
-    n = z.size
-    f = np.arange(n) / (2.0 * n * dt_s)  # DCT-II grid, Hz
-    # DCT filtering = circular filtering of the mirror extension
-    return _sfft.idct(_sfft.dct(z, 2, norm="ortho") * gaussian_transfer(f, period_s), 2, norm="ortho")
+    return dct_filter(z, dt_s, lambda f: gaussian_transfer(f, period_s))
 
 
 def lowpass_resolution_m(period_s, speed_mps):

@@ -33,7 +33,7 @@ from pydantic_core import PydanticCustomError
 from .consistency import CheckOptions
 from .errors import ConfigError, suggest
 from .grid import GRID_METHODS, GridOptions
-from .inm.params import RADIUS_SOURCES, InitialState, InmParams, mat_nb_from_attitude
+from .inm.params import RADIUS_SOURCES, TRIADS, InitialState, InmParams, mat_nb_from_attitude
 from .io.csv import DEFAULT_COLUMNS, TIME_FORMATS, UNITS
 from .io.ingest import OPTIONAL_ROLES, ROLES, IngestOptions, imu_axes_matrix
 from .io.mcap import DEFAULT_JSON_FIELDS, DEFAULT_MAX_RECORD_BYTES
@@ -55,7 +55,6 @@ __all__ = [
 
 #: flight names: safe in file names and XYZ line labels
 FLIGHT_NAME_PATTERN = r"^[A-Za-z0-9_.-]{1,64}$"
-TRIADS = ("platform", "strapdown")
 PROCESSING_METHODS = ("inm", "classic")
 ELLIPSOIDS = ("WGS84", "GRS80")
 #: most a GNSS lever arm component may be, m (a larger one is a unit mistake: mm or cm)
@@ -70,6 +69,15 @@ def stage_default(cls, name: str):
                 return f.default
             return f.default_factory()  # type: ignore[misc]
     raise KeyError(f"{cls.__name__} has no attribute {name!r}")
+
+
+def _defaults_of(cls):
+    """``Field`` factory whose defaults are read from the stage settings class ``cls``."""
+
+    def field(name: str, desc: str, **limits) -> Any:
+        return Field(stage_default(cls, name), description=desc, **limits)
+
+    return field
 
 
 def fail(message: str, key: tuple = ()) -> PydanticCustomError:
@@ -107,13 +115,8 @@ class Section(BaseModel):
         return set(self.model_fields_set)
 
 
-def _num(desc: str, default: Any = ..., **limits) -> Any:
-    return Field(default, description=desc, **limits)
-
-
 # ============================================================================ model (3D-INM)
-def _m(name: str, desc: str, **limits) -> Any:
-    return Field(stage_default(InmParams, name), description=desc, **limits)
+_m = _defaults_of(InmParams)
 
 
 class ModelSection(Section):
@@ -166,8 +169,7 @@ class ModelSection(Section):
 
 
 # ============================================================================ lines
-def _ln(name: str, desc: str, **limits) -> Any:
-    return Field(stage_default(SegmentationOptions, name), description=desc, **limits)
+_ln = _defaults_of(SegmentationOptions)
 
 
 class WindowSection(Section):
@@ -230,8 +232,7 @@ class LinesSection(Section):
 
 
 # ============================================================================ postprocess
-def _pp(name: str, desc: str, **limits) -> Any:
-    return Field(stage_default(PostprocessOptions, name), description=desc, **limits)
+_pp = _defaults_of(PostprocessOptions)
 
 
 class PostprocessSection(Section):
@@ -268,8 +269,7 @@ class PostprocessSection(Section):
 
 
 # ============================================================================ checks (survey level)
-def _ck(name: str, desc: str, **limits) -> Any:
-    return Field(stage_default(CheckOptions, name), description=desc, **limits)
+_ck = _defaults_of(CheckOptions)
 
 
 class ChecksSection(Section):
@@ -295,8 +295,7 @@ class ChecksSection(Section):
 
 
 # ============================================================================ levelling, grid
-def _lv(name: str, desc: str, **limits) -> Any:
-    return Field(stage_default(LevellingOptions, name), description=desc, **limits)
+_lv = _defaults_of(LevellingOptions)
 
 
 class LevellingSection(Section):
@@ -316,8 +315,7 @@ class LevellingSection(Section):
                                             "levelling (below it the adjustment fits noise)", gt=0)
 
 
-def _gr(name: str, desc: str, **limits) -> Any:
-    return Field(stage_default(GridOptions, name), description=desc, **limits)
+_gr = _defaults_of(GridOptions)
 
 
 class GridSection(Section):

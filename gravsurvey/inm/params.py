@@ -29,6 +29,8 @@ import numpy as np
 from ..errors import ConfigError, DataError
 
 
+#: instrument triads: ENU-stabilised platform, or body-fixed (docs/conventions.md)
+TRIADS = ("platform", "strapdown")
 RADIUS_SOURCES = ("altimeter", "computed")
 #: Boolean settings (everything else but ``radius_source`` is a number).
 _BOOL_KEYS = ("gnss_aiding", "identify")
@@ -235,7 +237,7 @@ def mat_nb_from_attitude(roll, pitch, heading):
 
 
 def _check_triad(triad, key_path):
-    if triad not in ("platform", "strapdown"):
+    if triad not in TRIADS:
         raise ConfigError(f"{key_path}: triad must be 'platform' or 'strapdown', got {triad!r}")
 
 
