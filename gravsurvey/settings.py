@@ -67,7 +67,7 @@ def stage_default(cls, name: str):
         if f.name == name:
             if f.default is not dataclasses.MISSING:
                 return f.default
-            return f.default_factory()  # type: ignore[misc]
+            return f.default_factory()  # type: ignore[misc,operator]
     raise KeyError(f"{cls.__name__} has no attribute {name!r}")
 
 
@@ -434,7 +434,7 @@ def _names(v, allowed_lengths, what: str):
 JsonFields = _role_model("JsonFields", DEFAULT_JSON_FIELDS, "MCAP JSON field name",
                          ("specific_force", "angular_rate"))
 CsvColumns = _role_model("CsvColumns", DEFAULT_COLUMNS, "CSV column name", ("time",))
-UnitsSection = create_model(
+UnitsSection = create_model(  # type: ignore[call-overload]
     "UnitsSection", __base__=Section, __doc__="units of the channels as written",
     **{k: (Literal[tuple(v)], Field(next(iter(v)), description=f"unit of {k}: {', '.join(v)}"))  # type: ignore[misc]
        for k, v in UNITS.items()})
@@ -736,7 +736,7 @@ def _choices(expected: str) -> list[str]:
     return [c.strip().strip("'\"") for c in re.split(r",| or ", expected) if c.strip()]
 
 
-def _message(err: dict, field=None) -> tuple[tuple, str]:
+def _message(err: Any, field=None) -> tuple[tuple, str]:
     """(extra key path, text) of one pydantic error in gravsurvey's words (``field``: the
     schema field at the error's location, for its limits and description)."""
     t, ctx, v = err["type"], err.get("ctx") or {}, err.get("input")
@@ -794,7 +794,8 @@ def _message(err: dict, field=None) -> tuple[tuple, str]:
 
 def _field_at(model: type, loc) -> Any:
     """The schema field at ``loc`` below ``model`` (None when the path leaves the schema)."""
-    field, cur = None, model
+    field: Any = None
+    cur: Any = model
     for part in loc:
         if isinstance(part, int):
             args = [a for a in get_args(cur) if a is not type(None)] if cur is not None else []
@@ -933,14 +934,15 @@ def initial_state(section: InitialSection | dict, triad: str, key_path: str = "i
 def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", base_dir=None) -> IngestOptions:
     """:class:`~gravsurvey.io.ingest.IngestOptions` from a flight's ingestion keys
     (:data:`INGEST_KEYS`; a mapping with only these keys, or a validated :class:`FlightSection`)."""
-    if not isinstance(flight, FlightSection):
+    if isinstance(flight, FlightSection):
+        f = flight
+    else:
         if isinstance(flight, dict):
             extra = [k for k in flight if k not in INGEST_KEYS]
             if extra:
                 raise ConfigError(f"{key_path}.{extra[0]}: unknown key{suggest(extra[0], INGEST_KEYS)}; "
                                   f"valid keys here: {', '.join(INGEST_KEYS)}")
-        flight = validate_section(FlightSection, flight, key_path)
-    f = flight
+        f = validate_section(FlightSection, flight, key_path)
     o = IngestOptions(key_path=key_path, base_dir=os.fspath(base_dir) if base_dir is not None else None)
     if f.inputs.gravimeter is not None:
         from .io.formats.flight import gravimeter_options_from_dict
@@ -951,22 +953,23 @@ def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", b
         o.kind, o.mcap_path = "mcap", f.inputs.mcap
     else:
         o.kind = "csv"
+        assert f.inputs.csv is not None  # exactly one input kind (InputsSection)
         o.csv_paths = {r: p for r, p in _as_dict(f.inputs.csv).items() if p is not None}
     given_topics = f.topics.given()
     o.topics.update({r: getattr(f.topics, r) for r in ROLES + OPTIONAL_ROLES if r in given_topics})
     o.topics_explicit = tuple(r for r in ROLES + OPTIONAL_ROLES if r in given_topics)
-    for role, names in f.mcap.json_fields:
+    for role, names in _as_dict(f.mcap.json_fields).items():
         if names is not None:
-            o.json_fields[role].update({q: v for q, v in names if v is not None})
+            o.json_fields[role].update({q: v for q, v in _as_dict(names).items() if v is not None})
     if "units" in f.mcap.given():
         o.mcap_units = _as_dict(f.mcap.units)
     o.time_source = f.mcap.time_source
     o.check_crc = f.mcap.check_crc
     o.max_record_bytes = f.mcap.max_record_mib * 2**20
     o.csv_time_format = f.csv.time_format
-    for role, names in f.csv.columns:
+    for role, names in _as_dict(f.csv.columns).items():
         if names is not None:
-            o.csv_columns[role] = {q: v for q, v in names if v is not None}
+            o.csv_columns[role] = {q: v for q, v in _as_dict(names).items() if v is not None}
     if "units" in f.csv.given():
         o.csv_units = _as_dict(f.csv.units)
     o.csv_delimiter = f.csv.delimiter
@@ -979,12 +982,12 @@ def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", b
 
 
 # ============================================================================ docs/config.md
-def _role_section(model: type, role: str) -> type:
+def _role_section(model: Any, role: str) -> type:
     return next(a for a in get_args(model.model_fields[role].annotation) if a is not type(None))
 
 
 #: sections of the generated reference: (heading, key prefix, model)
-DOC_SECTIONS: list[tuple[str, str, type]] = [
+DOC_SECTIONS: list[tuple[str, str, Any]] = [
     ("Top level", "", SurveyFile),
     ("`survey`", "survey.", SurveySection),
     ("`processing`", "processing.", ProcessingSection),
