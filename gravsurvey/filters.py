@@ -103,11 +103,14 @@ def lowpass_period_s(dt_s, speed_mps, resolution_m=None, filter_length_s=None):
     if filter_length_s is not None:
         return float(filter_length_s)
     if resolution_m is None:
-        raise ConfigError("postprocess.resolution_m: required by the low-pass filters "
-                          "(or give postprocess.filter_length_s)")
+        raise ConfigError(
+            "postprocess.resolution_m: required by the low-pass filters (or give postprocess.filter_length_s)"
+        )
     if not speed_mps > 0:
-        raise DataError(f"wavelet post-processor: line speed {speed_mps!r} m/s, expected > 0 "
-                        "to convert resolution_m to a filter length")
+        raise DataError(
+            f"wavelet post-processor: line speed {speed_mps!r} m/s, expected > 0 "
+            "to convert resolution_m to a filter length"
+        )
     return 2.0 * float(resolution_m) / float(speed_mps)
 
 
@@ -181,5 +184,3 @@ def gaussian_lowpass(z, dt_s, period_s):
 def lowpass_resolution_m(period_s, speed_mps):
     """Half-wavelength resolution (m) of a filter of length ``period_s`` at ``speed_mps``."""
     return 0.5 * float(speed_mps) * float(period_s)
-
-

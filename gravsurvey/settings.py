@@ -27,7 +27,16 @@ import sys
 from typing import Annotated, Any, Literal, Optional, get_args, get_origin
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    create_model,
+    field_validator,
+    model_validator,
+)
 from pydantic_core import PydanticCustomError
 
 from .consistency import CheckOptions
@@ -44,13 +53,39 @@ from .ties import G_ABS_RANGE_MGAL, TieConfig, TieReading
 from .wavelet import BOUNDARY_MODES, LOWPASS_METHODS, METHODS, THRESHOLDINGS, WAVELETS, PostprocessOptions
 
 __all__ = [
-    "Section", "SurveyFile", "FlightSection", "ModelSection", "LinesSection", "PostprocessSection",
-    "ProcessingSection", "OutputSection", "ChecksSection", "LevellingSection", "GridSection",
-    "TieSection", "InitialSection", "config_error", "validate_section", "parse_survey",
-    "inm_params", "segmentation_options", "postprocess_options", "check_options",
-    "levelling_options", "grid_options", "tie_config", "ingest_options", "initial_overrides",
-    "initial_state", "check_inm_params", "reference_markdown", "FLIGHT_NAME_PATTERN",
-    "INGEST_KEYS", "TRIADS", "PROCESSING_METHODS", "ELLIPSOIDS",
+    "Section",
+    "SurveyFile",
+    "FlightSection",
+    "ModelSection",
+    "LinesSection",
+    "PostprocessSection",
+    "ProcessingSection",
+    "OutputSection",
+    "ChecksSection",
+    "LevellingSection",
+    "GridSection",
+    "TieSection",
+    "InitialSection",
+    "config_error",
+    "validate_section",
+    "parse_survey",
+    "inm_params",
+    "segmentation_options",
+    "postprocess_options",
+    "check_options",
+    "levelling_options",
+    "grid_options",
+    "tie_config",
+    "ingest_options",
+    "initial_overrides",
+    "initial_state",
+    "check_inm_params",
+    "reference_markdown",
+    "FLIGHT_NAME_PATTERN",
+    "INGEST_KEYS",
+    "TRIADS",
+    "PROCESSING_METHODS",
+    "ELLIPSOIDS",
 ]
 
 #: flight names: safe in file names and XYZ line labels
@@ -122,50 +157,78 @@ _m = _defaults_of(InmParams)
 class ModelSection(Section):
     """``model``: 3D-INM Kalman filter (docs/method.md)."""
 
-    identify: bool = _m("identify", "identify the anomaly prior (`anomaly_sigma_mps2`, `anomaly_lambda_per_m`), "
-                        "`gravimeter_white_mps2` and `altimeter_sigma_m` from the flight (those written in "
-                        "the config are held fixed); `false`: the configured values or the defaults as they are")
+    identify: bool = _m(
+        "identify",
+        "identify the anomaly prior (`anomaly_sigma_mps2`, `anomaly_lambda_per_m`), "
+        "`gravimeter_white_mps2` and `altimeter_sigma_m` from the flight (those written in "
+        "the config are held fixed); `false`: the configured values or the defaults as they are",
+    )
     target_resolution_m: Optional[float] = _m(
-        "target_resolution_m", "half-wavelength resolution the smoother should have, m (the anomaly sigma is "
+        "target_resolution_m",
+        "half-wavelength resolution the smoother should have, m (the anomaly sigma is "
         "chosen to put its half-power point there: finer = noisier); null: the resolution of least expected "
-        "error for the flight", gt=0)
+        "error for the flight",
+        gt=0,
+    )
     filter_rate_hz: float = _m("filter_rate_hz", "Kalman epoch rate, Hz (the IMU rate is decimated)", gt=0)
-    accel_noise_mps2: float = _m("accel_noise_mps2", "sigma_f1 = sigma_f2, horizontal accelerometer white "
-                                 "noise, m/s^2 (one-second sigma)", ge=0)
+    accel_noise_mps2: float = _m(
+        "accel_noise_mps2", "sigma_f1 = sigma_f2, horizontal accelerometer white noise, m/s^2 (one-second sigma)", ge=0
+    )
     gyro_drift_degph: float = _m("gyro_drift_degph", "sigma_nu, white gyro drift, deg/h (one-second sigma)", ge=0)
-    gravimeter_lambda_per_s: float = _m("gravimeter_lambda_per_s", "lambda_f3, gravimeter error correlation "
-                                        "rate, 1/s", ge=0)
+    gravimeter_lambda_per_s: float = _m(
+        "gravimeter_lambda_per_s", "lambda_f3, gravimeter error correlation rate, 1/s", ge=0
+    )
     gravimeter_sigma_mps2: float = _m("gravimeter_sigma_mps2", "sigma_f3, gravimeter Markov error, m/s^2", ge=0)
-    gravimeter_white_mps2: float = _m("gravimeter_white_mps2", "gravimeter white noise on top of the Markov "
-                                      "error, m/s^2 (one-second sigma)", ge=0)
-    anomaly_lambda_per_m: float = _m("anomaly_lambda_per_m", "lambda_s, spatial correlation rate of the anomaly, "
-                                     "1/m (lambda_g = lambda_s * speed)", ge=0)
+    gravimeter_white_mps2: float = _m(
+        "gravimeter_white_mps2", "gravimeter white noise on top of the Markov error, m/s^2 (one-second sigma)", ge=0
+    )
+    anomaly_lambda_per_m: float = _m(
+        "anomaly_lambda_per_m",
+        "lambda_s, spatial correlation rate of the anomaly, 1/m (lambda_g = lambda_s * speed)",
+        ge=0,
+    )
     anomaly_sigma_mps2: float = _m("anomaly_sigma_mps2", "sigma_s, anomaly sigma, m/s^2", ge=0)
     altimeter_sigma_m: float = _m("altimeter_sigma_m", "sigma_eps, radial (height) measurement noise, m", ge=0)
     radius_source: Literal[RADIUS_SOURCES] = _m(  # type: ignore[valid-type]
-        "radius_source", "|q| of the gravity model: `altimeter` (Andreev: stable in all channels) or `computed` "
-        "(the navigation solution)")
+        "radius_source",
+        "|q| of the gravity model: `altimeter` (Andreev: stable in all channels) or `computed` "
+        "(the navigation solution)",
+    )
     initial_position_sigma_m: float = _m("initial_position_sigma_m", "initial sigma of each dq component, m", ge=0)
-    initial_velocity_sigma_mps: float = _m("initial_velocity_sigma_mps", "initial sigma of each dp component, "
-                                           "m/s", ge=0)
+    initial_velocity_sigma_mps: float = _m(
+        "initial_velocity_sigma_mps", "initial sigma of each dp component, m/s", ge=0
+    )
     initial_anomaly_sigma_mps2: float = _m("initial_anomaly_sigma_mps2", "initial sigma of g, m/s^2", ge=0)
     initial_gravimeter_sigma_mps2: float = _m("initial_gravimeter_sigma_mps2", "initial sigma of f3, m/s^2", ge=0)
-    gnss_aiding: bool = _m("gnss_aiding", "use the record's GNSS positions (when it has a GNSS channel) as a "
-                           "position measurement; the filter then carries 14 states: the seed's 8 plus attitude "
-                           "error and gyro bias (docs/method.md, \"GNSS position aiding\"); `false`: the seed's "
-                           "altimeter-only filter")
-    gnss_horizontal_sigma_m: float = _m("gnss_horizontal_sigma_m", "sigma of each GNSS sample's east and north "
-                                        "error, m", gt=0)
+    gnss_aiding: bool = _m(
+        "gnss_aiding",
+        "use the record's GNSS positions (when it has a GNSS channel) as a "
+        "position measurement; the filter then carries 14 states: the seed's 8 plus attitude "
+        'error and gyro bias (docs/method.md, "GNSS position aiding"); `false`: the seed\'s '
+        "altimeter-only filter",
+    )
+    gnss_horizontal_sigma_m: float = _m(
+        "gnss_horizontal_sigma_m", "sigma of each GNSS sample's east and north error, m", gt=0
+    )
     gnss_vertical_sigma_m: float = _m("gnss_vertical_sigma_m", "sigma of each GNSS sample's height error, m", gt=0)
     initial_attitude_sigma_deg: Optional[float] = _m(
-        "initial_attitude_sigma_deg", "initial sigma of each attitude-error component, deg (GNSS-aided filter "
+        "initial_attitude_sigma_deg",
+        "initial sigma of each attitude-error component, deg (GNSS-aided filter "
         "only); null: the alignment's own covariance when the attitude comes from the alignment, 0.05 deg when "
-        "it was given", ge=0)
-    attitude_passes: int = _m("attitude_passes", "most filter/smoother passes of a GNSS-aided strapdown flight: "
-                              "each re-mechanizes about the smoothed initial-attitude correction; stops below "
-                              "0.001 deg", ge=1, le=5)
-    gyro_bias_sigma_degph: float = _m("gyro_bias_sigma_degph", "sigma of each gyro's constant bias, deg/h "
-                                      "(GNSS-aided filter only)", ge=0)
+        "it was given",
+        ge=0,
+    )
+    attitude_passes: int = _m(
+        "attitude_passes",
+        "most filter/smoother passes of a GNSS-aided strapdown flight: "
+        "each re-mechanizes about the smoothed initial-attitude correction; stops below "
+        "0.001 deg",
+        ge=1,
+        le=5,
+    )
+    gyro_bias_sigma_degph: float = _m(
+        "gyro_bias_sigma_degph", "sigma of each gyro's constant bias, deg/h (GNSS-aided filter only)", ge=0
+    )
 
 
 # ============================================================================ lines
@@ -178,8 +241,9 @@ class WindowSection(Section):
     name: str = Field(..., description="line name, unique in the flight", min_length=1)
     start_s: float = Field(..., description="start, s after the flight's first sample")
     stop_s: float = Field(..., description="end, s after the flight's first sample")
-    kind: Optional[Literal["line", "tie"]] = Field(None, description="`line` or `tie`; default: `tie` for "
-                                                   "names `T<digit>...`, else `line`")
+    kind: Optional[Literal["line", "tie"]] = Field(
+        None, description="`line` or `tie`; default: `tie` for names `T<digit>...`, else `line`"
+    )
 
     @model_validator(mode="after")
     def _ordered(self):
@@ -200,28 +264,41 @@ class LinesSection(Section):
     """``lines``: line segmentation (docs/outputs.md)."""
 
     mode: Literal[SEGMENTATION_MODES] = _ln(  # type: ignore[valid-type]
-        "mode", "`auto` (straight-line detection from heading and speed), `windows` (the `windows` below), "
-        "`whole` (the whole flight is line L01)")
+        "mode",
+        "`auto` (straight-line detection from heading and speed), `windows` (the `windows` below), "
+        "`whole` (the whole flight is line L01)",
+    )
     min_line_m: float = _ln("min_line_m", "shortest line kept, along-track length, m", gt=0)
-    min_line_s: Optional[float] = _ln("min_line_s", "optional additional time limit, s (null: none; lines are "
-                                      "specified by length)", gt=0)
+    min_line_s: Optional[float] = _ln(
+        "min_line_s", "optional additional time limit, s (null: none; lines are specified by length)", gt=0
+    )
     heading_tol_deg: float = _ln("heading_tol_deg", "heading deviation allowed on a line, deg", gt=0)
     min_speed_mps: float = _ln("min_speed_mps", "slower epochs are not line (stationary, taxi), m/s", ge=0)
     max_turn_rate_degps: float = _ln("max_turn_rate_degps", "faster heading change is a turn, deg/s", gt=0)
-    max_vertical_speed_mps: Optional[float] = _ln("max_vertical_speed_mps", "faster climb/descent is not line, "
-                                                  "m/s (null: no limit)", gt=0)
+    max_vertical_speed_mps: Optional[float] = _ln(
+        "max_vertical_speed_mps", "faster climb/descent is not line, m/s (null: no limit)", gt=0
+    )
     speed_tol_mps: float = _ln("speed_tol_mps", "speed change allowed on a line, m/s", gt=0)
     smooth_s: float = _ln("smooth_s", "smoothing of heading/speed before detection, s", gt=0)
     merge_gap_s: float = _ln("merge_gap_s", "line pieces separated by less are merged, s", ge=0)
     transit_angle_deg: Optional[float] = _ln(
-        "transit_angle_deg", "straight legs within this of the dominant direction are lines, within this of its "
+        "transit_angle_deg",
+        "straight legs within this of the dominant direction are lines, within this of its "
         "perpendicular tie lines, in between transits (not lines), deg; null: no transits, `tie_angle_deg` "
-        "decides", gt=0, lt=45)
-    tie_angle_deg: float = _ln("tie_angle_deg", "with `transit_angle_deg: null`: lines more than this from the "
-                               "dominant direction are tie lines, deg", gt=0, lt=90)
-    windows: list[WindowSection] = Field(default_factory=list, description="`mode: windows`: "
-                                         "`{name, start_s, stop_s[, kind]}` for every flight (s after its first "
-                                         "sample)")
+        "decides",
+        gt=0,
+        lt=45,
+    )
+    tie_angle_deg: float = _ln(
+        "tie_angle_deg",
+        "with `transit_angle_deg: null`: lines more than this from the dominant direction are tie lines, deg",
+        gt=0,
+        lt=90,
+    )
+    windows: list[WindowSection] = Field(
+        default_factory=list,
+        description="`mode: windows`: `{name, start_s, stop_s[, kind]}` for every flight (s after its first sample)",
+    )
 
     @model_validator(mode="after")
     def _windows_given(self):
@@ -239,20 +316,30 @@ class PostprocessSection(Section):
     """``postprocess``: per-line post-processor (docs/wavelet.md)."""
 
     method: Literal[("default",) + METHODS] = _pp(  # type: ignore[valid-type]
-        "method", "`default` (= `none`: the smoothed Kalman estimate, at the resolution stated in summary.json), "
+        "method",
+        "`default` (= `none`: the smoothed Kalman estimate, at the resolution stated in summary.json), "
         "`ti_cosphi`, `cosphi` (the seed's rule, faithful), `visushrink`, `sure`, `bayes`, `butterworth`, "
-        "`gaussian`, `none`")
+        "`gaussian`, `none`",
+    )
     wavelet: Literal[WAVELETS] = _pp("wavelet", "`db10`, `coif4`, `auto` (the smaller Phi)")  # type: ignore[valid-type]
     thresholding: Literal[THRESHOLDINGS] = _pp(  # type: ignore[valid-type]
-        "thresholding", "`soft` or `hard` (`cosphi`, `visushrink`)")
+        "thresholding", "`soft` or `hard` (`cosphi`, `visushrink`)"
+    )
     boundary: Literal[BOUNDARY_MODES] = _pp(  # type: ignore[valid-type]
-        "boundary", "PyWavelets extension mode of the decimated pyramid")
-    resolution_m: Optional[float] = _pp("resolution_m", "half-wavelength resolution of `butterworth`/`gaussian`, "
-                                        "m (required by them unless `filter_length_s` is given)", gt=0)
-    filter_length_s: Optional[float] = _pp("filter_length_s", "alternative to `resolution_m`: full filter "
-                                           "wavelength, s", gt=0)
-    butterworth_order: int = _pp("butterworth_order", "Butterworth prototype order (applied forward-backward)",
-                                 ge=1, le=12)
+        "boundary", "PyWavelets extension mode of the decimated pyramid"
+    )
+    resolution_m: Optional[float] = _pp(
+        "resolution_m",
+        "half-wavelength resolution of `butterworth`/`gaussian`, "
+        "m (required by them unless `filter_length_s` is given)",
+        gt=0,
+    )
+    filter_length_s: Optional[float] = _pp(
+        "filter_length_s", "alternative to `resolution_m`: full filter wavelength, s", gt=0
+    )
+    butterworth_order: int = _pp(
+        "butterworth_order", "Butterworth prototype order (applied forward-backward)", ge=1, le=12
+    )
     threshold_steps: int = _pp("threshold_steps", "thresholds tried per level by `cosphi`", ge=1, le=100)
     max_level: Optional[int] = _pp("max_level", "highest level searched (null: 1 + floor(log2 N))", ge=1, le=64)
     min_level: int = _pp("min_level", "lowest level searched by `ti_cosphi`", ge=1, le=64)
@@ -275,21 +362,39 @@ _ck = _defaults_of(CheckOptions)
 class ChecksSection(Section):
     """``checks``: gaps, clocks, input consistency and result plausibility (docs/reliability.md)."""
 
-    max_imu_gap_s: float = _ck("max_imu_gap_s", "IMU gaps up to this long are bridged by the mechanization; "
-                               "longer ones split the flight into separately estimated segments, s", gt=0)
-    max_aiding_gap_s: float = _ck("max_aiding_gap_s", "gaps with neither altimeter nor GNSS samples up to this "
-                                  "long are bridged (the smoothed sigma grows across them); longer ones split "
-                                  "the flight, s", gt=0)
-    max_time_offset_s: float = _ck("max_time_offset_s", "largest IMU-GNSS clock offset (measured by "
-                                   "cross-correlating specific force) accepted, s", gt=0)
+    max_imu_gap_s: float = _ck(
+        "max_imu_gap_s",
+        "IMU gaps up to this long are bridged by the mechanization; "
+        "longer ones split the flight into separately estimated segments, s",
+        gt=0,
+    )
+    max_aiding_gap_s: float = _ck(
+        "max_aiding_gap_s",
+        "gaps with neither altimeter nor GNSS samples up to this "
+        "long are bridged (the smoothed sigma grows across them); longer ones split "
+        "the flight, s",
+        gt=0,
+    )
+    max_time_offset_s: float = _ck(
+        "max_time_offset_s",
+        "largest IMU-GNSS clock offset (measured by cross-correlating specific force) accepted, s",
+        gt=0,
+    )
     max_gravity_mismatch_mgal: float = _ck(
-        "max_gravity_mismatch_mgal", "largest median difference between the specific-force magnitude the IMU "
+        "max_gravity_mismatch_mgal",
+        "largest median difference between the specific-force magnitude the IMU "
         "measures and the one the GNSS track and normal gravity imply, mGal; beyond it an error when a GNSS "
-        "column mix-up explains it or it exceeds 5x this, else a note", gt=0)
-    max_abs_disturbance_mgal: float = _ck("max_abs_disturbance_mgal", "largest absolute disturbance of the final "
-                                          "product on lines, mGal", gt=0)
-    max_track_deviation_m: float = _ck("max_track_deviation_m", "largest horizontal distance of the GNSS-aided "
-                                       "navigation from the GNSS track (31-epoch running median), m", gt=0)
+        "column mix-up explains it or it exceeds 5x this, else a note",
+        gt=0,
+    )
+    max_abs_disturbance_mgal: float = _ck(
+        "max_abs_disturbance_mgal", "largest absolute disturbance of the final product on lines, mGal", gt=0
+    )
+    max_track_deviation_m: float = _ck(
+        "max_track_deviation_m",
+        "largest horizontal distance of the GNSS-aided navigation from the GNSS track (31-epoch running median), m",
+        gt=0,
+    )
     allow_no_lines: bool = _ck("allow_no_lines", "accept a flight in which no survey line is found")
     allow_nonfinite: bool = _ck("allow_nonfinite", "accept non-finite values in the estimate or product")
 
@@ -301,18 +406,27 @@ _lv = _defaults_of(LevellingOptions)
 class LevellingSection(Section):
     """``levelling``: crossover levelling (gravsurvey/levelling.py, docs/survey.md)."""
 
-    enabled: Optional[bool] = _lv("enabled", "null: level when there are at least `min_crossovers_per_unknown` "
-                                  "crossovers per unknown; true: whenever there are crossovers; false: never")
+    enabled: Optional[bool] = _lv(
+        "enabled",
+        "null: level when there are at least `min_crossovers_per_unknown` "
+        "crossovers per unknown; true: whenever there are crossovers; false: never",
+    )
     model: Literal[LEVELLING_MODELS] = _lv(  # type: ignore[valid-type]
-        "model", "`constant` per line, `line_trend` (constant + trend per line), `flight_trend` (constant per "
-        "line + drift per untied flight)")
+        "model",
+        "`constant` per line, `line_trend` (constant + trend per line), `flight_trend` (constant per "
+        "line + drift per untied flight)",
+    )
     robust: bool = _lv("robust", "Huber IRLS (outlying crossovers lose weight)")
     huber_k: float = _lv("huber_k", "Huber constant, robust standard deviations", gt=0)
-    sigma_floor_mgal: float = _lv("sigma_floor_mgal", "smallest line sigma in the weights "
-                                  "`1/(sigma_a^2 + sigma_b^2)`, mGal", gt=0)
+    sigma_floor_mgal: float = _lv(
+        "sigma_floor_mgal", "smallest line sigma in the weights `1/(sigma_a^2 + sigma_b^2)`, mGal", gt=0
+    )
     max_iterations: int = _lv("max_iterations", "IRLS iterations at most", ge=1)
-    min_crossovers_per_unknown: float = _lv("min_crossovers_per_unknown", "redundancy needed for automatic "
-                                            "levelling (below it the adjustment fits noise)", gt=0)
+    min_crossovers_per_unknown: float = _lv(
+        "min_crossovers_per_unknown",
+        "redundancy needed for automatic levelling (below it the adjustment fits noise)",
+        gt=0,
+    )
 
 
 _gr = _defaults_of(GridOptions)
@@ -323,17 +437,20 @@ class GridSection(Section):
 
     enabled: Optional[bool] = _gr("enabled", "null: grid when the survey has >= 2 lines; false: never")
     method: Literal[GRID_METHODS] = _gr(  # type: ignore[valid-type]
-        "method", "harmonica `equivalent_sources` (continued to `altitude_m`) or verde `spline` (2-D, at the "
-        "flight heights)")
+        "method",
+        "harmonica `equivalent_sources` (continued to `altitude_m`) or verde `spline` (2-D, at the flight heights)",
+    )
     spacing_m: Optional[float] = _gr("spacing_m", "grid cell size, m (null: line spacing / 4)", gt=0)
-    altitude_m: Optional[float] = _gr("altitude_m", "ellipsoidal height of the grid, m (null: median flight "
-                                      "height)")
-    max_distance_m: Optional[float] = _gr("max_distance_m", "cells farther from the data are empty, m (null: 0.6 "
-                                          "line spacing)", gt=0)
-    depth_m: Optional[float] = _gr("depth_m", "equivalent-source depth below the data, m (null: 1.5 line "
-                                   "spacing)", gt=0)
-    damping: Optional[float] = _gr("damping", "damping of the source coefficients (null: from 0.01, 1, 100 by "
-                                   "block k-fold cross-validation)", gt=0)
+    altitude_m: Optional[float] = _gr("altitude_m", "ellipsoidal height of the grid, m (null: median flight height)")
+    max_distance_m: Optional[float] = _gr(
+        "max_distance_m", "cells farther from the data are empty, m (null: 0.6 line spacing)", gt=0
+    )
+    depth_m: Optional[float] = _gr(
+        "depth_m", "equivalent-source depth below the data, m (null: 1.5 line spacing)", gt=0
+    )
+    damping: Optional[float] = _gr(
+        "damping", "damping of the source coefficients (null: from 0.01, 1, 100 by block k-fold cross-validation)", gt=0
+    )
     cv_folds: int = _gr("cv_folds", "cross-validation folds", ge=2)
 
 
@@ -344,10 +461,15 @@ NonEmptyStr = Field(min_length=1)
 class TieReadingSection(Section):
     """A still reading at the base: ``{reading_mgal[, time_s]}`` or ``{start_s, stop_s}``."""
 
-    reading_mgal: Optional[float] = Field(None, description="absolute gravity the processed data read at the "
-                                          "base, mGal", ge=G_ABS_RANGE_MGAL[0], le=G_ABS_RANGE_MGAL[1])
-    time_s: Optional[float] = Field(None, description="when, s after the flight's first sample (default: the "
-                                    "flight's first/last epoch)")
+    reading_mgal: Optional[float] = Field(
+        None,
+        description="absolute gravity the processed data read at the base, mGal",
+        ge=G_ABS_RANGE_MGAL[0],
+        le=G_ABS_RANGE_MGAL[1],
+    )
+    time_s: Optional[float] = Field(
+        None, description="when, s after the flight's first sample (default: the flight's first/last epoch)"
+    )
     start_s: Optional[float] = Field(None, description="still window start, s after the flight's first sample")
     stop_s: Optional[float] = Field(None, description="still window end, s after the flight's first sample")
 
@@ -356,8 +478,10 @@ class TieReadingSection(Section):
         value_form = self.reading_mgal is not None
         window_form = self.start_s is not None or self.stop_s is not None
         if value_form == window_form:
-            raise fail("give either reading_mgal (with time_s) or start_s and stop_s, not "
-                       f"{'both' if value_form else 'neither'}")
+            raise fail(
+                "give either reading_mgal (with time_s) or start_s and stop_s, not "
+                f"{'both' if value_form else 'neither'}"
+            )
         if window_form:
             if self.start_s is None or self.stop_s is None:
                 raise fail("a window needs both start_s and stop_s (s after the flight's first sample)")
@@ -371,15 +495,21 @@ class TieReadingSection(Section):
 class TieSection(Section):
     """``flights[i].tie``: base tie, absolute level and linear drift of a flight (docs/survey.md)."""
 
-    base_gravity_mgal: float = Field(..., description="absolute gravity at the base station, mGal",
-                                     ge=G_ABS_RANGE_MGAL[0], le=G_ABS_RANGE_MGAL[1])
-    before: Optional[TieReadingSection] = Field(None, description="base reading before the flight: "
-                                                "`{reading_mgal, time_s}` or a still window `{start_s, stop_s}`")
+    base_gravity_mgal: float = Field(
+        ..., description="absolute gravity at the base station, mGal", ge=G_ABS_RANGE_MGAL[0], le=G_ABS_RANGE_MGAL[1]
+    )
+    before: Optional[TieReadingSection] = Field(
+        None,
+        description="base reading before the flight: `{reading_mgal, time_s}` or a still window `{start_s, stop_s}`",
+    )
     after: Optional[TieReadingSection] = Field(None, description="base reading after the flight (as `before`)")
-    base_lat_deg: Optional[float] = Field(None, description="base latitude for its normal gravity, deg "
-                                          "(null: median position in the window)", ge=-90, le=90)
-    base_height_m: Optional[float] = Field(None, description="base ellipsoidal height, m (null: median in the "
-                                           "window)")
+    base_lat_deg: Optional[float] = Field(
+        None,
+        description="base latitude for its normal gravity, deg (null: median position in the window)",
+        ge=-90,
+        le=90,
+    )
+    base_height_m: Optional[float] = Field(None, description="base ellipsoidal height, m (null: median in the window)")
 
     @model_validator(mode="after")
     def _a_reading(self):
@@ -405,21 +535,31 @@ class InitialSection(Section):
     lon_deg: Optional[float] = Field(None, description="longitude, deg")
     height_m: Optional[float] = Field(None, description="ellipsoidal height, m")
     velocity_enu_mps: Optional[Vector3] = Field(None, description="[E, N, U] velocity relative to the Earth, m/s")
-    attitude_deg: Optional[Vector3] = Field(None, description="[roll, pitch, heading] of the triad w.r.t. ENU, deg "
-                                            "(strapdown only; used instead of the alignment when its sigma "
-                                            "`model.initial_attitude_sigma_deg` is smaller)")
+    attitude_deg: Optional[Vector3] = Field(
+        None,
+        description="[roll, pitch, heading] of the triad w.r.t. ENU, deg "
+        "(strapdown only; used instead of the alignment when its sigma "
+        "`model.initial_attitude_sigma_deg` is smaller)",
+    )
 
 
 def _role_model(name: str, table: dict, desc: str, vector_keys=()) -> type:
     """A section whose keys are the roles, each a mapping of quantity -> name(s) (from ``table``)."""
     roles = {}
     for role, names in table.items():
-        fields = {q: (Optional[Any], Field(None, description=f"{desc} for {q} (default `{v}`)",
-                                           json_schema_extra={"type_text": "string" + (" or list" if q in vector_keys else "")}))
-                  for q, v in names.items()}
+        fields = {
+            q: (
+                Optional[Any],
+                Field(
+                    None,
+                    description=f"{desc} for {q} (default `{v}`)",
+                    json_schema_extra={"type_text": "string" + (" or list" if q in vector_keys else "")},
+                ),
+            )
+            for q, v in names.items()
+        }
         sub = create_model(f"{name}_{role}", __base__=Section, __doc__=f"{desc}: {role} channel", **fields)  # type: ignore[call-overload]
-        roles[role] = (Optional[sub],
-                       Field(None, description=f"{role} channel"))
+        roles[role] = (Optional[sub], Field(None, description=f"{role} channel"))
     return create_model(name, __base__=Section, __doc__=desc, **roles)  # type: ignore[call-overload]
 
 
@@ -431,27 +571,42 @@ def _names(v, allowed_lengths, what: str):
     raise fail(f"expected {what}, got {v!r:.60}")
 
 
-JsonFields = _role_model("JsonFields", DEFAULT_JSON_FIELDS, "MCAP JSON field name",
-                         ("specific_force", "angular_rate"))
+JsonFields = _role_model("JsonFields", DEFAULT_JSON_FIELDS, "MCAP JSON field name", ("specific_force", "angular_rate"))
 CsvColumns = _role_model("CsvColumns", DEFAULT_COLUMNS, "CSV column name", ("time",))
 UnitsSection = create_model(  # type: ignore[call-overload]
-    "UnitsSection", __base__=Section, __doc__="units of the channels as written",
-    **{k: (Literal[tuple(v)], Field(next(iter(v)), description=f"unit of {k}: {', '.join(v)}"))  # type: ignore[misc]
-       for k, v in UNITS.items()})
+    "UnitsSection",
+    __base__=Section,
+    __doc__="units of the channels as written",
+    **{
+        k: (Literal[tuple(v)], Field(next(iter(v)), description=f"unit of {k}: {', '.join(v)}"))  # type: ignore[misc]
+        for k, v in UNITS.items()
+    },
+)
 
 
 class McapSection(Section):
     """``flights[i].mcap``: MCAP reading options (docs/input-formats.md)."""
 
-    json_fields: JsonFields = Field(default_factory=JsonFields, description="JSON field names per channel; "  # type: ignore[valid-type]
-                                    "`specific_force`/`angular_rate`: one array field or 3 scalar fields")
-    units: UnitsSection = Field(default_factory=UnitsSection, description="units of accel, gyro, height, "  # type: ignore[valid-type]
-                                "gradient")
+    json_fields: JsonFields = Field(  # type: ignore[valid-type]
+        default_factory=JsonFields,
+        description="JSON field names per channel; "  # type: ignore[valid-type]
+        "`specific_force`/`angular_rate`: one array field or 3 scalar fields",
+    )
+    units: UnitsSection = Field(
+        default_factory=UnitsSection,
+        description="units of accel, gyro, height, "  # type: ignore[valid-type]
+        "gradient",
+    )
     time_source: Literal["auto", "log_time"] = Field(
-        "auto", description="`auto` (header.stamp / JSON time, else log_time) or `log_time`")
+        "auto", description="`auto` (header.stamp / JSON time, else log_time) or `log_time`"
+    )
     check_crc: bool = Field(True, description="verify chunk CRCs")
-    max_record_mib: int = Field(DEFAULT_MAX_RECORD_BYTES // 2**20, description="largest record read, MiB "
-                                "(a larger length field is damage)", ge=1, le=65536)
+    max_record_mib: int = Field(
+        DEFAULT_MAX_RECORD_BYTES // 2**20,
+        description="largest record read, MiB (a larger length field is damage)",
+        ge=1,
+        le=65536,
+    )
 
     @field_validator("json_fields", mode="after")
     @classmethod
@@ -462,8 +617,12 @@ class McapSection(Section):
             for q, x in names:
                 if x is not None:
                     try:
-                        _names(x, (3,) if q in ("specific_force", "angular_rate") else (), "a field name"
-                               + (" or a list of 3 field names" if q in ("specific_force", "angular_rate") else ""))
+                        _names(
+                            x,
+                            (3,) if q in ("specific_force", "angular_rate") else (),
+                            "a field name"
+                            + (" or a list of 3 field names" if q in ("specific_force", "angular_rate") else ""),
+                        )
                     except PydanticCustomError as exc:
                         raise fail(exc.context["message"], (role, q)) from None  # type: ignore[index]
         return v
@@ -474,15 +633,18 @@ class CsvSection(Section):
 
     columns: CsvColumns = Field(default_factory=CsvColumns, description="column names per channel")  # type: ignore[valid-type]
     time_format: Literal[TIME_FORMATS] = Field("ns", description="`ns`, `s`, `gps_week_sow` or `iso`")  # type: ignore[valid-type]
-    units: UnitsSection = Field(default_factory=UnitsSection, description="units of accel, gyro, height, "  # type: ignore[valid-type]
-                                "gradient")
+    units: UnitsSection = Field(
+        default_factory=UnitsSection,
+        description="units of accel, gyro, height, "  # type: ignore[valid-type]
+        "gradient",
+    )
     delimiter: str = Field(",", description="one character such as `,` `;` or a tab")
     gps_leap_seconds: int = Field(18, description="GPS - UTC, s (time_format `iso`)", ge=0, le=100)
 
     @field_validator("delimiter")
     @classmethod
     def _one_char(cls, d):
-        if len(d) != 1 or d in "#\"\r\n0123456789.-+eE":
+        if len(d) != 1 or d in '#"\r\n0123456789.-+eE':
             raise fail(f"expected one character such as ',' ';' or a tab, got {d!r}")
         return d
 
@@ -495,12 +657,18 @@ class CsvSection(Section):
                 if v is None:
                     continue
                 if q == "time":
-                    v = _names_at(v, (2, 3), "a column name, or [week, seconds_of_week] or [cycle, week, "
-                                  "seconds_of_week] columns", ("columns", role, q))
+                    v = _names_at(
+                        v,
+                        (2, 3),
+                        "a column name, or [week, seconds_of_week] or [cycle, week, seconds_of_week] columns",
+                        ("columns", role, q),
+                    )
                     if isinstance(v, list) != (self.time_format == "gps_week_sow"):
-                        raise fail(f"time_format {self.time_format} needs "
-                                   f"{'two columns' if isinstance(v, str) else 'one column'}, got {v!r}",
-                                   ("columns", role, q))
+                        raise fail(
+                            f"time_format {self.time_format} needs "
+                            f"{'two columns' if isinstance(v, str) else 'one column'}, got {v!r}",
+                            ("columns", role, q),
+                        )
                 else:
                     _names_at(v, (), "a column name", ("columns", role, q))
         return self
@@ -516,8 +684,9 @@ def _names_at(v, lengths, what, key):
 class FlightChecksSection(Section):
     """``flights[i].checks``: gap detection and plausibility of the inputs (docs/input-formats.md)."""
 
-    gap_factor: float = Field(5.0, description="a sample step longer than this many nominal steps is a gap",
-                              ge=1.5, le=1e6)
+    gap_factor: float = Field(
+        5.0, description="a sample step longer than this many nominal steps is a gap", ge=1.5, le=1e6
+    )
     plausibility: Literal["error", "warn"] = Field("error", description="implausible inputs: `error` or `warn`")
 
 
@@ -535,8 +704,11 @@ class InputsSection(Section):
 
     mcap: Optional[str] = Field(None, description="one MCAP file with the channels", min_length=1)
     csv: Optional[CsvInputs] = Field(None, description="`{imu: f, altimeter: f, gnss: f}`")
-    gravimeter: Optional[dict] = Field(None, description="`{format: f, file: f, ...}`: a vendor gravimeter file + "
-                                       "navigation, classic chain only (docs/input-formats.md)")
+    gravimeter: Optional[dict] = Field(
+        None,
+        description="`{format: f, file: f, ...}`: a vendor gravimeter file + "
+        "navigation, classic chain only (docs/input-formats.md)",
+    )
 
     @model_validator(mode="before")
     @classmethod
@@ -553,11 +725,13 @@ class TopicsSection(Section):
     """``flights[i].topics``: MCAP topic per channel (else found by schema)."""
 
     imu: str = Field(stage_default(IngestOptions, "topics")["imu"], description="IMU topic", min_length=1)
-    altimeter: str = Field(stage_default(IngestOptions, "topics")["altimeter"], description="altimeter topic",
-                           min_length=1)
+    altimeter: str = Field(
+        stage_default(IngestOptions, "topics")["altimeter"], description="altimeter topic", min_length=1
+    )
     gnss: str = Field(stage_default(IngestOptions, "topics")["gnss"], description="GNSS topic", min_length=1)
-    gradient: Optional[str] = Field(None, description="gravity-gradient topic (default `/gradient`, else found "
-                                    "by its schema)", min_length=1)
+    gradient: Optional[str] = Field(
+        None, description="gravity-gradient topic (default `/gradient`, else found by its schema)", min_length=1
+    )
 
 
 #: Flight-level keys handed to ingestion (io/ingest.py)
@@ -567,35 +741,56 @@ INGEST_KEYS = ("inputs", "topics", "mcap", "csv", "checks", "imu_axes", "gnss_le
 class FlightSection(Section):
     """``flights[i]``: one flight."""
 
-    name: Optional[str] = Field(None, description="unique flight name, `[A-Za-z0-9_.-]{1,64}` (default `F01`, "
-                                "`F02`, ...)")
-    inputs: InputsSection = Field(..., description="`{mcap: file}` or `{csv: {imu: f, altimeter: f, gnss: f}}` "
-                                  "or `{gravimeter: {format: f, file: f, ...}}` (vendor gravimeter file + "
-                                  "navigation, classic chain only: docs/input-formats.md)")
+    name: Optional[str] = Field(
+        None, description="unique flight name, `[A-Za-z0-9_.-]{1,64}` (default `F01`, `F02`, ...)"
+    )
+    inputs: InputsSection = Field(
+        ...,
+        description="`{mcap: file}` or `{csv: {imu: f, altimeter: f, gnss: f}}` "
+        "or `{gravimeter: {format: f, file: f, ...}}` (vendor gravimeter file + "
+        "navigation, classic chain only: docs/input-formats.md)",
+    )
     topics: TopicsSection = Field(default_factory=TopicsSection, description="MCAP topic per channel")
-    mcap: McapSection = Field(default_factory=McapSection, description="JSON field names, units, time source, "
-                              "CRC check, record size bound (docs/input-formats.md)")
-    csv: CsvSection = Field(default_factory=CsvSection, description="column names, time format, units, "
-                            "delimiter (docs/input-formats.md)")
-    checks: FlightChecksSection = Field(default_factory=FlightChecksSection, description="gap detection and "
-                                        "plausibility checks of the inputs (docs/input-formats.md)")
-    triad: Literal[TRIADS] = Field("platform", description="`platform` (ENU-stabilised) or `strapdown` "  # type: ignore[valid-type]
-                                   "(body-fixed triad; docs/conventions.md)")
-    imu_axes: Any = Field("FLU", json_schema_extra={"type_text": "`FLU` \\| `FRD` \\| `RFU` \\| 3x3 matrix"},
-                          description="the IMU's axis convention: `FLU` forward-left-up (gravsurvey's "
-                          "own), `FRD` forward-right-down (VectorNav, Xsens, iMAR, NovAtel), `RFU` "
-                          "right-forward-up, or a 3x3 proper rotation `M` with `vec_flu = M vec_sensor`")
-    gnss_lever_arm_m: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0],
-                                          json_schema_extra={"type_text": "[forward, left, up], numbers"},
-                                          description="[forward, left, up] "
-                                      "GNSS antenna position from the IMU on its (FLU) axes, m (strapdown GNSS "
-                                      "aiding)")
-    initial: Optional[InitialSection] = Field(None, description="optional overrides of the state at the first IMU "
-                                              "sample (`initial` below); null: from the data")
-    truth: Optional[str] = Field(None, description="simulator truth CSV (docs/formats.md): adds `truth_mgal`, "
-                                 "`error_mgal`", min_length=1)
-    lines: Optional[list[WindowSection]] = Field(None, description="explicit line windows for this flight, "
-                                                 "`{name, start_s, stop_s[, kind]}`")
+    mcap: McapSection = Field(
+        default_factory=McapSection,
+        description="JSON field names, units, time source, CRC check, record size bound (docs/input-formats.md)",
+    )
+    csv: CsvSection = Field(
+        default_factory=CsvSection, description="column names, time format, units, delimiter (docs/input-formats.md)"
+    )
+    checks: FlightChecksSection = Field(
+        default_factory=FlightChecksSection,
+        description="gap detection and plausibility checks of the inputs (docs/input-formats.md)",
+    )
+    triad: Literal[TRIADS] = Field(  # type: ignore[valid-type]
+        "platform",
+        description="`platform` (ENU-stabilised) or `strapdown` "  # type: ignore[valid-type]
+        "(body-fixed triad; docs/conventions.md)",
+    )
+    imu_axes: Any = Field(
+        "FLU",
+        json_schema_extra={"type_text": "`FLU` \\| `FRD` \\| `RFU` \\| 3x3 matrix"},
+        description="the IMU's axis convention: `FLU` forward-left-up (gravsurvey's "
+        "own), `FRD` forward-right-down (VectorNav, Xsens, iMAR, NovAtel), `RFU` "
+        "right-forward-up, or a 3x3 proper rotation `M` with `vec_flu = M vec_sensor`",
+    )
+    gnss_lever_arm_m: list[float] = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0],
+        json_schema_extra={"type_text": "[forward, left, up], numbers"},
+        description="[forward, left, up] "
+        "GNSS antenna position from the IMU on its (FLU) axes, m (strapdown GNSS "
+        "aiding)",
+    )
+    initial: Optional[InitialSection] = Field(
+        None,
+        description="optional overrides of the state at the first IMU sample (`initial` below); null: from the data",
+    )
+    truth: Optional[str] = Field(
+        None, description="simulator truth CSV (docs/formats.md): adds `truth_mgal`, `error_mgal`", min_length=1
+    )
+    lines: Optional[list[WindowSection]] = Field(
+        None, description="explicit line windows for this flight, `{name, start_s, stop_s[, kind]}`"
+    )
     tie: Optional[TieSection] = Field(None, description="base tie (`flights[].tie` below, docs/survey.md)")
 
     @field_validator("lines")
@@ -635,8 +830,9 @@ class FlightSection(Section):
 class SurveySection(Section):
     """``survey``: name and description."""
 
-    name: Optional[str] = Field(None, description="survey name in outputs (default: the config file's name)",
-                                min_length=1)
+    name: Optional[str] = Field(
+        None, description="survey name in outputs (default: the config file's name)", min_length=1
+    )
     description: Optional[str] = Field(None, description="free text")
 
     @field_validator("name")
@@ -650,31 +846,45 @@ class SurveySection(Section):
 class ProcessingSection(Section):
     """``processing``: the estimation chain."""
 
-    method: Literal[PROCESSING_METHODS] = Field("inm", description="`inm` (3D-INM Kalman/RTS) or `classic` (the "  # type: ignore[valid-type]
-                                                "conventional scalar reduction, docs/benchmarks.md)")
-    classic_resolution_m: Optional[float] = Field(None, description="half-wavelength resolution of the classic "
-                                                  "method's low-pass, m (null: classic's default)", gt=0)
+    method: Literal[PROCESSING_METHODS] = Field(  # type: ignore[valid-type]
+        "inm",
+        description="`inm` (3D-INM Kalman/RTS) or `classic` (the "  # type: ignore[valid-type]
+        "conventional scalar reduction, docs/benchmarks.md)",
+    )
+    classic_resolution_m: Optional[float] = Field(
+        None,
+        description="half-wavelength resolution of the classic method's low-pass, m (null: classic's default)",
+        gt=0,
+    )
     normal_gravity: Literal[NORMAL_GRAVITY_CHOICES] = Field(  # type: ignore[valid-type]
-        "exact", description="classic only: normal gravity subtracted: `exact` (the field of `ellipsoid`) or a "
-        "closed-form formula (IGF1967 for comparisons with NCEI/MGD77 archives; docs/input-formats.md)")
-    gradiometer: bool = Field(False, description="seed-000 products of a flight's gravity-gradient channel in "
-                              "summary.json `flights.<F>.estimator.gradiometer` (docs/method.md section 7)")
+        "exact",
+        description="classic only: normal gravity subtracted: `exact` (the field of `ellipsoid`) or a "
+        "closed-form formula (IGF1967 for comparisons with NCEI/MGD77 archives; docs/input-formats.md)",
+    )
+    gradiometer: bool = Field(
+        False,
+        description="seed-000 products of a flight's gravity-gradient channel in "
+        "summary.json `flights.<F>.estimator.gradiometer` (docs/method.md section 7)",
+    )
 
     @model_validator(mode="after")
     def _classic_formula(self):
         if self.normal_gravity != "exact" and self.method != "classic":
-            raise fail(f"{self.normal_gravity} applies to processing.method classic only (the 3D-INM uses the "
-                       "exact normal gravity field)", ("normal_gravity",))
+            raise fail(
+                f"{self.normal_gravity} applies to processing.method classic only (the 3D-INM uses the "
+                "exact normal gravity field)",
+                ("normal_gravity",),
+            )
         return self
 
 
 class OutputSection(Section):
     """``output``: deliverables."""
 
-    dir: str = Field("out", description="output directory (relative to the config file; `-o` overrides)",
-                     min_length=1)
-    epsg: Optional[int] = Field(None, description="projected CRS of `easting_m`/`northing_m` (null: the UTM zone "
-                                "of the data)", gt=0)
+    dir: str = Field("out", description="output directory (relative to the config file; `-o` overrides)", min_length=1)
+    epsg: Optional[int] = Field(
+        None, description="projected CRS of `easting_m`/`northing_m` (null: the UTM zone of the data)", gt=0
+    )
     plots: bool = Field(True, description="write PNG plots")
     xyz: bool = Field(True, description="write Geosoft XYZ")
     geojson: bool = Field(True, description="write GeoJSON lines")
@@ -684,17 +894,24 @@ class SurveyFile(Section):
     """The whole processing config."""
 
     survey: SurveySection = Field(default_factory=SurveySection, description="`name`, `description`")
-    ellipsoid: Literal[ELLIPSOIDS] = Field("WGS84", description="reference of heights, positions and normal "  # type: ignore[valid-type]
-                                           "gravity")
+    ellipsoid: Literal[ELLIPSOIDS] = Field(  # type: ignore[valid-type]
+        "WGS84",
+        description="reference of heights, positions and normal "  # type: ignore[valid-type]
+        "gravity",
+    )
     flights: list[FlightSection] = Field(..., description="one mapping per flight", min_length=1)
     model: ModelSection = Field(default_factory=ModelSection, description="3D-INM filter parameters")
     lines: LinesSection = Field(default_factory=LinesSection, description="line segmentation")
-    postprocess: PostprocessSection = Field(default_factory=PostprocessSection, description="per-line "
-                                            "post-processor (docs/wavelet.md)")
+    postprocess: PostprocessSection = Field(
+        default_factory=PostprocessSection, description="per-line post-processor (docs/wavelet.md)"
+    )
     processing: ProcessingSection = Field(default_factory=ProcessingSection, description="estimation chain")
     output: OutputSection = Field(default_factory=OutputSection, description="deliverables")
-    checks: ChecksSection = Field(default_factory=ChecksSection, description="gaps, clocks, input consistency "
-                                  "and result plausibility; not the flight-level `checks` of ingestion")
+    checks: ChecksSection = Field(
+        default_factory=ChecksSection,
+        description="gaps, clocks, input consistency "
+        "and result plausibility; not the flight-level `checks` of ingestion",
+    )
     levelling: LevellingSection = Field(default_factory=LevellingSection, description="crossover levelling")
     grid: GridSection = Field(default_factory=GridSection, description="gridding of the levelled lines")
 
@@ -712,8 +929,11 @@ class SurveyFile(Section):
                 raise fail(f"flight name {name!r} is used twice", ("flights", i, "name"))
             names.add(name)
             if fl.inputs.gravimeter is not None and self.processing.method != "classic":
-                raise fail("a gravimeter file is processed by the classic chain only; set processing.method: "
-                           f"classic (got {self.processing.method!r})", ("flights", i, "inputs", "gravimeter"))
+                raise fail(
+                    "a gravimeter file is processed by the classic chain only; set processing.method: "
+                    f"classic (got {self.processing.method!r})",
+                    ("flights", i, "inputs", "gravimeter"),
+                )
         return self
 
 
@@ -778,8 +998,12 @@ def _message(err: Any, field=None) -> tuple[tuple, str]:
     if t in bounds:
         ann = field.annotation if field is not None else type(v)
         kind = "an integer" if ann is int or int in get_args(ann) else "a number"
-        lim = {a: getattr(m, a) for m in (field.metadata if field is not None else ())
-               for a in ("gt", "ge", "lt", "le") if getattr(m, a, None) is not None} or dict(ctx)
+        lim = {
+            a: getattr(m, a)
+            for m in (field.metadata if field is not None else ())
+            for a in ("gt", "ge", "lt", "le")
+            if getattr(m, a, None) is not None
+        } or dict(ctx)
         lo = [(a, x) for a, x in lim.items() if a in ("gt", "ge")]
         hi = [(a, x) for a, x in lim.items() if a in ("lt", "le")]
         if lo and hi:
@@ -803,8 +1027,11 @@ def _field_at(model: type, loc) -> Any:
             continue
         while cur is not None and not (isinstance(cur, type) and issubclass(cur, BaseModel)):
             args = [a for a in get_args(cur) if a is not type(None)]
-            cur = args[0] if len(args) == 1 and get_origin(cur) is not list else (
-                args[0] if get_origin(cur) is list else None)
+            cur = (
+                args[0]
+                if len(args) == 1 and get_origin(cur) is not list
+                else (args[0] if get_origin(cur) is list else None)
+            )
             if get_origin(cur) is list:
                 break
         if not (isinstance(cur, type) and issubclass(cur, BaseModel)) or part not in cur.model_fields:
@@ -865,11 +1092,11 @@ def segmentation_options(section: LinesSection | dict | None = None, key_path: s
     return SegmentationOptions(**d)
 
 
-def postprocess_options(section: PostprocessSection | dict | None = None,
-                        key_path: str = "postprocess") -> PostprocessOptions:
+def postprocess_options(
+    section: PostprocessSection | dict | None = None, key_path: str = "postprocess"
+) -> PostprocessOptions:
     """:class:`~gravsurvey.wavelet.PostprocessOptions` from the ``postprocess`` section."""
-    s = section if isinstance(section, PostprocessSection) else validate_section(PostprocessSection, section,
-                                                                                 key_path)
+    s = section if isinstance(section, PostprocessSection) else validate_section(PostprocessSection, section, key_path)
     return PostprocessOptions(**_as_dict(s))
 
 
@@ -879,8 +1106,7 @@ def check_options(section: ChecksSection | dict | None = None, key_path: str = "
     return CheckOptions(**_as_dict(s))
 
 
-def levelling_options(section: LevellingSection | dict | None = None,
-                      key_path: str = "levelling") -> LevellingOptions:
+def levelling_options(section: LevellingSection | dict | None = None, key_path: str = "levelling") -> LevellingOptions:
     """:class:`~gravsurvey.levelling.LevellingOptions` from the ``levelling`` section."""
     s = section if isinstance(section, LevellingSection) else validate_section(LevellingSection, section, key_path)
     return LevellingOptions(**_as_dict(s))
@@ -927,8 +1153,13 @@ def initial_state(section: InitialSection | dict, triad: str, key_path: str = "i
     mat_nt = np.eye(3)
     if triad == "strapdown":
         mat_nt = mat_nb_from_attitude(*np.radians(given["attitude_deg"]))
-    return InitialState(math.radians(given["lat_deg"]), math.radians(given["lon_deg"]), given["height_m"],
-                        given["velocity_enu_mps"], mat_nt)
+    return InitialState(
+        math.radians(given["lat_deg"]),
+        math.radians(given["lon_deg"]),
+        given["height_m"],
+        given["velocity_enu_mps"],
+        mat_nt,
+    )
 
 
 def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", base_dir=None) -> IngestOptions:
@@ -940,8 +1171,10 @@ def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", b
         if isinstance(flight, dict):
             extra = [k for k in flight if k not in INGEST_KEYS]
             if extra:
-                raise ConfigError(f"{key_path}.{extra[0]}: unknown key{suggest(extra[0], INGEST_KEYS)}; "
-                                  f"valid keys here: {', '.join(INGEST_KEYS)}")
+                raise ConfigError(
+                    f"{key_path}.{extra[0]}: unknown key{suggest(extra[0], INGEST_KEYS)}; "
+                    f"valid keys here: {', '.join(INGEST_KEYS)}"
+                )
         f = validate_section(FlightSection, flight, key_path)
     o = IngestOptions(key_path=key_path, base_dir=os.fspath(base_dir) if base_dir is not None else None)
     if f.inputs.gravimeter is not None:
@@ -998,10 +1231,14 @@ DOC_SECTIONS: list[tuple[str, str, Any]] = [
     ("`flights[i].mcap`", "mcap.", McapSection),
     ("`flights[i].csv`", "csv.", CsvSection),
     ("`flights[i].mcap.units`, `flights[i].csv.units`", "units.", UnitsSection),
-    *[(f"`flights[i].mcap.json_fields.{role}`", f"mcap.json_fields.{role}.", _role_section(JsonFields, role))
-      for role in DEFAULT_JSON_FIELDS],
-    *[(f"`flights[i].csv.columns.{role}`", f"csv.columns.{role}.", _role_section(CsvColumns, role))
-      for role in DEFAULT_COLUMNS],
+    *[
+        (f"`flights[i].mcap.json_fields.{role}`", f"mcap.json_fields.{role}.", _role_section(JsonFields, role))
+        for role in DEFAULT_JSON_FIELDS
+    ],
+    *[
+        (f"`flights[i].csv.columns.{role}`", f"csv.columns.{role}.", _role_section(CsvColumns, role))
+        for role in DEFAULT_COLUMNS
+    ],
     ("`flights[i].checks`", "checks.", FlightChecksSection),
     ("`flights[i].initial`", "initial.", InitialSection),
     ("`flights[i].lines`, `lines.windows[j]`", "", WindowSection),
@@ -1037,7 +1274,8 @@ def _type_text(ann, field) -> str:
     elif base is str:
         t = "string"
     elif any(getattr(m, "func", None) is _three for m in field.metadata) or (
-            get_origin(base) is Annotated and any(getattr(m, "func", None) is _three for m in get_args(base)[1:])):
+        get_origin(base) is Annotated and any(getattr(m, "func", None) is _three for m in get_args(base)[1:])
+    ):
         t = "list of 3 numbers"
     elif get_origin(base) is list:
         t = "list"
@@ -1079,8 +1317,14 @@ def reference_markdown() -> str:
     """The generated key reference of docs/config.md (between the GENERATED markers)."""
     out = [GENERATED_BEGIN, ""]
     for heading, prefix, model in DOC_SECTIONS:
-        out += [f"### {heading}", "", (model.__doc__ or "").strip().split("\n")[0], "",
-                "| key | type | default | meaning |", "|---|---|---|---|"]
+        out += [
+            f"### {heading}",
+            "",
+            (model.__doc__ or "").strip().split("\n")[0],
+            "",
+            "| key | type | default | meaning |",
+            "|---|---|---|---|",
+        ]
         for name, field in model.model_fields.items():
             key = f"{prefix}{field.alias or name}"
             desc = (field.description or "").replace("|", "\\|")
@@ -1095,7 +1339,7 @@ def splice_reference(doc_text: str) -> str:
     a, b = doc_text.find(GENERATED_BEGIN), doc_text.find(GENERATED_END)
     if a < 0 or b < a:
         raise ValueError("docs/config.md has no generated reference markers")
-    return doc_text[:a] + reference_markdown() + doc_text[b + len(GENERATED_END):]
+    return doc_text[:a] + reference_markdown() + doc_text[b + len(GENERATED_END) :]
 
 
 def main(argv=None) -> int:
@@ -1114,8 +1358,11 @@ def main(argv=None) -> int:
     new = splice_reference(text)
     if a.check:
         if new != text:
-            print(f"{p}: generated reference differs from gravsurvey/settings.py; run python -m "
-                  "gravsurvey.settings --doc", file=sys.stderr)
+            print(
+                f"{p}: generated reference differs from gravsurvey/settings.py; run python -m "
+                "gravsurvey.settings --doc",
+                file=sys.stderr,
+            )
             return 1
         return 0
     if a.doc:
