@@ -43,7 +43,9 @@ from .consistency import CheckOptions
 from .errors import ConfigError, suggest
 from .grid import GRID_METHODS, GridOptions
 from .inm.params import RADIUS_SOURCES, TRIADS, InitialState, InmParams, mat_nb_from_attitude
+from .io.checks import HEIGHT_OK
 from .io.csv import DEFAULT_COLUMNS, TIME_FORMATS, UNITS
+from .io.formats.flight import GRAVIMETER_FORMATS, NAV_FORMATS, GravimeterOptions
 from .io.ingest import OPTIONAL_ROLES, ROLES, IngestOptions, imu_axes_matrix
 from .io.mcap import DEFAULT_JSON_FIELDS, DEFAULT_MAX_RECORD_BYTES
 from .levelling import LEVELLING_MODELS, LevellingOptions
@@ -79,6 +81,7 @@ __all__ = [
     "ingest_options",
     "initial_overrides",
     "initial_state",
+    "gravimeter_options",
     "check_inm_params",
     "reference_markdown",
     "FLIGHT_NAME_PATTERN",
@@ -699,12 +702,92 @@ class CsvInputs(Section):
     gradient: Optional[str] = Field(None, description="gravity-gradient CSV file", min_length=1)
 
 
+class NavSection(Section):
+    """``inputs.gravimeter.nav``: the navigation file of a gravimeter flight."""
+
+    format: Literal[NAV_FORMATS] = Field(..., description="`nmea` or `trajectory`")  # type: ignore[valid-type]
+    file: str = Field(..., description="navigation file", min_length=1)
+    time_source: Optional[Literal["auto", "fix", "logger"]] = Field(
+        None, description="nmea only: `auto`, `fix` (the fix clock) or `logger` (default `auto`)"
+    )
+    time_system: Optional[Literal["auto", "gps", "utc"]] = Field(
+        None, description="trajectory only: `auto`, `gps` or `utc` (default `auto`)"
+    )
+
+    @model_validator(mode="after")
+    def _format_options(self):
+        if self.time_source is not None and self.format != "nmea":
+            raise fail(f"nmea only (format is {self.format})", ("time_source",))
+        if self.time_system is not None and self.format != "trajectory":
+            raise fail(f"trajectory only (format is {self.format})", ("time_system",))
+        return self
+
+
+class GravimeterSection(Section):
+    """``inputs.gravimeter``: a vendor gravimeter file + navigation (classic chain only;
+    docs/input-formats.md)."""
+
+    format: Literal[tuple(GRAVIMETER_FORMATS)] = Field(  # type: ignore[misc,valid-type]
+        ..., description="`mgd77t`, `dgs_laptop`, `at1a`, `zls`, `bgm_serial` or `bgm_rgs`"
+    )
+    file: Optional[str] = Field(None, description="the gravimeter file (or `files`)", min_length=1)
+    files: Optional[list[Annotated[str, Field(min_length=1)]]] = Field(
+        None, description="several files (zls only: a list of files or a directory)", min_length=1
+    )
+    offset_mgal: Optional[float] = Field(
+        None,
+        description="base-tie offset: absolute gravity = scale x reading + offset_mgal, mGal; required for "
+        "meter-unit formats (dgs_laptop, at1a, zls, bgm_serial), default 0 for the others",
+    )
+    scale: float = Field(1.0, description="meter calibration factor applied to the reading first", gt=0)
+    counts_scale_mgal: Optional[float] = Field(
+        None, description="bgm_serial only (required there): mGal per count", gt=0
+    )
+    time_source: Optional[Literal["auto", "meter", "logger"]] = Field(
+        None, description="dgs_laptop only: `auto`, `meter` or `logger` clock (default `auto`)"
+    )
+    height_m: Optional[float] = Field(
+        None,
+        description="constant ellipsoidal height of the meter, m (overrides nav heights)",
+        ge=HEIGHT_OK[0],
+        le=HEIGHT_OK[1],
+    )
+    nav: Optional[NavSection] = Field(
+        None, description="navigation file; required for formats without positions (dgs_laptop's are optional)"
+    )
+
+    @model_validator(mode="after")
+    def _format_rules(self):
+        fmt, info = self.format, GRAVIMETER_FORMATS[self.format]
+        if (self.file is None) == (self.files is None):
+            raise fail("give file (one path) or files (a list of paths)")
+        if self.files is not None and fmt != "zls" and len(self.files) > 1:
+            raise fail(f"format {fmt} reads one file per flight; got {len(self.files)}", ("files",))
+        if self.offset_mgal is None and not info["absolute"]:
+            raise fail(
+                f"missing; {fmt} readings are in meter units with an arbitrary offset: give the base-tie offset "
+                "(absolute gravity = scale x reading + offset_mgal)",
+                ("offset_mgal",),
+            )
+        if fmt == "bgm_serial" and self.counts_scale_mgal is None:
+            raise fail("missing; bgm_serial needs the meter's mGal per count", ("counts_scale_mgal",))
+        if fmt != "bgm_serial" and self.counts_scale_mgal is not None:
+            raise fail("only for format bgm_serial", ("counts_scale_mgal",))
+        if self.time_source is not None and fmt != "dgs_laptop":
+            raise fail("only for format dgs_laptop (the others have one clock)", ("time_source",))
+        if self.nav is None and not info["positions"]:
+            raise fail(
+                f"missing; {fmt} files hold no positions: give nav: {{format: nmea|trajectory, file: ...}}", ("nav",)
+            )
+        return self
+
+
 class InputsSection(Section):
     """``flights[i].inputs``: exactly one of ``mcap``, ``csv``, ``gravimeter``."""
 
     mcap: Optional[str] = Field(None, description="one MCAP file with the channels", min_length=1)
     csv: Optional[CsvInputs] = Field(None, description="`{imu: f, altimeter: f, gnss: f}`")
-    gravimeter: Optional[dict] = Field(
+    gravimeter: Optional[GravimeterSection] = Field(
         None,
         description="`{format: f, file: f, ...}`: a vendor gravimeter file + "
         "navigation, classic chain only (docs/input-formats.md)",
@@ -1162,6 +1245,24 @@ def initial_state(section: InitialSection | dict, triad: str, key_path: str = "i
     )
 
 
+def gravimeter_options(
+    section: GravimeterSection | dict, key_path: str = "flights[0].inputs.gravimeter"
+) -> GravimeterOptions:
+    """:class:`~gravsurvey.io.formats.flight.GravimeterOptions` from a flight's ``inputs.gravimeter``."""
+    g = section if isinstance(section, GravimeterSection) else validate_section(GravimeterSection, section, key_path)
+    return GravimeterOptions(
+        format=g.format,
+        files=[g.file] if g.file is not None else list(g.files or []),
+        offset_mgal=0.0 if g.offset_mgal is None else g.offset_mgal,
+        scale=g.scale,
+        counts_scale_mgal=g.counts_scale_mgal,
+        time_source=g.time_source or "auto",
+        height_m=g.height_m,
+        nav=g.nav.model_dump(exclude_none=True) if g.nav is not None else None,
+        key_path=key_path,
+    )
+
+
 def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", base_dir=None) -> IngestOptions:
     """:class:`~gravsurvey.io.ingest.IngestOptions` from a flight's ingestion keys
     (:data:`INGEST_KEYS`; a mapping with only these keys, or a validated :class:`FlightSection`)."""
@@ -1178,10 +1279,8 @@ def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", b
         f = validate_section(FlightSection, flight, key_path)
     o = IngestOptions(key_path=key_path, base_dir=os.fspath(base_dir) if base_dir is not None else None)
     if f.inputs.gravimeter is not None:
-        from .io.formats.flight import gravimeter_options_from_dict
-
         o.kind = "gravimeter"
-        o.gravimeter = gravimeter_options_from_dict(f.inputs.gravimeter, f"{key_path}.inputs.gravimeter")
+        o.gravimeter = gravimeter_options(f.inputs.gravimeter, f"{key_path}.inputs.gravimeter")
     elif f.inputs.mcap is not None:
         o.kind, o.mcap_path = "mcap", f.inputs.mcap
     else:
@@ -1227,6 +1326,8 @@ DOC_SECTIONS: list[tuple[str, str, Any]] = [
     ("Flights (`flights[i]`)", "", FlightSection),
     ("`flights[i].inputs`", "inputs.", InputsSection),
     ("`flights[i].inputs.csv`", "inputs.csv.", CsvInputs),
+    ("`flights[i].inputs.gravimeter`", "inputs.gravimeter.", GravimeterSection),
+    ("`flights[i].inputs.gravimeter.nav`", "inputs.gravimeter.nav.", NavSection),
     ("`flights[i].topics`", "topics.", TopicsSection),
     ("`flights[i].mcap`", "mcap.", McapSection),
     ("`flights[i].csv`", "csv.", CsvSection),
