@@ -14,13 +14,12 @@ Units: SI inside (s, m, rad); headings and angles at the edges in degrees (named
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from gravsurvey.errors import ConfigError, DataError, check_keys
+from gravsurvey.errors import ConfigError, DataError
 from gravsurvey.geodesy import radii_of_curvature
 
 __all__ = [
@@ -470,37 +469,16 @@ def segments_from_windows(time_s, windows: list[dict], *, key_path: str = "lines
     ConfigError
         A window is malformed, names repeat, or a window holds fewer than 2 samples of the flight.
     """
+    from gravsurvey.settings import time_windows
+
     t = np.asarray(time_s, dtype=float)
-    if not isinstance(windows, (list, tuple)) or not windows:
-        raise ConfigError(f"{key_path}: expected a non-empty list of {{name, start_s, stop_s}}")
     out = []
-    seen = set()
-    for i, wdw in enumerate(windows):
+    for i, wdw in enumerate(time_windows(windows, key_path)):
         kp = f"{key_path}[{i}]"
-        if not isinstance(wdw, dict):
-            raise ConfigError(f"{kp}: expected a mapping with name, start_s, stop_s")
-        check_keys(wdw, ("name", "start_s", "stop_s", "kind"), kp)
-        for k in ("name", "start_s", "stop_s"):
-            if k not in wdw:
-                raise ConfigError(f"{kp}: missing key '{k}'")
-        name = wdw["name"]
-        if not isinstance(name, str) or not name:
-            raise ConfigError(f"{kp}.name: expected a non-empty string, got {name!r}")
-        if name in seen:
-            raise ConfigError(f"{kp}.name: '{name}' appears twice")
-        seen.add(name)
-        try:
-            t0 = float(wdw["start_s"])
-            t1 = float(wdw["stop_s"])
-        except (TypeError, ValueError):
-            raise ConfigError(f"{kp}: start_s and stop_s must be numbers (s)") from None
-        if not (math.isfinite(t0) and math.isfinite(t1)) or t1 <= t0:
-            raise ConfigError(f"{kp}: expected finite start_s < stop_s, got {t0} .. {t1}")
-        kind = wdw.get("kind")
+        name, t0, t1 = wdw.name, wdw.start_s, wdw.stop_s
+        kind = wdw.kind
         if kind is None:
             kind = "tie" if len(name) > 1 and name[0] == "T" and name[1].isdigit() else "line"
-        if kind not in ("line", "tie"):
-            raise ConfigError(f"{kp}.kind: expected 'line' or 'tie', got {kind!r}")
         a = int(np.searchsorted(t, t0, side="left"))
         b = int(np.searchsorted(t, t1, side="right"))
         if b - a < 2:

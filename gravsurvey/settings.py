@@ -40,7 +40,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from .consistency import CheckOptions
-from .errors import ConfigError, suggest
+from .errors import ConfigError, suggest, unknown_key_text
 from .grid import GRID_METHODS, GridOptions
 from .inm.params import RADIUS_SOURCES, TRIADS, InitialState, InmParams, mat_nb_from_attitude
 from .io.checks import HEIGHT_OK
@@ -82,6 +82,7 @@ __all__ = [
     "initial_overrides",
     "initial_state",
     "gravimeter_options",
+    "time_windows",
     "check_inm_params",
     "reference_markdown",
     "FLIGHT_NAME_PATTERN",
@@ -1047,7 +1048,7 @@ def _message(err: Any, field=None) -> tuple[tuple, str]:
         return tuple(ctx.get("key", ())), ctx["message"]
     if t == "unknown_key":
         valid = ctx["valid"]
-        return (ctx["key"],), f"unknown key{suggest(ctx['key'], valid)}; valid keys here: {', '.join(valid)}"
+        return (ctx["key"],), unknown_key_text(ctx["key"], valid)
     if t in ("mapping", "model_type", "dict_type"):
         return (), f"expected a mapping, got {type(v).__name__} {_got(v)}"
     if t == "missing":
@@ -1152,6 +1153,21 @@ def parse_survey(raw: dict) -> SurveyFile:
 # ============================================================================ builders
 def _as_dict(section: Section) -> dict:
     return {k: getattr(section, k) for k in type(section).model_fields}
+
+
+def time_windows(windows: Any, key_path: str = "lines.windows") -> list[WindowSection]:
+    """A non-empty list of time windows validated (types, ``start_s < stop_s``, unique names)."""
+    if not isinstance(windows, (list, tuple)) or not windows:
+        raise ConfigError(f"{key_path}: expected a non-empty list of {{name, start_s, stop_s}}, got {_got(windows)}")
+    out = []
+    for i, w in enumerate(windows):
+        out.append(validate_section(WindowSection, w, f"{key_path}[{i}]"))
+    try:
+        _unique_windows(out, ())
+    except PydanticCustomError as exc:
+        ctx = exc.context or {}
+        raise ConfigError(f"{_path(key_path, ctx.get('key', ()))}: {ctx.get('message')}") from None
+    return out
 
 
 def inm_params(section: ModelSection | dict | None = None, key_path: str = "model") -> InmParams:
@@ -1272,10 +1288,7 @@ def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", b
         if isinstance(flight, dict):
             extra = [k for k in flight if k not in INGEST_KEYS]
             if extra:
-                raise ConfigError(
-                    f"{key_path}.{extra[0]}: unknown key{suggest(extra[0], INGEST_KEYS)}; "
-                    f"valid keys here: {', '.join(INGEST_KEYS)}"
-                )
+                raise ConfigError(f"{key_path}.{extra[0]}: {unknown_key_text(extra[0], INGEST_KEYS)}")
         f = validate_section(FlightSection, flight, key_path)
     o = IngestOptions(key_path=key_path, base_dir=os.fspath(base_dir) if base_dir is not None else None)
     if f.inputs.gravimeter is not None:
