@@ -459,7 +459,6 @@ class GridSection(Section):
 
 
 # ============================================================================ flights
-NonEmptyStr = Field(min_length=1)
 
 
 class TieReadingSection(Section):
