@@ -1039,6 +1039,25 @@ def _choices(expected: str) -> list[str]:
     return [c.strip().strip("'\"") for c in re.split(r",| or ", expected) if c.strip()]
 
 
+def _limits_text(field, ctx: dict) -> str:
+    """``" > 0"``, ``" in [1, 5]"``, ``" in (0, 45)"`` from a field's limits (or the error's), or ``""``."""
+    lim = {
+        a: getattr(m, a)
+        for m in (field.metadata if field is not None else ())
+        for a in ("gt", "ge", "lt", "le")
+        if getattr(m, a, None) is not None
+    } or {a: x for a, x in ctx.items() if a in ("gt", "ge", "lt", "le")}
+    lo = [(a, x) for a, x in lim.items() if a in ("gt", "ge")]
+    hi = [(a, x) for a, x in lim.items() if a in ("lt", "le")]
+    if lo and hi:
+        (la, lx), (ha, hx) = lo[0], hi[0]
+        return f" in {'(' if la == 'gt' else '['}{lx:g}, {hx:g}{')' if ha == 'lt' else ']'}"
+    if lim:
+        a, x = next(iter(lim.items()))
+        return f" {dict(gt='>', ge='>=', lt='<', le='<=')[a]} {x:g}"
+    return ""
+
+
 def _message(err: Any, field=None) -> tuple[tuple, str]:
     """(extra key path, text) of one pydantic error in gravsurvey's words (``field``: the
     schema field at the error's location, for its limits and description)."""
@@ -1057,11 +1076,11 @@ def _message(err: Any, field=None) -> tuple[tuple, str]:
         ch = _choices(ctx.get("expected", ""))
         return (), f"expected one of {', '.join(ch)}, got {_got(v)}{suggest(v, ch)}"
     if t in ("float_type", "float_parsing"):
-        return (), f"expected a number, got {_got(v)}"
+        return (), f"expected a number{_limits_text(field, ctx)}, got {_got(v)}"
     if t == "finite_number":
-        return (), f"expected a finite number, got {_got(v)}"
+        return (), f"expected a finite number{_limits_text(field, ctx)}, got {_got(v)}"
     if t in ("int_type", "int_parsing", "int_from_float"):
-        return (), f"expected an integer, got {_got(v)}"
+        return (), f"expected an integer{_limits_text(field, ctx)}, got {_got(v)}"
     if t == "bool_type":
         return (), f"expected true or false, got {_got(v)}"
     if t == "string_type":
@@ -1072,30 +1091,14 @@ def _message(err: Any, field=None) -> tuple[tuple, str]:
         return (), f"expected a list, got {_got(v)}"
     if t in ("too_short", "too_long"):
         lo, hi = ctx.get("min_length"), ctx.get("max_length")
-        n = ctx.get("actual_length")
         if t == "too_short" and lo == 1:
             return (), f"expected a non-empty list, got {_got(v)}"
         want = f"at least {lo}" if t == "too_short" else f"at most {hi}"
-        return (), f"expected {want} item(s), got {n}: {_got(v)}"
-    bounds = ("greater_than", "greater_than_equal", "less_than", "less_than_equal")
-    if t in bounds:
+        return (), f"expected {want} item(s), got {ctx.get('actual_length')}: {_got(v)}"
+    if t in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
         ann = field.annotation if field is not None else type(v)
         kind = "an integer" if ann is int or int in get_args(ann) else "a number"
-        lim = {
-            a: getattr(m, a)
-            for m in (field.metadata if field is not None else ())
-            for a in ("gt", "ge", "lt", "le")
-            if getattr(m, a, None) is not None
-        } or dict(ctx)
-        lo = [(a, x) for a, x in lim.items() if a in ("gt", "ge")]
-        hi = [(a, x) for a, x in lim.items() if a in ("lt", "le")]
-        if lo and hi:
-            (la, lx), (ha, hx) = lo[0], hi[0]
-            rng = f"{'(' if la == 'gt' else '['}{lx:g}, {hx:g}{')' if ha == 'lt' else ']'}"
-            return (), f"expected {kind} in {rng}, got {_got(v)}"
-        a, x = next(iter(lim.items()))
-        op = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}[a]
-        return (), f"expected {kind} {op} {x:g}, got {_got(v)}"
+        return (), f"expected {kind}{_limits_text(field, ctx)}, got {_got(v)}"
     return (), f"{err['msg']}, got {_got(v)}"
 
 
