@@ -58,6 +58,7 @@ class SurveyConfig:
     processing_method: str = "inm"
     classic_resolution_m: float | None = None
     normal_gravity: str = "exact"  # classic: "exact" (the ellipsoid's field) or a closed-form formula
+    gradiometer: bool = False  # processing.gradiometer: seed-000 products of a gradient channel
     output_dir: Path = Path("out")
     epsg: int | None = None
     plots: bool = True
@@ -273,6 +274,7 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
         processing_method=doc.processing.method,
         classic_resolution_m=doc.processing.classic_resolution_m,
         normal_gravity=doc.processing.normal_gravity,
+        gradiometer=doc.processing.gradiometer,
         output_dir=Path(output_dir) if output_dir is not None else _resolve(base, out.dir),
         epsg=out.epsg,
         plots=out.plots,

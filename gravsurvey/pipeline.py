@@ -166,7 +166,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
     names = channel_names(fl.ingest, cfg.base_dir)
     notes += [f"{fl.name}: {n}" for n in check_overlap(record, names)]
     notes += [f"{fl.name}: {n}" for n in check_gnss_consistency(
-        record, names, checks, cfg.ellipsoid, fl.initial_raw, f"flights[{fl.index}].initial")]
+        record, names, checks, cfg.ellipsoid, fl.initial_given, f"flights[{fl.index}].initial")]
     segment_loss: list[str] = []
 
     t = time.perf_counter()
@@ -181,7 +181,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightResult:
         notes += [f"{fl.name}: {n}" for n in seg_notes]
     timings["estimate_s"] = time.perf_counter() - t
     gradio = None
-    if cfg.raw.get("processing", {}).get("gradiometer", False):
+    if cfg.gradiometer:
         gradio = _gradiometer_products(fl, record, sol, notes)
 
     t = time.perf_counter()
