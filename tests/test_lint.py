@@ -18,7 +18,7 @@ FORMATTED = [
     "gravsurvey/errors.py",
     "gravsurvey/filters.py",
     "gravsurvey/regression.py",
-    "gravsurvey/settings.py",
+    "gravsurvey/settings",
     "tests/test_cache.py",
     "tests/test_exit_codes.py",
     "tests/test_gyro_turns.py",

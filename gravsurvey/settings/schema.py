@@ -1,96 +1,38 @@
-"""The configuration schema: every key, type, unit, default and description in one place.
-
-One pydantic (v2) model per section of the processing config (docs/config.md is generated from
-these models: ``python -m gravsurvey.settings --doc``).  :func:`parse_survey` validates a whole
-loaded YAML mapping; :func:`config_error` turns any validation failure into one
-:class:`~gravsurvey.errors.ConfigError` line naming the full key path, so ``validate`` and
-``run`` refuse the same configs with the same words.
-
-Stage modules never see raw mappings: the builders here (:func:`inm_params`,
-:func:`segmentation_options`, :func:`postprocess_options`, :func:`check_options`,
-:func:`levelling_options`, :func:`grid_options`, :func:`tie_config`, :func:`ingest_options`,
-:func:`initial_overrides`, :func:`initial_state`) return the typed settings each stage takes.
-Those settings classes keep their defaults (a notebook user writes ``InmParams()``); the
-schema's defaults are read from them, so a default is written once.
-
-Adding a key: one line in the section's model below (plus the attribute of the stage's settings
-class, whose default the schema reads through :func:`stage_default`).
-"""
+"""The config schema proper: one pydantic model per section (keys, types, limits, defaults,
+descriptions with units), the defaults read from the stage settings classes."""
 
 from __future__ import annotations
 
 import dataclasses
-import math
-import os
 import re
-import sys
-from typing import Annotated, Any, Literal, Optional, get_args, get_origin
+from typing import Annotated, Any, Literal, Optional
 
-import numpy as np
 from pydantic import (
     AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
-    ValidationError,
     create_model,
     field_validator,
     model_validator,
 )
 from pydantic_core import PydanticCustomError
 
-from .consistency import CheckOptions
-from .errors import ConfigError, suggest, unknown_key_text
-from .grid import GRID_METHODS, GridOptions
-from .inm.params import RADIUS_SOURCES, TRIADS, InitialState, InmParams, mat_nb_from_attitude
-from .io.checks import HEIGHT_OK
-from .io.csv import DEFAULT_COLUMNS, TIME_FORMATS, UNITS
-from .io.formats.flight import GRAVIMETER_FORMATS, NAV_FORMATS, GravimeterOptions
-from .io.ingest import OPTIONAL_ROLES, ROLES, IngestOptions, imu_axes_matrix
-from .io.mcap import DEFAULT_JSON_FIELDS, DEFAULT_MAX_RECORD_BYTES
-from .levelling import LEVELLING_MODELS, LevellingOptions
-from .marine import NORMAL_GRAVITY_CHOICES
-from .segmentation import SEGMENTATION_MODES, SegmentationOptions
-from .ties import G_ABS_RANGE_MGAL, TieConfig, TieReading
-from .wavelet import BOUNDARY_MODES, LOWPASS_METHODS, METHODS, THRESHOLDINGS, WAVELETS, PostprocessOptions
+from ..consistency import CheckOptions
+from ..errors import ConfigError
+from ..grid import GRID_METHODS, GridOptions
+from ..inm.params import RADIUS_SOURCES, TRIADS, InmParams
+from ..io.checks import HEIGHT_OK
+from ..io.csv import DEFAULT_COLUMNS, TIME_FORMATS, UNITS
+from ..io.formats.flight import GRAVIMETER_FORMATS, NAV_FORMATS
+from ..io.ingest import IngestOptions, imu_axes_matrix
+from ..io.mcap import DEFAULT_JSON_FIELDS, DEFAULT_MAX_RECORD_BYTES
+from ..levelling import LEVELLING_MODELS, LevellingOptions
+from ..marine import NORMAL_GRAVITY_CHOICES
+from ..segmentation import SEGMENTATION_MODES, SegmentationOptions
+from ..ties import G_ABS_RANGE_MGAL
+from ..wavelet import BOUNDARY_MODES, LOWPASS_METHODS, METHODS, THRESHOLDINGS, WAVELETS, PostprocessOptions
 
-__all__ = [
-    "Section",
-    "SurveyFile",
-    "FlightSection",
-    "ModelSection",
-    "LinesSection",
-    "PostprocessSection",
-    "ProcessingSection",
-    "OutputSection",
-    "ChecksSection",
-    "LevellingSection",
-    "GridSection",
-    "TieSection",
-    "InitialSection",
-    "config_error",
-    "validate_section",
-    "parse_survey",
-    "inm_params",
-    "segmentation_options",
-    "postprocess_options",
-    "check_options",
-    "levelling_options",
-    "grid_options",
-    "tie_config",
-    "ingest_options",
-    "initial_overrides",
-    "initial_state",
-    "gravimeter_options",
-    "time_windows",
-    "check_inm_params",
-    "reference_markdown",
-    "FLIGHT_NAME_PATTERN",
-    "INGEST_KEYS",
-    "TRIADS",
-    "PROCESSING_METHODS",
-    "ELLIPSOIDS",
-]
 
 #: flight names: safe in file names and XYZ line labels
 FLIGHT_NAME_PATTERN = r"^[A-Za-z0-9_.-]{1,64}$"
@@ -256,7 +198,7 @@ class WindowSection(Section):
         return self
 
 
-def _unique_windows(windows: list[WindowSection], key: tuple) -> None:
+def check_unique_windows(windows: list[WindowSection], key: tuple) -> None:
     seen = set()
     for i, w in enumerate(windows):
         if w.name in seen:
@@ -308,7 +250,7 @@ class LinesSection(Section):
     def _windows_given(self):
         if self.mode == "windows" and not self.windows:
             raise fail("required (a non-empty list) when mode is 'windows'", ("windows",))
-        _unique_windows(self.windows, ("windows",))
+        check_unique_windows(self.windows, ("windows",))
         return self
 
 
@@ -521,14 +463,14 @@ class TieSection(Section):
         return self
 
 
-def _three(v: list[float]) -> list[float]:
+def three_numbers(v: list[float]) -> list[float]:
     if len(v) != 3:
         raise fail(f"expected a list of 3 numbers, got {v!r:.60}")
     return v
 
 
 #: a vector of 3 numbers (the meaning of each is in the key's description)
-Vector3 = Annotated[list[float], AfterValidator(_three)]
+Vector3 = Annotated[list[float], AfterValidator(three_numbers)]
 
 
 class InitialSection(Section):
@@ -880,7 +822,7 @@ class FlightSection(Section):
     @classmethod
     def _window_names(cls, v):
         if v is not None:
-            _unique_windows(v, ())
+            check_unique_windows(v, ())
         return v
 
     @field_validator("name")
@@ -1018,475 +960,3 @@ class SurveyFile(Section):
                     ("flights", i, "inputs", "gravimeter"),
                 )
         return self
-
-
-# ============================================================================ errors
-def _path(prefix: str, loc) -> str:
-    out = prefix
-    for part in loc:
-        if isinstance(part, int):
-            out += f"[{part}]"
-        else:
-            out = f"{out}.{part}" if out else str(part)
-    return out
-
-
-def _got(v) -> str:
-    return f"{v!r:.60}"
-
-
-def _choices(expected: str) -> list[str]:
-    return [c.strip().strip("'\"") for c in re.split(r",| or ", expected) if c.strip()]
-
-
-def _limits_text(field, ctx: dict) -> str:
-    """``" > 0"``, ``" in [1, 5]"``, ``" in (0, 45)"`` from a field's limits (or the error's), or ``""``."""
-    lim = {
-        a: getattr(m, a)
-        for m in (field.metadata if field is not None else ())
-        for a in ("gt", "ge", "lt", "le")
-        if getattr(m, a, None) is not None
-    } or {a: x for a, x in ctx.items() if a in ("gt", "ge", "lt", "le")}
-    lo = [(a, x) for a, x in lim.items() if a in ("gt", "ge")]
-    hi = [(a, x) for a, x in lim.items() if a in ("lt", "le")]
-    if lo and hi:
-        (la, lx), (ha, hx) = lo[0], hi[0]
-        return f" in {'(' if la == 'gt' else '['}{lx:g}, {hx:g}{')' if ha == 'lt' else ']'}"
-    if lim:
-        a, x = next(iter(lim.items()))
-        return f" {dict(gt='>', ge='>=', lt='<', le='<=')[a]} {x:g}"
-    return ""
-
-
-def _message(err: Any, field=None) -> tuple[tuple, str]:
-    """(extra key path, text) of one pydantic error in gravsurvey's words (``field``: the
-    schema field at the error's location, for its limits and description)."""
-    t, ctx, v = err["type"], err.get("ctx") or {}, err.get("input")
-    if t == "gravsurvey":
-        return tuple(ctx.get("key", ())), ctx["message"]
-    if t == "unknown_key":
-        valid = ctx["valid"]
-        return (ctx["key"],), unknown_key_text(ctx["key"], valid)
-    if t in ("mapping", "model_type", "dict_type"):
-        return (), f"expected a mapping, got {type(v).__name__} {_got(v)}"
-    if t == "missing":
-        hint = f" ({field.description})" if field is not None and field.description else ""
-        return (), f"missing required key{hint}"
-    if t == "literal_error":
-        ch = _choices(ctx.get("expected", ""))
-        return (), f"expected one of {', '.join(ch)}, got {_got(v)}{suggest(v, ch)}"
-    if t in ("float_type", "float_parsing"):
-        return (), f"expected a number{_limits_text(field, ctx)}, got {_got(v)}"
-    if t == "finite_number":
-        return (), f"expected a finite number{_limits_text(field, ctx)}, got {_got(v)}"
-    if t in ("int_type", "int_parsing", "int_from_float"):
-        return (), f"expected an integer{_limits_text(field, ctx)}, got {_got(v)}"
-    if t == "bool_type":
-        return (), f"expected true or false, got {_got(v)}"
-    if t == "string_type":
-        return (), f"expected a string, got {_got(v)}"
-    if t == "string_too_short":
-        return (), f"expected a non-empty string, got {_got(v)}"
-    if t == "list_type":
-        return (), f"expected a list, got {_got(v)}"
-    if t in ("too_short", "too_long"):
-        lo, hi = ctx.get("min_length"), ctx.get("max_length")
-        if t == "too_short" and lo == 1:
-            return (), f"expected a non-empty list, got {_got(v)}"
-        want = f"at least {lo}" if t == "too_short" else f"at most {hi}"
-        return (), f"expected {want} item(s), got {ctx.get('actual_length')}: {_got(v)}"
-    if t in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
-        ann = field.annotation if field is not None else type(v)
-        kind = "an integer" if ann is int or int in get_args(ann) else "a number"
-        return (), f"expected {kind}{_limits_text(field, ctx)}, got {_got(v)}"
-    return (), f"{err['msg']}, got {_got(v)}"
-
-
-def _field_at(model: type, loc) -> Any:
-    """The schema field at ``loc`` below ``model`` (None when the path leaves the schema)."""
-    field: Any = None
-    cur: Any = model
-    for part in loc:
-        if isinstance(part, int):
-            args = [a for a in get_args(cur) if a is not type(None)] if cur is not None else []
-            cur = args[0] if args else None
-            continue
-        while cur is not None and not (isinstance(cur, type) and issubclass(cur, BaseModel)):
-            args = [a for a in get_args(cur) if a is not type(None)]
-            cur = (
-                args[0]
-                if len(args) == 1 and get_origin(cur) is not list
-                else (args[0] if get_origin(cur) is list else None)
-            )
-            if get_origin(cur) is list:
-                break
-        if not (isinstance(cur, type) and issubclass(cur, BaseModel)) or part not in cur.model_fields:
-            return None
-        field = cur.model_fields[part]
-        cur = field.annotation
-    return field
-
-
-def config_error(exc: ValidationError, key_path: str = "", model: type | None = None) -> ConfigError:
-    """The first problem of ``exc`` as a one-line :class:`ConfigError` naming the full key path.
-
-    ``<key path>: <what was expected>, got <value>``; an unknown key gets the nearest valid name
-    (:func:`gravsurvey.errors.suggest`) and the valid keys of its mapping.
-    """
-    err = exc.errors(include_url=False)[0]
-    field = _field_at(model, err["loc"]) if model is not None else None
-    extra, text = _message(err, field)
-    return ConfigError(f"{_path(key_path, tuple(err['loc']) + extra) or key_path or 'config'}: {text}")
-
-
-def validate_section(model: type[Section], data: Any, key_path: str = "") -> Any:
-    """``model`` validated from ``data`` (None: the defaults); :class:`ConfigError` otherwise."""
-    try:
-        return model.model_validate(data)
-    except ValidationError as exc:
-        raise config_error(exc, key_path, model) from None
-
-
-def parse_survey(raw: dict) -> SurveyFile:
-    """The whole loaded YAML mapping validated against :class:`SurveyFile`."""
-    return validate_section(SurveyFile, raw, "")
-
-
-# ============================================================================ builders
-def _as_dict(section: Section) -> dict:
-    return {k: getattr(section, k) for k in type(section).model_fields}
-
-
-def time_windows(windows: Any, key_path: str = "lines.windows") -> list[WindowSection]:
-    """A non-empty list of time windows validated (types, ``start_s < stop_s``, unique names)."""
-    if not isinstance(windows, (list, tuple)) or not windows:
-        raise ConfigError(f"{key_path}: expected a non-empty list of {{name, start_s, stop_s}}, got {_got(windows)}")
-    out = []
-    for i, w in enumerate(windows):
-        out.append(validate_section(WindowSection, w, f"{key_path}[{i}]"))
-    try:
-        _unique_windows(out, ())
-    except PydanticCustomError as exc:
-        ctx = exc.context or {}
-        raise ConfigError(f"{_path(key_path, ctx.get('key', ()))}: {ctx.get('message')}") from None
-    return out
-
-
-def inm_params(section: ModelSection | dict | None = None, key_path: str = "model") -> InmParams:
-    """:class:`~gravsurvey.inm.params.InmParams` from the ``model`` section; the keys written in
-    it are the ones identification holds fixed (``given``)."""
-    s = section if isinstance(section, ModelSection) else validate_section(ModelSection, section, key_path)
-    return InmParams(**_as_dict(s), given=frozenset(s.given()))
-
-
-def check_inm_params(params: InmParams, key_path: str = "model") -> None:
-    """Raise :class:`ConfigError` naming the key when an :class:`InmParams` built in Python holds a
-    value the ``model`` section would refuse."""
-    validate_section(ModelSection, {k: getattr(params, k) for k in ModelSection.model_fields}, key_path)
-
-
-def segmentation_options(section: LinesSection | dict | None = None, key_path: str = "lines") -> SegmentationOptions:
-    """:class:`~gravsurvey.segmentation.SegmentationOptions` from the ``lines`` section."""
-    s = section if isinstance(section, LinesSection) else validate_section(LinesSection, section, key_path)
-    d = _as_dict(s)
-    d["windows"] = [w.model_dump(exclude_none=True) for w in s.windows]
-    return SegmentationOptions(**d)
-
-
-def postprocess_options(
-    section: PostprocessSection | dict | None = None, key_path: str = "postprocess"
-) -> PostprocessOptions:
-    """:class:`~gravsurvey.wavelet.PostprocessOptions` from the ``postprocess`` section."""
-    s = section if isinstance(section, PostprocessSection) else validate_section(PostprocessSection, section, key_path)
-    return PostprocessOptions(**_as_dict(s))
-
-
-def check_options(section: ChecksSection | dict | None = None, key_path: str = "checks") -> CheckOptions:
-    """:class:`~gravsurvey.consistency.CheckOptions` from the ``checks`` section."""
-    s = section if isinstance(section, ChecksSection) else validate_section(ChecksSection, section, key_path)
-    return CheckOptions(**_as_dict(s))
-
-
-def levelling_options(section: LevellingSection | dict | None = None, key_path: str = "levelling") -> LevellingOptions:
-    """:class:`~gravsurvey.levelling.LevellingOptions` from the ``levelling`` section."""
-    s = section if isinstance(section, LevellingSection) else validate_section(LevellingSection, section, key_path)
-    return LevellingOptions(**_as_dict(s))
-
-
-def grid_options(section: GridSection | dict | None = None, key_path: str = "grid") -> GridOptions:
-    """:class:`~gravsurvey.grid.GridOptions` from the ``grid`` section."""
-    s = section if isinstance(section, GridSection) else validate_section(GridSection, section, key_path)
-    return GridOptions(**_as_dict(s))
-
-
-def tie_config(section: TieSection | dict, key_path: str = "flights[0].tie") -> TieConfig:
-    """:class:`~gravsurvey.ties.TieConfig` from a flight's ``tie`` section."""
-    s = section if isinstance(section, TieSection) else validate_section(TieSection, section, key_path)
-
-    def reading(r):
-        return None if r is None else TieReading(r.reading_mgal, r.time_s, r.start_s, r.stop_s)
-
-    return TieConfig(s.base_gravity_mgal, reading(s.before), reading(s.after), s.base_lat_deg, s.base_height_m)
-
-
-def initial_overrides(section: InitialSection | dict, key_path: str = "initial") -> dict:
-    """The ``initial`` keys given, as floats (``velocity_enu_mps``, ``attitude_deg``: ndarray (3,)),
-    for :func:`gravsurvey.inm.params.resolve_initial_state`."""
-    s = section if isinstance(section, InitialSection) else validate_section(InitialSection, section, key_path)
-    out: dict = {}
-    for k in ("lat_deg", "lon_deg", "height_m"):
-        if getattr(s, k) is not None:
-            out[k] = float(getattr(s, k))
-    for k in ("velocity_enu_mps", "attitude_deg"):
-        if getattr(s, k) is not None:
-            out[k] = np.asarray(getattr(s, k), dtype=float)
-    return out
-
-
-def initial_state(section: InitialSection | dict, triad: str, key_path: str = "initial") -> InitialState:
-    """A complete initial state from an ``initial`` block: position, velocity and, for a strapdown
-    triad, ``attitude_deg`` (a platform's triad is ENU)."""
-    given = initial_overrides(section, key_path)
-    need = ["lat_deg", "lon_deg", "height_m", "velocity_enu_mps"] + (["attitude_deg"] if triad == "strapdown" else [])
-    for k in need:
-        if k not in given:
-            raise ConfigError(f"{key_path}.{k}: missing required key")
-    mat_nt = np.eye(3)
-    if triad == "strapdown":
-        mat_nt = mat_nb_from_attitude(*np.radians(given["attitude_deg"]))
-    return InitialState(
-        math.radians(given["lat_deg"]),
-        math.radians(given["lon_deg"]),
-        given["height_m"],
-        given["velocity_enu_mps"],
-        mat_nt,
-    )
-
-
-def gravimeter_options(
-    section: GravimeterSection | dict, key_path: str = "flights[0].inputs.gravimeter"
-) -> GravimeterOptions:
-    """:class:`~gravsurvey.io.formats.flight.GravimeterOptions` from a flight's ``inputs.gravimeter``."""
-    g = section if isinstance(section, GravimeterSection) else validate_section(GravimeterSection, section, key_path)
-    return GravimeterOptions(
-        format=g.format,
-        files=[g.file] if g.file is not None else list(g.files or []),
-        offset_mgal=0.0 if g.offset_mgal is None else g.offset_mgal,
-        scale=g.scale,
-        counts_scale_mgal=g.counts_scale_mgal,
-        time_source=g.time_source or "auto",
-        height_m=g.height_m,
-        nav=g.nav.model_dump(exclude_none=True) if g.nav is not None else None,
-        key_path=key_path,
-    )
-
-
-def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", base_dir=None) -> IngestOptions:
-    """:class:`~gravsurvey.io.ingest.IngestOptions` from a flight's ingestion keys
-    (:data:`INGEST_KEYS`; a mapping with only these keys, or a validated :class:`FlightSection`)."""
-    if isinstance(flight, FlightSection):
-        f = flight
-    else:
-        if isinstance(flight, dict):
-            extra = [k for k in flight if k not in INGEST_KEYS]
-            if extra:
-                raise ConfigError(f"{key_path}.{extra[0]}: {unknown_key_text(extra[0], INGEST_KEYS)}")
-        f = validate_section(FlightSection, flight, key_path)
-    o = IngestOptions(key_path=key_path, base_dir=os.fspath(base_dir) if base_dir is not None else None)
-    if f.inputs.gravimeter is not None:
-        o.kind = "gravimeter"
-        o.gravimeter = gravimeter_options(f.inputs.gravimeter, f"{key_path}.inputs.gravimeter")
-    elif f.inputs.mcap is not None:
-        o.kind, o.mcap_path = "mcap", f.inputs.mcap
-    else:
-        o.kind = "csv"
-        assert f.inputs.csv is not None  # exactly one input kind (InputsSection)
-        o.csv_paths = {r: p for r, p in _as_dict(f.inputs.csv).items() if p is not None}
-    given_topics = f.topics.given()
-    o.topics.update({r: getattr(f.topics, r) for r in ROLES + OPTIONAL_ROLES if r in given_topics})
-    o.topics_explicit = tuple(r for r in ROLES + OPTIONAL_ROLES if r in given_topics)
-    for role, names in _as_dict(f.mcap.json_fields).items():
-        if names is not None:
-            o.json_fields[role].update({q: v for q, v in _as_dict(names).items() if v is not None})
-    if "units" in f.mcap.given():
-        o.mcap_units = _as_dict(f.mcap.units)
-    o.time_source = f.mcap.time_source
-    o.check_crc = f.mcap.check_crc
-    o.max_record_bytes = f.mcap.max_record_mib * 2**20
-    o.csv_time_format = f.csv.time_format
-    for role, names in _as_dict(f.csv.columns).items():
-        if names is not None:
-            o.csv_columns[role] = {q: v for q, v in _as_dict(names).items() if v is not None}
-    if "units" in f.csv.given():
-        o.csv_units = _as_dict(f.csv.units)
-    o.csv_delimiter = f.csv.delimiter
-    o.gps_leap_seconds = f.csv.gps_leap_seconds
-    o.mat_axes = imu_axes_matrix(f.imu_axes, f"{key_path}.imu_axes")
-    o.gnss_lever_arm_m = np.asarray(f.gnss_lever_arm_m, dtype=float)
-    o.gap_factor = float(f.checks.gap_factor)
-    o.plausibility = f.checks.plausibility
-    return o
-
-
-# ============================================================================ docs/config.md
-def _role_section(model: Any, role: str) -> type:
-    return next(a for a in get_args(model.model_fields[role].annotation) if a is not type(None))
-
-
-#: sections of the generated reference: (heading, key prefix, model)
-DOC_SECTIONS: list[tuple[str, str, Any]] = [
-    ("Top level", "", SurveyFile),
-    ("`survey`", "survey.", SurveySection),
-    ("`processing`", "processing.", ProcessingSection),
-    ("Flights (`flights[i]`)", "", FlightSection),
-    ("`flights[i].inputs`", "inputs.", InputsSection),
-    ("`flights[i].inputs.csv`", "inputs.csv.", CsvInputs),
-    ("`flights[i].inputs.gravimeter`", "inputs.gravimeter.", GravimeterSection),
-    ("`flights[i].inputs.gravimeter.nav`", "inputs.gravimeter.nav.", NavSection),
-    ("`flights[i].topics`", "topics.", TopicsSection),
-    ("`flights[i].mcap`", "mcap.", McapSection),
-    ("`flights[i].csv`", "csv.", CsvSection),
-    ("`flights[i].mcap.units`, `flights[i].csv.units`", "units.", UnitsSection),
-    *[
-        (f"`flights[i].mcap.json_fields.{role}`", f"mcap.json_fields.{role}.", _role_section(JsonFields, role))
-        for role in DEFAULT_JSON_FIELDS
-    ],
-    *[
-        (f"`flights[i].csv.columns.{role}`", f"csv.columns.{role}.", _role_section(CsvColumns, role))
-        for role in DEFAULT_COLUMNS
-    ],
-    ("`flights[i].checks`", "checks.", FlightChecksSection),
-    ("`flights[i].initial`", "initial.", InitialSection),
-    ("`flights[i].lines`, `lines.windows[j]`", "", WindowSection),
-    ("`flights[i].tie`", "tie.", TieSection),
-    ("`flights[i].tie.before`, `flights[i].tie.after`", "", TieReadingSection),
-    ("`model`: 3D-INM Kalman filter (docs/method.md)", "", ModelSection),
-    ("`lines`: line segmentation (docs/outputs.md)", "", LinesSection),
-    ("`postprocess`: per-line post-processor (docs/wavelet.md)", "", PostprocessSection),
-    ("`output`", "", OutputSection),
-    ("`checks`: gaps, clocks, consistency, plausibility (docs/reliability.md)", "", ChecksSection),
-    ("`levelling`: crossover levelling (gravsurvey/levelling.py)", "", LevellingSection),
-    ("`grid`: gridding (gravsurvey/grid.py)", "", GridSection),
-]
-GENERATED_BEGIN = "<!-- BEGIN GENERATED REFERENCE: python -m gravsurvey.settings --doc; do not edit by hand -->"
-GENERATED_END = "<!-- END GENERATED REFERENCE -->"
-
-
-def _type_text(ann, field) -> str:
-    """Markdown type of a field: choices, number/integer/bool/string/mapping/list, limits, null."""
-    if isinstance(field.json_schema_extra, dict) and "type_text" in field.json_schema_extra:
-        return str(field.json_schema_extra["type_text"])
-    args = [a for a in get_args(ann) if a is not type(None)] if get_origin(ann) is not None else []
-    nullable = type(None) in get_args(ann)
-    base = args[0] if nullable and len(args) == 1 else ann
-    if get_origin(base) is Literal:
-        t = " \\| ".join(f"`{c}`" for c in get_args(base))
-    elif base is bool:
-        t = "bool"
-    elif base is float:
-        t = "number"
-    elif base is int:
-        t = "integer"
-    elif base is str:
-        t = "string"
-    elif any(getattr(m, "func", None) is _three for m in field.metadata) or (
-        get_origin(base) is Annotated and any(getattr(m, "func", None) is _three for m in get_args(base)[1:])
-    ):
-        t = "list of 3 numbers"
-    elif get_origin(base) is list:
-        t = "list"
-    elif base is dict or (isinstance(base, type) and issubclass(base, BaseModel)):
-        t = "mapping"
-    else:
-        t = "see meaning"
-    limits = []
-    for m in field.metadata:
-        for attr, op in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<=")):
-            if getattr(m, attr, None) is not None:
-                limits.append(f"{op} {getattr(m, attr):g}")
-    if limits:
-        t += " " + ", ".join(limits)
-    return t + (" or null" if nullable else "")
-
-
-def _default_text(field) -> str:
-    if field.is_required():
-        return "required"
-    if field.default_factory is not None:
-        v = field.default_factory()
-        if isinstance(v, BaseModel):
-            return "below"
-    else:
-        v = field.default
-    if v is None:
-        return "null"
-    if isinstance(v, bool):
-        return f"`{str(v).lower()}`"
-    if isinstance(v, str):
-        return f"`{v}`"
-    if isinstance(v, float):
-        return f"{v:g}"
-    return f"`{v}`" if isinstance(v, list) and v else (f"{v}" if v != [] else "[]")
-
-
-def reference_markdown() -> str:
-    """The generated key reference of docs/config.md (between the GENERATED markers)."""
-    out = [GENERATED_BEGIN, ""]
-    for heading, prefix, model in DOC_SECTIONS:
-        out += [
-            f"### {heading}",
-            "",
-            (model.__doc__ or "").strip().split("\n")[0],
-            "",
-            "| key | type | default | meaning |",
-            "|---|---|---|---|",
-        ]
-        for name, field in model.model_fields.items():
-            key = f"{prefix}{field.alias or name}"
-            desc = (field.description or "").replace("|", "\\|")
-            out.append(f"| `{key}` | {_type_text(field.annotation, field)} | {_default_text(field)} | {desc} |")
-        out.append("")
-    out.append(GENERATED_END)
-    return "\n".join(out)
-
-
-def splice_reference(doc_text: str) -> str:
-    """``doc_text`` with its generated section replaced by :func:`reference_markdown`."""
-    a, b = doc_text.find(GENERATED_BEGIN), doc_text.find(GENERATED_END)
-    if a < 0 or b < a:
-        raise ValueError("docs/config.md has no generated reference markers")
-    return doc_text[:a] + reference_markdown() + doc_text[b + len(GENERATED_END) :]
-
-
-def main(argv=None) -> int:
-    """``python -m gravsurvey.settings --doc [docs/config.md]``: rewrite the generated reference;
-    ``--check``: exit 1 when the file's reference differs from the schema."""
-    import argparse
-    from pathlib import Path
-
-    ap = argparse.ArgumentParser(prog="python -m gravsurvey.settings")
-    ap.add_argument("--doc", action="store_true", help="rewrite the generated reference in the file")
-    ap.add_argument("--check", action="store_true", help="exit 1 if the file's reference is out of date")
-    ap.add_argument("path", nargs="?", default="docs/config.md")
-    a = ap.parse_args(argv)
-    p = Path(a.path)
-    text = p.read_text(encoding="utf-8")
-    new = splice_reference(text)
-    if a.check:
-        if new != text:
-            print(
-                f"{p}: generated reference differs from gravsurvey/settings.py; run python -m "
-                "gravsurvey.settings --doc",
-                file=sys.stderr,
-            )
-            return 1
-        return 0
-    if a.doc:
-        p.write_text(new, encoding="utf-8")
-        return 0
-    print(reference_markdown())
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
