@@ -310,3 +310,55 @@ def test_settings_module_doc_check_command(tmp_path):
     assert S.main(["--doc", str(stale)]) == 0
     assert S.main(["--check", str(stale)]) == 0
     assert stale.read_text().startswith("# prose\n\n") and "`filter_rate_hz`" in stale.read_text()
+
+
+ODD_VALUES = [None, True, -1, float("nan"), "", "x", [], [None], {}, {1: 2}, [[1, 2], [3]]]
+FULL = {"survey": {"name": "x"}, "ellipsoid": "WGS84",
+        "flights": [{"name": "F01", "inputs": {"mcap": "a.mcap"}, "topics": {"imu": "/imu"}, "triad": "strapdown",
+                     "imu_axes": "FRD", "gnss_lever_arm_m": [0, 0, 1],
+                     "lines": [{"name": "L1", "start_s": 0, "stop_s": 10}],
+                     "initial": {"lat_deg": 1.0, "velocity_enu_mps": [1, 2, 3]},
+                     "tie": {"base_gravity_mgal": 980000, "before": {"start_s": 0, "stop_s": 5}},
+                     "csv": {"columns": {"imu": {"time": "t"}}, "units": {"gyro": "deg/s"}},
+                     "mcap": {"json_fields": {"imu": {"specific_force": ["a", "b", "c"]}}}}],
+        "model": {"filter_rate_hz": 1.0}, "lines": {"mode": "auto"}, "postprocess": {"method": "default"},
+        "processing": {"method": "inm"}, "output": {"dir": "out"}, "checks": {"max_imu_gap_s": 2.0},
+        "levelling": {"enabled": None}, "grid": {"spacing_m": 100.0}}
+
+
+def _key_paths(d, p=()):
+    items = d.items() if isinstance(d, dict) else enumerate(d) if isinstance(d, list) else ()
+    for k, v in items:
+        yield p + (k,)
+        yield from _key_paths(v, p + (k,))
+
+
+def test_any_value_anywhere_is_accepted_or_one_config_error_line():
+    """Every key of a full config replaced by odd values: the schema and the builders either accept
+    it or raise one ConfigError line naming a key path, never another exception (a random search
+    over such replacements found a crash on `name: null` and `inputs: null`, now fixed)."""
+    import copy
+
+    S.parse_survey(FULL)
+    seen_errors = 0
+    for path in _key_paths(FULL):
+        for value in ODD_VALUES:
+            d = copy.deepcopy(FULL)
+            cur = d
+            for k in path[:-1]:
+                cur = cur[k]
+            cur[path[-1]] = value
+            try:
+                doc = S.parse_survey(d)
+                for i, f in enumerate(doc.flights):
+                    S.ingest_options(f, f"flights[{i}]")
+                    if f.initial is not None:
+                        S.initial_overrides(f.initial)
+                    if f.tie is not None:
+                        S.tie_config(f.tie)
+                S.inm_params(doc.model)
+                S.segmentation_options(doc.lines)
+            except ConfigError as e:
+                seen_errors += 1
+                assert "\n" not in str(e) and re.match(r"^[\w.\[\]]+: ", str(e)), str(e)
+    assert seen_errors > 300  # most replacements are wrong, and each said so

@@ -739,6 +739,8 @@ class InputsSection(Section):
     @classmethod
     def _exactly_one(cls, data):
         # before the fields: with two inputs, naming the choice helps more than a key inside one
+        if data is None:
+            data = {}
         if isinstance(data, dict) and set(data) <= set(cls.model_fields):
             given = [k for k in ("mcap", "csv", "gravimeter") if data.get(k) is not None]
             if len(given) != 1:
@@ -828,7 +830,7 @@ class FlightSection(Section):
     @field_validator("name")
     @classmethod
     def _safe_name(cls, v):
-        if not re.match(FLIGHT_NAME_PATTERN, v):
+        if v is not None and not re.match(FLIGHT_NAME_PATTERN, v):
             raise fail(f"expected 1-64 characters of A-Z a-z 0-9 _ . -, got {v!r}")
         return v
 
@@ -863,7 +865,7 @@ class SurveySection(Section):
     @field_validator("name")
     @classmethod
     def _not_blank(cls, v):
-        if not v.strip():
+        if v is not None and not v.strip():
             raise fail(f"expected a non-empty string, got {v!r}")
         return v
 
