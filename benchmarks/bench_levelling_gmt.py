@@ -7,7 +7,7 @@ Usage::
 
 Simulates a line survey with known truth (tests/levelling_truth.py: 3 flights, 8 lines, 4 tie
 lines, per-flight offsets and drifts, 0.2 mGal white noise), finds the crossovers with
-``gravsurvey.survey.find_crossovers`` and levels them with ``gravsurvey.levelling`` (constant
+``gravsurvey.crossovers.find_crossovers`` and levels them with ``gravsurvey.levelling`` (constant
 per line, unweighted, not robust: the model ``x2sys_solve -Ec`` fits), exports the lines with
 ``gravsurvey.levelling.write_gmt_tracks`` and runs ``gmt x2sys_init``, ``x2sys_cross -Il -Qe``,
 ``x2sys_list -Fnc`` and ``x2sys_solve -Ec``. Prints the largest differences of crossover
@@ -36,7 +36,8 @@ for p in (REPO, REPO / "tests"):
         sys.path.insert(0, str(p))
 
 from gravsurvey.levelling import LevellingOptions, level_survey, write_gmt_tracks  # noqa: E402
-from gravsurvey.survey import find_crossovers  # noqa: E402
+from gravsurvey.crossovers import find_crossovers  # noqa: E402
+from gravsurvey.settings import tie_config  # noqa: E402
 from levelling_truth import simulated_survey  # noqa: E402
 
 
@@ -162,7 +163,7 @@ def figures(directory) -> dict:
     from gravsurvey.geodesy import MGAL, normal_gravity
     from gravsurvey.grid import grid_lines
     from gravsurvey.report import plot_grid_map, plot_levelling
-    from gravsurvey.ties import TieConfig, tie_flight
+    from gravsurvey.ties import tie_flight
     from levelling_truth import truth_field_mgal
 
     d = Path(directory)
@@ -175,7 +176,7 @@ def figures(directory) -> dict:
     for f, (off, drift, t_end) in flights.items():
         tt = np.concatenate([np.arange(0, 600.0), np.arange(t_end - 600.0, t_end)])
         z = dist_base + off + drift * tt / 3600.0 + rng.normal(0, 1.0, tt.size)
-        cfg = TieConfig.from_dict({"base_gravity_mgal": g_base, "before": {"start_s": 0, "stop_s": 599},
+        cfg = tie_config({"base_gravity_mgal": g_base, "before": {"start_s": 0, "stop_s": 599},
                                    "after": {"start_s": float(t_end - 600), "stop_s": float(t_end)}})
         ties[f] = tie_flight(cfg, tt, np.full(tt.size, lat_b), np.full(tt.size, h_b), z)
     raw_err = np.concatenate([ln["value_mgal"] - ln["truth_mgal"] for ln in lines])

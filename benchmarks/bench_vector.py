@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from gravsurvey.geodesy import MGAL  # noqa: E402
-from gravsurvey.inm.params import InmParams  # noqa: E402
+from gravsurvey.settings import inm_params  # noqa: E402
 from gravsurvey.inm.solve import estimate_anomaly  # noqa: E402
 from gravsurvey.inm.vector import resolution_filter  # noqa: E402
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel  # noqa: E402
@@ -61,14 +61,14 @@ def run(plan: str, sensors: str, scale: float):
     rec = FlightRecord(s.start_unix_ns, ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
                        AltimeterChannel(s.alt_time, s.alt_height), g, source="bench")
     t0 = time.perf_counter()
-    sol = estimate_anomaly(rec, InmParams.from_dict(dict(model, horizontal=True)), None, "strapdown")
+    sol = estimate_anomaly(rec, inm_params(dict(model, horizontal=True)), None, "strapdown")
     dt = time.perf_counter() - t0
     truth = np.stack([np.interp(sol.time, s.truth["time"], s.truth[k]) for k in ("dg_north", "dg_east")], axis=1)
     err = sol.dg_horizontal - truth
     prior = sol.identification["horizontal_prior"]["sigma_mps2"]
     v = float(np.median(sol.speed))
     g_true = np.interp(sol.time, s.truth["time"], s.truth["disturbance"])
-    vert = estimate_anomaly(rec, InmParams.from_dict(model), None, "strapdown")
+    vert = estimate_anomaly(rec, inm_params(model), None, "strapdown")
     g_true14 = np.interp(vert.time, s.truth["time"], s.truth["disturbance"])
     vertical = (np.sqrt(np.mean((vert.g_smooth - g_true14) ** 2)) / MGAL,
                 np.sqrt(np.mean((sol.g_smooth - g_true) ** 2)) / MGAL)

@@ -111,7 +111,7 @@ def check_mgd77t_run(d: Path):
     import tempfile
     import warnings
 
-    from gravsurvey.classic import gaussian_fir
+    from gravsurvey.filters import gaussian_fir
     from gravsurvey.pipeline import run_survey
 
     f = d / "mgd77t" / "nbp9908.m77t"

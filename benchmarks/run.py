@@ -427,7 +427,7 @@ def score_scenario(name: str, cfg_path: Path, methods, edge_s: float, errors: Er
 
 def _crossovers(name, per_flight, names, errors):
     from gravsurvey.georef import project
-    from gravsurvey.survey import find_crossovers
+    from gravsurvey.crossovers import find_crossovers
 
     out = []
     lat = np.concatenate([a["lat"] for _, a, _ in per_flight])

@@ -33,7 +33,8 @@ This is what most airborne processors do (DGP, shipgrav and their relatives), ke
   (GNSS latitude/longitude differentiated on the grid, ``v_N = (M + h) dlat/dt``,
   ``v_E = (N + h) cos(lat) dlon/dt``, second-order central differences) or from a supplied
   navigation solution (``track=``).
-* ``gamma`` -- normal gravity magnitude at the point, closed form (``boule``, Li & Goetze 2001).
+* ``gamma`` -- normal gravity magnitude at the point, exact (:func:`gravsurvey.geodesy.normal_gravity`,
+  checked against ``boule``, Li & Goetze 2001).
   The normal gravity vector at flight height leans from the ellipsoid normal by < 1e-5 rad,
   which changes its Up component by < 1e-9 m/s^2: negligible.
 
@@ -57,22 +58,18 @@ import math
 import warnings
 from dataclasses import dataclass, field
 
-import boule
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from .errors import ConfigError, DataError, DataWarning, check_keys
-from .geodesy import MGAL, WGS84, Ellipsoid, radii_of_curvature
+from .errors import ConfigError, DataError, DataWarning
+from .geodesy import MGAL, WGS84, Ellipsoid, normal_gravity, radii_of_curvature
+from .filters import SIGMA_PER_LENGTH, gaussian_fir, lowpass_valid
+from .inm.params import TRIADS
 from .io.record import FlightRecord
 
 #: Default filter length (full wavelength at -6 dB), s.  model.md: ~400 s reaches ~1 mGal.
 DEFAULT_FILTER_LENGTH_S = 400.0
-#: Gaussian kernel truncated at this many standard deviations.
-KERNEL_HALF_WIDTH_SIGMAS = 4.0
-#: sigma / L for the Gaussian whose transfer function is 0.5 at period L.
-SIGMA_PER_LENGTH = math.sqrt(math.log(2.0) / 2.0) / math.pi
 
-_BOULE = {"WGS84": boule.WGS84, "GRS80": boule.GRS80}
 
 HEIGHT_SOURCES = ("auto", "gnss", "altimeter")
 
@@ -125,127 +122,9 @@ class ClassicResult:
     info: dict = field(default_factory=dict)
 
 
-@dataclass(frozen=True)
-class ClassicOptions:
-    """Settings of the classic reduction (config block ``postprocess.classic``).
-
-    Attributes
-    ----------
-    filter_length_s : float or None
-        Gaussian filter length L (full wavelength at -6 dB), s.  None: ``resolution_m`` or the
-        default 400 s.
-    resolution_m : float or None
-        Wanted half-wavelength resolution, m; sets ``L = 2 * resolution_m / speed``.
-    height_source : str
-        'auto' (GNSS height when present, else altimeter), 'gnss' or 'altimeter'.
-    """
-
-    filter_length_s: float | None = None
-    resolution_m: float | None = None
-    height_source: str = "auto"
-
-    def kwargs(self) -> dict:
-        """Keyword arguments for :func:`classic_reduction`."""
-        return {
-            "filter_length_s": self.filter_length_s,
-            "resolution_m": self.resolution_m,
-            "height_source": self.height_source,
-        }
-
-
-_OPTION_KEYS = ("filter_length_s", "resolution_m", "height_source")
-
-
-def classic_options_from_dict(d, key_path: str = "postprocess.classic") -> ClassicOptions:
-    """Validate a config mapping into :class:`ClassicOptions`.
-
-    Parameters
-    ----------
-    d : dict or None
-        The mapping (None or {} -> defaults).
-    key_path : str
-        Where the mapping sits in the config file, for error messages.
-
-    Raises
-    ------
-    ConfigError
-        Unknown key (with the nearest valid name), wrong type, non-positive number, both
-        ``filter_length_s`` and ``resolution_m`` given, or an unknown ``height_source``.
-    """
-    if d is None:
-        return ClassicOptions()
-    if not isinstance(d, dict):
-        raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-    check_keys(d, _OPTION_KEYS, key_path)
-    vals = {}
-    for k in ("filter_length_s", "resolution_m"):
-        v = d.get(k)
-        if v is None:
-            vals[k] = None
-            continue
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise ConfigError(f"{key_path}.{k}: expected a positive number, got {v!r}")
-        if not math.isfinite(v) or v <= 0:
-            raise ConfigError(f"{key_path}.{k}: expected a positive number, got {v!r}")
-        vals[k] = float(v)
-    if vals["filter_length_s"] is not None and vals["resolution_m"] is not None:
-        raise ConfigError(f"{key_path}: give filter_length_s or resolution_m, not both")
-    hs = d.get("height_source", "auto")
-    if hs not in HEIGHT_SOURCES:
-        raise ConfigError(f"{key_path}.height_source: expected one of {', '.join(HEIGHT_SOURCES)}, got {hs!r}")
-    return ClassicOptions(vals["filter_length_s"], vals["resolution_m"], hs)
-
-
 # --------------------------------------------------------------------------
 # Building blocks (public: tests pass truth through the very same filter)
 # --------------------------------------------------------------------------
-
-
-def gaussian_fir(filter_length_s: float, dt_s: float) -> np.ndarray:
-    """Zero-phase Gaussian FIR kernel.
-
-    Parameters
-    ----------
-    filter_length_s : float
-        L, the full wavelength (in time, s) at which the transfer function is 0.5.
-    dt_s : float
-        Sample step, s.
-
-    Returns
-    -------
-    w : ndarray, shape (2K+1,)
-        Symmetric weights summing to 1; ``K = ceil(4 s / dt)``, ``s = 0.1874 L``.
-    """
-    s = SIGMA_PER_LENGTH * filter_length_s
-    k = max(1, math.ceil(KERNEL_HALF_WIDTH_SIGMAS * s / dt_s))
-    t = np.arange(-k, k + 1) * dt_s
-    w = np.exp(-0.5 * (t / s) ** 2)
-    return w / w.sum()
-
-
-def gaussian_transfer(freq_hz, filter_length_s: float):
-    """Transfer function of the (untruncated) Gaussian filter: ``exp(-2 pi^2 s^2 f^2)``; 0.5 at f = 1/L."""
-    s = SIGMA_PER_LENGTH * filter_length_s
-    f = np.asarray(freq_hz, dtype=float)
-    return np.exp(-2.0 * math.pi**2 * s**2 * f**2)
-
-
-def lowpass_valid(x: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Apply a symmetric FIR ``w`` (length 2K+1) once, forward: the ``valid`` part, shape (m - 2K,).
-
-    Output sample ``j`` is centred on input sample ``j + K``: no phase shift.
-    """
-    x = np.asarray(x, dtype=float)
-    if x.shape[0] < w.shape[0]:
-        raise DataError(
-            f"classic: {x.shape[0]} epochs are fewer than the low-pass kernel's {w.shape[0]}; "
-            "flight too short for the filter length"
-        )
-    if w.shape[0] > 64:
-        from scipy.signal import fftconvolve  # lazily: scipy.signal costs ~0.9 s at start-up
-
-        return fftconvolve(x, w, mode="valid")
-    return np.convolve(x, w, mode="valid")
 
 
 def interval_mean(t: np.ndarray, y: np.ndarray, t_out: np.ndarray, dt_s: float) -> np.ndarray:
@@ -370,16 +249,6 @@ def eotvos_harlan(lat, height, ground_speed, track, ellipsoid: Ellipsoid = WGS84
     ) * np.sin(track) * (1.0 + height / a)
 
 
-def normal_gravity_boule(lat, height, ellipsoid: Ellipsoid = WGS84):
-    """Normal gravity magnitude (m/s^2) at geodetic ``lat`` (rad), ellipsoidal ``height`` (m), via boule."""
-    try:
-        ell = _BOULE[ellipsoid.name.upper()]
-    except KeyError:
-        raise ConfigError(f"ellipsoid: classic needs WGS84 or GRS80, got {ellipsoid.name!r}") from None
-    lat = np.asarray(lat, dtype=float)
-    return ell.normal_gravity((np.zeros_like(lat), np.degrees(lat), np.asarray(height, dtype=float)), si_units=True)
-
-
 def second_difference(h: np.ndarray, dt_s: float) -> np.ndarray:
     """``(h[k+1] - 2h[k] + h[k-1]) / dt^2`` with NaN at both ends, shape (m,)."""
     out = np.full(h.shape, np.nan)
@@ -456,7 +325,7 @@ def classic_reduction(
         than the filter, channels that do not overlap.
     """
     notes: list[str] = []
-    if triad not in ("platform", "strapdown"):
+    if triad not in TRIADS:
         raise ConfigError(f"triad: expected platform or strapdown, got {triad!r}")
     if height_source not in HEIGHT_SOURCES:
         raise ConfigError(f"height_source: expected one of {', '.join(HEIGHT_SOURCES)}, got {height_source!r}")
@@ -583,7 +452,7 @@ def classic_reduction(
     f_up = triangle_mean(t_imu, f_up_imu, grid, dt)
     hdd = second_difference(h, dt)
     eot = eotvos_exact(lat, h, ve, vn, ellipsoid)
-    gam = normal_gravity_boule(lat, h, ellipsoid)
+    gam = normal_gravity(lat, h, ellipsoid)
     raw = f_up - hdd + eot - gam
 
     # drop the two ends where hdd is undefined, then filter

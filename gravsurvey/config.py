@@ -1,19 +1,17 @@
 """Processing configuration: YAML -> validated settings.
 
 The YAML is loaded safely (``yaml.safe_load``: no object construction from tags).
-Every key is documented in docs/config.md; paths are relative to the config file.
-Sections owned by a stage are validated by that stage's own ``from_dict``
-(``model`` by :mod:`gravsurvey.inm.params`, ``lines`` by :mod:`gravsurvey.survey`,
-``postprocess`` by :mod:`gravsurvey.wavelet`, a flight's input keys by
-:mod:`gravsurvey.io.ingest`); this module checks the frame around them and names
-the key path in every error.
+Every key, its type, unit, default and meaning is declared once, in the schema
+(:mod:`gravsurvey.settings`, from which docs/config.md's reference is generated); paths are
+relative to the config file.  This module reads the YAML safely, validates it against the schema,
+builds the typed settings each stage takes, and makes the :func:`preflight_checks` that need
+files or PROJ, so ``validate`` and ``run`` refuse the same configs.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,27 +20,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .errors import ConfigError, check_keys
-from .io.ingest import INGEST_KEYS as FLIGHT_INGEST_KEYS
+from .errors import ConfigError
 
-TOP_KEYS = ("survey", "ellipsoid", "flights", "model", "lines", "postprocess", "processing", "output", "checks",
-            "levelling", "grid")
-SURVEY_KEYS = ("name", "description")
-#: flight keys handled here; every other key of a flight goes to the ingestion options
-FLIGHT_OWN_KEYS = ("name", "triad", "initial", "truth", "lines", "tie")
-OUTPUT_KEYS = ("dir", "epsg", "plots", "xyz", "geojson")
-PROCESSING_KEYS = ("method", "classic_resolution_m", "normal_gravity", "gradiometer")
-TRIADS = ("platform", "strapdown")
-PROCESSING_METHODS = ("inm", "classic")
-_NAME_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
-
-
-def expect_mapping(v: Any, path: str) -> dict:
-    if v is None:
-        return {}
-    if not isinstance(v, dict):
-        raise ConfigError(f"{path}: expected a mapping, got {type(v).__name__} {v!r:.40}")
-    return v
 
 
 @dataclass
@@ -79,6 +58,7 @@ class SurveyConfig:
     processing_method: str = "inm"
     classic_resolution_m: float | None = None
     normal_gravity: str = "exact"  # classic: "exact" (the ellipsoid's field) or a closed-form formula
+    gradiometer: bool = False  # processing.gradiometer: seed-000 products of a gradient channel
     output_dir: Path = Path("out")
     epsg: int | None = None
     plots: bool = True
@@ -229,9 +209,7 @@ def load_yaml(path: Path) -> dict:
     return data
 
 
-def _resolve(base: Path, p: Any, key: str) -> Path:
-    if not isinstance(p, str) or not p:
-        raise ConfigError(f"{key}: expected a path string, got {p!r}")
+def _resolve(base: Path, p: str) -> Path:
     q = Path(p).expanduser()
     return q if q.is_absolute() else (base / q)
 
@@ -251,148 +229,60 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
     ConfigError
         Naming the key path and what was expected.
     """
+    from . import settings as S
     from .geodesy import get_ellipsoid
-    from .inm.params import InmParams, initial_override_from_dict, initial_state_from_dict
-    from .io.ingest import ingest_options_from_dict
-    from .survey import SegmentationOptions
-    from .wavelet import options_from_dict as postprocess_options_from_dict
 
     path = Path(path).resolve()
     raw = load_yaml(path)
     base = path.parent
-    check_keys(raw, TOP_KEYS, "")
-
-    survey = expect_mapping(raw.get("survey"), "survey")
-    check_keys(survey, SURVEY_KEYS, "survey")
-    name = survey.get("name", path.stem)
-    if not isinstance(name, str) or not name.strip():
-        raise ConfigError(f"survey.name: expected a non-empty string, got {name!r}")
-
-    ell_name = raw.get("ellipsoid", "WGS84")
-    try:
-        ellipsoid = get_ellipsoid(str(ell_name))
-    except ValueError:
-        raise ConfigError(f"ellipsoid: expected one of WGS84, GRS80, got {ell_name!r}") from None
-
-    model = InmParams.from_dict(expect_mapping(raw.get("model"), "model"), key_path="model")
-    lines = SegmentationOptions.from_dict(expect_mapping(raw.get("lines"), "lines"), key_path="lines")
-    post = postprocess_options_from_dict(
-        expect_mapping(raw.get("postprocess"), "postprocess"), key_path="postprocess"
-    )
-
-    from .consistency import CheckOptions
-
-    checks = CheckOptions.from_dict(expect_mapping(raw.get("checks"), "checks"), key_path="checks")
-    proc = expect_mapping(raw.get("processing"), "processing")
-    check_keys(proc, PROCESSING_KEYS, "processing")
-    method = proc.get("method", "inm")
-    if method not in PROCESSING_METHODS:
-        raise ConfigError(
-            f"processing.method: expected one of {', '.join(PROCESSING_METHODS)}, got {method!r}"
-        )
-    classic_res = proc.get("classic_resolution_m")
-    if classic_res is not None and (not isinstance(classic_res, (int, float)) or classic_res <= 0):
-        raise ConfigError(f"processing.classic_resolution_m: expected a positive number (m), got {classic_res!r}")
-    from .errors import suggest
-    from .marine import NORMAL_GRAVITY_CHOICES
-
-    normal_g = proc.get("normal_gravity", "exact")
-    if normal_g not in NORMAL_GRAVITY_CHOICES:
-        raise ConfigError(f"processing.normal_gravity: expected one of {', '.join(NORMAL_GRAVITY_CHOICES)}, "
-                          f"got {normal_g!r}{suggest(normal_g, NORMAL_GRAVITY_CHOICES)}")
-    if normal_g != "exact" and method != "classic":
-        raise ConfigError(f"processing.normal_gravity: {normal_g} applies to processing.method classic only "
-                          "(the 3D-INM uses the exact normal gravity field)")
-
-    if not isinstance(proc.get("gradiometer", False), bool):
-        raise ConfigError(f"processing.gradiometer: expected true or false, got {proc['gradiometer']!r}")
-    out = expect_mapping(raw.get("output"), "output")
-    check_keys(out, OUTPUT_KEYS, "output")
-    out_dir = Path(output_dir) if output_dir is not None else _resolve(base, out.get("dir", "out"), "output.dir")
-    epsg = out.get("epsg")
-    if epsg is not None and (not isinstance(epsg, int) or isinstance(epsg, bool) or epsg <= 0):
-        raise ConfigError(f"output.epsg: expected a positive integer EPSG code, got {epsg!r}")
-    flags = {}
-    for k in ("plots", "xyz", "geojson"):
-        v = out.get(k, True)
-        if not isinstance(v, bool):
-            raise ConfigError(f"output.{k}: expected true or false, got {v!r}")
-        flags[k] = v
-
-    flights_raw = raw.get("flights")
-    if not isinstance(flights_raw, list) or not flights_raw:
-        raise ConfigError("flights: expected a non-empty list of flights")
+    doc = S.parse_survey(raw)
     flights: list[FlightConfig] = []
-    seen = set()
-    for i, fr in enumerate(flights_raw):
+    for i, (fr, fs) in enumerate(zip(raw["flights"], doc.flights)):
         kp = f"flights[{i}]"
-        fr = expect_mapping(fr, kp)
-        check_keys(fr, FLIGHT_OWN_KEYS + FLIGHT_INGEST_KEYS, kp)
-        fname = fr.get("name", f"F{i + 1:02d}")
-        if not isinstance(fname, str) or not _NAME_RE.match(fname):
-            raise ConfigError(f"{kp}.name: expected 1-64 characters of A-Z a-z 0-9 _ . -, got {fname!r}")
-        if fname in seen:
-            raise ConfigError(f"{kp}.name: flight name {fname!r} is used twice")
-        seen.add(fname)
-        triad = fr.get("triad", "platform")
-        if triad not in TRIADS:
-            raise ConfigError(f"{kp}.triad: expected one of {', '.join(TRIADS)}, got {triad!r}")
-        ingest = ingest_options_from_dict(
-            {k: v for k, v in fr.items() if k in FLIGHT_INGEST_KEYS}, key_path=kp, base_dir=base
-        )
-        init_raw = fr.get("initial")
         initial, given = None, None
-        if init_raw is not None:
-            given = initial_override_from_dict(expect_mapping(init_raw, f"{kp}.initial"), triad, f"{kp}.initial")
+        if fs.initial is not None:
+            given = S.initial_overrides(fs.initial, f"{kp}.initial")
             complete = {"lat_deg", "lon_deg", "height_m", "velocity_enu_mps"}
-            if triad == "strapdown":
+            if fs.triad == "strapdown":
                 complete.add("attitude_deg")
             if complete <= set(given):
-                initial = initial_state_from_dict(init_raw, triad, f"{kp}.initial")
-        truth = _resolve(base, fr["truth"], f"{kp}.truth") if fr.get("truth") is not None else None
-        windows = None
-        if fr.get("lines") is not None:
-            windows = fr["lines"]
-            if not isinstance(windows, list):
-                raise ConfigError(f"{kp}.lines: expected a list of {{name, start_s, stop_s}} windows")
-        if ingest.kind == "gravimeter" and method != "classic":
-            raise ConfigError(f"{kp}.inputs.gravimeter: a gravimeter file is processed by the classic chain only; "
-                              f"set processing.method: classic (got {method!r})")
-        tie = None
-        if fr.get("tie") is not None:
-            from .ties import TieConfig
-
-            tie = TieConfig.from_dict(fr["tie"], key_path=f"{kp}.tie")
-        flights.append(
-            FlightConfig(fname, i, triad, fr, ingest, initial, init_raw, truth, windows, given, tie)
-        )
-
-    from .grid import GridOptions
-    from .levelling import LevellingOptions
-
-    levelling = LevellingOptions.from_dict(expect_mapping(raw.get("levelling"), "levelling"), key_path="levelling")
-    grid = GridOptions.from_dict(expect_mapping(raw.get("grid"), "grid"), key_path="grid")
+                initial = S.initial_state(fs.initial, fs.triad, f"{kp}.initial")
+        flights.append(FlightConfig(
+            name=fs.name or f"F{i + 1:02d}",
+            index=i,
+            triad=fs.triad,
+            raw=fr,
+            ingest=S.ingest_options(fs, key_path=kp, base_dir=base),
+            initial=initial,
+            initial_raw=fr.get("initial"),
+            truth=_resolve(base, fs.truth) if fs.truth is not None else None,
+            lines_windows=[w.model_dump(exclude_none=True) for w in fs.lines] if fs.lines is not None else None,
+            initial_given=given,
+            tie=S.tie_config(fs.tie, f"{kp}.tie") if fs.tie is not None else None,
+        ))
+    out = doc.output
     cfg = SurveyConfig(
         path=path,
         base_dir=base,
         raw=raw,
-        name=name,
-        ellipsoid=ellipsoid,
+        name=doc.survey.name if doc.survey.name is not None else path.stem,
+        ellipsoid=get_ellipsoid(doc.ellipsoid),
         flights=flights,
-        model=model,
-        lines=lines,
-        postprocess=post,
-        processing_method=method,
-        classic_resolution_m=classic_res,
-        normal_gravity=normal_g,
-        output_dir=out_dir,
-        epsg=epsg,
-        plots=flags["plots"],
-        xyz=flags["xyz"],
-        geojson=flags["geojson"],
-        checks=checks,
-        levelling=levelling,
-        grid=grid,
+        model=S.inm_params(doc.model),
+        lines=S.segmentation_options(doc.lines),
+        postprocess=S.postprocess_options(doc.postprocess),
+        processing_method=doc.processing.method,
+        classic_resolution_m=doc.processing.classic_resolution_m,
+        normal_gravity=doc.processing.normal_gravity,
+        gradiometer=doc.processing.gradiometer,
+        output_dir=Path(output_dir) if output_dir is not None else _resolve(base, out.dir),
+        epsg=out.epsg,
+        plots=out.plots,
+        xyz=out.xyz,
+        geojson=out.geojson,
+        checks=S.check_options(doc.checks),
+        levelling=S.levelling_options(doc.levelling),
+        grid=S.grid_options(doc.grid),
     )
     preflight_checks(cfg)
     return cfg
@@ -400,7 +290,6 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
 
 #: columns a truth file must have (docs/formats.md)
 TRUTH_COLUMNS = ("time_ns", "disturbance_mgal")
-_LOWPASS_METHODS = ("butterworth", "gaussian")
 
 
 def preflight_checks(cfg: SurveyConfig) -> None:
@@ -409,29 +298,20 @@ def preflight_checks(cfg: SurveyConfig) -> None:
 
     - ``output.epsg``: known to PROJ and projected (metre coordinates), via the same
       :func:`gravsurvey.georef.project` the writers use;
-    - ``postprocess``: a low-pass method has ``resolution_m`` or ``filter_length_s``;
     - ``flights[i].truth``: an existing text CSV whose header has :data:`TRUTH_COLUMNS`
       (only the header is read);
-    - time windows (``lines.windows`` with ``mode: windows``, ``flights[i].lines``): well
-      formed, by :func:`gravsurvey.survey.segments_from_windows` itself on a time axis made of
-      the windows' own ends (whether each window holds samples is checked with the data).
+
+    Everything that needs no file or PROJ (types, ranges, unknown keys, cross-field rules such as
+    a low-pass post-processor's length or unique window names) is the schema's
+    (:mod:`gravsurvey.settings`), checked before these.
     """
     if cfg.epsg is not None:
         from .georef import project
 
         project(np.zeros(1), np.zeros(1), cfg.epsg, key="output.epsg")
-    post = cfg.postprocess
-    if (getattr(post, "method", None) in _LOWPASS_METHODS
-            and post.resolution_m is None and post.filter_length_s is None):
-        raise ConfigError(f"postprocess.resolution_m: required by method {post.method!r} "
-                          "(or give postprocess.filter_length_s)")
     for fl in cfg.flights:
         if fl.truth is not None:
             check_truth_header(fl.truth, f"flights[{fl.index}].truth")
-        if fl.lines_windows is not None:
-            check_windows(fl.lines_windows, f"flights[{fl.index}].lines")
-    if getattr(cfg.lines, "mode", None) == "windows" and getattr(cfg.lines, "windows", None):
-        check_windows(cfg.lines.windows, "lines.windows")
 
 
 def check_truth_header(path: Path, key: str) -> None:
@@ -455,20 +335,3 @@ def check_truth_header(path: Path, key: str) -> None:
     if missing:
         raise ConfigError(f"{key}: {path}: truth file lacks column(s) {', '.join(missing)}; "
                           f"header has {', '.join(h for h in head if h) or 'nothing'}")
-
-
-def check_windows(windows, key: str) -> None:
-    """Structure of time windows, checked by the segmentation's own parser."""
-    from .survey import segments_from_windows
-
-    ends = []
-    if isinstance(windows, (list, tuple)):
-        for w in windows:
-            if isinstance(w, dict):
-                for k in ("start_s", "stop_s"):
-                    v = w.get(k)
-                    if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
-                        ends.append(float(v))
-    # every well-formed window (start < stop) holds its own two ends on this axis
-    segments_from_windows(np.unique(np.asarray(ends, float)) if ends else np.zeros(0), windows,
-                          key_path=key)

@@ -28,12 +28,12 @@ Limits and their derivation: docs/reliability.md, "Gaps, clocks, consistency".
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from datetime import datetime, timezone
 
 import numpy as np
 
-from .errors import ConfigError, DataError, GravsurveyError, check_keys
+from .errors import DataError, GravsurveyError
 from .geodesy import MGAL, WGS84, geodetic_to_ecef, normal_gravity_ecef
 
 #: Fastest plausible ground speed of a survey aircraft or ship, m/s (a jet at cruise is
@@ -109,29 +109,6 @@ class CheckOptions:
     max_track_deviation_m: float = 50.0
     allow_no_lines: bool = False
     allow_nonfinite: bool = False
-
-    @classmethod
-    def from_dict(cls, d, key_path: str = "checks") -> CheckOptions:
-        """Validate the ``checks:`` mapping (None: defaults); ConfigError naming the key."""
-        if d is None:
-            d = {}
-        if not isinstance(d, dict):
-            raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-        check_keys(d, [f.name for f in fields(cls)], key_path)
-        obj = cls()
-        for f in fields(cls):
-            if f.name not in d:
-                continue
-            v = d[f.name]
-            if f.name.startswith("allow_"):
-                if not isinstance(v, bool):
-                    raise ConfigError(f"{key_path}.{f.name}: expected true or false, got {v!r}")
-            elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-                raise ConfigError(f"{key_path}.{f.name}: expected a number > 0, got {v!r}")
-            else:
-                v = float(v)
-            setattr(obj, f.name, v)
-        return obj
 
 
 # ----------------------------------------------------------------------------- helpers

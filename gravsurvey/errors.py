@@ -90,6 +90,13 @@ def suggest(word, choices) -> str:
     return f" (did you mean {near[0]!r}?)" if near else ""
 
 
+def unknown_key_text(key, valid) -> str:
+    """``"unknown key (did you mean 'x'?); valid keys here: a, b"``: the one wording of an unknown
+    key (the config schema and :func:`check_keys` alike)."""
+    valid = [str(v) for v in valid]
+    return f"unknown key{suggest(key, valid)}; valid keys here: {', '.join(valid)}"
+
+
 def check_keys(d, valid, path: str, required=()) -> None:
     """Reject the first key of mapping ``d`` that is not in ``valid``, then any missing ``required``.
 
@@ -104,7 +111,7 @@ def check_keys(d, valid, path: str, required=()) -> None:
     for k in d:
         if str(k) not in valid:
             where = f"{path}.{k}" if path else str(k)
-            raise ConfigError(f"{where}: unknown key{suggest(k, valid)}; valid keys here: {', '.join(valid)}")
+            raise ConfigError(f"{where}: {unknown_key_text(k, valid)}")
     for k in required:
         if k not in d:
             where = f"{path}.{k}" if path else str(k)

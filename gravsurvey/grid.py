@@ -32,17 +32,15 @@ survey (its EPSG code is written into the netCDF file).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from gravsurvey.errors import ConfigError, DataError, check_keys
+from gravsurvey.errors import DataError
 
-__all__ = ["GRID_KEYS", "GRID_METHODS", "GridOptions", "GridResult", "thin_lines", "line_spacing",
+__all__ = ["GRID_METHODS", "GridOptions", "GridResult", "thin_lines", "line_spacing",
            "grid_lines", "write_grid_netcdf"]
 
-GRID_KEYS = ("enabled", "method", "spacing_m", "altitude_m", "max_distance_m", "depth_m", "damping", "cv_folds")
 GRID_METHODS = ("equivalent_sources", "spline")
 #: damping candidates tried by cross-validation (harmonica's damping of the source coefficients)
 DAMPINGS = (1e-2, 1.0, 100.0)
@@ -86,38 +84,6 @@ class GridOptions:
     damping: float | None = None
     cv_folds: int = 3
 
-    @classmethod
-    def from_dict(cls, d, key_path: str = "grid") -> "GridOptions":
-        """Validate a parsed YAML mapping; ConfigError names the key."""
-        if d is None:
-            d = {}
-        if not isinstance(d, dict):
-            raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-        check_keys(d, GRID_KEYS, key_path)
-        o = cls()
-        if "enabled" in d:
-            if d["enabled"] is not None and not isinstance(d["enabled"], bool):
-                raise ConfigError(f"{key_path}.enabled: expected true, false or null (auto), got {d['enabled']!r}")
-            o.enabled = d["enabled"]
-        if "method" in d:
-            if d["method"] not in GRID_METHODS:
-                raise ConfigError(f"{key_path}.method: expected one of {', '.join(GRID_METHODS)}, got {d['method']!r}")
-            o.method = d["method"]
-        for k in ("spacing_m", "max_distance_m", "depth_m", "damping", "altitude_m"):
-            if d.get(k) is None:
-                continue
-            v = d[k]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ConfigError(f"{key_path}.{k}: expected a number or null (automatic), got {v!r}")
-            if k != "altitude_m" and v <= 0:
-                raise ConfigError(f"{key_path}.{k}: must be > 0, got {v:g}")
-            setattr(o, k, float(v))
-        if "cv_folds" in d:
-            v = d["cv_folds"]
-            if isinstance(v, bool) or not isinstance(v, int) or v < 2:
-                raise ConfigError(f"{key_path}.cv_folds: expected an integer >= 2, got {v!r}")
-            o.cv_folds = v
-        return o
 
 
 @dataclass

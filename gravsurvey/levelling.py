@@ -37,10 +37,9 @@ import numpy as np
 from scipy.sparse import coo_matrix, diags, identity
 from scipy.sparse.linalg import spsolve
 
-from gravsurvey.errors import ConfigError, DataError, check_keys
+from gravsurvey.errors import ConfigError, DataError
 
 __all__ = [
-    "LEVELLING_KEYS",
     "LEVELLING_MODELS",
     "LevellingOptions",
     "Levelling",
@@ -52,8 +51,6 @@ __all__ = [
 ]
 
 LEVELLING_MODELS = ("constant", "line_trend", "flight_trend", "flight_constant")
-LEVELLING_KEYS = ("enabled", "model", "robust", "huber_k", "sigma_floor_mgal", "max_iterations",
-                  "min_crossovers_per_unknown", "significance")
 #: Models tried, in this order after the configured one, when the configured one has too few
 #: crossovers (``enabled: null``): each has fewer unknowns than the one before.
 FALLBACK_MODELS = ("constant", "flight_constant")
@@ -107,52 +104,6 @@ class LevellingOptions:
     min_crossovers_per_unknown: float = 2.0
     significance: float = 0.05
 
-    @classmethod
-    def from_dict(cls, d, key_path: str = "levelling") -> "LevellingOptions":
-        """Validate a parsed YAML mapping.
-
-        Raises
-        ------
-        ConfigError
-            Unknown key, wrong type or out-of-range value, naming the key path.
-        """
-        if d is None:
-            d = {}
-        if not isinstance(d, dict):
-            raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-        check_keys(d, LEVELLING_KEYS, key_path)
-        o = cls()
-        if "enabled" in d:
-            if d["enabled"] is not None and not isinstance(d["enabled"], bool):
-                raise ConfigError(f"{key_path}.enabled: expected true, false or null (auto), got {d['enabled']!r}")
-            o.enabled = d["enabled"]
-        if "model" in d:
-            if d["model"] not in LEVELLING_MODELS:
-                raise ConfigError(
-                    f"{key_path}.model: expected one of {', '.join(LEVELLING_MODELS)}, got {d['model']!r}"
-                )
-            o.model = d["model"]
-        if "robust" in d:
-            if not isinstance(d["robust"], bool):
-                raise ConfigError(f"{key_path}.robust: expected true or false, got {d['robust']!r}")
-            o.robust = d["robust"]
-        for k in ("huber_k", "sigma_floor_mgal", "min_crossovers_per_unknown"):
-            if k in d:
-                v = d[k]
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-                    raise ConfigError(f"{key_path}.{k}: expected a positive number, got {v!r}")
-                setattr(o, k, float(v))
-        if "significance" in d:
-            v = d["significance"]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 1:
-                raise ConfigError(f"{key_path}.significance: expected a probability in (0, 1), e.g. 0.05, got {v!r}")
-            o.significance = float(v)
-        if "max_iterations" in d:
-            v = d["max_iterations"]
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ConfigError(f"{key_path}.max_iterations: expected a positive integer, got {v!r}")
-            o.max_iterations = v
-        return o
 
 
 def crossover_statistics(diff_mgal, line_a, line_b, line_keys) -> dict:
@@ -561,12 +512,12 @@ def level_crossovers(
 
 
 def level_survey(crossovers, lines, options: LevellingOptions | None = None, *, tied_flights=()) -> Levelling:
-    """Level the lines of a survey from a :class:`gravsurvey.survey.Crossovers` result.
+    """Level the lines of a survey from a :class:`gravsurvey.crossovers.Crossovers` result.
 
     Parameters
     ----------
-    crossovers : gravsurvey.survey.Crossovers
-        From :func:`gravsurvey.survey.find_crossovers` on ``lines`` (times in each flight's base).
+    crossovers : gravsurvey.crossovers.Crossovers
+        From :func:`gravsurvey.crossovers.find_crossovers` on ``lines`` (times in each flight's base).
     lines : list of dict
         ``{"flight", "line", "time_s": (m,)}`` and optionally ``"sigma_mgal": (m,)`` (the 1-sigma
         of the values, interpolated to the crossover times for the weights).

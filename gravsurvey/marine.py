@@ -20,6 +20,7 @@ from .geodesy import (
     NORMAL_GRAVITY_FORMULAS,
     WGS84,
     Ellipsoid,
+    normal_gravity,
     normal_gravity_formula_at_height,
     radii_of_curvature,
 )
@@ -153,7 +154,7 @@ def use_normal_gravity_formula(result, formula: str, ellipsoid: Ellipsoid = WGS8
     """Re-reference a :class:`~gravsurvey.classic.ClassicResult` to a closed-form normal gravity formula.
 
     The classic reduction subtracts the exact normal gravity of ``ellipsoid``
-    (:func:`gravsurvey.classic.normal_gravity_boule`); this adds back
+    (:func:`gravsurvey.geodesy.normal_gravity`); this adds back
     ``delta = gamma_exact(lat, h) - gamma_formula(lat, h)`` (second-order free-air term, see
     :func:`gravsurvey.geodesy.normal_gravity_formula_at_height`) to the filtered and the raw
     disturbance and the ``normal_gravity``/``raw`` terms, in place.  ``delta`` depends only on
@@ -179,11 +180,9 @@ def use_normal_gravity_formula(result, formula: str, ellipsoid: Ellipsoid = WGS8
     if formula not in NORMAL_GRAVITY_CHOICES:
         raise ValueError(f"normal gravity: expected one of {', '.join(NORMAL_GRAVITY_CHOICES)}, got {formula!r}")
     if formula == "exact":
-        result.info["normal_gravity"] = f"exact {ellipsoid.name} (boule)"
+        result.info["normal_gravity"] = f"exact {ellipsoid.name}"
         return result
-    from .classic import normal_gravity_boule
-
-    delta = normal_gravity_boule(result.lat, result.height, ellipsoid) - normal_gravity_formula_at_height(
+    delta = normal_gravity(result.lat, result.height, ellipsoid) - normal_gravity_formula_at_height(
         result.lat, result.height, formula
     )
     result.disturbance = result.disturbance + delta

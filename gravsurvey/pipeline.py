@@ -102,13 +102,13 @@ FlightResult = FlightEstimate
 
 
 def line_segments(cfg: SurveyConfig, fl: FlightConfig, est: FlightEstimate) -> list:
-    """The flight's lines (``survey.Segment`` list) by the configured ``lines`` mode.
+    """The flight's lines (``segmentation.Segment`` list) by the configured ``lines`` mode.
 
     Windows from the flight (``flights[].lines``) or the survey (``lines.windows``), the whole
     flight (``whole``: one line per run of estimated epochs, never across a gap epoch), or
     automatic segmentation of the track (``auto``).
     """
-    from .survey import segment_lines, segments_from_windows
+    from .segmentation import segment_lines, segments_from_windows
 
     mode = getattr(cfg.lines, "mode", "auto")
     if fl.lines_windows is not None:
@@ -116,7 +116,7 @@ def line_segments(cfg: SurveyConfig, fl: FlightConfig, est: FlightEstimate) -> l
     if mode == "windows":
         return segments_from_windows(est.time, cfg.lines.windows, key_path="lines.windows")
     if mode == "whole":
-        from .survey import Segment
+        from .segmentation import Segment
 
         # the whole flight, but never across a gap epoch (segment -1: the separator between
         # separately estimated pieces, or epochs a chain left empty)
@@ -233,14 +233,14 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
     names = channel_names(fl.ingest, cfg.base_dir)
     notes += [f"{fl.name}: {n}" for n in check_overlap(record, names)]
     notes += [f"{fl.name}: {n}" for n in check_gnss_consistency(
-        record, names, checks, cfg.ellipsoid, fl.initial_raw, f"flights[{fl.index}].initial")]
+        record, names, checks, cfg.ellipsoid, fl.initial_given, f"flights[{fl.index}].initial")]
 
     t = time.perf_counter()
     est, seg_notes, segment_loss = estimate_flight(cfg, fl, record, checks, names)
     notes += [f"{fl.name}: {n}" for n in seg_notes]
     timings["estimate_s"] = time.perf_counter() - t
     gradio = None
-    if cfg.raw.get("processing", {}).get("gradiometer", False):
+    if cfg.gradiometer:
         gradio = _gradiometer_products(fl, record, est, notes)
 
     t = time.perf_counter()
@@ -801,8 +801,8 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     """
     from . import report
     from .io import writers
+    from .crossovers import Crossovers, find_crossovers
     from .levelling import choose_levelling
-    from .survey import Crossovers, find_crossovers
 
     table, epsg = _profile_table(cfg, results)
     in_line = table["line"] != ""

@@ -150,7 +150,7 @@ def figure_survey_map(easting_m, northing_m, value_mgal, line_ids, crossovers=No
         Colour, mGal (diverging colour map centred on 0, limits at the 98th percentile of |value|).
     line_ids : array_like of str, shape (n,)
         Line label per sample (e.g. ``"F01/L01"``); each line is labelled at its first sample.
-    crossovers : gravsurvey.survey.Crossovers, optional
+    crossovers : gravsurvey.crossovers.Crossovers, optional
         Drawn as black-edged circles, size growing with |diff_mgal|.
     title, crs_label : str
 

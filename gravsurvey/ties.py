@@ -37,23 +37,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gravsurvey.errors import ConfigError, DataError, check_keys
+from gravsurvey.errors import DataError
 from gravsurvey.geodesy import MGAL, WGS84, normal_gravity
 
-__all__ = ["TIE_KEYS", "READING_KEYS", "TieReading", "TieConfig", "FlightTie", "drift_offset", "tie_flight"]
+__all__ = ["TieReading", "TieConfig", "FlightTie", "drift_offset", "tie_flight"]
 
-TIE_KEYS = ("base_gravity_mgal", "base_lat_deg", "base_height_m", "before", "after")
-READING_KEYS = ("reading_mgal", "time_s", "start_s", "stop_s")
 #: plausible absolute gravity on or near the Earth's surface, mGal (catches values given in m/s^2
 #: or as anomalies)
 G_ABS_RANGE_MGAL = (970_000.0, 990_000.0)
 S_PER_H = 3600.0
-
-
-def _number(v, key):
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise ConfigError(f"{key}: expected a number, got {v!r}")
-    return float(v)
 
 
 @dataclass(frozen=True)
@@ -76,31 +68,6 @@ class TieReading:
     start_s: float | None = None
     stop_s: float | None = None
 
-    @classmethod
-    def from_dict(cls, d, key_path: str) -> "TieReading":
-        if not isinstance(d, dict):
-            raise ConfigError(f"{key_path}: expected a mapping with reading_mgal[, time_s] or start_s, stop_s")
-        check_keys(d, READING_KEYS, key_path)
-        vals = {k: _number(d[k], f"{key_path}.{k}") for k in READING_KEYS if k in d and d[k] is not None}
-        value_form = "reading_mgal" in vals
-        window_form = "start_s" in vals or "stop_s" in vals
-        if value_form == window_form:
-            raise ConfigError(f"{key_path}: give either reading_mgal (with time_s) or start_s and stop_s, not {'both' if value_form else 'neither'}")
-        if value_form:
-            lo, hi = G_ABS_RANGE_MGAL
-            if not lo <= vals["reading_mgal"] <= hi:
-                raise ConfigError(
-                    f"{key_path}.reading_mgal: expected an absolute gravity in mGal ({lo:.0f} .. {hi:.0f}), "
-                    f"got {vals['reading_mgal']:g}"
-                )
-        else:
-            if "start_s" not in vals or "stop_s" not in vals:
-                raise ConfigError(f"{key_path}: a window needs both start_s and stop_s (s after the flight's first sample)")
-            if vals["stop_s"] <= vals["start_s"]:
-                raise ConfigError(f"{key_path}: expected start_s < stop_s, got {vals['start_s']:g} .. {vals['stop_s']:g}")
-            if "time_s" in vals:
-                raise ConfigError(f"{key_path}.time_s: only with reading_mgal (a window has its own times)")
-        return cls(**vals)
 
 
 @dataclass(frozen=True)
@@ -113,33 +80,6 @@ class TieConfig:
     base_lat_deg: float | None = None
     base_height_m: float | None = None
 
-    @classmethod
-    def from_dict(cls, d, key_path: str = "flights[0].tie") -> "TieConfig":
-        """Validate a parsed YAML mapping.
-
-        Raises
-        ------
-        ConfigError
-            Naming the key path: unknown key, missing base gravity or readings, implausible values.
-        """
-        if not isinstance(d, dict):
-            raise ConfigError(f"{key_path}: expected a mapping with base_gravity_mgal, before, after")
-        check_keys(d, TIE_KEYS, key_path, required=("base_gravity_mgal",))
-        g = _number(d["base_gravity_mgal"], f"{key_path}.base_gravity_mgal")
-        lo, hi = G_ABS_RANGE_MGAL
-        if not lo <= g <= hi:
-            raise ConfigError(
-                f"{key_path}.base_gravity_mgal: expected the base's absolute gravity in mGal ({lo:.0f} .. {hi:.0f}), got {g:g}"
-            )
-        before = TieReading.from_dict(d["before"], f"{key_path}.before") if d.get("before") is not None else None
-        after = TieReading.from_dict(d["after"], f"{key_path}.after") if d.get("after") is not None else None
-        if before is None and after is None:
-            raise ConfigError(f"{key_path}: needs a base reading before and/or after the flight (before:, after:)")
-        lat = _number(d["base_lat_deg"], f"{key_path}.base_lat_deg") if d.get("base_lat_deg") is not None else None
-        if lat is not None and not -90.0 <= lat <= 90.0:
-            raise ConfigError(f"{key_path}.base_lat_deg: expected -90 .. 90 deg, got {lat:g}")
-        h = _number(d["base_height_m"], f"{key_path}.base_height_m") if d.get("base_height_m") is not None else None
-        return cls(g, before, after, lat, h)
 
 
 def drift_offset(time_s, t0_s: float, offset0_mgal: float, t1_s: float | None = None,

@@ -16,11 +16,12 @@ This module holds
   linear operator that is *not* an orthogonal projector, so that Phi measures the real overlap
   between the kept and the removed parts (see docs/wavelet.md for the investigation); given the
   estimator's own sigma it never removes more than that sigma (RMS);
-* the baselines: VisuShrink, SURE and BayesShrink soft thresholding, and the zero-phase
-  low-pass filters used in airborne gravimetry (Butterworth forward-backward, Gaussian),
-  parameterised by their half-wavelength resolution at the line's speed;
-* :func:`postprocess`, the entry point the pipeline calls once per survey line, and
-  :func:`options_from_dict`, which validates the configuration's ``postprocess:`` block.
+* the baselines: VisuShrink, SURE and BayesShrink soft thresholding, and (from
+  :mod:`gravsurvey.filters`) the zero-phase low-pass filters used in airborne gravimetry
+  (Butterworth forward-backward, Gaussian), parameterised by their half-wavelength resolution at
+  the line's speed;
+* :func:`postprocess`, the entry point the pipeline calls once per survey line (its
+  ``postprocess:`` settings are validated by :func:`gravsurvey.settings.postprocess_options`).
 
 Everything works in SI units (m/s^2 for the anomaly, s, m, m/s); every method is
 scale-equivariant (scaling ``z`` and ``sigma`` scales the output), so any consistent unit works.
@@ -46,13 +47,15 @@ import pywt
 from numba import njit
 from scipy import fft as _sfft
 
-from gravsurvey.errors import ConfigError, DataError, suggest
+from gravsurvey.errors import ConfigError, DataError
+from gravsurvey.filters import butterworth_lowpass, gaussian_lowpass, lowpass_period_s, lowpass_resolution_m
 
 __all__ = [
     "METHODS",
     "DEFAULT_METHOD",
     "WAVELETS",
     "BOUNDARY_MODES",
+    "LOWPASS_METHODS",
     "PostprocessOptions",
     "n_levels",
     "phi_criterion",
@@ -69,11 +72,7 @@ __all__ = [
     "visushrink",
     "sure_shrink",
     "bayes_shrink",
-    "butterworth_lowpass",
-    "gaussian_lowpass",
-    "lowpass_resolution_m",
     "postprocess",
-    "options_from_dict",
 ]
 
 #: Method names accepted by :func:`postprocess` (plus ``"default"``).
@@ -124,7 +123,8 @@ CONTEXT_GATE_RATIO = 1.25
 DEGENERATE_ENERGY_FRACTION = 1e-12
 
 _WAVELET_METHODS = ("ti_cosphi", "cosphi", "visushrink", "sure", "bayes")
-_LOWPASS_METHODS = ("butterworth", "gaussian")
+#: post-processors that are low-pass filters (:mod:`gravsurvey.filters`): need a length
+LOWPASS_METHODS = ("butterworth", "gaussian")
 
 
 # --------------------------------------------------------------------------------------------
@@ -173,86 +173,6 @@ class PostprocessOptions:
     threshold_steps: int = 8
     max_level: int | None = None
     min_level: int = 1
-
-
-_OPTION_KEYS = tuple(PostprocessOptions.__dataclass_fields__)
-
-
-def options_from_dict(d, key_path="postprocess"):
-    """Validate the configuration's ``postprocess:`` block.
-
-    Parameters
-    ----------
-    d : dict or None
-        The block as loaded from YAML; ``None`` or ``{}`` gives the defaults.
-    key_path : str
-        Where the block sits in the configuration, used in error messages.
-
-    Returns
-    -------
-    PostprocessOptions
-
-    Raises
-    ------
-    ConfigError
-        Naming the offending key (``postprocess.method`` ...) and the allowed values.
-    """
-    if d is None:
-        d = {}
-    if not isinstance(d, dict):
-        raise ConfigError(f"{key_path}: expected a mapping of settings, got {type(d).__name__}")
-    for key in d:
-        if key not in _OPTION_KEYS:
-            raise ConfigError(
-                f"{key_path}.{key}: unknown key{suggest(key, _OPTION_KEYS)}; "
-                f"allowed: {', '.join(_OPTION_KEYS)}"
-            )
-
-    def choice(key, allowed, default):
-        v = d.get(key, default)
-        if not isinstance(v, str) or v not in allowed:
-            raise ConfigError(
-                f"{key_path}.{key}: {v!r} is not allowed{suggest(v, allowed)}; "
-                f"expected one of {', '.join(allowed)}"
-            )
-        return v
-
-    def positive_float(key):
-        v = d.get(key)
-        if v is None:
-            return None
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-            raise ConfigError(f"{key_path}.{key}: expected a positive number, got {v!r}")
-        return float(v)
-
-    def int_in(key, default, lo, hi, allow_none=False):
-        v = d.get(key, default)
-        if v is None and allow_none:
-            return None
-        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-            raise ConfigError(f"{key_path}.{key}: expected an integer in [{lo}, {hi}], got {v!r}")
-        return v
-
-    method = choice("method", ("default",) + METHODS, "default")
-    opts = PostprocessOptions(
-        method=method,
-        wavelet=choice("wavelet", WAVELETS, "auto"),
-        thresholding=choice("thresholding", THRESHOLDINGS, "soft"),
-        boundary=choice("boundary", BOUNDARY_MODES, "symmetric"),
-        resolution_m=positive_float("resolution_m"),
-        filter_length_s=positive_float("filter_length_s"),
-        butterworth_order=int_in("butterworth_order", 4, 1, 12),
-        threshold_steps=int_in("threshold_steps", 8, 1, 100),
-        max_level=int_in("max_level", None, 1, 64, allow_none=True),
-        min_level=int_in("min_level", 1, 1, 64),
-    )
-    if opts.resolution_m is not None and opts.filter_length_s is not None:
-        raise ConfigError(
-            f"{key_path}: give at most one of resolution_m and filter_length_s, not both"
-        )
-    if opts.max_level is not None and opts.max_level < opts.min_level:
-        raise ConfigError(f"{key_path}.max_level: must be >= min_level ({opts.min_level})")
-    return opts
 
 
 # --------------------------------------------------------------------------------------------
@@ -971,79 +891,6 @@ def bayes_shrink(z, wavelet="db10", mode="symmetric", levels=None):
 
 
 # --------------------------------------------------------------------------------------------
-# Baselines: zero-phase low-pass filters
-# --------------------------------------------------------------------------------------------
-def _period_s(dt_s, speed_mps, resolution_m, filter_length_s):
-    if filter_length_s is not None:
-        return float(filter_length_s)
-    if resolution_m is None:
-        raise ConfigError("postprocess.resolution_m: required by the low-pass filters "
-                          "(or give postprocess.filter_length_s)")
-    if not speed_mps > 0:
-        raise DataError(f"wavelet post-processor: line speed {speed_mps!r} m/s, expected > 0 "
-                        "to convert resolution_m to a filter length")
-    return 2.0 * float(resolution_m) / float(speed_mps)
-
-
-def butterworth_lowpass(z, dt_s, period_s, order=4):
-    """Zero-phase Butterworth low-pass: the forward-backward response, mirror extension.
-
-    Applies ``|H(f)|^2 = 1 / (1 + (f / fc)^(2 order))`` (the squared magnitude of the order-
-    ``order`` Butterworth prototype, i.e. what forward-backward filtering applies in the steady
-    state) on the DCT-II grid, which is exact circular filtering of the mirror extension of the
-    line: real response, no phase, no time shift, no start-up transient, any ``N``.
-
-    Parameters
-    ----------
-    z : ndarray, shape (N,)
-    dt_s : float
-        Sample spacing, s.
-    period_s : float
-        Filter length: the period (s) at which the amplitude response is 0.5 (the prototype's
-        -3 dB point, ``fc = 1 / period_s``).  Half-wavelength resolution = speed * period_s / 2.
-    order : int
-
-    Returns
-    -------
-    ndarray, shape (N,)
-    """
-    z = np.asarray(z, dtype=float)
-    n = z.size
-    f = np.arange(n) / (2.0 * n * dt_s)  # DCT-II grid, Hz
-    resp = 1.0 / (1.0 + (f * period_s) ** (2 * int(order)))
-    return _sfft.idct(_sfft.dct(z, 2, norm="ortho") * resp, 2, norm="ortho")
-
-
-def gaussian_lowpass(z, dt_s, period_s):
-    """Zero-phase Gaussian low-pass, mirror extension, response ``exp(-2 pi^2 s^2 f^2)``.
-
-    Parameters
-    ----------
-    z : ndarray, shape (N,)
-    dt_s : float
-        Sample spacing, s.
-    period_s : float
-        Period (s) at which the amplitude response is 0.5.
-
-    Returns
-    -------
-    ndarray, shape (N,)
-    """
-    z = np.asarray(z, dtype=float)
-    n = z.size
-    f = np.arange(n) / (2.0 * n * dt_s)  # DCT-II grid, Hz
-    fc = 1.0 / period_s
-    # exp(-a f^2) = 0.5 at f = fc; DCT filtering = circular filtering of the mirror extension
-    a = math.log(2.0) / fc ** 2
-    return _sfft.idct(_sfft.dct(z, 2, norm="ortho") * np.exp(-a * f ** 2), 2, norm="ortho")
-
-
-def lowpass_resolution_m(period_s, speed_mps):
-    """Half-wavelength resolution (m) of a filter of length ``period_s`` at ``speed_mps``."""
-    return 0.5 * float(speed_mps) * float(period_s)
-
-
-# --------------------------------------------------------------------------------------------
 # Entry point
 # --------------------------------------------------------------------------------------------
 def _wavelet_candidates(name):
@@ -1164,7 +1011,7 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
         ``"default"`` or one of :data:`METHODS`.  When ``options`` is given and ``method`` is
         ``"default"``, ``options.method`` is used.
     options : PostprocessOptions, optional
-        As returned by :func:`options_from_dict`.
+        As returned by :func:`gravsurvey.settings.postprocess_options`.
     sigma : float or ndarray, shape (N,), optional
         The estimator's own 1-sigma of ``z`` (e.g. ``InmSolution.sigma_smooth``), same unit.
         ``ti_cosphi`` then never removes more (RMS) than the RMS of ``sigma``: see
@@ -1183,7 +1030,7 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
         Otherwise, any key of the ``postprocess:`` block except ``method`` (``wavelet``,
         ``thresholding``, ``boundary``, ``resolution_m``, ``filter_length_s``,
         ``butterworth_order``, ``threshold_steps``, ``max_level``, ``min_level``), validated by
-        :func:`options_from_dict`.
+        :func:`gravsurvey.settings.postprocess_options`.
 
     Returns
     -------
@@ -1209,7 +1056,9 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
         if method == "default":
             method = opts.method
     else:
-        opts = options_from_dict(dict(kwargs, method=method))
+        from gravsurvey.settings import postprocess_options
+
+        opts = postprocess_options(dict(kwargs, method=method))
     if method == "default":
         method = DEFAULT_METHOD
     if method not in METHODS:
@@ -1242,8 +1091,8 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
             "phi_deg": None, "resolution_m": None}
     if method == "none":
         return z.copy(), info
-    if method in _LOWPASS_METHODS:
-        period = _period_s(dt_s, speed_mps, opts.resolution_m, opts.filter_length_s)
+    if method in LOWPASS_METHODS:
+        period = lowpass_period_s(dt_s, speed_mps, opts.resolution_m, opts.filter_length_s)
         if method == "butterworth":
             out = butterworth_lowpass(z, dt_s, period, opts.butterworth_order)
         else:

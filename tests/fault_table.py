@@ -26,8 +26,9 @@ from test_io_faults import FLIGHT_S, KINDS, everything, intact, records, sample 
 from test_io_support import static_flight  # noqa: E402
 
 from gravsurvey.errors import DataError, DataWarning, GravsurveyError  # noqa: E402
-from gravsurvey.io.ingest import ingest_options_from_dict, load_flight  # noqa: E402
+from gravsurvey.io.ingest import load_flight  # noqa: E402
 from gravsurvey.io.mcap import read_mcap  # noqa: E402
+from gravsurvey.settings import ingest_options
 
 FAULTS = ("flip", "zero", "garbage", "cut")
 
@@ -71,7 +72,7 @@ def one(kind, data, dmg):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", DataWarning)
-                load_flight(ingest_options_from_dict({"inputs": {"mcap": "d.mcap"}}, "f"), tmp)
+                load_flight(ingest_options({"inputs": {"mcap": "d.mcap"}}, "f"), tmp)
         except GravsurveyError:
             pass
         except Exception as e:  # noqa: BLE001

@@ -25,13 +25,13 @@ from gravsurvey.inm.alignment import (
 from gravsurvey.inm.params import (
     InitialState,
     InmParams,
-    initial_override_from_dict,
     mat_nb_from_attitude,
     resolve_initial_state,
 )
 from gravsurvey.inm.solve import estimate_anomaly
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
 from gravsurvey.simulate.run import quick_sim, simulate_flight
+from gravsurvey.settings import ingest_options, initial_overrides
 
 DATA = Path(__file__).parent / "data" / "real-imu"
 DEGPH = math.radians(1.0) / 3600.0
@@ -230,7 +230,7 @@ def test_given_attitude_disagreeing_with_the_data_is_a_config_error(in_flight):
     s = in_flight
     rec = _record(s)
     r, p, h = np.degrees(attitude_from_mat_nb(s.truth["mat_nt"][0]))
-    good = initial_override_from_dict({"attitude_deg": [r, p, h]}, "strapdown")
+    good = initial_overrides({"attitude_deg": [r, p, h]})
     # consistent, and its stated sigma beats the alignment's (0.038 deg): used, with that sigma
     st = resolve_initial_state(rec, "strapdown", _params(initial_attitude_sigma_deg=0.01), given=good)
     np.testing.assert_allclose(st.mat_nt, s.truth["mat_nt"][0], atol=1e-9)
@@ -238,10 +238,10 @@ def test_given_attitude_disagreeing_with_the_data_is_a_config_error(in_flight):
     # with the default 0.05 deg the alignment's own attitude is kept
     st = resolve_initial_state(rec, "strapdown", _params(), given=good)
     assert st.attitude_cov_t is not None
-    bad = initial_override_from_dict({"attitude_deg": [r, p, h + 2.0]}, "strapdown")
+    bad = initial_overrides({"attitude_deg": [r, p, h + 2.0]})
     with pytest.raises(ConfigError, match=r"^flights\[0\]\.initial\.attitude_deg: .* disagrees with the alignment"):
         resolve_initial_state(rec, "strapdown", _params(), given=bad, key_path="flights[0].initial")
-    far = initial_override_from_dict({"lat_deg": float(s.gnss_lat_deg[0]) + 0.01}, "strapdown")
+    far = initial_overrides({"lat_deg": float(s.gnss_lat_deg[0]) + 0.01})
     with pytest.raises(ConfigError, match=r"^initial\.lat_deg: .* m from the GNSS position"):
         resolve_initial_state(rec, "strapdown", _params(), given=far)
 
@@ -306,8 +306,7 @@ def test_static_levelling_on_real_vn310():
 
 
 def _vn310_options(**extra):
-    from gravsurvey.io.ingest import ingest_options_from_dict
-
+    
     t = ["GpsCycle", "GpsWeek", "GpsTow [s]"]
     cfg = {"inputs": {"csv": {"imu": "vn310-imu-part.csv", "altimeter": "vn310-gnss-part.csv",
                               "gnss": "vn310-gnss-part.csv"}},
@@ -318,7 +317,7 @@ def _vn310_options(**extra):
                "gnss": {"time": t, "lat": "GNSS1::PosLla::latitude [deg]", "lon": "GNSS1::PosLla::longitude [deg]",
                         "height": "GNSS1::PosLla::altitude [m]"}}},
            **extra}
-    return ingest_options_from_dict(cfg, base_dir=DATA)
+    return ingest_options(cfg, base_dir=DATA)
 
 
 def test_vn310_csv_with_frd_axes_and_gps_cycle_week_tow():
@@ -466,7 +465,7 @@ def test_given_attitude_is_used_when_the_data_cannot_align(in_flight):
     with pytest.raises(DataError, match="alignment"):
         resolve_initial_state(rec, "strapdown", _params())
     r, p, h = np.degrees(attitude_from_mat_nb(s.truth["mat_nt"][0]))
-    given = initial_override_from_dict({"attitude_deg": [r, p, h]}, "strapdown")
+    given = initial_overrides({"attitude_deg": [r, p, h]})
     st = resolve_initial_state(rec, "strapdown", _params(), given=given)
     np.testing.assert_allclose(st.mat_nt, s.truth["mat_nt"][0], atol=1e-9)
     assert st.alignment is None and st.attitude_cov_t is None

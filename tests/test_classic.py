@@ -9,6 +9,7 @@ from gravsurvey import classic as cl
 from gravsurvey import geodesy as gd
 from gravsurvey.errors import ConfigError, DataError
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
+from gravsurvey import filters as F
 
 MGAL = 1e-5
 
@@ -58,27 +59,27 @@ def test_eotvos_sign_east_vs_west():
 def test_gaussian_fir_half_gain_at_filter_length():
     """The stated resolution: the discrete kernel's gain is 0.5 at period L (truncation ~e^-8)."""
     for length, dt in ((400.0, 1.0), (120.0, 0.1), (37.0, 1.0)):
-        w = cl.gaussian_fir(length, dt)
+        w = F.gaussian_fir(length, dt)
         assert w.sum() == pytest.approx(1.0, abs=1e-14)
         np.testing.assert_array_equal(w, w[::-1])
         k = (w.size - 1) // 2
         t = np.arange(-k, k + 1) * dt
         gain = np.sum(w * np.cos(2 * np.pi * t / length))
         assert gain == pytest.approx(0.5, abs=2e-3), (length, dt, gain)
-        assert cl.gaussian_transfer(1.0 / length, length) == pytest.approx(0.5, rel=1e-12)
+        assert F.gaussian_transfer(1.0 / length, length) == pytest.approx(0.5, rel=1e-12)
 
 
 def test_lowpass_is_zero_phase_and_keeps_polynomials():
     """A symmetric unit-gain kernel passes linear trends unchanged and shifts nothing."""
     dt = 1.0
-    w = cl.gaussian_fir(100.0, dt)
+    w = F.gaussian_fir(100.0, dt)
     k = (w.size - 1) // 2
     t = np.arange(2000) * dt
     lin = 3.0 + 0.01 * t
-    np.testing.assert_allclose(cl.lowpass_valid(lin, w), lin[k:-k], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(F.lowpass_valid(lin, w), lin[k:-k], rtol=0, atol=1e-10)
     # a long sinusoid keeps its phase: peak stays put
     x = np.cos(2 * np.pi * (t - 1000.0) / 1500.0)
-    y = cl.lowpass_valid(x, w)
+    y = F.lowpass_valid(x, w)
     assert np.argmax(y) + k == 1000
 
 
@@ -184,12 +185,12 @@ def test_parallel_flight_recovers_lowpassed_disturbance():
     res = cl.classic_reduction(rec, filter_length_s=200.0)
     dt = res.info["dt_s"]
     assert dt == 1.0
-    w = cl.gaussian_fir(200.0, dt)
+    w = F.gaussian_fir(200.0, dt)
     k = (w.size - 1) // 2
     # grid: triangle windows inside the IMU span (1..3599 s), minus one epoch at each end for
     # the second difference of the height
     grid = np.arange(2.0, 3598.0 + 1e-9, 1.0)
-    truth_lp = cl.lowpass_valid(cl.triangle_mean(rec.imu.time, _smooth_dist(rec.imu.time), grid, dt), w)
+    truth_lp = F.lowpass_valid(cl.triangle_mean(rec.imu.time, _smooth_dist(rec.imu.time), grid, dt), w)
     np.testing.assert_allclose(res.time, grid[k:-k])
     err = np.max(np.abs(res.disturbance - truth_lp)) / MGAL
     assert err < 1e-4, err
@@ -204,10 +205,10 @@ def test_parallel_flight_recovers_lowpassed_disturbance():
 def _truth_lp(rec, res, dist, length):
     """The truth through the same triangle pre-average + FIR, at the result's epochs."""
     dt = res.info["dt_s"]
-    w = cl.gaussian_fir(length, dt)
+    w = F.gaussian_fir(length, dt)
     k = (w.size - 1) // 2
     grid = np.arange(res.time[0] - k * dt, res.time[-1] + k * dt + 1e-9, dt)
-    return cl.lowpass_valid(cl.triangle_mean(rec.imu.time, dist(rec.imu.time), grid, dt), w)
+    return F.lowpass_valid(cl.triangle_mean(rec.imu.time, dist(rec.imu.time), grid, dt), w)
 
 
 def _heave(t):
@@ -246,9 +247,9 @@ def test_height_noise_amplification_matches_formula():
     error ~5 % for ~180 independent filter lengths: bound 15 %).
     """
     length, dt, sig_h = 200.0, 1.0, 1.0
-    s = cl.SIGMA_PER_LENGTH * length
+    s = F.SIGMA_PER_LENGTH * length
     formula = sig_h * math.sqrt(dt * 3.0 / (8.0 * math.sqrt(math.pi) * s**5))
-    w = cl.gaussian_fir(length, dt)
+    w = F.gaussian_fir(length, dt)
     c = np.convolve(w, [1.0, -2.0, 1.0]) / dt**2
     exact = sig_h * math.sqrt(np.sum(c**2))
     assert exact == pytest.approx(formula, rel=0.01)
@@ -299,22 +300,6 @@ def test_non_finite_heights_are_dropped_and_noted():
     assert err < 0.05, err
 
 
-def test_options_from_dict():
-    o = cl.classic_options_from_dict({"resolution_m": 3000, "height_source": "altimeter"}, "postprocess.classic")
-    assert o.resolution_m == 3000.0 and o.height_source == "altimeter" and o.filter_length_s is None
-    assert cl.classic_options_from_dict(None) == cl.ClassicOptions()
-    with pytest.raises(ConfigError, match=r"^postprocess\.classic\.filter_lenght_s: unknown key \(did you mean 'filter_length_s'\?\); valid keys here: filter_length_s, "):
-        cl.classic_options_from_dict({"filter_lenght_s": 100})
-    with pytest.raises(ConfigError, match=r"postprocess\.classic\.resolution_m: expected a positive number"):
-        cl.classic_options_from_dict({"resolution_m": -5})
-    with pytest.raises(ConfigError, match=r"resolution_m: expected a positive number, got 'x'"):
-        cl.classic_options_from_dict({"resolution_m": "x"})
-    with pytest.raises(ConfigError, match="height_source: expected one of auto, gnss, altimeter"):
-        cl.classic_options_from_dict({"height_source": "baro"})
-    with pytest.raises(ConfigError, match="not both"):
-        cl.classic_options_from_dict({"resolution_m": 1.0, "filter_length_s": 2.0})
-
-
 # --------------------------------------------------------------------------
 # against the simulator's truth (independent physics: 3D kinematics, rotating Earth)
 # --------------------------------------------------------------------------
@@ -332,11 +317,11 @@ def _record_from_sim(sim):
 
 def _truth_lp_sim(sim, res, length):
     dt = res.info["dt_s"]
-    w = cl.gaussian_fir(length, dt)
+    w = F.gaussian_fir(length, dt)
     k = (w.size - 1) // 2
     grid = np.arange(res.time[0] - k * dt, res.time[-1] + k * dt + 1e-9 * dt, dt)
     assert grid.size == res.time.size + 2 * k
-    return cl.lowpass_valid(cl.triangle_mean(sim.truth["time"], sim.truth["disturbance"], grid, dt), w)
+    return F.lowpass_valid(cl.triangle_mean(sim.truth["time"], sim.truth["disturbance"], grid, dt), w)
 
 
 def test_simulated_level_flight_gives_lowpassed_truth():

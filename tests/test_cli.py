@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 
 from gravsurvey.io.writers import read_xyz
+from gravsurvey.settings import inm_params
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = ROOT / "sample_data"
@@ -267,9 +268,7 @@ def test_init_writes_a_valid_config(tmp_path):
     data = load_yaml(cfg)
     assert data["flights"][0]["triad"] == "platform"
     # the example's model block is accepted by the estimator's validation
-    from gravsurvey.inm.params import InmParams
-
-    InmParams.from_dict(data["model"], key_path="model")
+    inm_params(data["model"], key_path="model")
     r = gs("init", cfg)
     _one_line_error(r, 2, "exists")
 

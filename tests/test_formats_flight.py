@@ -15,12 +15,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gravsurvey.classic import classic_reduction, eotvos_exact, gaussian_fir, lowpass_valid
+from gravsurvey.classic import classic_reduction, eotvos_exact
+from gravsurvey.filters import gaussian_fir, lowpass_valid
 from gravsurvey.config import load_config
 from gravsurvey.errors import ConfigError, DataError
 from gravsurvey.geodesy import GRS80, normal_gravity, radii_of_curvature
 from gravsurvey.io.formats import read_mgd77t
-from gravsurvey.io.formats.flight import gravimeter_options_from_dict, gravimeter_record
+from gravsurvey.io.formats.flight import gravimeter_record
+from gravsurvey.settings import gravimeter_options
 
 ROOT = Path(__file__).resolve().parents[1]
 M77T = ROOT / "tests" / "data" / "formats" / "nbp9908_part.m77t"
@@ -91,7 +93,7 @@ def ship(tmp_path, n=7200, heave=False):
 @pytest.mark.parametrize("heave", [False, True])
 def test_dgs_and_nmea_through_classic_recover_the_anomaly(tmp_path, heave):
     d, truth = ship(tmp_path, heave=heave)
-    o = gravimeter_options_from_dict(
+    o = gravimeter_options(
         {"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL, "nav": {"format": "nmea", "file": "nav.gps"}}
     )
     with pytest.warns(Warning):
@@ -155,7 +157,7 @@ def test_mgd77t_run_reproduces_ncei_free_air(tmp_path, normal_gravity):
 
 def test_config_errors(tmp_path):
     def opts(d):
-        return gravimeter_options_from_dict(d, "flights[0].inputs.gravimeter")
+        return gravimeter_options(d, "flights[0].inputs.gravimeter")
 
     with pytest.raises(ConfigError, match=r"gravimeter\.fromat: unknown key \(did you mean 'format'\?\)"):
         opts({"fromat": "zls"})
@@ -186,31 +188,31 @@ def test_config_errors(tmp_path):
 def test_data_errors(tmp_path):
     d, _ = ship(tmp_path, n=50)
     # a missing tie: the reading (~10,000 meter units) is no absolute gravity
-    o = gravimeter_options_from_dict({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": 0.0,
+    o = gravimeter_options({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": 0.0,
                                       "nav": {"format": "nmea", "file": "nav.gps"}})
     with pytest.raises(DataError, match=r"DGS\.dat: implausible data: gravimeter: median absolute gravity .*offset_mgal"):
         gravimeter_record(o, d)
     # navigation of another day does not overlap
     bodies = [ln.split("$", 1)[1].split("*")[0].replace("110719", "120719") for ln in (d / "nav.gps").read_text().splitlines()]
     (d / "nav2.gps").write_text("\n".join(nmea(b) for b in bodies) + "\n")
-    o = gravimeter_options_from_dict({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL,
+    o = gravimeter_options({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL,
                                       "nav": {"format": "nmea", "file": "nav2.gps"}})
     with pytest.raises(DataError, match="do not overlap in time"):
         gravimeter_record(o, d)
-    o = gravimeter_options_from_dict({"format": "mgd77t", "file": "nope.m77t"})
+    o = gravimeter_options({"format": "mgd77t", "file": "nope.m77t"})
     with pytest.raises(DataError, match=r"nope\.m77t: gravimeter file not found"):
         gravimeter_record(o, d)
 
 
 def test_positions_from_the_gravimeter_file(tmp_path):
     d, truth = ship(tmp_path, n=600)
-    o = gravimeter_options_from_dict({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL})
+    o = gravimeter_options({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL})
     with pytest.warns(Warning, match="taken at 0 m"):
         rec = gravimeter_record(o, d)
     assert rec.gnss.time.size == 600 and np.all(rec.altimeter.height == 0.0)
     # the meter's 12-decimal degrees are the track: the record keeps them exactly
     assert np.degrees(rec.gnss.lat[0]) == pytest.approx(48.07, abs=1e-12)
-    o = gravimeter_options_from_dict({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL, "height_m": 12.0})
+    o = gravimeter_options({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL, "height_m": 12.0})
     with pytest.warns(Warning, match="height 12 m"):
         assert np.all(gravimeter_record(o, d).altimeter.height == 12.0)
 
@@ -218,7 +220,7 @@ def test_positions_from_the_gravimeter_file(tmp_path):
 def test_zls_with_a_trajectory_of_another_day_is_refused():
     # DGP's ZLS sample (2015-11-12) and GNSS sample (2017-03-22) are real files of different flights
     dgp = ROOT / "tests" / "data" / "formats" / "dgp"
-    o = gravimeter_options_from_dict({"format": "zls", "file": "sample_zls", "offset_mgal": 967000.0,
+    o = gravimeter_options({"format": "zls", "file": "sample_zls", "offset_mgal": 967000.0,
                                       "nav": {"format": "trajectory", "file": "sample_trajectory.txt"}})
     with pytest.raises(DataError, match=r"sample_zls.*do not overlap in time"):
         gravimeter_record(o, dgp)
@@ -238,7 +240,7 @@ def test_position_jumps_are_reported(tmp_path):
             sent = nmea(",".join(body))
         out.append(f"{stamp} {sent}")
     (d / "nav.gps").write_text("\n".join(out) + "\n")
-    o = gravimeter_options_from_dict({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL,
+    o = gravimeter_options({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL,
                                       "nav": {"format": "nmea", "file": "nav.gps"}})
     with pytest.warns(Warning, match=r"navigation: 1 position jump\(s\) implying more than 25 m/s at 149 s \(200\d m/s\)"):
         gravimeter_record(o, d)
@@ -257,7 +259,7 @@ def test_gaps_are_blanked_not_bridged(tmp_path):
         rows[k] = ",".join(f)
     rows = rows[:1800] + rows[2400:]
     (d / "DGS.dat").write_text("\n".join(rows) + "\n")
-    o = gravimeter_options_from_dict({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL,
+    o = gravimeter_options({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL,
                                       "nav": {"format": "nmea", "file": "nav.gps"}})
     with pytest.warns(Warning, match="gap"):
         rec = gravimeter_record(o, d)
@@ -303,7 +305,7 @@ def test_at1a_and_trajectory_airborne(tmp_path):
             tm = datetime.datetime(1980, 1, 6) + datetime.timedelta(seconds=gps0 + t[k])
             fh.write(f" {tm.month}/{tm.day}/{tm.year}, {tm.hour}:{tm.minute:02d}:{tm.second:02d}.{tm.microsecond // 100000}, "
                      f"{np.degrees(lat[k]):.10f},{np.degrees(lon[k]):.10f}, {h[k] - 20:11.4f}, {h[k]:11.4f},11,  2.00\n")
-    o = gravimeter_options_from_dict({"format": "at1a", "file": "at1a.csv", "offset_mgal": 967000.0,
+    o = gravimeter_options({"format": "at1a", "file": "at1a.csv", "offset_mgal": 967000.0,
                                       "nav": {"format": "trajectory", "file": "traj.txt"}})
     with pytest.warns(Warning):
         rec = gravimeter_record(o, tmp_path)

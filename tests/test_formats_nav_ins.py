@@ -21,7 +21,8 @@ import numpy as np
 import pytest
 
 from gravsurvey.errors import ConfigError, DataError
-from gravsurvey.io.ingest import ingest_options_from_dict, load_flight
+from gravsurvey.io.ingest import load_flight
+from gravsurvey.settings import ingest_options as ingest_options_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_data" / "markov_csv"

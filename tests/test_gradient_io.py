@@ -9,9 +9,10 @@ import pytest
 import yaml
 
 from gravsurvey.errors import ConfigError, DataError
-from gravsurvey.io.ingest import ingest_options_from_dict, load_flight
+from gravsurvey.io.ingest import load_flight
 from gravsurvey.simulate.run import quick_sim, simulate_flight, simulate_to_dir
 from gravsurvey.simulate.simconfig import load_sim_config
+from gravsurvey.settings import ingest_options
 
 E = 1e-9
 FIELD = {"type": "model", "point_masses": [{"lat_deg": 45.0, "lon_deg": 135.02, "depth_m": 1500.0, "mass_kg": 3e12}]}
@@ -29,7 +30,7 @@ def _sim(tmp_path, **kw):
 def _load(inputs, base, **extra):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return load_flight(ingest_options_from_dict({"inputs": inputs, **extra}, "flights[0]"), base)
+        return load_flight(ingest_options({"inputs": inputs, **extra}, "flights[0]"), base)
 
 
 @pytest.mark.parametrize("triad", ["platform", "strapdown"])

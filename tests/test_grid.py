@@ -8,6 +8,7 @@ import pytest
 
 from gravsurvey.errors import ConfigError, DataError
 from gravsurvey.grid import GridOptions, grid_lines, line_spacing, thin_lines, write_grid_netcdf
+from gravsurvey.settings import grid_options
 from levelling_truth import simulated_survey, truth_field_mgal
 
 NOISE_MGAL = 0.2
@@ -97,11 +98,11 @@ def test_thinning_and_spacing():
 
 def test_grid_errors():
     with pytest.raises(ConfigError, match="grid.method"):
-        GridOptions.from_dict({"method": "kriging"})
-    with pytest.raises(ConfigError, match="grid.spacing_m: must be > 0"):
-        GridOptions.from_dict({"spacing_m": -5})
+        grid_options({"method": "kriging"})
+    with pytest.raises(ConfigError, match=r"^grid\.spacing_m: expected a number > 0, got -5$"):
+        grid_options({"spacing_m": -5})
     with pytest.raises(ConfigError, match="grid.cv_folds"):
-        GridOptions.from_dict({"cv_folds": 1})
+        grid_options({"cv_folds": 1})
     with pytest.raises(DataError, match="at least 2 lines"):
         grid_lines(np.arange(10.0), np.zeros(10), np.zeros(10), np.zeros(10), np.array(["F/L1"] * 10))
 

@@ -14,6 +14,7 @@ from gravsurvey.inm.params import InitialState, InmParams
 from gravsurvey.inm.solve import estimate_anomaly
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
 from gravsurvey.simulate.run import quick_sim, simulate_flight
+from gravsurvey.settings import inm_params
 
 from inm_truth import parallel_flight
 
@@ -225,10 +226,10 @@ def test_gnss_aiding_not_worse_on_seed_scenarios(field):
 
 def test_gnss_params_validation():
     with pytest.raises(ConfigError, match="model.gnss_aiding: expected true or false"):
-        InmParams.from_dict({"gnss_aiding": 1})
-    with pytest.raises(ConfigError, match="model.gnss_horizontal_sigma_m: expected a sigma > 0"):
-        InmParams.from_dict({"gnss_horizontal_sigma_m": 0})
-    p = InmParams.from_dict({"gnss_aiding": False, "gnss_vertical_sigma_m": 3})
+        inm_params({"gnss_aiding": 1})
+    with pytest.raises(ConfigError, match=r"^model\.gnss_horizontal_sigma_m: expected a number > 0, got 0$"):
+        inm_params({"gnss_horizontal_sigma_m": 0})
+    p = inm_params({"gnss_aiding": False, "gnss_vertical_sigma_m": 3})
     assert p.gnss_aiding is False and p.gnss_vertical_sigma_m == 3.0
 
 

@@ -16,6 +16,7 @@ from gravsurvey.inm.params import InitialState, InmParams
 from gravsurvey.inm.solve import estimate_anomaly
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, ImuChannel
 from gravsurvey.simulate.run import quick_sim, simulate_flight
+from gravsurvey.settings import inm_params
 
 
 def _synthetic_channel(seed, height_sigma, white, sigma_g, tau, dt=0.2, seconds=4000.0):
@@ -129,7 +130,7 @@ def test_identified_flight_beats_the_seed_defaults_and_reports_itself(noisy_flig
 
 def test_config_values_are_held_fixed(noisy_flight):
     s, rec, init = noisy_flight
-    p = InmParams.from_dict({"altimeter_sigma_m": 0.3, "anomaly_sigma_mps2": 2e-4})
+    p = inm_params({"altimeter_sigma_m": 0.3, "anomaly_sigma_mps2": 2e-4})
     assert {"altimeter_sigma_m", "anomaly_sigma_mps2"} <= p.given
     sol = estimate_anomaly(rec, p, init, "platform")
     assert sol.params.altimeter_sigma_m == 0.3 and sol.params.anomaly_sigma_mps2 == 2e-4
@@ -141,8 +142,8 @@ def test_config_values_are_held_fixed(noisy_flight):
 
 def test_target_resolution_on_a_flight(noisy_flight):
     s, rec, init = noisy_flight
-    fine = estimate_anomaly(rec, InmParams.from_dict({"target_resolution_m": 3000.0}), init, "platform")
-    coarse = estimate_anomaly(rec, InmParams.from_dict({"target_resolution_m": 15000.0}), init, "platform")
+    fine = estimate_anomaly(rec, inm_params({"target_resolution_m": 3000.0}), init, "platform")
+    coarse = estimate_anomaly(rec, inm_params({"target_resolution_m": 15000.0}), init, "platform")
     assert fine.resolution_m == pytest.approx(3000.0, rel=0.02)
     assert coarse.resolution_m == pytest.approx(15000.0, rel=0.02)
     assert fine.identification["anomaly_sigma_mps2"]["how"] == "target_resolution_m"

@@ -9,16 +9,16 @@ from gravsurvey.errors import ConfigError
 from gravsurvey.georef import project, utm_epsg
 from gravsurvey.inm.params import (
     InmParams,
-    initial_state_from_dict,
     initial_state_from_gnss,
     mat_nb_from_attitude,
     solvability_warnings,
 )
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, ImuChannel
+from gravsurvey.settings import initial_state, inm_params
 
 
 def test_defaults_are_seed_004():
-    p = InmParams.from_dict({})
+    p = inm_params({})
     assert (p.accel_noise_mps2, p.gravimeter_sigma_mps2, p.gravimeter_lambda_per_s) == (1e-3, 1e-6, 0.025)
     assert (p.anomaly_lambda_per_m, p.anomaly_sigma_mps2, p.altimeter_sigma_m) == (1e-5, 1e-3, 1.0)
     assert (p.initial_position_sigma_m, p.initial_velocity_sigma_mps) == (50.0, 0.05)
@@ -28,28 +28,41 @@ def test_defaults_are_seed_004():
 
 @pytest.mark.parametrize("d,msg", [
     ({"acel_noise_mps2": 1e-3}, "model.acel_noise_mps2: unknown key (did you mean 'accel_noise_mps2'?); valid keys"),
-    ({"altimeter_sigma_m": -1.0}, "model.altimeter_sigma_m: expected a finite value >= 0"),
-    ({"gravimeter_lambda_per_s": -0.1}, "model.gravimeter_lambda_per_s: expected a finite value >= 0"),
-    ({"filter_rate_hz": 0}, "model.filter_rate_hz: expected a rate > 0 Hz"),
-    ({"anomaly_sigma_mps2": "big"}, "model.anomaly_sigma_mps2: expected a number, got str"),
-    ({"accel_noise_mps2": True}, "model.accel_noise_mps2: expected a number"),
-    ({"radius_source": "gps"}, "model.radius_source: expected one of ['altimeter', 'computed']"),
-    ({"gyro_drift_degph": float("nan")}, "model.gyro_drift_degph: expected a finite value"),
+    ({"altimeter_sigma_m": -1.0}, "model.altimeter_sigma_m: expected a number >= 0, got -1.0"),
+    ({"gravimeter_lambda_per_s": -0.1}, "model.gravimeter_lambda_per_s: expected a number >= 0, got -0.1"),
+    ({"filter_rate_hz": 0}, "model.filter_rate_hz: expected a number > 0, got 0"),
+    ({"anomaly_sigma_mps2": "big"}, "model.anomaly_sigma_mps2: expected a number >= 0, got 'big'"),
+    ({"accel_noise_mps2": True}, "model.accel_noise_mps2: expected a number >= 0, got True"),
+    ({"radius_source": "gps"}, "model.radius_source: expected one of altimeter, computed, got 'gps'"),
+    ({"gyro_drift_degph": float("nan")}, "model.gyro_drift_degph: expected a finite number >= 0, got nan"),
+    ({"attitude_passes": 2.0}, "model.attitude_passes: expected an integer in [1, 5], got 2.0"),
+    ({"attitude_passes": 6}, "model.attitude_passes: expected an integer in [1, 5], got 6"),
+    ({"target_resolution_m": 0}, "model.target_resolution_m: expected a number > 0, got 0"),
 ])
 def test_from_dict_rejects_nonsense_naming_the_key(d, msg):
     with pytest.raises(ConfigError) as e:
-        InmParams.from_dict(d)
+        inm_params(d)
     assert str(e.value).startswith(msg)
     assert "\n" not in str(e.value)
 
 
 def test_from_dict_key_path_and_ints():
     with pytest.raises(ConfigError, match=r"^flights\[0\]\.model\.altimeter_sigma_m"):
-        InmParams.from_dict({"altimeter_sigma_m": -2}, key_path="flights[0].model")
-    p = InmParams.from_dict({"filter_rate_hz": 2, "radius_source": "computed"})
+        inm_params({"altimeter_sigma_m": -2}, key_path="flights[0].model")
+    p = inm_params({"filter_rate_hz": 2, "radius_source": "computed"})
     assert p.filter_rate_hz == 2.0 and isinstance(p.filter_rate_hz, float) and p.radius_source == "computed"
     with pytest.raises(ConfigError, match="model: expected a mapping"):
-        InmParams.from_dict([1, 2])
+        inm_params([1, 2])
+
+
+def test_settings_built_in_python_have_defaults_and_the_same_rules():
+    """A notebook user writes InmParams(...): the schema's defaults, the schema's checks."""
+    p = InmParams()
+    assert p == inm_params({}) and p.given == frozenset()
+    assert InmParams(altimeter_sigma_m=0.3).given == frozenset({"altimeter_sigma_m"})
+    assert inm_params({"altimeter_sigma_m": 1.0}).given == frozenset({"altimeter_sigma_m"})  # written = held
+    with pytest.raises(ConfigError, match=r"^model\.filter_rate_hz: expected a number > 0, got -1$"):
+        InmParams(filter_rate_hz=-1)
 
 
 def test_solvability_warning_within_factor_two():
@@ -75,23 +88,22 @@ def test_attitude_convention_matches_simulator():
     assert m[2, 1] > 0  # left wing up
 
 
-def test_initial_state_from_dict():
+def test_initial_state():
     d = {"lat_deg": 45.0, "lon_deg": 135.0, "height_m": 1000.0, "velocity_enu_mps": [50.0, 0.0, 0.0],
          "attitude_deg": [0.0, 0.0, 90.0]}
-    st = initial_state_from_dict(d, "strapdown")
+    st = initial_state(d, "strapdown")
     assert st.lat == pytest.approx(math.pi / 4) and st.height == 1000.0
     np.testing.assert_allclose(st.mat_nt @ [1, 0, 0], [1, 0, 0], atol=1e-15)
-    stp = initial_state_from_dict({k: v for k, v in d.items() if k != "attitude_deg"}, "platform")
+    stp = initial_state({k: v for k, v in d.items() if k != "attitude_deg"}, "platform")
     np.testing.assert_array_equal(stp.mat_nt, np.eye(3))
     with pytest.raises(ConfigError, match=r"^flights\[0\]\.initial\.attitude_deg: missing"):
-        initial_state_from_dict({k: v for k, v in d.items() if k != "attitude_deg"}, "strapdown",
-                                "flights[0].initial")
+        initial_state({k: v for k, v in d.items() if k != "attitude_deg"}, "strapdown", "flights[0].initial")
     with pytest.raises(ConfigError, match=r"initial\.velocity_enu_mps: expected a list of 3 numbers"):
-        initial_state_from_dict({**d, "velocity_enu_mps": [1, 2]}, "platform")
+        initial_state({**d, "velocity_enu_mps": [1, 2]}, "platform")
     with pytest.raises(ConfigError, match=r"initial\.lat_dg: unknown key \(did you mean 'lat_deg'\?\)"):
-        initial_state_from_dict({**d, "lat_dg": 1}, "platform")
-    with pytest.raises(ConfigError, match=r"initial\.lat_deg: expected a latitude"):
-        initial_state_from_dict({**d, "lat_deg": 95}, "platform")
+        initial_state({**d, "lat_dg": 1}, "platform")
+    with pytest.raises(ConfigError, match=r"^initial\.lat_deg: expected a number in \(-90, 90\), got 95$"):
+        initial_state({**d, "lat_deg": 95}, "platform")
 
 
 def test_initial_state_from_gnss_errors():

@@ -11,8 +11,9 @@ from test_io_support import static_flight
 
 from gravsurvey.errors import DataError, DataWarning
 from gravsurvey.io import checks as ck
-from gravsurvey.io.ingest import ingest_options_from_dict, load_flight
+from gravsurvey.io.ingest import load_flight
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
+from gravsurvey.settings import ingest_options
 
 
 @functools.lru_cache(maxsize=None)
@@ -65,12 +66,12 @@ def test_unit_mistakes_stop_load_flight_with_channel_named(tmp_path):
     # a static period of 40 s: the gyro-unit verdict needs checks.REST_MIN_VERDICT_S (30 s) of rest
     d = static_flight(seconds=40.0)
     _write_flight_csv(tmp_path, d, gyro_scale=180 / np.pi)  # deg/s in a rad/s column
-    opts = ingest_options_from_dict({"inputs": CSV_IN}, "flights[0]")
+    opts = ingest_options({"inputs": CSV_IN}, "flights[0]")
     with pytest.raises(DataError, match=r"imu.csv: implausible data: imu: at rest .* "
                                         r"deg/s declared as rad/s\?"):
         load_flight(opts, tmp_path)
     # declaring the unit fixes it
-    ok = ingest_options_from_dict({"inputs": CSV_IN, "csv": {"units": {"gyro": "deg/s"}}}, "f")
+    ok = ingest_options({"inputs": CSV_IN, "csv": {"units": {"gyro": "deg/s"}}}, "f")
     rec = load_flight(ok, tmp_path)
     np.testing.assert_allclose(rec.imu.angular_rate_t, d["w"], rtol=1e-15)
     _write_flight_csv(tmp_path, d, acc_scale=1 / 9.80665)  # g in an m/s^2 column
@@ -79,7 +80,7 @@ def test_unit_mistakes_stop_load_flight_with_channel_named(tmp_path):
                                         r"g but declared as m/s\^2\?"):
         load_flight(opts, tmp_path)
     # plausibility: warn -> processed, the finding is a warning and a note
-    warn = ingest_options_from_dict({"inputs": CSV_IN, "checks": {"plausibility": "warn"}}, "f")
+    warn = ingest_options({"inputs": CSV_IN, "checks": {"plausibility": "warn"}}, "f")
     with pytest.warns(DataWarning, match="values are in g"):
         rec = load_flight(warn, tmp_path)
     assert any("values are in g" in n for n in rec.notes)

@@ -10,7 +10,8 @@ from test_io_support import static_flight
 
 from gravsurvey.errors import ConfigError, DataError, DataWarning
 from gravsurvey.io.csv import read_csv_channel
-from gravsurvey.io.ingest import ingest_options_from_dict, load_flight
+from gravsurvey.io.ingest import load_flight
+from gravsurvey.settings import ingest_options
 
 
 def _write_flight_csv(tmp, d, imu_cols=None, imu_fmt=None, acc_scale=1.0, gyro_scale=1.0,
@@ -67,7 +68,7 @@ def test_units_and_custom_columns(tmp_path):
     cfg = {"inputs": CSV_IN, "csv": {
         "columns": {"imu": dict(zip(["time", "fx", "fy", "fz", "wx", "wy", "wz"], cols))},
         "units": {"accel": "g", "gyro": "deg/h"}}}
-    rec = load_flight(ingest_options_from_dict(cfg, "f"), tmp_path)
+    rec = load_flight(ingest_options(cfg, "f"), tmp_path)
     np.testing.assert_allclose(rec.imu.specific_force_t, d["f"], rtol=1e-15, atol=0)
     np.testing.assert_allclose(rec.imu.angular_rate_t, d["w"], rtol=1e-15, atol=0)
     # feet
@@ -120,7 +121,7 @@ def test_mistyped_imu_csv_through_load_flight(tmp_path):
     (tmp_path / "imu.csv").write_text("\n".join(text))
     with pytest.raises(DataError, match=r"imu.csv: line 11, column 'wy_radps': expected a "
                                         r"number, got '0x1F'"):
-        load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+        load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
 
 
 def test_duplicates_backward_steps_and_gaps_repaired_and_listed(tmp_path):
@@ -135,7 +136,7 @@ def test_duplicates_backward_steps_and_gaps_repaired_and_listed(tmp_path):
     _write_flight_csv(tmp_path, dd)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        rec = load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+        rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
     msgs = " | ".join(str(w.message) for w in caught if w.category is DataWarning)
     assert "imu: dropped 1 duplicate samples" in msgs
     assert "imu: 1 backward time steps (re-sorted): 5.000000->4.990000 s" in msgs
@@ -149,7 +150,7 @@ def test_duplicates_backward_steps_and_gaps_repaired_and_listed(tmp_path):
 def test_config_errors_name_the_key_and_suggest(tmp_path):
     def err(cfg, match):
         with pytest.raises(ConfigError, match=match):
-            ingest_options_from_dict(cfg, "flights[0]")
+            ingest_options(cfg, "flights[0]")
 
     err({"inputs": CSV_IN, "csv": {"units": {"accel": "G"}}},
         r"flights\[0\].csv.units.accel: expected one of m/s\^2, g, mGal, got 'G' \(did you mean 'g'\?\)")
@@ -165,7 +166,7 @@ def test_config_errors_name_the_key_and_suggest(tmp_path):
         r"flights\[0\].mcap.json_fields.imu.specific_force: expected a field name or a list of 3")
     err({"inputs": CSV_IN, "csv": {"time_format": "gps_week_sow", "columns": {"imu": {"time": "t"}}}},
         r"flights\[0\].csv.columns.imu.time: time_format gps_week_sow needs two columns")
-    o = ingest_options_from_dict({"inputs": {"mcap": "F/x.mcap"}}, "flights[0]", base_dir=tmp_path)
+    o = ingest_options({"inputs": {"mcap": "F/x.mcap"}}, "flights[0]", base_dir=tmp_path)
     assert o.input_paths() == [tmp_path / "F" / "x.mcap"]
     assert o.topics == {"imu": "/imu", "altimeter": "/altimeter", "gnss": "/gnss"}
     assert o.check_crc is True and o.gap_factor == 5.0 and o.max_record_bytes == 256 * 2**20
@@ -173,9 +174,9 @@ def test_config_errors_name_the_key_and_suggest(tmp_path):
 
 def test_missing_input_file_error(tmp_path):
     with pytest.raises(DataError, match=r"imu.csv: cannot open"):
-        load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+        load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
     with pytest.raises(DataError, match=r"none.mcap: cannot open"):
-        load_flight(ingest_options_from_dict({"inputs": {"mcap": "none.mcap"}}, "f"), tmp_path)
+        load_flight(ingest_options({"inputs": {"mcap": "none.mcap"}}, "f"), tmp_path)
 
 
 def test_nonfinite_samples_dropped_with_warning(tmp_path):
@@ -187,7 +188,7 @@ def test_nonfinite_samples_dropped_with_warning(tmp_path):
     (tmp_path / "altimeter.csv").write_text("\n".join(lines) + "\n")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        rec = load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+        rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
     msgs = [str(w.message) for w in caught if w.category is DataWarning]
     assert any(m.startswith("altimeter: dropped 2 samples with NaN/inf or absurd") for m in msgs)
     # the hole left behind is one 0.3 s step in 27: flagged by the rate-stability check
@@ -201,4 +202,4 @@ def test_header_only_csv_is_a_clear_error(tmp_path):
     (tmp_path / "imu.csv").write_text("# nothing logged\ntime_ns,fx_mps2,fy_mps2,fz_mps2,"
                                       "wx_radps,wy_radps,wz_radps\n")
     with pytest.raises(DataError, match=r"imu.csv: no usable imu samples"):
-        load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+        load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)

@@ -17,8 +17,9 @@ from test_io_support import static_flight
 
 from gravsurvey.errors import DataError, DataWarning
 from gravsurvey.io.csv import read_csv_channel, sniff_csv_role
-from gravsurvey.io.ingest import ingest_options_from_dict, load_flight
+from gravsurvey.io.ingest import load_flight
 from gravsurvey.io.inspect import inspect_files
+from gravsurvey.settings import ingest_options
 
 CSV_IN = {"csv": {"imu": "imu.csv", "altimeter": "altimeter.csv", "gnss": "gnss.csv"}}
 
@@ -46,12 +47,12 @@ def _write(tmp, imu_bytes=None):
 
 def test_bom_accepted_same_data(tmp_path):
     _write(tmp_path)
-    clean = load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+    clean = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
     for role in ("imu", "altimeter", "gnss"):
         p = tmp_path / f"{role}.csv"
         p.write_bytes(b"\xef\xbb\xbf" + p.read_bytes())
     assert sniff_csv_role(tmp_path / "imu.csv") == "imu"
-    rec = load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+    rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
     np.testing.assert_array_equal(rec.imu.time, clean.imu.time)
     np.testing.assert_array_equal(rec.imu.specific_force_t, clean.imu.specific_force_t)
     np.testing.assert_array_equal(rec.gnss.lat, clean.gnss.lat)
@@ -125,7 +126,7 @@ def test_cut_last_line_through_load_flight_is_data_loss(tmp_path):
     _write(tmp_path, full[:cut_at])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", DataWarning)
-        rec = load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+        rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
     msg = f"{tmp_path / 'imu.csv'}: last line (line 301) cut after 30 bytes, 1 row dropped"
     assert rec.data_loss == [msg]
     assert [str(w.message) for w in caught].count(msg) == 1
@@ -142,7 +143,7 @@ def test_unterminated_complete_last_line_dropped_with_a_warning(tmp_path):
     _write(tmp_path, full.rstrip(b"\n"))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", DataWarning)
-        rec = load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+        rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
     assert rec.data_loss == []
     assert any("imu.csv: last line (line 301" in str(w.message) and "has no line end" in
                str(w.message) for w in caught)
@@ -166,7 +167,7 @@ def test_nonfinite_values_dropped_and_counted(rows, bad):
         _write(tmp, "\n".join(lines).encode())
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", DataWarning)
-            rec = load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp)
+            rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp)
     msgs = [str(w.message) for w in caught]
     assert any(f"imu: dropped {len(rows)} samples with NaN/inf or absurd" in m for m in msgs), msgs
     d = static_flight(seconds=3.0)
@@ -179,4 +180,4 @@ def test_short_line_in_the_middle_names_file_and_line(tmp_path):
     lines[101] = lines[101][: len(lines[101]) // 2]
     _write(tmp_path, "\n".join(lines).encode())
     with pytest.raises(DataError, match=r"imu.csv: line 102: \d fields, header has 7"):
-        load_flight(ingest_options_from_dict({"inputs": CSV_IN}, "f"), tmp_path)
+        load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)

@@ -22,8 +22,9 @@ from mcap.writer import CompressionType
 from test_io_support import static_flight, write_json, write_ros2
 
 from gravsurvey.errors import DataError, DataWarning, GravsurveyError
-from gravsurvey.io.ingest import ingest_options_from_dict, load_flight
+from gravsurvey.io.ingest import load_flight
 from gravsurvey.io.mcap import MAGIC, read_mcap
+from gravsurvey.settings import ingest_options
 
 
 @functools.lru_cache(maxsize=None)
@@ -88,7 +89,7 @@ def _recovered(data, **kw):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", DataWarning)
-                load_flight(ingest_options_from_dict({"inputs": {"mcap": "d.mcap"}}, "f"), tmp)
+                load_flight(ingest_options({"inputs": {"mcap": "d.mcap"}}, "f"), tmp)
         except GravsurveyError:
             pass
         return c, got
@@ -159,7 +160,7 @@ def test_cut_inside_uncompressed_chunk_keeps_its_complete_records(tmp_path):
     before = sum(len(m) for e, m in ends if e <= cut)
     assert c.salvage.recovered > before  # complete records of the cut chunk recovered too
     assert "cut inside a chunk" in c.salvage.reason
-    opts = ingest_options_from_dict({"inputs": {"mcap": "cut.mcap"}}, "f")
+    opts = ingest_options({"inputs": {"mcap": "cut.mcap"}}, "f")
     with pytest.warns(DataWarning, match=r"salvaged \d+ messages up to log time .* lost"):
         rec = load_flight(opts, tmp_path)
     d = static_flight(seconds=6.0)
@@ -239,7 +240,7 @@ def test_decompression_bomb_refused_with_bounded_memory(tmp_path):
     assert "decompressed to 1001 bytes, header says 1000" in c.salvage.reason
     assert peak < 1
     with pytest.raises(DataError, match="b2.mcap: no usable imu|b2.mcap: no imu"):
-        load_flight(ingest_options_from_dict({"inputs": {"mcap": "b2.mcap"}}, "f"), tmp_path)
+        load_flight(ingest_options({"inputs": {"mcap": "b2.mcap"}}, "f"), tmp_path)
 
 
 def test_crc_check_catches_silent_corruption(tmp_path):

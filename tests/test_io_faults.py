@@ -27,8 +27,9 @@ from mcap.writer import CompressionType
 from test_io_support import static_flight, write_json, write_ros2
 
 from gravsurvey.errors import DataError, DataWarning, GravsurveyError
-from gravsurvey.io.ingest import ingest_options_from_dict, load_flight
+from gravsurvey.io.ingest import load_flight
 from gravsurvey.io.mcap import OP_CHUNK, read_mcap, scan_records
+from gravsurvey.settings import ingest_options
 
 KINDS = ["ros2_zstd", "ros2_none", "json_lz4", "json_unchunked", "ros2_zstd_nocrc",
          "ros2_none_nocrc"]
@@ -118,7 +119,7 @@ def read_damaged(data):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", DataWarning)
-                load_flight(ingest_options_from_dict({"inputs": {"mcap": "d.mcap"}}, "f"), tmp)
+                load_flight(ingest_options({"inputs": {"mcap": "d.mcap"}}, "f"), tmp)
         except GravsurveyError:
             pass
         return c, got
@@ -285,7 +286,7 @@ def test_crcless_corrupted_values_dropped_and_counted(tmp_path):
     keep = np.setdiff1d(np.arange(600), [123, 321, 599])
     np.testing.assert_array_equal(imu.time_ns, d["imu_t"][keep])
     np.testing.assert_array_equal(imu.values["specific_force"], d["f"][keep])
-    opts = ingest_options_from_dict({"inputs": {"mcap": "v.mcap"}}, "f")
+    opts = ingest_options({"inputs": {"mcap": "v.mcap"}}, "f")
     with pytest.warns(DataWarning, match=r"imu: 3 messages .* dropped \(3 samples without a "
                                          r"chunk CRC failed the damage checks"):
         rec = load_flight(opts, tmp_path)
@@ -356,7 +357,7 @@ def test_crcless_flip_that_crashed_mechanization(tmp_path):
     raw = bytearray(_zero_chunk_crcs(bag.read_bytes()))
     raw[866968] ^= 0x02
     (tmp_path / "d.mcap").write_bytes(bytes(raw))
-    opts = ingest_options_from_dict({"inputs": {"mcap": "d.mcap"},
+    opts = ingest_options({"inputs": {"mcap": "d.mcap"},
                                      "topics": {"imu": "/imu", "altimeter": "/altimeter",
                                                 "gnss": "/gnss"}}, "f")
     with pytest.warns(DataWarning, match=r"1 samples without a chunk CRC failed the damage "

@@ -14,9 +14,10 @@ from mcap_ros2.decoder import DecoderFactory
 from test_io_support import EXTERNAL, static_flight, write_json, write_ros2
 
 from gravsurvey.errors import DataError, DataWarning
-from gravsurvey.io.ingest import ingest_options_from_dict, load_flight, read_raw_channels
+from gravsurvey.io.ingest import load_flight, read_raw_channels
 from gravsurvey.io.inspect import format_inspect, inspect_files
 from gravsurvey.io.mcap import read_mcap, scan_records
+from gravsurvey.settings import ingest_options
 
 CONFORMANCE = EXTERNAL / "mcap-conformance"
 ROS2 = EXTERNAL / "ros2-imu"
@@ -128,7 +129,7 @@ def test_ros2_real_recordings_counts_rates_values(ros2_reference):
 
 
 def test_ros2_real_recording_load_flight_and_inspect():
-    opts = ingest_options_from_dict({"inputs": {"mcap": "robot_localization_test1.mcap"},
+    opts = ingest_options({"inputs": {"mcap": "robot_localization_test1.mcap"},
                                      "topics": {"altimeter": "/fix"}}, "flights[0]")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -152,7 +153,7 @@ def test_ros2_real_recording_load_flight_and_inspect():
     assert any(x["check"] == "epoch" and x["level"] == "warning" for x in imu2["checks"])
     # second bag has no GNSS/altimeter: clear error naming the file
     with pytest.raises(DataError, match="robot_localization_test2.mcap: no altimeter"):
-        load_flight(ingest_options_from_dict({"inputs": {"mcap":
+        load_flight(ingest_options({"inputs": {"mcap":
                                               "robot_localization_test2.mcap"}}, "f"), ROS2)
 
 
@@ -161,7 +162,7 @@ def test_ros2_real_recording_load_flight_and_inspect():
 def test_ros2_roundtrip_exact(tmp_path, compression):
     d = static_flight(seconds=5.0)
     write_ros2(tmp_path / "f.mcap", d, compression=compression)
-    rec = load_flight(ingest_options_from_dict({"inputs": {"mcap": "f.mcap"}}, "f"), tmp_path)
+    rec = load_flight(ingest_options({"inputs": {"mcap": "f.mcap"}}, "f"), tmp_path)
     _assert_exact(rec, d)
 
 
@@ -170,7 +171,7 @@ def test_ros2_varying_frame_id_and_zero_stamps(tmp_path):
     n = len(d["imu_t"])
     fids = ["imu", "imu_link", "x" * 13, ""] * (n // 4)
     write_ros2(tmp_path / "f.mcap", d, frame_ids=fids, zero_stamps={7, 8})
-    opts = ingest_options_from_dict({"inputs": {"mcap": "f.mcap"}}, "f")
+    opts = ingest_options({"inputs": {"mcap": "f.mcap"}}, "f")
     with pytest.warns(DataWarning, match="2 of 300 messages .* used the MCAP log_time"):
         rec = load_flight(opts, tmp_path)
     _assert_exact(rec, d)  # log_time == true stamp in these files
@@ -180,7 +181,7 @@ def test_ros2_varying_frame_id_and_zero_stamps(tmp_path):
 def test_json_roundtrip_exact_and_field_mapping(tmp_path, chunked):
     d = static_flight(seconds=5.0)
     write_json(tmp_path / "f.mcap", d, use_chunking=chunked, compression=CompressionType.LZ4)
-    rec = load_flight(ingest_options_from_dict({"inputs": {"mcap": "f.mcap"}}, "f"), tmp_path)
+    rec = load_flight(ingest_options({"inputs": {"mcap": "f.mcap"}}, "f"), tmp_path)
     _assert_exact(rec, d)
     names = {"time": "t", "f": "acc", "w": "gyro", "h": "alt", "lat": "phi", "lon": "lam"}
     write_json(tmp_path / "g.mcap", d, names=names)
@@ -188,7 +189,7 @@ def test_json_roundtrip_exact_and_field_mapping(tmp_path, chunked):
         "imu": {"time": "t", "specific_force": "acc", "angular_rate": "gyro"},
         "altimeter": {"time": "t", "height": "alt"},
         "gnss": {"time": "t", "lat_deg": "phi", "lon_deg": "lam", "height": "alt"}}}}
-    _assert_exact(load_flight(ingest_options_from_dict(cfg, "f"), tmp_path), d)
+    _assert_exact(load_flight(ingest_options(cfg, "f"), tmp_path), d)
 
 
 def _assert_exact(rec, d):
@@ -216,7 +217,7 @@ def test_simulator_writers_roundtrip_exact(tmp_path):
     inputs = [{"mcap": "F01_json.mcap"}, {"mcap": "F01_ros2.mcap"},
               {"csv": {"imu": "imu.csv", "altimeter": "altimeter.csv", "gnss": "gnss.csv"}}]
     for inp in inputs:
-        opts = ingest_options_from_dict({"inputs": inp}, "f")
+        opts = ingest_options({"inputs": inp}, "f")
         with warnings.catch_warnings():
             warnings.simplefilter("error", DataWarning)  # clean data: no warning at all
             rec = load_flight(opts, tmp_path)
@@ -288,7 +289,7 @@ def test_json_bad_messages_dropped_and_counted(tmp_path):
         wr.finish()
     with pytest.warns(DataWarning, match="imu: 3 messages of .*bad.mcap topic /imu could not be "
                                          "decoded and were dropped"):
-        rec = load_flight(ingest_options_from_dict({"inputs": {"mcap": "bad.mcap"}}, "f"),
+        rec = load_flight(ingest_options({"inputs": {"mcap": "bad.mcap"}}, "f"),
                           tmp_path)
     np.testing.assert_array_equal(rec.imu.specific_force_t, d["f"])
     assert rec.gnss is None
@@ -298,4 +299,4 @@ def test_json_field_names_not_matching_mapping_is_a_clear_error(tmp_path):
     write_json(tmp_path / "n.mcap", static_flight(seconds=2.0), names={"f": "acc"})
     with pytest.raises(DataError, match=r"n.mcap topic /imu: no usable imu samples \(imu: 200 "
                                         r"messages .* could not be decoded .*specific_force_t"):
-        load_flight(ingest_options_from_dict({"inputs": {"mcap": "n.mcap"}}, "f"), tmp_path)
+        load_flight(ingest_options({"inputs": {"mcap": "n.mcap"}}, "f"), tmp_path)

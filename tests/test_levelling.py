@@ -10,8 +10,9 @@ import pytest
 from gravsurvey.errors import ConfigError, DataError
 from gravsurvey.geodesy import MGAL, normal_gravity
 from gravsurvey.levelling import LevellingOptions, level_crossovers, level_survey
-from gravsurvey.survey import find_crossovers
-from gravsurvey.ties import TieConfig, tie_flight
+from gravsurvey.crossovers import find_crossovers
+from gravsurvey.ties import tie_flight
+from gravsurvey.settings import levelling_options, tie_config
 from levelling_truth import simulated_survey
 
 def test_levelling_recovers_relative_levels_and_noise():
@@ -47,7 +48,7 @@ def test_ties_and_levelling_give_absolute_level():
     for f, (off, drift, t_end) in flights.items():
         tt = np.concatenate([np.arange(0, 600.0, 1.0), np.arange(t_end - 600.0, t_end, 1.0)])
         z = dist_base + off + drift * tt / 3600.0 + rng.normal(0, 1.0, tt.size)
-        cfg = TieConfig.from_dict({"base_gravity_mgal": g_base,
+        cfg = tie_config({"base_gravity_mgal": g_base,
                                    "before": {"start_s": 0, "stop_s": 599},
                                    "after": {"start_s": float(t_end - 600), "stop_s": float(t_end)}})
         tie = tie_flight(cfg, tt, np.full(tt.size, lat_b), np.full(tt.size, h_b), z)
@@ -105,24 +106,24 @@ def test_unconnected_line_is_not_levelled():
 
 def test_options_and_tie_config_errors():
     with pytest.raises(ConfigError, match="levelling.model"):
-        LevellingOptions.from_dict({"model": "quadratic"})
+        levelling_options({"model": "quadratic"})
     with pytest.raises(ConfigError, match="levelling.huber_kk: unknown key"):
-        LevellingOptions.from_dict({"huber_kk": 1})
-    with pytest.raises(ConfigError, match=r"flights\[0\].tie.base_gravity_mgal: expected the base's absolute"):
-        TieConfig.from_dict({"base_gravity_mgal": 9.81, "before": {"reading_mgal": 980000.0}})
+        levelling_options({"huber_kk": 1})
+    with pytest.raises(ConfigError, match=r"^flights\[0\]\.tie\.base_gravity_mgal: expected a number in \[970000, 990000\], got 9\.81$"):
+        tie_config({"base_gravity_mgal": 9.81, "before": {"reading_mgal": 980000.0}})
     with pytest.raises(ConfigError, match="missing required key"):
-        TieConfig.from_dict({"before": {"reading_mgal": 980000.0}})
+        tie_config({"before": {"reading_mgal": 980000.0}})
     with pytest.raises(ConfigError, match="either reading_mgal"):
-        TieConfig.from_dict({"base_gravity_mgal": 980000.0, "before": {"reading_mgal": 980001.0, "start_s": 1}})
+        tie_config({"base_gravity_mgal": 980000.0, "before": {"reading_mgal": 980001.0, "start_s": 1}})
     with pytest.raises(ConfigError, match="needs a base reading"):
-        TieConfig.from_dict({"base_gravity_mgal": 980000.0})
-    cfg = TieConfig.from_dict({"base_gravity_mgal": 980000.0, "before": {"start_s": 5000, "stop_s": 6000}})
+        tie_config({"base_gravity_mgal": 980000.0})
+    cfg = tie_config({"base_gravity_mgal": 980000.0, "before": {"start_s": 5000, "stop_s": 6000}})
     with pytest.raises(DataError, match="holds no estimate"):
         tie_flight(cfg, np.arange(100.0), np.zeros(100), np.zeros(100), np.zeros(100))
 
 
 def test_value_ties_linear_drift():
-    cfg = TieConfig.from_dict({"base_gravity_mgal": 980100.0, "before": {"reading_mgal": 980102.0, "time_s": 0},
+    cfg = tie_config({"base_gravity_mgal": 980100.0, "before": {"reading_mgal": 980102.0, "time_s": 0},
                                "after": {"reading_mgal": 980103.0, "time_s": 7200}})
     t = np.array([0.0, 3600.0, 7200.0])
     tie = tie_flight(cfg, t, np.zeros(3), np.zeros(3), np.zeros(3))
@@ -165,7 +166,7 @@ def test_survey_outputs_tie_level_grid_and_metadata(tmp_path):
     r = synthetic_flight(0, n_main=8, n_tie=3)  # 24 crossovers for 10 unknowns: levelled
     cfg_path = tmp_path / "survey.yaml"
     cfg_path.write_text("survey: {name: t}\n")
-    tie = TieConfig.from_dict({"base_gravity_mgal": 980_800.0, "before": {"reading_mgal": 980_802.0},
+    tie = tie_config({"base_gravity_mgal": 980_800.0, "before": {"reading_mgal": 980_802.0},
                                "after": {"reading_mgal": 980_802.0}})
     cfg = SurveyConfig(path=cfg_path, base_dir=tmp_path, raw={"survey": {"name": "t"}}, name="t", ellipsoid=WGS84,
                        flights=[SimpleNamespace(name=r.name, tie=tie, index=0)], model=None, lines=None,
@@ -304,10 +305,10 @@ def test_too_few_crossovers_fall_back_to_one_constant_per_flight():
 
 
 def test_significance_option_validated():
-    assert LevellingOptions.from_dict({"significance": 0.01}).significance == 0.01
-    with pytest.raises(ConfigError, match=r"^levelling\.significance: expected a probability in \(0, 1\)"):
-        LevellingOptions.from_dict({"significance": 5})
-    assert LevellingOptions.from_dict({"model": "flight_constant"}).model == "flight_constant"
+    assert levelling_options({"significance": 0.01}).significance == 0.01
+    with pytest.raises(ConfigError, match=r"^levelling\.significance: expected a number in \(0, 1\), got 5"):
+        levelling_options({"significance": 5})
+    assert levelling_options({"model": "flight_constant"}).model == "flight_constant"
 
 
 def test_decision_on_the_simulated_survey_applies_constant():

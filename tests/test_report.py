@@ -7,7 +7,7 @@ import pytest
 from matplotlib.collections import PathCollection, PolyCollection
 
 from gravsurvey import report
-from gravsurvey.survey import find_crossovers
+from gravsurvey.crossovers import find_crossovers
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

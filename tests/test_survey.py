@@ -6,15 +6,16 @@ import numpy as np
 import pytest
 
 from gravsurvey.errors import ConfigError, DataError
-from gravsurvey.survey import (
+from gravsurvey.crossovers import find_crossovers
+from gravsurvey.segmentation import (
     Segment,
     SegmentationOptions,
-    find_crossovers,
     segment_flight,
     segment_lines,
     segment_table,
     segments_from_windows,
 )
+from gravsurvey.settings import segmentation_options
 
 R_EARTH = 6371000.0
 
@@ -158,7 +159,7 @@ def test_lawnmower_lines_recovered(rate_hz, seed):
 
 def test_options_object_replaces_keywords():
     t, lat, lon, vel, lab = build_track(lawnmower(n_lines=2), seed=3)
-    opts = SegmentationOptions.from_dict({"min_line_s": 800.0})  # longer than the 600-s lines
+    opts = segmentation_options({"min_line_s": 800.0})  # longer than the 600-s lines
     assert [s.kind for s in segment_lines(t, lat, lon, vel, options=opts)].count("line") == 0
     def key(segs):
         return [(s.name, s.kind, s.start_index, s.stop_index) for s in segs]
@@ -226,7 +227,7 @@ def test_short_straights_and_slow_curves_are_turns():
 
 def test_segment_table_and_whole_mode():
     t = np.arange(0.0, 100.0, 0.5)
-    segs = segment_flight(SegmentationOptions.from_dict({"mode": "whole"}), t, 0.0, 0.0)
+    segs = segment_flight(segmentation_options({"mode": "whole"}), t, 0.0, 0.0)
     assert segs == [Segment("L01", "line", 0, t.size)]
     tab = segment_table(segs, t)
     assert tab[0]["duration_s"] == pytest.approx(99.5) and tab[0]["heading_deg"] is None
@@ -238,7 +239,7 @@ def test_windows():
     segs = segments_from_windows(t, wins)
     assert segs[0] == Segment("A7", "line", 100, 200)
     assert segs[1].kind == "tie" and (segs[1].start_index, segs[1].stop_index) == (500, 701)
-    opts = SegmentationOptions.from_dict({"mode": "windows", "windows": wins})
+    opts = segmentation_options({"mode": "windows", "windows": wins})
     assert segment_flight(opts, t, 0, 0) == segs
     with pytest.raises(ConfigError, match=r"lines\.windows\[0\]: window 2000 \.\. 3000 s holds 0 samples"):
         segments_from_windows(t, [{"name": "x", "start_s": 2000, "stop_s": 3000}])
@@ -249,20 +250,20 @@ def test_windows():
 
 
 def test_options_validation():
-    o = SegmentationOptions.from_dict({"min_line_s": 200, "heading_tol_deg": 8.0, "max_vertical_speed_mps": None})
+    o = segmentation_options({"min_line_s": 200, "heading_tol_deg": 8.0, "max_vertical_speed_mps": None})
     assert o.min_line_s == 200.0 and o.heading_tol_deg == 8.0 and o.max_vertical_speed_mps is None
-    with pytest.raises(ConfigError, match=r"^lines\.min_lin_s: unknown key \(did you mean 'min_line_s'\?\); valid keys here: mode, min_line_s, "):
-        SegmentationOptions.from_dict({"min_lin_s": 3})
+    with pytest.raises(ConfigError, match=r"^lines\.min_lin_s: unknown key \(did you mean 'min_line_s'\?\); valid keys here: mode, min_line_m, min_line_s, "):
+        segmentation_options({"min_lin_s": 3})
     with pytest.raises(ConfigError, match=r"lines\.mode: expected one of auto, windows, whole, got 'bogus'"):
-        SegmentationOptions.from_dict({"mode": "bogus"})
+        segmentation_options({"mode": "bogus"})
     with pytest.raises(ConfigError, match=r"lines\.smooth_s: expected a number"):
-        SegmentationOptions.from_dict({"smooth_s": "ten"})
-    with pytest.raises(ConfigError, match=r"lines\.min_line_s: must be > 0"):
-        SegmentationOptions.from_dict({"min_line_s": 0})
+        segmentation_options({"smooth_s": "ten"})
+    with pytest.raises(ConfigError, match=r"^lines\.min_line_s: expected a number > 0, got 0$"):
+        segmentation_options({"min_line_s": 0})
     with pytest.raises(ConfigError, match=r"lines\.windows: required"):
-        SegmentationOptions.from_dict({"mode": "windows"})
+        segmentation_options({"mode": "windows"})
     with pytest.raises(ConfigError, match=r"^flights\[0\]\.lines\.windows\[0\]\.stop: unknown key \(did you mean 'stop_s'\?\)"):
-        SegmentationOptions.from_dict({"windows": [{"name": "a", "start_s": 0, "stop": 1}]}, key_path="flights[0].lines")
+        segmentation_options({"windows": [{"name": "a", "start_s": 0, "stop": 1}]}, key_path="flights[0].lines")
 
 
 def test_bad_time_is_data_error():
@@ -427,6 +428,6 @@ def test_transit_is_recognised_by_heading():
     # with transit detection off, the 45-deg leg is a line or a tie again (tie_angle_deg rule)
     segs = segment_lines(t, lat, lon, vel, transit_angle_deg=None)
     assert [s.kind for s in segs if s.kind != "turn"][-1] in ("line", "tie")
-    with pytest.raises(ConfigError, match="lines.transit_angle_deg: must be in"):
-        SegmentationOptions.from_dict({"transit_angle_deg": 50})
-    assert SegmentationOptions.from_dict({"transit_angle_deg": None}).transit_angle_deg is None
+    with pytest.raises(ConfigError, match=r"^lines\.transit_angle_deg: expected a number in \(0, 45\), got 50$"):
+        segmentation_options({"transit_angle_deg": 50})
+    assert segmentation_options({"transit_angle_deg": None}).transit_angle_deg is None

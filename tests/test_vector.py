@@ -14,6 +14,7 @@ from gravsurvey.inm.errormodel import (GE, GN, N_STATE_AIDED, N_STATE_VECTOR, co
 from gravsurvey.inm.identify import horizontal_prior
 from gravsurvey.inm.mechanization import mechanize
 from gravsurvey.inm.params import InitialState, InmParams
+from gravsurvey.settings import inm_params
 from gravsurvey.inm.solve import estimate_anomaly
 from gravsurvey.inm.vector import ARCSEC, OBSERVABLE_SIGMA_RATIO, deflections_rad, resolution_filter
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
@@ -211,7 +212,7 @@ def straight_flight():
 
 
 def test_default_run_has_no_horizontal_outputs(grid_flight):
-    sol = estimate_anomaly(_record(grid_flight), InmParams.from_dict({k: v for k, v in NAV_MODEL.items()
+    sol = estimate_anomaly(_record(grid_flight), inm_params({k: v for k, v in NAV_MODEL.items()
                                                                       if k != "horizontal"}), None, "strapdown")
     assert sol.dg_horizontal is None and sol.dg_horizontal_sigma is None and sol.horizontal_observable is None
     assert sol.x_smooth.shape[1] == N_STATE_AIDED
@@ -220,7 +221,7 @@ def test_default_run_has_no_horizontal_outputs(grid_flight):
 def test_horizontal_accuracy_with_heading_changes(grid_flight):
     """Issue 16: RMS against the truth under 3 mGal and within 2x the filter's own sigma."""
     s = grid_flight
-    sol = estimate_anomaly(_record(s), InmParams.from_dict(NAV_MODEL), None, "strapdown")
+    sol = estimate_anomaly(_record(s), inm_params(NAV_MODEL), None, "strapdown")
     assert sol.x_smooth.shape[1] == N_STATE_VECTOR
     assert sol.dg_horizontal.shape == (sol.time.size, 2) and sol.horizontal_observable.shape == (sol.time.size,)
     e = _errors(s, sol)
@@ -244,7 +245,7 @@ def test_horizontal_accuracy_with_heading_changes(grid_flight):
 def test_turns_make_a_strong_field_observable():
     """The same grid over the sample's sources x4 (8 mGal horizontal): marked observable, and honest."""
     s = _sample_like(mass_scale=4.0)
-    sol = estimate_anomaly(_record(s), InmParams.from_dict(NAV_MODEL), None, "strapdown")
+    sol = estimate_anomaly(_record(s), inm_params(NAV_MODEL), None, "strapdown")
     e = _errors(s, sol)
     # measured: 66 % of the prior sigma (median), 93 % of the epochs marked observable, RMS
     # 3.80 / 4.48 mGal against sigma 3.79 / 3.80, correlation with the truth 0.90 / 0.89
@@ -261,7 +262,7 @@ def test_straight_line_is_marked_unobservable_and_turns_help(grid_flight, straig
     model = dict(NAV_MODEL, identify=False, anomaly_sigma_mps2=1e-4, anomaly_lambda_per_m=2e-4, altimeter_sigma_m=0.05)
     ratio = {}
     for name, s in (("line", straight_flight), ("grid", grid_flight)):
-        sol = estimate_anomaly(_record(s), InmParams.from_dict(model), None, "strapdown")
+        sol = estimate_anomaly(_record(s), inm_params(model), None, "strapdown")
         prior = sol.identification["horizontal_prior"]["sigma_mps2"]
         r = sol.dg_horizontal_sigma / prior
         ratio[name] = float(np.median(r))

@@ -10,6 +10,8 @@ from scipy import signal as sps
 
 from gravsurvey import wavelet as W
 from gravsurvey.errors import ConfigError, DataError, DataWarning
+from gravsurvey.settings import postprocess_options
+from gravsurvey import filters as F
 
 MGAL = 1e-5
 
@@ -222,8 +224,8 @@ def test_lowpass_half_amplitude_at_the_filter_length():
     t = np.arange(n) * dt
     z = np.sin(2 * np.pi * t / period)
     mid = slice(n // 4, 3 * n // 4)
-    for f in (lambda x: W.butterworth_lowpass(x, dt, period, 4),
-              lambda x: W.gaussian_lowpass(x, dt, period)):
+    for f in (lambda x: F.butterworth_lowpass(x, dt, period, 4),
+              lambda x: F.gaussian_lowpass(x, dt, period)):
         assert np.sqrt(2) * _rms(f(z)[mid]) == pytest.approx(0.5, abs=0.01)
     _, info = W.postprocess(z, dt, 50.0, "butterworth", resolution_m=7500.0)
     assert info["filter_length_s"] == pytest.approx(300.0)
@@ -236,8 +238,8 @@ def test_linear_operators_are_time_reversal_equivariant():
     rng = np.random.default_rng(8)
     z = np.cumsum(rng.standard_normal(5001)) * MGAL
     ops = [lambda x: W.ti_approximation(x, "db10", 7),
-           lambda x: W.butterworth_lowpass(x, 1.0, 400.0),
-           lambda x: W.gaussian_lowpass(x, 1.0, 400.0)]
+           lambda x: F.butterworth_lowpass(x, 1.0, 400.0),
+           lambda x: F.gaussian_lowpass(x, 1.0, 400.0)]
     for op in ops:
         np.testing.assert_allclose(op(z[::-1]), op(z)[::-1], rtol=0, atol=1e-9 * np.max(np.abs(z)))
 
@@ -434,22 +436,24 @@ def test_cosphi_faithful_runs_and_reports():
 # Options and bad input
 # ---------------------------------------------------------------------------------------------
 def test_options_defaults_and_validation():
-    o = W.options_from_dict(None)
+    o = postprocess_options(None)
     assert o.method == "default" and o.wavelet == "auto" and o.boundary == "symmetric"
-    o = W.options_from_dict({"method": "butterworth", "resolution_m": 5000})
+    o = postprocess_options({"method": "butterworth", "resolution_m": 5000})
     assert o.resolution_m == 5000.0
-    with pytest.raises(ConfigError, match=r"postprocess\.method: 'wavelets'.*expected one of"):
-        W.options_from_dict({"method": "wavelets"})
+    with pytest.raises(ConfigError, match=r"^postprocess\.method: expected one of default, ti_cosphi, .*, got 'wavelets'$"):
+        postprocess_options({"method": "wavelets"})
     with pytest.raises(ConfigError, match=r"postprocess\.wavelet.*db10, coif4, auto"):
-        W.options_from_dict({"wavelet": "db4"})
+        postprocess_options({"wavelet": "db4"})
     with pytest.raises(ConfigError, match=r"postprocess\.resolution: unknown key.*resolution_m"):
-        W.options_from_dict({"resolution": 5000})
-    with pytest.raises(ConfigError, match=r"pp\.resolution_m: expected a positive number"):
-        W.options_from_dict({"resolution_m": -1}, key_path="pp")
+        postprocess_options({"resolution": 5000})
+    with pytest.raises(ConfigError, match=r"^pp\.resolution_m: expected a number > 0, got -1$"):
+        postprocess_options({"resolution_m": -1}, key_path="pp")
     with pytest.raises(ConfigError, match=r"not both"):
-        W.options_from_dict({"resolution_m": 1.0, "filter_length_s": 2.0})
+        postprocess_options({"resolution_m": 1.0, "filter_length_s": 2.0})
+    with pytest.raises(ConfigError, match=r"^postprocess\.max_level: must be >= min_level \(3\)$"):
+        postprocess_options({"min_level": 3, "max_level": 2})
     with pytest.raises(ConfigError, match=r"postprocess\.boundary.*periodization"):
-        W.options_from_dict({"boundary": "mirror"})
+        postprocess_options({"boundary": "mirror"})
     with pytest.raises(ConfigError, match=r"resolution_m: required"):
         W.postprocess(np.zeros(100) + 1.0, 1.0, 50.0, "gaussian")
 
@@ -545,7 +549,7 @@ def test_seed_smooth_default_reaches_the_estimators_long_period_floor(seed_estim
     keep = (t >= t[0] + SEED_EDGE_S) & (t <= t[-1] - SEED_EDGE_S)
     out, _ = W.postprocess(z, 1.0, speed, "ti_cosphi", sigma=sigma)
     total = _rms((out - truth)[keep]) / MGAL
-    floor = _rms(W.gaussian_lowpass(z - truth, 1.0, 2000.0)[keep]) / MGAL
+    floor = _rms(F.gaussian_lowpass(z - truth, 1.0, 2000.0)[keep]) / MGAL
     assert total**2 <= floor**2 + 0.5**2
 
 

@@ -18,7 +18,7 @@ import pytest
 
 from gravsurvey.errors import DataError, GravsurveyError
 from gravsurvey.io import writers as w
-from gravsurvey.survey import find_crossovers
+from gravsurvey.crossovers import find_crossovers
 
 ROOT = Path(__file__).resolve().parents[1]
 T0_NS = 1_714_557_600_000_000_000  # 2024-05-01T10:00:00Z

@@ -26,18 +26,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError, DataError, check_keys
+from ..errors import ConfigError, DataError
 
-#: Numbers that may be None (null: derived from the data).
-_NULLABLE_KEYS = ("initial_attitude_sigma_deg",)
-#: Integer settings.
-_INT_KEYS = ("attitude_passes",)
 
+#: instrument triads: ENU-stabilised platform, or body-fixed (docs/conventions.md)
+TRIADS = ("platform", "strapdown")
 RADIUS_SOURCES = ("altimeter", "computed")
 #: Boolean settings (everything else but ``radius_source`` is a number).
 _BOOL_KEYS = ("gnss_aiding", "identify", "horizontal")
-#: Settings that may be null (``None``: not set).
-_OPTIONAL_KEYS = ("target_resolution_m",)
 #: Attributes that are not config keys.
 _INTERNAL = ("given",)
 
@@ -109,7 +105,7 @@ class InmParams:
         aiding; docs/method.md "Vector gravimetry").  Off by default.
     given : frozenset of str
         The keys held fixed by identification: those written in the config
-        (:meth:`from_dict`) or, when constructed directly and not given, every key whose value
+        (:func:`gravsurvey.settings.inm_params`) or, when constructed directly and not given, every key whose value
         differs from its default.  Not a config key itself.
     """
 
@@ -146,74 +142,12 @@ class InmParams:
                 if f.name not in _INTERNAL and f.name not in _BOOL_KEYS
                 and getattr(self, f.name) != f.default)
 
-    # ------------------------------------------------------------------
     def validate(self, key_path: str = "model") -> None:
-        """Raise :class:`ConfigError` naming the key for nonsense values."""
-        for f in dataclasses.fields(self):
-            val = getattr(self, f.name)
-            key = f"{key_path}.{f.name}"
-            if f.name in _INTERNAL:
-                continue
-            if f.name in _OPTIONAL_KEYS:
-                if val is None:
-                    continue
-                if isinstance(val, bool) or not isinstance(val, (int, float)) or not (
-                        math.isfinite(val) and val > 0):
-                    raise ConfigError(f"{key}: expected a length > 0 m or null, got {val!r}")
-                continue
-            if f.name == "radius_source":
-                if not isinstance(val, str) or val not in RADIUS_SOURCES:
-                    raise ConfigError(f"{key}: expected one of {list(RADIUS_SOURCES)}, got {val!r}")
-                continue
-            if f.name in _BOOL_KEYS:
-                if not isinstance(val, bool):
-                    raise ConfigError(f"{key}: expected true or false, got {type(val).__name__} {val!r}")
-                continue
-            if f.name in _NULLABLE_KEYS and val is None:
-                continue
-            if f.name in _INT_KEYS:
-                if isinstance(val, bool) or not isinstance(val, int) or not 1 <= val <= 5:
-                    raise ConfigError(f"{key}: expected an integer from 1 to 5, got {val!r}")
-                continue
-            if isinstance(val, bool) or not isinstance(val, (int, float)):
-                raise ConfigError(f"{key}: expected a number, got {type(val).__name__} {val!r}")
-            if not math.isfinite(val) or val < 0:
-                raise ConfigError(f"{key}: expected a finite value >= 0, got {val!r}")
-            if f.name == "filter_rate_hz" and val == 0:
-                raise ConfigError(f"{key}: expected a rate > 0 Hz, got {val!r}")
-            if f.name in ("gnss_horizontal_sigma_m", "gnss_vertical_sigma_m") and val == 0:
-                raise ConfigError(f"{key}: expected a sigma > 0 m, got {val!r}")
+        """Raise :class:`ConfigError` naming the key for a value the ``model`` section refuses
+        (the schema, :class:`gravsurvey.settings.ModelSection`, is the one rule)."""
+        from ..settings import check_inm_params
 
-    @classmethod
-    def from_dict(cls, d, key_path: str = "model") -> "InmParams":
-        """Build from a config mapping; unknown keys rejected with the nearest valid name.
-
-        Parameters
-        ----------
-        d : mapping or None
-            The ``model:`` section (missing keys take the seed defaults).
-        key_path : str
-            Dotted path used in error messages.
-        """
-        if d is None:
-            d = {}
-        if not isinstance(d, dict):
-            raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-        check_keys(d, [f.name for f in dataclasses.fields(cls) if f.name not in _INTERNAL], key_path)
-        obj = cls.__new__(cls)
-        for f in dataclasses.fields(cls):
-            if f.name in _INTERNAL:
-                continue
-            setattr(obj, f.name, d.get(f.name, f.default))
-        obj.given = frozenset(d)
-        obj.validate(key_path)
-        # integers are fine in YAML; store floats
-        for f in dataclasses.fields(cls):
-            if f.name in _INTERNAL or f.name in _BOOL_KEYS + _INT_KEYS or f.name == "radius_source":
-                continue
-            if getattr(obj, f.name) is not None:
-                setattr(obj, f.name, float(getattr(obj, f.name)))
-        return obj
+        check_inm_params(self, key_path)
 
     def to_dict(self) -> dict:
         """Plain mapping of the settings (for reports)."""
@@ -307,59 +241,9 @@ def mat_nb_from_attitude(roll, pitch, heading):
     return rz(0.5 * math.pi - heading) @ ry(-pitch) @ rx(roll)
 
 
-def _num(d, k, key_path, length=None):
-    if k not in d:
-        raise ConfigError(f"{key_path}.{k}: missing")
-    v = d[k]
-    try:
-        arr = np.asarray(v, dtype=float)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{key_path}.{k}: expected numbers, got {v!r}") from None
-    if length is None:
-        if arr.shape != () or isinstance(v, bool):
-            raise ConfigError(f"{key_path}.{k}: expected a number, got {v!r}")
-    elif arr.shape != (length,):
-        raise ConfigError(f"{key_path}.{k}: expected a list of {length} numbers, got {v!r}")
-    if not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{key_path}.{k}: expected finite numbers, got {v!r}")
-    return arr
-
-
-_INITIAL_KEYS = ("lat_deg", "lon_deg", "height_m", "velocity_enu_mps", "attitude_deg")
-
-
 def _check_triad(triad, key_path):
-    if triad not in ("platform", "strapdown"):
+    if triad not in TRIADS:
         raise ConfigError(f"{key_path}: triad must be 'platform' or 'strapdown', got {triad!r}")
-
-
-def initial_state_from_dict(d, triad: str, key_path: str = "initial") -> InitialState:
-    """Initial state from the config's ``initial:`` block.
-
-    Keys: ``lat_deg``, ``lon_deg``, ``height_m``, ``velocity_enu_mps`` [E, N, U],
-    ``attitude_deg`` [roll, pitch, heading] of the triad w.r.t. ENU, deg (required for a
-    strapdown triad; ignored for a platform, whose triad is ENU).
-
-    Raises
-    ------
-    ConfigError
-        Naming ``key_path.<key>`` for missing, unknown or malformed keys.
-    """
-    _check_triad(triad, key_path.rsplit(".", 1)[0] + ".triad" if "." in key_path else "triad")
-    if not isinstance(d, dict):
-        raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-    check_keys(d, _INITIAL_KEYS, key_path)
-    lat = float(_num(d, "lat_deg", key_path))
-    lon = float(_num(d, "lon_deg", key_path))
-    if not -90.0 < lat < 90.0:
-        raise ConfigError(f"{key_path}.lat_deg: expected a latitude in (-90, 90) deg, got {lat}")
-    h = float(_num(d, "height_m", key_path))
-    vel = _num(d, "velocity_enu_mps", key_path, 3)
-    mat_nt = np.eye(3)
-    if triad == "strapdown":
-        att = _num(d, "attitude_deg", key_path, 3)
-        mat_nt = mat_nb_from_attitude(*np.radians(att))
-    return InitialState(math.radians(lat), math.radians(lon), h, vel, mat_nt)
 
 
 def initial_state_from_gnss(record, triad: str, attitude_deg=None, params=None, ellipsoid=None) -> InitialState:
@@ -439,34 +323,6 @@ def _gnss_fit_velocity_factor(record) -> float:
     return float(math.sqrt(max(cov[1, 1], 0.0)))
 
 
-def initial_override_from_dict(d, triad: str, key_path: str = "initial") -> dict:
-    """Validate an ``initial:`` block whose keys are all optional (overrides of the data).
-
-    Returns
-    -------
-    dict
-        The keys present, as floats (``velocity_enu_mps``, ``attitude_deg``: ndarray (3,)).
-
-    Raises
-    ------
-    ConfigError
-        Naming ``key_path.<key>`` for unknown or malformed keys.
-    """
-    if not isinstance(d, dict):
-        raise ConfigError(f"{key_path}: expected a mapping, got {type(d).__name__}")
-    check_keys(d, _INITIAL_KEYS, key_path)
-    out = {}
-    for k in ("lat_deg", "lon_deg", "height_m"):
-        if k in d:
-            out[k] = float(_num(d, k, key_path))
-    if "lat_deg" in out and not -90.0 < out["lat_deg"] < 90.0:
-        raise ConfigError(f"{key_path}.lat_deg: expected a latitude in (-90, 90) deg, got {out['lat_deg']}")
-    for k in ("velocity_enu_mps", "attitude_deg"):
-        if k in d:
-            out[k] = _num(d, k, key_path, 3)
-    return out
-
-
 def resolve_initial_state(record, triad: str, params: InmParams | None = None, ellipsoid=None, given=None,
                           key_path: str = "initial") -> InitialState:
     """Initial state from the data, with the config's ``initial`` keys as checked overrides.
@@ -486,7 +342,7 @@ def resolve_initial_state(record, triad: str, params: InmParams | None = None, e
     params : InmParams, optional
     ellipsoid : Ellipsoid, optional
     given : dict, optional
-        From :func:`initial_override_from_dict`.
+        From :func:`gravsurvey.settings.initial_overrides`.
     key_path : str
         Path of the ``initial`` block in error messages.
     """

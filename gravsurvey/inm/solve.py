@@ -15,7 +15,7 @@ from .identify import (horizontal_prior, identify_params, keep_default_prior, mo
                        straight_weight, wide_prior_params)
 from .kalman import filter_and_smooth
 from .mechanization import mechanize, navigation_to_geodetic, rodrigues
-from .params import InitialState, InmParams, initial_state_from_gnss, solvability_warnings
+from .params import TRIADS, InitialState, InmParams, initial_state_from_gnss, solvability_warnings
 from .vector import horizontal_outputs
 
 __all__ = ["InmSolution", "estimate_anomaly", "solvability_warnings", "initial_state_from_gnss"]
@@ -216,7 +216,7 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     -------
     InmSolution
     """
-    if triad not in ("platform", "strapdown"):
+    if triad not in TRIADS:
         raise ConfigError(f"triad: expected 'platform' or 'strapdown', got {triad!r}")
     if gnss_lever_arm_t is not None and np.any(np.asarray(gnss_lever_arm_t, float) != 0.0) and triad != "strapdown":
         raise ConfigError("gnss_lever_arm_m: a lever arm on body axes needs a strapdown triad (a platform's axes are "

@@ -1,7 +1,8 @@
 """Ingestion: per-flight input options -> checked :class:`~gravsurvey.io.record.FlightRecord`.
 
-``ingest_options_from_dict`` validates the ingestion keys of one flight of the processing
-config (``inputs``, ``topics``, ``mcap``, ``csv``, ``checks``; see docs/input-formats.md);
+:class:`IngestOptions` holds one flight's ingestion settings (built from the config's
+``inputs``, ``topics``, ``mcap``, ``csv``, ``checks`` keys by
+:func:`gravsurvey.settings.ingest_options`; see docs/input-formats.md);
 ``load_flight`` reads the files, repairs the time bases, runs the plausibility checks and
 returns the record.  Problems are reported once: a :class:`~gravsurvey.errors.DataWarning`
 per finding, the same line in ``record.notes``.
@@ -16,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from gravsurvey.errors import ConfigError, DataError, DataWarning, check_keys, suggest
+from gravsurvey.errors import ConfigError, DataError, DataWarning
 from gravsurvey.io import checks as ck
-from gravsurvey.io.csv import (DEFAULT_COLUMNS, TIME_FORMATS, UNITS,
+from gravsurvey.io.csv import (UNITS,
                                read_csv_channel)
 from gravsurvey.io.mcap import (DEFAULT_JSON_FIELDS, DEFAULT_MAX_RECORD_BYTES, ROLE_SCHEMAS,
                                 McapContent, read_mcap)
@@ -38,8 +39,6 @@ GRADIENT_VERTICAL_RANGE_E = (1000.0, 10000.0)
 #: Median asymmetry max|T_ij - T_ji| of a 9-component gradient above which the tensor is
 #: rejected as not a gradient tensor (a real one is symmetric to its noise), Eotvos.
 GRADIENT_ASYMMETRY_TOL_E = 10.0
-#: Flight-level keys this module owns (config.py should hand them over / not reject them).
-INGEST_KEYS = ("inputs", "topics", "mcap", "csv", "checks", "imu_axes", "gnss_lever_arm_m")
 #: IMU axis conventions -> matrix mapping the sensor axes onto forward-left-up body axes
 #: (``vec_flu = M @ vec_sensor``); any other mounting is given as a 3x3 matrix.
 IMU_AXES = {
@@ -84,7 +83,7 @@ class IngestOptions:
     base_dir: str | None = None  # relative input paths refer to it
     gravimeter: object = None  # io.formats.flight.GravimeterOptions for kind "gravimeter"
     #: ``{format: nmea | trajectory, file, ...}``: a navigation file that is the flight's GNSS
-    #: (``inputs.nav``, validated by io.formats.flight.nav_options_from_dict)
+    #: (``inputs.nav``, validated by gravsurvey.settings (NavSection))
     nav: dict | None = None
 
     def _resolve(self, p, base_dir=None):
@@ -93,211 +92,12 @@ class IngestOptions:
 
     def input_paths(self, base_dir=None) -> list:
         """The input files (MCAP, or the CSVs in imu, altimeter, gnss order), resolved against
-        ``base_dir`` (default: the one given to :func:`ingest_options_from_dict`)."""
+        ``base_dir`` (default: the one given to :func:`gravsurvey.settings.ingest_options`)."""
         if self.kind == "gravimeter":
             return self.gravimeter.paths(base_dir if base_dir is not None else self.base_dir)
         paths = [self._resolve(self.csv_paths[r], base_dir) for r in ROLES + OPTIONAL_ROLES
                  if r in self.csv_paths] if self.kind == "csv" else [self._resolve(self.mcap_path, base_dir)]
         return paths + ([self._resolve(self.nav["file"], base_dir)] if self.nav else [])
-
-
-# ----------------------------------------------------------------------------- config parsing
-def _mapping(value, path):
-    if not isinstance(value, dict):
-        raise ConfigError(f"{path}: expected a mapping, got {type(value).__name__}")
-    return value
-
-
-def _str_value(v, path):
-    if not isinstance(v, str) or not v:
-        raise ConfigError(f"{path}: expected a non-empty string, got {v!r}")
-    return v
-
-
-def _choice(v, allowed, path):
-    if v not in allowed:
-        raise ConfigError(f"{path}: expected one of {', '.join(map(str, allowed))}, got {v!r}"
-                          f"{suggest(v, allowed)}")
-    return v
-
-
-def _number(v, path, lo=None, hi=None, integer=False):
-    ok = isinstance(v, int) if integer else isinstance(v, (int, float))
-    if isinstance(v, bool) or not ok or (lo is not None and v < lo) or (hi is not None and v > hi):
-        rng = f" in [{lo}, {hi}]" if lo is not None or hi is not None else ""
-        kind = "an integer" if integer else "a number"
-        raise ConfigError(f"{path}: expected {kind}{rng}, got {v!r}")
-    return v
-
-
-def _units(d, path):
-    d = _mapping(d, path)
-    check_keys(d, tuple(UNITS), path)
-    out = {k: next(iter(UNITS[k])) for k in UNITS}
-    for k, v in d.items():
-        out[k] = _choice(v, tuple(UNITS[k]), f"{path}.{k}")
-    return out
-
-
-def ingest_options_from_dict(flight_cfg: dict, key_path: str = "flights[0]",
-                             base_dir=None) -> IngestOptions:
-    """Validate the ingestion keys of one flight and return :class:`IngestOptions`.
-
-    Parameters
-    ----------
-    flight_cfg : dict
-        The ingestion keys of one entry of ``flights`` (``INGEST_KEYS``; any other key is
-        rejected, so the caller passes only these).
-    key_path : str
-        Where this dict sits in the config, for messages (e.g. ``"flights[0]"``).
-    base_dir : path, optional
-        Directory relative input paths refer to (the config file's); :func:`load_flight`'s
-        ``base_dir`` argument overrides it.
-
-    Raises
-    ------
-    ConfigError
-        Unknown key (nearest valid key suggested), wrong type or value; the message names the
-        full key path.
-    """
-    cfg = _mapping(flight_cfg, key_path)
-    check_keys(cfg, INGEST_KEYS, key_path)
-    o = IngestOptions(key_path=key_path,
-                      base_dir=os.fspath(base_dir) if base_dir is not None else None)
-    if "inputs" not in cfg:
-        raise ConfigError(f"{key_path}.inputs: missing; expected {{mcap: FILE}} or "
-                          "{csv: {imu: FILE, altimeter: FILE, gnss: FILE}}")
-    p = f"{key_path}.inputs"
-    inputs = _mapping(cfg["inputs"], p)
-    check_keys(inputs, ("mcap", "csv", "gravimeter", "nav"), p)
-    if "nav" in inputs:
-        # a navigation file (NMEA, GNSS trajectory text) as the GNSS of an IMU flight
-        from gravsurvey.io.formats.flight import nav_options_from_dict
-
-        if "gravimeter" in inputs:
-            raise ConfigError(f"{p}.nav: only next to mcap or csv; a gravimeter's navigation is {p}.gravimeter.nav")
-        o.nav = nav_options_from_dict(inputs["nav"], f"{p}.nav")
-        inputs = {k: v for k, v in inputs.items() if k != "nav"}
-    if len(inputs) != 1:
-        raise ConfigError(f"{p}: expected exactly one of mcap, csv, gravimeter, got "
-                          f"{', '.join(inputs) or 'none'}")
-    if "gravimeter" in inputs:
-        # a vendor gravimeter file + navigation (gravsurvey.io.formats.flight)
-        from gravsurvey.io.formats.flight import gravimeter_options_from_dict
-
-        o.kind = "gravimeter"
-        o.gravimeter = gravimeter_options_from_dict(inputs["gravimeter"], f"{p}.gravimeter")
-    elif "mcap" in inputs:
-        o.kind, o.mcap_path = "mcap", _str_value(inputs["mcap"], f"{p}.mcap")
-    else:
-        o.kind = "csv"
-        c = _mapping(inputs["csv"], f"{p}.csv")
-        check_keys(c, ROLES + OPTIONAL_ROLES, f"{p}.csv")
-        for r in ("imu", "altimeter"):
-            if r not in c:
-                raise ConfigError(f"{p}.csv.{r}: missing; expected a CSV file path")
-        o.csv_paths = {r: _str_value(v, f"{p}.csv.{r}") for r, v in c.items()}
-    if "topics" in cfg:
-        p = f"{key_path}.topics"
-        t = _mapping(cfg["topics"], p)
-        check_keys(t, ROLES + OPTIONAL_ROLES, p)
-        for r, v in t.items():
-            o.topics[r] = _str_value(v, f"{p}.{r}")
-        o.topics_explicit = tuple(t)
-    if "mcap" in cfg:
-        p = f"{key_path}.mcap"
-        m = _mapping(cfg["mcap"], p)
-        check_keys(m, ("json_fields", "units", "time_source", "check_crc", "max_record_mib"), p)
-        if "json_fields" in m:
-            jf = _mapping(m["json_fields"], f"{p}.json_fields")
-            check_keys(jf, ROLES + OPTIONAL_ROLES, f"{p}.json_fields")
-            for r, fm in jf.items():
-                q = f"{p}.json_fields.{r}"
-                fm = _mapping(fm, q)
-                check_keys(fm, tuple(DEFAULT_JSON_FIELDS[r]), q)
-                for k, v in fm.items():
-                    vec = k in ("specific_force", "angular_rate")
-                    if vec and isinstance(v, list):
-                        if len(v) != 3:
-                            raise ConfigError(f"{q}.{k}: expected a field name or a list of "
-                                              f"3 field names, got {v!r}")
-                        o.json_fields[r][k] = [_str_value(x, f"{q}.{k}") for x in v]
-                    else:
-                        o.json_fields[r][k] = _str_value(v, f"{q}.{k}")
-        if "units" in m:
-            o.mcap_units = _units(m["units"], f"{p}.units")
-        if "time_source" in m:
-            o.time_source = _choice(m["time_source"], ("auto", "log_time"), f"{p}.time_source")
-        if "check_crc" in m:
-            if not isinstance(m["check_crc"], bool):
-                raise ConfigError(f"{p}.check_crc: expected true or false, got "
-                                  f"{m['check_crc']!r}")
-            o.check_crc = m["check_crc"]
-        if "max_record_mib" in m:
-            o.max_record_bytes = int(_number(m["max_record_mib"], f"{p}.max_record_mib",
-                                             1, 65536) * 2**20)
-    if "csv" in cfg:
-        p = f"{key_path}.csv"
-        c = _mapping(cfg["csv"], p)
-        check_keys(c, ("columns", "time_format", "units", "delimiter", "gps_leap_seconds"), p)
-        if "time_format" in c:
-            o.csv_time_format = _choice(c["time_format"], TIME_FORMATS, f"{p}.time_format")
-        if "columns" in c:
-            cols = _mapping(c["columns"], f"{p}.columns")
-            check_keys(cols, ROLES + OPTIONAL_ROLES, f"{p}.columns")
-            for r, cm in cols.items():
-                q = f"{p}.columns.{r}"
-                cm = _mapping(cm, q)
-                check_keys(cm, tuple(DEFAULT_COLUMNS[r]), q)
-                out = {}
-                for k, v in cm.items():
-                    if k == "time" and isinstance(v, list):
-                        if len(v) not in (2, 3):
-                            raise ConfigError(f"{q}.time: expected a column name, or "
-                                              f"[week, seconds_of_week] or [cycle, week, seconds_of_week] "
-                                              f"columns, got {v!r}")
-                        out[k] = [_str_value(x, f"{q}.time") for x in v]
-                    else:
-                        out[k] = _str_value(v, f"{q}.{k}")
-                o.csv_columns[r] = out
-        for r, cm in o.csv_columns.items():
-            t = cm.get("time")
-            if t is not None and isinstance(t, list) != (o.csv_time_format == "gps_week_sow"):
-                raise ConfigError(f"{p}.columns.{r}.time: time_format {o.csv_time_format} "
-                                  f"needs {'two columns' if isinstance(t, str) else 'one column'}"
-                                  f", got {t!r}")
-        if "units" in c:
-            o.csv_units = _units(c["units"], f"{p}.units")
-        if "delimiter" in c:
-            d = c["delimiter"]
-            if not isinstance(d, str) or len(d) != 1 or d in "#\"\r\n0123456789.-+eE":
-                raise ConfigError(f"{p}.delimiter: expected one character such as ',' ';' "
-                                  f"or a tab, got {d!r}")
-            o.csv_delimiter = d
-        if "gps_leap_seconds" in c:
-            o.gps_leap_seconds = _number(c["gps_leap_seconds"], f"{p}.gps_leap_seconds", 0, 100,
-                                         integer=True)
-    if "imu_axes" in cfg:
-        o.mat_axes = imu_axes_matrix(cfg["imu_axes"], f"{key_path}.imu_axes")
-    if "gnss_lever_arm_m" in cfg:
-        v = cfg["gnss_lever_arm_m"]
-        q = f"{key_path}.gnss_lever_arm_m"
-        if (not isinstance(v, list) or len(v) != 3
-                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
-            raise ConfigError(f"{q}: expected [forward, left, up] in m on the IMU's (FLU) axes, got {v!r}")
-        arm = np.array(v, dtype=float)
-        if not np.all(np.isfinite(arm)) or np.max(np.abs(arm)) > 100.0:
-            raise ConfigError(f"{q}: expected finite components within 100 m, got {v!r}")
-        o.gnss_lever_arm_m = arm
-    if "checks" in cfg:
-        p = f"{key_path}.checks"
-        c = _mapping(cfg["checks"], p)
-        check_keys(c, ("gap_factor", "plausibility"), p)
-        if "gap_factor" in c:
-            o.gap_factor = float(_number(c["gap_factor"], f"{p}.gap_factor", 1.5, 1e6))
-        if "plausibility" in c:
-            o.plausibility = _choice(c["plausibility"], ("error", "warn"), f"{p}.plausibility")
-    return o
 
 
 def imu_axes_matrix(value, key_path="imu_axes") -> np.ndarray:

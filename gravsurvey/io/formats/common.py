@@ -18,9 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gravsurvey.errors import DataError
+from gravsurvey.geodesy import MGAL  # noqa: F401  (re-exported to the format readers)
 
-#: 1 mGal in m/s^2.
-MGAL = 1e-5
 #: 1 knot in m/s (international nautical mile per hour).
 KNOT = 1852.0 / 3600.0
 #: Nanoseconds per second.

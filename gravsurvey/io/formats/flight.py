@@ -36,7 +36,6 @@ correction from the navigation exactly once.  The processing method must be ``cl
 
 from __future__ import annotations
 
-import math
 import os
 import warnings
 from dataclasses import dataclass
@@ -44,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gravsurvey.errors import ConfigError, DataError, DataWarning, check_keys, suggest
+from gravsurvey.errors import DataError, DataWarning
 from gravsurvey.io import checks as ck
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
 
@@ -60,8 +59,6 @@ GRAVIMETER_FORMATS = {
     "bgm_rgs": {"positions": True, "absolute": True, "marine": True},
 }
 NAV_FORMATS = ("nmea", "trajectory")
-GRAVIMETER_KEYS = ("format", "file", "files", "offset_mgal", "scale", "counts_scale_mgal", "time_source", "height_m", "nav")
-NAV_KEYS = ("format", "file", "time_source", "time_system")
 #: Median absolute gravity (m/s^2) outside this range means a missing or wrong tie/scale.
 GRAVITY_OK = (9.70, 9.85)
 #: Fastest plausible ground speed (m/s) between consecutive fixes: ship (~49 kn), aircraft.
@@ -103,7 +100,8 @@ def position_jumps(time_ns, lat, lon, max_speed: float):
 
 @dataclass
 class GravimeterOptions:
-    """Validated ``inputs.gravimeter`` of one flight (paths as written; see module docstring)."""
+    """Validated ``inputs.gravimeter`` of one flight (paths as written; see module docstring;
+    built by :func:`gravsurvey.settings.gravimeter_options`)."""
 
     format: str
     files: list
@@ -124,103 +122,6 @@ class GravimeterOptions:
         if self.nav is not None:
             out.append(res(self.nav["file"]))
         return out
-
-
-def _num(v, path, positive=False):
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or (positive and v <= 0):
-        raise ConfigError(f"{path}: expected a {'positive ' if positive else ''}number, got {v!r}")
-    return float(v)
-
-
-def _str(v, path):
-    if not isinstance(v, str) or not v:
-        raise ConfigError(f"{path}: expected a non-empty string (a path), got {v!r}")
-    return v
-
-
-def nav_options_from_dict(nav, key_path: str) -> dict:
-    """Validate a navigation-file mapping ``{format: nmea|trajectory, file, [time_source |
-    time_system]}`` (``inputs.gravimeter.nav`` and ``inputs.nav``).
-
-    Raises
-    ------
-    ConfigError
-        Not a mapping, unknown key, unknown format, option of the other format; names the key path.
-    """
-    p = key_path
-    if not isinstance(nav, dict):
-        raise ConfigError(f"{p}: expected a mapping with format and file")
-    check_keys(nav, NAV_KEYS, p, required=("format", "file"))
-    if nav["format"] not in NAV_FORMATS:
-        raise ConfigError(f"{p}.format: expected one of {', '.join(NAV_FORMATS)}, got {nav['format']!r}{suggest(nav['format'], NAV_FORMATS)}")
-    _str(nav["file"], f"{p}.file")
-    if "time_source" in nav and (nav["format"] != "nmea" or nav["time_source"] not in ("auto", "fix", "logger")):
-        raise ConfigError(f"{p}.time_source: nmea only, one of auto, fix, logger; got {nav['time_source']!r}")
-    if "time_system" in nav and (nav["format"] != "trajectory" or nav["time_system"] not in ("auto", "gps", "utc")):
-        raise ConfigError(f"{p}.time_system: trajectory only, one of auto, gps, utc; got {nav['time_system']!r}")
-    return dict(nav)
-
-
-def gravimeter_options_from_dict(d, key_path: str = "flights[0].inputs.gravimeter") -> GravimeterOptions:
-    """Validate ``inputs.gravimeter``.
-
-    Raises
-    ------
-    ConfigError
-        Unknown key (nearest suggested), unknown format, missing file, missing ``offset_mgal``
-        for a meter-unit format, missing ``counts_scale_mgal`` for ``bgm_serial``, missing
-        ``nav`` for a format without positions, bad numbers; the message names the key path.
-    """
-    if not isinstance(d, dict):
-        raise ConfigError(f"{key_path}: expected a mapping with format and file, got {type(d).__name__}")
-    check_keys(d, GRAVIMETER_KEYS, key_path, required=("format",))
-    fmt = d["format"]
-    if fmt not in GRAVIMETER_FORMATS:
-        raise ConfigError(
-            f"{key_path}.format: expected one of {', '.join(GRAVIMETER_FORMATS)}, got {fmt!r}{suggest(fmt, GRAVIMETER_FORMATS)}"
-        )
-    info = GRAVIMETER_FORMATS[fmt]
-    if ("file" in d) == ("files" in d):
-        raise ConfigError(f"{key_path}: give file (one path) or files (a list of paths)")
-    if "file" in d:
-        files = [_str(d["file"], f"{key_path}.file")]
-    else:
-        if not isinstance(d["files"], list) or not d["files"]:
-            raise ConfigError(f"{key_path}.files: expected a non-empty list of paths")
-        files = [_str(v, f"{key_path}.files[{i}]") for i, v in enumerate(d["files"])]
-        if fmt != "zls" and len(files) > 1:
-            raise ConfigError(f"{key_path}.files: format {fmt} reads one file per flight; got {len(files)}")
-    o = GravimeterOptions(format=fmt, files=files, key_path=key_path)
-    if "offset_mgal" in d:
-        o.offset_mgal = _num(d["offset_mgal"], f"{key_path}.offset_mgal")
-    elif not info["absolute"]:
-        raise ConfigError(
-            f"{key_path}.offset_mgal: missing; {fmt} readings are in meter units with an arbitrary "
-            "offset: give the base-tie offset (absolute gravity = scale x reading + offset_mgal)"
-        )
-    if "scale" in d:
-        o.scale = _num(d["scale"], f"{key_path}.scale", positive=True)
-    if fmt == "bgm_serial":
-        if "counts_scale_mgal" not in d:
-            raise ConfigError(f"{key_path}.counts_scale_mgal: missing; bgm_serial needs the meter's mGal per count")
-        o.counts_scale_mgal = _num(d["counts_scale_mgal"], f"{key_path}.counts_scale_mgal", positive=True)
-    elif "counts_scale_mgal" in d:
-        raise ConfigError(f"{key_path}.counts_scale_mgal: only for format bgm_serial")
-    if "time_source" in d:
-        if fmt != "dgs_laptop":
-            raise ConfigError(f"{key_path}.time_source: only for format dgs_laptop (the others have one clock)")
-        if d["time_source"] not in ("auto", "meter", "logger"):
-            raise ConfigError(f"{key_path}.time_source: expected one of auto, meter, logger, got {d['time_source']!r}")
-        o.time_source = d["time_source"]
-    if "height_m" in d:
-        o.height_m = _num(d["height_m"], f"{key_path}.height_m")
-        if not ck.HEIGHT_OK[0] <= o.height_m <= ck.HEIGHT_OK[1]:
-            raise ConfigError(f"{key_path}.height_m: {o.height_m:g} m outside {ck.HEIGHT_OK[0]:g}..{ck.HEIGHT_OK[1]:g} m")
-    if "nav" in d:
-        o.nav = nav_options_from_dict(d["nav"], f"{key_path}.nav")
-    elif not info["positions"]:
-        raise ConfigError(f"{key_path}.nav: missing; {fmt} files hold no positions: give nav: {{format: nmea|trajectory, file: ...}}")
-    return o
 
 
 def read_gravimeter(o: GravimeterOptions, base_dir=None) -> FormatTable:

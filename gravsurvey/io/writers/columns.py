@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from gravsurvey.survey import Crossovers
+from gravsurvey.crossovers import Crossovers
 
 from .jsonout import to_jsonable
 
@@ -79,7 +79,7 @@ DECIMALS = {
 }
 #: required XYZ columns (the optional estimate, level, horizontal and truth columns follow when present)
 XYZ_COLUMNS = ("time_unix_s",) + PROFILE_COLUMNS[4:]
-#: crossovers.csv columns: the fields of :class:`gravsurvey.survey.Crossovers`, in order
+#: crossovers.csv columns: the fields of :class:`gravsurvey.crossovers.Crossovers`, in order
 CROSSOVER_COLUMNS = Crossovers.COLUMNS
 
 

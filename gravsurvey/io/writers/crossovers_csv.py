@@ -14,7 +14,7 @@ def write_crossovers_csv(path, crossovers, metadata: dict | None = None) -> None
 
     Parameters
     ----------
-    crossovers : gravsurvey.survey.Crossovers
+    crossovers : gravsurvey.crossovers.Crossovers
     """
     dec = {"easting_m": 3, "northing_m": 3, "time_a_s": 3, "time_b_s": 3, "value_a_mgal": 4,
            "value_b_mgal": 4, "diff_mgal": 4, "angle_deg": 2}

@@ -1,0 +1,160 @@
+"""The configuration schema: every key, type, unit, default and description in one place.
+
+One pydantic (v2) model per section of the processing config (docs/config.md is generated from
+these models: ``python -m gravsurvey.settings --doc``).  :func:`parse_survey` validates a whole
+loaded YAML mapping; :func:`config_error` turns any validation failure into one
+:class:`~gravsurvey.errors.ConfigError` line naming the full key path, so ``validate`` and
+``run`` refuse the same configs with the same words.
+
+Stage modules never see raw mappings: the builders here (:func:`inm_params`,
+:func:`segmentation_options`, :func:`postprocess_options`, :func:`check_options`,
+:func:`levelling_options`, :func:`grid_options`, :func:`tie_config`, :func:`ingest_options`,
+:func:`initial_overrides`, :func:`initial_state`) return the typed settings each stage takes.
+Those settings classes keep their defaults (a notebook user writes ``InmParams()``); the
+schema's defaults are read from them, so a default is written once.
+
+Modules: :mod:`.schema` (the section models), :mod:`.messages` (validation failures as one
+line), :mod:`.build` (typed settings for the stages), :mod:`.reference` (docs/config.md).
+
+Adding a key: one line in the section's model in :mod:`.schema` (plus the attribute of the stage's
+settings class, whose default the schema reads through :func:`stage_default`), then
+``python -m gravsurvey.settings --doc``.
+"""
+
+from .schema import (
+    ChecksSection,
+    CsvColumns,
+    CsvInputs,
+    CsvSection,
+    ELLIPSOIDS,
+    FLIGHT_NAME_PATTERN,
+    FlightChecksSection,
+    FlightSection,
+    GravimeterSection,
+    GridSection,
+    INGEST_KEYS,
+    InitialSection,
+    InputsSection,
+    JsonFields,
+    LevellingSection,
+    LinesSection,
+    MAX_LEVER_ARM_M,
+    McapSection,
+    ModelSection,
+    NavSection,
+    OutputSection,
+    PROCESSING_METHODS,
+    PostprocessSection,
+    ProcessingSection,
+    Section,
+    SurveyFile,
+    SurveySection,
+    TRIADS,
+    TieReadingSection,
+    TieSection,
+    TopicsSection,
+    UnitsSection,
+    Vector3,
+    WindowSection,
+    check_unique_windows,
+    fail,
+    stage_default,
+    three_numbers,
+)
+from .messages import (
+    config_error,
+    key_path_text,
+    parse_survey,
+    validate_section,
+    value_text,
+)
+from .build import (
+    check_inm_params,
+    check_options,
+    gravimeter_options,
+    grid_options,
+    ingest_options,
+    initial_overrides,
+    initial_state,
+    inm_params,
+    levelling_options,
+    postprocess_options,
+    section_dict,
+    segmentation_options,
+    tie_config,
+    time_windows,
+)
+from .reference import (
+    DOC_SECTIONS,
+    GENERATED_BEGIN,
+    GENERATED_END,
+    main,
+    reference_markdown,
+    splice_reference,
+)
+
+__all__ = [
+    "ChecksSection",
+    "CsvColumns",
+    "CsvInputs",
+    "CsvSection",
+    "ELLIPSOIDS",
+    "FLIGHT_NAME_PATTERN",
+    "FlightChecksSection",
+    "FlightSection",
+    "GravimeterSection",
+    "GridSection",
+    "INGEST_KEYS",
+    "InitialSection",
+    "InputsSection",
+    "JsonFields",
+    "LevellingSection",
+    "LinesSection",
+    "MAX_LEVER_ARM_M",
+    "McapSection",
+    "ModelSection",
+    "NavSection",
+    "OutputSection",
+    "PROCESSING_METHODS",
+    "PostprocessSection",
+    "ProcessingSection",
+    "Section",
+    "SurveyFile",
+    "SurveySection",
+    "TRIADS",
+    "TieReadingSection",
+    "TieSection",
+    "TopicsSection",
+    "UnitsSection",
+    "Vector3",
+    "WindowSection",
+    "check_unique_windows",
+    "fail",
+    "stage_default",
+    "three_numbers",
+    "config_error",
+    "key_path_text",
+    "parse_survey",
+    "validate_section",
+    "value_text",
+    "check_inm_params",
+    "check_options",
+    "gravimeter_options",
+    "grid_options",
+    "ingest_options",
+    "initial_overrides",
+    "initial_state",
+    "inm_params",
+    "levelling_options",
+    "postprocess_options",
+    "section_dict",
+    "segmentation_options",
+    "tie_config",
+    "time_windows",
+    "DOC_SECTIONS",
+    "GENERATED_BEGIN",
+    "GENERATED_END",
+    "main",
+    "reference_markdown",
+    "splice_reference",
+]
