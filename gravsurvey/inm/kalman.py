@@ -769,3 +769,94 @@ def filter_and_smooth(x0, p0, phi, q, z, h, r, reference: bool = False, unrolled
         _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, p_s, unrolled)
         _rts_into(x_f, p_f, x_p, p_p, phi, p_s, True, x_s, p_s, unrolled)
     return dict(x_f=x_f, p_f=p_f, x_p=x_p, p_p=p_p, innov=innov, x_s=x_s, p_s=p_s)
+
+
+def change_basis(t, t_inv, x0, p0, phi, q, h):
+    """The same linear-Gaussian model in the state ``x'_k = T_k x_k`` (an exact similarity).
+
+    ``phi'[k] = T_k phi[k] T_(k-1)^-1``, ``q'[k] = T_k q[k] T_k^T``, ``h'[k] = h[k] T_k^-1``,
+    ``x0' = T_0 x0``, ``P0' = T_0 P0 T_0^T``; ``z`` and ``r`` are unchanged.  Filtering either
+    model gives the same estimate (``x = T^-1 x'``, ``P = T^-1 P' T^-T``) up to rounding;
+    the rounding is what differs: a basis in which the covariance is well conditioned lets
+    any two correct implementations agree to ~1e-12 (docs/benchmarks.md, "Kalman filter").
+
+    Parameters
+    ----------
+    t, t_inv : ndarray (N, n, n)
+        ``T_k`` and its inverse per epoch.
+    x0 : ndarray (n,)
+    p0 : ndarray (n, n)
+    phi, q : ndarray (N, n, n)
+    h : ndarray (N, m, n)
+
+    Returns
+    -------
+    tuple
+        ``(x0', P0', phi', q', h')`` (covariances symmetrised).
+    """
+    phi2 = np.array(phi, dtype=float)
+    phi2[1:] = np.einsum("kij,kjl,klm->kim", t[1:], phi[1:], t_inv[:-1])
+    q2 = np.einsum("kij,kjl,kml->kim", t, q, t)
+    q2 = 0.5 * (q2 + q2.transpose(0, 2, 1))
+    h2 = np.einsum("kij,kjl->kil", h, t_inv)
+    p02 = t[0] @ p0 @ t[0].T
+    return t[0] @ x0, 0.5 * (p02 + p02.T), phi2, q2, h2
+
+
+def restore_basis(t_inv, x, p):
+    """States ``(N, n)`` and covariances ``(N, n, n)`` of a :func:`change_basis` model, back in
+    the original basis: ``x = T^-1 x'``, ``P = T^-1 P' T^-T``."""
+    p2 = np.einsum("kij,kjl,kml->kim", t_inv, p, t_inv)
+    return np.einsum("kij,kj->ki", t_inv, x), 0.5 * (p2 + p2.transpose(0, 2, 1))
+
+
+def filter_and_smooth_exact(x0, p0, phi, q, z, h, r):
+    """Textbook filter (Joseph form) + RTS smoother in ``np.longdouble`` with a pivoted
+    Gauss-Jordan inverse: the accuracy yardstick for the double-precision paths on badly
+    conditioned models (slow: pure Python loops; keep ``N`` to a few hundred epochs).
+
+    Same arguments as :func:`filter_and_smooth`; returns ``x_f, p_f, x_s, p_s`` as float64
+    ``(N, n)``, ``(N, n, n)`` arrays.  Where ``np.longdouble`` is plain double (some
+    platforms), this is only another double-precision implementation.
+    """
+    ld = np.longdouble
+    x0, p0, phi, q, z, h, r = (np.asarray(a, dtype=ld) for a in (x0, p0, phi, q, z, h, r))
+
+    def inv(a):
+        m = a.shape[0]
+        g = np.concatenate([a.copy(), np.eye(m, dtype=ld)], axis=1)
+        for c in range(m):
+            piv = c + int(np.argmax(np.abs(g[c:, c])))
+            g[[c, piv]] = g[[piv, c]]
+            g[c] /= g[c, c]
+            for i in range(m):
+                if i != c:
+                    g[i] -= g[i, c] * g[c]
+        return g[:, m:]
+
+    nep, n = phi.shape[0], x0.size
+    xf, pf = np.empty((nep, n), ld), np.empty((nep, n, n), ld)
+    xp, pp = np.empty_like(xf), np.empty_like(pf)
+    x, p = x0.copy(), p0.copy()
+    for k in range(nep):
+        if k:
+            x = phi[k] @ x
+            p = phi[k] @ p @ phi[k].T + q[k]
+            p = (p + p.T) / 2
+        xp[k], pp[k] = x, p
+        ok = ~np.isnan(z[k].astype(float))
+        if ok.any():
+            hk, rk = h[k][ok], r[k][np.ix_(ok, ok)]
+            kg = p @ hk.T @ inv(hk @ p @ hk.T + rk)
+            x = x + kg @ (z[k][ok] - hk @ x)
+            ikh = np.eye(n, dtype=ld) - kg @ hk
+            p = ikh @ p @ ikh.T + kg @ rk @ kg.T
+            p = (p + p.T) / 2
+        xf[k], pf[k] = x, p
+    xs, ps = xf.copy(), pf.copy()
+    for k in range(nep - 2, -1, -1):
+        g = pf[k] @ phi[k + 1].T @ inv(pp[k + 1])
+        xs[k] = xf[k] + g @ (xs[k + 1] - xp[k + 1])
+        pn = pf[k] + g @ (ps[k + 1] - pp[k + 1]) @ g.T
+        ps[k] = (pn + pn.T) / 2
+    return xf.astype(float), pf.astype(float), xs.astype(float), ps.astype(float)
