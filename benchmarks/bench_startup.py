@@ -49,13 +49,14 @@ import json, sys, time
 from gravsurvey.pipeline import run_survey
 cfg, out, reps = sys.argv[1], sys.argv[2], int(sys.argv[3])
 run_survey(cfg, output_dir=out + "/first", force=True)  # loads the cached kernels
-times = []
+times, cpus = [], []
 for i in range(reps):
-    t = time.perf_counter()
+    t, c = time.perf_counter(), time.process_time()
     res = run_survey(cfg, output_dir=f"{out}/{i}", force=True)
     times.append(time.perf_counter() - t)
+    cpus.append(time.process_time() - c)
     assert not res.failed, res.failed
-print(json.dumps(times))
+print(json.dumps([times, cpus]))
 """
 
 
@@ -140,7 +141,8 @@ def warm_flight_hour(work: Path, reps: int) -> list[dict]:
     )
     if p.returncode != 0:
         raise RuntimeError(f"in-process timing exited {p.returncode}: {p.stderr.strip()[-2000:]}")
-    inproc = _stats(json.loads(p.stdout.strip().splitlines()[-1]))
+    times, cpus = json.loads(p.stdout.strip().splitlines()[-1])
+    inproc = _stats(times)
     # the fixed price of a process: interpreter, imports (no kernel runs)
     imp_w = [
         _timed([sys.executable, "-c", "import gravsurvey.cli, gravsurvey.pipeline"], env, work)[0] for _ in range(reps)

@@ -386,3 +386,51 @@ def matmul14(a, b, out):
             o_1 = vadd(o_1, vmul(vsplat(c, 6), vload(b, 14 * j + 8, 6)))
         vstore(out, 14 * i + 0, o_0)
         vstore(out, 14 * i + 8, o_1)
+
+
+@njit(cache=True)
+def tri_solve8(lch, idg, b, forward):
+    """In place ``b <- L^-1 b`` (``forward``) or ``b <- L^-T b`` for (8, 8) C-contiguous
+    float64 arrays; ``idg = 1 / diag(L)``.
+
+    Row ``i`` is ``(b[i] - L[i, l] b[l] - ...) * idg[i]`` with ``l`` ascending (forward) or
+    ``(b[i] - L[l, i] b[l] - ...) * idg[i]`` with ``l`` from ``i + 1`` up: the rounding of
+    :func:`gravsurvey.inm.kalman._tri_solve_rows`.
+    """
+    for ii in range(8):
+        i = ii if forward else 7 - ii
+        lo = 0 if forward else i + 1
+        hi = i if forward else 8
+        s_0 = vload(b, 8 * i + 0, 8)
+        for l in range(lo, hi):
+            c = lch[i, l] if forward else lch[l, i]
+            s_0 = vsub(s_0, vmul(vsplat(c, 8), vload(b, 8 * l + 0, 8)))
+        gi = idg[i]
+        s_0 = vmul(s_0, vsplat(gi, 8))
+        vstore(b, 8 * i + 0, s_0)
+
+
+@njit(cache=True)
+def tri_solve14(lch, idg, b, forward):
+    """In place ``b <- L^-1 b`` (``forward``) or ``b <- L^-T b`` for (14, 14) C-contiguous
+    float64 arrays; ``idg = 1 / diag(L)``.
+
+    Row ``i`` is ``(b[i] - L[i, l] b[l] - ...) * idg[i]`` with ``l`` ascending (forward) or
+    ``(b[i] - L[l, i] b[l] - ...) * idg[i]`` with ``l`` from ``i + 1`` up: the rounding of
+    :func:`gravsurvey.inm.kalman._tri_solve_rows`.
+    """
+    for ii in range(14):
+        i = ii if forward else 13 - ii
+        lo = 0 if forward else i + 1
+        hi = i if forward else 14
+        s_0 = vload(b, 14 * i + 0, 8)
+        s_1 = vload(b, 14 * i + 8, 6)
+        for l in range(lo, hi):
+            c = lch[i, l] if forward else lch[l, i]
+            s_0 = vsub(s_0, vmul(vsplat(c, 8), vload(b, 14 * l + 0, 8)))
+            s_1 = vsub(s_1, vmul(vsplat(c, 6), vload(b, 14 * l + 8, 6)))
+        gi = idg[i]
+        s_0 = vmul(s_0, vsplat(gi, 8))
+        s_1 = vmul(s_1, vsplat(gi, 6))
+        vstore(b, 14 * i + 0, s_0)
+        vstore(b, 14 * i + 8, s_1)

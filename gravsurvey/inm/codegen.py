@@ -301,6 +301,33 @@ def _matmul(n):
     return g.lines
 
 
+def _tri_solve(n):
+    g = _Gen(n)
+    e = g.emit
+    e("@njit(cache=True)")
+    e(f"def tri_solve{n}(lch, idg, b, forward):")
+    e(f'    """In place ``b <- L^-1 b`` (``forward``) or ``b <- L^-T b`` for ({n}, {n}) C-contiguous')
+    e("    float64 arrays; ``idg = 1 / diag(L)``.")
+    e("")
+    e("    Row ``i`` is ``(b[i] - L[i, l] b[l] - ...) * idg[i]`` with ``l`` ascending (forward) or")
+    e("    ``(b[i] - L[l, i] b[l] - ...) * idg[i]`` with ``l`` from ``i + 1`` up: the rounding of")
+    e("    :func:`gravsurvey.inm.kalman._tri_solve_rows`.")
+    e('    """')
+    e(f"    for ii in range({n}):")
+    e(f"        i = ii if forward else {n - 1} - ii")
+    e("        lo = 0 if forward else i + 1")
+    e(f"        hi = i if forward else {n}")
+    g.load("        ", "s", "b", f"{n} * i")
+    e("        for l in range(lo, hi):")
+    e("            c = lch[i, l] if forward else lch[l, i]")
+    g.assign("            ", "s", lambda c: f"vsub(s_{c}, vmul({g.splat('c', c)}, "
+                                          f"vload(b, {n} * l + {g.row.chunks[c][0]}, {g.row.chunks[c][1]})))")
+    e("        gi = idg[i]")
+    g.assign("        ", "s", lambda c: f"vmul(s_{c}, {g.splat('gi', c)})")
+    g.store("        ", "b", f"{n} * i", "s")
+    return g.lines
+
+
 def generate() -> str:
     """Source text of :mod:`gravsurvey.inm._unrolled`."""
     body = [HEADER, ""]
@@ -308,6 +335,8 @@ def generate() -> str:
         body += _filter_step(n) + ["", ""] + _rts_step(n) + ["", ""]
     for n in MATMUL_SIZES:
         body += _matmul(n) + ["", ""]
+    for n in MATMUL_SIZES:
+        body += _tri_solve(n) + ["", ""]
     return "\n".join(body[:-2]) + "\n"
 
 

@@ -39,7 +39,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._unrolled import filter_step8, matmul8, matmul14, rts_step8
+from ._unrolled import filter_step8, matmul8, matmul14, rts_step8, tri_solve8, tri_solve14
 
 
 # --------------------------------------------------------------------------
@@ -309,6 +309,18 @@ def _matmul(a, b, out, upper):
 
 
 @njit(cache=True)
+def _tri_solve(lch, idg, b, forward):
+    """:func:`_tri_solve_rows` by generated vector loops for n = 8 and 14 (same rounding)."""
+    n = b.shape[0]
+    if n == 8:
+        tri_solve8(lch, idg, b, forward)
+    elif n == 14:
+        tri_solve14(lch, idg, b, forward)
+    else:
+        _tri_solve_rows(lch, idg, b, forward)
+
+
+@njit(cache=True)
 def _tri_solve_rows(lch, idg, b, forward):
     """In place ``b <- L^-1 b`` (``forward``) or ``b <- L^-T b``; ``idg = 1 / diag(L)``.
 
@@ -397,9 +409,9 @@ def _predict_into(phi, q, x, p, tmp, phit, xout, pout, xout2, pout2):
             acc += phi[i, j] * x[j]
         xout[i] = acc
         xout2[i] = acc
-    _matmul(phi, p, tmp, False)
+    _mm(phi, p, tmp)
     _transpose(phi, phit)
-    _matmul(tmp, phit, pout, True)
+    _mm(tmp, phit, pout)
     for i in range(n):
         for j in range(i, n):
             v = pout[i, j] + 0.5 * (q[i, j] + q[j, i])
@@ -719,14 +731,14 @@ def _rts_step(k, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg,
             for j in range(n):
                 b[i, j] = phi_pf[k, i, j] * c
     else:
-        _matmul(ph, pf, b, False)
+        _mm(ph, pf, b)
         for i in range(n):
             c = d[i]
             for j in range(n):
                 b[i, j] *= c
     # solve L L^T Y = B for all columns at once (row operations); G^T = D^-1 Y -> b
-    _tri_solve_rows(lch, idg, b, True)
-    _tri_solve_rows(lch, idg, b, False)
+    _tri_solve(lch, idg, b, True)
+    _tri_solve(lch, idg, b, False)
     for i in range(n):
         c = d[i]
         for j in range(n):
@@ -744,8 +756,8 @@ def _rts_step(k, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg,
         for j in range(n):
             dp[i, j] = p_s[k + 1, i, j] - pp[i, j]
     _transpose(b, bt)
-    _matmul(bt, dp, tmp, False)
-    _matmul(tmp, b, dp, True)  # symmetric: the upper triangle is used
+    _mm(bt, dp, tmp)
+    _mm(tmp, b, dp)  # symmetric: the upper triangle is used
     for i in range(n):
         for j in range(i, n):
             v = pf[i, j] + dp[i, j]
