@@ -20,16 +20,26 @@ a generated step (:mod:`gravsurvey.inm._unrolled`) that keeps every covariance r
 8-wide vector (:mod:`gravsurvey.inm.simd`): 0.6 us per epoch for filter + smoother against
 1.4 us for the generic loops below, and the same numbers to the last bit (tested).  Not for
 the 14-state GNSS-aided model: its generated steps took ~27 s to compile (once per machine) to
-save ~0.01 s per flight-hour (:mod:`gravsurvey.inm.codegen`).  The generic
+save ~0.01 s per flight-hour (:mod:`gravsurvey.inm.codegen`); there the generic loops take
+their n x n products and triangular solves from generated vector loops (``matmul14``,
+``tri_solve14``: same rounding, ~1.6x less CPU for filter + smoother than scalar loops, ~1 s
+of compilation).  The generated 8-state steps sit in their own compiled loops
+(:func:`_filter_loop8`, :func:`_rts_loop8`) so that other state sizes never compile them, and
+the full-R update uses no ``np.linalg`` (:func:`_update`): both for the cold start.  The generic
 loops (any n, any R): scalar measurement updates in O(n^2); small products in
 scalar-accumulator column blocks (:func:`_matmul`).  Both: outputs allocated by numpy, not
 inside the kernels (page faults); ``phi[k+1] P_f[k]`` from the prediction reused by the
 smoother (:func:`filter_and_smooth`); the backward sweep reads its inputs block-wise forwards
 first (prefetching).
 
+Agreement with filterpy on the 14-state model, and why it needs the true-error basis
+(:func:`change_basis`, :func:`gravsurvey.inm.errormodel.true_error_basis`): docs/benchmarks.md,
+"Kalman filter: speed and agreement".
+
 numba's on-disk cache tracks only the file that defines a function: after editing
-``simd.py`` or regenerating ``_unrolled.py``, delete ``gravsurvey/inm/__pycache__/*.nb?``
-(the cached kernels of this module would otherwise keep the old steps).
+``simd.py`` or regenerating ``_unrolled.py``, delete this module's cached kernels
+(``inm_*/kalman.*.nb?`` in the kernel cache folder, :func:`gravsurvey.setup_numba_cache`), or
+they keep the old steps.
 """
 
 from __future__ import annotations
