@@ -152,7 +152,7 @@ def warm_flight_hour(work: Path, reps: int) -> list[dict]:
         {
             "case": "1 flight-hour, 100 Hz, warm, in-process (run_survey)",
             "wall": inproc,
-            "cpu": None,
+            "cpu": _stats(cpus),
             "goal_s": GOAL_WARM_IN_PROCESS_S,
             "ratio_to_goal": inproc["median"] / GOAL_WARM_IN_PROCESS_S,
         },
