@@ -360,30 +360,12 @@ def matmul8(a, b, out):
     rounding of :func:`gravsurvey.inm.kalman._matmul`.
     """
     zero8 = vsplat(0.0, 8)
-    b0_0 = vload(b, 0 + 0, 8)
-    b1_0 = vload(b, 8 + 0, 8)
-    b2_0 = vload(b, 16 + 0, 8)
-    b3_0 = vload(b, 24 + 0, 8)
-    b4_0 = vload(b, 32 + 0, 8)
-    b5_0 = vload(b, 40 + 0, 8)
-    b6_0 = vload(b, 48 + 0, 8)
-    b7_0 = vload(b, 56 + 0, 8)
-    o0_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[0, 0], 8), b0_0)), vmul(vsplat(a[0, 1], 8), b1_0)), vmul(vsplat(a[0, 2], 8), b2_0)), vmul(vsplat(a[0, 3], 8), b3_0)), vmul(vsplat(a[0, 4], 8), b4_0)), vmul(vsplat(a[0, 5], 8), b5_0)), vmul(vsplat(a[0, 6], 8), b6_0)), vmul(vsplat(a[0, 7], 8), b7_0))
-    vstore(out, 0 + 0, o0_0)
-    o1_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[1, 0], 8), b0_0)), vmul(vsplat(a[1, 1], 8), b1_0)), vmul(vsplat(a[1, 2], 8), b2_0)), vmul(vsplat(a[1, 3], 8), b3_0)), vmul(vsplat(a[1, 4], 8), b4_0)), vmul(vsplat(a[1, 5], 8), b5_0)), vmul(vsplat(a[1, 6], 8), b6_0)), vmul(vsplat(a[1, 7], 8), b7_0))
-    vstore(out, 8 + 0, o1_0)
-    o2_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[2, 0], 8), b0_0)), vmul(vsplat(a[2, 1], 8), b1_0)), vmul(vsplat(a[2, 2], 8), b2_0)), vmul(vsplat(a[2, 3], 8), b3_0)), vmul(vsplat(a[2, 4], 8), b4_0)), vmul(vsplat(a[2, 5], 8), b5_0)), vmul(vsplat(a[2, 6], 8), b6_0)), vmul(vsplat(a[2, 7], 8), b7_0))
-    vstore(out, 16 + 0, o2_0)
-    o3_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[3, 0], 8), b0_0)), vmul(vsplat(a[3, 1], 8), b1_0)), vmul(vsplat(a[3, 2], 8), b2_0)), vmul(vsplat(a[3, 3], 8), b3_0)), vmul(vsplat(a[3, 4], 8), b4_0)), vmul(vsplat(a[3, 5], 8), b5_0)), vmul(vsplat(a[3, 6], 8), b6_0)), vmul(vsplat(a[3, 7], 8), b7_0))
-    vstore(out, 24 + 0, o3_0)
-    o4_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[4, 0], 8), b0_0)), vmul(vsplat(a[4, 1], 8), b1_0)), vmul(vsplat(a[4, 2], 8), b2_0)), vmul(vsplat(a[4, 3], 8), b3_0)), vmul(vsplat(a[4, 4], 8), b4_0)), vmul(vsplat(a[4, 5], 8), b5_0)), vmul(vsplat(a[4, 6], 8), b6_0)), vmul(vsplat(a[4, 7], 8), b7_0))
-    vstore(out, 32 + 0, o4_0)
-    o5_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[5, 0], 8), b0_0)), vmul(vsplat(a[5, 1], 8), b1_0)), vmul(vsplat(a[5, 2], 8), b2_0)), vmul(vsplat(a[5, 3], 8), b3_0)), vmul(vsplat(a[5, 4], 8), b4_0)), vmul(vsplat(a[5, 5], 8), b5_0)), vmul(vsplat(a[5, 6], 8), b6_0)), vmul(vsplat(a[5, 7], 8), b7_0))
-    vstore(out, 40 + 0, o5_0)
-    o6_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[6, 0], 8), b0_0)), vmul(vsplat(a[6, 1], 8), b1_0)), vmul(vsplat(a[6, 2], 8), b2_0)), vmul(vsplat(a[6, 3], 8), b3_0)), vmul(vsplat(a[6, 4], 8), b4_0)), vmul(vsplat(a[6, 5], 8), b5_0)), vmul(vsplat(a[6, 6], 8), b6_0)), vmul(vsplat(a[6, 7], 8), b7_0))
-    vstore(out, 48 + 0, o6_0)
-    o7_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[7, 0], 8), b0_0)), vmul(vsplat(a[7, 1], 8), b1_0)), vmul(vsplat(a[7, 2], 8), b2_0)), vmul(vsplat(a[7, 3], 8), b3_0)), vmul(vsplat(a[7, 4], 8), b4_0)), vmul(vsplat(a[7, 5], 8), b5_0)), vmul(vsplat(a[7, 6], 8), b6_0)), vmul(vsplat(a[7, 7], 8), b7_0))
-    vstore(out, 56 + 0, o7_0)
+    for i in range(8):
+        o_0 = zero8
+        for j in range(8):
+            c = a[i, j]
+            o_0 = vadd(o_0, vmul(vsplat(c, 8), vload(b, 8 * j + 0, 8)))
+        vstore(out, 8 * i + 0, o_0)
 
 
 @njit(cache=True)
@@ -395,87 +377,60 @@ def matmul14(a, b, out):
     """
     zero6 = vsplat(0.0, 6)
     zero8 = vsplat(0.0, 8)
-    b0_0 = vload(b, 0 + 0, 8)
-    b0_1 = vload(b, 0 + 8, 6)
-    b1_0 = vload(b, 14 + 0, 8)
-    b1_1 = vload(b, 14 + 8, 6)
-    b2_0 = vload(b, 28 + 0, 8)
-    b2_1 = vload(b, 28 + 8, 6)
-    b3_0 = vload(b, 42 + 0, 8)
-    b3_1 = vload(b, 42 + 8, 6)
-    b4_0 = vload(b, 56 + 0, 8)
-    b4_1 = vload(b, 56 + 8, 6)
-    b5_0 = vload(b, 70 + 0, 8)
-    b5_1 = vload(b, 70 + 8, 6)
-    b6_0 = vload(b, 84 + 0, 8)
-    b6_1 = vload(b, 84 + 8, 6)
-    b7_0 = vload(b, 98 + 0, 8)
-    b7_1 = vload(b, 98 + 8, 6)
-    b8_0 = vload(b, 112 + 0, 8)
-    b8_1 = vload(b, 112 + 8, 6)
-    b9_0 = vload(b, 126 + 0, 8)
-    b9_1 = vload(b, 126 + 8, 6)
-    b10_0 = vload(b, 140 + 0, 8)
-    b10_1 = vload(b, 140 + 8, 6)
-    b11_0 = vload(b, 154 + 0, 8)
-    b11_1 = vload(b, 154 + 8, 6)
-    b12_0 = vload(b, 168 + 0, 8)
-    b12_1 = vload(b, 168 + 8, 6)
-    b13_0 = vload(b, 182 + 0, 8)
-    b13_1 = vload(b, 182 + 8, 6)
-    o0_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[0, 0], 8), b0_0)), vmul(vsplat(a[0, 1], 8), b1_0)), vmul(vsplat(a[0, 2], 8), b2_0)), vmul(vsplat(a[0, 3], 8), b3_0)), vmul(vsplat(a[0, 4], 8), b4_0)), vmul(vsplat(a[0, 5], 8), b5_0)), vmul(vsplat(a[0, 6], 8), b6_0)), vmul(vsplat(a[0, 7], 8), b7_0)), vmul(vsplat(a[0, 8], 8), b8_0)), vmul(vsplat(a[0, 9], 8), b9_0)), vmul(vsplat(a[0, 10], 8), b10_0)), vmul(vsplat(a[0, 11], 8), b11_0)), vmul(vsplat(a[0, 12], 8), b12_0)), vmul(vsplat(a[0, 13], 8), b13_0))
-    o0_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[0, 0], 6), b0_1)), vmul(vsplat(a[0, 1], 6), b1_1)), vmul(vsplat(a[0, 2], 6), b2_1)), vmul(vsplat(a[0, 3], 6), b3_1)), vmul(vsplat(a[0, 4], 6), b4_1)), vmul(vsplat(a[0, 5], 6), b5_1)), vmul(vsplat(a[0, 6], 6), b6_1)), vmul(vsplat(a[0, 7], 6), b7_1)), vmul(vsplat(a[0, 8], 6), b8_1)), vmul(vsplat(a[0, 9], 6), b9_1)), vmul(vsplat(a[0, 10], 6), b10_1)), vmul(vsplat(a[0, 11], 6), b11_1)), vmul(vsplat(a[0, 12], 6), b12_1)), vmul(vsplat(a[0, 13], 6), b13_1))
-    vstore(out, 0 + 0, o0_0)
-    vstore(out, 0 + 8, o0_1)
-    o1_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[1, 0], 8), b0_0)), vmul(vsplat(a[1, 1], 8), b1_0)), vmul(vsplat(a[1, 2], 8), b2_0)), vmul(vsplat(a[1, 3], 8), b3_0)), vmul(vsplat(a[1, 4], 8), b4_0)), vmul(vsplat(a[1, 5], 8), b5_0)), vmul(vsplat(a[1, 6], 8), b6_0)), vmul(vsplat(a[1, 7], 8), b7_0)), vmul(vsplat(a[1, 8], 8), b8_0)), vmul(vsplat(a[1, 9], 8), b9_0)), vmul(vsplat(a[1, 10], 8), b10_0)), vmul(vsplat(a[1, 11], 8), b11_0)), vmul(vsplat(a[1, 12], 8), b12_0)), vmul(vsplat(a[1, 13], 8), b13_0))
-    o1_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[1, 0], 6), b0_1)), vmul(vsplat(a[1, 1], 6), b1_1)), vmul(vsplat(a[1, 2], 6), b2_1)), vmul(vsplat(a[1, 3], 6), b3_1)), vmul(vsplat(a[1, 4], 6), b4_1)), vmul(vsplat(a[1, 5], 6), b5_1)), vmul(vsplat(a[1, 6], 6), b6_1)), vmul(vsplat(a[1, 7], 6), b7_1)), vmul(vsplat(a[1, 8], 6), b8_1)), vmul(vsplat(a[1, 9], 6), b9_1)), vmul(vsplat(a[1, 10], 6), b10_1)), vmul(vsplat(a[1, 11], 6), b11_1)), vmul(vsplat(a[1, 12], 6), b12_1)), vmul(vsplat(a[1, 13], 6), b13_1))
-    vstore(out, 14 + 0, o1_0)
-    vstore(out, 14 + 8, o1_1)
-    o2_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[2, 0], 8), b0_0)), vmul(vsplat(a[2, 1], 8), b1_0)), vmul(vsplat(a[2, 2], 8), b2_0)), vmul(vsplat(a[2, 3], 8), b3_0)), vmul(vsplat(a[2, 4], 8), b4_0)), vmul(vsplat(a[2, 5], 8), b5_0)), vmul(vsplat(a[2, 6], 8), b6_0)), vmul(vsplat(a[2, 7], 8), b7_0)), vmul(vsplat(a[2, 8], 8), b8_0)), vmul(vsplat(a[2, 9], 8), b9_0)), vmul(vsplat(a[2, 10], 8), b10_0)), vmul(vsplat(a[2, 11], 8), b11_0)), vmul(vsplat(a[2, 12], 8), b12_0)), vmul(vsplat(a[2, 13], 8), b13_0))
-    o2_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[2, 0], 6), b0_1)), vmul(vsplat(a[2, 1], 6), b1_1)), vmul(vsplat(a[2, 2], 6), b2_1)), vmul(vsplat(a[2, 3], 6), b3_1)), vmul(vsplat(a[2, 4], 6), b4_1)), vmul(vsplat(a[2, 5], 6), b5_1)), vmul(vsplat(a[2, 6], 6), b6_1)), vmul(vsplat(a[2, 7], 6), b7_1)), vmul(vsplat(a[2, 8], 6), b8_1)), vmul(vsplat(a[2, 9], 6), b9_1)), vmul(vsplat(a[2, 10], 6), b10_1)), vmul(vsplat(a[2, 11], 6), b11_1)), vmul(vsplat(a[2, 12], 6), b12_1)), vmul(vsplat(a[2, 13], 6), b13_1))
-    vstore(out, 28 + 0, o2_0)
-    vstore(out, 28 + 8, o2_1)
-    o3_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[3, 0], 8), b0_0)), vmul(vsplat(a[3, 1], 8), b1_0)), vmul(vsplat(a[3, 2], 8), b2_0)), vmul(vsplat(a[3, 3], 8), b3_0)), vmul(vsplat(a[3, 4], 8), b4_0)), vmul(vsplat(a[3, 5], 8), b5_0)), vmul(vsplat(a[3, 6], 8), b6_0)), vmul(vsplat(a[3, 7], 8), b7_0)), vmul(vsplat(a[3, 8], 8), b8_0)), vmul(vsplat(a[3, 9], 8), b9_0)), vmul(vsplat(a[3, 10], 8), b10_0)), vmul(vsplat(a[3, 11], 8), b11_0)), vmul(vsplat(a[3, 12], 8), b12_0)), vmul(vsplat(a[3, 13], 8), b13_0))
-    o3_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[3, 0], 6), b0_1)), vmul(vsplat(a[3, 1], 6), b1_1)), vmul(vsplat(a[3, 2], 6), b2_1)), vmul(vsplat(a[3, 3], 6), b3_1)), vmul(vsplat(a[3, 4], 6), b4_1)), vmul(vsplat(a[3, 5], 6), b5_1)), vmul(vsplat(a[3, 6], 6), b6_1)), vmul(vsplat(a[3, 7], 6), b7_1)), vmul(vsplat(a[3, 8], 6), b8_1)), vmul(vsplat(a[3, 9], 6), b9_1)), vmul(vsplat(a[3, 10], 6), b10_1)), vmul(vsplat(a[3, 11], 6), b11_1)), vmul(vsplat(a[3, 12], 6), b12_1)), vmul(vsplat(a[3, 13], 6), b13_1))
-    vstore(out, 42 + 0, o3_0)
-    vstore(out, 42 + 8, o3_1)
-    o4_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[4, 0], 8), b0_0)), vmul(vsplat(a[4, 1], 8), b1_0)), vmul(vsplat(a[4, 2], 8), b2_0)), vmul(vsplat(a[4, 3], 8), b3_0)), vmul(vsplat(a[4, 4], 8), b4_0)), vmul(vsplat(a[4, 5], 8), b5_0)), vmul(vsplat(a[4, 6], 8), b6_0)), vmul(vsplat(a[4, 7], 8), b7_0)), vmul(vsplat(a[4, 8], 8), b8_0)), vmul(vsplat(a[4, 9], 8), b9_0)), vmul(vsplat(a[4, 10], 8), b10_0)), vmul(vsplat(a[4, 11], 8), b11_0)), vmul(vsplat(a[4, 12], 8), b12_0)), vmul(vsplat(a[4, 13], 8), b13_0))
-    o4_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[4, 0], 6), b0_1)), vmul(vsplat(a[4, 1], 6), b1_1)), vmul(vsplat(a[4, 2], 6), b2_1)), vmul(vsplat(a[4, 3], 6), b3_1)), vmul(vsplat(a[4, 4], 6), b4_1)), vmul(vsplat(a[4, 5], 6), b5_1)), vmul(vsplat(a[4, 6], 6), b6_1)), vmul(vsplat(a[4, 7], 6), b7_1)), vmul(vsplat(a[4, 8], 6), b8_1)), vmul(vsplat(a[4, 9], 6), b9_1)), vmul(vsplat(a[4, 10], 6), b10_1)), vmul(vsplat(a[4, 11], 6), b11_1)), vmul(vsplat(a[4, 12], 6), b12_1)), vmul(vsplat(a[4, 13], 6), b13_1))
-    vstore(out, 56 + 0, o4_0)
-    vstore(out, 56 + 8, o4_1)
-    o5_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[5, 0], 8), b0_0)), vmul(vsplat(a[5, 1], 8), b1_0)), vmul(vsplat(a[5, 2], 8), b2_0)), vmul(vsplat(a[5, 3], 8), b3_0)), vmul(vsplat(a[5, 4], 8), b4_0)), vmul(vsplat(a[5, 5], 8), b5_0)), vmul(vsplat(a[5, 6], 8), b6_0)), vmul(vsplat(a[5, 7], 8), b7_0)), vmul(vsplat(a[5, 8], 8), b8_0)), vmul(vsplat(a[5, 9], 8), b9_0)), vmul(vsplat(a[5, 10], 8), b10_0)), vmul(vsplat(a[5, 11], 8), b11_0)), vmul(vsplat(a[5, 12], 8), b12_0)), vmul(vsplat(a[5, 13], 8), b13_0))
-    o5_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[5, 0], 6), b0_1)), vmul(vsplat(a[5, 1], 6), b1_1)), vmul(vsplat(a[5, 2], 6), b2_1)), vmul(vsplat(a[5, 3], 6), b3_1)), vmul(vsplat(a[5, 4], 6), b4_1)), vmul(vsplat(a[5, 5], 6), b5_1)), vmul(vsplat(a[5, 6], 6), b6_1)), vmul(vsplat(a[5, 7], 6), b7_1)), vmul(vsplat(a[5, 8], 6), b8_1)), vmul(vsplat(a[5, 9], 6), b9_1)), vmul(vsplat(a[5, 10], 6), b10_1)), vmul(vsplat(a[5, 11], 6), b11_1)), vmul(vsplat(a[5, 12], 6), b12_1)), vmul(vsplat(a[5, 13], 6), b13_1))
-    vstore(out, 70 + 0, o5_0)
-    vstore(out, 70 + 8, o5_1)
-    o6_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[6, 0], 8), b0_0)), vmul(vsplat(a[6, 1], 8), b1_0)), vmul(vsplat(a[6, 2], 8), b2_0)), vmul(vsplat(a[6, 3], 8), b3_0)), vmul(vsplat(a[6, 4], 8), b4_0)), vmul(vsplat(a[6, 5], 8), b5_0)), vmul(vsplat(a[6, 6], 8), b6_0)), vmul(vsplat(a[6, 7], 8), b7_0)), vmul(vsplat(a[6, 8], 8), b8_0)), vmul(vsplat(a[6, 9], 8), b9_0)), vmul(vsplat(a[6, 10], 8), b10_0)), vmul(vsplat(a[6, 11], 8), b11_0)), vmul(vsplat(a[6, 12], 8), b12_0)), vmul(vsplat(a[6, 13], 8), b13_0))
-    o6_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[6, 0], 6), b0_1)), vmul(vsplat(a[6, 1], 6), b1_1)), vmul(vsplat(a[6, 2], 6), b2_1)), vmul(vsplat(a[6, 3], 6), b3_1)), vmul(vsplat(a[6, 4], 6), b4_1)), vmul(vsplat(a[6, 5], 6), b5_1)), vmul(vsplat(a[6, 6], 6), b6_1)), vmul(vsplat(a[6, 7], 6), b7_1)), vmul(vsplat(a[6, 8], 6), b8_1)), vmul(vsplat(a[6, 9], 6), b9_1)), vmul(vsplat(a[6, 10], 6), b10_1)), vmul(vsplat(a[6, 11], 6), b11_1)), vmul(vsplat(a[6, 12], 6), b12_1)), vmul(vsplat(a[6, 13], 6), b13_1))
-    vstore(out, 84 + 0, o6_0)
-    vstore(out, 84 + 8, o6_1)
-    o7_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[7, 0], 8), b0_0)), vmul(vsplat(a[7, 1], 8), b1_0)), vmul(vsplat(a[7, 2], 8), b2_0)), vmul(vsplat(a[7, 3], 8), b3_0)), vmul(vsplat(a[7, 4], 8), b4_0)), vmul(vsplat(a[7, 5], 8), b5_0)), vmul(vsplat(a[7, 6], 8), b6_0)), vmul(vsplat(a[7, 7], 8), b7_0)), vmul(vsplat(a[7, 8], 8), b8_0)), vmul(vsplat(a[7, 9], 8), b9_0)), vmul(vsplat(a[7, 10], 8), b10_0)), vmul(vsplat(a[7, 11], 8), b11_0)), vmul(vsplat(a[7, 12], 8), b12_0)), vmul(vsplat(a[7, 13], 8), b13_0))
-    o7_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[7, 0], 6), b0_1)), vmul(vsplat(a[7, 1], 6), b1_1)), vmul(vsplat(a[7, 2], 6), b2_1)), vmul(vsplat(a[7, 3], 6), b3_1)), vmul(vsplat(a[7, 4], 6), b4_1)), vmul(vsplat(a[7, 5], 6), b5_1)), vmul(vsplat(a[7, 6], 6), b6_1)), vmul(vsplat(a[7, 7], 6), b7_1)), vmul(vsplat(a[7, 8], 6), b8_1)), vmul(vsplat(a[7, 9], 6), b9_1)), vmul(vsplat(a[7, 10], 6), b10_1)), vmul(vsplat(a[7, 11], 6), b11_1)), vmul(vsplat(a[7, 12], 6), b12_1)), vmul(vsplat(a[7, 13], 6), b13_1))
-    vstore(out, 98 + 0, o7_0)
-    vstore(out, 98 + 8, o7_1)
-    o8_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[8, 0], 8), b0_0)), vmul(vsplat(a[8, 1], 8), b1_0)), vmul(vsplat(a[8, 2], 8), b2_0)), vmul(vsplat(a[8, 3], 8), b3_0)), vmul(vsplat(a[8, 4], 8), b4_0)), vmul(vsplat(a[8, 5], 8), b5_0)), vmul(vsplat(a[8, 6], 8), b6_0)), vmul(vsplat(a[8, 7], 8), b7_0)), vmul(vsplat(a[8, 8], 8), b8_0)), vmul(vsplat(a[8, 9], 8), b9_0)), vmul(vsplat(a[8, 10], 8), b10_0)), vmul(vsplat(a[8, 11], 8), b11_0)), vmul(vsplat(a[8, 12], 8), b12_0)), vmul(vsplat(a[8, 13], 8), b13_0))
-    o8_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[8, 0], 6), b0_1)), vmul(vsplat(a[8, 1], 6), b1_1)), vmul(vsplat(a[8, 2], 6), b2_1)), vmul(vsplat(a[8, 3], 6), b3_1)), vmul(vsplat(a[8, 4], 6), b4_1)), vmul(vsplat(a[8, 5], 6), b5_1)), vmul(vsplat(a[8, 6], 6), b6_1)), vmul(vsplat(a[8, 7], 6), b7_1)), vmul(vsplat(a[8, 8], 6), b8_1)), vmul(vsplat(a[8, 9], 6), b9_1)), vmul(vsplat(a[8, 10], 6), b10_1)), vmul(vsplat(a[8, 11], 6), b11_1)), vmul(vsplat(a[8, 12], 6), b12_1)), vmul(vsplat(a[8, 13], 6), b13_1))
-    vstore(out, 112 + 0, o8_0)
-    vstore(out, 112 + 8, o8_1)
-    o9_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[9, 0], 8), b0_0)), vmul(vsplat(a[9, 1], 8), b1_0)), vmul(vsplat(a[9, 2], 8), b2_0)), vmul(vsplat(a[9, 3], 8), b3_0)), vmul(vsplat(a[9, 4], 8), b4_0)), vmul(vsplat(a[9, 5], 8), b5_0)), vmul(vsplat(a[9, 6], 8), b6_0)), vmul(vsplat(a[9, 7], 8), b7_0)), vmul(vsplat(a[9, 8], 8), b8_0)), vmul(vsplat(a[9, 9], 8), b9_0)), vmul(vsplat(a[9, 10], 8), b10_0)), vmul(vsplat(a[9, 11], 8), b11_0)), vmul(vsplat(a[9, 12], 8), b12_0)), vmul(vsplat(a[9, 13], 8), b13_0))
-    o9_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[9, 0], 6), b0_1)), vmul(vsplat(a[9, 1], 6), b1_1)), vmul(vsplat(a[9, 2], 6), b2_1)), vmul(vsplat(a[9, 3], 6), b3_1)), vmul(vsplat(a[9, 4], 6), b4_1)), vmul(vsplat(a[9, 5], 6), b5_1)), vmul(vsplat(a[9, 6], 6), b6_1)), vmul(vsplat(a[9, 7], 6), b7_1)), vmul(vsplat(a[9, 8], 6), b8_1)), vmul(vsplat(a[9, 9], 6), b9_1)), vmul(vsplat(a[9, 10], 6), b10_1)), vmul(vsplat(a[9, 11], 6), b11_1)), vmul(vsplat(a[9, 12], 6), b12_1)), vmul(vsplat(a[9, 13], 6), b13_1))
-    vstore(out, 126 + 0, o9_0)
-    vstore(out, 126 + 8, o9_1)
-    o10_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[10, 0], 8), b0_0)), vmul(vsplat(a[10, 1], 8), b1_0)), vmul(vsplat(a[10, 2], 8), b2_0)), vmul(vsplat(a[10, 3], 8), b3_0)), vmul(vsplat(a[10, 4], 8), b4_0)), vmul(vsplat(a[10, 5], 8), b5_0)), vmul(vsplat(a[10, 6], 8), b6_0)), vmul(vsplat(a[10, 7], 8), b7_0)), vmul(vsplat(a[10, 8], 8), b8_0)), vmul(vsplat(a[10, 9], 8), b9_0)), vmul(vsplat(a[10, 10], 8), b10_0)), vmul(vsplat(a[10, 11], 8), b11_0)), vmul(vsplat(a[10, 12], 8), b12_0)), vmul(vsplat(a[10, 13], 8), b13_0))
-    o10_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[10, 0], 6), b0_1)), vmul(vsplat(a[10, 1], 6), b1_1)), vmul(vsplat(a[10, 2], 6), b2_1)), vmul(vsplat(a[10, 3], 6), b3_1)), vmul(vsplat(a[10, 4], 6), b4_1)), vmul(vsplat(a[10, 5], 6), b5_1)), vmul(vsplat(a[10, 6], 6), b6_1)), vmul(vsplat(a[10, 7], 6), b7_1)), vmul(vsplat(a[10, 8], 6), b8_1)), vmul(vsplat(a[10, 9], 6), b9_1)), vmul(vsplat(a[10, 10], 6), b10_1)), vmul(vsplat(a[10, 11], 6), b11_1)), vmul(vsplat(a[10, 12], 6), b12_1)), vmul(vsplat(a[10, 13], 6), b13_1))
-    vstore(out, 140 + 0, o10_0)
-    vstore(out, 140 + 8, o10_1)
-    o11_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[11, 0], 8), b0_0)), vmul(vsplat(a[11, 1], 8), b1_0)), vmul(vsplat(a[11, 2], 8), b2_0)), vmul(vsplat(a[11, 3], 8), b3_0)), vmul(vsplat(a[11, 4], 8), b4_0)), vmul(vsplat(a[11, 5], 8), b5_0)), vmul(vsplat(a[11, 6], 8), b6_0)), vmul(vsplat(a[11, 7], 8), b7_0)), vmul(vsplat(a[11, 8], 8), b8_0)), vmul(vsplat(a[11, 9], 8), b9_0)), vmul(vsplat(a[11, 10], 8), b10_0)), vmul(vsplat(a[11, 11], 8), b11_0)), vmul(vsplat(a[11, 12], 8), b12_0)), vmul(vsplat(a[11, 13], 8), b13_0))
-    o11_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[11, 0], 6), b0_1)), vmul(vsplat(a[11, 1], 6), b1_1)), vmul(vsplat(a[11, 2], 6), b2_1)), vmul(vsplat(a[11, 3], 6), b3_1)), vmul(vsplat(a[11, 4], 6), b4_1)), vmul(vsplat(a[11, 5], 6), b5_1)), vmul(vsplat(a[11, 6], 6), b6_1)), vmul(vsplat(a[11, 7], 6), b7_1)), vmul(vsplat(a[11, 8], 6), b8_1)), vmul(vsplat(a[11, 9], 6), b9_1)), vmul(vsplat(a[11, 10], 6), b10_1)), vmul(vsplat(a[11, 11], 6), b11_1)), vmul(vsplat(a[11, 12], 6), b12_1)), vmul(vsplat(a[11, 13], 6), b13_1))
-    vstore(out, 154 + 0, o11_0)
-    vstore(out, 154 + 8, o11_1)
-    o12_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[12, 0], 8), b0_0)), vmul(vsplat(a[12, 1], 8), b1_0)), vmul(vsplat(a[12, 2], 8), b2_0)), vmul(vsplat(a[12, 3], 8), b3_0)), vmul(vsplat(a[12, 4], 8), b4_0)), vmul(vsplat(a[12, 5], 8), b5_0)), vmul(vsplat(a[12, 6], 8), b6_0)), vmul(vsplat(a[12, 7], 8), b7_0)), vmul(vsplat(a[12, 8], 8), b8_0)), vmul(vsplat(a[12, 9], 8), b9_0)), vmul(vsplat(a[12, 10], 8), b10_0)), vmul(vsplat(a[12, 11], 8), b11_0)), vmul(vsplat(a[12, 12], 8), b12_0)), vmul(vsplat(a[12, 13], 8), b13_0))
-    o12_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[12, 0], 6), b0_1)), vmul(vsplat(a[12, 1], 6), b1_1)), vmul(vsplat(a[12, 2], 6), b2_1)), vmul(vsplat(a[12, 3], 6), b3_1)), vmul(vsplat(a[12, 4], 6), b4_1)), vmul(vsplat(a[12, 5], 6), b5_1)), vmul(vsplat(a[12, 6], 6), b6_1)), vmul(vsplat(a[12, 7], 6), b7_1)), vmul(vsplat(a[12, 8], 6), b8_1)), vmul(vsplat(a[12, 9], 6), b9_1)), vmul(vsplat(a[12, 10], 6), b10_1)), vmul(vsplat(a[12, 11], 6), b11_1)), vmul(vsplat(a[12, 12], 6), b12_1)), vmul(vsplat(a[12, 13], 6), b13_1))
-    vstore(out, 168 + 0, o12_0)
-    vstore(out, 168 + 8, o12_1)
-    o13_0 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero8, vmul(vsplat(a[13, 0], 8), b0_0)), vmul(vsplat(a[13, 1], 8), b1_0)), vmul(vsplat(a[13, 2], 8), b2_0)), vmul(vsplat(a[13, 3], 8), b3_0)), vmul(vsplat(a[13, 4], 8), b4_0)), vmul(vsplat(a[13, 5], 8), b5_0)), vmul(vsplat(a[13, 6], 8), b6_0)), vmul(vsplat(a[13, 7], 8), b7_0)), vmul(vsplat(a[13, 8], 8), b8_0)), vmul(vsplat(a[13, 9], 8), b9_0)), vmul(vsplat(a[13, 10], 8), b10_0)), vmul(vsplat(a[13, 11], 8), b11_0)), vmul(vsplat(a[13, 12], 8), b12_0)), vmul(vsplat(a[13, 13], 8), b13_0))
-    o13_1 = vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(vadd(zero6, vmul(vsplat(a[13, 0], 6), b0_1)), vmul(vsplat(a[13, 1], 6), b1_1)), vmul(vsplat(a[13, 2], 6), b2_1)), vmul(vsplat(a[13, 3], 6), b3_1)), vmul(vsplat(a[13, 4], 6), b4_1)), vmul(vsplat(a[13, 5], 6), b5_1)), vmul(vsplat(a[13, 6], 6), b6_1)), vmul(vsplat(a[13, 7], 6), b7_1)), vmul(vsplat(a[13, 8], 6), b8_1)), vmul(vsplat(a[13, 9], 6), b9_1)), vmul(vsplat(a[13, 10], 6), b10_1)), vmul(vsplat(a[13, 11], 6), b11_1)), vmul(vsplat(a[13, 12], 6), b12_1)), vmul(vsplat(a[13, 13], 6), b13_1))
-    vstore(out, 182 + 0, o13_0)
-    vstore(out, 182 + 8, o13_1)
+    for i in range(14):
+        o_0 = zero8
+        o_1 = zero6
+        for j in range(14):
+            c = a[i, j]
+            o_0 = vadd(o_0, vmul(vsplat(c, 8), vload(b, 14 * j + 0, 8)))
+            o_1 = vadd(o_1, vmul(vsplat(c, 6), vload(b, 14 * j + 8, 6)))
+        vstore(out, 14 * i + 0, o_0)
+        vstore(out, 14 * i + 8, o_1)
+
+
+@njit(cache=True)
+def tri_solve8(lch, idg, b, forward):
+    """In place ``b <- L^-1 b`` (``forward``) or ``b <- L^-T b`` for (8, 8) C-contiguous
+    float64 arrays; ``idg = 1 / diag(L)``.
+
+    Row ``i`` is ``(b[i] - L[i, l] b[l] - ...) * idg[i]`` with ``l`` ascending (forward) or
+    ``(b[i] - L[l, i] b[l] - ...) * idg[i]`` with ``l`` from ``i + 1`` up: the rounding of
+    :func:`gravsurvey.inm.kalman._tri_solve_rows`.
+    """
+    for ii in range(8):
+        i = ii if forward else 7 - ii
+        lo = 0 if forward else i + 1
+        hi = i if forward else 8
+        s_0 = vload(b, 8 * i + 0, 8)
+        for l in range(lo, hi):
+            c = lch[i, l] if forward else lch[l, i]
+            s_0 = vsub(s_0, vmul(vsplat(c, 8), vload(b, 8 * l + 0, 8)))
+        gi = idg[i]
+        s_0 = vmul(s_0, vsplat(gi, 8))
+        vstore(b, 8 * i + 0, s_0)
+
+
+@njit(cache=True)
+def tri_solve14(lch, idg, b, forward):
+    """In place ``b <- L^-1 b`` (``forward``) or ``b <- L^-T b`` for (14, 14) C-contiguous
+    float64 arrays; ``idg = 1 / diag(L)``.
+
+    Row ``i`` is ``(b[i] - L[i, l] b[l] - ...) * idg[i]`` with ``l`` ascending (forward) or
+    ``(b[i] - L[l, i] b[l] - ...) * idg[i]`` with ``l`` from ``i + 1`` up: the rounding of
+    :func:`gravsurvey.inm.kalman._tri_solve_rows`.
+    """
+    for ii in range(14):
+        i = ii if forward else 13 - ii
+        lo = 0 if forward else i + 1
+        hi = i if forward else 14
+        s_0 = vload(b, 14 * i + 0, 8)
+        s_1 = vload(b, 14 * i + 8, 6)
+        for l in range(lo, hi):
+            c = lch[i, l] if forward else lch[l, i]
+            s_0 = vsub(s_0, vmul(vsplat(c, 8), vload(b, 14 * l + 0, 8)))
+            s_1 = vsub(s_1, vmul(vsplat(c, 6), vload(b, 14 * l + 8, 6)))
+        gi = idg[i]
+        s_0 = vmul(s_0, vsplat(gi, 8))
+        s_1 = vmul(s_1, vsplat(gi, 6))
+        vstore(b, 14 * i + 0, s_0)
+        vstore(b, 14 * i + 8, s_1)

@@ -700,3 +700,40 @@ class GnssMeasurement:
         h[have] = hsum[have] / cnt[have, None, None]
         r[have] /= cnt[have, None, None]
         return z, h, r
+
+
+def true_error_basis(q_t, p_t, n_state: int = N_STATE_AIDED):
+    """Change of state basis ``x' = T x`` to the true position and velocity errors of the
+    aided model, and its inverse (for :func:`gravsurvey.inm.kalman.change_basis`).
+
+    The seed's ``dq = C^T dr - q x theta`` carries the attitude error scaled by the Earth's
+    radius (0.05 deg: 5.6 km against a 1 m GNSS position error), so the aided covariance is
+    nearly singular (smallest eigenvalue of the correlation matrix ~1e-6); in the basis
+    ``(dq + q x theta, dp + p x theta, g, f3, theta, b)`` = ``(C^T dr, C^T dv, ...)`` it is
+    well conditioned (~0.03).  Only the ``dq, dp`` rows change; ``T^-1`` flips the sign of
+    the ``theta`` coupling.
+
+    Parameters
+    ----------
+    q_t, p_t : ndarray (N, 3)
+        Computed triad-resolved position (m) and inertial velocity (m/s) at each epoch.
+    n_state : int
+        State size (>= 11: the attitude states ``TH`` must exist).
+
+    Returns
+    -------
+    t, t_inv : ndarray (N, n_state, n_state)
+    """
+    q_t = np.asarray(q_t, float)
+    p_t = np.asarray(p_t, float)
+    nep = q_t.shape[0]
+    t = np.broadcast_to(np.eye(n_state), (nep, n_state, n_state)).copy()
+    for rows, v in ((DQ, q_t), (DP, p_t)):
+        sk = np.zeros((nep, 3, 3))
+        sk[:, 0, 1], sk[:, 0, 2], sk[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+        sk[:, 1, 0], sk[:, 2, 0], sk[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+        t[:, rows[:, None], TH[None, :]] = sk
+    t_inv = t.copy()
+    t_inv[:, DQ[:, None], TH[None, :]] *= -1.0
+    t_inv[:, DP[:, None], TH[None, :]] *= -1.0
+    return t, t_inv

@@ -18,19 +18,28 @@ Speed notes (measured on the 8-state model, 14,401 epochs): no fastmath anywhere
 bit-for-bit reproducible across machines); for n = 8 and a diagonal R each epoch is one call of
 a generated step (:mod:`gravsurvey.inm._unrolled`) that keeps every covariance row in an
 8-wide vector (:mod:`gravsurvey.inm.simd`): 0.6 us per epoch for filter + smoother against
-1.4 us for the generic loops below, and the same numbers to the last bit (tested).  Every
-other size (14 GNSS-aided, 18 with the horizontal disturbance) takes the generic loops.  Not
-for the 14-state GNSS-aided model: its generated steps took ~27 s to compile (once per machine) to
-save ~0.01 s per flight-hour (:mod:`gravsurvey.inm.codegen`).  The generic
-loops (any n, any R): scalar measurement updates in O(n^2); small products in
+1.4 us for the generic loops below, and the same numbers to the last bit (tested).  Not for
+the 14-state GNSS-aided model: its generated steps took ~27 s to compile (once per machine) to
+save ~0.01 s per flight-hour (:mod:`gravsurvey.inm.codegen`); there the generic loops take
+their n x n products and triangular solves from generated vector loops (``matmul14``,
+``tri_solve14``: same rounding, ~1.6x less CPU for filter + smoother than scalar loops, ~1 s
+of compilation).  The generated 8-state steps sit in their own compiled loops
+(:func:`_filter_loop8`, :func:`_rts_loop8`) so that other state sizes never compile them, and
+the full-R update uses no ``np.linalg`` (:func:`_update`): both for the cold start.  Every other
+size (18 with the horizontal disturbance) takes the generic loops (any n, any R): scalar measurement updates in O(n^2); small products in
 scalar-accumulator column blocks (:func:`_matmul`).  Both: outputs allocated by numpy, not
 inside the kernels (page faults); ``phi[k+1] P_f[k]`` from the prediction reused by the
 smoother (:func:`filter_and_smooth`); the backward sweep reads its inputs block-wise forwards
 first (prefetching).
 
+Agreement with filterpy on the 14-state model, and why it needs the true-error basis
+(:func:`change_basis`, :func:`gravsurvey.inm.errormodel.true_error_basis`): docs/benchmarks.md,
+"Kalman filter: speed and agreement".
+
 numba's on-disk cache tracks only the file that defines a function: after editing
-``simd.py`` or regenerating ``_unrolled.py``, delete ``gravsurvey/inm/__pycache__/*.nb?``
-(the cached kernels of this module would otherwise keep the old steps).
+``simd.py`` or regenerating ``_unrolled.py``, delete this module's cached kernels
+(``inm_*/kalman.*.nb?`` in the kernel cache folder, :func:`gravsurvey.setup_numba_cache`), or
+they keep the old steps.
 """
 
 from __future__ import annotations
@@ -40,7 +49,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._unrolled import filter_step8, matmul8, matmul14, rts_step8
+from ._unrolled import filter_step8, matmul8, matmul14, rts_step8, tri_solve8, tri_solve14
 
 
 # --------------------------------------------------------------------------
@@ -201,53 +210,55 @@ def van_loan(a, qc, dt):
 
 
 @njit(cache=True)
-def _update(x, p, z, h, r, nis_out):
-    """Joseph-form update in place; writes whitened innovations into ``nis_out``."""
+def _update(x, p, z, h, r, nis_out, kg, ph):
+    """Joseph-form update in place with a full ``R`` (finite components of ``z`` only); writes
+    the whitened innovations into ``nis_out`` (NaN where ``z`` is NaN).
+
+    The measurement is decorrelated by the Cholesky factor of its ``R``: ``L^-1 z = L^-1 H x +
+    w`` with ``w`` white, then updated one scalar at a time (:func:`_scalar_update`).  That is
+    the batch update exactly (up to rounding), and the scalar updates' normalised innovations
+    are ``L_S^-1 nu`` with ``L_S`` the Cholesky factor of the innovation covariance
+    ``S = H P H^T + R``: the same whitening as before.  No ``np.linalg``: its kernels (LAPACK
+    wrappers with their error paths) took ~7 s of CPU to compile on a cold cache, for an update
+    a default run never makes (its ``R`` is diagonal).  ``R`` must be positive definite on the
+    finite components.
+    """
     m = z.shape[0]
     n = x.shape[0]
+    idx = np.empty(m, dtype=np.int64)
     cnt = 0
     for i in range(m):
-        if not math.isnan(z[i]):
-            cnt += 1
-    for i in range(m):
         nis_out[i] = np.nan
+        if not math.isnan(z[i]):
+            idx[cnt] = i
+            cnt += 1
     if cnt == 0:
         return
-    idx = np.empty(cnt, dtype=np.int64)
-    c = 0
-    for i in range(m):
-        if not math.isnan(z[i]):
-            idx[c] = i
-            c += 1
-    hs = np.empty((cnt, n))
-    zs = np.empty(cnt)
-    rs = np.empty((cnt, cnt))
+    lr = np.empty((cnt, cnt))
     for a in range(cnt):
-        hs[a] = h[idx[a]]
-        zs[a] = z[idx[a]]
-        for b in range(cnt):
-            rs[a, b] = r[idx[a], idx[b]]
-    nu = zs - hs @ x
-    pht = p @ hs.T
-    s = hs @ pht + rs
-    s = 0.5 * (s + s.T)
-    # K = P H^T S^-1  -> solve S K^T = H P
-    kt = np.linalg.solve(s, pht.T)
-    k = kt.T
-    x += k @ nu
-    ikh = np.eye(n) - k @ hs
-    pn = ikh @ p @ ikh.T + k @ rs @ k.T
-    p[:, :] = 0.5 * (pn + pn.T)
-    lch = np.linalg.cholesky(s)
-    # forward substitution: whitened innovation L^-1 nu
-    w = np.empty(cnt)
+        for b in range(a + 1):
+            acc = r[idx[a], idx[b]]
+            for c in range(b):
+                acc -= lr[a, c] * lr[b, c]
+            if a == b:
+                lr[a, a] = math.sqrt(acc)
+            else:
+                lr[a, b] = acc / lr[b, b]
+    # forward substitution, row by row: the whitened measurement and its row of H
+    zw = np.empty(cnt)
+    hw = np.empty((cnt, n))
     for a in range(cnt):
-        acc = nu[a]
-        for b in range(a):
-            acc -= lch[a, b] * w[b]
-        w[a] = acc / lch[a, a]
+        acc = z[idx[a]]
+        for c in range(a):
+            acc -= lr[a, c] * zw[c]
+        zw[a] = acc / lr[a, a]
+        for j in range(n):
+            acc = h[idx[a], j]
+            for c in range(a):
+                acc -= lr[a, c] * hw[c, j]
+            hw[a, j] = acc / lr[a, a]
     for a in range(cnt):
-        nis_out[idx[a]] = w[a]
+        nis_out[idx[a]] = _scalar_update(x, p, zw[a], hw[a], 1.0, kg, ph)
 
 
 @njit(cache=True)
@@ -315,6 +326,18 @@ def _matmul(a, b, out, upper):
                 s0 += a[i, l] * b[l, j]
             out[i, j] = s0
             j += 1
+
+
+@njit(cache=True)
+def _tri_solve(lch, idg, b, forward):
+    """:func:`_tri_solve_rows` by generated vector loops for n = 8 and 14 (same rounding)."""
+    n = b.shape[0]
+    if n == 8:
+        tri_solve8(lch, idg, b, forward)
+    elif n == 14:
+        tri_solve14(lch, idg, b, forward)
+    else:
+        _tri_solve_rows(lch, idg, b, forward)
 
 
 @njit(cache=True)
@@ -414,9 +437,9 @@ def _predict_into(phi, q, x, p, tmp, phit, xout, pout, xout2, pout2):
             acc += phi[i, j] * x[j]
         xout[i] = acc
         xout2[i] = acc
-    _matmul(phi, p, tmp, False)
+    matmul_into(phi, p, tmp)
     transpose_into(phi, phit)
-    _matmul(tmp, phit, pout, True)
+    matmul_into(tmp, phit, pout)
     for i in range(n):
         for j in range(i, n):
             v = pout[i, j] + 0.5 * (q[i, j] + q[j, i])
@@ -519,7 +542,6 @@ def kalman_filter(x0, p0, phi, q, z, h, r, unrolled=True):
     return x_f, p_f, x_p, p_p, innov
 
 
-@njit(cache=True)
 def _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, unrolled):
     """Kernel of :func:`kalman_filter`; writes into the preallocated outputs.
 
@@ -527,45 +549,72 @@ def _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_
     prediction, stored one row down so that the smoother's ``p_s`` can hold it) is kept for the
     smoother; give it one row to discard it.  ``unrolled``: use the generated fixed-size step
     (:mod:`gravsurvey.inm._unrolled`) where it applies (n = 8, diagonal R), same numbers.
+
+    Two compiled loops, chosen here: with the generated step in the same kernel, numba would
+    compile it for every state size (~4 s of CPU on a cold cache, for a step only n = 8 uses).
     """
-    nep = phi.shape[0]
+    if unrolled and x0.shape[0] == 8:
+        _filter_loop8(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf)
+    else:
+        _filter_loop(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf)
+
+
+@njit(cache=True)
+def _filter_loop(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf):
+    """Every epoch by the generic loops (:func:`_filter_epoch`)."""
     n = x0.shape[0]
-    m = z.shape[1]
-    keep = phi_pf.shape[0] == nep
-    fixed = unrolled and n == 8
     phit = np.empty((n, n))
     kg = np.empty(n)
     ph = np.empty(n)
-    for k in range(nep):
+    for k in range(phi.shape[0]):
+        _filter_epoch(k, x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, phit, kg, ph)
+
+
+@njit(cache=True)
+def _filter_loop8(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf):
+    """n = 8: the generated step wherever R is diagonal, the generic loops elsewhere."""
+    n = x0.shape[0]
+    keep = phi_pf.shape[0] == phi.shape[0]
+    phit = np.empty((n, n))
+    kg = np.empty(n)
+    ph = np.empty(n)
+    for k in range(phi.shape[0]):
         # the fixed-size step takes whole arrays and k: no row views (each costs atomic
         # reference-count updates, comparable to the arithmetic of a step)
-        diag = _diagonal_at(r, k)
-        if k > 0 and fixed and diag:
+        if k > 0 and _diagonal_at(r, k):
             filter_step8(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, k - 1 if keep else 0)
-            continue
-        x = x_f[k]
-        p = p_f[k]
-        if k > 0:
-            tmp = phi_pf[k - 1] if keep else phi_pf[0]
-            _predict_into(phi[k], q[k], x_f[k - 1], p_f[k - 1], tmp, phit, x_p[k], p_p[k], x, p)
         else:
-            for i in range(n):
-                x_p[0, i] = x0[i]
-                x[i] = x0[i]
-                for j in range(n):
-                    v = 0.5 * (p0[i, j] + p0[j, i])
-                    p_p[0, i, j] = v
-                    p[i, j] = v
-        if diag:
-            # sequential scalar updates: identical to the batch update for a diagonal R, and the
-            # normalised innovations are the Cholesky-whitened ones
-            for i in range(m):
-                if math.isnan(z[k, i]):
-                    innov[k, i] = np.nan
-                else:
-                    innov[k, i] = _scalar_update(x, p, z[k, i], h[k, i], r[k, i, i], kg, ph)
-        else:
-            _update(x, p, z[k], h[k], r[k], innov[k])
+            _filter_epoch(k, x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, phit, kg, ph)
+
+
+@njit(cache=True)
+def _filter_epoch(k, x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, phit, kg, ph):
+    """Epoch ``k`` of the filter by the generic loops (any n, any R); ``phit, kg, ph`` scratch."""
+    n = x0.shape[0]
+    m = z.shape[1]
+    x = x_f[k]
+    p = p_f[k]
+    if k > 0:
+        tmp = phi_pf[k - 1] if phi_pf.shape[0] == phi.shape[0] else phi_pf[0]
+        _predict_into(phi[k], q[k], x_f[k - 1], p_f[k - 1], tmp, phit, x_p[k], p_p[k], x, p)
+    else:
+        for i in range(n):
+            x_p[0, i] = x0[i]
+            x[i] = x0[i]
+            for j in range(n):
+                v = 0.5 * (p0[i, j] + p0[j, i])
+                p_p[0, i, j] = v
+                p[i, j] = v
+    if _diagonal_at(r, k):
+        # sequential scalar updates: identical to the batch update for a diagonal R, and the
+        # normalised innovations are the Cholesky-whitened ones
+        for i in range(m):
+            if math.isnan(z[k, i]):
+                innov[k, i] = np.nan
+            else:
+                innov[k, i] = _scalar_update(x, p, z[k, i], h[k, i], r[k, i, i], kg, ph)
+    else:
+        _update(x, p, z[k], h[k], r[k], innov[k], kg, ph)
 
 
 def rts_smoother(x_f, p_f, x_p, p_p, phi, unrolled=True):
@@ -586,15 +635,30 @@ def rts_smoother(x_f, p_f, x_p, p_p, phi, unrolled=True):
     return x_s, p_s
 
 
-@njit(cache=True)
 def _rts_into(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, unrolled):
     """Kernel of :func:`rts_smoother`; writes into the preallocated ``x_s, p_s``.
 
     With ``have_phi_pf``, ``phi_pf[k]`` must hold ``phi[k + 1] @ p_f[k]`` exactly as the
     filter computed it (see :func:`_kalman_filter_into`) and is used instead of recomputing it.
     ``phi_pf`` may be ``p_s`` itself: row ``k`` is read before ``p_s[k]`` is written.
-    ``unrolled``: the generated step (same numbers) when n = 8.
+    ``unrolled``: the generated step (same numbers) when n = 8, in its own compiled loop (as
+    the filter's).
     """
+    if unrolled and x_f.shape[1] == 8:
+        _rts_loop8(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s)
+    else:
+        _rts_loop(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s)
+
+
+# The recursion runs backwards in time, and backward streams through the (N, n, n) arrays are
+# badly prefetched (measured: 8x8 products 2.4x slower than in a forward loop).  So the epochs
+# are processed in blocks: each block's inputs are first read in a forward sweep (pulling them
+# into cache, :func:`_prefetch_block`), then the block is smoothed backwards from cache.
+
+
+@njit(cache=True)
+def _rts_loop(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s):
+    """Every epoch by the generic loops (:func:`_rts_step`)."""
     nep, n = x_f.shape
     if nep == 0:
         return 0.0
@@ -608,33 +672,47 @@ def _rts_into(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, unrolled):
     dx = np.empty(n)
     dp = np.empty((n, n))
     tmp = np.empty((n, n))
-    fixed = unrolled and n == 8
-    phi_pf1 = np.empty((1, n, n))
-    # The recursion runs backwards in time, and backward streams through the (N, n, n) arrays
-    # are badly prefetched (measured: 8x8 products 2.4x slower than in a forward loop).  So the
-    # epochs are processed in blocks: each block's inputs are first read in a forward sweep
-    # (pulling them into cache), then the block is smoothed backwards from cache.
     sink = 0.0
     for k1 in range(nep - 2, -1, -_BLOCK):
         k0 = max(k1 - _BLOCK + 1, 0)
-        sink += _touch(p_p, k0 + 1, k1 + 2) + _touch(p_f, k0, k1 + 1) + _touch(p_s, k0, k1 + 1)
-        if have_phi_pf:
-            sink += _touch(phi_pf, k0, k1 + 1)
-        else:
-            sink += _touch(phi, k0 + 1, k1 + 2)
+        sink += _prefetch_block(p_p, p_f, p_s, phi, phi_pf, have_phi_pf, k0, k1)
+        for kk in range(k1 - k0 + 1):
+            _rts_step(k1 - kk, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg, lch, b, bt, dx, dp,
+                      tmp)
+    return sink
+
+
+@njit(cache=True)
+def _rts_loop8(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s):
+    """n = 8: every epoch by the generated step."""
+    nep, n = x_f.shape
+    if nep == 0:
+        return 0.0
+    x_s[nep - 1] = x_f[nep - 1]
+    p_s[nep - 1] = p_f[nep - 1]
+    phi_pf1 = np.empty((1, n, n))
+    sink = 0.0
+    for k1 in range(nep - 2, -1, -_BLOCK):
+        k0 = max(k1 - _BLOCK + 1, 0)
+        sink += _prefetch_block(p_p, p_f, p_s, phi, phi_pf, have_phi_pf, k0, k1)
         for kk in range(k1 - k0 + 1):
             k = k1 - kk
-            if fixed:
-                a = phi_pf
-                ka = k
-                if not have_phi_pf:
-                    _matmul(phi[k + 1], p_f[k], phi_pf1[0], False)
-                    a = phi_pf1
-                    ka = 0
-                rts_step8(k, x_f, p_f, x_p, p_p, a, ka, x_s, p_s)
-                continue
-            _rts_step(k, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg, lch, b, bt, dx, dp,
-                      tmp)
+            if have_phi_pf:
+                rts_step8(k, x_f, p_f, x_p, p_p, phi_pf, k, x_s, p_s)
+            else:
+                _matmul(phi[k + 1], p_f[k], phi_pf1[0], False)
+                rts_step8(k, x_f, p_f, x_p, p_p, phi_pf1, 0, x_s, p_s)
+    return sink
+
+
+@njit(cache=True)
+def _prefetch_block(p_p, p_f, p_s, phi, phi_pf, have_phi_pf, k0, k1):
+    """Read the smoother's inputs of epochs ``k0..k1`` forwards (see above)."""
+    sink = _touch(p_p, k0 + 1, k1 + 2) + _touch(p_f, k0, k1 + 1) + _touch(p_s, k0, k1 + 1)
+    if have_phi_pf:
+        sink += _touch(phi_pf, k0, k1 + 1)
+    else:
+        sink += _touch(phi, k0 + 1, k1 + 2)
     return sink
 
 
@@ -681,14 +759,14 @@ def _rts_step(k, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg,
             for j in range(n):
                 b[i, j] = phi_pf[k, i, j] * c
     else:
-        _matmul(ph, pf, b, False)
+        matmul_into(ph, pf, b)
         for i in range(n):
             c = d[i]
             for j in range(n):
                 b[i, j] *= c
     # solve L L^T Y = B for all columns at once (row operations); G^T = D^-1 Y -> b
-    _tri_solve_rows(lch, idg, b, True)
-    _tri_solve_rows(lch, idg, b, False)
+    _tri_solve(lch, idg, b, True)
+    _tri_solve(lch, idg, b, False)
     for i in range(n):
         c = d[i]
         for j in range(n):
@@ -706,8 +784,8 @@ def _rts_step(k, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg,
         for j in range(n):
             dp[i, j] = p_s[k + 1, i, j] - pp[i, j]
     transpose_into(b, bt)
-    _matmul(bt, dp, tmp, False)
-    _matmul(tmp, b, dp, True)  # symmetric: the upper triangle is used
+    matmul_into(bt, dp, tmp)
+    matmul_into(tmp, b, dp)  # symmetric: the upper triangle is used
     for i in range(n):
         for j in range(i, n):
             v = pf[i, j] + dp[i, j]
@@ -788,3 +866,94 @@ def filter_and_smooth(x0, p0, phi, q, z, h, r, reference: bool = False, unrolled
         _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, p_s, unrolled)
         _rts_into(x_f, p_f, x_p, p_p, phi, p_s, True, x_s, p_s, unrolled)
     return dict(x_f=x_f, p_f=p_f, x_p=x_p, p_p=p_p, innov=innov, x_s=x_s, p_s=p_s)
+
+
+def change_basis(t, t_inv, x0, p0, phi, q, h):
+    """The same linear-Gaussian model in the state ``x'_k = T_k x_k`` (an exact similarity).
+
+    ``phi'[k] = T_k phi[k] T_(k-1)^-1``, ``q'[k] = T_k q[k] T_k^T``, ``h'[k] = h[k] T_k^-1``,
+    ``x0' = T_0 x0``, ``P0' = T_0 P0 T_0^T``; ``z`` and ``r`` are unchanged.  Filtering either
+    model gives the same estimate (``x = T^-1 x'``, ``P = T^-1 P' T^-T``) up to rounding;
+    the rounding is what differs: a basis in which the covariance is well conditioned lets
+    any two correct implementations agree to ~1e-12 (docs/benchmarks.md, "Kalman filter").
+
+    Parameters
+    ----------
+    t, t_inv : ndarray (N, n, n)
+        ``T_k`` and its inverse per epoch.
+    x0 : ndarray (n,)
+    p0 : ndarray (n, n)
+    phi, q : ndarray (N, n, n)
+    h : ndarray (N, m, n)
+
+    Returns
+    -------
+    tuple
+        ``(x0', P0', phi', q', h')`` (covariances symmetrised).
+    """
+    phi2 = np.array(phi, dtype=float)
+    phi2[1:] = np.einsum("kij,kjl,klm->kim", t[1:], phi[1:], t_inv[:-1])
+    q2 = np.einsum("kij,kjl,kml->kim", t, q, t)
+    q2 = 0.5 * (q2 + q2.transpose(0, 2, 1))
+    h2 = np.einsum("kij,kjl->kil", h, t_inv)
+    p02 = t[0] @ p0 @ t[0].T
+    return t[0] @ x0, 0.5 * (p02 + p02.T), phi2, q2, h2
+
+
+def restore_basis(t_inv, x, p):
+    """States ``(N, n)`` and covariances ``(N, n, n)`` of a :func:`change_basis` model, back in
+    the original basis: ``x = T^-1 x'``, ``P = T^-1 P' T^-T``."""
+    p2 = np.einsum("kij,kjl,kml->kim", t_inv, p, t_inv)
+    return np.einsum("kij,kj->ki", t_inv, x), 0.5 * (p2 + p2.transpose(0, 2, 1))
+
+
+def filter_and_smooth_exact(x0, p0, phi, q, z, h, r):
+    """Textbook filter (Joseph form) + RTS smoother in ``np.longdouble`` with a pivoted
+    Gauss-Jordan inverse: the accuracy yardstick for the double-precision paths on badly
+    conditioned models (slow: pure Python loops; keep ``N`` to a few hundred epochs).
+
+    Same arguments as :func:`filter_and_smooth`; returns ``x_f, p_f, x_s, p_s`` as float64
+    ``(N, n)``, ``(N, n, n)`` arrays.  Where ``np.longdouble`` is plain double (some
+    platforms), this is only another double-precision implementation.
+    """
+    ld = np.longdouble
+    x0, p0, phi, q, z, h, r = (np.asarray(a, dtype=ld) for a in (x0, p0, phi, q, z, h, r))
+
+    def inv(a):
+        m = a.shape[0]
+        g = np.concatenate([a.copy(), np.eye(m, dtype=ld)], axis=1)
+        for c in range(m):
+            piv = c + int(np.argmax(np.abs(g[c:, c])))
+            g[[c, piv]] = g[[piv, c]]
+            g[c] /= g[c, c]
+            for i in range(m):
+                if i != c:
+                    g[i] -= g[i, c] * g[c]
+        return g[:, m:]
+
+    nep, n = phi.shape[0], x0.size
+    xf, pf = np.empty((nep, n), ld), np.empty((nep, n, n), ld)
+    xp, pp = np.empty_like(xf), np.empty_like(pf)
+    x, p = x0.copy(), p0.copy()
+    for k in range(nep):
+        if k:
+            x = phi[k] @ x
+            p = phi[k] @ p @ phi[k].T + q[k]
+            p = (p + p.T) / 2
+        xp[k], pp[k] = x, p
+        ok = ~np.isnan(z[k].astype(float))
+        if ok.any():
+            hk, rk = h[k][ok], r[k][np.ix_(ok, ok)]
+            kg = p @ hk.T @ inv(hk @ p @ hk.T + rk)
+            x = x + kg @ (z[k][ok] - hk @ x)
+            ikh = np.eye(n, dtype=ld) - kg @ hk
+            p = ikh @ p @ ikh.T + kg @ rk @ kg.T
+            p = (p + p.T) / 2
+        xf[k], pf[k] = x, p
+    xs, ps = xf.copy(), pf.copy()
+    for k in range(nep - 2, -1, -1):
+        g = pf[k] @ phi[k + 1].T @ inv(pp[k + 1])
+        xs[k] = xf[k] + g @ (xs[k + 1] - xp[k + 1])
+        pn = pf[k] + g @ (ps[k + 1] - pp[k + 1]) @ g.T
+        ps[k] = (pn + pn.T) / 2
+    return xf.astype(float), pf.astype(float), xs.astype(float), ps.astype(float)
