@@ -240,7 +240,7 @@ def _imu_cdr(endian, sec, nsec, frame_id, w, f):
 
 
 def test_cdr_bulk_decoder_both_byte_orders_and_short_payloads():
-    from gravsurvey.io.mcap import _decode_ros2
+    from gravsurvey.io.mcap.decode import decode_ros2
 
     rng = np.random.default_rng(5)
     msgs, want = [], []
@@ -254,7 +254,7 @@ def test_cdr_bulk_decoder_both_byte_orders_and_short_payloads():
     buf = np.frombuffer(b"".join(msgs), np.uint8)
     lens = np.array([len(m) for m in msgs], np.int64)
     offs = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
-    blk = _decode_ros2("imu", buf, offs, lens, np.zeros(len(msgs), np.int64))
+    blk = decode_ros2("imu", buf, offs, lens, np.zeros(len(msgs), np.int64))
     assert blk.undecodable == 1
     np.testing.assert_array_equal(blk.time_ns, [t for t, _, _ in want])
     np.testing.assert_array_equal(blk.values["angular_rate"], [w for _, w, _ in want])

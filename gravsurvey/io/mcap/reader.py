@@ -1,430 +1,38 @@
-"""MCAP reader: damage-tolerant record scan, bounded chunk decompression, bulk decoding.
+"""The MCAP reader: :func:`read_mcap` ties scanning, record parsing, decoding and value checks.
 
-Why our own record scanner rather than ``mcap.reader``: the ``mcap`` package (1.6) trusts
-declared lengths (``zstandard.decompress(data, uncompressed_size)`` and ``lz4.frame.decompress``
-allocate whatever a damaged header says), does not notice short reads, and its indexed reader
-raises ``KeyError`` on valid files whose summary lacks repeated channel/schema records.  We scan
-the file linearly (the spec's streaming order), which needs neither the summary nor the indexes,
-and we check every length against the bytes that are really there.  The ``mcap`` package stays the
-independent reference in the tests and the benchmark.
-
-Memory bound: the file is memory-mapped (pages, not heap); besides the decoded output arrays, the
-reader holds at most one decompressed chunk, and refuses any chunk whose declared uncompressed
-size exceeds ``max_record_bytes`` (default 256 MiB) before allocating anything.  Top-level
-records are never copied, only sliced from the map.
-
-Salvage: a damaged record (length beyond end of file, absurd length, failed decompression, CRC
-mismatch, bad opcode, a message on an undefined channel, ...) is skipped and reading resumes at
-the next intact record (:func:`find_resync`: the next chain of plausible records, or the next
-chunk of the summary's chunk index); a chunk cut by the end of the file is decompressed as far
-as its bytes go and its complete message records are kept.  :class:`SalvageInfo` lists every
-skipped region (:class:`SkippedRegion`) with what was recovered and lost.  Samples not protected
-by a verified chunk CRC go through :func:`gravsurvey.io.checks.damaged_values`.
+It walks the file's top-level records in order, reads chunks, decodes the sensor channels,
+and after damage resumes at the next intact record; :class:`SalvageInfo` and
+:class:`SkippedRegion` say what was skipped, recovered and lost (package docstring:
+:mod:`gravsurvey.io.mcap`).
 """
 
 from __future__ import annotations
 
-import io
-import json
 import mmap
 import os
 import struct
 import zlib
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from gravsurvey.errors import DataError
-from gravsurvey.io.checks import damaged_values
+from gravsurvey.io.mcap.decode import (DEFAULT_JSON_FIELDS, ROLE_SCHEMAS, ROS2_IMU, ROS2_NAVSATFIX,
+                                       ROS2_POINTSTAMPED, concat_blocks, decode_json, decode_ros2)
+from gravsurvey.io.mcap.records import (DamagedRecord, chunk_index, decompress_chunk,
+                                        message_index_count, parse_channel, parse_schema,
+                                        parse_statistics, plausible_name, read_string,
+                                        summary_records, summary_statistics)
+from gravsurvey.io.mcap.scan import (MAGIC, MESSAGE_HEADER_BYTES, OP_CHANNEL, OP_CHUNK, OP_DATA_END,
+                                     OP_FOOTER, OP_HEADER, OP_MESSAGE, OP_MESSAGE_INDEX, OP_SCHEMA,
+                                     OP_STATISTICS, SCAN_BEYOND_END, SCAN_EARLY_FOOTER, SCAN_OK,
+                                     SCAN_REASONS, SCAN_SHORT_HEADER, SUMMARY_ONLY_OPS, chain_at,
+                                     find_resync, scan_records)
+from gravsurvey.io.mcap.value_checks import check_values
 
-MAGIC = b"\x89MCAP0\r\n"
-OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 1, 2, 3, 4, 5, 6
-OP_MESSAGE_INDEX, OP_CHUNK_INDEX, OP_ATTACHMENT, OP_ATTACHMENT_INDEX = 7, 8, 9, 10
-OP_STATISTICS, OP_METADATA, OP_METADATA_INDEX, OP_SUMMARY_OFFSET, OP_DATA_END = 11, 12, 13, 14, 15
-MESSAGE_HEADER_BYTES = 2 + 4 + 8 + 8  # channel_id, sequence, log_time, publish_time
 DEFAULT_MAX_RECORD_BYTES = 256 * 2**20
-
-# scan status codes (kernel and reference agree on them)
-SCAN_OK = 0  # ended exactly at ``end`` or after a footer
-SCAN_SHORT_HEADER = 1  # fewer than 9 bytes left for an opcode + length
-SCAN_BEYOND_END = 2  # a record's declared length runs past ``end``
-SCAN_BAD_MESSAGE = 3  # a message record shorter than its fixed 22-byte header
-SCAN_BAD_OPCODE = 4  # opcode 0; or > 0x0F inside a chunk (not forward-compatible there)
-SCAN_UNKNOWN_CHANNEL = 5  # a top-level message on a channel id no earlier record defined
-SCAN_EARLY_FOOTER = 6  # (reader only) a footer record that does not end the file
-# records that belong in the summary section only (a sign of damage before the data end)
-SUMMARY_ONLY_OPS = (OP_CHUNK_INDEX, OP_ATTACHMENT_INDEX, OP_STATISTICS, OP_METADATA_INDEX,
-                    OP_SUMMARY_OFFSET)
 DAMAGED_START_MAX = 4096  # a file without closing magic is read only if records chain by here
-DAMAGE_CHECK_PASSES = 4  # rounds of checks.damaged_values on CRC-less samples
 RESYNC_MIN_CHAIN = 4  # records that must chain up for a resynchronisation point to count
-
-# schema names by role, for topic auto-detection
-ROLE_SCHEMAS = {
-    "imu": ("sensor_msgs/msg/Imu", "sensor_msgs/Imu", "gravsurvey.Imu"),
-    "altimeter": ("geometry_msgs/msg/PointStamped", "geometry_msgs/PointStamped",
-                  "gravsurvey.Altimeter"),
-    "gnss": ("sensor_msgs/msg/NavSatFix", "sensor_msgs/NavSatFix", "gravsurvey.Gnss"),
-    # optional gravity-gradient channel (JSON only; docs/formats.md)
-    "gradient": ("gravsurvey.GravityGradient",),
-}
-ROS2_IMU = ("sensor_msgs/msg/Imu", "sensor_msgs/Imu")
-ROS2_NAVSATFIX = ("sensor_msgs/msg/NavSatFix", "sensor_msgs/NavSatFix")
-ROS2_POINTSTAMPED = ("geometry_msgs/msg/PointStamped", "geometry_msgs/PointStamped")
-
-
-# ----------------------------------------------------------------------------- record scanning
-@numba.njit(cache=True)
-def _u64(buf, i):
-    v = np.uint64(0)
-    for k in range(8):
-        v |= np.uint64(buf[i + k]) << np.uint64(8 * k)
-    return v
-
-
-@numba.njit(cache=True)
-def _scan_kernel(buf, start, end, stop_at_footer, known_in, check_chan, fill, opcodes, rec_pos,
-                 rec_len, chan, logt, pubt, seq):
-    """Walk MCAP records in ``buf[start:end]``.
-
-    Parameters
-    ----------
-    buf : ndarray of uint8
-    start, end : int
-        Byte range to walk.
-    stop_at_footer : bool
-        Top level: stop after a footer record; opcode 0 is damage (unknown opcodes 16-255 are
-        skipped, as the specification asks).  False (inside a chunk): opcode 0 or > 15 is
-        damage.
-    known_in : ndarray of bool, shape (65536,)
-        Channel ids defined before ``start``.
-    check_chan : bool
-        A message on a channel id that no earlier channel record defined is damage (the
-        specification puts every channel record before its messages).  Channel records met
-        on the way are added to a private copy of ``known_in``.
-    fill : bool
-        False: only count; True: write into the output arrays (sized by a counting pass).
-    opcodes, rec_pos, rec_len : ndarray
-        Per record: opcode, byte offset of its content, content length.
-    chan, logt, pubt, seq : ndarray
-        Per record (message records only, others 0): channel id, log time (ns),
-        publish time (ns), sequence.
-
-    Returns
-    -------
-    n : int
-        Number of complete records.
-    pos : int
-        Offset just after the last complete record.
-    status : int
-        ``SCAN_*`` code.
-    """
-    known = known_in.copy() if check_chan else known_in
-    pos = start
-    n = 0
-    status = 0
-    while pos < end:
-        if end - pos < 9:
-            status = 1
-            break
-        op = buf[pos]
-        length = _u64(buf, pos + 1)
-        if length > np.uint64(end - pos - 9):
-            status = 2
-            break
-        ln = np.int64(length)
-        if op == 5 and ln < 22:
-            status = 3
-            break
-        if op == 0 or (not stop_at_footer and op > 15):
-            status = 4
-            break
-        c = pos + 9
-        if check_chan:
-            if op == 5:
-                if not known[np.int64(buf[c]) | (np.int64(buf[c + 1]) << 8)]:
-                    status = 5
-                    break
-            elif op == 4 and ln >= 2:
-                known[np.int64(buf[c]) | (np.int64(buf[c + 1]) << 8)] = True
-        if fill:
-            opcodes[n] = op
-            rec_pos[n] = c
-            rec_len[n] = ln
-            if op == 5:
-                chan[n] = np.int64(buf[c]) | (np.int64(buf[c + 1]) << 8)
-                seq[n] = (np.int64(buf[c + 2]) | (np.int64(buf[c + 3]) << 8)
-                          | (np.int64(buf[c + 4]) << 16) | (np.int64(buf[c + 5]) << 24))
-                logt[n] = np.int64(_u64(buf, c + 6))
-                pubt[n] = np.int64(_u64(buf, c + 14))
-        n += 1
-        pos = pos + 9 + ln
-        if stop_at_footer and op == 2:
-            break
-    return n, pos, status
-
-
-def _scan_reference(buf, start, end, stop_at_footer, known_in=None, check_chan=False):
-    """Pure-Python reference of :func:`_scan_kernel` (same outputs); for tests."""
-    b = bytes(buf)
-    known = set() if known_in is None else set(np.flatnonzero(known_in).tolist())
-    pos, status = start, SCAN_OK
-    rows = []
-    while pos < end:
-        if end - pos < 9:
-            status = SCAN_SHORT_HEADER
-            break
-        op, length = struct.unpack_from("<BQ", b, pos)
-        if length > end - pos - 9:
-            status = SCAN_BEYOND_END
-            break
-        if op == OP_MESSAGE and length < MESSAGE_HEADER_BYTES:
-            status = SCAN_BAD_MESSAGE
-            break
-        if op == 0 or (not stop_at_footer and op > 15):
-            status = SCAN_BAD_OPCODE
-            break
-        c = pos + 9
-        if check_chan and op == OP_MESSAGE and struct.unpack_from("<H", b, c)[0] not in known:
-            status = SCAN_UNKNOWN_CHANNEL
-            break
-        if check_chan and op == OP_CHANNEL and length >= 2:
-            known.add(struct.unpack_from("<H", b, c)[0])
-        if op == OP_MESSAGE:
-            ch, sq, lt, pt = struct.unpack_from("<HIQQ", b, c)
-            # times above 2**63 wrap like the kernel's int64 cast
-            lt, pt = np.uint64(lt).astype(np.int64), np.uint64(pt).astype(np.int64)
-        else:
-            ch = sq = lt = pt = 0
-        rows.append((op, c, length, ch, int(lt), int(pt), sq))
-        pos = c + length
-        if stop_at_footer and op == OP_FOOTER:
-            break
-    cols = list(zip(*rows)) if rows else [()] * 7
-    out = [np.array(col, dtype=np.int64) for col in cols]
-    return len(rows), pos, status, out
-
-
-NO_CHANNELS = np.zeros(65536, np.bool_)
-
-
-def scan_records(buf, start, end, stop_at_footer=False, use_kernel=True, known=None):
-    """Index the MCAP records in ``buf[start:end]`` (numba kernel, two passes).
-
-    Parameters
-    ----------
-    known : ndarray of bool, shape (65536,), optional
-        Channel ids defined before ``start``; given, a message on an undefined channel stops
-        the scan with ``SCAN_UNKNOWN_CHANNEL`` (see :func:`_scan_kernel`).
-
-    Returns
-    -------
-    n, pos, status : int
-        See :func:`_scan_kernel`.
-    arrays : list of ndarray, each shape (n,), int64
-        opcodes, content offsets, content lengths, channel ids, log times, publish times,
-        sequences.
-    """
-    check = known is not None
-    known = NO_CHANNELS if known is None else known
-    if not use_kernel:
-        return _scan_reference(buf, start, end, stop_at_footer, known, check)
-    z = np.zeros(0, np.int64)
-    n, pos, status = _scan_kernel(buf, start, end, stop_at_footer, known, check, False,
-                                  z, z, z, z, z, z, z)
-    arrs = [np.zeros(n, np.int64) for _ in range(7)]
-    _scan_kernel(buf, start, end, stop_at_footer, known, check, True, *arrs)
-    return n, pos, status, arrs
-
-
-@numba.njit(cache=True)
-def _chain_at(buf, p, end, known, min_chain):
-    """Does a chain of plausible top-level records start at ``p``?
-
-    Plausible: opcode 1..15, length inside ``end``, a message at least 22 bytes long on a
-    channel defined earlier (``known``), a footer only as the last record before the closing
-    magic.  The chain counts when ``min_chain`` records follow one another, or at least one
-    does and the chain ends exactly at ``end``, or with a record cut by ``end`` (a truncated
-    file), or at the footer.
-    """
-    count = 0
-    while count < min_chain:
-        if p == end:
-            return count >= 1
-        if end - p < 9:
-            return count >= 1
-        op = buf[p]
-        if op == 0 or op > 15:
-            return False
-        length = _u64(buf, p + 1)
-        if length > np.uint64(end - p - 9):
-            return count >= 1 and length < np.uint64(1 << 40)
-        ln = np.int64(length)
-        if op == 5:
-            if ln < 22 or not known[np.int64(buf[p + 9]) | (np.int64(buf[p + 10]) << 8)]:
-                return False
-        if op == 2:  # a footer: 20 bytes, then the closing magic ends the file
-            return ln == 20 and p + 9 + 20 + 8 == end and buf[p + 29] == 0x89
-        count += 1
-        p = p + 9 + ln
-    return True
-
-
-@numba.njit(cache=True)
-def _resync_kernel(buf, start, end, known, min_chain, opcode):
-    """First offset >= ``start`` where :func:`_chain_at` holds (and, if ``opcode`` > 0, whose
-    record has that opcode); -1 when none."""
-    for p in range(start, end - 8):
-        op = buf[p]
-        if op == 0 or op > 15 or (opcode > 0 and op != opcode):
-            continue
-        if _chain_at(buf, p, end, known, min_chain):
-            return p
-    return -1
-
-
-def _resync_reference(buf, start, end, known, min_chain, opcode):
-    """Pure-Python reference of :func:`_resync_kernel` (for tests; slow)."""
-    b = bytes(buf)
-    ids = set(np.flatnonzero(known).tolist())
-
-    def chain(p):
-        count = 0
-        while count < min_chain:
-            if p == end or end - p < 9:
-                return count >= 1
-            op, length = struct.unpack_from("<BQ", b, p)
-            if op == 0 or op > 15:
-                return False
-            if length > end - p - 9:
-                return count >= 1 and length < 1 << 40
-            if op == OP_MESSAGE and (length < MESSAGE_HEADER_BYTES
-                                     or struct.unpack_from("<H", b, p + 9)[0] not in ids):
-                return False
-            if op == OP_FOOTER:
-                return length == 20 and p + 9 + 20 + 8 == end and b[p + 29] == 0x89
-            count += 1
-            p += 9 + length
-        return True
-
-    for p in range(start, end - 8):
-        op = b[p]
-        if op == 0 or op > 15 or (opcode > 0 and op != opcode):
-            continue
-        if chain(p):
-            return p
-    return -1
-
-
-def find_resync(buf, start, end, known, min_chain=4, opcode=0, use_kernel=True):
-    """Offset of the next plausible top-level record boundary at or after ``start``.
-
-    Parameters
-    ----------
-    buf : ndarray of uint8
-    start, end : int
-    known : ndarray of bool, shape (65536,)
-        Channel ids defined so far (messages on others are not plausible).
-    min_chain : int
-        Records that must follow one another for a boundary to count (fewer when they end
-        exactly at ``end`` or a footer).
-    opcode : int
-        Only boundaries whose first record has this opcode (0: any).
-
-    Returns
-    -------
-    int
-        The offset, or -1.
-    """
-    if use_kernel:
-        return int(_resync_kernel(buf, start, end, known, min_chain, opcode))
-    return _resync_reference(buf, start, end, known, min_chain, opcode)
-
-
-# ----------------------------------------------------------------------------- record parsing
-class _Damaged(Exception):
-    """Internal: a record's content is inconsistent (caught, turned into salvage)."""
-
-
-def _str(b, pos, end):
-    if pos + 4 > end:
-        raise _Damaged("string length beyond record")
-    (n,) = struct.unpack_from("<I", b, pos)
-    if pos + 4 + n > end:
-        raise _Damaged("string beyond record")
-    try:
-        return bytes(b[pos + 4:pos + 4 + n]).decode("utf-8"), pos + 4 + n
-    except UnicodeDecodeError as exc:
-        raise _Damaged("string not UTF-8") from exc
-
-
-def _bytes32(b, pos, end):
-    if pos + 4 > end:
-        raise _Damaged("byte array length beyond record")
-    (n,) = struct.unpack_from("<I", b, pos)
-    if pos + 4 + n > end:
-        raise _Damaged("byte array beyond record")
-    return bytes(b[pos + 4:pos + 4 + n]), pos + 4 + n
-
-
-def _plausible_name(s):
-    """A topic/schema name/encoding that could be real: non-empty, printable."""
-    return bool(s) and s.isprintable()
-
-
-def _parse_schema(b, pos, ln):
-    end = pos + ln
-    if ln < 2:
-        raise _Damaged("schema record too short")
-    (sid,) = struct.unpack_from("<H", b, pos)
-    name, p = _str(b, pos + 2, end)
-    enc, p = _str(b, p, end)
-    data, p = _bytes32(b, p, end)
-    return SchemaInfo(sid, name, enc, data)
-
-
-def _parse_channel(b, pos, ln):
-    end = pos + ln
-    if ln < 4:
-        raise _Damaged("channel record too short")
-    cid, sid = struct.unpack_from("<HH", b, pos)
-    topic, p = _str(b, pos + 4, end)
-    enc, p = _str(b, p, end)
-    if p + 4 > end:
-        raise _Damaged("channel metadata beyond record")
-    (mlen,) = struct.unpack_from("<I", b, p)
-    p += 4
-    mend = p + mlen
-    if mend > end:
-        raise _Damaged("channel metadata beyond record")
-    meta = {}
-    while p < mend:
-        k, p = _str(b, p, mend)
-        v, p = _str(b, p, mend)
-        meta[k] = v
-    return ChannelInfo(cid, sid, topic, enc, meta)
-
-
-@dataclass
-class SchemaInfo:
-    """An MCAP schema record (``id`` 0 never appears: it means schemaless)."""
-
-    id: int
-    name: str
-    encoding: str
-    data: bytes
-
-
-@dataclass
-class ChannelInfo:
-    """An MCAP channel record."""
-
-    id: int
-    schema_id: int
-    topic: str
-    message_encoding: str
-    metadata: dict
 
 
 def _utc(ns):
@@ -591,26 +199,6 @@ class SalvageInfo:
 
 
 @dataclass
-class DecodedBlock:
-    """Decoded samples of one channel (possibly concatenated over chunks).
-
-    ``values`` maps field names to float64 arrays: ``specific_force`` (n, 3),
-    ``angular_rate`` (n, 3) for IMU; ``height`` (n,) for altimeter; ``lat_deg``, ``lon_deg``,
-    ``height`` (n,) for GNSS.  ``time_ns`` int64 (n,) is the measurement time; ``log_time_used``
-    counts messages whose time fell back to the MCAP log time.
-    """
-
-    time_ns: np.ndarray
-    values: dict
-    log_time_used: int = 0
-    undecodable: int = 0
-    problems: list = field(default_factory=list)
-    log_time_ns: np.ndarray | None = None  # MCAP log time of each decoded message
-    verified: np.ndarray | None = None  # bool (n,): sample came from a CRC-checked chunk
-    value_check_dropped: int = 0  # unverified samples dropped by checks.damaged_values
-
-
-@dataclass
 class McapContent:
     """Everything :func:`read_mcap` learned from one file.
 
@@ -663,472 +251,6 @@ class McapContent:
         ch = self.channels.get(cid)
         sch = self.schemas.get(ch.schema_id) if ch else None
         return sch.name if sch else ""
-
-
-# ----------------------------------------------------------------------------- decompression
-def _decompress(compression, data, size, complete):
-    """Decompress one chunk's records, never producing more than ``size`` bytes.
-
-    ``complete`` False: the chunk was cut by the end of the file; return what the available
-    bytes decode to (possibly less than ``size``).  Raises _Damaged on failure.
-    """
-    if compression == "":
-        if complete and len(data) != size:
-            raise _Damaged(f"uncompressed chunk holds {len(data)} bytes, header says {size}")
-        return bytes(data[:size])
-    if compression == "zstd":
-        import zstandard
-
-        reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data),
-                                                             read_across_frames=True)
-        if complete:
-            try:
-                out = reader.read(size + 1) if size else b""
-            except zstandard.ZstdError as exc:
-                raise _Damaged(f"zstd: {exc}") from exc
-            if len(out) != size:
-                raise _Damaged(f"zstd chunk decompressed to {len(out)} bytes, header says {size}")
-            return out
-        parts, total = [], 0
-        while total < size:
-            try:
-                piece = reader.read(min(1 << 20, size - total))
-            except zstandard.ZstdError:
-                break
-            if not piece:
-                break
-            parts.append(piece)
-            total += len(piece)
-        return b"".join(parts)
-    if compression == "lz4":
-        import lz4.frame
-
-        dec = lz4.frame.LZ4FrameDecompressor()
-        try:
-            out = dec.decompress(bytes(data), max_length=size + 1 if complete else size)
-        except Exception as exc:  # lz4 raises RuntimeError on corrupt frames
-            if complete:
-                raise _Damaged(f"lz4: {exc}") from exc
-            return b""
-        if complete and len(out) != size:
-            raise _Damaged(f"lz4 chunk decompressed to {len(out)} bytes, header says {size}")
-        return out
-    raise _Damaged(f"unsupported chunk compression {compression!r} (supported: '', zstd, lz4)")
-
-
-# ----------------------------------------------------------------------------- decoding
-def _gather(buf, offs, width):
-    """Rows ``buf[offs[k] : offs[k] + width]`` as an (n, width) uint8 array."""
-    return buf[offs[:, None] + np.arange(width)[None, :]]
-
-
-def _cdr_header_fields(buf, offs, lens):
-    """Common CDR prefix: endianness, stamp, frame_id length.
-
-    Returns (ok, little, sec, nsec, flen) arrays; ``ok`` False for payloads too short or with a
-    non-CDR encapsulation.
-    """
-    n = len(offs)
-    ok = lens >= 16
-    little = np.ones(n, bool)
-    sec = np.zeros(n, np.int64)
-    nsec = np.zeros(n, np.int64)
-    flen = np.zeros(n, np.int64)
-    if not ok.any():
-        return ok, little, sec, nsec, flen
-    g = _gather(buf, offs[ok], 16)
-    enc = g[:, 1]
-    good = (g[:, 0] == 0) & ((enc == 0) | (enc == 1))
-    lit = enc == 1
-    body = np.ascontiguousarray(g[:, 4:16])
-    le = body.view("<i4")  # (m, 3): sec, nsec, frame_id length
-    be = body.view(">i4")
-    s = np.where(lit, le[:, 0], be[:, 0]).astype(np.int64)
-    ns = np.where(lit, le[:, 1].view("<u4"), be[:, 1].view(">u4")).astype(np.int64)
-    fl = np.where(lit, le[:, 2].view("<u4"), be[:, 2].view(">u4")).astype(np.int64)
-    idx = np.flatnonzero(ok)
-    ok[idx] = good
-    little[idx] = lit
-    sec[idx], nsec[idx], flen[idx] = s, ns, fl
-    return ok, little, sec, nsec, flen
-
-
-def _align(p, a):
-    return (p + a - 1) // a * a
-
-
-def _decode_ros2(kind, buf, offs, lens, logt):
-    """Bulk-decode ROS 2 CDR messages of one channel from one buffer.
-
-    The layout is fixed once the frame_id length and byte order are known, so messages are
-    grouped by (byte order, frame_id length) and each group is one numpy gather.
-
-    Parameters
-    ----------
-    kind : {"imu", "navsatfix", "pointstamped"}
-    buf : ndarray of uint8
-    offs, lens : ndarray of int64, shape (n,)
-        Payload offsets and lengths in ``buf``.
-    logt : ndarray of int64, shape (n,)
-        MCAP log times (fallback when header.stamp is zero).
-    """
-    ok, little, sec, nsec, flen = _cdr_header_fields(buf, offs, lens)
-    # payload byte offsets (from encapsulation start) of the float64 fields we need
-    base = 4 + _align(12 + flen, 8)  # first 8-aligned position after frame_id
-    if kind == "imu":
-        need = base + 296
-        fields = {"angular_rate": (104, 3), "specific_force": (200, 3)}
-    elif kind == "pointstamped":
-        need = base + 24
-        fields = {"point": (0, 3)}
-    else:  # navsatfix: status int8, service uint16 (2-aligned), then float64s (8-aligned)
-        base = 4 + _align(_align(12 + flen + 1, 2) + 2, 8)
-        need = base + 97
-        fields = {"lat_deg": (0, 1), "lon_deg": (8, 1), "height": (16, 1)}
-    ok &= (lens >= need) & (flen < 1 << 20)
-    keep = np.flatnonzero(ok)
-    n = len(keep)
-    out = {k: np.zeros((n, w)) for k, (o, w) in fields.items()}
-    if n:
-        key = base[keep] * 2 + little[keep]  # one group per (frame_id layout, byte order)
-        if (key == key[0]).all():  # the usual case: one fixed layout for the whole batch
-            keys, inv = key[:1], np.zeros(n, np.int64)
-        else:
-            keys, inv = np.unique(key, return_inverse=True)
-        for gi, k in enumerate(keys):
-            b0, lit = int(k) // 2, bool(k % 2)
-            sel = np.flatnonzero(inv == gi) if len(keys) > 1 else np.arange(n)
-            o = offs[keep[sel]]
-            for name, (rel, w) in fields.items():
-                rows = np.ascontiguousarray(_gather(buf, o + b0 + rel, 8 * w))
-                out[name][sel] = rows.view("<f8" if lit else ">f8").reshape(len(sel), w)
-    t = sec[keep] * 1_000_000_000 + nsec[keep]
-    zero = (sec[keep] == 0) & (nsec[keep] == 0)
-    t = np.where(zero, logt[keep], t)
-    values = {}
-    if kind == "imu":
-        values = {"specific_force": out["specific_force"], "angular_rate": out["angular_rate"]}
-    elif kind == "pointstamped":
-        values = {"height": out["point"][:, 2].copy()}
-    else:
-        values = {k: out[k][:, 0].copy() for k in ("lat_deg", "lon_deg", "height")}
-    return DecodedBlock(t, values, int(zero.sum()), int(len(offs) - n), [], logt[keep])
-
-
-def _get_path(obj, path):
-    for part in path.split("."):
-        if not isinstance(obj, dict) or part not in obj:
-            raise KeyError(path)
-        obj = obj[part]
-    return obj
-
-
-def _as_float(v):
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise TypeError
-    return float(v)
-
-
-def _column(objs, spec):
-    """``[obj[spec] for obj in objs]`` as an ndarray, or None if any is missing/non-numeric."""
-    if "." in spec:
-        col = [_get_path(o, spec) for o in objs]
-    else:
-        col = [o[spec] for o in objs]
-    try:
-        a = np.array(col)
-    except ValueError:  # ragged lists (numpy >= 1.24 refuses them): the per-message path
-        return None
-    if a.dtype.kind not in "fi":  # strings, bools, None, ragged lists, huge ints: slow path
-        return None
-    return a
-
-
-def _decode_json_fast(objs, fields, mapping, logt):
-    """Column-wise extraction when every message is well formed; None -> per-message path."""
-    try:
-        values = {}
-        for name, w in fields:
-            spec = mapping[name]
-            if w == 3 and isinstance(spec, list):
-                cols = [_column(objs, s) for s in spec]
-                if any(c is None or c.ndim != 1 for c in cols):
-                    return None
-                a = np.stack(cols, axis=1)
-            else:
-                a = _column(objs, spec)
-                if a is None or a.shape != ((len(objs), 3) if w == 3 else (len(objs),)):
-                    return None
-            values[name] = a.astype(np.float64)
-        tspec = mapping.get("time")
-        if tspec:
-            t = _column(objs, tspec)
-            if t is None or t.dtype.kind != "i" or t.shape != (len(objs),):
-                return None
-            t = t.astype(np.int64)
-        else:
-            return DecodedBlock(np.asarray(logt, np.int64).copy(), values, len(objs), 0, [],
-                                np.asarray(logt, np.int64).copy())
-    except (KeyError, TypeError, IndexError):
-        return None
-    return DecodedBlock(t, values, 0, 0, [], np.asarray(logt, np.int64).copy())
-
-
-def _decode_json(role, payloads, logt, mapping):
-    """Decode JSON messages of one channel.
-
-    ``mapping`` gives, per quantity, a dotted key path (a 3-list for vectors, or a path to a
-    3-element array), and ``time`` (integer ns; missing -> log time, reported).
-    """
-    if role == "gradient":
-        return _decode_json_gradient(payloads, logt, mapping)
-    try:  # one parse for the whole batch; fall back per message if any is broken
-        objs = json.loads(b"[" + b",".join(payloads) + b"]")
-    except (ValueError, RecursionError):
-        objs = []
-        for p in payloads:
-            try:
-                objs.append(json.loads(p))
-            except (ValueError, RecursionError):
-                objs.append(None)
-    fields = {"imu": (("specific_force", 3), ("angular_rate", 3)),
-              "altimeter": (("height", 1),),
-              "gnss": (("lat_deg", 1), ("lon_deg", 1), ("height", 1))}[role]
-    fast = _decode_json_fast(objs, fields, mapping, logt)
-    if fast is not None:
-        return fast
-    vals = {k: [] for k, _ in fields}
-    times, keep_lt, lts = [], 0, []
-    bad = 0
-    problems = []
-    for k, obj in enumerate(objs):
-        try:
-            row = {}
-            for name, w in fields:
-                spec = mapping[name]
-                if w == 3:
-                    if isinstance(spec, list):
-                        v = [_as_float(_get_path(obj, s)) for s in spec]
-                    else:
-                        v = _get_path(obj, spec)
-                        if not isinstance(v, list) or len(v) != 3:
-                            raise TypeError
-                        v = [_as_float(x) for x in v]
-                else:
-                    v = _as_float(_get_path(obj, spec))
-                row[name] = v
-            tspec = mapping.get("time")
-            try:
-                t = _get_path(obj, tspec) if tspec else None
-            except KeyError:
-                t = None
-            if t is None:
-                t = int(logt[k])
-                keep_lt += 1
-            elif isinstance(t, bool) or not isinstance(t, int):
-                raise TypeError
-        except (KeyError, TypeError, ValueError):
-            bad += 1
-            if len(problems) < 3:
-                problems.append(f"message {k}: fields {dict(mapping)} not all present/numeric")
-            continue
-        for name, _ in fields:
-            vals[name].append(row[name])
-        times.append(t)
-        lts.append(int(logt[k]))
-    values = {}
-    for name, w in fields:
-        values[name] = np.array(vals[name], dtype=np.float64).reshape(-1, w) if w == 3 \
-            else np.array(vals[name], dtype=np.float64)
-    try:
-        t_arr = np.array(times, dtype=np.int64)
-    except OverflowError:
-        t_arr = np.array([min(max(t, -2**63), 2**63 - 1) for t in times], dtype=np.int64)
-    return DecodedBlock(t_arr, values, keep_lt, bad, problems, np.array(lts, dtype=np.int64))
-
-
-#: Row-major positions of the 6 independent components ``xx, xy, xz, yy, yz, zz`` in a 3x3 tensor.
-GRADIENT_UPPER = (0, 1, 2, 4, 5, 8)
-_GRADIENT_EXPAND = (0, 1, 2, 1, 3, 4, 2, 4, 5)  # 6 -> row-major 9
-
-
-def _decode_json_gradient(payloads, logt, mapping):
-    """Decode ``gravsurvey.GravityGradient`` JSON messages.
-
-    The tensor field holds the 6 independent components ``[xx, xy, xz, yy, yz, zz]`` or the 9
-    of the full tensor row by row (then symmetry is checked at ingestion).  Returns values
-    ``{"gradient": (n, 9)}`` row-major, in the file's unit (Eotvos unless configured).
-    """
-    rows, times, lts, bad, problems, keep_lt = [], [], [], 0, [], 0
-    spec, tspec = mapping["gradient"], mapping.get("time")
-    for k, p in enumerate(payloads):
-        try:
-            obj = json.loads(p)
-            v = _get_path(obj, spec)
-            if not isinstance(v, list) or len(v) not in (6, 9):
-                raise TypeError
-            v = [_as_float(x) for x in v]
-            if len(v) == 6:
-                v = [v[i] for i in _GRADIENT_EXPAND]
-            try:
-                t = _get_path(obj, tspec) if tspec else None
-            except KeyError:
-                t = None
-            if t is None:
-                t = int(logt[k])
-                keep_lt += 1
-            elif isinstance(t, bool) or not isinstance(t, int):
-                raise TypeError
-        except (KeyError, TypeError, ValueError, RecursionError):
-            bad += 1
-            if len(problems) < 3:
-                problems.append(f"message {k}: field {spec!r} is not a list of 6 or 9 numbers")
-            continue
-        rows.append(v)
-        times.append(t)
-        lts.append(int(logt[k]))
-    vals = {"gradient": np.array(rows, dtype=np.float64).reshape(-1, 9)}
-    return DecodedBlock(np.array(times, dtype=np.int64), vals, keep_lt, bad, problems,
-                        np.array(lts, dtype=np.int64))
-
-
-def _concat_blocks(blocks):
-    if not blocks:
-        return None
-    if len(blocks) == 1:
-        return blocks[0]
-    vals = {k: np.concatenate([b.values[k] for b in blocks]) for k in blocks[0].values}
-    probs = [p for b in blocks for p in b.problems][:3]
-    return DecodedBlock(np.concatenate([b.time_ns for b in blocks]), vals,
-                        sum(b.log_time_used for b in blocks), sum(b.undecodable for b in blocks),
-                        probs, np.concatenate([b.log_time_ns for b in blocks]),
-                        np.concatenate([b.verified for b in blocks]))
-
-
-def _check_values(blk, role):
-    """Drop the samples of CRC-less data that fail :func:`checks.damaged_values`; count them.
-
-    The count joins ``undecodable`` (so ingestion reports it with the other dropped messages)
-    and the first problem line says why.
-    """
-    if blk is None or blk.verified is None or blk.verified.all() or len(blk.time_ns) == 0:
-        return blk
-    nbad, whys = 0, []
-    # again after each drop: a corrupted run leaves corrupted neighbours, and a spike is only
-    # recognised against neighbours that agree
-    for _ in range(DAMAGE_CHECK_PASSES):
-        bad, why = damaged_values(role, blk.time_ns, blk.log_time_ns, blk.values,
-                                  ~blk.verified)
-        if not bad.any():
-            break
-        nbad += int(bad.sum())
-        whys.append(why)
-        keep = ~bad
-        blk.time_ns, blk.log_time_ns, blk.verified = (blk.time_ns[keep], blk.log_time_ns[keep],
-                                                      blk.verified[keep])
-        blk.values = {k: v[keep] for k, v in blk.values.items()}
-    if not nbad:
-        return blk
-    blk.value_check_dropped = nbad
-    blk.undecodable += nbad
-    blk.problems.insert(0, f"{nbad} samples without a chunk CRC failed the damage checks "
-                           f"({'; '.join(whys)})")
-    return blk
-
-
-# ----------------------------------------------------------------------------- the reader
-DEFAULT_JSON_FIELDS = {
-    "imu": {"time": "time_ns", "specific_force": "specific_force_t",
-            "angular_rate": "angular_rate_t"},
-    "altimeter": {"time": "time_ns", "height": "height_m"},
-    "gnss": {"time": "time_ns", "lat_deg": "lat_deg", "lon_deg": "lon_deg",
-             "height": "height_m"},
-    "gradient": {"time": "time_ns", "gradient": "gradient_t_eotvos"},
-}
-
-
-def _parse_statistics(buf, p):
-    mc, = struct.unpack_from("<Q", buf, p)
-    t0, t1 = struct.unpack_from("<QQ", buf, p + 26)
-    return {"message_count": mc, "message_start_time": t0, "message_end_time": t1}
-
-
-def _summary_records(buf):
-    """The summary section's records via the footer at the file's end, or None.
-
-    Used after damage in the data section: the summary (if the file was finished) still says
-    how many messages and what time span the file held, and where every chunk starts.
-    """
-    size = len(buf)
-    foot = size - 8 - 9 - 20
-    if foot < 8 or bytes(buf[size - 8:]) != MAGIC or buf[foot] != OP_FOOTER:
-        return None
-    (ln, s0) = struct.unpack_from("<QQ", buf, foot + 1)
-    if ln != 20 or s0 == 0 or not 8 <= s0 < foot:
-        return None
-    n, _, _, arrs = scan_records(buf, s0, foot, stop_at_footer=True)
-    return n, arrs
-
-
-def _summary_statistics(buf):
-    """Statistics record of the summary section, or None (see :func:`_summary_records`)."""
-    rec = _summary_records(buf)
-    if rec is None:
-        return None
-    n, arrs = rec
-    for k in range(n):
-        if arrs[0][k] == OP_STATISTICS and arrs[2][k] >= 42:
-            return _parse_statistics(buf, int(arrs[1][k]))
-    return None
-
-
-@dataclass
-class ChunkIndexEntry:
-    """One chunk index record of the summary (times ns, offsets in bytes)."""
-
-    start_time: int
-    end_time: int
-    offset: int
-    length: int
-    message_index_offsets: dict  # channel id -> offset of its message index record
-
-
-def _chunk_index(buf):
-    """Chunk index entries of the summary section sorted by offset (empty when none/damaged)."""
-    rec = _summary_records(buf)
-    if rec is None:
-        return []
-    n, arrs = rec
-    out = []
-    size = len(buf)
-    for k in np.flatnonzero(arrs[0][:n] == OP_CHUNK_INDEX):
-        p, ln = int(arrs[1][k]), int(arrs[2][k])
-        if ln < 36:
-            continue
-        t0, t1, off, clen, mlen = struct.unpack_from("<QQQQI", buf, p)
-        if 36 + mlen > ln or mlen % 10 or not 8 <= off < size or off + clen > size:
-            continue
-        mio = {}
-        for j in range(mlen // 10):
-            cid, o = struct.unpack_from("<HQ", buf, p + 36 + 10 * j)
-            mio[cid] = o
-        out.append(ChunkIndexEntry(t0, t1, off, clen, mio))
-    out.sort(key=lambda e: e.offset)
-    return out
-
-
-def _message_index_count(buf, p):
-    """Entries of the message index record starting at ``p`` (opcode 7), or None."""
-    size = len(buf)
-    if not 0 <= p <= size - 9 - 6 or buf[p] != OP_MESSAGE_INDEX:
-        return None
-    (ln,) = struct.unpack_from("<Q", buf, p + 1)
-    if ln < 6 or p + 9 + ln > size:
-        return None
-    (rl,) = struct.unpack_from("<I", buf, p + 9 + 2)
-    if 6 + rl > ln or rl % 16:
-        return None
-    return rl // 16
 
 
 class _Reader:
@@ -1195,17 +317,17 @@ class _Reader:
         return None
 
     def _handle_schema(self, b, pos, ln, preload=False):
-        s = _parse_schema(b, pos, ln)
+        s = parse_schema(b, pos, ln)
         if s.id == 0:
-            raise _Damaged("schema record with reserved id 0")
+            raise DamagedRecord("schema record with reserved id 0")
         old = self.c.schemas.get(s.id)
         if old is not None and s.id in self.preloaded_schemas and not preload:
             self.preloaded_schemas.discard(s.id)
             if (old.name, old.encoding, old.data) != (s.name, s.encoding, s.data):
                 # two copies disagree: one is damaged; a CRC-checked or the only plausible
                 # copy wins, else the summary's (first) copy stays
-                take = self.verified or (_plausible_name(s.name) and not
-                                         _plausible_name(old.name))
+                take = self.verified or (plausible_name(s.name) and not
+                                         plausible_name(old.name))
                 self.c.notes.append(f"{self.path}: schema id {s.id}: the summary's copy differs "
                                     f"from the data section's; the "
                                     f"{'data section' if take else 'summary'}'s kept")
@@ -1220,7 +342,7 @@ class _Reader:
         self.c.schemas.setdefault(s.id, s)
 
     def _handle_channel(self, b, pos, ln, preload=False):
-        ch = _parse_channel(b, pos, ln)
+        ch = parse_channel(b, pos, ln)
         old = self.c.channels.get(ch.id)
         if old is not None and ch.id in self.preloaded_channels and not preload:
             self.preloaded_channels.discard(ch.id)
@@ -1229,9 +351,9 @@ class _Reader:
                 # two copies disagree: one is damaged; a CRC-checked or the only plausible
                 # copy wins, else the summary's (first) copy stays
                 take = self.verified or (
-                    _plausible_name(ch.topic) and _plausible_name(ch.message_encoding)
-                    and not (_plausible_name(old.topic)
-                             and _plausible_name(old.message_encoding)))
+                    plausible_name(ch.topic) and plausible_name(ch.message_encoding)
+                    and not (plausible_name(old.topic)
+                             and plausible_name(old.message_encoding)))
                 self.c.notes.append(f"{self.path}: channel id {ch.id}: the summary's copy "
                                     "differs from the data section's; the "
                                     f"{'data section' if take else 'summary'}'s kept")
@@ -1298,9 +420,9 @@ class _Reader:
             if kind == "json":
                 o, ln_ = mpos[sel], mlen[sel]
                 payloads = [bytes(buf[o[k]:o[k] + ln_[k]]) for k in range(len(o))]
-                blk = _decode_json(role, payloads, mlt[sel], self.json_fields[role])
+                blk = decode_json(role, payloads, mlt[sel], self.json_fields[role])
             else:
-                blk = _decode_ros2(kind, buf, mpos[sel], mlen[sel], mlt[sel])
+                blk = decode_ros2(kind, buf, mpos[sel], mlen[sel], mlt[sel])
             blk.verified = np.full(len(blk.time_ns), self.verified)
             self.blocks.setdefault(cid, []).append((role, blk))
 
@@ -1311,28 +433,28 @@ class _Reader:
         """
         end = pos + ln
         if ln < 8 * 3 + 4:
-            raise _Damaged("chunk header too short")
+            raise DamagedRecord("chunk header too short")
         t_start, t_end, usize, ucrc = struct.unpack_from("<QQQI", b, pos)
         self.chunk_start_time, self.chunk_end_time = t_start, t_end
-        comp, p = _str(b, pos + 28, end)
+        comp, p = read_string(b, pos + 28, end)
         if p + 8 > end:
-            raise _Damaged("chunk records length beyond record")
+            raise DamagedRecord("chunk records length beyond record")
         (rlen,) = struct.unpack_from("<Q", b, p)
         p += 8
         if usize > self.max_record_bytes:
-            raise _Damaged(f"chunk declares {usize} uncompressed bytes, above the "
+            raise DamagedRecord(f"chunk declares {usize} uncompressed bytes, above the "
                            f"{self.max_record_bytes}-byte limit (max_record_bytes)")
         avail = end - p
         if complete and rlen > avail:
-            raise _Damaged("chunk records beyond record")
+            raise DamagedRecord("chunk records beyond record")
         data = b[p:p + min(rlen, avail)]
         self.chunk_content_end = p + rlen
-        out = _decompress(comp, data, usize, complete)
+        out = decompress_chunk(comp, data, usize, complete)
         self.verified = False
         if complete and self.check_crc and ucrc != 0:
             if zlib.crc32(out) != ucrc:
                 self._rescue_definitions(np.frombuffer(out, np.uint8))
-                raise _Damaged("chunk CRC mismatch")
+                raise DamagedRecord("chunk CRC mismatch")
             self.verified = True
         self.c.compressions.add(comp or "none")
         self.c.chunks += 1
@@ -1351,17 +473,17 @@ class _Reader:
             p, ln = int(arrs[1][k]), int(arrs[2][k])
             try:
                 if arrs[0][k] == OP_SCHEMA:
-                    sch = _parse_schema(cbuf, p, ln)
+                    sch = parse_schema(cbuf, p, ln)
                     if sch.id != 0 and sch.id not in self.c.schemas:
                         self.c.schemas[sch.id] = sch
                         got.append(f"schema {sch.id} ({sch.name})")
                 else:
-                    ch = _parse_channel(cbuf, p, ln)
+                    ch = parse_channel(cbuf, p, ln)
                     if ch.id not in self.c.channels:
                         self.c.channels[ch.id] = ch
                         self.known[ch.id] = True
                         got.append(f"channel {ch.id} ({ch.topic})")
-            except _Damaged:
+            except DamagedRecord:
                 continue
         if got:
             self.c.notes.append(f"{self.path}: definitions taken from a chunk that failed its "
@@ -1370,7 +492,7 @@ class _Reader:
     def _inner(self, cbuf, complete):
         n, _, status, arrs = scan_records(cbuf, 0, len(cbuf))
         if status != SCAN_OK and complete:
-            raise _Damaged("inconsistent record inside a chunk")
+            raise DamagedRecord("inconsistent record inside a chunk")
         ops, pos, lens = arrs[0], arrs[1], arrs[2]
         self._definitions(cbuf, ops, pos, lens)
         self._messages(cbuf, ops, pos, lens, *arrs[3:])
@@ -1406,15 +528,15 @@ class _Reader:
             self.prev_op = op
             try:
                 if not self.data_end_seen and op in SUMMARY_ONLY_OPS:
-                    raise _Damaged(f"summary record (opcode {op}) inside the data section")
+                    raise DamagedRecord(f"summary record (opcode {op}) inside the data section")
                 if op == OP_MESSAGE_INDEX and prev not in (OP_CHUNK, OP_MESSAGE_INDEX):
-                    raise _Damaged("message index record not after a chunk")
+                    raise DamagedRecord("message index record not after a chunk")
                 if op > OP_DATA_END:
                     self.unknown_records += 1
                 self.verified = False  # top-level records carry no CRC
                 if op == OP_HEADER:
-                    c.profile, q = _str(buf, p, p + ln)
-                    c.library, _ = _str(buf, q, p + ln)
+                    c.profile, q = read_string(buf, p, p + ln)
+                    c.library, _ = read_string(buf, q, p + ln)
                 elif op == OP_SCHEMA:
                     self._handle_schema(buf, p, ln)
                 elif op == OP_CHANNEL:
@@ -1426,15 +548,15 @@ class _Reader:
                     self.cur_chunk = (p - 9, p + ln, self.n_msgs - before,
                                       self.chunk_start_time, self.chunk_end_time)
                 elif op == OP_MESSAGE_INDEX and self.cur_chunk is not None:
-                    cnt = _message_index_count(buf, p - 9)
+                    cnt = message_index_count(buf, p - 9)
                     self.cur_index_count += cnt or 0
                 elif op == OP_STATISTICS and ln >= 42:
-                    c.statistics = _parse_statistics(buf, p)
+                    c.statistics = parse_statistics(buf, p)
                 elif op == OP_DATA_END:
                     self.data_end_seen = True
                 elif op == OP_FOOTER:
                     self.footer_seen = True
-            except _Damaged as exc:
+            except DamagedRecord as exc:
                 return k, str(exc)
             k += 1
         return None, ""
@@ -1455,7 +577,7 @@ class _Reader:
 
     def _chunk_index(self):
         if self._index is None:
-            self._index = _chunk_index(self.buf)
+            self._index = chunk_index(self.buf)
         return self._index
 
     def _resync(self, start, exclude=-1):
@@ -1488,7 +610,7 @@ class _Reader:
         counts = []
         if idx:
             for e in idx:
-                counts += [_message_index_count(self.buf, o)
+                counts += [message_index_count(self.buf, o)
                            for o in e.message_index_offsets.values()]
             region.lost_start_ns = min(e.start_time for e in idx)
             region.lost_end_ns = max(e.end_time for e in idx)
@@ -1496,7 +618,7 @@ class _Reader:
             p, size = damaged_chunk_end, len(self.buf)
             counts = []
             while p < size and self.buf[p] == OP_MESSAGE_INDEX:
-                cnt = _message_index_count(self.buf, p)
+                cnt = message_index_count(self.buf, p)
                 if cnt is None:
                     break
                 counts.append(cnt)
@@ -1567,7 +689,7 @@ class _Reader:
                     damaged_chunk_end = int(rpos[kfail] + arrs[2][kfail])
                     # its length is sound when records chain up right after it: resume there
                     # (not inside it, where an uncompressed chunk's own records would chain)
-                    if damaged_chunk_end == size or _chain_at(buf, damaged_chunk_end, size,
+                    if damaged_chunk_end == size or chain_at(buf, damaged_chunk_end, size,
                                                               self.known, RESYNC_MIN_CHAIN):
                         resume = damaged_chunk_end
                 if resume == -1:
@@ -1575,10 +697,10 @@ class _Reader:
             elif look is not None:
                 dstart, resume = look
                 why = ("a record's declared length disagrees with the records that follow "
-                       f"(break at byte {endpos}: {_SCAN_REASONS.get(status, 'bad record')})")
+                       f"(break at byte {endpos}: {SCAN_REASONS.get(status, 'bad record')})")
             elif status != SCAN_OK:
                 dstart = endpos
-                why = _SCAN_REASONS.get(status, "bad record")
+                why = SCAN_REASONS.get(status, "bad record")
                 if status == SCAN_BEYOND_END:
                     (ln,) = struct.unpack_from("<Q", buf, endpos + 1)
                     if ln > self.max_record_bytes and ln > size:
@@ -1632,7 +754,7 @@ class _Reader:
         them first keeps messages decodable when the record that first defined their channel
         is damaged.
         """
-        rec = _summary_records(self.buf)
+        rec = summary_records(self.buf)
         if rec is None:
             return
         n, arrs = rec
@@ -1642,7 +764,7 @@ class _Reader:
                     self._handle_schema(self.buf, int(arrs[1][k]), int(arrs[2][k]), True)
                 else:
                     self._handle_channel(self.buf, int(arrs[1][k]), int(arrs[2][k]), True)
-            except _Damaged:
+            except DamagedRecord:
                 pass
 
     def _salvage_cut_chunk(self, at, region):
@@ -1658,7 +780,7 @@ class _Reader:
             cb = self._chunk(self.buf, at + 9, size - at - 9, False)
             self.verified = False
             self._inner(cb, False)
-        except _Damaged:
+        except DamagedRecord:
             pass
 
     def _finish(self, regions, tail_status, tail_at):
@@ -1687,7 +809,7 @@ class _Reader:
         else:
             first = regions[0]
             if c.statistics is None:
-                c.statistics = _summary_statistics(buf)
+                c.statistics = summary_statistics(buf)
             info = SalvageInfo(first.start, size, first.reason, self.n_msgs, self.last_lt,
                                regions=regions)
             tail = regions[-1] if not regions[-1].resumed else None
@@ -1717,18 +839,11 @@ class _Reader:
             c.log_times[cid] = np.concatenate(parts)
         for cid, blocks in self.blocks.items():
             role = blocks[0][0]
-            c.decoded[cid] = _check_values(_concat_blocks([b for _, b in blocks]), role)
+            c.decoded[cid] = check_values(concat_blocks([b for _, b in blocks]), role)
         if self.keep_raw:
             order = sorted(range(len(c.raw)), key=lambda i: c.raw[i][2])
             c.raw = [c.raw[i] for i in order]
 
-
-_SCAN_REASONS = {SCAN_SHORT_HEADER: "file ends inside a record header",
-                 SCAN_BEYOND_END: "a record's declared length runs past the end of the file",
-                 SCAN_BAD_MESSAGE: "a message record shorter than its header",
-                 SCAN_BAD_OPCODE: "record with opcode 0",
-                 SCAN_UNKNOWN_CHANNEL: "a message on a channel no earlier record defined",
-                 SCAN_EARLY_FOOTER: "a footer record before the end of the file"}
 
 
 def _opcode_at(buf, p):
