@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-# schema names by role, for topic auto-detection
+#: Schema names by role, for topic auto-detection.
 ROLE_SCHEMAS = {
     "imu": ("sensor_msgs/msg/Imu", "sensor_msgs/Imu", "gravsurvey.Imu"),
     "altimeter": ("geometry_msgs/msg/PointStamped", "geometry_msgs/PointStamped",
@@ -21,6 +21,7 @@ ROLE_SCHEMAS = {
     # optional gravity-gradient channel (JSON only; docs/formats.md)
     "gradient": ("gravsurvey.GravityGradient",),
 }
+#: ROS 2 schema names the CDR decoder understands (ROS 1 style names included).
 ROS2_IMU = ("sensor_msgs/msg/Imu", "sensor_msgs/Imu")
 ROS2_NAVSATFIX = ("sensor_msgs/msg/NavSatFix", "sensor_msgs/NavSatFix")
 ROS2_POINTSTAMPED = ("geometry_msgs/msg/PointStamped", "geometry_msgs/PointStamped")
@@ -32,8 +33,9 @@ class DecodedBlock:
 
     ``values`` maps field names to float64 arrays: ``specific_force`` (n, 3),
     ``angular_rate`` (n, 3) for IMU; ``height`` (n,) for altimeter; ``lat_deg``, ``lon_deg``,
-    ``height`` (n,) for GNSS.  ``time_ns`` int64 (n,) is the measurement time; ``log_time_used``
-    counts messages whose time fell back to the MCAP log time.
+    ``height`` (n,) for GNSS; ``gradient`` (n, 9) row-major for the gradient channel.
+    ``time_ns`` int64 (n,) is the measurement time; ``log_time_used`` counts messages whose
+    time fell back to the MCAP log time.
     """
 
     time_ns: np.ndarray
@@ -46,7 +48,7 @@ class DecodedBlock:
     value_check_dropped: int = 0  # unverified samples dropped by checks.damaged_values
 
 
-# ----------------------------------------------------------------------------- the reader
+#: Per role, the JSON key path of each quantity (``read_mcap(json_fields=...)`` overrides keys).
 DEFAULT_JSON_FIELDS = {
     "imu": {"time": "time_ns", "specific_force": "specific_force_t",
             "angular_rate": "angular_rate_t"},
@@ -56,7 +58,7 @@ DEFAULT_JSON_FIELDS = {
     "gradient": {"time": "time_ns", "gradient": "gradient_t_eotvos"},
 }
 
-# ----------------------------------------------------------------------------- decoding
+
 def _gather(buf, offs, width):
     """Rows ``buf[offs[k] : offs[k] + width]`` as an (n, width) uint8 array."""
     return buf[offs[:, None] + np.arange(width)[None, :]]
@@ -111,6 +113,14 @@ def decode_ros2(kind, buf, offs, lens, logt):
         Payload offsets and lengths in ``buf``.
     logt : ndarray of int64, shape (n,)
         MCAP log times (fallback when header.stamp is zero).
+
+    Returns
+    -------
+    DecodedBlock
+        ``imu``: ``specific_force`` and ``angular_rate`` (m, 3) in m/s^2 and rad/s as the
+        message holds them; ``pointstamped``: ``height`` (m,) (point.z, m); ``navsatfix``:
+        ``lat_deg``, ``lon_deg``, ``height`` (m,).  Payloads too short or not CDR are counted
+        in ``undecodable`` (m <= n).
     """
     ok, little, sec, nsec, flen = _cdr_header_fields(buf, offs, lens)
     # payload byte offsets (from encapsulation start) of the float64 fields we need
@@ -217,8 +227,23 @@ def _decode_json_fast(objs, fields, mapping, logt):
 def decode_json(role, payloads, logt, mapping):
     """Decode JSON messages of one channel.
 
-    ``mapping`` gives, per quantity, a dotted key path (a 3-list for vectors, or a path to a
-    3-element array), and ``time`` (integer ns; missing -> log time, reported).
+    Parameters
+    ----------
+    role : {"imu", "altimeter", "gnss", "gradient"}
+    payloads : list of bytes, length n
+        One JSON object per message.
+    logt : ndarray of int64, shape (n,)
+        MCAP log times (ns), the fallback for a message without a time field.
+    mapping : dict
+        Per quantity a dotted key path (for vectors a 3-list of paths, or a path to a
+        3-element array), and ``time`` (integer ns; missing -> log time, reported); see
+        ``DEFAULT_JSON_FIELDS``.
+
+    Returns
+    -------
+    DecodedBlock
+        Messages lacking a field or holding a non-number are counted in ``undecodable``, the
+        first three described in ``problems``.
     """
     if role == "gradient":
         return _decode_json_gradient(payloads, logt, mapping)
@@ -333,6 +358,18 @@ def _decode_json_gradient(payloads, logt, mapping):
 
 
 def concat_blocks(blocks):
+    """One block of a channel from its blocks in file order (per chunk or run of messages).
+
+    Parameters
+    ----------
+    blocks : list of DecodedBlock
+        Each with ``log_time_ns`` and ``verified`` set.
+
+    Returns
+    -------
+    DecodedBlock or None
+        None for no blocks; the only block itself (not a copy) for one.
+    """
     if not blocks:
         return None
     if len(blocks) == 1:
@@ -343,4 +380,3 @@ def concat_blocks(blocks):
                         sum(b.log_time_used for b in blocks), sum(b.undecodable for b in blocks),
                         probs, np.concatenate([b.log_time_ns for b in blocks]),
                         np.concatenate([b.verified for b in blocks]))
-

@@ -845,7 +845,6 @@ class _Reader:
             c.raw = [c.raw[i] for i in order]
 
 
-
 def _opcode_at(buf, p):
     """Opcode byte at ``p`` (-1 beyond the buffer)."""
     return int(buf[p]) if 0 <= p < len(buf) else -1

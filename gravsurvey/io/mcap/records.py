@@ -13,14 +13,39 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gravsurvey.io.mcap.scan import MAGIC, OP_CHUNK_INDEX, OP_FOOTER, OP_MESSAGE_INDEX, OP_STATISTICS, scan_records
+from gravsurvey.io.mcap.scan import (MAGIC, OP_CHUNK_INDEX, OP_FOOTER, OP_MESSAGE_INDEX,
+                                     OP_STATISTICS, scan_records)
 
-# ----------------------------------------------------------------------------- record parsing
+
 class DamagedRecord(Exception):
-    """Internal: a record's content is inconsistent (caught, turned into salvage)."""
+    """A record's content is inconsistent with its own lengths or checks.
+
+    Raised by the parsers of this module and by the reader's chunk handling; the reader
+    always catches it and turns it into a :class:`~gravsurvey.io.mcap.reader.SkippedRegion`
+    (its message is the region's reason), so it never reaches the user.
+    """
 
 
 def read_string(b, pos, end):
+    """An MCAP string (uint32 byte length, UTF-8 bytes) at ``pos``, within ``end``.
+
+    Parameters
+    ----------
+    b : buffer (bytes or ndarray of uint8)
+    pos, end : int
+        Byte offset of the length prefix; offset the string must end by (the record's end).
+
+    Returns
+    -------
+    text : str
+    next_pos : int
+        Offset just after the string.
+
+    Raises
+    ------
+    DamagedRecord
+        The string runs beyond ``end`` or is not UTF-8.
+    """
     if pos + 4 > end:
         raise DamagedRecord("string length beyond record")
     (n,) = struct.unpack_from("<I", b, pos)
@@ -42,11 +67,37 @@ def _bytes32(b, pos, end):
 
 
 def plausible_name(s):
-    """A topic/schema name/encoding that could be real: non-empty, printable."""
+    """A topic/schema name/encoding that could be real: non-empty, printable.
+
+    Parameters
+    ----------
+    s : str
+
+    Returns
+    -------
+    bool
+    """
     return bool(s) and s.isprintable()
 
 
 def parse_schema(b, pos, ln):
+    """Schema record whose content is ``b[pos:pos + ln]``.
+
+    Parameters
+    ----------
+    b : buffer (bytes or ndarray of uint8)
+    pos, ln : int
+        Content offset and length in bytes (after the opcode and length field).
+
+    Returns
+    -------
+    SchemaInfo
+
+    Raises
+    ------
+    DamagedRecord
+        A field runs beyond the record or a string is not UTF-8.
+    """
     end = pos + ln
     if ln < 2:
         raise DamagedRecord("schema record too short")
@@ -58,6 +109,23 @@ def parse_schema(b, pos, ln):
 
 
 def parse_channel(b, pos, ln):
+    """Channel record whose content is ``b[pos:pos + ln]``.
+
+    Parameters
+    ----------
+    b : buffer (bytes or ndarray of uint8)
+    pos, ln : int
+        Content offset and length in bytes (after the opcode and length field).
+
+    Returns
+    -------
+    ChannelInfo
+
+    Raises
+    ------
+    DamagedRecord
+        A field or the metadata map runs beyond the record, or a string is not UTF-8.
+    """
     end = pos + ln
     if ln < 4:
         raise DamagedRecord("channel record too short")
@@ -100,12 +168,31 @@ class ChannelInfo:
     metadata: dict
 
 
-# ----------------------------------------------------------------------------- decompression
 def decompress_chunk(compression, data, size, complete):
     """Decompress one chunk's records, never producing more than ``size`` bytes.
 
-    ``complete`` False: the chunk was cut by the end of the file; return what the available
-    bytes decode to (possibly less than ``size``).  Raises DamagedRecord on failure.
+    Parameters
+    ----------
+    compression : str
+        The chunk's compression field: ``""``, ``"zstd"`` or ``"lz4"``.
+    data : buffer
+        The chunk's compressed records (sliced from the file, not copied).
+    size : int
+        Uncompressed size in bytes the chunk header declares (the caller has checked it
+        against ``max_record_bytes``).
+    complete : bool
+        False: the chunk was cut by the end of the file; return what the available bytes
+        decode to (possibly less than ``size``).
+
+    Returns
+    -------
+    bytes
+
+    Raises
+    ------
+    DamagedRecord
+        Unsupported compression, a corrupt stream, or (``complete``) a size other than
+        ``size``.
     """
     if compression == "":
         if complete and len(data) != size:
@@ -122,7 +209,8 @@ def decompress_chunk(compression, data, size, complete):
             except zstandard.ZstdError as exc:
                 raise DamagedRecord(f"zstd: {exc}") from exc
             if len(out) != size:
-                raise DamagedRecord(f"zstd chunk decompressed to {len(out)} bytes, header says {size}")
+                raise DamagedRecord(f"zstd chunk decompressed to {len(out)} bytes, header says "
+                                    f"{size}")
             return out
         parts, total = [], 0
         while total < size:
@@ -152,6 +240,20 @@ def decompress_chunk(compression, data, size, complete):
 
 
 def parse_statistics(buf, p):
+    """Statistics record content at ``p`` (at least 42 bytes: the caller checks).
+
+    Parameters
+    ----------
+    buf : buffer
+    p : int
+        Content offset.
+
+    Returns
+    -------
+    dict
+        ``message_count``, ``message_start_time`` and ``message_end_time`` (ns since the
+        Unix epoch).
+    """
     mc, = struct.unpack_from("<Q", buf, p)
     t0, t1 = struct.unpack_from("<QQ", buf, p + 26)
     return {"message_count": mc, "message_start_time": t0, "message_end_time": t1}
@@ -162,6 +264,17 @@ def summary_records(buf):
 
     Used after damage in the data section: the summary (if the file was finished) still says
     how many messages and what time span the file held, and where every chunk starts.
+
+    Parameters
+    ----------
+    buf : ndarray of uint8
+        The whole file.
+
+    Returns
+    -------
+    (n, arrays) or None
+        As :func:`~gravsurvey.io.mcap.scan.scan_records` over the summary section; None when
+        the file has no intact footer, closing magic or summary offset.
     """
     size = len(buf)
     foot = size - 8 - 9 - 20
@@ -175,7 +288,18 @@ def summary_records(buf):
 
 
 def summary_statistics(buf):
-    """Statistics record of the summary section, or None (see :func:`summary_records`)."""
+    """Statistics record of the summary section, or None (see :func:`summary_records`).
+
+    Parameters
+    ----------
+    buf : ndarray of uint8
+        The whole file.
+
+    Returns
+    -------
+    dict or None
+        As :func:`parse_statistics`.
+    """
     rec = summary_records(buf)
     if rec is None:
         return None
@@ -198,7 +322,18 @@ class ChunkIndexEntry:
 
 
 def chunk_index(buf):
-    """Chunk index entries of the summary section sorted by offset (empty when none/damaged)."""
+    """Chunk index entries of the summary section sorted by offset (empty when none/damaged).
+
+    Parameters
+    ----------
+    buf : ndarray of uint8
+        The whole file.
+
+    Returns
+    -------
+    list of ChunkIndexEntry
+        Entries whose offsets and lengths lie inside the file.
+    """
     rec = summary_records(buf)
     if rec is None:
         return []
@@ -222,7 +357,20 @@ def chunk_index(buf):
 
 
 def message_index_count(buf, p):
-    """Entries of the message index record starting at ``p`` (opcode 7), or None."""
+    """Entries of the message index record starting at ``p`` (opcode 7), or None.
+
+    Parameters
+    ----------
+    buf : ndarray of uint8
+        The whole file.
+    p : int
+        Offset of the record's opcode byte.
+
+    Returns
+    -------
+    int or None
+        Messages the record lists; None when there is no sound message index record at ``p``.
+    """
     size = len(buf)
     if not 0 <= p <= size - 9 - 6 or buf[p] != OP_MESSAGE_INDEX:
         return None

@@ -32,7 +32,7 @@ SCAN_EARLY_FOOTER = 6  # (reader only) a footer record that does not end the fil
 SUMMARY_ONLY_OPS = (OP_CHUNK_INDEX, OP_ATTACHMENT_INDEX, OP_STATISTICS, OP_METADATA_INDEX,
                     OP_SUMMARY_OFFSET)
 
-# ----------------------------------------------------------------------------- record scanning
+
 @numba.njit(cache=True)
 def _u64(buf, i):
     v = np.uint64(0)
@@ -172,6 +172,13 @@ def scan_records(buf, start, end, stop_at_footer=False, use_kernel=True, known=N
 
     Parameters
     ----------
+    buf : ndarray of uint8
+    start, end : int
+        Byte range to walk (``start`` at an opcode byte).
+    stop_at_footer : bool
+        Top level (True) or inside a chunk (False): see :func:`_scan_kernel`.
+    use_kernel : bool
+        False: the pure-Python reference (same outputs; for tests).
     known : ndarray of bool, shape (65536,), optional
         Channel ids defined before ``start``; given, a message on an undefined channel stops
         the scan with ``SCAN_UNKNOWN_CHANNEL`` (see :func:`_scan_kernel`).
@@ -205,6 +212,20 @@ def chain_at(buf, p, end, known, min_chain):
     magic.  The chain counts when ``min_chain`` records follow one another, or at least one
     does and the chain ends exactly at ``end``, or with a record cut by ``end`` (a truncated
     file), or at the footer.
+
+    Parameters
+    ----------
+    buf : ndarray of uint8
+    p, end : int
+        Candidate offset of an opcode byte; end of the readable bytes.
+    known : ndarray of bool, shape (65536,)
+        Channel ids defined so far.
+    min_chain : int
+        Records that must follow one another.
+
+    Returns
+    -------
+    bool
     """
     count = 0
     while count < min_chain:
@@ -300,6 +321,7 @@ def find_resync(buf, start, end, known, min_chain=4, opcode=0, use_kernel=True):
     return _resync_reference(buf, start, end, known, min_chain, opcode)
 
 
+#: Why a scan stopped (``SCAN_*`` code -> reason in salvage reports).
 SCAN_REASONS = {SCAN_SHORT_HEADER: "file ends inside a record header",
                  SCAN_BEYOND_END: "a record's declared length runs past the end of the file",
                  SCAN_BAD_MESSAGE: "a message record shorter than its header",

@@ -16,6 +16,17 @@ def check_values(blk, role):
 
     The count joins ``undecodable`` (so ingestion reports it with the other dropped messages)
     and the first problem line says why.
+
+    Parameters
+    ----------
+    blk : DecodedBlock or None
+        One channel's samples with ``verified`` (bool (n,)) and ``log_time_ns`` set.
+    role : {"imu", "altimeter", "gnss", "gradient"}
+
+    Returns
+    -------
+    DecodedBlock or None
+        ``blk`` itself, its arrays shortened in place when samples were dropped.
     """
     if blk is None or blk.verified is None or blk.verified.all() or len(blk.time_ns) == 0:
         return blk
@@ -40,4 +51,3 @@ def check_values(blk, role):
     blk.problems.insert(0, f"{nbad} samples without a chunk CRC failed the damage checks "
                            f"({'; '.join(whys)})")
     return blk
-
