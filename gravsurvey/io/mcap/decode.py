@@ -179,6 +179,23 @@ def _as_float(v):
     return float(v)
 
 
+def _message_time(obj, tspec, log_time):
+    """A JSON message's time (integer ns) at key path ``tspec``, else its MCAP log time.
+
+    Returns ``(time_ns, used_log_time)``; raises TypeError when the field holds anything but
+    an integer (the message is then undecodable).
+    """
+    try:
+        t = _get_path(obj, tspec) if tspec else None
+    except KeyError:
+        t = None
+    if t is None:
+        return int(log_time), True
+    if isinstance(t, bool) or not isinstance(t, int):
+        raise TypeError
+    return t, False
+
+
 def _column(objs, spec):
     """``[obj[spec] for obj in objs]`` as an ndarray, or None if any is missing/non-numeric."""
     if "." in spec:
@@ -282,16 +299,8 @@ def decode_json(role, payloads, logt, mapping):
                 else:
                     v = _as_float(_get_path(obj, spec))
                 row[name] = v
-            tspec = mapping.get("time")
-            try:
-                t = _get_path(obj, tspec) if tspec else None
-            except KeyError:
-                t = None
-            if t is None:
-                t = int(logt[k])
-                keep_lt += 1
-            elif isinstance(t, bool) or not isinstance(t, int):
-                raise TypeError
+            t, used_log_time = _message_time(obj, mapping.get("time"), logt[k])
+            keep_lt += used_log_time
         except (KeyError, TypeError, ValueError):
             bad += 1
             if len(problems) < 3:
@@ -335,15 +344,8 @@ def _decode_json_gradient(payloads, logt, mapping):
             v = [_as_float(x) for x in v]
             if len(v) == 6:
                 v = [v[i] for i in _GRADIENT_EXPAND]
-            try:
-                t = _get_path(obj, tspec) if tspec else None
-            except KeyError:
-                t = None
-            if t is None:
-                t = int(logt[k])
-                keep_lt += 1
-            elif isinstance(t, bool) or not isinstance(t, int):
-                raise TypeError
+            t, used_log_time = _message_time(obj, tspec, logt[k])
+            keep_lt += used_log_time
         except (KeyError, TypeError, ValueError, RecursionError):
             bad += 1
             if len(problems) < 3:

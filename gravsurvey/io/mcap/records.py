@@ -109,22 +109,10 @@ def parse_schema(b, pos, ln):
 
 
 def parse_channel(b, pos, ln):
-    """Channel record whose content is ``b[pos:pos + ln]``.
+    """Channel record whose content is ``b[pos:pos + ln]`` (arguments as :func:`parse_schema`).
 
-    Parameters
-    ----------
-    b : buffer (bytes or ndarray of uint8)
-    pos, ln : int
-        Content offset and length in bytes (after the opcode and length field).
-
-    Returns
-    -------
-    ChannelInfo
-
-    Raises
-    ------
-    DamagedRecord
-        A field or the metadata map runs beyond the record, or a string is not UTF-8.
+    Returns a :class:`ChannelInfo`; raises :class:`DamagedRecord` when a field or the metadata
+    map runs beyond the record, or a string is not UTF-8.
     """
     end = pos + ln
     if ln < 4:
@@ -288,17 +276,10 @@ def summary_records(buf):
 
 
 def summary_statistics(buf):
-    """Statistics record of the summary section, or None (see :func:`summary_records`).
+    """Statistics record of the summary section of the file ``buf`` (ndarray of uint8).
 
-    Parameters
-    ----------
-    buf : ndarray of uint8
-        The whole file.
-
-    Returns
-    -------
-    dict or None
-        As :func:`parse_statistics`.
+    Returns the dict of :func:`parse_statistics`, or None when the file has no readable summary
+    (see :func:`summary_records`) or no statistics record in it.
     """
     rec = summary_records(buf)
     if rec is None:
@@ -324,15 +305,8 @@ class ChunkIndexEntry:
 def chunk_index(buf):
     """Chunk index entries of the summary section sorted by offset (empty when none/damaged).
 
-    Parameters
-    ----------
-    buf : ndarray of uint8
-        The whole file.
-
-    Returns
-    -------
-    list of ChunkIndexEntry
-        Entries whose offsets and lengths lie inside the file.
+    ``buf`` is the whole file (ndarray of uint8); returns a list of :class:`ChunkIndexEntry`,
+    only those whose offsets and lengths lie inside the file.
     """
     rec = summary_records(buf)
     if rec is None:
