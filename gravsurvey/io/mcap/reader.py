@@ -237,17 +237,16 @@ class McapContent:
     compressions: set = field(default_factory=set)
 
     def role_of_schema(self, cid):
-        ch = self.channels.get(cid)
-        if ch is None:
-            return None
-        sch = self.schemas.get(ch.schema_id)
-        name = sch.name if sch else ""
+        """Role (``imu``, ``altimeter``, ``gnss``, ``gradient``) that channel ``cid``'s schema
+        name identifies (``ROLE_SCHEMAS``), or None."""
+        name = self.schema_name(cid)
         for role, names in ROLE_SCHEMAS.items():
             if name in names:
                 return role
         return None
 
     def schema_name(self, cid):
+        """Schema name of channel ``cid`` ("" for an unknown channel, schema or schemaless)."""
         ch = self.channels.get(cid)
         sch = self.schemas.get(ch.schema_id) if ch else None
         return sch.name if sch else ""
