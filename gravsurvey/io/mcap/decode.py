@@ -196,6 +196,15 @@ def _message_time(obj, tspec, log_time):
     return t, False
 
 
+def _int64_times(times):
+    """Integer ns times as int64 (n,); values beyond the int64 range are clamped to it (the
+    time checks at ingestion then report them) rather than failing the whole channel."""
+    try:
+        return np.array(times, dtype=np.int64)
+    except OverflowError:
+        return np.array([min(max(t, -2**63), 2**63 - 1) for t in times], dtype=np.int64)
+
+
 def _column(objs, spec):
     """``[obj[spec] for obj in objs]`` as an ndarray, or None if any is missing/non-numeric."""
     if "." in spec:
@@ -314,11 +323,8 @@ def decode_json(role, payloads, logt, mapping):
     for name, w in fields:
         values[name] = np.array(vals[name], dtype=np.float64).reshape(-1, w) if w == 3 \
             else np.array(vals[name], dtype=np.float64)
-    try:
-        t_arr = np.array(times, dtype=np.int64)
-    except OverflowError:
-        t_arr = np.array([min(max(t, -2**63), 2**63 - 1) for t in times], dtype=np.int64)
-    return DecodedBlock(t_arr, values, keep_lt, bad, problems, np.array(lts, dtype=np.int64))
+    return DecodedBlock(_int64_times(times), values, keep_lt, bad, problems,
+                        np.array(lts, dtype=np.int64))
 
 
 #: Row-major positions of the 6 independent components ``xx, xy, xz, yy, yz, zz`` in a 3x3 tensor.
@@ -355,7 +361,7 @@ def _decode_json_gradient(payloads, logt, mapping):
         times.append(t)
         lts.append(int(logt[k]))
     vals = {"gradient": np.array(rows, dtype=np.float64).reshape(-1, 9)}
-    return DecodedBlock(np.array(times, dtype=np.int64), vals, keep_lt, bad, problems,
+    return DecodedBlock(_int64_times(times), vals, keep_lt, bad, problems,
                         np.array(lts, dtype=np.int64))
 
 
