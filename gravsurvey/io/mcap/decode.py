@@ -59,6 +59,37 @@ DEFAULT_JSON_FIELDS = {
 }
 
 
+def decoder_kind(role, schema_name, message_encoding):
+    """How a channel's payloads decode, given the role it was assigned.
+
+    Parameters
+    ----------
+    role : {"imu", "altimeter", "gnss", "gradient"}
+        From the configured topic, else from the schema name (``ROLE_SCHEMAS``).
+    schema_name, message_encoding : str
+        The channel's schema name ("" when schemaless) and message encoding.
+
+    Returns
+    -------
+    (role, kind) or None
+        ``kind`` is ``"json"`` (:func:`decode_json`) or a ROS 2 CDR layout for
+        :func:`decode_ros2` (``"imu"``, ``"navsatfix"``, ``"pointstamped"``; the CDR layout
+        fixes the role, except that a NavSatFix may serve as the altimeter); None when we do
+        not decode the encoding or the CDR schema.
+    """
+    if message_encoding == "cdr":
+        if schema_name in ROS2_IMU:
+            return ("imu", "imu")
+        if schema_name in ROS2_NAVSATFIX:
+            return (role if role in ("gnss", "altimeter") else "gnss", "navsatfix")
+        if schema_name in ROS2_POINTSTAMPED:
+            return ("altimeter", "pointstamped")
+        return None
+    if message_encoding == "json":
+        return (role, "json")
+    return None
+
+
 def _gather(buf, offs, width):
     """Rows ``buf[offs[k] : offs[k] + width]`` as an (n, width) uint8 array."""
     return buf[offs[:, None] + np.arange(width)[None, :]]

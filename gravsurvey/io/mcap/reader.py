@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gravsurvey.errors import DataError
-from gravsurvey.io.mcap.decode import (DEFAULT_JSON_FIELDS, ROLE_SCHEMAS, ROS2_IMU, ROS2_NAVSATFIX,
-                                       ROS2_POINTSTAMPED, concat_blocks, decode_json, decode_ros2)
+from gravsurvey.io.mcap.decode import (DEFAULT_JSON_FIELDS, ROLE_SCHEMAS, concat_blocks,
+                                       decode_json, decode_ros2, decoder_kind)
 from gravsurvey.io.mcap.records import (DamagedRecord, chunk_index, decompress_chunk,
                                         message_index_count, parse_channel, parse_schema,
                                         parse_statistics, plausible_name, read_string,
@@ -286,13 +286,12 @@ class _Reader:
         self.cur_range = None  # byte range of the chunk being read
         self._index = None
 
-    # which role would decode channel cid, and how ("ros2:imu", "json:imu", ...)
     def _decoder_for(self, cid):
+        """(role, kind) channel ``cid`` decodes as (:func:`decoder_kind`), or None; the role
+        from the configured topics first, else from the schema name."""
         ch = self.c.channels.get(cid)
         if ch is None:
             return None
-        sch = self.c.schemas.get(ch.schema_id)
-        name = sch.name if sch else ""
         role = None
         for r, topic in self.roles.items():
             if topic is not None and ch.topic == topic:
@@ -302,18 +301,7 @@ class _Reader:
             role = self.c.role_of_schema(cid)
         if role is None:
             return None
-        enc = ch.message_encoding
-        if enc == "cdr":
-            if name in ROS2_IMU:
-                return ("imu", "imu")
-            if name in ROS2_NAVSATFIX:
-                return (role if role in ("gnss", "altimeter") else "gnss", "navsatfix")
-            if name in ROS2_POINTSTAMPED:
-                return ("altimeter", "pointstamped")
-            return None
-        if enc == "json":
-            return (role, "json")
-        return None
+        return decoder_kind(role, self.c.schema_name(cid), ch.message_encoding)
 
     def _handle_schema(self, b, pos, ln, preload=False):
         s = parse_schema(b, pos, ln)
