@@ -241,7 +241,7 @@ def _imu_cdr(endian, sec, nsec, frame_id, w, f):
 
 
 def test_cdr_bulk_decoder_both_byte_orders_and_short_payloads():
-    from gravsurvey.io.mcap import _decode_ros2
+    from gravsurvey.io.mcap.decode import decode_ros2
 
     rng = np.random.default_rng(5)
     msgs, want = [], []
@@ -255,11 +255,28 @@ def test_cdr_bulk_decoder_both_byte_orders_and_short_payloads():
     buf = np.frombuffer(b"".join(msgs), np.uint8)
     lens = np.array([len(m) for m in msgs], np.int64)
     offs = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
-    blk = _decode_ros2("imu", buf, offs, lens, np.zeros(len(msgs), np.int64))
+    blk = decode_ros2("imu", buf, offs, lens, np.zeros(len(msgs), np.int64))
     assert blk.undecodable == 1
     np.testing.assert_array_equal(blk.time_ns, [t for t, _, _ in want])
     np.testing.assert_array_equal(blk.values["angular_rate"], [w for _, w, _ in want])
     np.testing.assert_array_equal(blk.values["specific_force"], [f for _, _, f in want])
+
+
+def test_json_times_beyond_int64_clamped_not_a_crash():
+    """A time field beyond the int64 range (a damaged or hostile file) is clamped for every role,
+    the gravity gradient included (it used to fail the whole read with an OverflowError); the
+    time checks at ingestion then report the step."""
+    from gravsurvey.io.mcap.decode import DEFAULT_JSON_FIELDS, decode_json
+
+    big, logt = 2**70, np.array([10, 20, 30], np.int64)
+    rows = {"imu": {"specific_force_t": [0.0, 0.0, 9.8], "angular_rate_t": [0.0, 0.0, 0.0]},
+            "gradient": {"gradient_t_eotvos": [1.0, 0.0, 0.0, 1.0, 0.0, -2.0]}}
+    for role, row in rows.items():
+        payloads = [json.dumps({**row, "time_ns": t}).encode() for t in (5, big, -big)]
+        blk = decode_json(role, payloads, logt, DEFAULT_JSON_FIELDS[role])
+        assert blk.undecodable == 0, role
+        assert blk.time_ns.tolist() == [5, 2**63 - 1, -2**63], role
+        np.testing.assert_array_equal(blk.log_time_ns, logt)
 
 
 def test_json_bad_messages_dropped_and_counted(tmp_path):
