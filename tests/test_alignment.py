@@ -250,7 +250,7 @@ def test_mirrored_axes_leave_the_gnss_track(in_flight):
     """A left-handed triad (one axis flipped, e.g. FRD declared as FLU with y only) cannot be aligned:
     the navigation leaves the GNSS track and the flight is a DataError, not a result."""
     rec = _record(in_flight, np.diag([1.0, -1.0, 1.0]))
-    with pytest.raises(DataError, match="leaves the GNSS track"):
+    with pytest.raises(DataError, match="leaves the GNSS track|made the mechanization run away"):
         estimate_anomaly(rec, _params(), None, "strapdown")
 
 

@@ -266,7 +266,7 @@ def test_init_writes_a_valid_config(tmp_path):
     from gravsurvey.config import load_yaml
 
     data = load_yaml(cfg)
-    assert data["flights"][0]["triad"] == "platform"
+    assert data["flights"][0]["triad"] == "strapdown"  # the sample it points at (tests/test_templates.py)
     # the example's model block is accepted by the estimator's validation
     inm_params(data["model"], key_path="model")
     r = gs("init", cfg)

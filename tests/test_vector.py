@@ -285,9 +285,14 @@ def test_gravsurvey_run_with_the_switch(tmp_path):
     import sys
 
     sample = ROOT / "sample_data" / "grid_ros2"
-    text = (sample / "survey.yaml").read_text().replace("F01/", f"{sample / 'F01'}/")
+    survey = yaml.safe_load((sample / "survey.yaml").read_text())
+    f01 = survey["flights"][0]  # one flight is enough here
+    f01["inputs"]["mcap"] = str(sample / f01["inputs"]["mcap"])
+    f01["truth"] = str(sample / f01["truth"])
+    survey["flights"] = [f01]
+    survey["model"] = {"horizontal": True}
     cfg = tmp_path / "survey.yaml"
-    cfg.write_text(text + "model: {horizontal: true}\n")
+    cfg.write_text(yaml.safe_dump(survey))
     r = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg)], capture_output=True, text=True,
                        timeout=600, env=dict(os.environ), stdin=subprocess.DEVNULL, cwd=tmp_path, check=False)
     assert r.returncode == 0, r.stderr
