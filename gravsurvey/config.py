@@ -21,6 +21,7 @@ import numpy as np
 import yaml
 
 from .errors import ConfigError
+from .truth import check_truth_header
 
 
 
@@ -40,6 +41,8 @@ class FlightConfig:
     #: the ``initial`` keys given (all optional overrides of the data; inm.params.resolve_initial_state)
     initial_given: dict | None = None
     tie: Any = None  # gravsurvey.ties.TieConfig or None (no base tie)
+    #: how to read ``truth`` (gravsurvey.truth.TruthSpec; columns, time format), None without truth
+    truth_spec: Any = None
 
 
 @dataclass
@@ -255,7 +258,8 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
             ingest=S.ingest_options(fs, key_path=kp, base_dir=base),
             initial=initial,
             initial_raw=fr.get("initial"),
-            truth=_resolve(base, fs.truth) if fs.truth is not None else None,
+            truth=_resolve(base, _truth_file(fs.truth)) if fs.truth is not None else None,
+            truth_spec=_truth_spec(base, fs.truth),
             lines_windows=[w.model_dump(exclude_none=True) for w in fs.lines] if fs.lines is not None else None,
             initial_given=given,
             tie=S.tie_config(fs.tie, f"{kp}.tie") if fs.tie is not None else None,
@@ -288,8 +292,21 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
     return cfg
 
 
-#: columns a truth file must have (docs/formats.md)
-TRUTH_COLUMNS = ("time_ns", "disturbance_mgal")
+def _truth_file(t):
+    return t if isinstance(t, str) else t.file
+
+
+def _truth_spec(base, t):
+    """``flights[i].truth`` (a path, or ``{file, columns, time_format, delimiter}``) as a
+    :class:`gravsurvey.truth.TruthSpec`."""
+    from .truth import TruthSpec
+
+    if t is None:
+        return None
+    if isinstance(t, str):
+        return TruthSpec(_resolve(base, t))
+    return TruthSpec(_resolve(base, t.file), {"time": t.columns.time, "disturbance_mgal": t.columns.disturbance_mgal},
+                     t.time_format, t.delimiter)
 
 
 def preflight_checks(cfg: SurveyConfig) -> None:
@@ -298,7 +315,7 @@ def preflight_checks(cfg: SurveyConfig) -> None:
 
     - ``output.epsg``: known to PROJ and projected (metre coordinates), via the same
       :func:`gravsurvey.georef.project` the writers use;
-    - ``flights[i].truth``: an existing text CSV whose header has :data:`TRUTH_COLUMNS`
+    - ``flights[i].truth``: an existing text CSV whose header has the configured columns
       (only the header is read);
 
     Everything that needs no file or PROJ (types, ranges, unknown keys, cross-field rules such as
@@ -311,27 +328,6 @@ def preflight_checks(cfg: SurveyConfig) -> None:
         project(np.zeros(1), np.zeros(1), cfg.epsg, key="output.epsg")
     for fl in cfg.flights:
         if fl.truth is not None:
-            check_truth_header(fl.truth, f"flights[{fl.index}].truth")
+            check_truth_header(fl.truth_spec or fl.truth, f"flights[{fl.index}].truth")
 
 
-def check_truth_header(path: Path, key: str) -> None:
-    """The truth file exists, is UTF-8 text, and its header names :data:`TRUTH_COLUMNS`."""
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{key}: truth file not found: {path}")
-    try:
-        with open(path, encoding="utf-8-sig") as fh:
-            for line in fh:
-                if line.strip() and not line.startswith("#"):
-                    break
-            else:
-                line = ""
-    except UnicodeDecodeError:
-        raise ConfigError(f"{key}: {path}: not a text CSV (truth file, docs/formats.md)") from None
-    except OSError as exc:
-        raise ConfigError(f"{key}: {path}: cannot read: {exc.strerror}") from None
-    head = [h.strip() for h in line.strip().split(",")]
-    missing = [c for c in TRUTH_COLUMNS if c not in head]
-    if missing:
-        raise ConfigError(f"{key}: {path}: truth file lacks column(s) {', '.join(missing)}; "
-                          f"header has {', '.join(h for h in head if h) or 'nothing'}")

@@ -29,6 +29,7 @@ from .errors import DataError, GravsurveyError, os_fault
 from .estimate import FlightEstimate, concatenate_estimates, from_classic, from_inm_solution
 from .geodesy import MGAL
 from .io.writers import to_jsonable
+from .truth import read_truth_csv, truth_at  # noqa: F401  (public here for notebooks and benchmarks)
 
 log = logging.getLogger("gravsurvey")
 
@@ -39,57 +40,6 @@ CACHE_VERSION = 4
 # truth files written by the simulator (docs/formats.md); read here as any
 # user-supplied truth would be: a documented CSV, no simulator code involved
 # --------------------------------------------------------------------------
-
-
-def read_truth_csv(path: Path) -> dict:
-    """Read a truth.csv (docs/formats.md): ``time_ns`` (int64) and float columns."""
-    import csv
-
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: truth file not found")
-    with open(path, newline="") as fh:
-        rows = [r for r in csv.reader(line for line in fh if not line.startswith("#"))]
-    if len(rows) < 2:
-        raise DataError(f"{path}: truth file has no data rows")
-    head = [h.strip() for h in rows[0]]
-    for need in ("time_ns", "disturbance_mgal"):
-        if need not in head:
-            raise DataError(f"{path}: truth file lacks column {need!r}; has {', '.join(head)}")
-    cols: dict = {h: [] for h in head}
-    for ln, r in enumerate(rows[1:], start=2):
-        if len(r) != len(head):
-            raise DataError(f"{path}: data row {ln} has {len(r)} fields, header has {len(head)}")
-        for h, v in zip(head, r):
-            cols[h].append(v)
-    out = {}
-    for h, v in cols.items():
-        try:
-            out[h] = np.array(v, dtype=np.int64) if h == "time_ns" else np.array(v, dtype=float)
-        except ValueError:
-            out[h] = np.array(v, dtype=object)
-    return out
-
-
-def truth_at(truth: dict, unix_ns: np.ndarray) -> np.ndarray:
-    """Truth disturbance interpolated to the given epochs.
-
-    Parameters
-    ----------
-    truth : dict
-        As :func:`read_truth_csv` returns: ``time_ns`` (int64) and ``disturbance_mgal``.
-    unix_ns : ndarray of int64, shape (N,)
-        Unix ns of the epochs.
-
-    Returns
-    -------
-    ndarray, shape (N,)
-        mGal; NaN outside the truth span.
-    """
-    t_ref = truth["time_ns"][0]
-    tt = (truth["time_ns"] - t_ref).astype(float)
-    x = (unix_ns - t_ref).astype(float)
-    return np.interp(x, tt, truth["disturbance_mgal"], left=np.nan, right=np.nan)
 
 
 # --------------------------------------------------------------------------
@@ -257,7 +207,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
     notes = [n for n in notes if PASSED not in n]
 
     if fl.truth is not None:
-        tr = read_truth_csv(fl.truth)
+        tr = read_truth_csv(fl.truth_spec or fl.truth)
         unix = record.t0_unix_ns + np.round(est.time * 1e9).astype(np.int64)
         est.truth_mgal = truth_at(tr, unix)
 

@@ -20,6 +20,8 @@ from .schema import Section, SurveyFile
 def key_path_text(prefix: str, loc) -> str:
     out = prefix
     for part in loc:
+        if isinstance(part, str) and part.startswith("<"):
+            continue  # a union member's tag (schema.Tag("<...>")), not a key
         if isinstance(part, int):
             out += f"[{part}]"
         else:

@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import dataclasses
 import re
-from typing import Annotated, Any, Literal, Optional
+from typing import Annotated, Any, Literal, Optional, Union
 
 from pydantic import (
     AfterValidator,
     BaseModel,
     ConfigDict,
+    Discriminator,
     Field,
+    Tag,
     create_model,
     field_validator,
     model_validator,
@@ -25,6 +27,7 @@ from ..inm.params import RADIUS_SOURCES, TRIADS, InmParams
 from ..io.checks import HEIGHT_OK
 from ..io.csv import DEFAULT_COLUMNS, TIME_FORMATS, UNITS
 from ..io.formats.flight import GRAVIMETER_FORMATS, NAV_FORMATS
+from ..truth import TRUTH_TIME_FORMATS
 from ..io.ingest import IngestOptions, imu_axes_matrix
 from ..io.mcap import DEFAULT_JSON_FIELDS, DEFAULT_MAX_RECORD_BYTES
 from ..levelling import LEVELLING_MODELS, LevellingOptions
@@ -786,6 +789,24 @@ class TopicsSection(Section):
 INGEST_KEYS = ("inputs", "topics", "mcap", "csv", "checks", "imu_axes", "gnss_lever_arm_m")
 
 
+class TruthColumns(Section):
+    """``flights[i].truth.columns``: the reference file's column names."""
+
+    time: str = Field("time_ns", description="time column (see `time_format`)", min_length=1)
+    disturbance_mgal: str = Field("disturbance_mgal", description="gravity disturbance column, mGal", min_length=1)
+
+
+class TruthSection(Section):
+    """``flights[i].truth`` as a mapping: a reference profile in any CSV (docs/formats.md)."""
+
+    file: str = Field(..., description="the reference CSV", min_length=1)
+    columns: TruthColumns = Field(default_factory=TruthColumns, description="column names")  # type: ignore[valid-type]
+    time_format: Literal[TRUTH_TIME_FORMATS] = Field(  # type: ignore[valid-type]
+        "ns", description="`ns` (integer Unix ns) or `s` (Unix seconds)"
+    )
+    delimiter: str = Field(",", description="one character such as `,` `;` or a tab", min_length=1, max_length=1)
+
+
 class FlightSection(Section):
     """``flights[i]``: one flight."""
 
@@ -833,8 +854,16 @@ class FlightSection(Section):
         None,
         description="optional overrides of the state at the first IMU sample (`initial` below); null: from the data",
     )
-    truth: Optional[str] = Field(
-        None, description="simulator truth CSV (docs/formats.md): adds `truth_mgal`, `error_mgal`", min_length=1
+    truth: Optional[
+        Annotated[
+            Union[Annotated[str, Field(min_length=1), Tag("<path>")], Annotated[TruthSection, Tag("<mapping>")]],
+            Discriminator(lambda v: "<mapping>" if isinstance(v, dict) else "<path>"),
+        ]
+    ] = Field(
+        None,
+        description="reference profile: a simulator truth CSV path (docs/formats.md), or "
+        "`{file, columns: {time, disturbance_mgal}, time_format: ns|s, delimiter}` for any CSV; adds "
+        "`truth_mgal`, `error_mgal`",
     )
     lines: Optional[list[WindowSection]] = Field(
         None, description="explicit line windows for this flight, `{name, start_s, stop_s[, kind]}`"
