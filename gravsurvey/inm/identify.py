@@ -92,6 +92,14 @@ MANOEUVRE_MARGIN_S = 30.0
 DETREND_ORDER = 2
 #: Shortest straight stretch used, s.
 MIN_RUN_S = 240.0
+#: Shortest stretch pooled when no stretch reaches :data:`MIN_RUN_S` (survey lines of a few km),
+#: s.  The straight stretches serve the noise levels: the height noise rises as ``f^4`` and
+#: dominates the vertical channel above a few mHz (5 cm at 1 Hz exceeds 1 mGal/sqrt(Hz) of white
+#: noise above 2 mHz), so a stretch of 60 s - lowest analysed bin 3 / 60 s = 0.05 Hz, 27 bins at
+#: 1 Hz - measures it as well as a long one; the white level, which needs the lowest bins, is
+#: then left unresolved and defaulted (:data:`WHITE_MAX_FACTOR`) instead of being taken from
+#: turns.  The stretches together must still span :data:`MIN_RUN_S`.
+SHORT_RUN_S = 60.0
 
 
 @dataclass(frozen=True)
@@ -254,6 +262,7 @@ class VerticalFit:
     seconds_used : float
         Length of the straight stretches that entered the fit, s.
     n_runs : int
+        Number of stretches (pooled: their periodograms enter one likelihood).
     nll : float
         Negative Whittle log-likelihood at the optimum.
     unresolved : tuple of str
@@ -269,6 +278,7 @@ class VerticalFit:
     n_runs: int
     nll: float
     unresolved: tuple = ()
+    short_runs: bool = False
 
 
 def _periodograms(y_runs, dt):
@@ -337,7 +347,8 @@ def fit_vertical_spectrum(time, residual_m, manoeuvring=None, *,
     Returns
     -------
     VerticalFit or None
-        None when the flight has no straight stretch of :data:`MIN_RUN_S`.
+        None when the flight has no straight stretch of :data:`MIN_RUN_S` and its stretches of
+        :data:`SHORT_RUN_S` or more (pooled, ``short_runs``) do not add up to that length.
     """
     from scipy.optimize import minimize
 
@@ -348,6 +359,13 @@ def fit_vertical_spectrum(time, residual_m, manoeuvring=None, *,
     dt = float(np.median(np.diff(t)))
     man = np.zeros(t.size, bool) if manoeuvring is None else np.asarray(manoeuvring, bool)
     runs = straight_runs(t, man)
+    short = False
+    if not runs and man.any():
+        # survey lines shorter than MIN_RUN_S: pool the shorter straight stretches (each its own
+        # periodogram, one likelihood) rather than fall back to a fit that includes the turns
+        pooled = straight_runs(t, man, min_run_s=SHORT_RUN_S)
+        if sum(b - a for a, b in pooled) * dt >= MIN_RUN_S:
+            runs, short = pooled, True
     if not runs:
         return None
     runs = [(a, b) for a, b in runs if b - a >= 16]
@@ -410,7 +428,7 @@ def fit_vertical_spectrum(time, residual_m, manoeuvring=None, *,
         unresolved = ("anomaly_tau_s",)
         factors["anomaly_tau_s"] = None
         at_bound = tuple(x for x in at_bound if x != "anomaly_tau_s")
-    return VerticalFit(model, factors, at_bound, dt, used, len(runs), float(best.fun), unresolved)
+    return VerticalFit(model, factors, at_bound, dt, used, len(runs), float(best.fun), unresolved, short)
 
 
 def _embed(u, v, free):
@@ -535,15 +553,21 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
     fixed = {k: min(max(val, BOUNDS[k][0]), BOUNDS[k][1]) for k, val in fixed.items()}
     report: dict = {"method": "whittle-vertical-spectrum", "warnings": []}
     fit = fit_vertical_spectrum(t, e, man, fixed=fixed)
+    whole_flight = False
     if fit is None:
-        # no straight stretch long enough (short lines, a flight of turns): the noise levels
-        # from the whole flight; the turns' attitude-error leak then counts as noise, which
-        # errs on the side of smoothing
+        # no straight stretches long enough (a flight of turns): the noise levels from the whole
+        # flight; the turns' attitude-error leak then counts as noise, which errs on the side of
+        # smoothing
         fit = fit_vertical_spectrum(t, e, None, fixed=fixed)
+        whole_flight = fit is not None
         if fit is not None:
             report["warnings"].append(
-                f"model identification: no straight stretch of {MIN_RUN_S:.0f} s; noise levels "
-                "identified over the whole flight, turns included")
+                f"model identification: straight stretches shorter than {MIN_RUN_S:.0f} s in all; noise "
+                "levels identified over the whole flight, turns included")
+    elif fit.short_runs:
+        report["warnings"].append(
+            f"model identification: no straight stretch of {MIN_RUN_S:.0f} s; {fit.n_runs} stretches of "
+            f"{SHORT_RUN_S:.0f} s or more pooled ({fit.seconds_used:.0f} s)")
     if fit is None:
         report["method"] = "none"
         report["warnings"].append(
@@ -562,6 +586,13 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
         # that only absorbed the anomaly's flat part or a short flight's scatter
         m = dataclasses.replace(m, white_mps2=WHITE_DEFAULT_MPS2)
         white_how = "default (not resolved by the data)"
+    elif "white_mps2" not in fixed and whole_flight:
+        # with the turns in, the likelihood pins a "white" level that is the turns' attitude
+        # leak (tens of mGal on a strapdown flight of short lines), and the first pass would then
+        # find no field above it and smooth the field away; the datasheet figure instead, and
+        # refine_prior's noise calibration raises it if the straight flight shows more
+        m = dataclasses.replace(m, white_mps2=WHITE_DEFAULT_MPS2)
+        white_how = "default (whole-flight fit: turns dominate the white level)"
     if params.target_resolution_m is not None:
         m = prior_for_resolution(m, v, params.target_resolution_m, fit.dt_s)
     found = {"anomaly_sigma_mps2": m.anomaly_sigma_mps2, "anomaly_lambda_per_m": 1.0 / (m.anomaly_tau_s * v),
