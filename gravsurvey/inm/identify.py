@@ -690,6 +690,13 @@ def straight_weight(nav, f_t, times) -> np.ndarray:
 #: Averaging window (s) of the first-pass estimate whose variance the prior must be able to
 #: hold (:func:`field_variance_seen`): long enough that the wide pass's noise averages down.
 FIELD_VAR_WINDOW_S = 120.0
+#: Least fraction of that variance the prior must hold.
+FIELD_VAR_HELD = 0.25
+#: Only the variance above this many times the first pass's own noise variance (through the
+#: same window) counts as field: the wide pass also carries slow errors its noise model does
+#: not hold (the gravimeter's drift, turbulence through attitude errors), which on weak fields
+#: exceed the field (measured: 1.24 mGal "seen" on a 0.32 mGal field).
+FIELD_VAR_NOISE_MARGIN = 3.0
 
 
 def _window_kernel(f, window_s: float, span_s: float):
@@ -815,7 +822,8 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
         sg = _markov_psd(x, wide.anomaly_sigma_mps2, tau1)
         return sn * (sg / (sg + sn)) ** 2
 
-    var_field = max(var_seen - windowed_variance(first_pass_noise, FIELD_VAR_WINDOW_S, span), 0.0)
+    var_field = max(var_seen - FIELD_VAR_NOISE_MARGIN * windowed_variance(first_pass_noise, FIELD_VAR_WINDOW_S, span),
+                    0.0)
     # bands of >= 8 bins, log-spaced: the periodogram's scatter (100 % per bin) averages down
     s_sig = np.zeros_like(f)
     edges = np.unique(np.concatenate([[0], np.geomspace(8, max(valid.sum(), 9), 24).astype(int)]))
@@ -857,7 +865,7 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
             score = gain_lo / PASS_BELOW_GAIN
             if var_field > 0.0:
                 held = windowed_variance(lambda x: _markov_psd(x, sg, tau), FIELD_VAR_WINDOW_S, span) / var_field
-                score = min(score, held)
+                score = min(score, held / FIELD_VAR_HELD)
             if fallback is None or score > fallback[0]:
                 fallback = (score, float(sg), float(tau))
             if score < 1.0:
