@@ -859,12 +859,14 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     best = None
     fallback = None
     for tau in taus:
+        # the Markov PSD scales with sigma^2: one integral per correlation time
+        unit_var = windowed_variance(lambda x: _markov_psd(x, 1.0, tau), FIELD_VAR_WINDOW_S, span)
         for sg in sigmas:
             s_lo = float(_markov_psd(f_lo, sg, tau))
             gain_lo = s_lo / (s_lo + s_n_lo)
             score = gain_lo / PASS_BELOW_GAIN
             if var_field > 0.0:
-                held = windowed_variance(lambda x: _markov_psd(x, sg, tau), FIELD_VAR_WINDOW_S, span) / var_field
+                held = sg * sg * unit_var / var_field
                 score = min(score, held / FIELD_VAR_HELD)
             if fallback is None or score > fallback[0]:
                 fallback = (score, float(sg), float(tau))
