@@ -218,7 +218,7 @@ def test_no_initial_block_matches_exact_attitude(in_flight, mount_deg):
     # which no flight can tell from the field's mean)
     rms = _rms_after_bias((sol.g_smooth - g_true)[keep]) / MGAL
     rms_exact = _rms_after_bias((exact.g_smooth - g_true)[keep]) / MGAL
-    # measured: 0.92-1.27 mGal, within 0.98-1.04 of the exact-attitude run
+    # measured: 1.05-1.22 mGal, 1.01-1.05 x the exact-attitude run (1.01-1.19 mGal)
     assert rms <= 1.10 * rms_exact, (rms, rms_exact)
     # attitude against the truth of the turned triad, every epoch after convergence
     k = np.clip(np.searchsorted(s.truth["time"], sol.time), 0, s.truth["time"].size - 1)
