@@ -214,13 +214,24 @@ def median_resolution_km(summary, key="resolution_m"):
     return float(np.median(vals)) / 1000.0 if vals else None
 
 
-def evaluate_flight(spec, folder: Path) -> dict:
+def sigma_ratio_rms(err, sigma) -> float | None:
+    """RMS of (error minus its mean) / stated 1-sigma over the finite samples (1 when calibrated)."""
+    e, s = np.asarray(err, float), np.asarray(sigma, float)
+    ok = np.isfinite(e) & np.isfinite(s) & (s > 0)
+    if not ok.any():
+        return None
+    return float(np.sqrt(np.mean(((e[ok] - e[ok].mean()) / s[ok]) ** 2)))
+
+
+def evaluate_flight(spec, folder: Path, runs=("default", "oracle", "classic")) -> dict:
     """Run default / oracle / classic on one prepared flight and score them against truth."""
     truth = read_truth_csv(folder / "F01" / "truth.csv")
     truth["line"] = np.array(truth_lines(folder / "F01" / "truth.csv"), dtype=object)
     row = {"name": spec["name"], "seed": spec["seed"], "summary": spec_summary(spec)}
     prof = {}
     for tag, cfg in (("default", "survey.yaml"), ("oracle", "oracle.yaml"), ("classic", "classic.yaml")):
+        if tag not in runs:
+            continue
         t0 = time.perf_counter()
         res = run_survey(folder / cfg, output_dir=folder / f"out_{tag}", force=True)
         row[f"{tag}_s"] = time.perf_counter() - t0
@@ -237,6 +248,8 @@ def evaluate_flight(spec, folder: Path) -> dict:
     row["scored_samples"] = int(mask.sum())
     row["default_rms"], row["default_coverage"] = rms_after_bias((p["disturbance_mgal"] - tr)[mask])
     row["kalman_rms"], _ = rms_after_bias((p["kalman_mgal"] - tr)[mask])
+    # honest uncertainty (issue 12 item 2): the final product's error over its stated sigma
+    row["default_z"] = sigma_ratio_rms((p["disturbance_mgal"] - tr)[mask], p["sigma_mgal"][mask])
     for tag in ("oracle", "classic"):
         if tag in prof:
             q = prof[tag]
@@ -265,8 +278,8 @@ def _fmt(v, nd=2):
 
 def print_table(rows):
     print("| flight | drawn | default | kalman | oracle | classic | bound | default/bound | kalman/bound "
-          "| res default / classic / bound (km) | truth std |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "| res default / classic / bound (km) | truth std | error/sigma |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         b = r.get("bound_rms")
         ratio = (r["default_rms"] / b) if (b and r.get("default_rms") is not None) else None
@@ -278,7 +291,7 @@ def print_table(rows):
               f"{_fmt(r.get('kalman_rms'))} | {_fmt(r.get('oracle_rms'))} | {_fmt(r.get('classic_rms'))} | "
               f"{_fmt(b)} | {_fmt(ratio)} | {_fmt(kr)} | {_fmt(r.get('default_resolution_km'), 1)} / "
               f"{_fmt(r.get('classic_resolution_km'), 1)} / {_fmt(r.get('bound_resolution_km'), 1)} | "
-              f"{_fmt(r.get('truth_std_mgal'))} |" + (f" {err}" if err else ""))
+              f"{_fmt(r.get('truth_std_mgal'))} | {_fmt(r.get('default_z'))} |" + (f" {err}" if err else ""))
     print()
     for key in ("default", "kalman", "oracle", "classic"):
         ratios = [r[f"{key}_rms"] / r["bound_rms"] for r in rows
@@ -286,6 +299,11 @@ def print_table(rows):
         if ratios:
             print(f"{key:8s} RMS / bound: median {np.median(ratios):.2f}, worst {np.max(ratios):.2f} "
                   f"over {len(ratios)} flights")
+    zs = [r["default_z"] for r in rows if r.get("default_z") is not None]
+    if zs:
+        inside = sum(0.7 <= z <= 1.5 for z in zs)
+        print(f"default error/sigma RMS: median {np.median(zs):.2f}, range {min(zs):.2f}-{max(zs):.2f}, "
+              f"{inside} of {len(zs)} flights in [0.7, 1.5]")
     worse = [r["name"] for r in rows if r.get("default_rms") is not None and r.get("classic_rms") is not None
              and r["default_rms"] > r["classic_rms"]]
     print(f"default worse than classic on {len(worse)} of {len(rows)} flights: {', '.join(worse) or '-'}")
@@ -307,6 +325,8 @@ def main(argv=None):
                     help=f"cap each flight at {QUICK_MAX_DURATION_S / 60:.0f} min and {QUICK_MAX_IMU_HZ:g} Hz IMU")
     ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON")
     ap.add_argument("--cache", type=Path, default=CACHE, help="where simulated flights are kept")
+    ap.add_argument("--runs", default="default,oracle,classic",
+                    help="comma-separated subset of default,oracle,classic to run (faster checks)")
     a = ap.parse_args(argv)
     if a.flights < 1:
         ap.error("--flights must be >= 1")
@@ -319,7 +339,7 @@ def main(argv=None):
         try:
             folder = prepare_flight(spec, a.cache)
             t_sim = time.perf_counter() - t0
-            row = evaluate_flight(spec, folder)
+            row = evaluate_flight(spec, folder, tuple(a.runs.split(",")))
         except GravsurveyError as exc:  # one bad flight must not hide the others' rows
             t_sim = time.perf_counter() - t0
             row = {"name": spec["name"], "seed": spec["seed"], "summary": spec_summary(spec),
@@ -329,7 +349,8 @@ def main(argv=None):
         print(f"{row['summary']}: default {_fmt(row.get('default_rms'))} kalman {_fmt(row.get('kalman_rms'))} "
               f"oracle {_fmt(row.get('oracle_rms'))} classic {_fmt(row.get('classic_rms'))} "
               f"bound {_fmt(row.get('bound_rms'))} mGal (sim {t_sim:.0f} s, run "
-              f"{row.get('default_s', 0):.0f}/{row.get('oracle_s', 0):.0f}/{row.get('classic_s', 0):.0f} s)",
+              f"{row.get('default_s', 0):.0f}/{row.get('oracle_s', 0):.0f}/{row.get('classic_s', 0):.0f} s, "
+              f"error/sigma {_fmt(row.get('default_z'))})",
               file=sys.stderr, flush=True)
     print_table(rows)
     if a.json:

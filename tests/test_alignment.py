@@ -71,12 +71,10 @@ def static_start():
 
 
 def _params(**kw):
-    # the simulated sensors' model, held fixed: these tests are about the attitude, not about
-    # identifying the anomaly prior (with it identified the heading error leaves its 3 sigma
-    # band on ~20 % of the epochs of one mount: noted in docs/method.md, "Identification")
-    kw.setdefault("identify", False)
-    return InmParams(accel_noise_mps2=5e-4, gyro_drift_degph=0.005, gravimeter_sigma_mps2=1e-6,
-                     gravimeter_white_mps2=1e-4, altimeter_sigma_m=0.05, gnss_horizontal_sigma_m=0.5,
+    # what a user knows from the datasheets of the simulated sensors (accelerometer, gyro, GNSS);
+    # the rest at its default: the gravimeter/height noise and the anomaly prior are identified
+    # from the flight (model.identify, on by default)
+    return InmParams(accel_noise_mps2=5e-4, gyro_drift_degph=0.005, gnss_horizontal_sigma_m=0.5,
                      gnss_vertical_sigma_m=1.0, **kw)
 
 
@@ -98,6 +96,10 @@ def _exact_initial(s, mount=None):
 
 def _rms(x):
     return float(np.sqrt(np.mean(np.square(x))))
+
+
+def _rms_after_bias(x):
+    return _rms(np.asarray(x) - np.mean(x))
 
 
 def _theta_n(mat_est, mat_true):
@@ -212,9 +214,11 @@ def test_no_initial_block_matches_exact_attitude(in_flight, mount_deg):
     assert 0.0 <= conv < 900.0
     keep = sol.time - sol.time[0] >= conv
     g_true = np.interp(sol.time, s.truth["time"], s.truth["disturbance"])
-    rms = _rms((sol.g_smooth - g_true)[keep]) / MGAL
-    rms_exact = _rms((exact.g_smooth - g_true)[keep]) / MGAL
-    # measured (no mount): 3.18 vs 3.17 mGal, first-pass correction 0.064 deg
+    # RMS after removing the mean error (issue 13's measure: the mean is the gravimeter's bias,
+    # which no flight can tell from the field's mean)
+    rms = _rms_after_bias((sol.g_smooth - g_true)[keep]) / MGAL
+    rms_exact = _rms_after_bias((exact.g_smooth - g_true)[keep]) / MGAL
+    # measured: 1.05-1.22 mGal, 1.01-1.05 x the exact-attitude run (1.01-1.19 mGal)
     assert rms <= 1.10 * rms_exact, (rms, rms_exact)
     # attitude against the truth of the turned triad, every epoch after convergence
     k = np.clip(np.searchsorted(s.truth["time"], sol.time), 0, s.truth["time"].size - 1)
@@ -223,7 +227,8 @@ def test_no_initial_block_matches_exact_attitude(in_flight, mount_deg):
     err = sol.attitude - true_att
     err[:, 2] = (err[:, 2] + math.pi) % (2 * math.pi) - math.pi
     inside = np.abs(err[keep]) < 3.0 * sol.attitude_sigma[keep]
-    assert inside.mean(axis=0).min() > 0.95, inside.mean(axis=0)
+    # measured: every epoch inside on every mount (roll, pitch, heading)
+    assert inside.mean(axis=0).min() >= 0.99, inside.mean(axis=0)
 
 
 def test_given_attitude_disagreeing_with_the_data_is_a_config_error(in_flight):

@@ -180,6 +180,10 @@ MIN_REFINE_S = 900.0
 #: The passes stop once the initial-attitude correction is below this, rad (0.001 deg).
 ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
 
+#: An initial-attitude correction above this (rad, 0.5 deg) re-runs the identification about
+#: the corrected attitude in the next pass (after an alignment: 0.004-0.13 deg measured, not re-run).
+REIDENTIFY_RAD = math.radians(0.5)
+
 
 def estimate_anomaly(record, params: InmParams, initial: InitialState | None, triad: str,
                      ellipsoid: Ellipsoid = WGS84, attitude_deg=None, reference: bool = False,
@@ -229,15 +233,18 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     corrections = []
     passes = int(params.attitude_passes)
     ident = {}
+    given_params, reidentify = params, True
     for k in range(passes):
         cur = InitialState(initial.lat, initial.lon, initial.height, initial.vel_n, mat_nt0,
                            initial.attitude_cov_t, initial.alignment)
         nav = _mechanize(record, params, cur, ellipsoid, reference)
         if k == 0:
             speed0 = _typical_speed(record, nav, ellipsoid)
-            if params.identify:
-                params, ident = _identify(record, params, cur, nav, ellipsoid, reference, theta_prior,
-                                          gnss_lever_arm_t, speed0)
+        if given_params.identify and reidentify:
+            params, ident = _identify(record, given_params, cur, nav, ellipsoid, reference, theta_prior,
+                                      gnss_lever_arm_t, speed0)
+            ident["identified_in_pass"] = k + 1
+            reidentify = False
         idx, c, gnss_used, n_state, out = _one_pass(record, params, cur, nav, ellipsoid, reference, theta_prior,
                                                     gnss_lever_arm_t)
         if not (gnss_used and triad == "strapdown") or k == passes - 1:
@@ -246,6 +253,10 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
         corrections.append(float(np.linalg.norm(th0)))
         if corrections[-1] < ATTITUDE_CONVERGED_RAD:
             break
+        # the model was identified on a navigation this far off (a given attitude degrees off: tilt
+        # leaks the horizontal specific force into the vertical channel): identify it again about
+        # the corrected attitude
+        reidentify = corrections[-1] > REIDENTIFY_RAD
         # C_true = C Exp(theta): the triad -> ENU matrix gets the same right factor
         rot = rodrigues(np.ascontiguousarray(th0))
         mat_nt0 = mat_nt0 @ rot
