@@ -63,11 +63,25 @@ SENSORS = {
 
 
 def _flight(static_s):
-    plan = {"kind": "grid", "origin_lat_deg": 47.0, "origin_lon_deg": 11.0, "altitude_m": 800.0, "speed_mps": 70.0,
-            "lines": {"count": 3, "spacing_m": 3000.0, "length_m": 25000.0, "heading_deg": 0.0},
-            "static_start_s": static_s}
-    sim = quick_sim(plan=plan, triad="strapdown", noise=SENSORS, field="seed_smooth", gnss_hz=5.0, altimeter_hz=5.0,
-                    seed=3, turbulence={"vertical_sigma_m": 1.0, "horizontal_sigma_m": 1.0, "attitude_sigma_deg": 0.5})
+    plan = {
+        "kind": "grid",
+        "origin_lat_deg": 47.0,
+        "origin_lon_deg": 11.0,
+        "altitude_m": 800.0,
+        "speed_mps": 70.0,
+        "lines": {"count": 3, "spacing_m": 3000.0, "length_m": 25000.0, "heading_deg": 0.0},
+        "static_start_s": static_s,
+    }
+    sim = quick_sim(
+        plan=plan,
+        triad="strapdown",
+        noise=SENSORS,
+        field="seed_smooth",
+        gnss_hz=5.0,
+        altimeter_hz=5.0,
+        seed=3,
+        turbulence={"vertical_sigma_m": 1.0, "horizontal_sigma_m": 1.0, "attitude_sigma_deg": 0.5},
+    )
     return simulate_flight(sim)
 
 
@@ -79,15 +93,19 @@ def rotation_deg(roll, pitch, heading):
 def _params(**kw):
     # datasheet figures of the simulated accelerometer, gyro and GNSS; the gravimeter and height
     # noise and the anomaly prior are identified from the flight (the default)
-    return InmParams(accel_noise_mps2=5e-4, gyro_drift_degph=0.005, gnss_horizontal_sigma_m=0.5,
-                     gnss_vertical_sigma_m=1.0, **kw)
+    return InmParams(
+        accel_noise_mps2=5e-4, gyro_drift_degph=0.005, gnss_horizontal_sigma_m=0.5, gnss_vertical_sigma_m=1.0, **kw
+    )
 
 
 def _record(s, mount):
-    return FlightRecord(s.start_unix_ns, ImuChannel(s.imu_time, s.specific_force_t @ mount, s.angular_rate_t @ mount),
-                        AltimeterChannel(s.alt_time, s.alt_height),
-                        GnssChannel(s.gnss_time, np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg), s.gnss_height),
-                        source="sim")
+    return FlightRecord(
+        s.start_unix_ns,
+        ImuChannel(s.imu_time, s.specific_force_t @ mount, s.angular_rate_t @ mount),
+        AltimeterChannel(s.alt_time, s.alt_height),
+        GnssChannel(s.gnss_time, np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg), s.gnss_height),
+        source="sim",
+    )
 
 
 def _rms_after(sol, s, t_from):
@@ -128,35 +146,58 @@ def run(quick=False) -> list[dict]:
             given = InitialState(ini.lat, ini.lon, ini.height, ini.vel_n, m)
             for passes, sig in ((1, 0.05), (1, max(dh, dl, 0.05)), (5, max(dh, dl, 0.05))):
                 try:
-                    sol = estimate_anomaly(_record(s, eye), _params(attitude_passes=passes,
-                                                                    initial_attitude_sigma_deg=sig), given, "strapdown")
+                    sol = estimate_anomaly(
+                        _record(s, eye),
+                        _params(attitude_passes=passes, initial_attitude_sigma_deg=sig),
+                        given,
+                        "strapdown",
+                    )
                     rms = _rms_after(sol, s, t_from)
                 except DataError:
                     rms = math.inf  # the navigation left the GNSS track
-                rows.append({"flight": label, "case": f"given, heading off {dh:g} deg, roll/pitch off {dl:g} deg",
-                             "passes": passes, "sigma_deg": sig, "rms_mgal": rms, "t_from_s": t_from})
+                rows.append(
+                    {
+                        "flight": label,
+                        "case": f"given, heading off {dh:g} deg, roll/pitch off {dl:g} deg",
+                        "passes": passes,
+                        "sigma_deg": sig,
+                        "rms_mgal": rms,
+                        "t_from_s": t_from,
+                    }
+                )
         mounts = [(0.0, 0.0, 0.0), (5.0, -3.0, 90.0), (-4.0, 5.0, 180.0), (3.0, 4.0, 270.0)]
         if quick:
             mounts = mounts[:2]
         for mount_deg in mounts:
             mount = rotation_deg(*mount_deg)
             rec = _record(s, mount)
-            ex_m = estimate_anomaly(rec, _params(attitude_passes=1),
-                                    InitialState(ini.lat, ini.lon, ini.height, ini.vel_n, tr["mat_nt"][0] @ mount),
-                                    "strapdown")
+            ex_m = estimate_anomaly(
+                rec,
+                _params(attitude_passes=1),
+                InitialState(ini.lat, ini.lon, ini.height, ini.vel_n, tr["mat_nt"][0] @ mount),
+                "strapdown",
+            )
             t0 = time.perf_counter()
             init = resolve_initial_state(rec, "strapdown", _params())
             sol = estimate_anomaly(rec, _params(), init, "strapdown")
             dt = time.perf_counter() - t0
             al = sol.alignment
-            rows.append({"flight": label, "case": f"no initial, triad mounted at roll/pitch/heading {mount_deg}",
-                         "passes": sol.passes, "rms_mgal": _rms_after(sol, s, sol.attitude_converge_s),
-                         "exact_rms_mgal": _rms_after(ex_m, s, sol.attitude_converge_s),
-                         "t_from_s": sol.attitude_converge_s, "method": al.method,
-                         "inside_3sigma": _attitude_inside(sol, s, mount),
-                         "align_sigma_heading_deg": math.degrees(al.sigma_heading_rad),
-                         "align_converge_s": al.converge_s,
-                         "corrections_deg": [math.degrees(c) for c in sol.attitude_corrections], "seconds": dt})
+            rows.append(
+                {
+                    "flight": label,
+                    "case": f"no initial, triad mounted at roll/pitch/heading {mount_deg}",
+                    "passes": sol.passes,
+                    "rms_mgal": _rms_after(sol, s, sol.attitude_converge_s),
+                    "exact_rms_mgal": _rms_after(ex_m, s, sol.attitude_converge_s),
+                    "t_from_s": sol.attitude_converge_s,
+                    "method": al.method,
+                    "inside_3sigma": _attitude_inside(sol, s, mount),
+                    "align_sigma_heading_deg": math.degrees(al.sigma_heading_rad),
+                    "align_converge_s": al.converge_s,
+                    "corrections_deg": [math.degrees(c) for c in sol.attitude_corrections],
+                    "seconds": dt,
+                }
+            )
     return rows
 
 
@@ -170,13 +211,17 @@ def main(argv=None):
     for r in rows:
         extra = ""
         if "method" in r:
-            extra = (f" ({r['method']}, heading sigma {r['align_sigma_heading_deg']:.3f} deg after "
-                     f"{r['align_converge_s']:.0f} s; corrections {', '.join(f'{c:.4f}' for c in r['corrections_deg'])} "
-                     f"deg; attitude inside 3 sigma on {100 * r['inside_3sigma']:.1f} % of epochs; {r['seconds']:.1f} s)")
+            extra = (
+                f" ({r['method']}, heading sigma {r['align_sigma_heading_deg']:.3f} deg after "
+                f"{r['align_converge_s']:.0f} s; corrections {', '.join(f'{c:.4f}' for c in r['corrections_deg'])} "
+                f"deg; attitude inside 3 sigma on {100 * r['inside_3sigma']:.1f} % of epochs; {r['seconds']:.1f} s)"
+            )
         sig = f"{r['sigma_deg']:g}" if "sigma_deg" in r else "alignment"
         exact = f"{r['exact_rms_mgal']:.3f}" if "exact_rms_mgal" in r else ""
-        print(f"| {r['flight']} | {r['case']}{extra} | {r['passes']} | {sig} | {r['rms_mgal']:.3f} | {exact} | "
-              f"{r['t_from_s']:.0f} |")
+        print(
+            f"| {r['flight']} | {r['case']}{extra} | {r['passes']} | {sig} | {r['rms_mgal']:.3f} | {exact} | "
+            f"{r['t_from_s']:.0f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -57,7 +57,9 @@ def offsets():
 
 
 def aiding_gaps():
-    print("| aiding gap, s | sigma outside, mGal | max sigma in gap, mGal | RMS error outside | RMS error in gap, mGal |")
+    print(
+        "| aiding gap, s | sigma outside, mGal | max sigma in gap, mGal | RMS error outside | RMS error in gap, mGal |"
+    )
     print("|---|---|---|---|---|")
     for gap in (0, 10, 30, 60, 120):
         a, b = 400.0, 400.0 + gap
@@ -87,16 +89,20 @@ def splits():
         "IMU gap 60 s": lambda p: d.drop_between(p, "imu", 400, 460),
         "all channels: 30 min gap": lambda p: d.shift_after(p, 480, 1800),
         "IMU clock restart at 600 s, 300 s back (placed)": lambda p: d.restart_clock(p, "imu", 600, 300),
-        "IMU clock restarts twice (dropped)": lambda p: (d.restart_clock(p, "imu", 300, 100),
-                                                     d.restart_clock(p, "imu", 700, 200)),
+        "IMU clock restarts twice (dropped)": lambda p: (
+            d.restart_clock(p, "imu", 300, 100),
+            d.restart_clock(p, "imu", 700, 200),
+        ),
     }
     for name, prep in cases.items():
         _, _, _, r = _flight(prep)
         err = r.disturbance / 1e-5 - r.truth_mgal
         segs = [n.split("estimated ")[1].split(" of")[0] for n in r.notes if " segments: " in n]
         nseg = len(segs)
-        print(f"| {name} | {segs[0] if nseg else 1} | {len(r.line_info)} | "
-              f"{np.sqrt(np.nanmean(err[r.line != ''] ** 2)):.2f} |")
+        print(
+            f"| {name} | {segs[0] if nseg else 1} | {len(r.line_info)} | "
+            f"{np.sqrt(np.nanmean(err[r.line != ''] ** 2)):.2f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -55,23 +55,42 @@ def random_field(rng, lat0, lon0, length_m):
     dlon = 1.0 / (111e3 * math.cos(math.radians(lat0)))
     pms = []
     for _ in range(12):
-        pms.append({"lat_deg": lat0 + rng.uniform(-5e3, 5e3) * dlat, "lon_deg": lon0 + rng.uniform(0, length_m) * dlon,
-                    "depth_m": float(rng.uniform(1000, 4000)), "mass_kg": float(rng.choice([-1, 1]) * rng.uniform(2e13, 1e14))})
+        pms.append(
+            {
+                "lat_deg": lat0 + rng.uniform(-5e3, 5e3) * dlat,
+                "lon_deg": lon0 + rng.uniform(0, length_m) * dlon,
+                "depth_m": float(rng.uniform(1000, 4000)),
+                "mass_kg": float(rng.choice([-1, 1]) * rng.uniform(2e13, 1e14)),
+            }
+        )
     prisms = []
     for _ in range(4):
-        prisms.append({"lat_deg": lat0 + rng.uniform(-3e3, 3e3) * dlat, "lon_deg": lon0 + rng.uniform(0, length_m) * dlon,
-                       "east_m": [-float(rng.uniform(1e3, 4e3)), float(rng.uniform(1e3, 4e3))],
-                       "north_m": [-float(rng.uniform(1e3, 4e3)), float(rng.uniform(1e3, 4e3))],
-                       "depth_m": [float(rng.uniform(200, 800)), float(rng.uniform(1500, 3000))],
-                       "density_kgm3": float(rng.choice([-1, 1]) * rng.uniform(200, 500))})
+        prisms.append(
+            {
+                "lat_deg": lat0 + rng.uniform(-3e3, 3e3) * dlat,
+                "lon_deg": lon0 + rng.uniform(0, length_m) * dlon,
+                "east_m": [-float(rng.uniform(1e3, 4e3)), float(rng.uniform(1e3, 4e3))],
+                "north_m": [-float(rng.uniform(1e3, 4e3)), float(rng.uniform(1e3, 4e3))],
+                "depth_m": [float(rng.uniform(200, 800)), float(rng.uniform(1500, 3000))],
+                "density_kgm3": float(rng.choice([-1, 1]) * rng.uniform(200, 500)),
+            }
+        )
     return {"type": "model", "point_masses": pms, "prisms": prisms}
 
 
 def flight(seed, duration_s, noise_e, speed=100.0):
     lat0, lon0 = 45.0, 135.0
     fld = random_field(np.random.default_rng(1000 + seed), lat0, lon0, speed * duration_s)
-    sim = quick_sim(duration_s=duration_s, speed_mps=speed, lat_deg=lat0, lon_deg=lon0, field=fld, imu_hz=1.0, seed=seed,
-                    noise={"gradiometer": {"rate_hz": 1.0, "white_eotvos_rthz": noise_e}})
+    sim = quick_sim(
+        duration_s=duration_s,
+        speed_mps=speed,
+        lat_deg=lat0,
+        lon_deg=lon0,
+        field=fld,
+        imu_hz=1.0,
+        seed=seed,
+        noise={"gradiometer": {"rate_hz": 1.0, "white_eotvos_rthz": noise_e}},
+    )
     return simulate_flight(load_sim_config(sim)), load_sim_config(sim)
 
 
@@ -170,21 +189,29 @@ def main(argv=None):
             fs, cfg = flight(s, dur, noise)
             acc.append(evaluate(fs, cfg))
         rows.append((noise, {k: float(np.mean([a[k] for a in acc])) for k in acc[0]}))
-    print(f"Flight: {dur / 60:.0f} min due east at 100 m/s, 1000 m, 45N; 12 point masses + 4 prisms per field; "
-          f"{seeds} field(s) per row (means); gradient 1 Hz, white noise only; platform triad.\n")
+    print(
+        f"Flight: {dur / 60:.0f} min due east at 100 m/s, 1000 m, 45N; 12 point masses + 4 prisms per field; "
+        f"{seeds} field(s) per row (means); gradient 1 Hz, white noise only; platform triad.\n"
+    )
     r0 = rows[0][1]
-    print(f"Anomaly along the line (what a normal-field model misses): vertical RMS {r0['anom_v_rms']:.1f} mGal, "
-          f"horizontal RMS {r0['anom_h_rms']:.1f} mGal; conventional vertical error (deflection) RMS "
-          f"{r0['tilt_conv_arcsec']:.2f}\"; free-inertial Schuler channel driven by it: "
-          f"{r0['conv_10']:.1f} m after 10 min, {r0['conv_end']:.1f} m after {dur / 60:.0f} min.\n")
-    print("| gradient noise, E/sqrt(Hz) | gravity by dg/dt=T V: vertical RMS / end, mGal | horizontal RMS, mGal "
-          f"| eigen-vertical error RMS, arcsec | free-inertial pos. error 10 / {dur / 60:.0f} min, m | "
-          "GNSS-aided pos. RMS asym / KF, m | accel.-error estimate RMS asym / KF, mGal |")
+    print(
+        f"Anomaly along the line (what a normal-field model misses): vertical RMS {r0['anom_v_rms']:.1f} mGal, "
+        f"horizontal RMS {r0['anom_h_rms']:.1f} mGal; conventional vertical error (deflection) RMS "
+        f'{r0["tilt_conv_arcsec"]:.2f}"; free-inertial Schuler channel driven by it: '
+        f"{r0['conv_10']:.1f} m after 10 min, {r0['conv_end']:.1f} m after {dur / 60:.0f} min.\n"
+    )
+    print(
+        "| gradient noise, E/sqrt(Hz) | gravity by dg/dt=T V: vertical RMS / end, mGal | horizontal RMS, mGal "
+        f"| eigen-vertical error RMS, arcsec | free-inertial pos. error 10 / {dur / 60:.0f} min, m | "
+        "GNSS-aided pos. RMS asym / KF, m | accel.-error estimate RMS asym / KF, mGal |"
+    )
     print("|---|---|---|---|---|---|---|")
     for noise, r in rows:
-        print(f"| {noise:g} | {r['grav_v_rms']:.3f} / {r['grav_v_end']:.3f} | {r['grav_h_rms']:.3f} | "
-              f"{r['tilt_grad_arcsec']:.1f} | {r['grad_10']:.0f} / {r['grad_end']:.0f} | "
-              f"{r['aided_pos_as']:.2f} / {r['aided_pos_kf']:.2f} | {r['aided_acc_as']:.1f} / {r['aided_acc_kf']:.1f} |")
+        print(
+            f"| {noise:g} | {r['grav_v_rms']:.3f} / {r['grav_v_end']:.3f} | {r['grav_h_rms']:.3f} | "
+            f"{r['tilt_grad_arcsec']:.1f} | {r['grad_10']:.0f} / {r['grad_end']:.0f} | "
+            f"{r['aided_pos_as']:.2f} / {r['aided_pos_kf']:.2f} | {r['aided_acc_as']:.1f} / {r['aided_acc_kf']:.1f} |"
+        )
     print(f"\n({time.perf_counter() - t0:.0f} s)")
     return rows
 

@@ -46,10 +46,18 @@ def _flight(path: Path, seconds: float, imu_hz: float = 100.0):
     n, m = int(seconds * imu_hz), int(seconds)
     ti = start + np.round(np.arange(n) * 1e9 / imu_hz).astype(np.int64)
     ta = start + np.arange(m, dtype=np.int64) * 10**9
-    logs = SensorLogs(start, ti, rng.normal(0, 1, (n, 3)) + [0, 0, 9.8],
-                      rng.normal(0, 1e-4, (n, 3)), ta, 1000 + rng.normal(0, 1, m), ta.copy(),
-                      45 + rng.normal(0, 1e-5, m), 135 + rng.normal(0, 1e-5, m),
-                      1000 + rng.normal(0, 1, m))
+    logs = SensorLogs(
+        start,
+        ti,
+        rng.normal(0, 1, (n, 3)) + [0, 0, 9.8],
+        rng.normal(0, 1e-4, (n, 3)),
+        ta,
+        1000 + rng.normal(0, 1, m),
+        ta.copy(),
+        45 + rng.normal(0, 1e-5, m),
+        135 + rng.normal(0, 1e-5, m),
+        1000 + rng.normal(0, 1, m),
+    )
     files = write_flight_logs(path, "BENCH", ["mcap_json", "mcap_ros2"], logs)
     return {"json": files[0], "ros2": files[1]}
 
@@ -123,35 +131,72 @@ def run(quick: bool = False) -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp:
         files = _flight(Path(tmp), seconds)
         sim_topics = {"imu": "/imu", "altimeter": "/altimeter", "gnss": "/gnss"}
-        cases = [("simulated flight", "ros2", files["ros2"], sim_topics,
-                  [("mcap_ros2", _mcap_ros2), ("mcap raw iteration", _mcap_raw)]),
-                 ("simulated flight", "json", files["json"], sim_topics,
-                  [("mcap+json.loads", _mcap_json), ("mcap raw iteration", _mcap_raw)])]
+        cases = [
+            (
+                "simulated flight",
+                "ros2",
+                files["ros2"],
+                sim_topics,
+                [("mcap_ros2", _mcap_ros2), ("mcap raw iteration", _mcap_raw)],
+            ),
+            (
+                "simulated flight",
+                "json",
+                files["json"],
+                sim_topics,
+                [("mcap+json.loads", _mcap_json), ("mcap raw iteration", _mcap_raw)],
+            ),
+        ]
         real = EXTERNAL / "ros2-imu" / "robot_localization_test1.mcap"
         if real.is_file():
-            cases.append(("robot_localization_test1 (real)", "ros2", real,
-                          {"imu": "/imu/data", "gnss": "/fix"},
-                          [("mcap_ros2", _mcap_ros2), ("mcap raw iteration", _mcap_raw)]))
+            cases.append(
+                (
+                    "robot_localization_test1 (real)",
+                    "ros2",
+                    real,
+                    {"imu": "/imu/data", "gnss": "/fix"},
+                    [("mcap_ros2", _mcap_ros2), ("mcap raw iteration", _mcap_raw)],
+                )
+            )
         read_mcap(files["ros2"])  # load the numba kernels before timing
         for label, enc, path, topics, peers in cases:
             n0, t0 = _time(_ours, path, topics, repeats=repeats)
-            rows.append({"file": label, "encoding": enc, "reader": "gravsurvey", "messages": n0,
-                         "seconds": t0, "msgs_per_s": n0 / t0, "ours_speedup": 1.0})
+            rows.append(
+                {
+                    "file": label,
+                    "encoding": enc,
+                    "reader": "gravsurvey",
+                    "messages": n0,
+                    "seconds": t0,
+                    "msgs_per_s": n0 / t0,
+                    "ours_speedup": 1.0,
+                }
+            )
             for name, fn in peers:
                 n, t = _time(fn, path, topics, repeats=repeats)
                 if n != n0:
                     raise RuntimeError(f"{name} read {n} messages of {path}, we read {n0}")
-                rows.append({"file": label, "encoding": enc, "reader": name, "messages": n,
-                             "seconds": t, "msgs_per_s": n / t, "ours_speedup": t / t0})
+                rows.append(
+                    {
+                        "file": label,
+                        "encoding": enc,
+                        "reader": name,
+                        "messages": n,
+                        "seconds": t,
+                        "msgs_per_s": n / t,
+                        "ours_speedup": t / t0,
+                    }
+                )
     return rows
 
 
 def format_rows(rows) -> str:
-    out = ["| file | enc | reader | messages | s | msgs/s | ours x faster |",
-           "|---|---|---|---:|---:|---:|---:|"]
+    out = ["| file | enc | reader | messages | s | msgs/s | ours x faster |", "|---|---|---|---:|---:|---:|---:|"]
     for r in rows:
-        out.append(f"| {r['file']} | {r['encoding']} | {r['reader']} | {r['messages']} | "
-                   f"{r['seconds']:.4f} | {r['msgs_per_s']:.4g} | {r['ours_speedup']:.1f} |")
+        out.append(
+            f"| {r['file']} | {r['encoding']} | {r['reader']} | {r['messages']} | "
+            f"{r['seconds']:.4f} | {r['msgs_per_s']:.4g} | {r['ours_speedup']:.1f} |"
+        )
     return "\n".join(out)
 
 

@@ -87,21 +87,30 @@ def _flight(duration_s, rate_hz=10.0, seed=0):
     rec = FlightRecord(0, ImuChannel(t, f_t, w_t), AltimeterChannel(alt_t, h + rng.normal(size=alt_t.size)))
     init = InitialState(lat0, float(lon[0]), h, np.array([v, 0.0, 0.0]), np.eye(3))
     # GNSS positions at 1 Hz with 1 m / 2 m noise, for the 14-state aided model
-    gnss = (alt_t, lat[:: int(rate_hz)] + rng.normal(size=alt_t.size) / 6.4e6,
-            lon[:: int(rate_hz)] + rng.normal(size=alt_t.size) / 4.5e6, h + 2.0 * rng.normal(size=alt_t.size))
+    gnss = (
+        alt_t,
+        lat[:: int(rate_hz)] + rng.normal(size=alt_t.size) / 6.4e6,
+        lon[:: int(rate_hz)] + rng.normal(size=alt_t.size) / 4.5e6,
+        h + 2.0 * rng.normal(size=alt_t.size),
+    )
     return rec, init, gnss
 
 
 def _model(rec, init, params, gnss):
     """``(x0, P0, Phi, Q, z, H, R)`` of the GNSS-aided model as gravsurvey.inm.solve builds it, and
     ``(T, T^-1)`` of its true-error basis."""
-    nav = mechanize(rec.imu.time, rec.imu.specific_force_t, rec.imu.angular_rate_t, init,
-                    rec.altimeter.time, rec.altimeter.height)
+    nav = mechanize(
+        rec.imu.time, rec.imu.specific_force_t, rec.imu.angular_rate_t, init, rec.altimeter.time, rec.altimeter.height
+    )
     idx = np.arange(0, rec.imu.time.size, 10)
     n = N_STATE_AIDED
     phi, q = discretise(epoch_geometry(nav, idx), params, 1.0, aided=True)
-    parts = [AltimeterMeasurement(rec.altimeter.time, rec.altimeter.height, params.altimeter_sigma_m)
-             .build(nav, idx, 0.5, n), GnssMeasurement(*gnss, 1.0, 2.0).build(nav, idx, 0.5, n)]
+    parts = [
+        AltimeterMeasurement(rec.altimeter.time, rec.altimeter.height, params.altimeter_sigma_m).build(
+            nav, idx, 0.5, n
+        ),
+        GnssMeasurement(*gnss, 1.0, 2.0).build(nav, idx, 0.5, n),
+    ]
     c = nav.mat_it[idx[0]]
     p0 = initial_covariance(params, c.T @ nav.r_i[idx[0]], c.T @ nav.v_i[idx[0]])
     z, h, r = stack_measurements(parts)
@@ -178,8 +187,12 @@ def _agreement(ours, other, prefix):
     """States and covariances, filtered and smoothed: relative and in sigmas."""
     xf, pf, xs, ps = other
     out = {}
-    for key, a, b, p in (("x_f", ours["x_f"], xf, pf), ("p_f", ours["p_f"], pf, pf),
-                         ("x_s", ours["x_s"], xs, ps), ("p_s", ours["p_s"], ps, ps)):
+    for key, a, b, p in (
+        ("x_f", ours["x_f"], xf, pf),
+        ("p_f", ours["p_f"], pf, pf),
+        ("x_s", ours["x_s"], xs, ps),
+        ("p_s", ours["p_s"], ps, ps),
+    ):
         out[f"{prefix}_{key}_rel"] = _rel(a, b)
         out[f"{prefix}_{key}_sigmas"] = _sigmas(a, b, p)
     out[f"{prefix}_rel"] = max(out[f"{prefix}_{k}_rel"] for k in ("x_f", "p_f", "x_s", "p_s"))
@@ -206,8 +219,9 @@ def compare_filterpy(model, basis, reps, n_exact):
     row["n_exact"] = n_exact
     row.update(_agreement(filter_and_smooth(*short), exact, "ours_vs_exact"))
     fp_short = _filterpy(*short)
-    row.update(_agreement(dict(x_f=fp_short[0], p_f=fp_short[1], x_s=fp_short[2], p_s=fp_short[3]), exact,
-                          "filterpy_vs_exact"))
+    row.update(
+        _agreement(dict(x_f=fp_short[0], p_f=fp_short[1], x_s=fp_short[2], p_s=fp_short[3]), exact, "filterpy_vs_exact")
+    )
     # the same model in the true-error basis: well conditioned, so the two must agree to rounding
     t, t_inv = basis
     x0b, p0b, phib, qb, hb = change_basis(t, t_inv, model[0], model[1], model[2], model[3], model[5])
@@ -230,17 +244,31 @@ def run(quick: bool = False) -> list[dict]:
     rows = [compare_filterpy(model, basis, reps, 200 if quick else 600)]
     # mechanization per IMU sample (median of repetitions, with the range)
     t = rec.imu.time
-    mechanize(t[:100], rec.imu.specific_force_t[:100], rec.imu.angular_rate_t[:100], init,
-              rec.altimeter.time, rec.altimeter.height)
+    mechanize(
+        t[:100],
+        rec.imu.specific_force_t[:100],
+        rec.imu.angular_rate_t[:100],
+        init,
+        rec.altimeter.time,
+        rec.altimeter.height,
+    )
     times = []
     for _ in range(reps):
         t0 = time.perf_counter()
-        mechanize(t, rec.imu.specific_force_t, rec.imu.angular_rate_t, init, rec.altimeter.time,
-                  rec.altimeter.height)
+        mechanize(t, rec.imu.specific_force_t, rec.imu.angular_rate_t, init, rec.altimeter.time, rec.altimeter.height)
         times.append(time.perf_counter() - t0)
     med, lo, hi = _median_range(times)
-    rows.append({"stage": "mechanization", "n": int(t.size), "ours_s": med, "ours_s_min": lo, "ours_s_max": hi,
-                 "us_per_sample": 1e6 * med / t.size, "goal": "<= 2 us/sample"})
+    rows.append(
+        {
+            "stage": "mechanization",
+            "n": int(t.size),
+            "ours_s": med,
+            "ours_s_min": lo,
+            "ours_s_max": hi,
+            "us_per_sample": 1e6 * med / t.size,
+            "goal": "<= 2 us/sample",
+        }
+    )
     estimate_anomaly(rec, params, init, "platform")  # kernels of this path compiled or loaded untimed
     times = []
     for _ in range(3 if quick else 5):
@@ -248,8 +276,16 @@ def run(quick: bool = False) -> list[dict]:
         estimate_anomaly(rec, params, init, "platform")
         times.append(time.perf_counter() - t0)
     med, lo, hi = _median_range(times)
-    rows.append({"stage": "estimate_anomaly (all, 8 states: no GNSS given)", "n": int(t.size), "ours_s": med,
-                 "ours_s_min": lo, "ours_s_max": hi, "s_per_flight_hour": med / hours})
+    rows.append(
+        {
+            "stage": "estimate_anomaly (all, 8 states: no GNSS given)",
+            "n": int(t.size),
+            "ours_s": med,
+            "ours_s_min": lo,
+            "ours_s_max": hi,
+            "s_per_flight_hour": med / hours,
+        }
+    )
     return rows
 
 
@@ -261,27 +297,37 @@ def main(argv=None):
     for r in rows:
         rng = f"{r['ours_s']:.4f} [{r['ours_s_min']:.4f}, {r['ours_s_max']:.4f}]"
         if "filterpy_s" in r:
-            print(f"| {r['stage']} | {r['n']} epochs, {r['pairs']} pairs | {rng} | {r['filterpy_s']:.3f} "
-                  f"[{r['filterpy_s_min']:.3f}, {r['filterpy_s_max']:.3f}] | {r['speedup']:.1f}x "
-                  f"[{r['speedup_min']:.1f}, {r['speedup_max']:.1f}] (CPU time: {r['cpu_speedup']:.1f}x "
-                  f"[{r['cpu_speedup_min']:.1f}, {r['cpu_speedup_max']:.1f}]) | {r['goal']} |")
+            print(
+                f"| {r['stage']} | {r['n']} epochs, {r['pairs']} pairs | {rng} | {r['filterpy_s']:.3f} "
+                f"[{r['filterpy_s_min']:.3f}, {r['filterpy_s_max']:.3f}] | {r['speedup']:.1f}x "
+                f"[{r['speedup_min']:.1f}, {r['speedup_max']:.1f}] (CPU time: {r['cpu_speedup']:.1f}x "
+                f"[{r['cpu_speedup_min']:.1f}, {r['cpu_speedup_max']:.1f}]) | {r['goal']} |"
+            )
         elif "us_per_sample" in r:
             print(f"| {r['stage']} | {r['n']} samples | {rng} | - | {r['us_per_sample']:.2f} us/sample | {r['goal']} |")
         else:
-            print(f"| {r['stage']} | {r['n']} samples | {rng} | - | {r['s_per_flight_hour']:.3f} s per flight hour | - |")
+            print(
+                f"| {r['stage']} | {r['n']} samples | {rng} | - | {r['s_per_flight_hour']:.3f} s per flight hour | - |"
+            )
     r = rows[0]
     print()
-    print("| comparison (14 states) | epochs | max relative (x_f, p_f, x_s, p_s) | max in sigmas (x_f, p_f, x_s, p_s) |")
+    print(
+        "| comparison (14 states) | epochs | max relative (x_f, p_f, x_s, p_s) | max in sigmas (x_f, p_f, x_s, p_s) |"
+    )
     print("|---|---|---|---|")
-    for prefix, label, n in (("filterpy", "ours vs filterpy, pipeline basis", r["n"]),
-                             ("ours_vs_exact", "ours vs extended precision", r["n_exact"]),
-                             ("filterpy_vs_exact", "filterpy vs extended precision", r["n_exact"]),
-                             ("basis_filterpy", "ours vs filterpy, true-error basis", r["n"])):
+    for prefix, label, n in (
+        ("filterpy", "ours vs filterpy, pipeline basis", r["n"]),
+        ("ours_vs_exact", "ours vs extended precision", r["n_exact"]),
+        ("filterpy_vs_exact", "filterpy vs extended precision", r["n_exact"]),
+        ("basis_filterpy", "ours vs filterpy, true-error basis", r["n"]),
+    ):
         rel = ", ".join(f"{r[f'{prefix}_{k}_rel']:.1e}" for k in ("x_f", "p_f", "x_s", "p_s"))
         sig = ", ".join(f"{r[f'{prefix}_{k}_sigmas']:.1e}" for k in ("x_f", "p_f", "x_s", "p_s"))
         print(f"| {label} | {n} | {rel} | {sig} |")
-    print(f"| ours, true-error basis mapped back vs ours, pipeline basis (x_s) | {r['n']} | - | "
-          f"{r['basis_vs_original_x_s_sigmas']:.1e} |")
+    print(
+        f"| ours, true-error basis mapped back vs ours, pipeline basis (x_s) | {r['n']} | - | "
+        f"{r['basis_vs_original_x_s_sigmas']:.1e} |"
+    )
 
 
 if __name__ == "__main__":

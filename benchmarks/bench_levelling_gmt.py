@@ -119,8 +119,9 @@ def compare(seed: int = 1) -> dict:
         g = run_gmt(lines, tmp)
     # key crossovers by the unordered pair of track names
     mine = {}
-    for fa, la, fb, lb, e, n, d in zip(xo.flight_a, xo.line_a, xo.flight_b, xo.line_b, xo.easting_m,
-                                       xo.northing_m, xo.diff_mgal):
+    for fa, la, fb, lb, e, n, d in zip(
+        xo.flight_a, xo.line_a, xo.flight_b, xo.line_b, xo.easting_m, xo.northing_m, xo.diff_mgal
+    ):
         mine[(f"{fa}_{la}", f"{fb}_{lb}")] = (float(e), float(n), float(d))
     dpos, dval = [], []
     for t1, t2, x, y, v in g["crossovers"]:
@@ -176,37 +177,61 @@ def figures(directory) -> dict:
     for f, (off, drift, t_end) in flights.items():
         tt = np.concatenate([np.arange(0, 600.0), np.arange(t_end - 600.0, t_end)])
         z = dist_base + off + drift * tt / 3600.0 + rng.normal(0, 1.0, tt.size)
-        cfg = tie_config({"base_gravity_mgal": g_base, "before": {"start_s": 0, "stop_s": 599},
-                                   "after": {"start_s": float(t_end - 600), "stop_s": float(t_end)}})
+        cfg = tie_config(
+            {
+                "base_gravity_mgal": g_base,
+                "before": {"start_s": 0, "stop_s": 599},
+                "after": {"start_s": float(t_end - 600), "stop_s": float(t_end)},
+            }
+        )
         ties[f] = tie_flight(cfg, tt, np.full(tt.size, lat_b), np.full(tt.size, h_b), z)
     raw_err = np.concatenate([ln["value_mgal"] - ln["truth_mgal"] for ln in lines])
     tied = [dict(ln, value_mgal=ln["value_mgal"] - ties[ln["flight"]].correction(ln["time_s"])) for ln in lines]
     tied_err = np.concatenate([ln["value_mgal"] - ln["truth_mgal"] for ln in tied])
     xo = find_crossovers(tied)
     lev = level_survey(xo, tied, LevellingOptions(), tied_flights=list(ties))
-    lev_err = np.concatenate([ln["value_mgal"] - lev.correction(ln["flight"], ln["line"], ln["time_s"]) - ln["truth_mgal"]
-                              for ln in tied])
-    plot_levelling(d / "levelling_example.png", lev, title="simulated survey: 3 flights, 8 lines, 4 ties; after base ties, tied flights as datum")
+    lev_err = np.concatenate(
+        [ln["value_mgal"] - lev.correction(ln["flight"], ln["line"], ln["time_s"]) - ln["truth_mgal"] for ln in tied]
+    )
+    plot_levelling(
+        d / "levelling_example.png",
+        lev,
+        title="simulated survey: 3 flights, 8 lines, 4 ties; after base ties, tied flights as datum",
+    )
     cat = lambda k, src: np.concatenate([ln[k] for ln in src])  # noqa: E731
     val = np.concatenate([ln["value_mgal"] - lev.correction(ln["flight"], ln["line"], ln["time_s"]) for ln in tied])
     lab = np.concatenate([np.full(ln["time_s"].size, f"{ln['flight']}/{ln['line']}") for ln in tied])
     g = grid_lines(cat("easting_m", tied), cat("northing_m", tied), cat("height_m", tied), val, lab)
     GE, GN = np.meshgrid(g.easting_m, g.northing_m)
     gerr = g.value_mgal - truth_field_mgal(GE, GN, g.altitude_m)
-    plot_grid_map(d / "grid_example.png", g.easting_m, g.northing_m, g.value_mgal, cat("easting_m", tied),
-                  cat("northing_m", tied), track_ids=lab, crs_label="local projected x/y (simulation)",
-                  title="simulated survey: tied, levelled, gridded by equivalent sources",
-                  note=f"{g.spacing_m:.0f} m cells at {g.altitude_m:.0f} m; CV RMS {g.cv_rms_mgal:.2f} mGal; "
-                       f"RMS vs truth {np.sqrt(np.nanmean(gerr**2)):.2f} mGal")
+    plot_grid_map(
+        d / "grid_example.png",
+        g.easting_m,
+        g.northing_m,
+        g.value_mgal,
+        cat("easting_m", tied),
+        cat("northing_m", tied),
+        track_ids=lab,
+        crs_label="local projected x/y (simulation)",
+        title="simulated survey: tied, levelled, gridded by equivalent sources",
+        note=f"{g.spacing_m:.0f} m cells at {g.altitude_m:.0f} m; CV RMS {g.cv_rms_mgal:.2f} mGal; "
+        f"RMS vs truth {np.sqrt(np.nanmean(gerr**2)):.2f} mGal",
+    )
     return {
-        "raw_mean_error_mgal": float(raw_err.mean()), "raw_std_error_mgal": float(raw_err.std()),
-        "tied_mean_error_mgal": float(tied_err.mean()), "tied_std_error_mgal": float(tied_err.std()),
-        "levelled_mean_error_mgal": float(lev_err.mean()), "levelled_std_error_mgal": float(lev_err.std()),
-        "crossover_rms_before_mgal": lev.before["rms_mgal"], "crossover_rms_after_mgal": lev.after["rms_mgal"],
+        "raw_mean_error_mgal": float(raw_err.mean()),
+        "raw_std_error_mgal": float(raw_err.std()),
+        "tied_mean_error_mgal": float(tied_err.mean()),
+        "tied_std_error_mgal": float(tied_err.std()),
+        "levelled_mean_error_mgal": float(lev_err.mean()),
+        "levelled_std_error_mgal": float(lev_err.std()),
+        "crossover_rms_before_mgal": lev.before["rms_mgal"],
+        "crossover_rms_after_mgal": lev.after["rms_mgal"],
         "drift_recovered_mgal_per_h": {f: t.drift_mgal_per_h for f, t in ties.items()},
         "drift_true_mgal_per_h": {f: v[1] for f, v in flights.items()},
-        "grid_rms_vs_truth_mgal": float(np.sqrt(np.nanmean(gerr**2))), "grid_cv_rms_mgal": g.cv_rms_mgal,
-        "grid_spacing_m": g.spacing_m, "grid_altitude_m": g.altitude_m,
+        "grid_rms_vs_truth_mgal": float(np.sqrt(np.nanmean(gerr**2))),
+        "grid_cv_rms_mgal": g.cv_rms_mgal,
+        "grid_spacing_m": g.spacing_m,
+        "grid_altitude_m": g.altitude_m,
     }
 
 
@@ -226,8 +251,10 @@ def main() -> int:
     print(f"| max crossover position difference | {r['max_position_m']:.3g} m |")
     print(f"| max crossover value difference | {r['max_value_mgal']:.3g} mGal |")
     print(f"| max per-line correction difference (x2sys_solve -Ec) | {r['max_correction_mgal']:.3g} mGal |")
-    print(f"| crossover RMS before / after gravsurvey / after GMT | {r['rms_before_mgal']:.3f} / "
-          f"{r['rms_after_mgal']:.3f} / {r['rms_after_gmt_mgal']:.3f} mGal |")
+    print(
+        f"| crossover RMS before / after gravsurvey / after GMT | {r['rms_before_mgal']:.3f} / "
+        f"{r['rms_after_mgal']:.3f} / {r['rms_after_gmt_mgal']:.3f} mGal |"
+    )
     print("\n| line | gravsurvey mGal | GMT mGal |\n|---|---|---|")
     for k, (a, b) in r["corrections"].items():
         print(f"| {k} | {a:.4f} | {b:.4f} |")

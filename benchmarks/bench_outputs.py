@@ -71,12 +71,26 @@ def synthetic_flight(k: int, n_main: int = 16, n_tie: int = 4, speed: float = 80
     lon = LON0 + e / (R_EARTH * np.cos(LAT0))
     val = (5.0 * np.sin(e / 7000.0) * np.cos(n / 9000.0) + rng.normal(0, 0.3) + rng.normal(0, 0.5, m)) * MGAL
     final = np.where(line != "", val, np.nan)
-    info = {ln: {"kind": kind, "method": "synthetic", "speed_mps": speed, "samples": int((line == ln).sum())}
-            for ln, kind, _e, _n in legs}
+    info = {
+        ln: {"kind": kind, "method": "synthetic", "speed_mps": speed, "samples": int((line == ln).sum())}
+        for ln, kind, _e, _n in legs
+    }
     return FlightEstimate(
-        name=f"F{k + 1:03d}", method="inm", t0_unix_ns=1_700_000_000_000_000_000 + k * 86_400 * 10**9, time=t,
-        lat=lat, lon=lon, height=np.full(m, 800.0), vel_n=np.zeros((m, 3)), speed=np.full(m, speed),
-        heading=np.zeros(m), smoothed=val, forward=val, sigma=np.full(m, 0.5 * MGAL), disturbance=final, line=line,
+        name=f"F{k + 1:03d}",
+        method="inm",
+        t0_unix_ns=1_700_000_000_000_000_000 + k * 86_400 * 10**9,
+        time=t,
+        lat=lat,
+        lon=lon,
+        height=np.full(m, 800.0),
+        vel_n=np.zeros((m, 3)),
+        speed=np.full(m, speed),
+        heading=np.zeros(m),
+        smoothed=val,
+        forward=val,
+        sigma=np.full(m, 0.5 * MGAL),
+        disturbance=final,
+        line=line,
         line_info=info,
     )
 
@@ -90,9 +104,18 @@ def run(sizes, grid: bool = False, repeats: int = 1):
         cfg_path = Path(tmp) / "survey.yaml"
         cfg_path.write_text("survey: {name: bench}\n")
         cfg = SurveyConfig(
-            path=cfg_path, base_dir=Path(tmp), raw={"survey": {"name": "bench"}}, name="bench", ellipsoid=WGS84,
-            flights=[], model=None, lines=None, postprocess=None, plots=False,
-            levelling=LevellingOptions(), grid=GridOptions(enabled=grid),
+            path=cfg_path,
+            base_dir=Path(tmp),
+            raw={"survey": {"name": "bench"}},
+            name="bench",
+            ellipsoid=WGS84,
+            flights=[],
+            model=None,
+            lines=None,
+            postprocess=None,
+            plots=False,
+            levelling=LevellingOptions(),
+            grid=GridOptions(enabled=grid),
         )
         for nf in sizes:
             results = [synthetic_flight(k) for k in range(nf)]
@@ -104,10 +127,19 @@ def run(sizes, grid: bool = False, repeats: int = 1):
                 walls.append(time.perf_counter() - t0)
                 cpus.append(time.process_time() - c0)
             wall, cpu = float(np.median(walls)), float(np.median(cpus))
-            out.append({"flights": nf, "lines": sum(len(r.line_info) for r in results), "rows": rows,
-                        "crossovers": summary["crossovers"]["count"], "seconds": wall, "cpu_seconds": cpu,
-                        "us_per_row": wall / rows * 1e6, "cpu_us_per_row": cpu / rows * 1e6,
-                        "levelled": bool(summary.get("levelling") and summary["levelling"].get("applied"))})
+            out.append(
+                {
+                    "flights": nf,
+                    "lines": sum(len(r.line_info) for r in results),
+                    "rows": rows,
+                    "crossovers": summary["crossovers"]["count"],
+                    "seconds": wall,
+                    "cpu_seconds": cpu,
+                    "us_per_row": wall / rows * 1e6,
+                    "cpu_us_per_row": cpu / rows * 1e6,
+                    "levelled": bool(summary.get("levelling") and summary["levelling"].get("applied")),
+                }
+            )
     return out
 
 
@@ -124,8 +156,10 @@ def main(argv=None) -> int:
     print("| flights | lines | rows | crossovers | levelled | output stage wall, s | CPU, s | CPU us per row |")
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['flights']} | {r['lines']} | {r['rows']:,} | {r['crossovers']} | {r['levelled']} | "
-              f"{r['seconds']:.1f} | {r['cpu_seconds']:.1f} | {r['cpu_us_per_row']:.1f} |")
+        print(
+            f"| {r['flights']} | {r['lines']} | {r['rows']:,} | {r['crossovers']} | {r['levelled']} | "
+            f"{r['seconds']:.1f} | {r['cpu_seconds']:.1f} | {r['cpu_us_per_row']:.1f} |"
+        )
     return 0
 
 

@@ -19,7 +19,15 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_unseen import CACHE, median_resolution_km, truth_lines, prepare_flight, read_profiles, rms_after_bias, scored_mask
+from bench_unseen import (
+    CACHE,
+    median_resolution_km,
+    truth_lines,
+    prepare_flight,
+    read_profiles,
+    rms_after_bias,
+    scored_mask,
+)
 
 from gravsurvey.pipeline import read_truth_csv, run_survey
 from gravsurvey.simulate.unseen import draw_flight_spec, limit_spec
@@ -63,10 +71,14 @@ def main(argv=None):
     for r in rows:
         print(f"| {r['name']} | " + " | ".join(f"{_f(r[m][0])} ({_f(r[m][1], 1)})" for m in METHODS) + " |")
     for m in METHODS[1:]:
-        better = [r["name"] for r in rows if r[m][0] is not None and r["none"][0] is not None and r[m][0] < r["none"][0]]
+        better = [
+            r["name"] for r in rows if r[m][0] is not None and r["none"][0] is not None and r[m][0] < r["none"][0]
+        ]
         ratio = [r[m][0] / r["none"][0] for r in rows if r[m][0] and r["none"][0]]
-        print(f"{m}: better than the smoothed estimate on {len(better)} of {len(rows)} flights; "
-              f"median RMS ratio to it {np.median(ratio):.2f}, worst {np.max(ratio):.2f}")
+        print(
+            f"{m}: better than the smoothed estimate on {len(better)} of {len(rows)} flights; "
+            f"median RMS ratio to it {np.median(ratio):.2f}, worst {np.max(ratio):.2f}"
+        )
 
 
 def _f(v, nd=2):

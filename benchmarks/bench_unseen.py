@@ -80,8 +80,10 @@ def prepare_flight(spec, cache=CACHE) -> Path:
         cfg = yaml.safe_load((d / "survey.yaml").read_text())
         cfg["processing"] = {"method": "classic"}
         cfg["output"] = {"dir": "out_classic"}
-        (d / "classic.yaml").write_text("# survey.yaml with the conventional scalar chain\n"
-                                        + yaml.safe_dump(cfg, sort_keys=False, default_flow_style=None))
+        (d / "classic.yaml").write_text(
+            "# survey.yaml with the conventional scalar chain\n"
+            + yaml.safe_dump(cfg, sort_keys=False, default_flow_style=None)
+        )
         done.write_text(json.dumps({k: v for k, v in spec.items() if k != "sim"}, indent=1, default=float))
     return d
 
@@ -277,8 +279,10 @@ def _fmt(v, nd=2):
 
 
 def print_table(rows):
-    print("| flight | drawn | default | kalman | oracle | classic | bound | default/bound | kalman/bound "
-          "| res default / classic / bound (km) | truth std | error/sigma |")
+    print(
+        "| flight | drawn | default | kalman | oracle | classic | bound | default/bound | kalman/bound "
+        "| res default / classic / bound (km) | truth std | error/sigma |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         b = r.get("bound_rms")
@@ -287,30 +291,45 @@ def print_table(rows):
         err = "; ".join(dict.fromkeys(r[k] for k in ("default_error", "oracle_error", "classic_error") if k in r))
         cov = r.get("default_coverage")
         cov = f" ({cov:.0%} covered)" if cov is not None and cov < 0.995 else ""
-        print(f"| {r['name']} | {r['summary'].split(' ', 1)[1]} | {_fmt(r.get('default_rms'))}{cov} | "
-              f"{_fmt(r.get('kalman_rms'))} | {_fmt(r.get('oracle_rms'))} | {_fmt(r.get('classic_rms'))} | "
-              f"{_fmt(b)} | {_fmt(ratio)} | {_fmt(kr)} | {_fmt(r.get('default_resolution_km'), 1)} / "
-              f"{_fmt(r.get('classic_resolution_km'), 1)} / {_fmt(r.get('bound_resolution_km'), 1)} | "
-              f"{_fmt(r.get('truth_std_mgal'))} | {_fmt(r.get('default_z'))} |" + (f" {err}" if err else ""))
+        print(
+            f"| {r['name']} | {r['summary'].split(' ', 1)[1]} | {_fmt(r.get('default_rms'))}{cov} | "
+            f"{_fmt(r.get('kalman_rms'))} | {_fmt(r.get('oracle_rms'))} | {_fmt(r.get('classic_rms'))} | "
+            f"{_fmt(b)} | {_fmt(ratio)} | {_fmt(kr)} | {_fmt(r.get('default_resolution_km'), 1)} / "
+            f"{_fmt(r.get('classic_resolution_km'), 1)} / {_fmt(r.get('bound_resolution_km'), 1)} | "
+            f"{_fmt(r.get('truth_std_mgal'))} | {_fmt(r.get('default_z'))} |" + (f" {err}" if err else "")
+        )
     print()
     for key in ("default", "kalman", "oracle", "classic"):
-        ratios = [r[f"{key}_rms"] / r["bound_rms"] for r in rows
-                  if r.get(f"{key}_rms") is not None and r.get("bound_rms")]
+        ratios = [
+            r[f"{key}_rms"] / r["bound_rms"] for r in rows if r.get(f"{key}_rms") is not None and r.get("bound_rms")
+        ]
         if ratios:
-            print(f"{key:8s} RMS / bound: median {np.median(ratios):.2f}, worst {np.max(ratios):.2f} "
-                  f"over {len(ratios)} flights")
+            print(
+                f"{key:8s} RMS / bound: median {np.median(ratios):.2f}, worst {np.max(ratios):.2f} "
+                f"over {len(ratios)} flights"
+            )
     zs = [r["default_z"] for r in rows if r.get("default_z") is not None]
     if zs:
         inside = sum(0.7 <= z <= 1.5 for z in zs)
-        print(f"default error/sigma RMS: median {np.median(zs):.2f}, range {min(zs):.2f}-{max(zs):.2f}, "
-              f"{inside} of {len(zs)} flights in [0.7, 1.5]")
-    worse = [r["name"] for r in rows if r.get("default_rms") is not None and r.get("classic_rms") is not None
-             and r["default_rms"] > r["classic_rms"]]
+        print(
+            f"default error/sigma RMS: median {np.median(zs):.2f}, range {min(zs):.2f}-{max(zs):.2f}, "
+            f"{inside} of {len(zs)} flights in [0.7, 1.5]"
+        )
+    worse = [
+        r["name"]
+        for r in rows
+        if r.get("default_rms") is not None and r.get("classic_rms") is not None and r["default_rms"] > r["classic_rms"]
+    ]
     print(f"default worse than classic on {len(worse)} of {len(rows)} flights: {', '.join(worse) or '-'}")
     # issue 12: never worse than the scalar chain at the same or coarser resolution
-    coarser = [r["name"] for r in rows if r["name"] in worse and r.get("default_resolution_km") is not None
-               and r.get("classic_resolution_km") is not None
-               and r["default_resolution_km"] >= r["classic_resolution_km"]]
+    coarser = [
+        r["name"]
+        for r in rows
+        if r["name"] in worse
+        and r.get("default_resolution_km") is not None
+        and r.get("classic_resolution_km") is not None
+        and r["default_resolution_km"] >= r["classic_resolution_km"]
+    ]
     print(f"... of which at the same or coarser stated resolution: {len(coarser)}: {', '.join(coarser) or '-'}")
     failed = [r["name"] for r in rows if any(k in r for k in ("default_error", "oracle_error", "classic_error"))]
     if failed:
@@ -321,12 +340,18 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--flights", type=int, default=20, help="number of flights (seeds first-seed ..)")
     ap.add_argument("--first-seed", type=int, default=0)
-    ap.add_argument("--quick", action="store_true",
-                    help=f"cap each flight at {QUICK_MAX_DURATION_S / 60:.0f} min and {QUICK_MAX_IMU_HZ:g} Hz IMU")
+    ap.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"cap each flight at {QUICK_MAX_DURATION_S / 60:.0f} min and {QUICK_MAX_IMU_HZ:g} Hz IMU",
+    )
     ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON")
     ap.add_argument("--cache", type=Path, default=CACHE, help="where simulated flights are kept")
-    ap.add_argument("--runs", default="default,oracle,classic",
-                    help="comma-separated subset of default,oracle,classic to run (faster checks)")
+    ap.add_argument(
+        "--runs",
+        default="default,oracle,classic",
+        help="comma-separated subset of default,oracle,classic to run (faster checks)",
+    )
     a = ap.parse_args(argv)
     if a.flights < 1:
         ap.error("--flights must be >= 1")
@@ -342,16 +367,23 @@ def main(argv=None):
             row = evaluate_flight(spec, folder, tuple(a.runs.split(",")))
         except GravsurveyError as exc:  # one bad flight must not hide the others' rows
             t_sim = time.perf_counter() - t0
-            row = {"name": spec["name"], "seed": spec["seed"], "summary": spec_summary(spec),
-                   "default_error": f"{type(exc).__name__}: {exc}"}
+            row = {
+                "name": spec["name"],
+                "seed": spec["seed"],
+                "summary": spec_summary(spec),
+                "default_error": f"{type(exc).__name__}: {exc}",
+            }
         row["simulate_s"] = t_sim
         rows.append(row)
-        print(f"{row['summary']}: default {_fmt(row.get('default_rms'))} kalman {_fmt(row.get('kalman_rms'))} "
-              f"oracle {_fmt(row.get('oracle_rms'))} classic {_fmt(row.get('classic_rms'))} "
-              f"bound {_fmt(row.get('bound_rms'))} mGal (sim {t_sim:.0f} s, run "
-              f"{row.get('default_s', 0):.0f}/{row.get('oracle_s', 0):.0f}/{row.get('classic_s', 0):.0f} s, "
-              f"error/sigma {_fmt(row.get('default_z'))})",
-              file=sys.stderr, flush=True)
+        print(
+            f"{row['summary']}: default {_fmt(row.get('default_rms'))} kalman {_fmt(row.get('kalman_rms'))} "
+            f"oracle {_fmt(row.get('oracle_rms'))} classic {_fmt(row.get('classic_rms'))} "
+            f"bound {_fmt(row.get('bound_rms'))} mGal (sim {t_sim:.0f} s, run "
+            f"{row.get('default_s', 0):.0f}/{row.get('oracle_s', 0):.0f}/{row.get('classic_s', 0):.0f} s, "
+            f"error/sigma {_fmt(row.get('default_z'))})",
+            file=sys.stderr,
+            flush=True,
+        )
     print_table(rows)
     if a.json:
         a.json.write_text(json.dumps(rows, indent=1, default=float))

@@ -67,9 +67,16 @@ def run(quick: bool = False) -> list[dict]:
     W.postprocess(_line(2048), 1.0, 50.0, "cosphi", wavelet="db10")  # numba compile outside timing
     for n in sizes:
         z = _line(n)
-        cases = [("ti_cosphi", "db10"), ("ti_cosphi", "auto"), ("cosphi", "db10"),
-                 ("visushrink", "db10"), ("sure", "db10"), ("bayes", "db10"),
-                 ("butterworth", None), ("gaussian", None)]
+        cases = [
+            ("ti_cosphi", "db10"),
+            ("ti_cosphi", "auto"),
+            ("cosphi", "db10"),
+            ("visushrink", "db10"),
+            ("sure", "db10"),
+            ("bayes", "db10"),
+            ("butterworth", None),
+            ("gaussian", None),
+        ]
         cases.append(("ti_cosphi+context", "db10"))
         # the line cut from the middle of a flight twice its length (context=(z_full, a, b))
         z_full = _line(2 * n, seed=1)
@@ -80,16 +87,24 @@ def run(quick: bool = False) -> list[dict]:
                 kw["context"] = (z_full, a, a + n)
 
             def call(method=method, kw=kw, z=z, z_full=z_full, a=a, n=n):
-                zz = z_full[a:a + n] if "context" in kw else z
+                zz = z_full[a : a + n] if "context" in kw else z
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", DataWarning)
                     return W.postprocess(zz, 1.0, 50.0, method.split("+")[0], **kw)
 
             sec = _time(call, repeats)
             _, info = call()
-            rows.append({"method": method, "wavelet": wav or "-", "N": n, "K": W.n_levels(n),
-                         "level_n": info.get("n"), "seconds": sec,
-                         "complexity": COMPLEXITY[method]})
+            rows.append(
+                {
+                    "method": method,
+                    "wavelet": wav or "-",
+                    "N": n,
+                    "K": W.n_levels(n),
+                    "level_n": info.get("n"),
+                    "seconds": sec,
+                    "complexity": COMPLEXITY[method],
+                }
+            )
     return rows
 
 
@@ -99,8 +114,10 @@ def main(argv=None):
     print("| method | wavelet | N | K | chosen n | seconds | complexity |")
     print("|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['method']} | {r['wavelet']} | {r['N']} | {r['K']} | {r['level_n']} | "
-              f"{r['seconds']:.3f} | {r['complexity']} |")
+        print(
+            f"| {r['method']} | {r['wavelet']} | {r['N']} | {r['K']} | {r['level_n']} | "
+            f"{r['seconds']:.3f} | {r['complexity']} |"
+        )
 
 
 if __name__ == "__main__":

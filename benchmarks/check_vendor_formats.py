@@ -90,11 +90,17 @@ def check_mgd77t(d: Path):
     for formula in ("IGF1967", "GRS80", "WGS84"):
         dd = (free_air_anomaly(c["gra_obs"], c["lat"], 0.0, formula) - c["freeair"])[g] / MGAL
         p5, p50, p95 = np.percentile(dd, [5, 50, 95])
-        row(f.name, f"FAA({formula}) - FREEAIR: median [5, 95 %] max|.|",
-            f"{p50:+.3f} [{p5:+.3f}, {p95:+.3f}] {np.abs(dd).max():.3f}", "0 within 0.1 rounding" if formula == "IGF1967" else "offset 0.7-0.9",
-            None)
+        row(
+            f.name,
+            f"FAA({formula}) - FREEAIR: median [5, 95 %] max|.|",
+            f"{p50:+.3f} [{p5:+.3f}, {p95:+.3f}] {np.abs(dd).max():.3f}",
+            "0 within 0.1 rounding" if formula == "IGF1967" else "offset 0.7-0.9",
+            None,
+        )
         if formula == "IGF1967":
-            row(f.name, "FAA(IGF1967): fraction within 0.1 mGal", f"{np.mean(np.abs(dd) <= 0.1 + 1e-9):.4f}", "1", 0.002)
+            row(
+                f.name, "FAA(IGF1967): fraction within 0.1 mGal", f"{np.mean(np.abs(dd) <= 0.1 + 1e-9):.4f}", "1", 0.002
+            )
             row(f.name, "FAA(IGF1967): max |FAA - FREEAIR|", f"{np.abs(dd).max():.3f}", 0.1, 0.005, "mGal")
     ts, _ = tb.time_s()
     e = eotvos_from_track(ts, c["lat"], c["lon"], max_gap_s=90.0) / MGAL
@@ -144,9 +150,21 @@ def check_mgd77t_run(d: Path):
         name = f"run (classic, normal_gravity {formula}) - FREEAIR (400 s filter)"
         row(f.name, name + ": median", f"{p50:+.3f}", -0.87 if formula == "exact" else 0.0, 0.2, "mGal")
         row(f.name, name + ": 5 %, 95 %, max|.|", f"{p5:+.2f}, {p95:+.2f}, {np.abs(dd).max():.1f}", "-", None)
-        row(f.name, f"run ({formula}): epochs kept, failed flights, wall time (s)", f"{dd.size} of {n_all}, {len(res.failed)}, {el:.1f}", "-", None)
+        row(
+            f.name,
+            f"run ({formula}): epochs kept, failed flights, wall time (s)",
+            f"{dd.size} of {n_all}, {len(res.failed)}, {el:.1f}",
+            "-",
+            None,
+        )
         jumps = [n for n in res.notes if "position jump" in n]
-        row(f.name, f"run ({formula}): epochs with |diff| > 5 mGal; jump warnings", f"{int((np.abs(dd) > 5).sum())}; {len(jumps)}", "-", None)
+        row(
+            f.name,
+            f"run ({formula}): epochs with |diff| > 5 mGal; jump warnings",
+            f"{int((np.abs(dd) > 5).sum())}; {len(jumps)}",
+            "-",
+            None,
+        )
 
 
 def check_shipgrav(d: Path):
@@ -214,7 +232,13 @@ def check_shipgrav(d: Path):
         tb = read_nmea(s / name, time_source=src)
         row(name, f"row 0 time ({src} clock)", f"{tb.time_ns[0] / 1e9:.4f}", t_exp, t_tol)
         row(name, "row 0 lon (deg)", f"{np.degrees(tb.columns['lon'][0]):.9f}", lon_exp, lon_tol)
-        row(name, "fixes (skipped lines), ignored sentences", f"{len(tb)} ({tb.n_skipped}) {tb.meta['ignored_sentences']}", "-", None)
+        row(
+            name,
+            "fixes (skipped lines), ignored sentences",
+            f"{len(tb)} ({tb.n_skipped}) {tb.meta['ignored_sentences']}",
+            "-",
+            None,
+        )
 
 
 def check_dgp(d: Path):
@@ -225,10 +249,30 @@ def check_dgp(d: Path):
     row("sample_zls/ (3 files)", "records (skipped)", f"{len(tb)} ({tb.n_skipped})", "10800 (0)", 0)
     row("sample_zls/ (3 files)", "read time (s)", f"{el:.2f}", "-", None)
     want = [12754.71, 12747.7, 0.3, -375.8, -1.0, 0.0, -14.0, 5.0, -2.0, 57.0, 4.0, 128.0, -15.0, 34.0]
-    names = ["gravity", "spring_tension", "cross_coupling", "beam", "vcc", "al", "ax", "ve2", "ax2", "xacc2", "lacc2", "xacc", "lacc",
-             "platform_period"]
+    names = [
+        "gravity",
+        "spring_tension",
+        "cross_coupling",
+        "beam",
+        "vcc",
+        "al",
+        "ax",
+        "ve2",
+        "ax2",
+        "xacc2",
+        "lacc2",
+        "xacc",
+        "lacc",
+        "platform_period",
+    ]
     got = [tb.columns[c][20] / (MGAL if tb.units[c] == "m/s^2" else 1.0) for c in names]
-    row("sample_zls/", "row 20, 14 numeric fields: max |diff|", f"{max(abs(a - b) for a, b in zip(got, want)):.2g}", 0, 1e-9)
+    row(
+        "sample_zls/",
+        "row 20, 14 numeric fields: max |diff|",
+        f"{max(abs(a - b) for a, b in zip(got, want)):.2g}",
+        0,
+        1e-9,
+    )
     row("sample_zls/", "row 0 time (unix s)", tb.time_ns[0] / 1e9, 1447286401.0, 0)
     tb = read_at1a(z / "sample_gravity.csv")
     row("sample_gravity.csv", "row 4 gravity", f"{tb.columns['gravity'][4] / MGAL:.6f}", 10061.171360, 1e-9)
@@ -238,7 +282,13 @@ def check_dgp(d: Path):
     b = read_trajectory(z / "sample_trajectory_week-sow.txt")
     row("sample_trajectory.txt", "row 9 lat (deg)", f"{np.degrees(a.columns['lat'][9]):.10f}", 76.5350241071, 1e-10)
     row("sample_trajectory.txt", "row 9 lon (deg)", f"{np.degrees(a.columns['lon'][9]):.10f}", -68.7218956324, 1e-10)
-    row("sample_trajectory*.txt", "date/time vs week/SOW: max |dt| (s)", f"{np.abs(a.time_ns - b.time_ns).max() / 1e9:g}", 0, 0)
+    row(
+        "sample_trajectory*.txt",
+        "date/time vs week/SOW: max |dt| (s)",
+        f"{np.abs(a.time_ns - b.time_ns).max() / 1e9:g}",
+        0,
+        0,
+    )
 
 
 def main() -> int:
@@ -248,8 +298,15 @@ def main() -> int:
         return 0
     for fn in (check_mgd77t, check_mgd77t_run, check_shipgrav, check_dgp):
         fn(d)
-    w = [max(len(str(r[i])) for r in ROWS + [("file", "quantity", "ours", "expected", "|diff|", "verdict")]) for i in range(6)]
-    print("| " + " | ".join(h.ljust(w[i]) for i, h in enumerate(("file", "quantity", "ours", "expected", "|diff|", "verdict"))) + " |")
+    w = [
+        max(len(str(r[i])) for r in ROWS + [("file", "quantity", "ours", "expected", "|diff|", "verdict")])
+        for i in range(6)
+    ]
+    print(
+        "| "
+        + " | ".join(h.ljust(w[i]) for i, h in enumerate(("file", "quantity", "ours", "expected", "|diff|", "verdict")))
+        + " |"
+    )
     print("|" + "|".join("-" * (x + 2) for x in w) + "|")
     for r in ROWS:
         print("| " + " | ".join(str(v).ljust(w[i]) for i, v in enumerate(r)) + " |")

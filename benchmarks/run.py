@@ -90,7 +90,11 @@ def machine_info() -> dict:
         ).stdout.strip()
         dirty = bool(
             subprocess.run(
-                ["git", "-C", str(REPO), "status", "--porcelain"], capture_output=True, text=True, timeout=10, check=False
+                ["git", "-C", str(REPO), "status", "--porcelain"],
+                capture_output=True,
+                text=True,
+                timeout=10,
+                check=False,
             ).stdout.strip()
         )
     except (OSError, subprocess.SubprocessError):
@@ -274,7 +278,11 @@ def evaluate_flight(cfg, fl, methods, edge_s: float):
     truth = truth_at(read_truth_csv(fl.truth), unix) * MGAL
     n = time_s.size
     dt = float(np.median(np.diff(time_s)))
-    segs = [s for s in line_segments(cfg, fl, from_inm_solution(sol)) if s.kind in ("line", "tie") and s.stop_index - s.start_index >= 8]
+    segs = [
+        s
+        for s in line_segments(cfg, fl, from_inm_solution(sol))
+        if s.kind in ("line", "tie") and s.stop_index - s.start_index >= 8
+    ]
     in_line = np.zeros(n, bool)
     for s in segs:
         in_line[s.start_index : s.stop_index] = True
@@ -302,9 +310,15 @@ def evaluate_flight(cfg, fl, methods, edge_s: float):
                 warnings.simplefilter("always")
                 # exactly as gravsurvey.pipeline calls it: the smoother's sigma and the flight as context
                 g_full = np.asarray(sol.g_smooth, float)
-                out, info = postprocess(g_full[a:b], dt, speed, method=m,
-                                        sigma=np.asarray(sol.sigma_smooth, float)[a:b],
-                                        context=(g_full, a, b), **kw)
+                out, info = postprocess(
+                    g_full[a:b],
+                    dt,
+                    speed,
+                    method=m,
+                    sigma=np.asarray(sol.sigma_smooth, float)[a:b],
+                    context=(g_full, a, b),
+                    **kw,
+                )
             for w in caught:
                 notes.append(f"{m} {s.name}: {w.message}")
             z[a:b] = out
@@ -340,7 +354,9 @@ def evaluate_flight(cfg, fl, methods, edge_s: float):
         est["classic"] = np.interp(time_s, cr.time, cr.disturbance, left=np.nan, right=np.nan)
         resolution["classic"] = cr.info["resolution_m"]
         how["classic"] = "Gaussian FIR transfer function (-6 dB)"
-        infos["classic"] = {k: cr.info[k] for k in ("filter_length_s", "resolution_m", "height_source", "velocity_source", "attitude")}
+        infos["classic"] = {
+            k: cr.info[k] for k in ("filter_length_s", "resolution_m", "height_source", "velocity_source", "attitude")
+        }
     finally:
         timings["classic_s"] = time.perf_counter() - t
 
@@ -361,7 +377,18 @@ def evaluate_flight(cfg, fl, methods, edge_s: float):
         "resolution_how": how,
         "notes": notes,
     }
-    return {"time": time_s, "truth": truth, "keep": keep, "est": est, "lat": np.asarray(sol.lat), "lon": np.asarray(sol.lon)}, lines, facts
+    return (
+        {
+            "time": time_s,
+            "truth": truth,
+            "keep": keep,
+            "est": est,
+            "lat": np.asarray(sol.lat),
+            "lon": np.asarray(sol.lon),
+        },
+        lines,
+        facts,
+    )
 
 
 def _attitude_at_imu(sol, record, initial, cfg):
@@ -380,8 +407,9 @@ def _attitude_at_imu(sol, record, initial, cfg):
     )
 
 
-def score_scenario(name: str, cfg_path: Path, methods, edge_s: float, errors: Errors, crossovers: bool,
-                   measure_resolution: bool = True):
+def score_scenario(
+    name: str, cfg_path: Path, methods, edge_s: float, errors: Errors, crossovers: bool, measure_resolution: bool = True
+):
     from gravsurvey.config import load_config
 
     cfg = load_config(cfg_path)
@@ -738,7 +766,9 @@ def _fmt(v, nd=3):
             return "nan"
         if abs(v) >= 1000:
             return f"{v:.0f}"
-        return f"{v:.{nd}g}" if abs(v) < 1e-2 and v != 0 else f"{v:.{nd}f}".rstrip("0").rstrip(".") if nd else f"{v:.0f}"
+        return (
+            f"{v:.{nd}g}" if abs(v) < 1e-2 and v != 0 else f"{v:.{nd}f}".rstrip("0").rstrip(".") if nd else f"{v:.0f}"
+        )
     return str(v)
 
 
@@ -791,7 +821,10 @@ def markdown(results: dict) -> str:
                     ],
                 )
             )
-    for key, title in (("speed", "Speed (end to end, MCAP -> deliverables)"), ("scaling", "Scaling with flight length")):
+    for key, title in (
+        ("speed", "Speed (end to end, MCAP -> deliverables)"),
+        ("scaling", "Scaling with flight length"),
+    ):
         rows = results.get(key)
         if rows:
             out.append(f"\n## {title}\n")
@@ -865,7 +898,11 @@ def main(argv=None) -> int:
         ap.error(f"--only: unknown section(s) {', '.join(bad)}; expected {', '.join(SECTIONS)}")
     errors = Errors()
     t_all = time.perf_counter()
-    results = {"quick": args.quick, "machine": machine_info(), "command": " ".join(["python", "benchmarks/run.py", *(argv or sys.argv[1:])])}
+    results = {
+        "quick": args.quick,
+        "machine": machine_info(),
+        "command": " ".join(["python", "benchmarks/run.py", *(argv or sys.argv[1:])]),
+    }
     tmp = None
     if args.workdir:
         work = Path(args.workdir)
@@ -886,7 +923,13 @@ def main(argv=None) -> int:
         if "scaling" in only:
             t = time.perf_counter()
             results["scaling"] = run_speed(
-                args.quick, work, errors, lengths=(1, 4, 16), rates=(10.0,), base_s=(300.0 if args.quick else 3600.0), tag="scaling"
+                args.quick,
+                work,
+                errors,
+                lengths=(1, 4, 16),
+                rates=(10.0,),
+                base_s=(300.0 if args.quick else 3600.0),
+                tag="scaling",
             )
             section_s["scaling"] = time.perf_counter() - t
         if "stages" in only:

@@ -44,20 +44,29 @@ def grid_at(grid_nc: Path, e: np.ndarray, n: np.ndarray) -> np.ndarray:
 
     with xr.open_dataset(grid_nc) as ds:
         g = ds["gravity_disturbance"].values.astype(float)
-        ip = RegularGridInterpolator((ds["northing"].values, ds["easting"].values), g, bounds_error=False,
-                                     fill_value=np.nan)
+        ip = RegularGridInterpolator(
+            (ds["northing"].values, ds["easting"].values), g, bounds_error=False, fill_value=np.nan
+        )
     return ip(np.column_stack([n, e]))
 
 
 def stats(err: np.ndarray) -> dict:
     err = err[np.isfinite(err)]
-    return {"n": int(err.size), "mean_mgal": float(err.mean()), "std_mgal": float(err.std()),
-            "rms_mgal": float(np.sqrt(np.mean(err**2)))}
+    return {
+        "n": int(err.size),
+        "mean_mgal": float(err.mean()),
+        "std_mgal": float(err.std()),
+        "rms_mgal": float(np.sqrt(np.mean(err**2))),
+    }
 
 
 def run(out: Path) -> dict:
-    r = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(SAMPLE / "survey.yaml"), "-o", str(out), "-q"],
-                       capture_output=True, text=True, check=False)
+    r = subprocess.run(
+        [sys.executable, "-m", "gravsurvey", "run", str(SAMPLE / "survey.yaml"), "-o", str(out), "-q"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     if r.returncode != 0:
         raise SystemExit(f"gravsurvey run failed ({r.returncode}): {r.stderr.strip()}")
     summary = json.loads((out / "summary.json").read_text())
@@ -65,14 +74,20 @@ def run(out: Path) -> dict:
     truth = _f(rows, "truth_mgal")
     before = _f(rows, "disturbance_mgal") - truth
     after = _f(rows, "levelled_mgal") - truth
-    res = {"levelling": summary["levelling"], "crossovers": summary["crossovers"], "grid": summary["grid"],
-           "profiles_vs_truth": {"before_levelling": stats(before), "after_levelling": stats(after)},
-           "per_line": {}}
+    res = {
+        "levelling": summary["levelling"],
+        "crossovers": summary["crossovers"],
+        "grid": summary["grid"],
+        "profiles_vs_truth": {"before_levelling": stats(before), "after_levelling": stats(after)},
+        "per_line": {},
+    }
     for fl, f in summary["flights"].items():
         for name, ln in f["lines"].items():
             sel = np.array([r["flight"] == fl and r["line"] == name for r in rows])
             res["per_line"][f"{fl}/{name}"] = {
-                "kind": ln["kind"], "before": stats(before[sel]), "after": stats(after[sel]),
+                "kind": ln["kind"],
+                "before": stats(before[sel]),
+                "after": stats(after[sel]),
                 "correction_mgal": (ln.get("levelling") or {}).get("constant_mgal"),
                 "crossovers_before": ((ln.get("levelling") or {}).get("before") or {}).get("rms_mgal"),
                 "crossovers_after": ((ln.get("levelling") or {}).get("after") or {}).get("rms_mgal"),
@@ -98,11 +113,15 @@ def main() -> int:
     dec = lev.get("decision") or {}
     print(f"levelling: applied={dec.get('applied')} model={dec.get('model')} rule: {dec.get('rule')}")
     for t in dec.get("tried", []):
-        print(f"  {t['model']}: {t['n_observations']} crossovers, {t['n_unknowns']} unknowns, "
-              f"F = {t['f_statistic']:.3g}, p = {t['p_value']:.3g}")
+        print(
+            f"  {t['model']}: {t['n_observations']} crossovers, {t['n_unknowns']} unknowns, "
+            f"F = {t['f_statistic']:.3g}, p = {t['p_value']:.3g}"
+        )
     if lev:
-        print(f"  crossover RMS {lev['before']['rms_mgal']:.2f} -> {lev['after']['rms_mgal']:.2f} mGal "
-              f"({lev['before']['count']} crossovers)")
+        print(
+            f"  crossover RMS {lev['before']['rms_mgal']:.2f} -> {lev['after']['rms_mgal']:.2f} mGal "
+            f"({lev['before']['count']} crossovers)"
+        )
     print("profiles vs truth (mean / std / RMS, mGal):")
     for k, s in res["profiles_vs_truth"].items():
         print(f"  {k}: {s['mean_mgal']:+.2f} / {s['std_mgal']:.2f} / {s['rms_mgal']:.2f} (n={s['n']})")
@@ -110,13 +129,17 @@ def main() -> int:
     for k, v in res["per_line"].items():
         c = v["correction_mgal"]
         xb, xa = v["crossovers_before"], v["crossovers_after"]
-        print(f"  {k:8s} {v['kind']:4s} {'' if c is None else f'{c:+.2f}':>6s} "
-              f"{'' if xb is None else f'{xb:.2f}':>5s} -> {'' if xa is None else f'{xa:.2f}':>5s}   "
-              f"{v['before']['rms_mgal']:.2f} -> {v['after']['rms_mgal']:.2f}")
+        print(
+            f"  {k:8s} {v['kind']:4s} {'' if c is None else f'{c:+.2f}':>6s} "
+            f"{'' if xb is None else f'{xb:.2f}':>5s} -> {'' if xa is None else f'{xa:.2f}':>5s}   "
+            f"{v['before']['rms_mgal']:.2f} -> {v['after']['rms_mgal']:.2f}"
+        )
     g, s = res["grid"], res["grid_vs_truth_at_lines"]
-    print(f"grid: {g['shape']} cells of {g['spacing_m']:.0f} m at {g['altitude_m']:.0f} m, CV RMS {g['cv_rms_mgal']:.2f} "
-          f"mGal; vs truth at the line samples: mean {s['mean_mgal']:+.2f}, std {s['std_mgal']:.2f}, "
-          f"RMS {s['rms_mgal']:.2f} mGal (n={s['n']})")
+    print(
+        f"grid: {g['shape']} cells of {g['spacing_m']:.0f} m at {g['altitude_m']:.0f} m, CV RMS {g['cv_rms_mgal']:.2f} "
+        f"mGal; vs truth at the line samples: mean {s['mean_mgal']:+.2f}, std {s['std_mgal']:.2f}, "
+        f"RMS {s['rms_mgal']:.2f} mGal (n={s['n']})"
+    )
     return 0
 
 

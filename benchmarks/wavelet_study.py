@@ -66,33 +66,42 @@ def real_estimate(kind, seed=None):
         t0_unix_ns=int(sim.start_unix_ns),
         imu=ImuChannel(sim.imu_time, sim.specific_force_t, sim.angular_rate_t),
         altimeter=AltimeterChannel(sim.alt_time, sim.alt_height),
-        gnss=GnssChannel(sim.gnss_time, np.radians(sim.gnss_lat_deg), np.radians(sim.gnss_lon_deg),
-                         sim.gnss_height),
+        gnss=GnssChannel(sim.gnss_time, np.radians(sim.gnss_lat_deg), np.radians(sim.gnss_lon_deg), sim.gnss_height),
         source=f"seed_{kind}",
     )
     # As `gravsurvey simulate` writes it into survey.yaml (flights[].initial): the state at the
     # first IMU sample; the platform triad is ENU (identity mat_nt).
     tr = sim.truth
-    initial = InitialState(float(tr["lat"][0]), float(tr["lon"][0]), float(tr["height"][0]),
-                           np.asarray(tr["vel_n"][0], float), np.eye(3))
+    initial = InitialState(
+        float(tr["lat"][0]), float(tr["lon"][0]), float(tr["height"][0]), np.asarray(tr["vel_n"][0], float), np.eye(3)
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sol = estimate_anomaly(rec, InmParams(identify=False), initial, "platform")  # the seed's own model
     truth = np.interp(sol.time, sim.truth["time"], sim.truth["disturbance"])
-    return (np.asarray(sol.time, float), np.asarray(sol.g_smooth, float), truth,
-            float(np.nanmean(sol.speed)), np.asarray(sol.sigma_smooth, float))
+    return (
+        np.asarray(sol.time, float),
+        np.asarray(sol.g_smooth, float),
+        truth,
+        float(np.nanmean(sol.speed)),
+        np.asarray(sol.sigma_smooth, float),
+    )
 
 
 def seed_truth(kind, t):
     """Seed scenario anomaly as a function of time (model.md section 3), m/s^2."""
     if kind == "smooth":
-        return MGAL * (30 * np.sin(2 * np.pi * t / 3600) + 20 * np.sin(2 * np.pi * t / 1500 + 1)
-                       + 10 * np.sin(2 * np.pi * t / 900 + 2))
+        return MGAL * (
+            30 * np.sin(2 * np.pi * t / 3600)
+            + 20 * np.sin(2 * np.pi * t / 1500 + 1)
+            + 10 * np.sin(2 * np.pi * t / 900 + 2)
+        )
     return MGAL * (40.0 * (t >= 3600) - 60.0 * (t >= 7200) + 30.0 * (t >= 10800))
 
 
-def surrogate_estimate(kind, seed=0, duration_s=14400.0, v=50.0, lam_s=1e-5, sig_s=1e-3,
-                       lam_f=0.025, sig_f=1e-6, sig_eps=1.0):
+def surrogate_estimate(
+    kind, seed=0, duration_s=14400.0, v=50.0, lam_s=1e-5, sig_s=1e-3, lam_f=0.025, sig_f=1e-6, sig_eps=1.0
+):
     """SURROGATE: vertical-channel KF + RTS smoother on h'' = g + f3, altimeter 1 m at 1 Hz."""
     from scipy.linalg import expm
 
@@ -114,7 +123,7 @@ def surrogate_estimate(kind, seed=0, duration_s=14400.0, v=50.0, lam_s=1e-5, sig
     y = hh[::sub] + sig_eps * rng.standard_normal(n)
     lam_g = lam_s * v
     F = np.array([[0, 1, 0, 0], [0, 0, 1, 1], [0, 0, -lam_g, 0], [0, 0, 0, -lam_f]], float)
-    Qc = np.diag([0.0, 1e-12, 2 * lam_g * sig_s ** 2, 2 * lam_f * sig_f ** 2])
+    Qc = np.diag([0.0, 1e-12, 2 * lam_g * sig_s**2, 2 * lam_f * sig_f**2])
     M = np.zeros((8, 8))
     M[:4, :4], M[:4, 4:], M[4:, 4:] = -F, Qc, F.T
     E = expm(M * dt)
@@ -122,7 +131,7 @@ def surrogate_estimate(kind, seed=0, duration_s=14400.0, v=50.0, lam_s=1e-5, sig
     Q = Phi @ E[:4, 4:]
     H = np.array([1.0, 0, 0, 0])
     x = np.array([y[0], 0.0, 0.0, 0.0])
-    P = np.diag([sig_eps ** 2, 0.05 ** 2, sig_s ** 2, sig_f ** 2])
+    P = np.diag([sig_eps**2, 0.05**2, sig_s**2, sig_f**2])
     xf, Pf = np.empty((n, 4)), np.empty((n, 4, 4))
     xp, Pp = np.empty((n, 4)), np.empty((n, 4, 4))
     for k in range(n):
@@ -130,7 +139,7 @@ def surrogate_estimate(kind, seed=0, duration_s=14400.0, v=50.0, lam_s=1e-5, sig
             x = Phi @ x
             P = Phi @ P @ Phi.T + Q
         xp[k], Pp[k] = x, P
-        K = P @ H / (H @ P @ H + sig_eps ** 2)
+        K = P @ H / (H @ P @ H + sig_eps**2)
         x = x + K * (y[k] - H @ x)
         P = P - np.outer(K, H @ P)
         xf[k], Pf[k] = x, P
@@ -157,8 +166,7 @@ def method_rows():
     for w in ("db10", "coif4"):
         for mode in ("symmetric", "periodization", "smooth"):
             for th in ("soft", "hard"):
-                rows.append((f"cosphi {w} {mode} {th}", "cosphi",
-                             {"wavelet": w, "boundary": mode, "thresholding": th}))
+                rows.append((f"cosphi {w} {mode} {th}", "cosphi", {"wavelet": w, "boundary": mode, "thresholding": th}))
     for m in ("visushrink", "sure", "bayes"):
         for w in ("db10", "coif4"):
             rows.append((f"{m} {w}", m, {"wavelet": w}))
@@ -178,16 +186,24 @@ def score(t, z, truth, speed, sigma=None):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             zt, info = W.postprocess(z, dt, speed, method, sigma=sg, **opts)
-        out[label] = {"rms": _rms_mgal(zt, truth, keep), "n": info.get("n"),
-                      "Phi": info.get("Phi"), "res_km": (info.get("resolution_m") or 0) / 1e3 or None,
-                      "wavelet": info.get("wavelet")}
+        out[label] = {
+            "rms": _rms_mgal(zt, truth, keep),
+            "n": info.get("n"),
+            "Phi": info.get("Phi"),
+            "res_km": (info.get("resolution_m") or 0) / 1e3 or None,
+            "wavelet": info.get("wavelet"),
+        }
     # low-pass baselines: at the default's resolution, and the oracle best over a grid
     res_default = out["ti_cosphi auto"]["res_km"]
     for m in ("butterworth", "gaussian"):
         if res_default:
             zt, info = W.postprocess(z, dt, speed, m, resolution_m=res_default * 1e3)
-            out[f"{m} @ default's resolution"] = {"rms": _rms_mgal(zt, truth, keep), "n": None,
-                                                  "Phi": info["Phi"], "res_km": res_default}
+            out[f"{m} @ default's resolution"] = {
+                "rms": _rms_mgal(zt, truth, keep),
+                "n": None,
+                "Phi": info["Phi"],
+                "res_km": res_default,
+            }
         best = None
         for p in LOWPASS_GRID_S:
             zt, info = W.postprocess(z, dt, speed, m, filter_length_s=p)
@@ -195,7 +211,11 @@ def score(t, z, truth, speed, sigma=None):
             if best is None or r < best[0]:
                 best = (r, info)
         out[f"{m} best of grid (ORACLE: tuned on truth)"] = {
-            "rms": best[0], "n": None, "Phi": best[1]["Phi"], "res_km": best[1]["resolution_m"] / 1e3}
+            "rms": best[0],
+            "n": None,
+            "Phi": best[1]["Phi"],
+            "res_km": best[1]["resolution_m"] / 1e3,
+        }
     return out
 
 
@@ -217,8 +237,7 @@ def table(results, names):
         cells = []
         for n in names:
             r = results[n][lab]
-            cells.append(f"{_fmt(r['rms'], 2)} / {_fmt(r['n'])} / {_fmt(r['Phi'])} / "
-                         f"{_fmt(r['res_km'], 1)}")
+            cells.append(f"{_fmt(r['rms'], 2)} / {_fmt(r['n'])} / {_fmt(r['Phi'])} / {_fmt(r['res_km'], 1)}")
         lines.append(f"| {lab} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -276,16 +295,24 @@ def survey_line_estimates(which):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             record = load_flight(fl.ingest, cfg.base_dir)
-            initial = fl.initial if fl.initial is not None else \
-                initial_state_from_gnss(record, fl.triad)
+            initial = fl.initial if fl.initial is not None else initial_state_from_gnss(record, fl.triad)
             sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid)
         t = np.asarray(sol.time, float)
         unix = record.t0_unix_ns + np.round(t * 1e9).astype(np.int64)
         truth = truth_at(read_truth_csv(fl.truth), unix)
-        segs = [(s.name, int(s.start_index), int(s.stop_index)) for s in line_segments(cfg, fl, from_inm_solution(sol))
-                if s.kind in ("line", "tie") and s.stop_index - s.start_index >= 8]
-        yield (f"{which} {fl.name}", np.asarray(sol.g_smooth, float),
-               np.asarray(sol.sigma_smooth, float), np.asarray(sol.speed, float), truth, segs)
+        segs = [
+            (s.name, int(s.start_index), int(s.stop_index))
+            for s in line_segments(cfg, fl, from_inm_solution(sol))
+            if s.kind in ("line", "tie") and s.stop_index - s.start_index >= 8
+        ]
+        yield (
+            f"{which} {fl.name}",
+            np.asarray(sol.g_smooth, float),
+            np.asarray(sol.sigma_smooth, float),
+            np.asarray(sol.speed, float),
+            truth,
+            segs,
+        )
     if tmp is not None:
         tmp.cleanup()
 
@@ -296,15 +323,13 @@ def line_study(whiches=("grid_ros2", "platform", "strapdown")):
     context (gated, as the pipeline would pass it) and with context ungated; plus per line."""
     variants = {
         "default (mirror ends)": lambda z, a, b, dt, sp, sg: W.postprocess(z[a:b], dt, sp, sigma=sg),
-        "default + context": lambda z, a, b, dt, sp, sg: W.postprocess(
-            z[a:b], dt, sp, sigma=sg, context=(z, a, b)),
+        "default + context": lambda z, a, b, dt, sp, sg: W.postprocess(z[a:b], dt, sp, sigma=sg, context=(z, a, b)),
     }
 
     def ungated(z, a, b, dt, sp, sg):
         out, info = W.postprocess(z[a:b], dt, sp, sigma=sg)
         if info["n"]:
-            out = W.ti_apply_with_context(z, a, b, info["wavelet"], info["n"],
-                                          gate_ratio=float("inf"))
+            out = W.ti_apply_with_context(z, a, b, info["wavelet"], info["n"], gate_ratio=float("inf"))
         return out, info
 
     variants["context, gate off"] = ungated
@@ -329,8 +354,16 @@ def line_study(whiches=("grid_ros2", "platform", "strapdown")):
                 edge.append(np.r_[e[:k], e[-k:]])
                 mid.append(e[k:-k])
                 if name == "default (mirror ends)":
-                    per_line.append((label, sname, b - a, float(np.sqrt(np.mean((z[a:b] / MGAL - truth[a:b]) ** 2))),
-                                     float(np.sqrt(np.mean(e ** 2))), info.get("n")))
+                    per_line.append(
+                        (
+                            label,
+                            sname,
+                            b - a,
+                            float(np.sqrt(np.mean((z[a:b] / MGAL - truth[a:b]) ** 2))),
+                            float(np.sqrt(np.mean(e**2))),
+                            info.get("n"),
+                        )
+                    )
             r = [float(np.sqrt(np.mean(np.concatenate(x) ** 2))) for x in (allr, edge, mid)]
             cols[name] = f"{r[0]:.2f} / {r[1]:.2f} / {r[2]:.2f}"
         lens = ",".join(str(b - a) for _, a, b in segs)
@@ -346,8 +379,9 @@ def main(argv=None):
     ap.add_argument("--seeds", default="1,2,3,5", help="extra noise realisations (comma list)")
     ap.add_argument("--no-surrogate", action="store_true")
     ap.add_argument("--curves-only", action="store_true", help="only the Phi(n) tables")
-    ap.add_argument("--lines", action="store_true",
-                    help="only the survey-line study (sample_data/grid_ros2, realistic survey)")
+    ap.add_argument(
+        "--lines", action="store_true", help="only the survey-line study (sample_data/grid_ros2, realistic survey)"
+    )
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     if args.lines:
@@ -364,7 +398,6 @@ def main(argv=None):
     else:
         _print_headline(results)
 
-
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     if seeds:
         means = {}
@@ -372,9 +405,14 @@ def main(argv=None):
             per = [score(*real_estimate(kind, s)) for s in seeds]
             keys = per[0].keys()
             means[f"real {kind}, mean of {len(seeds)} seeds"] = {
-                k: {"rms": float(np.sqrt(np.mean([p[k]["rms"] ** 2 for p in per]))),
+                k: {
+                    "rms": float(np.sqrt(np.mean([p[k]["rms"] ** 2 for p in per]))),
                     "n": "/".join(str(p[k]["n"]) for p in per) if per[0][k]["n"] is not None else None,
-                    "Phi": None, "res_km": per[0][k]["res_km"]} for k in keys}
+                    "Phi": None,
+                    "res_km": per[0][k]["res_km"],
+                }
+                for k in keys
+            }
         print(f"\n## Real pipeline, RMS over seeds {seeds} (n per seed)\n")
         print(table(means, list(means)))
 
@@ -386,8 +424,7 @@ def main(argv=None):
     for kind in ("smooth", "steps"):
         t, z, truth = data[kind][:3]
         print(f"\n## Phi(n) at full removal, db10, real {kind}\n")
-        print("| n | decimated symmetric | decimated periodized (N=2^11 k) | translation-invariant |"
-              " TI RMS mGal |")
+        print("| n | decimated symmetric | decimated periodized (N=2^11 k) | translation-invariant | TI RMS mGal |")
         print("|---|---|---|---|---|")
         keep = (t >= t[0] + EDGE_S) & (t <= t[-1] - EDGE_S)
         for n, s, p, ti in phi_curves(z):
@@ -395,8 +432,10 @@ def main(argv=None):
             print(f"| {n} | {_fmt(s)} | {_fmt(p)} | {_fmt(ti)} | {r:.2f} |")
         # long-period part of the estimator's error: what no low-pass post-processor can remove
         lp = filters.gaussian_lowpass(z - truth, 1.0, 2000.0)
-        print(f"\nreal {kind}: RMS of the smoother's error at periods > ~2000 s "
-              f"(Gaussian low-pass of the error): {np.sqrt(np.mean(lp[keep] ** 2)) / MGAL:.2f} mGal")
+        print(
+            f"\nreal {kind}: RMS of the smoother's error at periods > ~2000 s "
+            f"(Gaussian low-pass of the error): {np.sqrt(np.mean(lp[keep] ** 2)) / MGAL:.2f} mGal"
+        )
     print(f"\n(study ran in {time.perf_counter() - t0:.0f} s)")
 
 

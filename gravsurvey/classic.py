@@ -244,9 +244,9 @@ def eotvos_harlan(lat, height, ground_speed, track, ellipsoid: Ellipsoid = WGS84
     lat = np.asarray(lat, dtype=float)
     c2 = np.cos(lat) ** 2
     s2a = np.sin(track) ** 2
-    return ground_speed**2 / a * (1.0 + height / a - f * (1.0 - c2 * (3.0 - 2.0 * s2a))) + 2.0 * w * ground_speed * np.cos(
-        lat
-    ) * np.sin(track) * (1.0 + height / a)
+    return ground_speed**2 / a * (
+        1.0 + height / a - f * (1.0 - c2 * (3.0 - 2.0 * s2a))
+    ) + 2.0 * w * ground_speed * np.cos(lat) * np.sin(track) * (1.0 + height / a)
 
 
 def second_difference(h: np.ndarray, dt_s: float) -> np.ndarray:
@@ -342,7 +342,9 @@ def classic_reduction(
     if mat_nt is not None:
         mat_nt = np.asarray(mat_nt, dtype=float)
         if mat_nt.shape != (t_imu.size, 3, 3):
-            raise DataError(f"classic: mat_nt must have shape ({t_imu.size}, 3, 3) (one per IMU sample), got {mat_nt.shape}")
+            raise DataError(
+                f"classic: mat_nt must have shape ({t_imu.size}, 3, 3) (one per IMU sample), got {mat_nt.shape}"
+            )
         # Up row of mat_nt times f_t: the vertical specific force
         f_up_imu = np.einsum("kj,kj->k", mat_nt[:, 2, :], f_t)
     else:
@@ -406,7 +408,9 @@ def classic_reduction(
             grid, h = grid[keep], h[keep]
             notes.append("output limited to the span of the navigation track")
             if grid.size < 3:
-                raise DataError(f"{record.source or 'record'}: the height channel and the navigation track hardly overlap in time")
+                raise DataError(
+                    f"{record.source or 'record'}: the height channel and the navigation track hardly overlap in time"
+                )
         lat = np.interp(grid, tt, lat_t)
         lon = np.interp(grid, tt, lon_t)
         ve = np.interp(grid, tt, vel[:, 0])

@@ -140,16 +140,37 @@ cli.epilog = "\b\nExit codes:\n" + _exit_code_table()
 
 @cli.command()
 @click.argument("config", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", "output_dir", type=click.Path(file_okay=False), default=None,
-              help="Output directory (overrides output.dir of the config).")
-@click.option("-j", "--jobs", type=click.IntRange(1, 256), default=1, show_default=True,
-              help="Flights processed in parallel (process pool).")
+@click.option(
+    "-o",
+    "--output",
+    "output_dir",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Output directory (overrides output.dir of the config).",
+)
+@click.option(
+    "-j",
+    "--jobs",
+    type=click.IntRange(1, 256),
+    default=1,
+    show_default=True,
+    help="Flights processed in parallel (process pool).",
+)
 @click.option("--force", is_flag=True, help="Reprocess flights whose inputs and config are unchanged.")
-@click.option("--wait", "wait_s", type=click.FloatRange(0), default=0.0, show_default=True,
-              help="Seconds to wait for another run holding the output directory.")
-@click.option("-q", "--quiet", is_flag=True,
-              help="No progress or summary (default when not on a terminal); warnings and errors "
-                   "are still printed.")
+@click.option(
+    "--wait",
+    "wait_s",
+    type=click.FloatRange(0),
+    default=0.0,
+    show_default=True,
+    help="Seconds to wait for another run holding the output directory.",
+)
+@click.option(
+    "-q",
+    "--quiet",
+    is_flag=True,
+    help="No progress or summary (default when not on a terminal); warnings and errors are still printed.",
+)
 @click.option("--no-plots", is_flag=True, help="Write no PNG plots (overrides output.plots).")
 def run(config, output_dir, jobs, force, wait_s, quiet, no_plots):
     """Process a survey: ingest, 3D-INM Kalman/RTS, wavelet, deliverables.
@@ -168,8 +189,15 @@ def run(config, output_dir, jobs, force, wait_s, quiet, no_plots):
 
     show = _interactive() and not quiet
     marker = announce_compilation()
-    result = run_survey(config, output_dir=output_dir, jobs=jobs, force=force, wait_s=wait_s,
-                        progress=show, plots=False if no_plots else None)
+    result = run_survey(
+        config,
+        output_dir=output_dir,
+        jobs=jobs,
+        force=force,
+        wait_s=wait_s,
+        progress=show,
+        plots=False if no_plots else None,
+    )
     lost = set(result.data_loss)  # reported below as a data problem, not again as a warning
     for note in result.notes:  # already in the log (pipeline), so only printed and counted
         if note not in lost:
@@ -191,11 +219,21 @@ def run(config, output_dir, jobs, force, wait_s, quiet, no_plots):
 
 @cli.command()
 @click.argument("sim_config", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", "output_dir", required=True, type=click.Path(file_okay=False),
-              help="Directory to write the simulated survey into.")
-@click.option("--oracle-config", "oracle", is_flag=True,
-              help="Also write oracle.yaml: the noise model, anomaly prior and exact initial state "
-                   "matched to the simulated truth (a benchmark reference no user has).")
+@click.option(
+    "-o",
+    "--output",
+    "output_dir",
+    required=True,
+    type=click.Path(file_okay=False),
+    help="Directory to write the simulated survey into.",
+)
+@click.option(
+    "--oracle-config",
+    "oracle",
+    is_flag=True,
+    help="Also write oracle.yaml: the noise model, anomaly prior and exact initial state "
+    "matched to the simulated truth (a benchmark reference no user has).",
+)
 def simulate(sim_config, output_dir, oracle):
     """Simulate a survey with known truth: sensor logs, truth.csv, survey.yaml.
 
@@ -218,9 +256,14 @@ def simulate(sim_config, output_dir, oracle):
 @cli.command()
 @click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable JSON output.")
-@click.option("--config", "config", type=click.Path(dir_okay=False), default=None,
-              help="Survey config: each file is read with the topics, JSON fields, CSV "
-                   "columns, time format and units of the flight that names it.")
+@click.option(
+    "--config",
+    "config",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Survey config: each file is read with the topics, JSON fields, CSV "
+    "columns, time format and units of the flight that names it.",
+)
 def inspect(files, as_json, config):
     """Describe sensor logs (MCAP or CSV): channels, counts, spans, rates, gaps, unit checks.
 
@@ -303,10 +346,20 @@ def init(path, force):
 @cli.command()
 @click.argument("result_dir", type=click.Path(file_okay=False))
 @click.argument("reference_dir", type=click.Path(file_okay=False))
-@click.option("--tol-mgal", type=click.FloatRange(0), default=0.05, show_default=True,
-              help="Largest allowed per-sample change of disturbance_mgal.")
-@click.option("--tol-rms-mgal", type=click.FloatRange(0), default=0.02, show_default=True,
-              help="Largest allowed change of a line's RMS vs truth / crossover RMS.")
+@click.option(
+    "--tol-mgal",
+    type=click.FloatRange(0),
+    default=0.05,
+    show_default=True,
+    help="Largest allowed per-sample change of disturbance_mgal.",
+)
+@click.option(
+    "--tol-rms-mgal",
+    type=click.FloatRange(0),
+    default=0.02,
+    show_default=True,
+    help="Largest allowed change of a line's RMS vs truth / crossover RMS.",
+)
 def check(result_dir, reference_dir, tol_mgal, tol_rms_mgal):
     """Compare a run's outputs with a reference run, for CI regression gates.
 
@@ -323,8 +376,7 @@ def check(result_dir, reference_dir, tol_mgal, tol_rms_mgal):
     if diffs:
         for d in diffs:
             click.echo(d, err=True)
-        raise RegressionFailure(f"{result_dir}: {len(diffs)} difference(s) from {reference_dir} "
-                                "beyond tolerance")
+        raise RegressionFailure(f"{result_dir}: {len(diffs)} difference(s) from {reference_dir} beyond tolerance")
     if _interactive():
         click.echo("check: outputs agree with the reference within tolerance")
 

@@ -24,7 +24,6 @@ from .errors import ConfigError
 from .truth import check_truth_header
 
 
-
 @dataclass
 class FlightConfig:
     """One flight of the survey after validation."""
@@ -107,8 +106,8 @@ class _Loader(yaml.SafeLoader):
                     k = key_node.value
                     if k in seen:
                         raise yaml.constructor.ConstructorError(
-                            None, None, f"key {k!r} given twice (first on line {seen[k] + 1})",
-                            key_node.start_mark)
+                            None, None, f"key {k!r} given twice (first on line {seen[k] + 1})", key_node.start_mark
+                        )
                     seen[k] = key_node.start_mark.line
         return super().construct_mapping(node, deep=deep)
 
@@ -172,8 +171,9 @@ def load_yaml(path: Path) -> dict:
     try:
         size = path.stat().st_size
         if size > MAX_CONFIG_BYTES:
-            raise ConfigError(f"{path}: {size} bytes; a config may have at most {MAX_CONFIG_BYTES} "
-                              "bytes (is this the right file?)")
+            raise ConfigError(
+                f"{path}: {size} bytes; a config may have at most {MAX_CONFIG_BYTES} bytes (is this the right file?)"
+            )
         with open(path, "rb") as fh:
             raw_bytes = fh.read(MAX_CONFIG_BYTES + 1)
     except OSError as exc:
@@ -185,17 +185,18 @@ def load_yaml(path: Path) -> dict:
     b = np.frombuffer(raw_bytes, dtype=np.uint8)
     if b.size:
         # bracket depth, counting brackets inside quotes and comments too: an upper bound
-        step = (np.isin(b, (0x5B, 0x7B)).astype(np.int64) - np.isin(b, (0x5D, 0x7D)))
+        step = np.isin(b, (0x5B, 0x7B)).astype(np.int64) - np.isin(b, (0x5D, 0x7D))
         if int(np.cumsum(step).max()) > MAX_CONFIG_FLOW_DEPTH:
-            raise ConfigError(f"{path}: YAML nested more than {MAX_CONFIG_FLOW_DEPTH} levels "
-                              "deep; refused")
+            raise ConfigError(f"{path}: YAML nested more than {MAX_CONFIG_FLOW_DEPTH} levels deep; refused")
     try:
         loader = _Loader(text)
         try:
             node = loader.get_single_node()
             if node is not None and _expanded_nodes(node, MAX_CONFIG_NODES) > MAX_CONFIG_NODES:
-                raise ConfigError(f"{path}: more than {MAX_CONFIG_NODES} YAML nodes once aliases "
-                                  "are expanded (an alias bomb or a recursive alias?); refused")
+                raise ConfigError(
+                    f"{path}: more than {MAX_CONFIG_NODES} YAML nodes once aliases "
+                    "are expanded (an alias bomb or a recursive alias?); refused"
+                )
             data = loader.construct_document(node) if node is not None else None
         finally:
             loader.dispose()
@@ -250,20 +251,22 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
                 complete.add("attitude_deg")
             if complete <= set(given):
                 initial = S.initial_state(fs.initial, fs.triad, f"{kp}.initial")
-        flights.append(FlightConfig(
-            name=fs.name or f"F{i + 1:02d}",
-            index=i,
-            triad=fs.triad,
-            raw=fr,
-            ingest=S.ingest_options(fs, key_path=kp, base_dir=base),
-            initial=initial,
-            initial_raw=fr.get("initial"),
-            truth=_resolve(base, _truth_file(fs.truth)) if fs.truth is not None else None,
-            truth_spec=_truth_spec(base, fs.truth),
-            lines_windows=[w.model_dump(exclude_none=True) for w in fs.lines] if fs.lines is not None else None,
-            initial_given=given,
-            tie=S.tie_config(fs.tie, f"{kp}.tie") if fs.tie is not None else None,
-        ))
+        flights.append(
+            FlightConfig(
+                name=fs.name or f"F{i + 1:02d}",
+                index=i,
+                triad=fs.triad,
+                raw=fr,
+                ingest=S.ingest_options(fs, key_path=kp, base_dir=base),
+                initial=initial,
+                initial_raw=fr.get("initial"),
+                truth=_resolve(base, _truth_file(fs.truth)) if fs.truth is not None else None,
+                truth_spec=_truth_spec(base, fs.truth),
+                lines_windows=[w.model_dump(exclude_none=True) for w in fs.lines] if fs.lines is not None else None,
+                initial_given=given,
+                tie=S.tie_config(fs.tie, f"{kp}.tie") if fs.tie is not None else None,
+            )
+        )
     out = doc.output
     cfg = SurveyConfig(
         path=path,
@@ -305,8 +308,12 @@ def _truth_spec(base, t):
         return None
     if isinstance(t, str):
         return TruthSpec(_resolve(base, t))
-    return TruthSpec(_resolve(base, t.file), {"time": t.columns.time, "disturbance_mgal": t.columns.disturbance_mgal},
-                     t.time_format, t.delimiter)
+    return TruthSpec(
+        _resolve(base, t.file),
+        {"time": t.columns.time, "disturbance_mgal": t.columns.disturbance_mgal},
+        t.time_format,
+        t.delimiter,
+    )
 
 
 def preflight_checks(cfg: SurveyConfig) -> None:
@@ -329,5 +336,3 @@ def preflight_checks(cfg: SurveyConfig) -> None:
     for fl in cfg.flights:
         if fl.truth is not None:
             check_truth_header(fl.truth_spec or fl.truth, f"flights[{fl.index}].truth")
-
-

@@ -152,8 +152,9 @@ def channel_names(ingest, base_dir=None) -> ChannelNames:
     else:
         for role, topic in ingest.topics.items():
             files[role] = f"{ingest.mcap_path} topic {topic}"
-            cols[role] = {k: (v if isinstance(v, str) else "/".join(v))
-                          for k, v in ingest.json_fields.get(role, {}).items()}
+            cols[role] = {
+                k: (v if isinstance(v, str) else "/".join(v)) for k, v in ingest.json_fields.get(role, {}).items()
+            }
     return ChannelNames(files, cols)
 
 
@@ -238,7 +239,8 @@ def clock_restart_messages(role: str, source: str, t0_ns: int, events) -> list[s
             f"{role}: clock restart in {source} at sample {j}: time went back from "
             f"{utc(t0_ns, (tb - t0_ns) / 1e9)} to {utc(t0_ns, (ta - t0_ns) / 1e9)} "
             f"({(tb - ta) / 1e9:.1f} s back); {n} samples from the restart on dropped (their time "
-            "is unknown)")
+            "is unknown)"
+        )
     return out
 
 
@@ -278,8 +280,9 @@ def place_by_gnss(block_ns, specific_force_t, gnss, kept_ns, min_corr: float = P
         return None, nan
     ref = int(g_ns[0])
     gt = (g_ns - ref) / 1e9
-    tm, fg, _ = gnss_specific_force(gt, np.radians(gnss.values["lat_deg"]), np.radians(gnss.values["lon_deg"]),
-                                    gnss.values["height"])
+    tm, fg, _ = gnss_specific_force(
+        gt, np.radians(gnss.values["lat_deg"]), np.radians(gnss.values["lon_deg"]), gnss.values["height"]
+    )
     good = np.isfinite(fg)
     tm, fg = tm[good], fg[good]
     dt = float(np.median(np.diff(gt)))
@@ -322,7 +325,7 @@ def place_by_gnss(block_ns, specific_force_t, gnss, kept_ns, min_corr: float = P
     cf = np.array([corr(x) for x in fine])
     j = int(np.argmax(cf))
     best = float(fine[j])
-    if 0 < j < len(fine) - 1 and np.all(np.isfinite(cf[j - 1:j + 2])):
+    if 0 < j < len(fine) - 1 and np.all(np.isfinite(cf[j - 1 : j + 2])):
         d = cf[j - 1] - 2 * cf[j] + cf[j + 1]
         if d < 0:
             best += 0.025 * (cf[j - 1] - cf[j + 1]) / d
@@ -371,7 +374,8 @@ def drop_clock_restarts(raw: dict, min_jump_s: float = 1.0):
                     f"{role}: clock restart in {ch.source} at sample {j}: time went back from "
                     f"{utc(t0, (tbf - t0) / 1e9)} to {utc(t0, (taf - t0) / 1e9)}; the {n} samples after it "
                     f"placed at {utc(t0, (tb[0] + shift - t0) / 1e9)}..{utc(t0, (tb[-1] + shift - t0) / 1e9)} "
-                    f"by cross-correlation with GNSS (r = {c:.2f})")
+                    f"by cross-correlation with GNSS (r = {c:.2f})"
+                )
                 continue
         ch.time_ns = ch.time_ns[keep]
         ch.values = {k: v[keep] for k, v in ch.values.items()}
@@ -408,10 +412,13 @@ def check_overlap(record, names: ChannelNames | None = None, min_fraction: float
             raise DataError(
                 f"imu ({fi}) {span_text(t0, a0, a1)} and {role} ({fr}) {span_text(t0, b0, b1)} "
                 f"do not overlap in time ({max(a0, b0) - min(a1, b1):.1f} s apart): a clock out of "
-                "step or files of different flights?")
+                "step or files of different flights?"
+            )
         if ov < min_fraction * (a1 - a0):
-            notes.append(f"{role} covers only {100 * ov / (a1 - a0):.0f} % of the IMU time span: imu "
-                         f"{span_text(t0, a0, a1)}, {role} {span_text(t0, b0, b1)}")
+            notes.append(
+                f"{role} covers only {100 * ov / (a1 - a0):.0f} % of the IMU time span: imu "
+                f"{span_text(t0, a0, a1)}, {role} {span_text(t0, b0, b1)}"
+            )
     return notes
 
 
@@ -428,8 +435,7 @@ def _near_samples(t, tg, max_step):
     return (t[j] - t[j - 1]) <= max_step
 
 
-def gnss_specific_force(time, lat, lon, height, window_s: float = KINEMATIC_WINDOW_S,
-                        ellipsoid=WGS84):
+def gnss_specific_force(time, lat, lon, height, window_s: float = KINEMATIC_WINDOW_S, ellipsoid=WGS84):
     """Specific-force magnitude implied by the GNSS track: ``|r'' + 2 w x r' - gamma(r)|``.
 
     ECEF positions are averaged over ``window_s`` and twice differenced at a spacing of
@@ -465,14 +471,13 @@ def gnss_specific_force(time, lat, lon, height, window_s: float = KINEMATIC_WIND
     # uniform grid; grid points inside a gap (> 2 steps) are invalid, and so is every
     # estimate whose window touches one (no kinematics across gaps)
     tg = np.arange(t[0], t[-1], dt)
-    r = geodetic_to_ecef(np.interp(tg, t, lat), np.interp(tg, t, np.unwrap(lon)),
-                         np.interp(tg, t, height), ellipsoid)
+    r = geodetic_to_ecef(np.interp(tg, t, lat), np.interp(tg, t, np.unwrap(lon)), np.interp(tg, t, height), ellipsoid)
     r[~_near_samples(t, tg, 2.0 * dt)] = np.nan
     rm = _box(r, n)  # mean over n samples, centred at tg[k] + (n - 1) dt / 2
     tm = tg[: len(rm)] + 0.5 * (n - 1) * dt
     h = n * dt
-    acc = (rm[2 * n:] - 2 * rm[n:-n] + rm[:-2 * n]) / h**2
-    vel = (rm[2 * n:] - rm[:-2 * n]) / (2 * h)
+    acc = (rm[2 * n :] - 2 * rm[n:-n] + rm[: -2 * n]) / h**2
+    vel = (rm[2 * n :] - rm[: -2 * n]) / (2 * h)
     rc = rm[n:-n]
     omega = np.array([0.0, 0.0, ellipsoid.omega])
     f = acc + 2.0 * np.cross(omega, vel) - normal_gravity_ecef(rc, ellipsoid)
@@ -537,8 +542,15 @@ def _quat_mul(a, b):
     """Hamilton products of quaternions ``[w, x, y, z]``, ``(..., 4)`` each."""
     w1, x1, y1, z1 = np.moveaxis(a, -1, 0)
     w2, x2, y2, z2 = np.moveaxis(b, -1, 0)
-    return np.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=-1)
+    return np.stack(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ],
+        axis=-1,
+    )
 
 
 def _quat_cumprod(d):
@@ -561,17 +573,20 @@ def _rotvec_quat(v):
 def _quat_to_mat(q):
     """Rotation matrices from unit quaternions, ``(n, 4)`` -> ``(n, 3, 3)``."""
     w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1)], axis=1)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+        ],
+        axis=1,
+    )
 
 
 def _step_means(t, values, tg):
     """Means of a sampled quantity over the steps ``[tg[k], tg[k+1]]`` (trapezoid), ``(m-1, k)``."""
     v = np.asarray(values, float).reshape(len(t), -1)
-    cum = np.concatenate([np.zeros((1, v.shape[1])),
-                          np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t)[:, None], axis=0)])
+    cum = np.concatenate([np.zeros((1, v.shape[1])), np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t)[:, None], axis=0)])
     at = np.stack([np.interp(tg, t, cum[:, c]) for c in range(v.shape[1])], axis=1)
     return np.diff(at, axis=0) / np.diff(tg)[:, None]
 
@@ -731,15 +746,20 @@ def mismatch_hints(record, ellipsoid=WGS84):
     if np.all(np.abs(lon) <= math.pi / 2):
         cands.append(("latitude and longitude swapped", (lon, lat, h)))
     if np.all(np.abs(np.degrees(lat)) <= math.pi / 2):
-        cands.append(("latitude/longitude in radians but declared as degrees",
-                      (np.degrees(lat), np.degrees(lon), h)))
+        cands.append(("latitude/longitude in radians but declared as degrees", (np.degrees(lat), np.degrees(lon), h)))
     cands.append(("height in feet but declared as metres", (lat, lon, h * 0.3048)))
     cands.append(("height in metres but declared as feet", (lat, lon, h / 0.3048)))
     return [(name, abs(gravity_mismatch(record, t, *x, ellipsoid)[0])) for name, x in cands]
 
 
-def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, ellipsoid=WGS84,
-                           initial_raw: dict | None = None, initial_key: str = "initial") -> list[str]:
+def check_gnss_consistency(
+    record,
+    names: ChannelNames,
+    opts: CheckOptions,
+    ellipsoid=WGS84,
+    initial_raw: dict | None = None,
+    initial_key: str = "initial",
+) -> list[str]:
     """GNSS positions against themselves and the IMU motion.
 
     * Ground speed from the GNSS track at most ``MAX_GROUND_SPEED_MPS``.
@@ -775,33 +795,46 @@ def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, elli
         return notes
     vmax = float(np.nanpercentile(speed, 99))
     if vmax > MAX_GROUND_SPEED_MPS:
-        raise DataError(f"{latlon_c}: the GNSS track moves at {vmax:.4g} m/s (99th percentile), "
-                        f"expected at most {MAX_GROUND_SPEED_MPS:g} m/s for an aircraft or ship: "
-                        "wrong scale or unit of the positions, or jumps in them")
+        raise DataError(
+            f"{latlon_c}: the GNSS track moves at {vmax:.4g} m/s (99th percentile), "
+            f"expected at most {MAX_GROUND_SPEED_MPS:g} m/s for an aircraft or ship: "
+            "wrong scale or unit of the positions, or jumps in them"
+        )
     diff, n = gravity_mismatch(record, g.time, g.lat, g.lon, g.height, ellipsoid)
     tol = opts.max_gravity_mismatch_mgal * MGAL
     if np.isfinite(diff) and abs(diff) > tol:
         # a column mix-up that explains the mismatch is an error naming it; so is a gross
         # mismatch; a moderate one without an explanation may be the IMU (accelerometer bias or
         # scale, a MEMS gyro smearing the axes) and is a note, not a failed flight
-        good = [name for name, res in sorted(mismatch_hints(record, ellipsoid), key=lambda x: x[1])
-                if res < max(tol, 0.3 * abs(diff))]
-        what = (f"the IMU measures a specific force {diff / MGAL:+.0f} mGal off the one the GNSS track and "
-                f"normal gravity imply (median over {n} epochs; expected within "
-                f"{opts.max_gravity_mismatch_mgal:g} mGal, checks.max_gravity_mismatch_mgal)")
+        good = [
+            name
+            for name, res in sorted(mismatch_hints(record, ellipsoid), key=lambda x: x[1])
+            if res < max(tol, 0.3 * abs(diff))
+        ]
+        what = (
+            f"the IMU measures a specific force {diff / MGAL:+.0f} mGal off the one the GNSS track and "
+            f"normal gravity imply (median over {n} epochs; expected within "
+            f"{opts.max_gravity_mismatch_mgal:g} mGal, checks.max_gravity_mismatch_mgal)"
+        )
         if good:
             cols = h_c if "height" in good[0] else latlon_c
             raise DataError(f"{cols}: {what}: {good[0]}?")
         if abs(diff) > GROSS_MISMATCH_FACTOR * tol:
-            raise DataError(f"{names.column('gnss', 'lat', 'lon', 'height')}: {what}: wrong latitude, height "
-                            "unit or accelerometer scale?")
-        notes.append(f"gnss vs imu: {what}; no column mix-up explains it and it is less than "
-                     f"{GROSS_MISMATCH_FACTOR:g} x the limit: accelerometer bias or scale, or a gyro too poor "
-                     "for the check?")
+            raise DataError(
+                f"{names.column('gnss', 'lat', 'lon', 'height')}: {what}: wrong latitude, height "
+                "unit or accelerometer scale?"
+            )
+        notes.append(
+            f"gnss vs imu: {what}; no column mix-up explains it and it is less than "
+            f"{GROSS_MISMATCH_FACTOR:g} x the limit: accelerometer bias or scale, or a gyro too poor "
+            "for the check?"
+        )
     elif np.isfinite(diff):
         # a passed check is a fact for summary.json, not a warning: a good flight prints nothing
-        notes.append(f"{PASSED}gnss vs imu: median specific-force difference {diff / MGAL:+.1f} mGal "
-                     f"(limit {opts.max_gravity_mismatch_mgal:g})")
+        notes.append(
+            f"{PASSED}gnss vs imu: median specific-force difference {diff / MGAL:+.1f} mGal "
+            f"(limit {opts.max_gravity_mismatch_mgal:g})"
+        )
     off, c = estimate_time_offset(record)
     if off is None:
         notes.append(f"{PASSED}imu-gnss time offset: not measurable (too little manoeuvring to correlate)")
@@ -809,17 +842,22 @@ def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, elli
         t0 = record.t0_unix_ns
         a0, a1 = channel_spans(record)["imu"]
         b0, b1 = channel_spans(record)["gnss"]
-        txt = (f"imu ({names.files.get('imu', 'imu')}) {span_text(t0, a0, a1)} runs {off:+.2f} s "
-               f"relative to gnss ({names.files.get('gnss', 'gnss')}) {span_text(t0, b0, b1)} "
-               f"(cross-correlation of specific force, r = {c:.2f})")
+        txt = (
+            f"imu ({names.files.get('imu', 'imu')}) {span_text(t0, a0, a1)} runs {off:+.2f} s "
+            f"relative to gnss ({names.files.get('gnss', 'gnss')}) {span_text(t0, b0, b1)} "
+            f"(cross-correlation of specific force, r = {c:.2f})"
+        )
         if abs(off) > opts.max_time_offset_s and c >= OFFSET_VERDICT_CORRELATION:
-            raise DataError(f"{txt}; expected within {opts.max_time_offset_s:g} s "
-                            "(checks.max_time_offset_s): clocks out of step")
+            raise DataError(
+                f"{txt}; expected within {opts.max_time_offset_s:g} s (checks.max_time_offset_s): clocks out of step"
+            )
         if abs(off) > opts.max_time_offset_s:
             # a weak correlation (turbulence on a strapdown triad) can place the peak a few
             # tenths off on a flight with no offset at all (measured -0.63 s, r = 0.81): say it
-            notes.append(f"time offset: {txt}; beyond {opts.max_time_offset_s:g} s but the correlation is "
-                         f"below {OFFSET_VERDICT_CORRELATION:g}: not a verdict, check the clocks")
+            notes.append(
+                f"time offset: {txt}; beyond {opts.max_time_offset_s:g} s but the correlation is "
+                f"below {OFFSET_VERDICT_CORRELATION:g}: not a verdict, check the clocks"
+            )
         else:
             notes.append(f"{PASSED}time offset: {txt}")
     if initial_raw:
@@ -827,9 +865,15 @@ def check_gnss_consistency(record, names: ChannelNames, opts: CheckOptions, elli
     return notes
 
 
-def check_initial(record, initial_raw: dict, key: str, ellipsoid=WGS84,
-                  max_horizontal_m: float = 1000.0, max_vertical_m: float = 100.0,
-                  max_velocity_mps: float = 10.0) -> list[str]:
+def check_initial(
+    record,
+    initial_raw: dict,
+    key: str,
+    ellipsoid=WGS84,
+    max_horizontal_m: float = 1000.0,
+    max_vertical_m: float = 100.0,
+    max_velocity_mps: float = 10.0,
+) -> list[str]:
     """The configured ``initial`` position against GNSS at the first IMU sample.
 
     Raises
@@ -848,21 +892,28 @@ def check_initial(record, initial_raw: dict, key: str, ellipsoid=WGS84,
     lon = float(np.interp(t0, g.time, np.unwrap(g.lon)))
     h = float(np.interp(t0, g.time, g.height))
     try:
-        ilat, ilon, ih = (math.radians(float(initial_raw["lat_deg"])), math.radians(float(initial_raw["lon_deg"])),
-                          float(initial_raw["height_m"]))
+        ilat, ilon, ih = (
+            math.radians(float(initial_raw["lat_deg"])),
+            math.radians(float(initial_raw["lon_deg"])),
+            float(initial_raw["height_m"]),
+        )
     except (KeyError, TypeError, ValueError):
         return []
     r = geodetic_to_ecef(np.array([lat, ilat]), np.array([lon, ilon]), np.array([h, h]), ellipsoid)
     dist = float(np.linalg.norm(r[1] - r[0]))
     if dist > max_horizontal_m:
         bad = "lat_deg" if abs(ilat - lat) * 6.4e6 > max_horizontal_m / 2 else "lon_deg"
-        raise DataError(f"{key}.{bad}: the initial position ({math.degrees(ilat):.6f}, {math.degrees(ilon):.6f} "
-                        f"deg) is {dist / 1000:.3g} km from the GNSS track at the first IMU sample "
-                        f"({math.degrees(lat):.6f}, {math.degrees(lon):.6f} deg); expected within "
-                        f"{max_horizontal_m:g} m")
+        raise DataError(
+            f"{key}.{bad}: the initial position ({math.degrees(ilat):.6f}, {math.degrees(ilon):.6f} "
+            f"deg) is {dist / 1000:.3g} km from the GNSS track at the first IMU sample "
+            f"({math.degrees(lat):.6f}, {math.degrees(lon):.6f} deg); expected within "
+            f"{max_horizontal_m:g} m"
+        )
     if abs(ih - h) > max_vertical_m:
-        raise DataError(f"{key}.height_m: {ih:g} m is {ih - h:+.1f} m from the GNSS height {h:.1f} m at the "
-                        f"first IMU sample; expected within {max_vertical_m:g} m")
+        raise DataError(
+            f"{key}.height_m: {ih:g} m is {ih - h:+.1f} m from the GNSS height {h:.1f} m at the "
+            f"first IMU sample; expected within {max_vertical_m:g} m"
+        )
     vel = initial_raw.get("velocity_enu_mps")
     if vel is not None and g.time[0] <= t0 + 1.0:
         from .inm.params import initial_state_from_gnss
@@ -873,9 +924,11 @@ def check_initial(record, initial_raw: dict, key: str, ellipsoid=WGS84,
         except (GravsurveyError, ValueError, TypeError):
             return []
         if dv > max_velocity_mps:
-            raise DataError(f"{key}.velocity_enu_mps: {list(map(float, vel))} m/s is {dv:.3g} m/s from the GNSS "
-                            f"velocity [{v_gnss[0]:.2f}, {v_gnss[1]:.2f}, {v_gnss[2]:.2f}] m/s at the first IMU "
-                            f"sample (10 s fit); expected within {max_velocity_mps:g} m/s")
+            raise DataError(
+                f"{key}.velocity_enu_mps: {list(map(float, vel))} m/s is {dv:.3g} m/s from the GNSS "
+                f"velocity [{v_gnss[0]:.2f}, {v_gnss[1]:.2f}, {v_gnss[2]:.2f}] m/s at the first IMU "
+                f"sample (10 s fit); expected within {max_velocity_mps:g} m/s"
+            )
     return []
 
 
@@ -932,8 +985,10 @@ def plan_segments(record, opts: CheckOptions, names: ChannelNames | None = None)
         nom = float(np.median(np.diff(imu_t)))
         short = [(a, b) for a, b in find_gaps(imu_t, 5 * nom) if b - a <= opts.max_imu_gap_s]
         if short:
-            notes.append(f"imu: {len(short)} gaps of {5 * nom:.3g}-{opts.max_imu_gap_s:g} s bridged by the "
-                         f"mechanization (longest {max(b - a for a, b in short):.2f} s)")
+            notes.append(
+                f"imu: {len(short)} gaps of {5 * nom:.3g}-{opts.max_imu_gap_s:g} s bridged by the "
+                f"mechanization (longest {max(b - a for a, b in short):.2f} s)"
+            )
     cuts.sort()
     merged = []  # overlapping gaps of several channels are one cut
     for a, b, what in cuts:
@@ -956,11 +1011,14 @@ def plan_segments(record, opts: CheckOptions, names: ChannelNames | None = None)
         if b - a >= MIN_SEGMENT_S and n >= 8:
             keep.append((float(a), float(b)))
         elif b > a or n:
-            dropped.append(f"segment {span_text(t0, a, b)} between gaps is shorter than {MIN_SEGMENT_S:g} s: "
-                           "not estimated")
+            dropped.append(
+                f"segment {span_text(t0, a, b)} between gaps is shorter than {MIN_SEGMENT_S:g} s: not estimated"
+            )
     if not keep:
-        raise DataError(f"{record.source or 'record'}: no piece of the flight between gaps is at least "
-                        f"{MIN_SEGMENT_S:g} s long ({'; '.join(n for n in notes if n.startswith('split'))})")
+        raise DataError(
+            f"{record.source or 'record'}: no piece of the flight between gaps is at least "
+            f"{MIN_SEGMENT_S:g} s long ({'; '.join(n for n in notes if n.startswith('split'))})"
+        )
     return keep, notes, dropped
 
 
@@ -983,8 +1041,9 @@ def track_deviation_m(sol, record, ellipsoid=WGS84):
     return np.linalg.norm(r_nav - r_gn, axis=1)
 
 
-def check_result(name: str, final_mps2, in_line, sol, record, opts: CheckOptions, n_lines: int,
-                 ellipsoid=WGS84) -> list[str]:
+def check_result(
+    name: str, final_mps2, in_line, sol, record, opts: CheckOptions, n_lines: int, ellipsoid=WGS84
+) -> list[str]:
     """Plausibility of a flight's product; DataError naming the cause unless allowed.
 
     Parameters
@@ -1007,32 +1066,46 @@ def check_result(name: str, final_mps2, in_line, sol, record, opts: CheckOptions
     """
     notes = []
     if n_lines == 0 and not opts.allow_no_lines:
-        raise DataError(f"{name}: no survey lines found (straight, level, steady-speed pieces of at least "
-                        "the lines.min_line_s); nothing to deliver (set checks.allow_no_lines: true to accept)")
+        raise DataError(
+            f"{name}: no survey lines found (straight, level, steady-speed pieces of at least "
+            "the lines.min_line_s); nothing to deliver (set checks.allow_no_lines: true to accept)"
+        )
     valid = np.asarray(sol.segment) >= 0
     fin = np.asarray(final_mps2, float)
     bad = in_line & valid & ~np.isfinite(fin)
-    series = [("kalman estimate", sol.smoothed), ("unfiltered reduction", sol.unfiltered), ("sigma", sol.sigma),
-              ("latitude", sol.lat), ("longitude", sol.lon), ("height", sol.height)]
+    series = [
+        ("kalman estimate", sol.smoothed),
+        ("unfiltered reduction", sol.unfiltered),
+        ("sigma", sol.sigma),
+        ("latitude", sol.lat),
+        ("longitude", sol.lon),
+        ("height", sol.height),
+    ]
     for label, arr in ((lb, a) for lb, a in series if a is not None):
         arr = np.asarray(arr, float)
         if label == "sigma" and not np.isfinite(arr).any():
             continue  # a method without a sigma (classic) reports NaN throughout by design
         nb = int(np.count_nonzero(valid & ~np.isfinite(arr)))
         if nb and not opts.allow_nonfinite:
-            raise DataError(f"{name}: the {label} has {nb} non-finite values of {int(valid.sum())} epochs "
-                            "(set checks.allow_nonfinite: true to accept)")
+            raise DataError(
+                f"{name}: the {label} has {nb} non-finite values of {int(valid.sum())} epochs "
+                "(set checks.allow_nonfinite: true to accept)"
+            )
     if bad.any() and not opts.allow_nonfinite:
-        raise DataError(f"{name}: the final disturbance has {int(bad.sum())} non-finite values on lines "
-                        "(set checks.allow_nonfinite: true to accept)")
+        raise DataError(
+            f"{name}: the final disturbance has {int(bad.sum())} non-finite values on lines "
+            "(set checks.allow_nonfinite: true to accept)"
+        )
     absf = np.where(in_line & np.isfinite(fin), np.abs(fin), -np.inf)
     if np.isfinite(absf).any():
         k = int(np.argmax(absf))
         vmax = float(absf[k]) / MGAL
         if vmax > opts.max_abs_disturbance_mgal:
-            raise DataError(f"{name}: |disturbance| reaches {vmax:.4g} mGal at t = {sol.time[k]:.1f} s; "
-                            f"expected at most {opts.max_abs_disturbance_mgal:g} mGal "
-                            "(checks.max_abs_disturbance_mgal)")
+            raise DataError(
+                f"{name}: |disturbance| reaches {vmax:.4g} mGal at t = {sol.time[k]:.1f} s; "
+                f"expected at most {opts.max_abs_disturbance_mgal:g} mGal "
+                "(checks.max_abs_disturbance_mgal)"
+            )
     if sol.estimator.get("gnss_aided", False):
         # running median over TRACK_WINDOW epochs: a few GNSS outliers (multipath) are not a
         # navigation that left the track
@@ -1045,13 +1118,15 @@ def check_result(name: str, final_mps2, in_line, sol, record, opts: CheckOptions
                 med = np.full(len(win), np.nan)
                 if ok.any():
                     med[ok] = np.nanmedian(win[ok], axis=1)
-            dev[TRACK_WINDOW // 2: TRACK_WINDOW // 2 + len(win)] = med
+            dev[TRACK_WINDOW // 2 : TRACK_WINDOW // 2 + len(win)] = med
         if np.isfinite(dev).any():
             dmax = float(np.nanmax(dev))
             if dmax > opts.max_track_deviation_m:
                 k = int(np.nanargmax(dev))
-                raise DataError(f"{name}: the navigation left the GNSS track by {dmax:.4g} m at t = "
-                                f"{sol.time[k]:.1f} s; expected within {opts.max_track_deviation_m:g} m "
-                                "(checks.max_track_deviation_m)")
+                raise DataError(
+                    f"{name}: the navigation left the GNSS track by {dmax:.4g} m at t = "
+                    f"{sol.time[k]:.1f} s; expected within {opts.max_track_deviation_m:g} m "
+                    "(checks.max_track_deviation_m)"
+                )
             notes.append(f"{PASSED}{name}: navigation within {dmax:.3g} m of the GNSS track")
     return notes

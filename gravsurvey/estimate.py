@@ -206,8 +206,13 @@ def horizontal_fields(sol, n: int) -> dict:
     sig = np.full((n, 2), np.nan) if sig is None else np.asarray(sig, float).reshape(n, 2)
     obs = getattr(sol, "horizontal_observable", None)
     obs = np.isfinite(dg).all(axis=1) if obs is None else np.asarray(obs, bool).reshape(n)
-    return {"dg_north": dg[:, 0].copy(), "dg_east": dg[:, 1].copy(), "sigma_north": sig[:, 0].copy(),
-            "sigma_east": sig[:, 1].copy(), "horizontal_observable": obs}
+    return {
+        "dg_north": dg[:, 0].copy(),
+        "dg_east": dg[:, 1].copy(),
+        "sigma_north": sig[:, 0].copy(),
+        "sigma_east": sig[:, 1].copy(),
+        "horizontal_observable": obs,
+    }
 
 
 def attitude_report(sol) -> dict:
@@ -319,8 +324,23 @@ def from_classic(res, *, name: str = "", t0_unix_ns: int = 0) -> FlightEstimate:
     )
 
 
-_SERIES = ("lat", "lon", "height", "speed", "heading", "disturbance", "sigma", "smoothed", "forward",
-           "forward_sigma", "unfiltered", "dg_north", "dg_east", "sigma_north", "sigma_east")
+_SERIES = (
+    "lat",
+    "lon",
+    "height",
+    "speed",
+    "heading",
+    "disturbance",
+    "sigma",
+    "smoothed",
+    "forward",
+    "forward_sigma",
+    "unfiltered",
+    "dg_north",
+    "dg_east",
+    "sigma_north",
+    "sigma_east",
+)
 
 
 def concatenate_estimates(parts: list[FlightEstimate]) -> FlightEstimate:
@@ -343,8 +363,9 @@ def concatenate_estimates(parts: list[FlightEstimate]) -> FlightEstimate:
     if len(parts) == 1:
         return parts[0]
     first = parts[0]
-    out: dict = {k: [] for k in _SERIES + ("time", "vel_n", "segment", "attitude", "attitude_sigma",
-                                           "horizontal_observable")}
+    out: dict = {
+        k: [] for k in _SERIES + ("time", "vel_n", "segment", "attitude", "attitude_sigma", "horizontal_observable")
+    }
     present = {k: any(getattr(p, k) is not None for p in parts) for k in _SERIES}
     for i, p in enumerate(parts):
         n = len(p.time)

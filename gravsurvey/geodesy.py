@@ -178,9 +178,7 @@ def normal_gravitational_potential_scalar(x, y, z, a, f, gm, omega):
     b = a * (1.0 - f)
     q0 = _q(b, big_e)
     sb = math.sin(beta)
-    return gm / big_e * math.atan(big_e / u) + 0.5 * omega * omega * a * a * _q(u, big_e) / q0 * (
-        sb * sb - 1.0 / 3.0
-    )
+    return gm / big_e * math.atan(big_e / u) + 0.5 * omega * omega * a * a * _q(u, big_e) / q0 * (sb * sb - 1.0 / 3.0)
 
 
 @njit(cache=True)
@@ -259,9 +257,7 @@ def _ecef_to_geodetic_arr(r, a, f, out):
 @njit(cache=True)
 def _gravitation_arr(r, a, f, gm, omega, out):
     for k in range(r.shape[0]):
-        out[k, 0], out[k, 1], out[k, 2] = normal_gravitation_ecef_scalar(
-            r[k, 0], r[k, 1], r[k, 2], a, f, gm, omega
-        )
+        out[k, 0], out[k, 1], out[k, 2] = normal_gravitation_ecef_scalar(r[k, 0], r[k, 1], r[k, 2], a, f, gm, omega)
 
 
 def _broadcast(*arrays):
@@ -435,7 +431,9 @@ def normal_gravity_formula(lat, formula: str = DEFAULT_NORMAL_GRAVITY_FORMULA):
     if key == "IGF1930":
         # sin^2(2 phi) = 4 sin^2 phi cos^2 phi
         return 978049.0e-5 * (1.0 + 0.0052884 * s2 - 0.0000059 * 4.0 * s2 * (1.0 - s2))
-    raise ValueError(f"unknown normal gravity formula {formula!r}; expected one of {', '.join(NORMAL_GRAVITY_FORMULAS)}")
+    raise ValueError(
+        f"unknown normal gravity formula {formula!r}; expected one of {', '.join(NORMAL_GRAVITY_FORMULAS)}"
+    )
 
 
 def normal_gravity_formula_at_height(lat, height, formula: str = DEFAULT_NORMAL_GRAVITY_FORMULA):

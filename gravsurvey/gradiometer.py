@@ -198,7 +198,9 @@ def propagate_gravitation_e(t_s, g0_e, gamma_e, vel_e):
     gam = _as_tensors(gamma_e, "gamma_e")
     v = np.asarray(vel_e, dtype=float)
     if gam.shape[0] != t.size or v.shape != (t.size, 3):
-        raise DataError(f"propagate_gravitation_e: expected gamma_e ({t.size}, 3, 3) and vel_e ({t.size}, 3), got {gam.shape} and {v.shape}")
+        raise DataError(
+            f"propagate_gravitation_e: expected gamma_e ({t.size}, 3, 3) and vel_e ({t.size}, 3), got {gam.shape} and {v.shape}"
+        )
     rate = np.einsum("kij,kj->ki", gam, v)
     inc = 0.5 * (rate[1:] + rate[:-1]) * np.diff(t)[:, None]
     out = np.empty((t.size, 3))
@@ -478,7 +480,9 @@ def steady_state_kalman_gain(a, h, q, r):
     p : ndarray, shape (m, m)
         Steady-state error covariance.
     """
-    p = scipy.linalg.solve_continuous_are(np.asarray(a, float).T, np.asarray(h, float).T, np.asarray(q, float), np.array([[float(r)]]))
+    p = scipy.linalg.solve_continuous_are(
+        np.asarray(a, float).T, np.asarray(h, float).T, np.asarray(q, float), np.array([[float(r)]])
+    )
     return (p @ np.asarray(h, float).T / r)[:, 0], p
 
 
@@ -526,7 +530,9 @@ def run_channel_filters(t_s, z_pos, r_pos, q_acc, l0_rad_s, x0_sigma):
     a = horizontal_channel_matrix(0.0, gradiometer=True)
     phi = scipy.linalg.expm(a * dt)
     # discretised random-walk process noise (Van Loan, closed form for the triple integrator)
-    qd = q_acc * np.array([[dt**5 / 20, dt**4 / 8, dt**3 / 6], [dt**4 / 8, dt**3 / 3, dt**2 / 2], [dt**3 / 6, dt**2 / 2, dt]])
+    qd = q_acc * np.array(
+        [[dt**5 / 20, dt**4 / 8, dt**3 / 6], [dt**4 / 8, dt**3 / 3, dt**2 / 2], [dt**3 / 6, dt**2 / 2, dt]]
+    )
     n = t.size
     x_kf = np.zeros((n, 3))
     x_as = np.zeros((n, 3))
@@ -616,8 +622,10 @@ def flight_products(grad_time, gamma_t, nav_time, lat, lon, height, vel_n, distu
         "trace_median_eotvos": float(np.median(np.trace(gam, axis1=1, axis2=2)) / EOTVOS),
     }
     if triad != "platform":
-        out["note"] = ("strapdown triad: dg/dt = T V needs the triad attitude, which the scalar "
-                       "solution does not carry; only rotation invariants reported")
+        out["note"] = (
+            "strapdown triad: dg/dt = T V needs the triad attitude, which the scalar "
+            "solution does not carry; only rotation invariants reported"
+        )
         return out
     sel = (grad_time >= nav_time[0]) & (grad_time <= nav_time[-1])
     t = np.asarray(grad_time)[sel]
@@ -638,11 +646,13 @@ def flight_products(grad_time, gamma_t, nav_time, lat, lon, height, vel_n, distu
     anom_n = np.einsum("kji,kj->ki", m_en, g_e) - g_norm_n
     _, g0 = vertical_eigen(gam[sel])
     tilt = np.degrees(np.arccos(np.clip(-g0[:, 2], -1.0, 1.0))) * 3600.0
-    out.update({
-        "time": t,
-        "disturbance": -anom_n[:, 2],
-        "horizontal_n": anom_n[:, :2],
-        "horizontal_end_mgal": [float(x / 1e-5) for x in anom_n[-1, :2]],
-        "eigen_vertical_tilt_rms_arcsec": float(np.sqrt(np.mean(tilt**2))),
-    })
+    out.update(
+        {
+            "time": t,
+            "disturbance": -anom_n[:, 2],
+            "horizontal_n": anom_n[:, :2],
+            "horizontal_end_mgal": [float(x / 1e-5) for x in anom_n[-1, :2]],
+            "eigen_vertical_tilt_rms_arcsec": float(np.sqrt(np.mean(tilt**2))),
+        }
+    )
     return out

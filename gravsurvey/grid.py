@@ -38,8 +38,7 @@ import numpy as np
 
 from gravsurvey.errors import DataError
 
-__all__ = ["GRID_METHODS", "GridOptions", "GridResult", "thin_lines", "line_spacing",
-           "grid_lines", "write_grid_netcdf"]
+__all__ = ["GRID_METHODS", "GridOptions", "GridResult", "thin_lines", "line_spacing", "grid_lines", "write_grid_netcdf"]
 
 GRID_METHODS = ("equivalent_sources", "spline")
 #: damping candidates tried by cross-validation (harmonica's damping of the source coefficients)
@@ -83,7 +82,6 @@ class GridOptions:
     depth_m: float | None = None
     damping: float | None = None
     cv_folds: int = 3
-
 
 
 @dataclass
@@ -238,8 +236,9 @@ def _fit_predict(method, depth, damping, coords_fit, v_fit, coords_pred):
     return eqs.predict(coords_pred)
 
 
-def grid_lines(easting_m, northing_m, height_m, value_mgal, line, options: GridOptions | None = None,
-               *, random_state: int = 0) -> GridResult:
+def grid_lines(
+    easting_m, northing_m, height_m, value_mgal, line, options: GridOptions | None = None, *, random_state: int = 0
+) -> GridResult:
     """Grid line data (module docstring); see :func:`_grid_lines` for the parameters.
 
     The fits are small dense solves: multi-threaded BLAS gains nothing on them and, on a busy
@@ -254,8 +253,9 @@ def grid_lines(easting_m, northing_m, height_m, value_mgal, line, options: GridO
         return _grid_lines(easting_m, northing_m, height_m, value_mgal, line, options, random_state=random_state)
 
 
-def _grid_lines(easting_m, northing_m, height_m, value_mgal, line, options: GridOptions | None = None,
-                *, random_state: int = 0) -> GridResult:
+def _grid_lines(
+    easting_m, northing_m, height_m, value_mgal, line, options: GridOptions | None = None, *, random_state: int = 0
+) -> GridResult:
     """Grid line data (module docstring).
 
     Parameters
@@ -326,7 +326,9 @@ def _grid_lines(easting_m, northing_m, height_m, value_mgal, line, options: Grid
         for dmp in damps:
             res = np.full(v.size, np.nan)
             for tr, te in splits:
-                pred = _fit_predict(o.method, dep, dmp, tuple(c[tr] for c in coords), v[tr], tuple(c[te] for c in coords))
+                pred = _fit_predict(
+                    o.method, dep, dmp, tuple(c[tr] for c in coords), v[tr], tuple(c[te] for c in coords)
+                )
                 res[te] = v[te] - pred
             rms = float(np.sqrt(np.nanmean(res**2)))
             r2 = float(1.0 - np.nansum(res**2) / np.sum((v - v.mean()) ** 2))
@@ -358,8 +360,15 @@ def _grid_lines(easting_m, northing_m, height_m, value_mgal, line, options: Grid
     )
 
 
-def write_grid_netcdf(path, grid: GridResult, crs_epsg: int | None, *, title: str = "gravsurvey grid",
-                      variable: str = "gravity_disturbance", attrs: dict | None = None) -> None:
+def write_grid_netcdf(
+    path,
+    grid: GridResult,
+    crs_epsg: int | None,
+    *,
+    title: str = "gravsurvey grid",
+    variable: str = "gravity_disturbance",
+    attrs: dict | None = None,
+) -> None:
     """Write a grid as CF-1.8 netCDF (netCDF3 via scipy; readable by GMT, QGIS, xarray).
 
     Variables: ``easting`` (x, m), ``northing`` (y, m), ``<variable>`` (y, x) in mGal with
@@ -385,10 +394,18 @@ def write_grid_netcdf(path, grid: GridResult, crs_epsg: int | None, *, title: st
             "grid_mapping": "crs",
         },
     )
-    da["easting"].attrs = {"standard_name": "projection_x_coordinate", "long_name": "easting", "units": "m",
-                           "axis": "X"}
-    da["northing"].attrs = {"standard_name": "projection_y_coordinate", "long_name": "northing", "units": "m",
-                            "axis": "Y"}
+    da["easting"].attrs = {
+        "standard_name": "projection_x_coordinate",
+        "long_name": "easting",
+        "units": "m",
+        "axis": "X",
+    }
+    da["northing"].attrs = {
+        "standard_name": "projection_y_coordinate",
+        "long_name": "northing",
+        "units": "m",
+        "axis": "Y",
+    }
     crs_attrs = {}
     if crs_epsg is not None:
         try:

@@ -105,7 +105,6 @@ class LevellingOptions:
     significance: float = 0.05
 
 
-
 def crossover_statistics(diff_mgal, line_a, line_b, line_keys) -> dict:
     """Count, mean, RMS and RMS/sqrt(2) of crossover differences, overall and per line.
 
@@ -133,8 +132,12 @@ def crossover_statistics(diff_mgal, line_a, line_b, line_keys) -> dict:
 
     def stats(cnt, s1, s2):
         if cnt == 0:
-            return {"count": 0, "mean_mgal": float("nan"), "rms_mgal": float("nan"),
-                    "rms_over_sqrt2_mgal": float("nan")}
+            return {
+                "count": 0,
+                "mean_mgal": float("nan"),
+                "rms_mgal": float("nan"),
+                "rms_over_sqrt2_mgal": float("nan"),
+            }
         rms = math.sqrt(s2 / cnt)
         return {"count": int(cnt), "mean_mgal": s1 / cnt, "rms_mgal": rms, "rms_over_sqrt2_mgal": rms / math.sqrt(2.0)}
 
@@ -486,7 +489,9 @@ def level_crossovers(
         )
     ngroups = len(np.unique(comp[col_xo])) if col_xo.any() else 0
     if ngroups > 1:
-        notes.append(f"the crossovers split the lines into {ngroups} unconnected groups, each levelled to its own datum")
+        notes.append(
+            f"the crossovers split the lines into {ngroups} unconnected groups, each levelled to its own datum"
+        )
     return Levelling(
         model=model,
         line_keys=keys,
@@ -564,10 +569,21 @@ def level_survey(crossovers, lines, options: LevellingOptions | None = None, *, 
         lo, hi = fmid.get(str(ln["flight"]), (np.inf, -np.inf))
         fmid[str(ln["flight"])] = (min(lo, np.nanmin(t)), max(hi, np.nanmax(t)))
     return level_crossovers(
-        crossovers.diff_mgal, ia, ib, ta, tb, keys, mids,
-        sigma_a_mgal=sig_at(ia, ta), sigma_b_mgal=sig_at(ib, tb),
-        model=o.model, robust=o.robust, huber_k=o.huber_k, sigma_floor_mgal=o.sigma_floor_mgal,
-        max_iterations=o.max_iterations, tied_flights=tied_flights,
+        crossovers.diff_mgal,
+        ia,
+        ib,
+        ta,
+        tb,
+        keys,
+        mids,
+        sigma_a_mgal=sig_at(ia, ta),
+        sigma_b_mgal=sig_at(ib, tb),
+        model=o.model,
+        robust=o.robust,
+        huber_k=o.huber_k,
+        sigma_floor_mgal=o.sigma_floor_mgal,
+        max_iterations=o.max_iterations,
+        tied_flights=tied_flights,
         flight_mid_s={f: 0.5 * (a + b) for f, (a, b) in fmid.items()},
     )
 
@@ -597,8 +613,13 @@ def significance_test(lev: Levelling) -> dict:
         S1 / (n - u): unit-weight standard deviations, 1 for sigmas that are right).
     """
     n, u = int(lev.n_observations), int(lev.n_unknowns)
-    out = {"redundancy": n - u, "f_statistic": float("nan"), "p_value": float("nan"),
-           "sigma0_before": float("nan"), "sigma0_after": float("nan")}
+    out = {
+        "redundancy": n - u,
+        "f_statistic": float("nan"),
+        "p_value": float("nan"),
+        "sigma0_before": float("nan"),
+        "sigma0_after": float("nan"),
+    }
     if n == 0:
         return out
     s0, s1 = lev.ls_misfit
@@ -617,8 +638,7 @@ def significance_test(lev: Levelling) -> dict:
     return out
 
 
-def choose_levelling(crossovers, lines, options: LevellingOptions | None = None, *,
-                     tied_flights=()) -> Levelling:
+def choose_levelling(crossovers, lines, options: LevellingOptions | None = None, *, tied_flights=()) -> Levelling:
     """Level a survey and decide whether its corrections are applied (``levelling.enabled``).
 
     ``enabled: false``: nothing is fitted; returns None. ``enabled: true``: the configured
@@ -646,8 +666,9 @@ def choose_levelling(crossovers, lines, options: LevellingOptions | None = None,
     if o.enabled is False:
         return None
     flights = {str(ln["flight"]) for ln in lines}
-    order = [o.model] + [m for m in FALLBACK_MODELS if m != o.model
-                         and not (m == "flight_constant" and len(flights) < 2)]
+    order = [o.model] + [
+        m for m in FALLBACK_MODELS if m != o.model and not (m == "flight_constant" and len(flights) < 2)
+    ]
     if o.enabled:
         order = order[:1]
     tried, fits, pick = [], [], 0
@@ -655,8 +676,15 @@ def choose_levelling(crossovers, lines, options: LevellingOptions | None = None,
         lev = level_survey(crossovers, lines, replace(o, model=model), tied_flights=tied_flights)
         test = significance_test(lev)
         enough = lev.n_unknowns > 0 and lev.n_observations >= o.min_crossovers_per_unknown * lev.n_unknowns
-        tried.append({"model": model, "n_observations": lev.n_observations, "n_unknowns": lev.n_unknowns,
-                      "enough_crossovers": bool(enough), **test})
+        tried.append(
+            {
+                "model": model,
+                "n_observations": lev.n_observations,
+                "n_unknowns": lev.n_unknowns,
+                "enough_crossovers": bool(enough),
+                **test,
+            }
+        )
         fits.append(lev)
         if enough:
             pick = len(fits) - 1
@@ -668,18 +696,25 @@ def choose_levelling(crossovers, lines, options: LevellingOptions | None = None,
         reason = "" if applied else "no usable crossovers"
     elif not last["enough_crossovers"]:
         applied, rule = False, f"at least {o.min_crossovers_per_unknown:g} crossovers per unknown"
-        reason = ("too few crossovers for every model: "
-                  + "; ".join(f"{t['model']} {t['n_observations']} for {t['n_unknowns']} unknowns" for t in tried))
+        reason = "too few crossovers for every model: " + "; ".join(
+            f"{t['model']} {t['n_observations']} for {t['n_unknowns']} unknowns" for t in tried
+        )
     else:
         p = last["p_value"]
         applied = bool(np.isfinite(p) and p < o.significance)
-        rule = (f"at least {o.min_crossovers_per_unknown:g} crossovers per unknown and the F-test of "
-                f"'no level errors' rejected at {o.significance:g}")
-        reason = "" if applied else (
-            f"{lev.model}: the crossovers show no significant level errors (F = {last['f_statistic']:.3g}, "
-            f"p = {p:.3g} >= {o.significance:g}): the corrections would fit noise")
-    lev.decision = {"applied": bool(applied), "model": lev.model, "rule": rule, "reason": reason,
-                    "tried": tried}
+        rule = (
+            f"at least {o.min_crossovers_per_unknown:g} crossovers per unknown and the F-test of "
+            f"'no level errors' rejected at {o.significance:g}"
+        )
+        reason = (
+            ""
+            if applied
+            else (
+                f"{lev.model}: the crossovers show no significant level errors (F = {last['f_statistic']:.3g}, "
+                f"p = {p:.3g} >= {o.significance:g}): the corrections would fit noise"
+            )
+        )
+    lev.decision = {"applied": bool(applied), "model": lev.model, "rule": rule, "reason": reason, "tried": tried}
     return lev
 
 

@@ -142,7 +142,13 @@ def line_products(est: FlightEstimate, segs, postprocess_options, model=None) ->
     for s in segs:
         a, b = int(s.start_index), int(s.stop_index)
         seg_out.append(
-            {"name": s.name, "kind": s.kind, "start_s": float(est.time[a]), "stop_s": float(est.time[b - 1]), "n": b - a}
+            {
+                "name": s.name,
+                "kind": s.kind,
+                "start_s": float(est.time[a]),
+                "stop_s": float(est.time[b - 1]),
+                "n": b - a,
+            }
         )
         if s.kind not in ("line", "tie") or b - a < 8:
             continue
@@ -153,8 +159,14 @@ def line_products(est: FlightEstimate, segs, postprocess_options, model=None) ->
         else:
             if model is not None:
                 notes += [f"{est.name} {s.name}: {w}" for w in solvability_warnings(model, speed)]
-            z, info = postprocess(est.smoothed[a:b], dt, speed, options=postprocess_options,
-                                  sigma=est.sigma[a:b], context=(est.smoothed, a, b))
+            z, info = postprocess(
+                est.smoothed[a:b],
+                dt,
+                speed,
+                options=postprocess_options,
+                sigma=est.sigma[a:b],
+                context=(est.smoothed, a, b),
+            )
             if info.get("method") == "none":
                 # the product is the smoother's own estimate: state the smoother's resolution
                 info["resolution_m"] = float(est.resolution_m)
@@ -182,8 +194,12 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
     checks = getattr(cfg, "checks", None) or CheckOptions()
     names = channel_names(fl.ingest, cfg.base_dir)
     notes += [f"{fl.name}: {n}" for n in check_overlap(record, names)]
-    notes += [f"{fl.name}: {n}" for n in check_gnss_consistency(
-        record, names, checks, cfg.ellipsoid, fl.initial_given, f"flights[{fl.index}].initial")]
+    notes += [
+        f"{fl.name}: {n}"
+        for n in check_gnss_consistency(
+            record, names, checks, cfg.ellipsoid, fl.initial_given, f"flights[{fl.index}].initial"
+        )
+    ]
 
     t = time.perf_counter()
     est, seg_notes, segment_loss = estimate_flight(cfg, fl, record, checks, names)
@@ -198,8 +214,9 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
     est.line_segments, est.line_info, line_notes = line_products(est, segs, cfg.postprocess, cfg.model)
     notes += line_notes
     timings["postprocess_s"] = time.perf_counter() - t
-    notes += check_result(fl.name, est.disturbance, est.line != "", est, record, checks, len(est.line_info),
-                          cfg.ellipsoid)
+    notes += check_result(
+        fl.name, est.disturbance, est.line != "", est, record, checks, len(est.line_info), cfg.ellipsoid
+    )
     # checks that passed are facts for summary.json (estimator.checks_passed), not warnings
     from .consistency import PASSED
 
@@ -234,8 +251,17 @@ def _gradiometer_products(fl, record, est: FlightEstimate, notes):
         notes.append(f"{fl.name}: processing.gradiometer is on but the flight has no gravity-gradient channel")
         return None
     series = est.unprocessed
-    p = flight_products(record.gradient.time, record.gradient.gamma_t, est.time, est.lat, est.lon, est.height,
-                        est.vel_n, float(series[0]), fl.triad)
+    p = flight_products(
+        record.gradient.time,
+        record.gradient.gamma_t,
+        est.time,
+        est.lat,
+        est.lon,
+        est.height,
+        est.vel_n,
+        float(series[0]),
+        fl.triad,
+    )
     if "disturbance" in p:
         # the gradient-propagated disturbance against the scalar estimate at the gradient epochs
         d = p.pop("disturbance")
@@ -268,8 +294,9 @@ def inm_estimate(cfg: SurveyConfig, fl: FlightConfig, record, checks, names) -> 
     from .inm.solve import estimate_anomaly
     from .io.record import slice_record
 
-    initial = resolve_initial_state(record, fl.triad, cfg.model, cfg.ellipsoid, fl.initial_given,
-                                    f"flights[{fl.index}].initial")
+    initial = resolve_initial_state(
+        record, fl.triad, cfg.model, cfg.ellipsoid, fl.initial_given, f"flights[{fl.index}].initial"
+    )
     lever = getattr(fl.ingest, "gnss_lever_arm_m", None)
     t0 = int(record.t0_unix_ns)
     spans, notes, loss = plan_segments(record, checks, names)
@@ -278,7 +305,8 @@ def inm_estimate(cfg: SurveyConfig, fl: FlightConfig, record, checks, names) -> 
         sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid, gnss_lever_arm_t=lever)
         return from_inm_solution(sol, name=fl.name, t0_unix_ns=t0), notes, loss
     reinit_model = dataclasses.replace(
-        cfg.model, initial_velocity_sigma_mps=max(cfg.model.initial_velocity_sigma_mps, REINIT_VELOCITY_SIGMA_MPS))
+        cfg.model, initial_velocity_sigma_mps=max(cfg.model.initial_velocity_sigma_mps, REINIT_VELOCITY_SIGMA_MPS)
+    )
     parts = []
     for a, b in spans:
         sub = slice_record(record, a, b, margin_s=2.0)
@@ -294,8 +322,10 @@ def inm_estimate(cfg: SurveyConfig, fl: FlightConfig, record, checks, names) -> 
             loss.append(f"segment {span_text(record.t0_unix_ns, a, b)} not estimated: {exc}")
     if not parts:
         raise DataError(f"{record.source}: no segment of the flight could be estimated: {'; '.join(loss)}")
-    notes.append(f"estimated {len(parts)} of {len(spans)} segments: "
-                 + ", ".join(span_text(record.t0_unix_ns, p.time[0], p.time[-1]) for p in parts))
+    notes.append(
+        f"estimated {len(parts)} of {len(spans)} segments: "
+        + ", ".join(span_text(record.t0_unix_ns, p.time[0], p.time[-1]) for p in parts)
+    )
     return concatenate_estimates(parts), notes, loss
 
 
@@ -313,8 +343,9 @@ def classic_estimate(cfg: SurveyConfig, fl: FlightConfig, record) -> FlightEstim
     mat_nt, track = None, None
     needs_nav = fl.triad == "strapdown" or record.gnss is None
     if needs_nav:
-        initial = resolve_initial_state(record, fl.triad, cfg.model, cfg.ellipsoid, fl.initial_given,
-                                        f"flights[{fl.index}].initial")
+        initial = resolve_initial_state(
+            record, fl.triad, cfg.model, cfg.ellipsoid, fl.initial_given, f"flights[{fl.index}].initial"
+        )
         if fl.triad == "strapdown":
             mat_nt = strapdown_attitude(record, initial, ellipsoid=cfg.ellipsoid)
         if record.gnss is None:
@@ -340,6 +371,7 @@ def classic_estimate(cfg: SurveyConfig, fl: FlightConfig, record) -> FlightEstim
 
         blank_gaps(res, record, fl.ingest.gap_factor)
     return from_classic(res, name=fl.name, t0_unix_ns=int(record.t0_unix_ns))
+
 
 # --------------------------------------------------------------------------
 # survey
@@ -428,8 +460,16 @@ def _setup_log(out_dir: Path) -> logging.Handler:
     return h
 
 
-def run_survey(config_path, *, output_dir=None, jobs: int = 1, force: bool = False,
-               wait_s: float = 0.0, progress: bool = False, plots: bool | None = None) -> RunResult:
+def run_survey(
+    config_path,
+    *,
+    output_dir=None,
+    jobs: int = 1,
+    force: bool = False,
+    wait_s: float = 0.0,
+    progress: bool = False,
+    plots: bool | None = None,
+) -> RunResult:
     """Run a whole survey and write the deliverables (docs/outputs.md).
 
     Returns a RunResult; raises ConfigError for config problems (exit 2). Data problems of a
@@ -499,8 +539,9 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
             from .pool import WorkerPool  # workers ignore Ctrl-C; interrupted: terminated
 
             with WorkerPool(min(jobs, len(todo))) as pool:
-                futs = dict(zip(pool.submit_all(_worker, [(str(cfg.path), str(out_dir), fl.index)
-                                                          for fl in todo]), todo))
+                futs = dict(
+                    zip(pool.submit_all(_worker, [(str(cfg.path), str(out_dir), fl.index) for fl in todo]), todo)
+                )
                 for fut in as_completed(futs):
                     fl = futs[fut]
                     try:
@@ -517,7 +558,10 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
                 except GravsurveyError as exc:
                     status, payload = "error", f"{fl.name}: {exc}"
                 except Exception as exc:
-                    status, payload = "bug", f"{fl.name}: internal error {type(exc).__name__}: {exc}\n{traceback.format_exc()}"
+                    status, payload = (
+                        "bug",
+                        f"{fl.name}: internal error {type(exc).__name__}: {exc}\n{traceback.format_exc()}",
+                    )
                 _collect(fl, status, payload)
                 if bar:
                     bar.update(1)
@@ -564,8 +608,15 @@ def _profile_table(cfg: SurveyConfig, results: list[FlightEstimate]):
     # the estimate the product was made from, named for what it holds (docs/outputs.md)
     for col, attr in (("kalman_mgal", "smoothed"), ("unfiltered_mgal", "unfiltered")):
         if any(getattr(r, attr) is not None for r in results):
-            table[col] = np.concatenate([getattr(r, attr) if getattr(r, attr) is not None
-                                         else np.full(len(r.time), np.nan) for r in results]) / MGAL
+            table[col] = (
+                np.concatenate(
+                    [
+                        getattr(r, attr) if getattr(r, attr) is not None else np.full(len(r.time), np.nan)
+                        for r in results
+                    ]
+                )
+                / MGAL
+            )
     table["sigma_mgal"] = np.concatenate([r.sigma for r in results]) / MGAL
     if any(r.has_attitude for r in results):
         # strapdown attitude and its 1-sigma per epoch (NaN for flights without it)
@@ -599,16 +650,26 @@ def horizontal_columns(results: list[FlightEstimate], ellipsoid=None) -> dict:
     from .geodesy import WGS84
 
     ell = ellipsoid if ellipsoid is not None else WGS84
-    cols: dict = {c: [] for c in ("dg_north_mgal", "dg_east_mgal", "xi_arcsec", "eta_arcsec", "dg_north_sigma_mgal",
-                                  "dg_east_sigma_mgal", "xi_sigma_arcsec", "eta_sigma_arcsec")}
+    cols: dict = {
+        c: []
+        for c in (
+            "dg_north_mgal",
+            "dg_east_mgal",
+            "xi_arcsec",
+            "eta_arcsec",
+            "dg_north_sigma_mgal",
+            "dg_east_sigma_mgal",
+            "xi_sigma_arcsec",
+            "eta_sigma_arcsec",
+        )
+    }
     for r in results:
         n = len(r.time)
         if not r.has_horizontal:
             for v in cols.values():
                 v.append(np.full(n, np.nan))
             continue
-        obs = (np.asarray(r.horizontal_observable, bool) if r.horizontal_observable is not None
-               else np.ones(n, bool))
+        obs = np.asarray(r.horizontal_observable, bool) if r.horizontal_observable is not None else np.ones(n, bool)
         blank = lambda a: np.where(obs, np.asarray(a, float), np.nan) if a is not None else np.full(n, np.nan)  # noqa: E731
         dn, de, sn, se = blank(r.dg_north), blank(r.dg_east), blank(r.sigma_north), blank(r.sigma_east)
         cols["dg_north_mgal"].append(dn / MGAL)
@@ -637,8 +698,10 @@ def horizontal_line_stats(table: dict, idx) -> dict:
     dn = np.asarray(table["dg_north_mgal"], float)[idx]
     obs = np.isfinite(dn)
     frac = float(obs.mean()) if obs.size else 0.0
-    out = {"horizontal_meaningful": bool(obs.size) and frac >= HORIZONTAL_MEANINGFUL_FRACTION,
-           "horizontal_observable_fraction": frac}
+    out = {
+        "horizontal_meaningful": bool(obs.size) and frac >= HORIZONTAL_MEANINGFUL_FRACTION,
+        "horizontal_observable_fraction": frac,
+    }
     for c in ("dg_north_mgal", "dg_east_mgal", "xi_arcsec", "eta_arcsec"):
         v = np.asarray(table[c], float)[idx]
         v = v[np.isfinite(v)]
@@ -693,8 +756,15 @@ def _apply_ties(cfg, results, rows) -> tuple[dict, np.ndarray, list]:
         if fl is None or fl.tie is None:
             continue
         try:
-            tie = tie_flight(fl.tie, r.time, r.lat, r.height, r.unprocessed / MGAL, ellipsoid=cfg.ellipsoid,
-                             key_path=f"flights[{fl.index}].tie")
+            tie = tie_flight(
+                fl.tie,
+                r.time,
+                r.lat,
+                r.height,
+                r.unprocessed / MGAL,
+                ellipsoid=cfg.ellipsoid,
+                key_path=f"flights[{fl.index}].tie",
+            )
         except DataError as exc:
             notes.append(f"{r.name}: base tie not applied, the flight stays on a relative level: {exc}")
             continue
@@ -722,14 +792,23 @@ def _output_metadata(cfg, epsg, level_state) -> dict:
             "projected_epsg": int(epsg),
             "height": f"ellipsoidal height above the {getattr(cfg.ellipsoid, 'name', 'WGS84')} ellipsoid, m",
         },
-        "units": {"*_mgal": "mGal (1e-5 m/s^2)", "*_m": "m", "*_deg": "deg", "time_unix_ns": "ns since 1970-01-01 UTC",
-                  "time_s": "s"},
+        "units": {
+            "*_mgal": "mGal (1e-5 m/s^2)",
+            "*_m": "m",
+            "*_deg": "deg",
+            "time_unix_ns": "ns since 1970-01-01 UTC",
+            "time_s": "s",
+        },
         "software": f"gravsurvey {__version__}",
         "level": level_state,
         "processing": {
             "method": cfg.processing_method,
             "ellipsoid": getattr(cfg.ellipsoid, "name", None),
-            **{k: cfg.raw.get(k) for k in ("model", "lines", "postprocess", "levelling", "grid") if cfg.raw.get(k) is not None},
+            **{
+                k: cfg.raw.get(k)
+                for k in ("model", "lines", "postprocess", "levelling", "grid")
+                if cfg.raw.get(k) is not None
+            },
         },
     }
 
@@ -828,7 +907,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         via_lev = j is not None and lev.datum == "tied flights" and bool(lev.levelled[j])
         absolute[key] = ln["flight"] in ties or via_lev
     n_abs = sum(absolute.values())
-    level_state = ("absolute" if lines and n_abs == len(lines) else "relative" if n_abs == 0 else "partly absolute")
+    level_state = "absolute" if lines and n_abs == len(lines) else "relative" if n_abs == 0 else "partly absolute"
     level_note = {
         "absolute": "levelled_mgal is on an absolute level (base ties)",
         "relative": "levelled_mgal is on a relative level: no base ties (flights[].tie); mean levelling correction zero",
@@ -848,8 +927,14 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         lab = np.where(in_line, table["flight"].astype(str), "")
         lab = np.char.add(np.char.add(lab, "/"), table["line"].astype(str))
         try:
-            grid = grid_lines(table["easting_m"][in_line], table["northing_m"][in_line], table["height_m"][in_line],
-                              table["levelled_mgal"][in_line], lab[in_line], gopt)
+            grid = grid_lines(
+                table["easting_m"][in_line],
+                table["northing_m"][in_line],
+                table["height_m"][in_line],
+                table["levelled_mgal"][in_line],
+                lab[in_line],
+                gopt,
+            )
             grid_info = grid.summary()
         except (DataError, np.linalg.LinAlgError, ValueError) as exc:
             notes.append(f"grid: not computed: {exc}")
@@ -911,15 +996,21 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         "processing_method": cfg.processing_method,
         "crs_epsg": epsg,
         "crs": metadata["crs"],
-        "level": {"state": level_state, "note": level_note, "tied_flights": sorted(ties),
-                  "untied_flights": [r.name for r in results if r.name not in ties]},
+        "level": {
+            "state": level_state,
+            "note": level_note,
+            "tied_flights": sorted(ties),
+            "untied_flights": [r.name for r in results if r.name not in ties],
+        },
         "flights": flights_summary,
         "failed_flights": [f.splitlines()[0] for f in failed],
         "crossovers": xo_stats,
         "levelling": (
-            {"applied": True, **{k: v for k, v in lev_stats.items() if k != "per_line"}} if lev_stats
+            {"applied": True, **{k: v for k, v in lev_stats.items() if k != "per_line"}}
+            if lev_stats
             else {"applied": False, **{k: v for k, v in lev_skipped.statistics().items() if k != "per_line"}}
-            if lev_skipped is not None else None
+            if lev_skipped is not None
+            else None
         ),
         "grid": grid_info,
         "notes": notes,
@@ -938,16 +1029,27 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     with OutputTransaction(out_dir) as tx:
         writers.write_profiles_csv(tx.path("profiles.csv"), table, metadata=metadata)
         if cfg.xyz:
-            writers.write_xyz(tx.path("profiles.xyz"), table, title=f"gravsurvey profiles: {cfg.name}", metadata=metadata)
+            writers.write_xyz(
+                tx.path("profiles.xyz"), table, title=f"gravsurvey profiles: {cfg.name}", metadata=metadata
+            )
         if cfg.geojson:
             writers.write_geojson(tx.path("lines.geojson"), table, line_stats, epsg, metadata=metadata)
         writers.write_crossovers_csv(tx.path("crossovers.csv"), xo, metadata=metadata)
         if grid is not None:
             from .grid import write_grid_netcdf
 
-            write_grid_netcdf(tx.path("grid.nc"), grid, epsg, title=f"{cfg.name}: gravity disturbance (levelled_mgal)",
-                              attrs={"survey": cfg.name, "software": f"gravsurvey {__version__}",
-                                     "level": level_state, "source": "profiles.csv levelled_mgal"})
+            write_grid_netcdf(
+                tx.path("grid.nc"),
+                grid,
+                epsg,
+                title=f"{cfg.name}: gravity disturbance (levelled_mgal)",
+                attrs={
+                    "survey": cfg.name,
+                    "software": f"gravsurvey {__version__}",
+                    "level": level_state,
+                    "source": "profiles.csv levelled_mgal",
+                },
+            )
         if cfg.plots:
             for ln in lines:
                 idx = ln["index"]
@@ -965,9 +1067,14 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                     truth_mgal=table["truth_mgal"][idx] if "truth_mgal" in table else None,
                     title=f"{cfg.name} {ln['flight']} {ln['line']}",
                     x_label="distance along line, km",
-                    horizontal=({c: table[c][idx] for c in ("dg_north_mgal", "dg_east_mgal", "dg_north_sigma_mgal",
-                                                           "dg_east_sigma_mgal")}
-                                if "dg_north_mgal" in table else None),
+                    horizontal=(
+                        {
+                            c: table[c][idx]
+                            for c in ("dg_north_mgal", "dg_east_mgal", "dg_north_sigma_mgal", "dg_east_sigma_mgal")
+                        }
+                        if "dg_north_mgal" in table
+                        else None
+                    ),
                 )
             report.plot_survey_map(
                 tx.path("survey_map.png"),
@@ -984,17 +1091,36 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                 report.plot_levelling(tx.path("levelling.png"), lev, title=f"{cfg.name}: crossover levelling")
             if grid is not None:
                 report.plot_grid_map(
-                    tx.path("grid_map.png"), grid.easting_m, grid.northing_m, grid.value_mgal,
-                    table["easting_m"][in_line], table["northing_m"][in_line],
+                    tx.path("grid_map.png"),
+                    grid.easting_m,
+                    grid.northing_m,
+                    grid.value_mgal,
+                    table["easting_m"][in_line],
+                    table["northing_m"][in_line],
                     track_ids=np.char.add(table["flight"][in_line].astype(str), table["line"][in_line].astype(str)),
                     crs_label=_crs_name(epsg),
-                    title=(f"{cfg.name}: gravity disturbance, "
-                           + ("tied and levelled" if lev is not None and ties else "levelled" if lev is not None
-                              else "tied, not levelled" if ties else "not levelled")
-                           + f" ({level_state} level)"),
-                    note=(f"{grid.method.replace('_', ' ')}, {grid.spacing_m:.0f} m cells, "
-                          + (f"at {grid.altitude_m:.0f} m ellipsoidal height" if grid.altitude_m is not None else "at the flight heights")
-                          + f"; cross-validation RMS {grid.cv_rms_mgal:.2f} mGal"),
+                    title=(
+                        f"{cfg.name}: gravity disturbance, "
+                        + (
+                            "tied and levelled"
+                            if lev is not None and ties
+                            else "levelled"
+                            if lev is not None
+                            else "tied, not levelled"
+                            if ties
+                            else "not levelled"
+                        )
+                        + f" ({level_state} level)"
+                    ),
+                    note=(
+                        f"{grid.method.replace('_', ' ')}, {grid.spacing_m:.0f} m cells, "
+                        + (
+                            f"at {grid.altitude_m:.0f} m ellipsoidal height"
+                            if grid.altitude_m is not None
+                            else "at the flight heights"
+                        )
+                        + f"; cross-validation RMS {grid.cv_rms_mgal:.2f} mGal"
+                    ),
                 )
         summary["output_sha256"] = tx.file_hashes()
         writers.write_json(tx.path("summary.json"), summary)

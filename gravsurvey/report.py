@@ -50,8 +50,17 @@ def _save(fig: Figure, path) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def figure_line_profile(x, kalman_mgal, final_mgal, sigma_mgal, truth_mgal=None, *, title: str = "",
-                        x_label: str = "time, s", horizontal=None) -> Figure:
+def figure_line_profile(
+    x,
+    kalman_mgal,
+    final_mgal,
+    sigma_mgal,
+    truth_mgal=None,
+    *,
+    title: str = "",
+    x_label: str = "time, s",
+    horizontal=None,
+) -> Figure:
     """Figure of one line's profile.
 
     Parameters
@@ -99,7 +108,9 @@ def figure_line_profile(x, kalman_mgal, final_mgal, sigma_mgal, truth_mgal=None,
         d = d[np.isfinite(d)]
         if d.size:
             rms = math.sqrt(float(np.mean(d**2)))
-            full_title = f"{title}  (final - truth: RMS {rms:.2f} mGal)" if title else f"final - truth: RMS {rms:.2f} mGal"
+            full_title = (
+                f"{title}  (final - truth: RMS {rms:.2f} mGal)" if title else f"final - truth: RMS {rms:.2f} mGal"
+            )
     handles, labels = ax.get_legend_handles_labels()
     names = {"kalman": "Kalman/RTS", "final": "final (wavelet)", "truth": "truth", "sigma": "Kalman ± 1σ"}
     ax.legend(handles, [names[lb] for lb in labels], loc="best", fontsize=8)
@@ -124,22 +135,40 @@ def figure_line_profile(x, kalman_mgal, final_mgal, sigma_mgal, truth_mgal=None,
     return fig
 
 
-def plot_line_profile(path, x, kalman_mgal, final_mgal, sigma_mgal, truth_mgal=None, *, title: str = "",
-                      x_label: str = "time, s", horizontal=None) -> None:
+def plot_line_profile(
+    path,
+    x,
+    kalman_mgal,
+    final_mgal,
+    sigma_mgal,
+    truth_mgal=None,
+    *,
+    title: str = "",
+    x_label: str = "time, s",
+    horizontal=None,
+) -> None:
     """Write a line's profile plot as PNG (see :func:`figure_line_profile`)."""
-    _save(figure_line_profile(x, kalman_mgal, final_mgal, sigma_mgal, truth_mgal, title=title, x_label=x_label,
-                              horizontal=horizontal), path)
+    _save(
+        figure_line_profile(
+            x, kalman_mgal, final_mgal, sigma_mgal, truth_mgal, title=title, x_label=x_label, horizontal=horizontal
+        ),
+        path,
+    )
 
 
 def _crossover_arrays(crossovers):
     if crossovers is None:
         return np.zeros(0), np.zeros(0), np.zeros(0)
-    return (np.asarray(crossovers.easting_m, float), np.asarray(crossovers.northing_m, float),
-            np.asarray(crossovers.diff_mgal, float))
+    return (
+        np.asarray(crossovers.easting_m, float),
+        np.asarray(crossovers.northing_m, float),
+        np.asarray(crossovers.diff_mgal, float),
+    )
 
 
-def figure_survey_map(easting_m, northing_m, value_mgal, line_ids, crossovers=None, *, title: str = "",
-                      crs_label: str = "") -> Figure:
+def figure_survey_map(
+    easting_m, northing_m, value_mgal, line_ids, crossovers=None, *, title: str = "", crs_label: str = ""
+) -> Figure:
     """Map of the survey: tracks coloured by the anomaly, line labels, crossover marks.
 
     Parameters
@@ -184,8 +213,16 @@ def figure_survey_map(easting_m, northing_m, value_mgal, line_ids, crossovers=No
     if xe.size:
         ad = np.abs(np.nan_to_num(xd, nan=0.0))
         size = 15 + 60 * ad / max(float(ad.max()), 1e-12)
-        ax.scatter(xe / 1e3, xn / 1e3, s=size, facecolors="none", edgecolors="black", linewidths=0.8,
-                   gid="crossovers", label=f"crossovers ({xe.size}); size ~ |difference|")
+        ax.scatter(
+            xe / 1e3,
+            xn / 1e3,
+            s=size,
+            facecolors="none",
+            edgecolors="black",
+            linewidths=0.8,
+            gid="crossovers",
+            label=f"crossovers ({xe.size}); size ~ |difference|",
+        )
         ax.legend(loc="upper right", fontsize=8)
     ax.set_aspect("equal", adjustable="datalim")
     if np.isfinite(e).any():
@@ -194,8 +231,16 @@ def figure_survey_map(easting_m, northing_m, value_mgal, line_ids, crossovers=No
             from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
             L = _nice_length_km(x1 - x0)
-            bar = AnchoredSizeBar(ax.transData, L, f"{L:g} km", "lower left", pad=0.5, frameon=False,
-                                  size_vertical=0.0, fontproperties={"size": 9})
+            bar = AnchoredSizeBar(
+                ax.transData,
+                L,
+                f"{L:g} km",
+                "lower left",
+                pad=0.5,
+                frameon=False,
+                size_vertical=0.0,
+                fontproperties={"size": 9},
+            )
             bar.set_gid("scalebar")
             ax.add_artist(bar)
     suffix = f" ({crs_label})" if crs_label else ""
@@ -208,11 +253,14 @@ def figure_survey_map(easting_m, northing_m, value_mgal, line_ids, crossovers=No
     return fig
 
 
-def plot_survey_map(path, easting_m, northing_m, value_mgal, line_ids, crossovers=None, *, title: str = "",
-                    crs_label: str = "") -> None:
+def plot_survey_map(
+    path, easting_m, northing_m, value_mgal, line_ids, crossovers=None, *, title: str = "", crs_label: str = ""
+) -> None:
     """Write the survey map as PNG (see :func:`figure_survey_map`)."""
-    _save(figure_survey_map(easting_m, northing_m, value_mgal, line_ids, crossovers, title=title,
-                            crs_label=crs_label), path)
+    _save(
+        figure_survey_map(easting_m, northing_m, value_mgal, line_ids, crossovers, title=title, crs_label=crs_label),
+        path,
+    )
 
 
 def figure_crossover_histogram(crossovers, *, title: str = "") -> Figure:
@@ -260,8 +308,18 @@ def _nice_length_km(span_km: float) -> float:
     return 10.0**k
 
 
-def figure_grid_map(easting_m, northing_m, value_mgal, track_easting_m=None, track_northing_m=None, *,
-                    track_ids=None, crs_label: str = "", title: str = "", note: str = ""):
+def figure_grid_map(
+    easting_m,
+    northing_m,
+    value_mgal,
+    track_easting_m=None,
+    track_northing_m=None,
+    *,
+    track_ids=None,
+    crs_label: str = "",
+    title: str = "",
+    note: str = "",
+):
     """Map of a grid: colour in mGal, flight lines, scale bar, CRS label.
 
     Parameters
@@ -296,8 +354,9 @@ def figure_grid_map(easting_m, northing_m, value_mgal, track_easting_m=None, tra
     lim = float(np.percentile(np.abs(v[fin]), 99)) if fin.any() else 1.0
     lim = lim if lim > 0 else 1.0
     # diverging map whose centre is a pale yellow, not white; tracks are drawn in black on top
-    im = ax.pcolormesh(ge, gn, np.ma.masked_invalid(v), cmap="RdYlBu_r", vmin=-lim, vmax=lim, shading="nearest",
-                       gid="grid")
+    im = ax.pcolormesh(
+        ge, gn, np.ma.masked_invalid(v), cmap="RdYlBu_r", vmin=-lim, vmax=lim, shading="nearest", gid="grid"
+    )
     cb = fig.colorbar(im, ax=ax, shrink=0.8)
     cb.set_label("gravity disturbance, mGal")
     if track_easting_m is not None and track_northing_m is not None:
@@ -307,8 +366,9 @@ def figure_grid_map(easting_m, northing_m, value_mgal, track_easting_m=None, tra
         cut = np.flatnonzero(ids[1:] != ids[:-1]) + 1
         first = True
         for a, b in zip(np.concatenate(([0], cut)), np.concatenate((cut, [te.size]))):
-            ax.plot(te[a:b], tn[a:b], color="black", linewidth=0.6, gid="tracks",
-                    label="flight lines" if first else None)
+            ax.plot(
+                te[a:b], tn[a:b], color="black", linewidth=0.6, gid="tracks", label="flight lines" if first else None
+            )
             first = False
         ax.legend(loc="upper right", fontsize=8)
     ax.set_aspect("equal", adjustable="datalim")
@@ -319,8 +379,16 @@ def figure_grid_map(easting_m, northing_m, value_mgal, track_easting_m=None, tra
     ax.plot([xs, xs + L], [ys, ys], color="black", linewidth=4, solid_capstyle="butt", gid="scalebar")
     ax.text(xs + L / 2, ys + 0.015 * (y1 - y0), f"{L:g} km", ha="center", va="bottom", fontsize=9)
     if crs_label:
-        ax.text(0.99, 0.01, crs_label, transform=ax.transAxes, ha="right", va="bottom", fontsize=8,
-                bbox={"facecolor": "white", "alpha": 0.8, "linewidth": 0})
+        ax.text(
+            0.99,
+            0.01,
+            crs_label,
+            transform=ax.transAxes,
+            ha="right",
+            va="bottom",
+            fontsize=8,
+            bbox={"facecolor": "white", "alpha": 0.8, "linewidth": 0},
+        )
     suffix = f" ({crs_label.split()[0]})" if crs_label else ""
     ax.set_xlabel(f"easting, km{suffix}")
     ax.set_ylabel(f"northing, km{suffix}")
@@ -357,8 +425,9 @@ def figure_levelling(levelling, *, title: str = ""):
     lim = float(np.max(np.abs(both))) if both.size else 1.0
     bins = np.linspace(-lim, lim, 31) if lim > 0 else 10
     if np.isfinite(raw).any():
-        ax1.hist(raw[np.isfinite(raw)], bins=bins, color="tab:gray", alpha=0.6,
-                 label=f"before: RMS {b['rms_mgal']:.2f} mGal")
+        ax1.hist(
+            raw[np.isfinite(raw)], bins=bins, color="tab:gray", alpha=0.6, label=f"before: RMS {b['rms_mgal']:.2f} mGal"
+        )
     ax1.hist(d0[np.isfinite(d0)], bins=bins, color="tab:blue", alpha=0.7, label=f"after: RMS {a['rms_mgal']:.2f} mGal")
     ax1.set_xlabel("crossover difference, mGal")
     ax1.set_ylabel("count")

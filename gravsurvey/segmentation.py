@@ -370,8 +370,10 @@ def segment_lines(
     gs = np.hypot(vv[:, 0], vv[:, 1])
     cum = np.concatenate(([0.0], np.cumsum(0.5 * (gs[1:] + gs[:-1]) * np.diff(t))))
     straight = [
-        (a, b) for a, b in merged
-        if cum[b - 1] - cum[a] >= min_line_m and (min_line_s is None or t[b - 1] - t[a] >= min_line_s)
+        (a, b)
+        for a, b in merged
+        if cum[b - 1] - cum[a] >= min_line_m
+        and (min_line_s is None or t[b - 1] - t[a] >= min_line_s)
         and _heading_drift_deg(t[a:b], heading_u[a:b]) <= 0.5 * heading_tol_deg
     ]
 
@@ -528,11 +530,7 @@ class SegmentationOptions:
 
     def detection_kwargs(self) -> dict:
         """Keyword arguments for :func:`segment_lines`."""
-        return {
-            k: getattr(self, k)
-            for k in self.keys()
-            if k not in ("mode", "windows")
-        }
+        return {k: getattr(self, k) for k in self.keys() if k not in ("mode", "windows")}
 
 
 def segment_flight(options: SegmentationOptions, time_s, lat_rad, lon_rad, vel_enu=None, *, key_path="lines"):
@@ -552,5 +550,3 @@ def segment_flight(options: SegmentationOptions, time_s, lat_rad, lon_rad, vel_e
     if options.mode == "windows":
         return segments_from_windows(t, options.windows, key_path=f"{key_path}.windows")
     return segment_lines(t, lat_rad, lon_rad, vel_enu, **options.detection_kwargs())
-
-

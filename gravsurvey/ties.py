@@ -69,7 +69,6 @@ class TieReading:
     stop_s: float | None = None
 
 
-
 @dataclass(frozen=True)
 class TieConfig:
     """A flight's ``tie:`` section (module docstring)."""
@@ -81,9 +80,9 @@ class TieConfig:
     base_height_m: float | None = None
 
 
-
-def drift_offset(time_s, t0_s: float, offset0_mgal: float, t1_s: float | None = None,
-                 offset1_mgal: float | None = None) -> np.ndarray:
+def drift_offset(
+    time_s, t0_s: float, offset0_mgal: float, t1_s: float | None = None, offset1_mgal: float | None = None
+) -> np.ndarray:
     """The tie offset at the given times: linear between two readings, constant with one.
 
     Parameters
@@ -133,8 +132,9 @@ class FlightTie:
     def correction(self, time_s) -> np.ndarray:
         """Offset to subtract at the given times (s after the flight's first sample), mGal."""
         if self.offset_before_mgal is not None and self.offset_after_mgal is not None:
-            return drift_offset(time_s, self.time_before_s, self.offset_before_mgal,
-                                self.time_after_s, self.offset_after_mgal)
+            return drift_offset(
+                time_s, self.time_before_s, self.offset_before_mgal, self.time_after_s, self.offset_after_mgal
+            )
         o = self.offset_before_mgal if self.offset_before_mgal is not None else self.offset_after_mgal
         return drift_offset(time_s, 0.0, o)
 
@@ -149,8 +149,9 @@ class FlightTie:
         }
 
 
-def tie_flight(tie: TieConfig, time_s, lat_rad, height_m, disturbance_mgal, *, ellipsoid=WGS84,
-               key_path: str = "tie") -> FlightTie:
+def tie_flight(
+    tie: TieConfig, time_s, lat_rad, height_m, disturbance_mgal, *, ellipsoid=WGS84, key_path: str = "tie"
+) -> FlightTie:
     """Offsets and drift of one flight from its base readings.
 
     Parameters

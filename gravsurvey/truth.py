@@ -84,10 +84,15 @@ def check_truth_header(spec, key: str) -> None:
         raise ConfigError(f"{key}: {path}: cannot read: {exc.strerror}") from None
     missing = [c for c in spec.columns.values() if c not in head]
     if missing:
-        hint = ("" if spec.columns != TruthSpec(path).columns else
-                f" (other names: {key}: {{file: ..., columns: {{time: ..., disturbance_mgal: ...}}}})")
-        raise ConfigError(f"{key}: {path}: truth file lacks column(s) {', '.join(missing)}; "
-                          f"header has {', '.join(h for h in head if h) or 'nothing'}{hint}")
+        hint = (
+            ""
+            if spec.columns != TruthSpec(path).columns
+            else f" (other names: {key}: {{file: ..., columns: {{time: ..., disturbance_mgal: ...}}}})"
+        )
+        raise ConfigError(
+            f"{key}: {path}: truth file lacks column(s) {', '.join(missing)}; "
+            f"header has {', '.join(h for h in head if h) or 'nothing'}{hint}"
+        )
 
 
 def read_truth_csv(spec) -> dict:

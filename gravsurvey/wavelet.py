@@ -380,8 +380,7 @@ def _cosphi_descent_kernel(gram, rz, zz, top, steps, max_sweeps, out_k, out_phi)
                         continue
                     new = j * s1 + k
                     # r' = r - img_old + img_new
-                    rr2 = (rr - 2.0 * rimg[old] + gram[old, old]
-                           + 2.0 * (rimg[new] - gram[old, new]) + gram[new, new])
+                    rr2 = rr - 2.0 * rimg[old] + gram[old, old] + 2.0 * (rimg[new] - gram[old, new]) + gram[new, new]
                     rz2 = rzs - rz[old] + rz[new]
                     ph = _phi_dots_nb(rr2, rz2 - rr2, zz - 2.0 * rz2 + rr2, floor)
                     if not np.isnan(ph) and (np.isnan(best_phi) or ph < best_phi):
@@ -389,8 +388,7 @@ def _cosphi_descent_kernel(gram, rz, zz, top, steps, max_sweeps, out_k, out_phi)
                         best_phi = ph
                 if best_k != ks[j]:
                     new = j * s1 + best_k
-                    rr = (rr - 2.0 * rimg[old] + gram[old, old]
-                          + 2.0 * (rimg[new] - gram[old, new]) + gram[new, new])
+                    rr = rr - 2.0 * rimg[old] + gram[old, old] + 2.0 * (rimg[new] - gram[old, new]) + gram[new, new]
                     rzs = rzs - rz[old] + rz[new]
                     for b in range(na):
                         rimg[b] += gram[new, b] - gram[old, b]
@@ -460,8 +458,9 @@ def _cosphi_descent_numpy(images, z, top, steps, max_sweeps):
     return out_k, out_phi
 
 
-def cosphi_search(z, wavelet="db10", mode="symmetric", thresholding="soft", steps=8,
-                  max_level=None, max_sweeps=3, reference=False):
+def cosphi_search(
+    z, wavelet="db10", mode="symmetric", thresholding="soft", steps=8, max_level=None, max_sweeps=3, reference=False
+):
     """The seed's rule: ``min over (n, p) of Phi(z, z~)``, Phi of the signal-domain vectors.
 
     For every level ``n = 1..max_level`` the thresholds ``p_j`` of the detail components
@@ -527,8 +526,14 @@ def cosphi_search(z, wavelet="db10", mode="symmetric", thresholding="soft", step
     phi_by_level = [float(x) for x in out_phi[:top]]
     finite = [(v, n) for n, v in enumerate(phi_by_level, start=1) if np.isfinite(v)]
     if not finite:  # nothing removable (e.g. a constant line): leave it as it is
-        return z.copy(), {"n": 0, "p": [], "Phi": float("nan"), "phi_deg": float("nan"),
-                          "phi_by_level": phi_by_level, "levels_fully_removed": 0}
+        return z.copy(), {
+            "n": 0,
+            "p": [],
+            "Phi": float("nan"),
+            "phi_deg": float("nan"),
+            "phi_by_level": phi_by_level,
+            "levels_fully_removed": 0,
+        }
     phi, n = min(finite)
     ks = out_k[n - 1, :n]
     r = images[np.arange(n), ks].sum(axis=0)
@@ -577,7 +582,7 @@ def ti_response(wavelet, level, freq_cyc_per_sample):
     out = np.ones_like(f)
     taps = np.arange(h.size)
     for k in range(int(level)):
-        w = 2.0 * np.pi * f * (2 ** k)
+        w = 2.0 * np.pi * f * (2**k)
         hw = np.exp(-1j * np.outer(w.ravel(), taps)) @ h
         out = out * (np.abs(hw) ** 2 / 2.0).reshape(f.shape)
     return out
@@ -718,11 +723,10 @@ def ti_cosphi(z, wavelet="db10", min_level=1, max_level=None, sigma_rms=None):
     c = _sfft.dct(z, 2, norm="ortho")
     c2 = c * c
     resp = _level_responses(wavelet, n_samples, top)
-    kk = (resp ** 2) @ c2
+    kk = (resp**2) @ c2
     rr = ((1.0 - resp) ** 2) @ c2
     rk = (resp * (1.0 - resp)) @ c2
-    phis = [float("nan") if n < lo else _phi_from_dots(rr[n - 1], rk[n - 1], kk[n - 1])
-            for n in range(1, top + 1)]
+    phis = [float("nan") if n < lo else _phi_from_dots(rr[n - 1], rk[n - 1], kk[n - 1]) for n in range(1, top + 1)]
     removed_rms = [float(math.sqrt(max(v, 0.0) / n_samples)) for v in rr]
     sigma_top = None
     if sigma_rms is not None and np.isfinite(sigma_rms) and sigma_rms > 0:
@@ -732,10 +736,17 @@ def ti_cosphi(z, wavelet="db10", min_level=1, max_level=None, sigma_rms=None):
         phis = [v if n <= sigma_top else float("nan") for n, v in enumerate(phis, start=1)]
     n_best, found = _gap_level(phis, lo)
     if n_best is None:  # constant line, or sigma allows no level: nothing to remove
-        return z.copy(), {"n": 0, "Phi": float("nan"), "phi_deg": float("nan"),
-                          "phi_by_level": phis, "period_samples": 0.0, "gap_found": False,
-                          "removed_rms_by_level": removed_rms, "sigma_limited_level": sigma_top,
-                          "length_limited_level": length_top}
+        return z.copy(), {
+            "n": 0,
+            "Phi": float("nan"),
+            "phi_deg": float("nan"),
+            "phi_by_level": phis,
+            "period_samples": 0.0,
+            "gap_found": False,
+            "removed_rms_by_level": removed_rms,
+            "sigma_limited_level": sigma_top,
+            "length_limited_level": length_top,
+        }
     phi = phis[n_best - 1]
     return _sfft.idct(c * resp[n_best - 1], 2, norm="ortho"), {
         "n": n_best,
@@ -834,11 +845,11 @@ def _sure_threshold(d, sigma):
     x = np.sort(np.abs(d) / sigma)
     universal = math.sqrt(2.0 * math.log(max(n, 2)))
     # sparse level: universal threshold (hybrid rule)
-    eta = (float(np.sum(x ** 2)) - n) / n
+    eta = (float(np.sum(x**2)) - n) / n
     crit = math.log2(max(n, 2)) ** 1.5 / math.sqrt(n)
     if eta <= crit:
         return universal * sigma
-    x2 = x ** 2
+    x2 = x**2
     cums = np.cumsum(x2)
     k = np.arange(1, n + 1)
     # risk(t = x_k) = n - 2 k + sum_{i<=k} x_i^2 + (n - k) x_k^2
@@ -859,8 +870,7 @@ def sure_shrink(z, wavelet="db10", mode="symmetric", levels=None):
     info : dict
         ``p`` (threshold per level 1..K).
     """
-    z_t, ps = _shrink(z, wavelet, mode, levels,
-                      lambda j, d: _sure_threshold(d, _mad_sigma(d)))
+    z_t, ps = _shrink(z, wavelet, mode, levels, lambda j, d: _sure_threshold(d, _mad_sigma(d)))
     return z_t, {"p": ps}
 
 
@@ -877,14 +887,15 @@ def bayes_shrink(z, wavelet="db10", mode="symmetric", levels=None):
     info : dict
         ``p`` (threshold per level 1..K).
     """
+
     def per_level(j, d):
         if d.size == 0:
             return 0.0
         s = _mad_sigma(d)
-        sx2 = float(np.mean(d ** 2)) - s ** 2
+        sx2 = float(np.mean(d**2)) - s**2
         if sx2 <= 0.0:
             return float(np.max(np.abs(d)))
-        return s ** 2 / math.sqrt(sx2)
+        return s**2 / math.sqrt(sx2)
 
     z_t, ps = _shrink(z, wavelet, mode, levels, per_level)
     return z_t, {"p": ps}
@@ -905,24 +916,31 @@ def _check_context(context, z):
         raise DataError("wavelet post-processor: context must be (z_full, start, stop)") from None
     z_full = np.asarray(z_full, dtype=float)
     if z_full.ndim != 1:
-        raise DataError(f"wavelet post-processor: context z_full has shape {z_full.shape}, "
-                        "expected 1-D (the whole flight's estimate)")
-    if isinstance(start, bool) or isinstance(stop, bool) or \
-            int(start) != start or int(stop) != stop:
-        raise DataError(f"wavelet post-processor: context start/stop {start!r}/{stop!r}, "
-                        "expected integer sample indices")
+        raise DataError(
+            f"wavelet post-processor: context z_full has shape {z_full.shape}, "
+            "expected 1-D (the whole flight's estimate)"
+        )
+    if isinstance(start, bool) or isinstance(stop, bool) or int(start) != start or int(stop) != stop:
+        raise DataError(
+            f"wavelet post-processor: context start/stop {start!r}/{stop!r}, expected integer sample indices"
+        )
     start, stop = int(start), int(stop)
     if not (0 <= start < stop <= z_full.size) or stop - start != z.size:
-        raise DataError(f"wavelet post-processor: context range [{start}, {stop}) does not hold "
-                        f"the line's {z.size} samples inside the {z_full.size}-sample flight")
+        raise DataError(
+            f"wavelet post-processor: context range [{start}, {stop}) does not hold "
+            f"the line's {z.size} samples inside the {z_full.size}-sample flight"
+        )
     if not np.array_equal(z_full[start:stop], z):
-        raise DataError("wavelet post-processor: context z_full[start:stop] differs from the "
-                        "line; expected the same estimate the line was cut from")
+        raise DataError(
+            "wavelet post-processor: context z_full[start:stop] differs from the "
+            "line; expected the same estimate the line was cut from"
+        )
     return z_full, start, stop
 
 
-def ti_apply_with_context(z_full, start, stop, wavelet, level, margin_periods=CONTEXT_MARGIN_PERIODS,
-                          gate_ratio=CONTEXT_GATE_RATIO):
+def ti_apply_with_context(
+    z_full, start, stop, wavelet, level, margin_periods=CONTEXT_MARGIN_PERIODS, gate_ratio=CONTEXT_GATE_RATIO
+):
     """The level-``level`` TI approximation of the line ``z_full[start:stop]``, filtered over
     the line extended on both sides by the flight's own estimate.
 
@@ -985,17 +1003,16 @@ def ti_apply_with_context(z_full, start, stop, wavelet, level, margin_periods=CO
         def _ms(x):
             return float(np.mean(x * x))
 
-        limit = gate_ratio ** 2 * _ms(r[start - lo2:stop - lo2])
-        if lo < start and _ms(r[lo - lo2:start - lo2]) > limit:
+        limit = gate_ratio**2 * _ms(r[start - lo2 : stop - lo2])
+        if lo < start and _ms(r[lo - lo2 : start - lo2]) > limit:
             lo = start
-        if hi > stop and _ms(r[stop - lo2:hi - lo2]) > limit:
+        if hi > stop and _ms(r[stop - lo2 : hi - lo2]) > limit:
             hi = stop
     out = ti_approximation(np.asarray(z_full[lo:hi], dtype=float), wavelet, level)
-    return out[start - lo:stop - lo]
+    return out[start - lo : stop - lo]
 
 
-def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, context=None,
-                **kwargs):
+def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, context=None, **kwargs):
     """Clean the smoothed anomaly estimate of ONE survey line.
 
     Parameters
@@ -1050,8 +1067,7 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
     """
     if options is not None:
         if kwargs:
-            raise ConfigError("postprocess: give either options=PostprocessOptions or keyword "
-                              "settings, not both")
+            raise ConfigError("postprocess: give either options=PostprocessOptions or keyword settings, not both")
         opts = options
         if method == "default":
             method = opts.method
@@ -1062,15 +1078,17 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
     if method == "default":
         method = DEFAULT_METHOD
     if method not in METHODS:
-        raise ConfigError(f"postprocess.method: {method!r} is not allowed; expected one of "
-                          f"default, {', '.join(METHODS)}")
+        raise ConfigError(
+            f"postprocess.method: {method!r} is not allowed; expected one of default, {', '.join(METHODS)}"
+        )
     z = np.asarray(z, dtype=float)
     if z.ndim != 1 or z.size < 2:
-        raise DataError(f"wavelet post-processor: expected a 1-D line of >= 2 samples, "
-                        f"got shape {z.shape}")
+        raise DataError(f"wavelet post-processor: expected a 1-D line of >= 2 samples, got shape {z.shape}")
     if not np.all(np.isfinite(z)):
-        raise DataError(f"wavelet post-processor: line holds {int(np.sum(~np.isfinite(z)))} "
-                        "non-finite samples; expected finite values")
+        raise DataError(
+            f"wavelet post-processor: line holds {int(np.sum(~np.isfinite(z)))} "
+            "non-finite samples; expected finite values"
+        )
     if not (dt_s > 0 and math.isfinite(dt_s)):
         raise DataError(f"wavelet post-processor: sample spacing {dt_s!r} s, expected > 0")
 
@@ -1078,8 +1096,9 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
     if sigma is not None:
         sg = np.asarray(sigma, dtype=float)
         if sg.ndim and sg.shape != z.shape:
-            raise DataError(f"wavelet post-processor: sigma has shape {sg.shape}, expected a "
-                            f"scalar or the line's shape {z.shape}")
+            raise DataError(
+                f"wavelet post-processor: sigma has shape {sg.shape}, expected a scalar or the line's shape {z.shape}"
+            )
         sg = np.broadcast_to(sg, z.shape)
         ok = np.isfinite(sg)
         if not np.any(ok) or np.any(sg[ok] < 0):
@@ -1087,8 +1106,7 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
         sigma_rms = float(np.sqrt(np.mean(sg[ok] ** 2)))
     if context is not None:
         context = _check_context(context, z)
-    info = {"method": method, "wavelet": None, "n": None, "p": None, "Phi": None,
-            "phi_deg": None, "resolution_m": None}
+    info = {"method": method, "wavelet": None, "n": None, "p": None, "Phi": None, "phi_deg": None, "resolution_m": None}
     if method == "none":
         return z.copy(), info
     if method in LOWPASS_METHODS:
@@ -1098,9 +1116,12 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
         else:
             out = gaussian_lowpass(z, dt_s, period)
         phi = phi_criterion(z, out)
-        info.update(Phi=phi, phi_deg=_deg(phi), filter_length_s=period,
-                    resolution_m=lowpass_resolution_m(period, speed_mps)
-                    if speed_mps and speed_mps > 0 else None)
+        info.update(
+            Phi=phi,
+            phi_deg=_deg(phi),
+            filter_length_s=period,
+            resolution_m=lowpass_resolution_m(period, speed_mps) if speed_mps and speed_mps > 0 else None,
+        )
         return out, info
 
     best = None
@@ -1126,8 +1147,7 @@ def postprocess(z, dt_s, speed_mps, method="default", options=None, sigma=None, 
 
 
 def _deg(phi):
-    return math.degrees(math.acos(min(1.0, phi))) if phi is not None and np.isfinite(phi) \
-        else float("nan")
+    return math.degrees(math.acos(min(1.0, phi))) if phi is not None and np.isfinite(phi) else float("nan")
 
 
 def _run_wavelet(method, z, wname, opts, dt_s, speed_mps, sigma_rms=None):
@@ -1137,13 +1157,13 @@ def _run_wavelet(method, z, wname, opts, dt_s, speed_mps, sigma_rms=None):
         return lowpass_resolution_m(ti_period_samples(wname, m) * dt_s, speed_mps)
 
     if method == "ti_cosphi":
-        out, sub = ti_cosphi(z, wname, min_level=opts.min_level, max_level=opts.max_level,
-                             sigma_rms=sigma_rms)
+        out, sub = ti_cosphi(z, wname, min_level=opts.min_level, max_level=opts.max_level, sigma_rms=sigma_rms)
         sub["resolution_m"] = res_of_level(sub["n"])
         return out, sub
     if method == "cosphi":
-        out, sub = cosphi_search(z, wname, opts.boundary, opts.thresholding,
-                                 steps=opts.threshold_steps, max_level=opts.max_level)
+        out, sub = cosphi_search(
+            z, wname, opts.boundary, opts.thresholding, steps=opts.threshold_steps, max_level=opts.max_level
+        )
         sub["resolution_m"] = res_of_level(sub["levels_fully_removed"])
         return out, sub
     if method == "visushrink":

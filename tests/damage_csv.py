@@ -84,6 +84,7 @@ def restart_clock(dst, name, at_s, back_s):
 
 def map_columns(dst, name, fn_by_col):
     """Replace values: {column: f(float ndarray) -> ndarray}."""
+
     def fn(head, rows):
         for col, f in fn_by_col.items():
             j = head.index(col)

@@ -49,7 +49,7 @@ def damage(kind, fault, rng):
     if fault == "garbage":
         a = rng.randrange(n)
         junk = bytes(rng.randrange(256) for _ in range(rng.randint(1, 64)))
-        raw[a:a + len(junk)] = junk
+        raw[a : a + len(junk)] = junk
         return bytes(raw[:n]), [(a, min(n, a + len(junk)))]
     cut = rng.randrange(n)
     return bytes(raw[:cut]), [(cut, n)]
@@ -63,8 +63,7 @@ def one(kind, data, dmg):
         exc = None
         try:
             c = read_mcap(p, keep_raw=True)
-            got = Counter((c.channels[ch].topic, lt, bytes(b)) for ch, _, lt, _, b in c.raw
-                          if ch in c.channels)
+            got = Counter((c.channels[ch].topic, lt, bytes(b)) for ch, _, lt, _, b in c.raw if ch in c.channels)
         except DataError:
             c, got = None, Counter()
         except Exception as e:  # noqa: BLE001 - counted, that is the point
@@ -93,8 +92,7 @@ def one(kind, data, dmg):
                 if k is None:
                     corrupt += 1
                     continue
-                err = max(float(np.max(np.abs(f - d["f"][k]))),
-                          float(np.max(np.abs(w - d["w"][k]))))
+                err = max(float(np.max(np.abs(f - d["f"][k]))), float(np.max(np.abs(w - d["w"][k]))))
                 if not err == 0.0:
                     corrupt += 1
                     worst = max(worst, err) if np.isfinite(err) else float("inf")
@@ -105,11 +103,17 @@ def one(kind, data, dmg):
     lost_before = sum((before - got).values())
     lost_after = sum((after - got).values())
     total_lost = sum(everything(kind).values()) - sum(got.values())
-    said = c is None or c.salvage is not None or any(
-        "unknown opcodes" in n or "no footer" in n for n in c.notes)
-    return dict(intact_after=sum(after.values()), lost_before=lost_before,
-                lost_after=lost_after, unreported=int(total_lost > 0 and not said),
-                corrupt_kept=corrupt, dropped=dropped, worst=worst, exc=exc)
+    said = c is None or c.salvage is not None or any("unknown opcodes" in n or "no footer" in n for n in c.notes)
+    return dict(
+        intact_after=sum(after.values()),
+        lost_before=lost_before,
+        lost_after=lost_after,
+        unreported=int(total_lost > 0 and not said),
+        corrupt_kept=corrupt,
+        dropped=dropped,
+        worst=worst,
+        exc=exc,
+    )
 
 
 def main(per_cell=50, seed=0):
@@ -126,14 +130,18 @@ def main(per_cell=50, seed=0):
                 if r["exc"]:
                     excs[r["exc"]] += 1
             rows.append((fault, kind, per_cell, agg, excs))
-    print("| fault | file | cases | intact messages after the damage | lost before | "
-          "lost after | losses not reported | other exceptions | IMU samples dropped by "
-          "damage checks | corrupted IMU samples kept | their largest error |")
+    print(
+        "| fault | file | cases | intact messages after the damage | lost before | "
+        "lost after | losses not reported | other exceptions | IMU samples dropped by "
+        "damage checks | corrupted IMU samples kept | their largest error |"
+    )
     print("|---|---|---:|---:|---:|---:|---:|---|---:|---:|---:|")
     for fault, kind, n, a, e in rows:
-        print(f"| {fault} | {kind} | {n} | {a['intact_after']} | {a['lost_before']} | "
-              f"{a['lost_after']} | {a['unreported']} | {dict(e) or 0} | {a['dropped']} | "
-              f"{a['corrupt_kept']} | {a['worst']:.3g} |")
+        print(
+            f"| {fault} | {kind} | {n} | {a['intact_after']} | {a['lost_before']} | "
+            f"{a['lost_after']} | {a['unreported']} | {dict(e) or 0} | {a['dropped']} | "
+            f"{a['corrupt_kept']} | {a['worst']:.3g} |"
+        )
 
 
 def csv_cut_table(cases=400, seed=14):
@@ -160,9 +168,12 @@ def csv_cut_table(cases=400, seed=14):
                 out["refused (DataError naming file and line)"] += 1
                 continue
             n = len(t)
-            exact = (n <= complete + 1 and np.array_equal(t, d["imu_t"][:n])
-                     and np.array_equal(v["specific_force"], d["f"][:n])
-                     and np.array_equal(v["angular_rate"], d["w"][:n]))
+            exact = (
+                n <= complete + 1
+                and np.array_equal(t, d["imu_t"][:n])
+                and np.array_equal(v["specific_force"], d["f"][:n])
+                and np.array_equal(v["angular_rate"], d["w"][:n])
+            )
             if not exact:
                 out["WRONG: a value read that the file was not written with"] += 1
             elif n < complete:

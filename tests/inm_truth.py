@@ -29,9 +29,19 @@ def rz(a):
     return m
 
 
-def parallel_flight(duration_s=3600.0, rate_hz=10.0, lat0_deg=45.0, lon0_deg=135.0, h=1000.0,
-                    speed=50.0, disturbance=None, triad="platform", yaw_rate=0.0, heading0_deg=90.0,
-                    t0=0.0):
+def parallel_flight(
+    duration_s=3600.0,
+    rate_hz=10.0,
+    lat0_deg=45.0,
+    lon0_deg=135.0,
+    h=1000.0,
+    speed=50.0,
+    disturbance=None,
+    triad="platform",
+    yaw_rate=0.0,
+    heading0_deg=90.0,
+    t0=0.0,
+):
     """Return a dict of truth and noiseless sensor data.
 
     disturbance : callable(t) -> m/s^2 positive down, or None.
@@ -68,5 +78,16 @@ def parallel_flight(duration_s=3600.0, rate_hz=10.0, lat0_deg=45.0, lon0_deg=135
     f_t = np.einsum("nji,nj->ni", m_it, f_i)
     v_n = np.zeros((t.size, 3))
     v_n[:, 0] = speed
-    return dict(time=t, lat=lat, lon=lon, height=np.full_like(t, h), vel_n=v_n, r_i=r_i,
-                mat_it=m_it, mat_nt=mat_nt, f_t=f_t, w_t=w_t, disturbance=dist)
+    return dict(
+        time=t,
+        lat=lat,
+        lon=lon,
+        height=np.full_like(t, h),
+        vel_n=v_n,
+        r_i=r_i,
+        mat_it=m_it,
+        mat_nt=mat_nt,
+        f_t=f_t,
+        w_t=w_t,
+        disturbance=dist,
+    )

@@ -13,15 +13,14 @@ G_NEWTON = 6.674e-11
 def truth_field_mgal(e, n, h=800.0):
     """Vertical attraction of three buried point masses at height h, mGal (analytic)."""
     out = np.zeros_like(np.asarray(e, float))
-    for (e0, n0, d, m) in ((8e3, 12e3, 2500.0, 2e13), (20e3, 5e3, 3000.0, -1.5e13), (14e3, 20e3, 2000.0, 8e12)):
+    for e0, n0, d, m in ((8e3, 12e3, 2500.0, 2e13), (20e3, 5e3, 3000.0, -1.5e13), (14e3, 20e3, 2000.0, 8e12)):
         dz = h + d
         r2 = (e - e0) ** 2 + (n - n0) ** 2 + dz**2
         out += G_NEWTON * m * dz / r2**1.5 / MGAL
     return out
 
 
-def simulated_survey(seed=1, noise_mgal=0.2, spacing_m=4000.0, speed=80.0, dt=2.0, tie_tilt_deg=0.0,
-                     altitudes=None):
+def simulated_survey(seed=1, noise_mgal=0.2, spacing_m=4000.0, speed=80.0, dt=2.0, tie_tilt_deg=0.0, altitudes=None):
     """3 flights: F1 and F2 fly 4 north-south lines each (24 km), F3 flies 4 east-west ties.
 
     Each flight gets an offset (2 .. -3 mGal) and a drift (mGal/h); each line an extra offset of
@@ -53,8 +52,18 @@ def simulated_survey(seed=1, noise_mgal=0.2, spacing_m=4000.0, speed=80.0, dt=2.
             alt = 800.0 if altitudes is None else float(altitudes[f])
             tru = truth_field_mgal(e, nn, alt)
             err = off + drift * t / 3600.0 + rng.normal(0, 0.5) + rng.normal(0, noise_mgal, e.size)
-            lines.append({"flight": f, "line": name, "easting_m": e, "northing_m": nn, "time_s": t,
-                          "value_mgal": tru + err, "truth_mgal": tru, "sigma_mgal": np.full(e.size, noise_mgal),
-                          "height_m": np.full(e.size, alt)})
+            lines.append(
+                {
+                    "flight": f,
+                    "line": name,
+                    "easting_m": e,
+                    "northing_m": nn,
+                    "time_s": t,
+                    "value_mgal": tru + err,
+                    "truth_mgal": tru,
+                    "sigma_mgal": np.full(e.size, noise_mgal),
+                    "height_m": np.full(e.size, alt),
+                }
+            )
         flights[f] = (off, drift, t_now + 300.0)
     return lines, flights

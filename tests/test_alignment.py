@@ -46,16 +46,29 @@ SENSORS = {
 
 
 def _grid(static_s):
-    return {"kind": "grid", "origin_lat_deg": 47.0, "origin_lon_deg": 11.0, "altitude_m": 800.0, "speed_mps": 70.0,
-            "lines": {"count": 3, "spacing_m": 3000.0, "length_m": 25000.0, "heading_deg": 0.0},
-            "static_start_s": static_s}
+    return {
+        "kind": "grid",
+        "origin_lat_deg": 47.0,
+        "origin_lon_deg": 11.0,
+        "altitude_m": 800.0,
+        "speed_mps": 70.0,
+        "lines": {"count": 3, "spacing_m": 3000.0, "length_m": 25000.0, "heading_deg": 0.0},
+        "static_start_s": static_s,
+    }
 
 
 def _simulate(static_s):
     """Strapdown grid, 22-25 min at 10 Hz, gyro biases <= 0.03 deg/h, 0.5 m GNSS at 5 Hz."""
-    sim = quick_sim(plan=_grid(static_s), triad="strapdown", noise=SENSORS, field="seed_smooth", gnss_hz=5.0,
-                    altimeter_hz=5.0, seed=3,
-                    turbulence={"vertical_sigma_m": 1.0, "horizontal_sigma_m": 1.0, "attitude_sigma_deg": 0.5})
+    sim = quick_sim(
+        plan=_grid(static_s),
+        triad="strapdown",
+        noise=SENSORS,
+        field="seed_smooth",
+        gnss_hz=5.0,
+        altimeter_hz=5.0,
+        seed=3,
+        turbulence={"vertical_sigma_m": 1.0, "horizontal_sigma_m": 1.0, "attitude_sigma_deg": 0.5},
+    )
     return simulate_flight(sim)
 
 
@@ -74,8 +87,9 @@ def _params(**kw):
     # what a user knows from the datasheets of the simulated sensors (accelerometer, gyro, GNSS);
     # the rest at its default: the gravimeter/height noise and the anomaly prior are identified
     # from the flight (model.identify, on by default)
-    return InmParams(accel_noise_mps2=5e-4, gyro_drift_degph=0.005, gnss_horizontal_sigma_m=0.5,
-                     gnss_vertical_sigma_m=1.0, **kw)
+    return InmParams(
+        accel_noise_mps2=5e-4, gyro_drift_degph=0.005, gnss_horizontal_sigma_m=0.5, gnss_vertical_sigma_m=1.0, **kw
+    )
 
 
 def _record(s, mount=None, gnss=True):
@@ -83,9 +97,14 @@ def _record(s, mount=None, gnss=True):
     mount = np.eye(3) if mount is None else mount
     f = s.specific_force_t @ mount  # rows: (mount^T f_b)^T
     w = s.angular_rate_t @ mount
-    g = GnssChannel(s.gnss_time, np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg), s.gnss_height) if gnss else None
-    return FlightRecord(s.start_unix_ns, ImuChannel(s.imu_time, f, w), AltimeterChannel(s.alt_time, s.alt_height), g,
-                        source="sim")
+    g = (
+        GnssChannel(s.gnss_time, np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg), s.gnss_height)
+        if gnss
+        else None
+    )
+    return FlightRecord(
+        s.start_unix_ns, ImuChannel(s.imu_time, f, w), AltimeterChannel(s.alt_time, s.alt_height), g, source="sim"
+    )
 
 
 def _exact_initial(s, mount=None):
@@ -192,8 +211,14 @@ def test_no_static_and_no_gnss_is_a_data_error(in_flight):
 
 # mounts: the triad turned against the body by (roll, pitch, heading) deg: the initial attitude
 # the estimator must find spans 0-360 deg of heading and up to 5 deg of roll and pitch
-MOUNTS = [(0.0, 0.0, 0.0), (5.0, -3.0, 90.0), (-4.0, 5.0, 180.0), (3.0, 4.0, 270.0), (-5.0, -5.0, 45.0),
-          (2.0, -2.0, 330.0)]
+MOUNTS = [
+    (0.0, 0.0, 0.0),
+    (5.0, -3.0, 90.0),
+    (-4.0, 5.0, 180.0),
+    (3.0, 4.0, 270.0),
+    (-5.0, -5.0, 45.0),
+    (2.0, -2.0, 330.0),
+]
 
 
 @pytest.mark.parametrize("mount_deg", MOUNTS)
@@ -296,8 +321,9 @@ def test_static_levelling_on_real_vn310():
     dev_pitch = np.mean(gn["Att::YawPitchRoll::P [deg]"])
     g = np.linalg.norm(f_t.mean(axis=0))
     noise = np.std(f_t[:, :2], axis=0).max() / math.sqrt(t.size)
-    bound = (3.0 * math.degrees(math.hypot(ACCEL_BIAS_SIGMA_MPS2, noise) / g)
-             + 3.0 * max(np.std(gn["Att::YawPitchRoll::R [deg]"]), np.std(gn["Att::YawPitchRoll::P [deg]"])))
+    bound = 3.0 * math.degrees(math.hypot(ACCEL_BIAS_SIGMA_MPS2, noise) / g) + 3.0 * max(
+        np.std(gn["Att::YawPitchRoll::R [deg]"]), np.std(gn["Att::YawPitchRoll::P [deg]"])
+    )
     assert bound < 0.015
     assert abs(math.degrees(roll) - dev_roll) < bound, (math.degrees(roll), dev_roll, bound)
     assert abs(math.degrees(pitch) - dev_pitch) < bound, (math.degrees(pitch), dev_pitch, bound)
@@ -311,17 +337,31 @@ def test_static_levelling_on_real_vn310():
 
 
 def _vn310_options(**extra):
-    
+
     t = ["GpsCycle", "GpsWeek", "GpsTow [s]"]
-    cfg = {"inputs": {"csv": {"imu": "vn310-imu-part.csv", "altimeter": "vn310-gnss-part.csv",
-                              "gnss": "vn310-gnss-part.csv"}},
-           "csv": {"time_format": "gps_week_sow", "columns": {
-               "imu": {"time": t, **{f"f{a.lower()}": f"IMU::UncompAccel::{a} [m/s^2]" for a in "XYZ"},
-                       **{f"w{a.lower()}": f"IMU::UncompGyro::{a} [rad/s]" for a in "XYZ"}},
-               "altimeter": {"time": t, "height": "GNSS1::PosLla::altitude [m]"},
-               "gnss": {"time": t, "lat": "GNSS1::PosLla::latitude [deg]", "lon": "GNSS1::PosLla::longitude [deg]",
-                        "height": "GNSS1::PosLla::altitude [m]"}}},
-           **extra}
+    cfg = {
+        "inputs": {
+            "csv": {"imu": "vn310-imu-part.csv", "altimeter": "vn310-gnss-part.csv", "gnss": "vn310-gnss-part.csv"}
+        },
+        "csv": {
+            "time_format": "gps_week_sow",
+            "columns": {
+                "imu": {
+                    "time": t,
+                    **{f"f{a.lower()}": f"IMU::UncompAccel::{a} [m/s^2]" for a in "XYZ"},
+                    **{f"w{a.lower()}": f"IMU::UncompGyro::{a} [rad/s]" for a in "XYZ"},
+                },
+                "altimeter": {"time": t, "height": "GNSS1::PosLla::altitude [m]"},
+                "gnss": {
+                    "time": t,
+                    "lat": "GNSS1::PosLla::latitude [deg]",
+                    "lon": "GNSS1::PosLla::longitude [deg]",
+                    "height": "GNSS1::PosLla::altitude [m]",
+                },
+            },
+        },
+        **extra,
+    }
     return ingest_options(cfg, base_dir=DATA)
 
 
@@ -425,8 +465,16 @@ def _run_cli(cfg, tmp_path):
     import subprocess
     import sys
 
-    r = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg)], capture_output=True, text=True,
-                       timeout=600, env=dict(os.environ), stdin=subprocess.DEVNULL, cwd=tmp_path, check=False)
+    r = subprocess.run(
+        [sys.executable, "-m", "gravsurvey", "run", str(cfg)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=dict(os.environ),
+        stdin=subprocess.DEVNULL,
+        cwd=tmp_path,
+        check=False,
+    )
     assert r.returncode == 0, r.stderr
     out = cfg.parent / "out"
     with open(out / "profiles.csv", newline="") as fh:
@@ -454,7 +502,9 @@ def test_strapdown_sample_without_initial_block(tmp_path):
     h_sig = np.array([float(r["heading_sigma_deg"]) for r in rows])
     assert np.isfinite(heading).all() and (0 <= heading).all() and (heading < 360).all()
     assert np.isfinite(h_sig).all() and np.median(h_sig) < 0.1
-    err = np.array([float(r["error_mgal"]) for r in rows if r["error_mgal"] not in ("", "nan") and r["flight"] == "F01"])
+    err = np.array(
+        [float(r["error_mgal"]) for r in rows if r["error_mgal"] not in ("", "nan") and r["flight"] == "F01"]
+    )
     err = err[np.isfinite(err)]
     assert err.size > 100 and _rms(err) < 2.2
 
@@ -465,8 +515,9 @@ def test_given_attitude_is_used_when_the_data_cannot_align(in_flight):
     s = in_flight
     rec = _record(s)
     keep = s.gnss_time <= 3.0
-    rec.gnss = GnssChannel(s.gnss_time[keep], np.radians(s.gnss_lat_deg[keep]), np.radians(s.gnss_lon_deg[keep]),
-                           s.gnss_height[keep])
+    rec.gnss = GnssChannel(
+        s.gnss_time[keep], np.radians(s.gnss_lat_deg[keep]), np.radians(s.gnss_lon_deg[keep]), s.gnss_height[keep]
+    )
     with pytest.raises(DataError, match="alignment"):
         resolve_initial_state(rec, "strapdown", _params())
     r, p, h = np.degrees(attitude_from_mat_nb(s.truth["mat_nt"][0]))

@@ -124,8 +124,9 @@ def test_interval_mean_and_second_difference_are_exact():
 # --------------------------------------------------------------------------
 
 
-def _parallel_record(duration_s=3600.0, v=60.0, lat_deg=50.0, h0=2000.0, imu_hz=10.0, dist=None,
-                     heave=None, alt_noise_m=0.0, seed=0):
+def _parallel_record(
+    duration_s=3600.0, v=60.0, lat_deg=50.0, h0=2000.0, imu_hz=10.0, dist=None, heave=None, alt_noise_m=0.0, seed=0
+):
     """Flight due east along a parallel; specific force from the exact kinematics.
 
     The longitude rate is constant, ``dlon/dt = v / ((N + h0) cos lat)``, the height
@@ -356,7 +357,10 @@ def test_sign_over_excess_mass_is_positive():
     """A buried point mass under the track: classic disturbance peaks positive over it."""
     from gravsurvey.simulate.run import quick_sim, simulate_flight
 
-    field = {"type": "model", "point_masses": [{"lat_deg": 45.0, "lon_deg": 135.5, "depth_m": 3000.0, "mass_kg": 5.0e12}]}
+    field = {
+        "type": "model",
+        "point_masses": [{"lat_deg": 45.0, "lon_deg": 135.5, "depth_m": 3000.0, "mass_kg": 5.0e12}],
+    }
     sim = simulate_flight(quick_sim(duration_s=4000.0, field=field, speed_mps=50.0))
     res = cl.classic_reduction(_record_from_sim(sim), filter_length_s=200.0)
     truth = _truth_lp_sim(sim, res, 200.0)
@@ -409,7 +413,9 @@ def test_strapdown_attitude_from_mechanization():
     sim = simulate_flight(quick_sim(duration_s=1500.0, field="seed_smooth", triad="strapdown", turbulence=turb))
     rec = _record_from_sim(sim)
     tr = sim.truth
-    init = InitialState(lat=tr["lat"][0], lon=tr["lon"][0], height=tr["height"][0], vel_n=tr["vel_n"][0], mat_nt=tr["mat_nt"][0])
+    init = InitialState(
+        lat=tr["lat"][0], lon=tr["lon"][0], height=tr["height"][0], vel_n=tr["vel_n"][0], mat_nt=tr["mat_nt"][0]
+    )
     mat = cl.strapdown_attitude(rec, init)
     # angle of mat^T truth
     rel = np.einsum("nji,njk->nik", mat, tr["mat_nt"])

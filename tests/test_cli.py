@@ -28,8 +28,15 @@ EXE = [sys.executable, "-m", "gravsurvey"]
 def gs(*args, cwd=None, timeout=600):
     """Run the CLI in a subprocess (not a terminal: quiet on success)."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.run(EXE + [str(a) for a in args], capture_output=True, text=True,
-                          cwd=cwd, timeout=timeout, env=env, stdin=subprocess.DEVNULL)
+    return subprocess.run(
+        EXE + [str(a) for a in args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=timeout,
+        env=env,
+        stdin=subprocess.DEVNULL,
+    )
 
 
 def _bounds_from_docs():
@@ -59,16 +66,36 @@ def test_sample_survey_end_to_end(sample_run):
     name, src, out, r = sample_run
     assert r.returncode == 0, r.stderr
     assert r.stdout == "" and r.stderr == ""  # cron: quiet on success when not on a terminal
-    for f in ("profiles.csv", "profiles.xyz", "lines.geojson", "summary.json", "crossovers.csv",
-              "gravsurvey.log", "survey_map.png"):
+    for f in (
+        "profiles.csv",
+        "profiles.xyz",
+        "lines.geojson",
+        "summary.json",
+        "crossovers.csv",
+        "gravsurvey.log",
+        "survey_map.png",
+    ):
         assert (out / f).is_file(), f
     assert list(out.glob("profile_*_*.png"))
     # CSV columns as documented in docs/outputs.md
     with open(out / "profiles.csv", newline="") as fh:
         head = next(csv.reader(line for line in fh if not line.startswith("#")))
     documented = re.findall(r"^\| `(\w+)` \|", (ROOT / "docs" / "outputs.md").read_text(), re.M)
-    for col in ("flight", "line", "time_utc", "lat_deg", "lon_deg", "height_m", "easting_m", "northing_m",
-                "disturbance_mgal", "kalman_mgal", "sigma_mgal", "truth_mgal", "error_mgal"):
+    for col in (
+        "flight",
+        "line",
+        "time_utc",
+        "lat_deg",
+        "lon_deg",
+        "height_m",
+        "easting_m",
+        "northing_m",
+        "disturbance_mgal",
+        "kalman_mgal",
+        "sigma_mgal",
+        "truth_mgal",
+        "error_mgal",
+    ):
         assert col in head and col in documented
     xyz = read_xyz(out / "profiles.xyz")
     assert len(xyz.lines) >= 1
@@ -155,7 +182,11 @@ def test_error_unknown_key(tmp_path):
 
 def test_error_wrong_type(tmp_path):
     src = _copy_sample("seed_line", tmp_path)
-    text = (src / "survey.yaml").read_text().replace("lines: {mode: whole}", "model: {altimeter_sigma_m: one}\nlines: {mode: whole}")
+    text = (
+        (src / "survey.yaml")
+        .read_text()
+        .replace("lines: {mode: whole}", "model: {altimeter_sigma_m: one}\nlines: {mode: whole}")
+    )
     (src / "survey.yaml").write_text(text)
     r = gs("validate", src / "survey.yaml")
     _one_line_error(r, 2, "model.altimeter_sigma_m")
@@ -216,11 +247,18 @@ def test_sigkill_leaves_previous_outputs_intact(tmp_path):
     out = tmp_path / "out"
     r = gs("run", src / "survey.yaml", "-o", out)
     assert r.returncode == 0
-    before = {p.name: p.read_bytes() for p in out.iterdir()
-              if p.is_file() and not p.name.startswith(".") and p.name != "gravsurvey.log"}
+    before = {
+        p.name: p.read_bytes()
+        for p in out.iterdir()
+        if p.is_file() and not p.name.startswith(".") and p.name != "gravsurvey.log"
+    }
     for delay in (1.0, 2.5, 4.0):
-        p = subprocess.Popen(EXE + ["run", str(src / "survey.yaml"), "-o", str(out), "--force"],
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
+        p = subprocess.Popen(
+            EXE + ["run", str(src / "survey.yaml"), "-o", str(out), "--force"],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            stdin=subprocess.DEVNULL,
+        )
         time.sleep(delay)
         p.send_signal(signal.SIGKILL)
         p.wait()
@@ -249,8 +287,13 @@ def test_two_runs_on_one_output_dir(tmp_path):
     with OutputLock(out):
         r = gs("run", src / "survey.yaml", "-o", out)
         _one_line_error(r, 2, "another gravsurvey run")
-        p = subprocess.Popen(EXE + ["run", str(src / "survey.yaml"), "-o", str(out), "--wait", "120"],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True)
+        p = subprocess.Popen(
+            EXE + ["run", str(src / "survey.yaml"), "-o", str(out), "--wait", "120"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            stdin=subprocess.DEVNULL,
+            text=True,
+        )
         time.sleep(4.0)
         assert p.poll() is None  # still waiting for the lock
         assert not (out / "summary.json").exists()

@@ -51,8 +51,9 @@ def test_generated_reference_matches_the_schema():
     try:
         assert S.splice_reference(text) != text
     finally:
-        S.ModelSection.model_fields["filter_rate_hz"].description = \
-            S.ModelSection.model_fields["filter_rate_hz"].description[:-len(" (changed)")]
+        S.ModelSection.model_fields["filter_rate_hz"].description = S.ModelSection.model_fields[
+            "filter_rate_hz"
+        ].description[: -len(" (changed)")]
 
 
 def _sample_with(tmp_path, old, new):
@@ -96,8 +97,11 @@ def test_strapdown_without_initial_attitude(tmp_path):
     text = SAMPLE.read_text()
     assert "initial:" not in text  # the sample is a platform flight initialised from GNSS
     p = tmp_path / "c.yaml"
-    p.write_text(text.replace("triad: platform", "triad: strapdown").replace(
-        "truth: F01/truth.csv", f"truth: {SAMPLE.parent / 'F01' / 'truth.csv'}"))
+    p.write_text(
+        text.replace("triad: platform", "triad: strapdown").replace(
+            "truth: F01/truth.csv", f"truth: {SAMPLE.parent / 'F01' / 'truth.csv'}"
+        )
+    )
     # issue 13: no initial block needed; position/velocity from GNSS, attitude from the alignment
     fl = C.load_config(p).flights[0]
     assert fl.triad == "strapdown" and fl.initial is None and fl.initial_given is None
@@ -136,19 +140,30 @@ def test_example_config_from_init_is_documented_and_valid_apart_from_inputs(tmp_
 @pytest.mark.parametrize(
     "old,new,match",
     [
-        ("output: {dir: out}", "output: {dir: out, epsg: 4326}",
-         r"^output\.epsg: EPSG:4326 .* not a projected CRS"),
+        ("output: {dir: out}", "output: {dir: out, epsg: 4326}", r"^output\.epsg: EPSG:4326 .* not a projected CRS"),
         ("output: {dir: out}", "output: {dir: out, epsg: 99999}", r"^output\.epsg: unknown EPSG code 99999"),
-        ("postprocess: {method: default}", "postprocess: {method: butterworth}",
-         r"^postprocess\.resolution_m: required by method 'butterworth'"),
-        ("postprocess: {method: default}", "postprocess: {method: gaussian}",
-         r"^postprocess\.resolution_m: required by method 'gaussian'"),
+        (
+            "postprocess: {method: default}",
+            "postprocess: {method: butterworth}",
+            r"^postprocess\.resolution_m: required by method 'butterworth'",
+        ),
+        (
+            "postprocess: {method: default}",
+            "postprocess: {method: gaussian}",
+            r"^postprocess\.resolution_m: required by method 'gaussian'",
+        ),
         ("truth: ", "truth: nope/", r"^flights\[0\]\.truth: truth file not found"),
         ("truth.csv", "F01_json.mcap", r"^flights\[0\]\.truth: .* not a text CSV"),
-        ("lines: {mode: whole}", "lines: {mode: windows, windows: [{name: A, start_s: 10}]}",
-         r"^lines\.windows\[0\]\.stop_s: missing required key \(end, s after the flight's first sample\)$"),
-        ("  truth: ", "  lines: [{name: A, start_s: 500, stop_s: 10}]\n  truth: ",
-         r"^flights\[0\]\.lines\[0\]: expected finite start_s < stop_s"),
+        (
+            "lines: {mode: whole}",
+            "lines: {mode: windows, windows: [{name: A, start_s: 10}]}",
+            r"^lines\.windows\[0\]\.stop_s: missing required key \(end, s after the flight's first sample\)$",
+        ),
+        (
+            "  truth: ",
+            "  lines: [{name: A, start_s: 500, stop_s: 10}]\n  truth: ",
+            r"^flights\[0\]\.lines\[0\]: expected finite start_s < stop_s",
+        ),
         ("ellipsoid: WGS84", "ellipsoid: WGS84\nellipsoid: GRS80", r"key 'ellipsoid' given twice"),
     ],
 )
@@ -164,15 +179,21 @@ def test_truth_file_without_the_required_columns(tmp_path):
     bad = tmp_path / "truth.csv"
     bad.write_text("# header comment\ntime_s,anomaly\n1,2\n")
     p = _sample_with(tmp_path, f"truth: {SAMPLE.parent}/F01/truth.csv", f"truth: {bad}")
-    with pytest.raises(ConfigError, match=r"flights\[0\]\.truth: .* lacks column\(s\) time_ns, "
-                                          r"disturbance_mgal; header has time_s, anomaly"):
+    with pytest.raises(
+        ConfigError,
+        match=r"flights\[0\]\.truth: .* lacks column\(s\) time_ns, "
+        r"disturbance_mgal; header has time_s, anomaly",
+    ):
         C.load_config(p)
 
 
 def test_valid_windows_pass_the_structure_check(tmp_path):
-    p = _sample_with(tmp_path, "lines: {mode: whole}",
-                     "lines: {mode: windows, windows: [{name: L1, start_s: 10, stop_s: 20}, "
-                     "{name: T1, start_s: 15.5, stop_s: 15.6}]}")
+    p = _sample_with(
+        tmp_path,
+        "lines: {mode: whole}",
+        "lines: {mode: windows, windows: [{name: L1, start_s: 10, stop_s: 20}, "
+        "{name: T1, start_s: 15.5, stop_s: 15.6}]}",
+    )
     assert C.load_config(p).lines.mode == "windows"
 
 
@@ -227,49 +248,99 @@ SECOND_FLIGHT = "- name: F02\n  inputs: {mcap: F01/F01_json.mcap}\n  truth: F01/
 @pytest.mark.parametrize(
     "old,new,message",
     [
-        ("lines: {mode: whole}", "model: {filter_rate_hz: abc}\nlines: {mode: whole}",
-         "model.filter_rate_hz: expected a number > 0, got 'abc'"),
-        ("lines: {mode: whole}", "model: {gnss_aiding: 'yes'}\nlines: {mode: whole}",
-         "model.gnss_aiding: expected true or false, got 'yes'"),
-        ("lines: {mode: whole}", "model: {attitude_passes: 2.5}\nlines: {mode: whole}",
-         "model.attitude_passes: expected an integer in [1, 5], got 2.5"),
-        ("lines: {mode: whole}", "model: {anomaly_sigma_mps2: .nan}\nlines: {mode: whole}",
-         "model.anomaly_sigma_mps2: expected a finite number >= 0, got nan"),
-        ("lines: {mode: whole}", "model: [1, 2]\nlines: {mode: whole}",
-         "model: expected a mapping, got list [1, 2]"),
-        ("lines: {mode: whole}", SECOND_FLIGHT.replace("mcap: F01/F01_json.mcap", "csv: {imu: i.csv}"),
-         "flights[1].inputs.csv.altimeter: missing required key (altimeter CSV file)"),
-        ("lines: {mode: whole}", SECOND_FLIGHT.replace("{mcap: F01/F01_json.mcap}",
-                                                       "{mcap: F01/F01_json.mcap}\n  mcap: {max_record_mib: 0}"),
-         "flights[1].mcap.max_record_mib: expected an integer in [1, 65536], got 0"),
-        ("lines: {mode: whole}", SECOND_FLIGHT.replace("{mcap: F01/F01_json.mcap}",
-                                                       "{mcap: F01/F01_json.mcap}\n  mcap: {unit: {}}"),
-         "flights[1].mcap.unit: unknown key (did you mean 'units'?); valid keys here: json_fields, units, "
-         "time_source, check_crc, max_record_mib"),
-        ("lines: {mode: whole}", SECOND_FLIGHT.replace("name: F02", "name: F01"),
-         "flights[1].name: flight name 'F01' is used twice"),
-        ("lines: {mode: whole}", SECOND_FLIGHT.replace("{mcap: F01/F01_json.mcap}", "{mcap: a.mcap, csv: {}}"),
-         "flights[1].inputs: expected exactly one of mcap, csv, gravimeter, got mcap, csv"),
-        ("lines: {mode: whole}", SECOND_FLIGHT.replace("truth: F01/truth.csv", "tie: {base_gravity_mgal: 9.81, "
-                                                       "before: {reading_mgal: 980000}}"),
-         "flights[1].tie.base_gravity_mgal: expected a number in [970000, 990000], got 9.81"),
-        ("lines: {mode: whole}", SECOND_FLIGHT.replace("truth: F01/truth.csv", "initial: {velocity_enu_mps: [1, 2]}"),
-         "flights[1].initial.velocity_enu_mps: expected a list of 3 numbers, got [1.0, 2.0]"),
-        ("lines: {mode: whole}", "lines: {mode: windows, windows: [{name: A, start_s: 0, stop_s: 9}, "
-                                 "{name: A, start_s: 10, stop_s: 20}]}",
-         "lines.windows[1].name: 'A' appears twice"),
-        ("postprocess: {method: default}", "postprocess: {method: gausian}",
-         "postprocess.method: expected one of default, ti_cosphi, cosphi, visushrink, sure, bayes, butterworth, "
-         "gaussian, none, got 'gausian' (did you mean 'gaussian'?)"),
-        ("output: {dir: out}", "output: {dir: out}\nprocessing: {normal_gravity: IGF1967}",
-         "processing.normal_gravity: IGF1967 applies to processing.method classic only (the 3D-INM uses the exact "
-         "normal gravity field)"),
-        ("output: {dir: out}", "output: {dir: out}\nlevelling: {max_iterations: 0}",
-         "levelling.max_iterations: expected an integer >= 1, got 0"),
-        ("output: {dir: out}", "output: {dir: out}\ngrid: {cv_folds: true}",
-         "grid.cv_folds: expected an integer >= 2, got True"),
-        ("output: {dir: out}", "output: {dir: out}\nchecks: {max_imu_gap_s: -1}",
-         "checks.max_imu_gap_s: expected a number > 0, got -1"),
+        (
+            "lines: {mode: whole}",
+            "model: {filter_rate_hz: abc}\nlines: {mode: whole}",
+            "model.filter_rate_hz: expected a number > 0, got 'abc'",
+        ),
+        (
+            "lines: {mode: whole}",
+            "model: {gnss_aiding: 'yes'}\nlines: {mode: whole}",
+            "model.gnss_aiding: expected true or false, got 'yes'",
+        ),
+        (
+            "lines: {mode: whole}",
+            "model: {attitude_passes: 2.5}\nlines: {mode: whole}",
+            "model.attitude_passes: expected an integer in [1, 5], got 2.5",
+        ),
+        (
+            "lines: {mode: whole}",
+            "model: {anomaly_sigma_mps2: .nan}\nlines: {mode: whole}",
+            "model.anomaly_sigma_mps2: expected a finite number >= 0, got nan",
+        ),
+        ("lines: {mode: whole}", "model: [1, 2]\nlines: {mode: whole}", "model: expected a mapping, got list [1, 2]"),
+        (
+            "lines: {mode: whole}",
+            SECOND_FLIGHT.replace("mcap: F01/F01_json.mcap", "csv: {imu: i.csv}"),
+            "flights[1].inputs.csv.altimeter: missing required key (altimeter CSV file)",
+        ),
+        (
+            "lines: {mode: whole}",
+            SECOND_FLIGHT.replace(
+                "{mcap: F01/F01_json.mcap}", "{mcap: F01/F01_json.mcap}\n  mcap: {max_record_mib: 0}"
+            ),
+            "flights[1].mcap.max_record_mib: expected an integer in [1, 65536], got 0",
+        ),
+        (
+            "lines: {mode: whole}",
+            SECOND_FLIGHT.replace("{mcap: F01/F01_json.mcap}", "{mcap: F01/F01_json.mcap}\n  mcap: {unit: {}}"),
+            "flights[1].mcap.unit: unknown key (did you mean 'units'?); valid keys here: json_fields, units, "
+            "time_source, check_crc, max_record_mib",
+        ),
+        (
+            "lines: {mode: whole}",
+            SECOND_FLIGHT.replace("name: F02", "name: F01"),
+            "flights[1].name: flight name 'F01' is used twice",
+        ),
+        (
+            "lines: {mode: whole}",
+            SECOND_FLIGHT.replace("{mcap: F01/F01_json.mcap}", "{mcap: a.mcap, csv: {}}"),
+            "flights[1].inputs: expected exactly one of mcap, csv, gravimeter, got mcap, csv",
+        ),
+        (
+            "lines: {mode: whole}",
+            SECOND_FLIGHT.replace(
+                "truth: F01/truth.csv", "tie: {base_gravity_mgal: 9.81, before: {reading_mgal: 980000}}"
+            ),
+            "flights[1].tie.base_gravity_mgal: expected a number in [970000, 990000], got 9.81",
+        ),
+        (
+            "lines: {mode: whole}",
+            SECOND_FLIGHT.replace("truth: F01/truth.csv", "initial: {velocity_enu_mps: [1, 2]}"),
+            "flights[1].initial.velocity_enu_mps: expected a list of 3 numbers, got [1.0, 2.0]",
+        ),
+        (
+            "lines: {mode: whole}",
+            "lines: {mode: windows, windows: [{name: A, start_s: 0, stop_s: 9}, {name: A, start_s: 10, stop_s: 20}]}",
+            "lines.windows[1].name: 'A' appears twice",
+        ),
+        (
+            "postprocess: {method: default}",
+            "postprocess: {method: gausian}",
+            "postprocess.method: expected one of default, ti_cosphi, cosphi, visushrink, sure, bayes, butterworth, "
+            "gaussian, none, got 'gausian' (did you mean 'gaussian'?)",
+        ),
+        (
+            "output: {dir: out}",
+            "output: {dir: out}\nprocessing: {normal_gravity: IGF1967}",
+            "processing.normal_gravity: IGF1967 applies to processing.method classic only (the 3D-INM uses the exact "
+            "normal gravity field)",
+        ),
+        (
+            "output: {dir: out}",
+            "output: {dir: out}\nlevelling: {max_iterations: 0}",
+            "levelling.max_iterations: expected an integer >= 1, got 0",
+        ),
+        (
+            "output: {dir: out}",
+            "output: {dir: out}\ngrid: {cv_folds: true}",
+            "grid.cv_folds: expected an integer >= 2, got True",
+        ),
+        (
+            "output: {dir: out}",
+            "output: {dir: out}\nchecks: {max_imu_gap_s: -1}",
+            "checks.max_imu_gap_s: expected a number > 0, got -1",
+        ),
     ],
 )
 def test_schema_errors_are_one_line_with_the_full_key_path(tmp_path, old, new, message):
@@ -313,17 +384,33 @@ def test_settings_module_doc_check_command(tmp_path):
 
 
 ODD_VALUES = [None, True, -1, float("nan"), "", "x", [], [None], {}, {1: 2}, [[1, 2], [3]]]
-FULL = {"survey": {"name": "x"}, "ellipsoid": "WGS84",
-        "flights": [{"name": "F01", "inputs": {"mcap": "a.mcap"}, "topics": {"imu": "/imu"}, "triad": "strapdown",
-                     "imu_axes": "FRD", "gnss_lever_arm_m": [0, 0, 1],
-                     "lines": [{"name": "L1", "start_s": 0, "stop_s": 10}],
-                     "initial": {"lat_deg": 1.0, "velocity_enu_mps": [1, 2, 3]},
-                     "tie": {"base_gravity_mgal": 980000, "before": {"start_s": 0, "stop_s": 5}},
-                     "csv": {"columns": {"imu": {"time": "t"}}, "units": {"gyro": "deg/s"}},
-                     "mcap": {"json_fields": {"imu": {"specific_force": ["a", "b", "c"]}}}}],
-        "model": {"filter_rate_hz": 1.0}, "lines": {"mode": "auto"}, "postprocess": {"method": "default"},
-        "processing": {"method": "inm"}, "output": {"dir": "out"}, "checks": {"max_imu_gap_s": 2.0},
-        "levelling": {"enabled": None}, "grid": {"spacing_m": 100.0}}
+FULL = {
+    "survey": {"name": "x"},
+    "ellipsoid": "WGS84",
+    "flights": [
+        {
+            "name": "F01",
+            "inputs": {"mcap": "a.mcap"},
+            "topics": {"imu": "/imu"},
+            "triad": "strapdown",
+            "imu_axes": "FRD",
+            "gnss_lever_arm_m": [0, 0, 1],
+            "lines": [{"name": "L1", "start_s": 0, "stop_s": 10}],
+            "initial": {"lat_deg": 1.0, "velocity_enu_mps": [1, 2, 3]},
+            "tie": {"base_gravity_mgal": 980000, "before": {"start_s": 0, "stop_s": 5}},
+            "csv": {"columns": {"imu": {"time": "t"}}, "units": {"gyro": "deg/s"}},
+            "mcap": {"json_fields": {"imu": {"specific_force": ["a", "b", "c"]}}},
+        }
+    ],
+    "model": {"filter_rate_hz": 1.0},
+    "lines": {"mode": "auto"},
+    "postprocess": {"method": "default"},
+    "processing": {"method": "inm"},
+    "output": {"dir": "out"},
+    "checks": {"max_imu_gap_s": 2.0},
+    "levelling": {"enabled": None},
+    "grid": {"spacing_m": 100.0},
+}
 
 
 def _key_paths(d, p=()):

@@ -140,8 +140,11 @@ def test_aiding_gap_is_bridged_and_sigma_grows_across_it(tmp_path, intact):
 def test_imu_clock_an_hour_out_of_step_is_an_error_naming_both_channels(tmp_path):
     """Measured before: a profile of 0.0000 mGal, exit 0."""
     cfg, fl = _flight(tmp_path, lambda p: d.shift_after(p, -1, 3600, names=("imu",)))
-    with pytest.raises(DataError, match=r"imu \(.*imu\.csv\) 2025-03-10T13:00:00.*altimeter \(.*altimeter\.csv\) "
-                                        r"2025-03-10T12:00:00.*do not overlap"):
+    with pytest.raises(
+        DataError,
+        match=r"imu \(.*imu\.csv\) 2025-03-10T13:00:00.*altimeter \(.*altimeter\.csv\) "
+        r"2025-03-10T12:00:00.*do not overlap",
+    ):
         process_flight(cfg, fl)
 
 
@@ -206,8 +209,12 @@ def test_find_clock_restarts_ignores_jitter_and_filled_holes():
 
 
 @settings(max_examples=60, deadline=None)
-@given(n=st.integers(50, 400), frac=st.floats(0.2, 0.9), back_s=st.floats(1.5, 1e4),
-       jitter=st.lists(st.integers(1, 398), max_size=5))
+@given(
+    n=st.integers(50, 400),
+    frac=st.floats(0.2, 0.9),
+    back_s=st.floats(1.5, 1e4),
+    jitter=st.lists(st.integers(1, 398), max_size=5),
+)
 @example(n=100, frac=0.6, back_s=3.0, jitter=[])
 def test_generated_restarts_drop_exactly_the_restarted_samples(n, frac, back_s, jitter):
     t = np.arange(n, dtype=np.int64) * 10**8
@@ -230,14 +237,24 @@ def test_generated_restarts_drop_exactly_the_restarted_samples(n, frac, back_s, 
 
 
 # ----------------------------------------------------------------------------- input consistency
-@pytest.mark.parametrize("case, prep, cols, hint", [
-    ("swapped", lambda p: d.swap_columns(p, "gnss", "lat_deg", "lon_deg"), "columns lat_deg, lon_deg",
-     "swapped"),
-    ("radians", lambda p: d.map_columns(p, "gnss", {"lat_deg": np.radians, "lon_deg": np.radians}),
-     "columns lat_deg, lon_deg", "radians"),
-    ("feet", lambda p: [d.map_columns(p, n, {"height_m": lambda h: h / 0.3048}) for n in ("gnss", "altimeter")],
-     "column height_m", "feet"),
-])
+@pytest.mark.parametrize(
+    "case, prep, cols, hint",
+    [
+        ("swapped", lambda p: d.swap_columns(p, "gnss", "lat_deg", "lon_deg"), "columns lat_deg, lon_deg", "swapped"),
+        (
+            "radians",
+            lambda p: d.map_columns(p, "gnss", {"lat_deg": np.radians, "lon_deg": np.radians}),
+            "columns lat_deg, lon_deg",
+            "radians",
+        ),
+        (
+            "feet",
+            lambda p: [d.map_columns(p, n, {"height_m": lambda h: h / 0.3048}) for n in ("gnss", "altimeter")],
+            "column height_m",
+            "feet",
+        ),
+    ],
+)
 def test_gnss_column_mixups_name_the_column(tmp_path, case, prep, cols, hint):
     cfg, fl = _flight(tmp_path, prep)
     with pytest.raises(DataError) as exc:
@@ -304,8 +321,14 @@ def test_a_few_gnss_outliers_are_not_a_navigation_off_track(tmp_path):
     t0 = 1741608000000000000
 
     def prep(p):  # 3 s of GNSS latitude 222 m off (multipath)
-        d.edit(p, "gnss", lambda h, rows: [r if not (400 <= (int(r[0]) - t0) / 1e9 < 403)
-                                           else [r[0], repr(float(r[1]) + 0.002)] + r[2:] for r in rows])
+        d.edit(
+            p,
+            "gnss",
+            lambda h, rows: [
+                r if not (400 <= (int(r[0]) - t0) / 1e9 < 403) else [r[0], repr(float(r[1]) + 0.002)] + r[2:]
+                for r in rows
+            ],
+        )
 
     cfg, fl = _flight(tmp_path, prep)
     r = process_flight(cfg, fl)
@@ -328,8 +351,15 @@ def test_check_result_nonfinite(intact):
         check_result("F01", r.disturbance, on, est, None, CheckOptions(), 1)
     check_result("F01", final, on, est, None, CheckOptions(allow_nonfinite=True), 1)
     # a classic estimate names its series for what it is (no Kalman filter involved)
-    cl = dataclasses.replace(r, method="classic", smoothed=None, forward=None, unfiltered=r.smoothed.copy(),
-                             sigma=np.full(len(r.time), np.nan), estimator={"gnss_aided": False})
+    cl = dataclasses.replace(
+        r,
+        method="classic",
+        smoothed=None,
+        forward=None,
+        unfiltered=r.smoothed.copy(),
+        sigma=np.full(len(r.time), np.nan),
+        estimator={"gnss_aided": False},
+    )
     cl.unfiltered[4] = np.nan
     with pytest.raises(DataError, match="unfiltered reduction has 1 non-finite"):
         check_result("F01", r.disturbance, on, cl, None, CheckOptions(), 1)
@@ -390,12 +420,25 @@ def test_concatenate_puts_a_nan_epoch_between_segments(intact):
     parts = []
     for a, b in ((0, 100), (150, 300)):
         n = b - a
-        parts.append(FlightEstimate(
-            name="F01", method="inm", t0_unix_ns=intact.t0_unix_ns, time=intact.time[a:b], lat=intact.lat[a:b],
-            lon=intact.lon[a:b], height=intact.height[a:b], vel_n=np.zeros((n, 3)), speed=intact.speed[a:b],
-            heading=np.zeros(n), disturbance=intact.smoothed[a:b], sigma=intact.sigma[a:b],
-            smoothed=intact.smoothed[a:b], resolution_m=1000.0 * (1 + a),
-            estimator={"gnss_aided": a == 0, "identification": {"k": a}}))
+        parts.append(
+            FlightEstimate(
+                name="F01",
+                method="inm",
+                t0_unix_ns=intact.t0_unix_ns,
+                time=intact.time[a:b],
+                lat=intact.lat[a:b],
+                lon=intact.lon[a:b],
+                height=intact.height[a:b],
+                vel_n=np.zeros((n, 3)),
+                speed=intact.speed[a:b],
+                heading=np.zeros(n),
+                disturbance=intact.smoothed[a:b],
+                sigma=intact.sigma[a:b],
+                smoothed=intact.smoothed[a:b],
+                resolution_m=1000.0 * (1 + a),
+                estimator={"gnss_aided": a == 0, "identification": {"k": a}},
+            )
+        )
     c = concatenate_estimates(parts)
     assert len(c.time) == 251 and np.isnan(c.smoothed[100]) and c.segment[100] == -1
     assert np.isnan(c.disturbance[100]) and np.isnan(c.vel_n[100]).all()
@@ -424,16 +467,28 @@ def test_cli_exit_codes(tmp_path):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     cfg = d.copy_sample(tmp_path / "clock")
     d.shift_after(tmp_path / "clock", -1, 3600, names=("imu",))
-    p = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg), "-o", str(tmp_path / "o1")],
-                       check=False, capture_output=True, text=True, env=env, timeout=600,
-                       stdin=subprocess.DEVNULL)
+    p = subprocess.run(
+        [sys.executable, "-m", "gravsurvey", "run", str(cfg), "-o", str(tmp_path / "o1")],
+        check=False,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+        stdin=subprocess.DEVNULL,
+    )
     assert p.returncode == 1, p.stderr
     assert "do not overlap" in p.stderr and "Traceback" not in p.stderr
     cfg = d.copy_sample(tmp_path / "gap")
     d.shift_after(tmp_path / "gap", 480, 1800)
-    p = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg), "-o", str(tmp_path / "o2")],
-                       check=False, capture_output=True, text=True, env=env, timeout=600,
-                       stdin=subprocess.DEVNULL)
+    p = subprocess.run(
+        [sys.executable, "-m", "gravsurvey", "run", str(cfg), "-o", str(tmp_path / "o2")],
+        check=False,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+        stdin=subprocess.DEVNULL,
+    )
     assert p.returncode == 0, p.stderr
     assert (tmp_path / "o2" / "profiles.csv").is_file()
 
@@ -441,6 +496,7 @@ def test_cli_exit_codes(tmp_path):
 def test_one_absurd_csv_value_is_dropped_and_the_flight_processes(tmp_path, intact):
     """Measured before: one specific force of 2.6e21 m/s^2 in markov_csv's imu.csv gave
     'internal error ZeroDivisionError' in the mechanization."""
+
     def prep(p):
         d.edit(p, "imu", lambda h, rows: [r if i != 5000 else [r[0], "2.6e21"] + r[2:] for i, r in enumerate(rows)])
 
@@ -448,4 +504,3 @@ def test_one_absurd_csv_value_is_dropped_and_the_flight_processes(tmp_path, inta
     r = process_flight(cfg, fl)
     assert any("imu: dropped 1 samples with NaN/inf or absurd" in n for n in r.notes)
     assert abs(_rms_on_lines(r) - _rms_on_lines(intact)) < 0.2
-

@@ -39,10 +39,25 @@ def inm_like(horizontal: bool):
     """An object with the InmSolution fields (and the horizontal ones of the h-vector interface)."""
     t, lat, lon, h, vel = _track()
     g = 20 * MGAL * np.sin(t / 60.0)
-    s = SimpleNamespace(time=t, lat=lat, lon=lon, height=h, vel_n=vel, speed=np.full(N, 80.0), heading=np.zeros(N),
-                        g_smooth=g, sigma_smooth=np.full(N, 0.8 * MGAL), g_forward=g + 1 * MGAL,
-                        sigma_forward=np.full(N, 1.5 * MGAL), resolution_m=2500.0, gnss_aided=True,
-                        identification={"q": 1.0}, attitude=None, attitude_sigma=None, alignment=None)
+    s = SimpleNamespace(
+        time=t,
+        lat=lat,
+        lon=lon,
+        height=h,
+        vel_n=vel,
+        speed=np.full(N, 80.0),
+        heading=np.zeros(N),
+        g_smooth=g,
+        sigma_smooth=np.full(N, 0.8 * MGAL),
+        g_forward=g + 1 * MGAL,
+        sigma_forward=np.full(N, 1.5 * MGAL),
+        resolution_m=2500.0,
+        gnss_aided=True,
+        identification={"q": 1.0},
+        attitude=None,
+        attitude_sigma=None,
+        alignment=None,
+    )
     if horizontal:
         s.dg_horizontal = np.column_stack([30 * MGAL * np.cos(t / 50.0), -12 * MGAL + 0 * t])
         s.dg_horizontal_sigma = np.column_stack([np.full(N, 4 * MGAL), np.full(N, 5 * MGAL)])
@@ -63,9 +78,20 @@ def with_lines(est: FlightEstimate) -> FlightEstimate:
 def survey_cfg(tmp_path: Path) -> SurveyConfig:
     p = tmp_path / "survey.yaml"
     p.write_text("survey: {name: t}\n")
-    return SurveyConfig(path=p, base_dir=tmp_path, raw={"survey": {"name": "t"}}, name="t", ellipsoid=WGS84,
-                        flights=[], model=None, lines=None, postprocess=None, plots=False,
-                        levelling=LevellingOptions(enabled=False), grid=GridOptions(enabled=False))
+    return SurveyConfig(
+        path=p,
+        base_dir=tmp_path,
+        raw={"survey": {"name": "t"}},
+        name="t",
+        ellipsoid=WGS84,
+        flights=[],
+        model=None,
+        lines=None,
+        postprocess=None,
+        plots=False,
+        levelling=LevellingOptions(enabled=False),
+        grid=GridOptions(enabled=False),
+    )
 
 
 def read_csv(path):
@@ -136,8 +162,12 @@ def test_profile_plot_has_a_horizontal_panel(tmp_path):
 
     s = inm_like(horizontal=True)
     x = np.arange(N) * 0.08
-    h = {"dg_north_mgal": s.dg_horizontal[:, 0] / MGAL, "dg_east_mgal": s.dg_horizontal[:, 1] / MGAL,
-         "dg_north_sigma_mgal": np.full(N, 4.0), "dg_east_sigma_mgal": np.full(N, 5.0)}
+    h = {
+        "dg_north_mgal": s.dg_horizontal[:, 0] / MGAL,
+        "dg_east_mgal": s.dg_horizontal[:, 1] / MGAL,
+        "dg_north_sigma_mgal": np.full(N, 4.0),
+        "dg_east_sigma_mgal": np.full(N, 5.0),
+    }
     fig = report.figure_line_profile(x, s.g_smooth / MGAL, s.g_smooth / MGAL, np.full(N, 0.8), horizontal=h)
     assert len(fig.axes) == 2
     lines = {ln.get_label(): ln for ln in fig.axes[1].get_lines()}
@@ -160,8 +190,17 @@ def test_classic_columns_are_named_for_what_they_hold(tmp_path):
     t, lat, lon, h, vel = _track()
     raw = 2.8e6 * MGAL * np.sin(t * 1.3)  # the size of the classic unfiltered reduction
     low = 10 * MGAL * np.sin(t / 60.0)
-    res = ClassicResult(time=t, disturbance=low, lat=lat, lon=lon, height=h, speed=np.full(N, 80.0), vel_n=vel,
-                        raw=raw, info={"method": "classic", "filter": "gaussian", "resolution_m": 4000.0})
+    res = ClassicResult(
+        time=t,
+        disturbance=low,
+        lat=lat,
+        lon=lon,
+        height=h,
+        speed=np.full(N, 80.0),
+        vel_n=vel,
+        raw=raw,
+        info={"method": "classic", "filter": "gaussian", "resolution_m": 4000.0},
+    )
     est = from_classic(res, name="F01", t0_unix_ns=1_700_000_000 * 10**9)
     assert est.method == "classic" and est.smoothed is None and est.forward is None
     assert np.isnan(est.sigma).all() and est.product_info["filter"] == "gaussian"
@@ -178,9 +217,17 @@ def test_classic_columns_are_named_for_what_they_hold(tmp_path):
 
 def classic_estimate(raw_scale=1.0):
     t, lat, lon, h, vel = _track()
-    res = ClassicResult(time=t, disturbance=10 * MGAL * np.sin(t / 60.0), lat=lat, lon=lon, height=h,
-                        speed=np.full(N, 80.0), vel_n=vel, raw=raw_scale * 2.8e6 * MGAL * np.sin(t * 1.3),
-                        info={"method": "classic", "resolution_m": 4000.0})
+    res = ClassicResult(
+        time=t,
+        disturbance=10 * MGAL * np.sin(t / 60.0),
+        lat=lat,
+        lon=lon,
+        height=h,
+        speed=np.full(N, 80.0),
+        vel_n=vel,
+        raw=raw_scale * 2.8e6 * MGAL * np.sin(t * 1.3),
+        info={"method": "classic", "resolution_m": 4000.0},
+    )
     return with_lines(from_classic(res, name="F01", t0_unix_ns=1_700_000_000 * 10**9))
 
 

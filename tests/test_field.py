@@ -208,7 +208,10 @@ def _edge_points(b):
 
 def _harmonica(p, b, rho):
     c = (p[:, 0], p[:, 1], p[:, 2])
-    g = np.stack([harmonica.prism_gravity(c, b, rho, field=f, parallel=False) for f in ("g_e", "g_n", "g_z")], axis=-1) * MGAL
+    g = (
+        np.stack([harmonica.prism_gravity(c, b, rho, field=f, parallel=False) for f in ("g_e", "g_n", "g_z")], axis=-1)
+        * MGAL
+    )
     g[:, 2] *= -1.0  # harmonica's g_z is the downward component; ours is along Up
     return g, harmonica.prism_gravity(c, b, rho, field="potential", parallel=False)
 
@@ -220,8 +223,10 @@ def test_prism_matches_harmonica_including_edges(rho):
     p = np.vstack([_edge_points(BOX), rand])
     g_ref, v_ref = _harmonica(p, BOX, rho)
     scale = G_NEWTON * abs(rho) * 1.0e4  # G rho L: the size of g near a 10 km body
-    for fg, fv in ((prism_gravitation_local, prism_potential_local),
-                   (prism_gravitation_local_numpy, prism_potential_local_numpy)):
+    for fg, fv in (
+        (prism_gravitation_local, prism_potential_local),
+        (prism_gravitation_local_numpy, prism_potential_local_numpy),
+    ):
         g = fg(p[:, 0], p[:, 1], p[:, 2], BOX, rho)
         v = fv(p[:, 0], p[:, 1], p[:, 2], BOX, rho)
         assert np.all(np.isfinite(g)) and np.all(np.isfinite(v))
@@ -234,7 +239,9 @@ def test_prism_continuous_across_faces_edges_corners():
     b = BOX
     for base in ([b[1], 0.0, -1000.0], [b[1], b[3], -1000.0], [b[1], b[3], b[5]], [0.0, 0.0, b[5]]):
         base = np.array(base)
-        offs = np.array([[0, 0, 0], [1e-7, 0, 0], [-1e-7, 0, 0], [0, 1e-7, 0], [0, -1e-7, 0], [0, 0, 1e-7], [0, 0, -1e-7]])
+        offs = np.array(
+            [[0, 0, 0], [1e-7, 0, 0], [-1e-7, 0, 0], [0, 1e-7, 0], [0, -1e-7, 0], [0, 0, 1e-7], [0, 0, -1e-7]]
+        )
         p = base + offs
         g = prism_gravitation_local(p[:, 0], p[:, 1], p[:, 2], b, 1000.0)
         assert np.all(np.isfinite(g))
@@ -276,8 +283,10 @@ def test_prism_far_field_stable(b, tol):
     dist = np.concatenate([np.geomspace(3 * diag, 1e4 * diag, 380), np.full(10, 1.0e5), np.full(10, 1.0e6)])
     p = c + dist[:, None] * dirs
     g_ref, v_ref = _gauss_legendre(p, bb)
-    for fg, fv in ((prism_gravitation_local, prism_potential_local),
-                   (prism_gravitation_local_numpy, prism_potential_local_numpy)):
+    for fg, fv in (
+        (prism_gravitation_local, prism_potential_local),
+        (prism_gravitation_local_numpy, prism_potential_local_numpy),
+    ):
         g = fg(p[:, 0], p[:, 1], p[:, 2], bb, 1.0)
         v = fv(p[:, 0], p[:, 1], p[:, 2], bb, 1.0)
         assert np.max(np.linalg.norm(g - g_ref, axis=1) / np.linalg.norm(g_ref, axis=1)) < tol
@@ -401,11 +410,16 @@ def test_gravity_disturbance_is_minus_up_component():
 
 def test_seed_smooth_values():
     t = np.array([0.0, 900.0, 3600.0])
-    expect = np.array([
-        20 * math.sin(1) + 10 * math.sin(2),
-        30 * math.sin(math.pi / 2) + 20 * math.sin(2 * math.pi * 0.6 + 1) + 10 * math.sin(2 * math.pi + 2),
-        20 * math.sin(2 * math.pi * 2.4 + 1) + 10 * math.sin(8 * math.pi + 2),
-    ]) * MGAL
+    expect = (
+        np.array(
+            [
+                20 * math.sin(1) + 10 * math.sin(2),
+                30 * math.sin(math.pi / 2) + 20 * math.sin(2 * math.pi * 0.6 + 1) + 10 * math.sin(2 * math.pi + 2),
+                20 * math.sin(2 * math.pi * 2.4 + 1) + 10 * math.sin(8 * math.pi + 2),
+            ]
+        )
+        * MGAL
+    )
     assert np.allclose(seed_smooth_disturbance(t), expect, rtol=1e-12, atol=1e-18)
     assert seed_smooth_disturbance(0.0) == pytest.approx(25.922394 * MGAL, rel=1e-6)  # 20 sin 1 + 10 sin 2
 
@@ -501,10 +515,22 @@ GOOD = {
         {"lat_deg": 45.0, "lon_deg": 135.5, "depth_m": 3000, "mass_kg": 1e12, "separation_m": 5000, "azimuth_deg": 30}
     ],
     "prisms": [
-        {"lat_deg": 45.0, "lon_deg": 135.3, "east_m": [-5000, 5000], "north_m": [-2000, 2000],
-         "depth_m": [0, 3000], "density_kgm3": -300},
-        {"lat_deg": 45.2, "lon_deg": 135.3, "east_m": [-1000, 1000], "north_m": [-1000, 1000],
-         "depth_m": [-800, 0], "density_kgm3": 2670},
+        {
+            "lat_deg": 45.0,
+            "lon_deg": 135.3,
+            "east_m": [-5000, 5000],
+            "north_m": [-2000, 2000],
+            "depth_m": [0, 3000],
+            "density_kgm3": -300,
+        },
+        {
+            "lat_deg": 45.2,
+            "lon_deg": 135.3,
+            "east_m": [-1000, 1000],
+            "north_m": [-1000, 1000],
+            "depth_m": [-800, 0],
+            "density_kgm3": 2670,
+        },
     ],
 }
 
@@ -544,7 +570,11 @@ def test_config_good():
         (("prisms", 0, "depth_m"), [3000, 0], r"field\.prisms\[0\]\.depth_m: expected \[low, high\]"),
         (("prisms", 0, "east_m"), 5000, r"field\.prisms\[0\]\.east_m: expected a list of two numbers"),
         (("prisms", 0, "north_m"), [0, True], r"field\.prisms\[0\]\.north_m\[1\]: expected a number"),
-        (("prisms", 0, "densty_kgm3"), 1.0, r"field\.prisms\[0\]\.densty_kgm3: unknown key \(did you mean 'density_kgm3'\?\)"),
+        (
+            ("prisms", 0, "densty_kgm3"),
+            1.0,
+            r"field\.prisms\[0\]\.densty_kgm3: unknown key \(did you mean 'density_kgm3'\?\)",
+        ),
         (("prisms", 0, "lat_deg"), KeyError, r"field\.prisms\[0\]\.lat_deg: missing required key"),
         (("point_masses", 0, "depth_m"), -5.0, r"field\.point_masses\[0\]\.depth_m: expected > 0"),
         (("point_masses", 0, "mass_kg"), float("nan"), r"field\.point_masses\[0\]\.mass_kg: expected a finite"),

@@ -2,7 +2,6 @@
 symmetry, Laplace (zero trace away from masses), finite differences of the simulator's own
 gravitation, and harmonica's independent prism implementation."""
 
-
 import numpy as np
 import pytest
 
@@ -71,7 +70,14 @@ def test_prism_far_field_tends_to_point_mass():
 def test_prism_matches_harmonica():
     hm = pytest.importorskip("harmonica")
     # harmonica's z axis points down for g_z: g_ez and g_nz change sign, g_zz does not.
-    comps = {"g_ee": (0, 0, 1), "g_nn": (1, 1, 1), "g_zz": (2, 2, 1), "g_en": (0, 1, 1), "g_ez": (0, 2, -1), "g_nz": (1, 2, -1)}
+    comps = {
+        "g_ee": (0, 0, 1),
+        "g_nn": (1, 1, 1),
+        "g_zz": (2, 2, 1),
+        "g_en": (0, 1, 1),
+        "g_ez": (0, 2, -1),
+        "g_nz": (1, 2, -1),
+    }
     gam = F.prism_gradient_local(POINTS[:, 0], POINTS[:, 1], POINTS[:, 2], BOUNDS, 2670.0)
     coords = (POINTS[:, 0], POINTS[:, 1], POINTS[:, 2])
     for name, (i, j, sgn) in comps.items():
@@ -106,8 +112,26 @@ def test_model_gradient_matches_fd_of_model_gravitation():
         {
             "type": "model",
             "point_masses": [{"lat_deg": 45.01, "lon_deg": 10.0, "depth_m": 3000.0, "mass_kg": 5e12}],
-            "dipoles": [{"lat_deg": 45.0, "lon_deg": 10.03, "depth_m": 2000.0, "mass_kg": 2e12, "separation_m": 3000.0, "azimuth_deg": 30.0}],
-            "prisms": [{"lat_deg": 45.0, "lon_deg": 9.98, "east_m": [-2000.0, 2000.0], "north_m": [-1000.0, 3000.0], "depth_m": [500.0, 2500.0], "density_kgm3": -400.0}],
+            "dipoles": [
+                {
+                    "lat_deg": 45.0,
+                    "lon_deg": 10.03,
+                    "depth_m": 2000.0,
+                    "mass_kg": 2e12,
+                    "separation_m": 3000.0,
+                    "azimuth_deg": 30.0,
+                }
+            ],
+            "prisms": [
+                {
+                    "lat_deg": 45.0,
+                    "lon_deg": 9.98,
+                    "east_m": [-2000.0, 2000.0],
+                    "north_m": [-1000.0, 3000.0],
+                    "depth_m": [500.0, 2500.0],
+                    "density_kgm3": -400.0,
+                }
+            ],
         }
     )
     lat = np.radians([45.0, 45.005, 45.02])

@@ -77,10 +77,31 @@ def ship(tmp_path, n=7200, heave=False):
     rows, nav = [], []
     for k in range(n):
         tm = datetime.datetime(1970, 1, 1) + datetime.timedelta(microseconds=(t0 + k * NS) // 1000)
-        f = [reading[k] - 500.0, reading[k], -0.5, -0.6, 0.003, 53.37, 20814, 5403321, 31.1, 50.1, 0.8, -0.0018, 0.1, 0.25,
-             np.degrees(lat[k]), np.degrees(lon[k]), 11.0, 75.0, 0.32]
+        f = [
+            reading[k] - 500.0,
+            reading[k],
+            -0.5,
+            -0.6,
+            0.003,
+            53.37,
+            20814,
+            5403321,
+            31.1,
+            50.1,
+            0.8,
+            -0.0018,
+            0.1,
+            0.25,
+            np.degrees(lat[k]),
+            np.degrees(lon[k]),
+            11.0,
+            75.0,
+            0.32,
+        ]
         body = ",".join(f"{v:.12f}" if isinstance(v, float) else f"{v:16d}" for v in f)
-        rows.append(body + f",{tm.year},{tm.month:02d},{tm.day:02d},{tm.hour:02d},{tm.minute:02d},{tm.second:02d}.00,{k}")
+        rows.append(
+            body + f",{tm.year},{tm.month:02d},{tm.day:02d},{tm.hour:02d},{tm.minute:02d},{tm.second:02d}.00,{k}"
+        )
         hms = tm.strftime("%H%M%S.00")
         la_s, lo_s = dm(np.degrees(lat[k]), 2), dm(-np.degrees(lon[k]), 3)
         nav.append(nmea(f"INGGA,{hms},{la_s},N,{lo_s},W,2,10,0.8,{h[k] - 50.0:.3f},M,50.000,M,,"))
@@ -94,7 +115,12 @@ def ship(tmp_path, n=7200, heave=False):
 def test_dgs_and_nmea_through_classic_recover_the_anomaly(tmp_path, heave):
     d, truth = ship(tmp_path, heave=heave)
     o = gravimeter_options(
-        {"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL, "nav": {"format": "nmea", "file": "nav.gps"}}
+        {
+            "format": "dgs_laptop",
+            "file": "DGS.dat",
+            "offset_mgal": OFFSET_MGAL,
+            "nav": {"format": "nmea", "file": "nav.gps"},
+        }
     )
     with pytest.warns(Warning):
         rec = gravimeter_record(o, d)
@@ -119,8 +145,14 @@ def test_mgd77t_run_reproduces_ncei_free_air(tmp_path, normal_gravity):
         f"flights:\n- name: NBP9908\n  inputs:\n    gravimeter: {{format: mgd77t, file: {M77T}}}\n"
         "output: {dir: out}\n"
     )
-    r = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg)], capture_output=True, text=True, timeout=600,
-                       env=dict(os.environ), stdin=subprocess.DEVNULL)
+    r = subprocess.run(
+        [sys.executable, "-m", "gravsurvey", "run", str(cfg)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=dict(os.environ),
+        stdin=subprocess.DEVNULL,
+    )
     assert r.returncode == 0, r.stderr
     import csv
 
@@ -161,7 +193,9 @@ def test_config_errors(tmp_path):
 
     with pytest.raises(ConfigError, match=r"gravimeter\.fromat: unknown key \(did you mean 'format'\?\)"):
         opts({"fromat": "zls"})
-    with pytest.raises(ConfigError, match=r"gravimeter\.format: expected one of .*got 'dgs_lapotp' \(did you mean 'dgs_laptop'"):
+    with pytest.raises(
+        ConfigError, match=r"gravimeter\.format: expected one of .*got 'dgs_lapotp' \(did you mean 'dgs_laptop'"
+    ):
         opts({"format": "dgs_lapotp", "file": "x"})
     with pytest.raises(ConfigError, match=r"gravimeter\.offset_mgal: missing; dgs_laptop readings"):
         opts({"format": "dgs_laptop", "file": "x"})
@@ -172,31 +206,52 @@ def test_config_errors(tmp_path):
     with pytest.raises(ConfigError, match=r"nav\.format: expected one of nmea, trajectory"):
         opts({"format": "mgd77t", "file": "x", "nav": {"format": "gpx", "file": "n"}})
     cfg = tmp_path / "c.yaml"
-    cfg.write_text(f"survey: {{name: x}}\nflights:\n- name: A\n  inputs:\n    gravimeter: {{format: mgd77t, file: {M77T}}}\n")
+    cfg.write_text(
+        f"survey: {{name: x}}\nflights:\n- name: A\n  inputs:\n    gravimeter: {{format: mgd77t, file: {M77T}}}\n"
+    )
     with pytest.raises(ConfigError, match=r"flights\[0\]\.inputs\.gravimeter: .*processing\.method: classic"):
         load_config(cfg)
-    cfg.write_text(f"survey: {{name: x}}\nprocessing: {{method: classic, normal_gravity: IGF1976}}\n"
-                   f"flights:\n- name: A\n  inputs:\n    gravimeter: {{format: mgd77t, file: {M77T}}}\n")
-    with pytest.raises(ConfigError, match=r"processing\.normal_gravity: expected one of exact, IGF1930, .*\(did you mean 'IGF1967'\?\)"):
+    cfg.write_text(
+        f"survey: {{name: x}}\nprocessing: {{method: classic, normal_gravity: IGF1976}}\n"
+        f"flights:\n- name: A\n  inputs:\n    gravimeter: {{format: mgd77t, file: {M77T}}}\n"
+    )
+    with pytest.raises(
+        ConfigError, match=r"processing\.normal_gravity: expected one of exact, IGF1930, .*\(did you mean 'IGF1967'\?\)"
+    ):
         load_config(cfg)
-    cfg.write_text(f"survey: {{name: x}}\nprocessing: {{normal_gravity: GRS80}}\n"
-                   f"flights:\n- name: A\n  inputs:\n    gravimeter: {{format: mgd77t, file: {M77T}}}\n")
-    with pytest.raises(ConfigError, match=r"processing\.normal_gravity: GRS80 applies to processing\.method classic only"):
+    cfg.write_text(
+        f"survey: {{name: x}}\nprocessing: {{normal_gravity: GRS80}}\n"
+        f"flights:\n- name: A\n  inputs:\n    gravimeter: {{format: mgd77t, file: {M77T}}}\n"
+    )
+    with pytest.raises(
+        ConfigError, match=r"processing\.normal_gravity: GRS80 applies to processing\.method classic only"
+    ):
         load_config(cfg)
 
 
 def test_data_errors(tmp_path):
     d, _ = ship(tmp_path, n=50)
     # a missing tie: the reading (~10,000 meter units) is no absolute gravity
-    o = gravimeter_options({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": 0.0,
-                                      "nav": {"format": "nmea", "file": "nav.gps"}})
-    with pytest.raises(DataError, match=r"DGS\.dat: implausible data: gravimeter: median absolute gravity .*offset_mgal"):
+    o = gravimeter_options(
+        {"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": 0.0, "nav": {"format": "nmea", "file": "nav.gps"}}
+    )
+    with pytest.raises(
+        DataError, match=r"DGS\.dat: implausible data: gravimeter: median absolute gravity .*offset_mgal"
+    ):
         gravimeter_record(o, d)
     # navigation of another day does not overlap
-    bodies = [ln.split("$", 1)[1].split("*")[0].replace("110719", "120719") for ln in (d / "nav.gps").read_text().splitlines()]
+    bodies = [
+        ln.split("$", 1)[1].split("*")[0].replace("110719", "120719") for ln in (d / "nav.gps").read_text().splitlines()
+    ]
     (d / "nav2.gps").write_text("\n".join(nmea(b) for b in bodies) + "\n")
-    o = gravimeter_options({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL,
-                                      "nav": {"format": "nmea", "file": "nav2.gps"}})
+    o = gravimeter_options(
+        {
+            "format": "dgs_laptop",
+            "file": "DGS.dat",
+            "offset_mgal": OFFSET_MGAL,
+            "nav": {"format": "nmea", "file": "nav2.gps"},
+        }
+    )
     with pytest.raises(DataError, match="do not overlap in time"):
         gravimeter_record(o, d)
     o = gravimeter_options({"format": "mgd77t", "file": "nope.m77t"})
@@ -220,8 +275,14 @@ def test_positions_from_the_gravimeter_file(tmp_path):
 def test_zls_with_a_trajectory_of_another_day_is_refused():
     # DGP's ZLS sample (2015-11-12) and GNSS sample (2017-03-22) are real files of different flights
     dgp = ROOT / "tests" / "data" / "formats" / "dgp"
-    o = gravimeter_options({"format": "zls", "file": "sample_zls", "offset_mgal": 967000.0,
-                                      "nav": {"format": "trajectory", "file": "sample_trajectory.txt"}})
+    o = gravimeter_options(
+        {
+            "format": "zls",
+            "file": "sample_zls",
+            "offset_mgal": 967000.0,
+            "nav": {"format": "trajectory", "file": "sample_trajectory.txt"},
+        }
+    )
     with pytest.raises(DataError, match=r"sample_zls.*do not overlap in time"):
         gravimeter_record(o, dgp)
 
@@ -240,9 +301,17 @@ def test_position_jumps_are_reported(tmp_path):
             sent = nmea(",".join(body))
         out.append(f"{stamp} {sent}")
     (d / "nav.gps").write_text("\n".join(out) + "\n")
-    o = gravimeter_options({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL,
-                                      "nav": {"format": "nmea", "file": "nav.gps"}})
-    with pytest.warns(Warning, match=r"navigation: 1 position jump\(s\) implying more than 25 m/s at 149 s \(200\d m/s\)"):
+    o = gravimeter_options(
+        {
+            "format": "dgs_laptop",
+            "file": "DGS.dat",
+            "offset_mgal": OFFSET_MGAL,
+            "nav": {"format": "nmea", "file": "nav.gps"},
+        }
+    )
+    with pytest.warns(
+        Warning, match=r"navigation: 1 position jump\(s\) implying more than 25 m/s at 149 s \(200\d m/s\)"
+    ):
         gravimeter_record(o, d)
 
 
@@ -259,8 +328,14 @@ def test_gaps_are_blanked_not_bridged(tmp_path):
         rows[k] = ",".join(f)
     rows = rows[:1800] + rows[2400:]
     (d / "DGS.dat").write_text("\n".join(rows) + "\n")
-    o = gravimeter_options({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL,
-                                      "nav": {"format": "nmea", "file": "nav.gps"}})
+    o = gravimeter_options(
+        {
+            "format": "dgs_laptop",
+            "file": "DGS.dat",
+            "offset_mgal": OFFSET_MGAL,
+            "nav": {"format": "nmea", "file": "nav.gps"},
+        }
+    )
     with pytest.warns(Warning, match="gap"):
         rec = gravimeter_record(o, d)
     res = classic_reduction(rec, ellipsoid=GRS80, filter_length_s=300.0, height_source="altimeter")
@@ -283,13 +358,15 @@ def test_at1a_and_trajectory_airborne(tmp_path):
     """An aircraft at 10 Hz: AT1A file (GPS week/SOW) + trajectory (GPS date/time), both GPS time."""
     n, rate = 9000, 10.0
     t = np.arange(n) / rate
-    gps0 = (calendar.timegm((2017, 3, 22, 14, 0, 0)) + 18 - 315964800)  # GPS seconds of 14:00 UTC
+    gps0 = calendar.timegm((2017, 3, 22, 14, 0, 0)) + 18 - 315964800  # GPS seconds of 14:00 UTC
     ve = 80.0  # due east
     lat = np.full(n, np.radians(76.5))
     m_rad, n_rad = radii_of_curvature(lat, GRS80)
     h = 2000.0 + 30.0 * np.sin(2 * np.pi * t / 120.0)
     hdd = -30.0 * (2 * np.pi / 120.0) ** 2 * np.sin(2 * np.pi * t / 120.0)
-    lon = np.radians(-68.7) + ve * t / (n_rad * np.cos(lat))  # constant height ignored in the radius: exact velocity below
+    lon = np.radians(-68.7) + ve * t / (
+        n_rad * np.cos(lat)
+    )  # constant height ignored in the radius: exact velocity below
     ve_true = ve * (n_rad + h) / n_rad
     dg = 15.0 * MGAL * np.sin(2 * np.pi * t / 300.0)
     f_up = normal_gravity(lat, h, GRS80) + dg + hdd - eotvos_exact(lat, h, ve_true, 0.0, GRS80)
@@ -298,15 +375,27 @@ def test_at1a_and_trajectory_airborne(tmp_path):
         for k in range(n):
             g = gps0 + t[k]
             week, sow = int(g // 604800), g % 604800
-            fh.write(f"{reading[k]:.6f},   -0.084221,   -0.115037,   -0.093792,   62.251979,       21061,   39.690004,   52.294525,{week},{sow:.3f}\n")
+            fh.write(
+                f"{reading[k]:.6f},   -0.084221,   -0.115037,   -0.093792,   62.251979,       21061,   39.690004,   52.294525,{week},{sow:.3f}\n"
+            )
     with open(tmp_path / "traj.txt", "w") as fh:
-        fh.write("GPS Date,GPS Time, Latitude, Longitude, Orthometric Height,Ellipsoidal Height,Num of satellites,PDOP\n")
+        fh.write(
+            "GPS Date,GPS Time, Latitude, Longitude, Orthometric Height,Ellipsoidal Height,Num of satellites,PDOP\n"
+        )
         for k in range(n):
             tm = datetime.datetime(1980, 1, 6) + datetime.timedelta(seconds=gps0 + t[k])
-            fh.write(f" {tm.month}/{tm.day}/{tm.year}, {tm.hour}:{tm.minute:02d}:{tm.second:02d}.{tm.microsecond // 100000}, "
-                     f"{np.degrees(lat[k]):.10f},{np.degrees(lon[k]):.10f}, {h[k] - 20:11.4f}, {h[k]:11.4f},11,  2.00\n")
-    o = gravimeter_options({"format": "at1a", "file": "at1a.csv", "offset_mgal": 967000.0,
-                                      "nav": {"format": "trajectory", "file": "traj.txt"}})
+            fh.write(
+                f" {tm.month}/{tm.day}/{tm.year}, {tm.hour}:{tm.minute:02d}:{tm.second:02d}.{tm.microsecond // 100000}, "
+                f"{np.degrees(lat[k]):.10f},{np.degrees(lon[k]):.10f}, {h[k] - 20:11.4f}, {h[k]:11.4f},11,  2.00\n"
+            )
+    o = gravimeter_options(
+        {
+            "format": "at1a",
+            "file": "at1a.csv",
+            "offset_mgal": 967000.0,
+            "nav": {"format": "trajectory", "file": "traj.txt"},
+        }
+    )
     with pytest.warns(Warning):
         rec = gravimeter_record(o, tmp_path)
     # both files are GPS time: they land on the same UTC epochs

@@ -35,7 +35,9 @@ def test_published_formula_values():
 
 def test_height_term_against_exact():
     for h, tol in ((1000.0, 0.011), (10000.0, 0.071)):
-        d = normal_gravity_formula_at_height(LAT, np.full_like(LAT, h), "GRS80") - normal_gravity(LAT, np.full_like(LAT, h), GRS80)
+        d = normal_gravity_formula_at_height(LAT, np.full_like(LAT, h), "GRS80") - normal_gravity(
+            LAT, np.full_like(LAT, h), GRS80
+        )
         assert np.abs(d).max() / MGAL < tol
     fa = free_air_anomaly(np.full(3, 9.8), LAT[:3], 100.0, "IGF1967")
     assert np.allclose(fa, 9.8 - normal_gravity_formula_at_height(LAT[:3], np.full(3, 100.0), "IGF1967"))
@@ -102,8 +104,14 @@ def test_use_normal_gravity_formula_shifts_by_the_formula_difference():
     lat = np.radians(np.linspace(-60, 60, 50))
     h = np.linspace(0, 3000, 50)
     base = np.full(50, 3.0 * MGAL)
-    r = SimpleNamespace(lat=lat, height=h, disturbance=base.copy(), raw=base.copy(),
-                        terms={"raw": base.copy(), "normal_gravity": np.full(50, 9.8)}, info={})
+    r = SimpleNamespace(
+        lat=lat,
+        height=h,
+        disturbance=base.copy(),
+        raw=base.copy(),
+        terms={"raw": base.copy(), "normal_gravity": np.full(50, 9.8)},
+        info={},
+    )
     use_normal_gravity_formula(r, "exact", GRS80)
     assert np.array_equal(r.disturbance, base) and "exact" in r.info["normal_gravity"]
     use_normal_gravity_formula(r, "IGF1967", GRS80)

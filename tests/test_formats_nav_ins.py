@@ -49,8 +49,14 @@ def dm(x: float, deg_digits: int) -> str:
 
 def write_nmea(gnss_csv: Path, out: Path) -> np.ndarray:
     """GGA + RMC per fix from the simulator's GNSS CSV; returns the CSV rows (n, 4)."""
-    rows = np.array([[float(v) for v in r] for r in csv.reader(
-        ln for ln in gnss_csv.read_text().splitlines() if ln and not ln.startswith(("#", "time")))])
+    rows = np.array(
+        [
+            [float(v) for v in r]
+            for r in csv.reader(
+                ln for ln in gnss_csv.read_text().splitlines() if ln and not ln.startswith(("#", "time"))
+            )
+        ]
+    )
     lines = []
     for t_ns, lat, lon, h in rows:
         tm = datetime.fromtimestamp(int(t_ns) // 10**9, tz=timezone.utc)
@@ -73,19 +79,36 @@ def flight(tmp_path_factory):
 
 def _run(d: Path, name: str, inputs: str) -> dict:
     cfg = d / f"{name}.yaml"
-    cfg.write_text(f"survey: {{name: {name}}}\nflights:\n- name: F01\n  inputs:\n{inputs}  triad: platform\n"
-                   f"  truth: F01/truth.csv\nlines: {{mode: auto}}\ngrid: {{enabled: false}}\n"
-                   f"output: {{dir: out_{name}, plots: false}}\n")
-    r = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg), "-q"], capture_output=True, text=True,
-                       timeout=900, env=dict(os.environ), stdin=subprocess.DEVNULL, cwd=d, check=False)
+    cfg.write_text(
+        f"survey: {{name: {name}}}\nflights:\n- name: F01\n  inputs:\n{inputs}  triad: platform\n"
+        f"  truth: F01/truth.csv\nlines: {{mode: auto}}\ngrid: {{enabled: false}}\n"
+        f"output: {{dir: out_{name}, plots: false}}\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-m", "gravsurvey", "run", str(cfg), "-q"],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        env=dict(os.environ),
+        stdin=subprocess.DEVNULL,
+        cwd=d,
+        check=False,
+    )
     assert r.returncode == 0, r.stderr
     return json.loads((d / f"out_{name}" / "summary.json").read_text())
 
 
 def test_nmea_positions_reach_the_record(flight):
     d, rows = flight
-    o = ingest_options_from_dict({"inputs": {"csv": {"imu": "F01/imu.csv", "altimeter": "F01/altimeter.csv"},
-                                             "nav": {"format": "nmea", "file": "F01/gnss.nmea"}}}, base_dir=d)
+    o = ingest_options_from_dict(
+        {
+            "inputs": {
+                "csv": {"imu": "F01/imu.csv", "altimeter": "F01/altimeter.csv"},
+                "nav": {"format": "nmea", "file": "F01/gnss.nmea"},
+            }
+        },
+        base_dir=d,
+    )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         rec = load_flight(o)
@@ -103,8 +126,11 @@ def test_nmea_positions_reach_the_record(flight):
 def test_ins_flight_with_nmea_gnss_matches_the_csv_gnss_run(flight):
     d, _ = flight
     ref = _run(d, "csvgnss", "    csv: {imu: F01/imu.csv, altimeter: F01/altimeter.csv, gnss: F01/gnss.csv}\n")
-    got = _run(d, "nmeagnss", "    csv: {imu: F01/imu.csv, altimeter: F01/altimeter.csv}\n"
-                              "    nav: {format: nmea, file: F01/gnss.nmea}\n")
+    got = _run(
+        d,
+        "nmeagnss",
+        "    csv: {imu: F01/imu.csv, altimeter: F01/altimeter.csv}\n    nav: {format: nmea, file: F01/gnss.nmea}\n",
+    )
     e_ref, e_got = ref["flights"]["F01"]["estimator"], got["flights"]["F01"]["estimator"]
     assert e_ref["gnss_aided"] and e_got["gnss_aided"]
     r_ref, r_got = ref["rms_vs_truth_mgal"], got["rms_vs_truth_mgal"]
@@ -130,12 +156,14 @@ def test_nav_config_and_data_errors(tmp_path, flight):
     (tmp_path / "F01" / "msl.nmea").write_text("\n".join(bad) + "\n")
     for f in ("imu.csv", "altimeter.csv"):
         (tmp_path / "F01" / f).symlink_to(d / "F01" / f)
-    o = ingest_options_from_dict({"inputs": {**base, "nav": {"format": "nmea", "file": "F01/msl.nmea"}}},
-                                 base_dir=tmp_path)
+    o = ingest_options_from_dict(
+        {"inputs": {**base, "nav": {"format": "nmea", "file": "F01/msl.nmea"}}}, base_dir=tmp_path
+    )
     with pytest.raises(DataError, match=r"msl\.nmea: no ellipsoidal heights; expected GGA sentences with the geoid"):
         load_flight(o)
-    o = ingest_options_from_dict({"inputs": {**base, "nav": {"format": "trajectory", "file": "F01/none.txt"}}},
-                                 base_dir=tmp_path)
+    o = ingest_options_from_dict(
+        {"inputs": {**base, "nav": {"format": "trajectory", "file": "F01/none.txt"}}}, base_dir=tmp_path
+    )
     with pytest.raises(DataError, match=r"none\.txt: navigation file not found"):
         load_flight(o)
 
@@ -149,11 +177,18 @@ def test_trajectory_text_is_the_gnss_of_an_ins_flight(flight, tmp_path):
     for t_ns, lat, lon, h in rows:
         t_gps = int(t_ns) // 10**9 + gps_leap_seconds(int(t_ns) / 1e9)  # UTC -> GPS time
         tm = datetime.fromtimestamp(t_gps, tz=timezone.utc)
-        lines.append(f"{tm:%m/%d/%Y}, {tm:%H:%M:%S}.{int(t_ns) % 10**9 // 10**6:03d}, {lat:.9f}, {lon:.9f}, {h:.3f}, 12, 1.4")
+        lines.append(
+            f"{tm:%m/%d/%Y}, {tm:%H:%M:%S}.{int(t_ns) % 10**9 // 10**6:03d}, {lat:.9f}, {lon:.9f}, {h:.3f}, 12, 1.4"
+        )
     (tmp_path / "traj.txt").write_text("\n".join(lines) + "\n")
-    o = ingest_options_from_dict({"inputs": {"csv": {"imu": str(d / "F01" / "imu.csv"),
-                                                     "altimeter": str(d / "F01" / "altimeter.csv")},
-                                             "nav": {"format": "trajectory", "file": str(tmp_path / "traj.txt")}}})
+    o = ingest_options_from_dict(
+        {
+            "inputs": {
+                "csv": {"imu": str(d / "F01" / "imu.csv"), "altimeter": str(d / "F01" / "altimeter.csv")},
+                "nav": {"format": "trajectory", "file": str(tmp_path / "traj.txt")},
+            }
+        }
+    )
     rec = load_flight(o)
     t = rec.t0_unix_ns + np.round(rec.gnss.time * 1e9).astype(np.int64)
     assert np.array_equal(t, rows[:, 0].astype(np.int64))  # GPS time back to UTC exactly

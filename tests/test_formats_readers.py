@@ -158,10 +158,32 @@ def test_nmea_refuses_other_files(tmp_path):
 # ----------------------------------------------------------------------------- DGS fixtures
 def laptop_line(t_ns, grav, lat, lon, ve=0.5, speed_kn=11.0, course=270.0):
     tm = civil(t_ns)
-    f = [grav - 500.0, grav, -0.5, -0.6, 0.003, 53.37, 20814, 5403321, 31.1, 50.1, ve, -0.0018, 0.1, 0.25,
-         lat, lon, speed_kn, course, 0.32]
+    f = [
+        grav - 500.0,
+        grav,
+        -0.5,
+        -0.6,
+        0.003,
+        53.37,
+        20814,
+        5403321,
+        31.1,
+        50.1,
+        ve,
+        -0.0018,
+        0.1,
+        0.25,
+        lat,
+        lon,
+        speed_kn,
+        course,
+        0.32,
+    ]
     body = ",".join(f"{x:.12f}" if isinstance(x, float) else f"{x:16d}" for x in f)
-    return body + f",{tm.year},{tm.month:02d},{tm.day:02d},{tm.hour:02d},{tm.minute:02d},{tm.second:02d}.{tm.microsecond // 10000:02d},{int(t_ns // NS) % 10**7}"
+    return (
+        body
+        + f",{tm.year},{tm.month:02d},{tm.day:02d},{tm.hour:02d},{tm.minute:02d},{tm.second:02d}.{tm.microsecond // 10000:02d},{int(t_ns // NS) % 10**7}"
+    )
 
 
 def test_dgs_laptop_plain_and_prefixed(tmp_path):
@@ -214,7 +236,9 @@ def raw_line(counter, grav_counts, stamp):
 
 def test_dgs_raw_serial(tmp_path):
     t0 = unix_ns(2023, 6, 16)
-    lines = [f"{iso(t0 + k * NS + 857719000)}Z {raw_line(198247 + k, -218747 + 10 * k, 1686873601 + k)}" for k in range(10)]
+    lines = [
+        f"{iso(t0 + k * NS + 857719000)}Z {raw_line(198247 + k, -218747 + 10 * k, 1686873601 + k)}" for k in range(10)
+    ]
     lines[4] = lines[4].replace(",1208,", ",12x8,")
     lines.append(lines[5].replace("\x00", "") + "\x00")
     p = tmp_path / "raw.txt"
@@ -269,8 +293,22 @@ def test_zls_matches_dgp():
     assert len(tb) == 180 and tb.n_skipped == 0 and tb.meta["line_names"] == ["FLIGHT3"]
     # DGP tests/test_gravity_ingestor.py::test_import_zls, row 20 of the hour files
     want = [12754.71, 12747.7, 0.3, -375.8, -1.0, 0.0, -14.0, 5.0, -2.0, 57.0, 4.0, 128.0, -15.0, 34.0]
-    names = ["gravity", "spring_tension", "cross_coupling", "beam", "vcc", "al", "ax", "ve2", "ax2", "xacc2", "lacc2",
-             "xacc", "lacc", "platform_period"]
+    names = [
+        "gravity",
+        "spring_tension",
+        "cross_coupling",
+        "beam",
+        "vcc",
+        "al",
+        "ax",
+        "ve2",
+        "ax2",
+        "xacc2",
+        "lacc2",
+        "xacc",
+        "lacc",
+        "platform_period",
+    ]
     got = [tb.columns[c][20] / (MGAL if tb.units[c] == "m/s^2" else 1.0) for c in names]
     assert got == pytest.approx(want, abs=1e-9)
     assert tb.meta["par_port"] == "FFFFFF"
@@ -393,8 +431,13 @@ def test_nmea_gga_only_dated_by_the_logger_across_midnight(tmp_path):
     # Thompson-style: GGA only, the date comes from the logger stamp, which runs 0.6 s behind
     # the fix clock across midnight
     lines = []
-    for k, (stamp, hms) in enumerate((("03/12/2022,23:59:58.900", "235959.50"), ("03/12/2022,23:59:59.900", "000000.50"),
-                                      ("03/13/2022,00:00:00.900", "000001.50"))):
+    for k, (stamp, hms) in enumerate(
+        (
+            ("03/12/2022,23:59:58.900", "235959.50"),
+            ("03/12/2022,23:59:59.900", "000000.50"),
+            ("03/13/2022,00:00:00.900", "000001.50"),
+        )
+    ):
         lines.append(f"{stamp},{nmea(f'INGGA,{hms},3217.33152,N,11839.14935,W,5,26,0.8,0.19,M,,,7,1015')}")
     p = tmp_path / "POSMV.Raw"
     p.write_text("\n".join(lines) + "\n")

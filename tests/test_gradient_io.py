@@ -20,8 +20,13 @@ UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
 def _sim(tmp_path, **kw):
-    sim = quick_sim(duration_s=120.0, field=FIELD, formats=["mcap_json", "csv"],
-                    noise={"gradiometer": {"rate_hz": 2.0, "white_eotvos_rthz": 3.0, "markov_sigma_eotvos": 1.0}}, **kw)
+    sim = quick_sim(
+        duration_s=120.0,
+        field=FIELD,
+        formats=["mcap_json", "csv"],
+        noise={"gradiometer": {"rate_hz": 2.0, "white_eotvos_rthz": 3.0, "markov_sigma_eotvos": 1.0}},
+        **kw,
+    )
     p = tmp_path / "sim.yaml"
     p.write_text(yaml.safe_dump(sim))
     return sim, p
@@ -50,9 +55,17 @@ def test_gradient_round_trip_csv_and_mcap(tmp_path, triad):
         assert np.all((tzz > 3000) & (tzz < 3200))
     trace = truth[:, 0] + truth[:, 3] + truth[:, 5]
     assert np.abs(trace).max() < 1e-3  # Laplace holds on any axes
-    for inputs in ({"mcap": str(out / "F01" / "F01_json.mcap")},
-                   {"csv": {"imu": str(out / "F01" / "imu.csv"), "altimeter": str(out / "F01" / "altimeter.csv"),
-                            "gnss": str(out / "F01" / "gnss.csv"), "gradient": str(out / "F01" / "gradient.csv")}}):
+    for inputs in (
+        {"mcap": str(out / "F01" / "F01_json.mcap")},
+        {
+            "csv": {
+                "imu": str(out / "F01" / "imu.csv"),
+                "altimeter": str(out / "F01" / "altimeter.csv"),
+                "gnss": str(out / "F01" / "gnss.csv"),
+                "gradient": str(out / "F01" / "gradient.csv"),
+            }
+        },
+    ):
         rec = _load(inputs, out)
         assert rec.gradient is not None
         gam = rec.gradient.gamma_t
@@ -137,13 +150,20 @@ def test_asymmetric_tensor_in_mcap_is_a_clear_error(tmp_path):
     with open(path, "wb") as fh:
         w = Writer(fh)
         w.start()
-        sid = {n: w.register_schema(name=n, encoding="jsonschema", data=b"{}") for n in ("gravsurvey.Imu", "gravsurvey.Altimeter", "gravsurvey.GravityGradient")}
+        sid = {
+            n: w.register_schema(name=n, encoding="jsonschema", data=b"{}")
+            for n in ("gravsurvey.Imu", "gravsurvey.Altimeter", "gravsurvey.GravityGradient")
+        }
         ci = w.register_channel(topic="/imu", message_encoding="json", schema_id=sid["gravsurvey.Imu"])
         ca = w.register_channel(topic="/altimeter", message_encoding="json", schema_id=sid["gravsurvey.Altimeter"])
         cg = w.register_channel(topic="/gradient", message_encoding="json", schema_id=sid["gravsurvey.GravityGradient"])
         for k in range(len(rec.imu.time)):
             t = t0 + round(rec.imu.time[k] * 1e9)
-            msg = {"time_ns": t, "specific_force_t": rec.imu.specific_force_t[k].tolist(), "angular_rate_t": rec.imu.angular_rate_t[k].tolist()}
+            msg = {
+                "time_ns": t,
+                "specific_force_t": rec.imu.specific_force_t[k].tolist(),
+                "angular_rate_t": rec.imu.angular_rate_t[k].tolist(),
+            }
             w.add_message(ci, t, json.dumps(msg).encode(), t)
         for k in range(len(rec.altimeter.time)):
             t = t0 + round(rec.altimeter.time[k] * 1e9)
@@ -163,31 +183,46 @@ def test_flight_products_against_truth():
     # the truth disturbance and horizontal anomaly (noise-free gradiometer)
     from gravsurvey import gradiometer as G
 
-    sim = quick_sim(duration_s=600.0, speed_mps=100.0, field=FIELD, imu_hz=1.0,
-                    noise={"gradiometer": {"rate_hz": 1.0}})
+    sim = quick_sim(duration_s=600.0, speed_mps=100.0, field=FIELD, imu_hz=1.0, noise={"gradiometer": {"rate_hz": 1.0}})
     fs = simulate_flight(load_sim_config(sim))
     comps = fs.gradient_t_eotvos * E
     gam = np.empty((comps.shape[0], 3, 3))
     for k, (i, j) in enumerate(UPPER):
         gam[:, i, j] = gam[:, j, i] = comps[:, k]
     tr = fs.truth
-    p = G.flight_products(fs.gradient_time, gam, tr["time"], tr["lat"], tr["lon"], tr["height"], tr["vel_n"],
-                          tr["disturbance"][0], "platform")
+    p = G.flight_products(
+        fs.gradient_time,
+        gam,
+        tr["time"],
+        tr["lat"],
+        tr["lon"],
+        tr["height"],
+        tr["vel_n"],
+        tr["disturbance"][0],
+        "platform",
+    )
     assert 3000 < p["vertical_eigenvalue_median_eotvos"] < 3200
     assert abs(p["trace_median_eotvos"]) < 1e-3
     assert np.ptp(tr["disturbance"]) > 2e-5  # > 2 mGal of signal (3.2 measured)
     # trapezoid at 1 Hz, 100 m/s, 2.5 km from the mass: 0.011 mGal measured
     np.testing.assert_allclose(p["disturbance"], tr["disturbance"], rtol=0, atol=0.02e-5)
     np.testing.assert_allclose(p["horizontal_n"], tr["anomaly_n"][:, :2] - tr["anomaly_n"][0, :2], rtol=0, atol=0.02e-5)
-    q = G.flight_products(fs.gradient_time, gam, tr["time"], tr["lat"], tr["lon"], tr["height"], tr["vel_n"], 0.0, "strapdown")
+    q = G.flight_products(
+        fs.gradient_time, gam, tr["time"], tr["lat"], tr["lon"], tr["height"], tr["vel_n"], 0.0, "strapdown"
+    )
     assert "disturbance" not in q and "attitude" in q["note"]
 
 
 def test_gravsurvey_run_with_processing_gradiometer(tmp_path):
     from gravsurvey.pipeline import run_survey
 
-    sim = quick_sim(duration_s=600.0, speed_mps=100.0, field=FIELD, formats=["mcap_json"],
-                    noise={"gradiometer": {"rate_hz": 1.0, "white_eotvos_rthz": 1.0}})
+    sim = quick_sim(
+        duration_s=600.0,
+        speed_mps=100.0,
+        field=FIELD,
+        formats=["mcap_json"],
+        noise={"gradiometer": {"rate_hz": 1.0, "white_eotvos_rthz": 1.0}},
+    )
     p = tmp_path / "sim.yaml"
     p.write_text(yaml.safe_dump(sim))
     simulate_to_dir(p, tmp_path / "s")
@@ -214,7 +249,14 @@ def test_gradiometer_noise_statistics():
     from gravsurvey.simulate.sensors import gradiometer_errors
 
     rng = np.random.default_rng(11)
-    cfg = {"gradiometer": {"rate_hz": 4.0, "white_eotvos_rthz": 3.0, "markov_sigma_eotvos": 0.0, "markov_lambda_per_s": 0.001}}
+    cfg = {
+        "gradiometer": {
+            "rate_hz": 4.0,
+            "white_eotvos_rthz": 3.0,
+            "markov_sigma_eotvos": 0.0,
+            "markov_lambda_per_s": 0.001,
+        }
+    }
     e = gradiometer_errors(40000, 4.0, cfg, rng)
     # one-second sigma 3 E/sqrt(Hz): 6 E per 4 Hz sample, 3 E averaged over 1 s
     assert abs(np.std(e) - 6.0) < 0.1

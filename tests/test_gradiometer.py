@@ -18,7 +18,16 @@ def _model():
         {
             "type": "model",
             "point_masses": [{"lat_deg": 45.01, "lon_deg": 10.0, "depth_m": 2000.0, "mass_kg": 2e13}],
-            "prisms": [{"lat_deg": 45.0, "lon_deg": 9.98, "east_m": [-2000.0, 2000.0], "north_m": [-1000.0, 3000.0], "depth_m": [300.0, 2500.0], "density_kgm3": -400.0}],
+            "prisms": [
+                {
+                    "lat_deg": 45.0,
+                    "lon_deg": 9.98,
+                    "east_m": [-2000.0, 2000.0],
+                    "north_m": [-1000.0, 3000.0],
+                    "depth_m": [300.0, 2500.0],
+                    "density_kgm3": -400.0,
+                }
+            ],
         }
     )
 
@@ -77,7 +86,10 @@ def test_eigen_vertical_against_the_ellipsoid_truth():
     gam = F.total_gradient_n(None, r, lat, lon, WGS84)
     g_n = np.einsum("kji,kj->ki", mat_en(lat, lon), normal_gravitation_ecef(r, WGS84))
     _, g0 = G.vertical_eigen(gam)
-    ang = np.degrees(np.arccos(np.clip(np.einsum("ki,ki->k", g0, g_n / np.linalg.norm(g_n, axis=1)[:, None]), -1, 1))) * 3600
+    ang = (
+        np.degrees(np.arccos(np.clip(np.einsum("ki,ki->k", g0, g_n / np.linalg.norm(g_n, axis=1)[:, None]), -1, 1)))
+        * 3600
+    )
     assert ang[0] < 0.5 and 100.0 < ang[1] < 125.0 and ang[2] < 10.0
 
 
@@ -106,8 +118,20 @@ def test_gravitation_propagated_by_t_v_closes_on_truth():
     v = np.gradient(r, t, axis=0, edge_order=2)
     # exact velocity from a fine difference of the analytic track
     dt = 1e-3
-    v = (geodetic_to_ecef(np.radians(45.0 - 0.02 + 0.04 * (t + dt) / t[-1]), np.radians(9.95 + 0.1 * (t + dt) / t[-1]), 1500.0 + 50.0 * np.sin((t + dt) / 200.0), WGS84)
-         - geodetic_to_ecef(np.radians(45.0 - 0.02 + 0.04 * (t - dt) / t[-1]), np.radians(9.95 + 0.1 * (t - dt) / t[-1]), 1500.0 + 50.0 * np.sin((t - dt) / 200.0), WGS84)) / (2 * dt)
+    v = (
+        geodetic_to_ecef(
+            np.radians(45.0 - 0.02 + 0.04 * (t + dt) / t[-1]),
+            np.radians(9.95 + 0.1 * (t + dt) / t[-1]),
+            1500.0 + 50.0 * np.sin((t + dt) / 200.0),
+            WGS84,
+        )
+        - geodetic_to_ecef(
+            np.radians(45.0 - 0.02 + 0.04 * (t - dt) / t[-1]),
+            np.radians(9.95 + 0.1 * (t - dt) / t[-1]),
+            1500.0 + 50.0 * np.sin((t - dt) / 200.0),
+            WGS84,
+        )
+    ) / (2 * dt)
     g_true = normal_gravitation_ecef(r, WGS84) + F.anomalous_gravitation_ecef(model, r)
     gam = F.normal_gradient_ecef(r, WGS84) + F.anomalous_gradient_ecef(model, r)
     g_prop = G.propagate_gravitation_e(t, g_true[0], gam, v)
@@ -222,7 +246,9 @@ def test_kalman_versus_asymptotic_filter():
     raw = rms(z - x)
     assert rms(x_kf[:, G.POS] - x) < 0.6 * raw and rms(x_as[:, G.POS] - x) < 0.6 * raw
     assert rms(x_kf[:, G.ACC] - b) <= 1.2 * rms(x_as[:, G.ACC] - b)
-    k_c, p_c = G.steady_state_kalman_gain(G.horizontal_channel_matrix(0.0, True), np.array([[1.0, 0, 0]]), np.diag([0, 0, q_acc]), 9.0 * dt)
+    k_c, p_c = G.steady_state_kalman_gain(
+        G.horizontal_channel_matrix(0.0, True), np.array([[1.0, 0, 0]]), np.diag([0, 0, q_acc]), 9.0 * dt
+    )
     # measured: position 0.40 m, acceleration 2.8e-5 m/s^2 against the Riccati sigmas 0.40 m, 3.0e-5
     sig = np.sqrt(np.diag(p_c))
     for i, truth in ((G.POS, x), (G.ACC, b)):

@@ -74,8 +74,16 @@ def test_grid_map_has_tracks_scale_bar_and_crs(gridded, tmp_path):
     from gravsurvey.report import figure_grid_map, plot_grid_map
 
     g, (e, n, _h, _v, lab) = gridded
-    fig = figure_grid_map(g.easting_m, g.northing_m, g.value_mgal, e, n, track_ids=lab,
-                          crs_label="EPSG:32632 WGS 84 / UTM zone 32N", title="t")
+    fig = figure_grid_map(
+        g.easting_m,
+        g.northing_m,
+        g.value_mgal,
+        e,
+        n,
+        track_ids=lab,
+        crs_label="EPSG:32632 WGS 84 / UTM zone 32N",
+        title="t",
+    )
     ax = fig.axes[0]
     gids = {a.get_gid() for a in ax.get_children()}
     assert {"grid", "tracks", "scalebar"} <= gids

@@ -29,11 +29,14 @@ def test_state_indices_are_seed_order():
     np.testing.assert_allclose(np.diag(p), [2500.0, 0.0025, 2500.0, 0.0025, 2500.0, 0.0025, 1e-6, 1e-10], rtol=1e-12)
 
 
-@pytest.mark.parametrize("triad,yaw_rate,radius_source", [
-    ("platform", 0.0, "altimeter"),
-    ("strapdown", 0.02, "altimeter"),
-    ("strapdown", 0.02, "computed"),
-])
+@pytest.mark.parametrize(
+    "triad,yaw_rate,radius_source",
+    [
+        ("platform", 0.0, "altimeter"),
+        ("strapdown", 0.02, "altimeter"),
+        ("strapdown", 0.02, "computed"),
+    ],
+)
 def test_transition_matrices_predict_nonlinear_error_propagation(triad, yaw_rate, radius_source):
     """Perturb the initial state, add an unknown constant disturbance g and a gravimeter bias f3.
 

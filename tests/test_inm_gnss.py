@@ -7,8 +7,17 @@ import pytest
 
 from gravsurvey.errors import ConfigError
 from gravsurvey.geodesy import MGAL, radii_of_curvature
-from gravsurvey.inm.errormodel import (BG, DQ, G, TH, AltimeterMeasurement, GnssMeasurement, discretise,
-                                       epoch_geometry, initial_covariance)
+from gravsurvey.inm.errormodel import (
+    BG,
+    DQ,
+    G,
+    TH,
+    AltimeterMeasurement,
+    GnssMeasurement,
+    discretise,
+    epoch_geometry,
+    initial_covariance,
+)
 from gravsurvey.inm.mechanization import mechanize
 from gravsurvey.inm.params import InitialState, InmParams
 from gravsurvey.inm.solve import estimate_anomaly
@@ -22,9 +31,18 @@ DEGPH = math.radians(1.0) / 3600.0
 
 
 def _record(s, gnss=True):
-    g = GnssChannel(s.gnss_time, np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg), s.gnss_height) if gnss else None
-    return FlightRecord(s.start_unix_ns, ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
-                        AltimeterChannel(s.alt_time, s.alt_height), g, source="sim")
+    g = (
+        GnssChannel(s.gnss_time, np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg), s.gnss_height)
+        if gnss
+        else None
+    )
+    return FlightRecord(
+        s.start_unix_ns,
+        ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
+        AltimeterChannel(s.alt_time, s.alt_height),
+        g,
+        source="sim",
+    )
 
 
 def _initial(s):
@@ -139,25 +157,46 @@ SENSORS = {
     "altimeter": {"sigma_m": 0.05},
     "gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0},
 }
-GRID = {"kind": "grid", "origin_lat_deg": 47.0, "origin_lon_deg": 11.0, "altitude_m": 800.0, "speed_mps": 70.0,
-        "lines": {"count": 3, "spacing_m": 3000.0, "length_m": 25000.0, "heading_deg": 0.0},
-        "static_start_s": 120.0}
+GRID = {
+    "kind": "grid",
+    "origin_lat_deg": 47.0,
+    "origin_lon_deg": 11.0,
+    "altitude_m": 800.0,
+    "speed_mps": 70.0,
+    "lines": {"count": 3, "spacing_m": 3000.0, "length_m": 25000.0, "heading_deg": 0.0},
+    "static_start_s": 120.0,
+}
 
 
 @pytest.fixture(scope="module")
 def biased_grid():
     """Strapdown grid with gyro biases (<= 0.03 deg/h) and 0.5 m GNSS: 25 min at 10 Hz."""
-    sim = quick_sim(plan=GRID, triad="strapdown", noise=SENSORS, field="seed_smooth", gnss_hz=5.0, altimeter_hz=5.0,
-                    turbulence={"vertical_sigma_m": 1.0, "horizontal_sigma_m": 1.0, "attitude_sigma_deg": 0.5},
-                    seed=3)
+    sim = quick_sim(
+        plan=GRID,
+        triad="strapdown",
+        noise=SENSORS,
+        field="seed_smooth",
+        gnss_hz=5.0,
+        altimeter_hz=5.0,
+        turbulence={"vertical_sigma_m": 1.0, "horizontal_sigma_m": 1.0, "attitude_sigma_deg": 0.5},
+        seed=3,
+    )
     return simulate_flight(sim)
 
 
 def _params(aided):
     # one fixed model for both runs: the comparison is of the aiding, not of identification
-    return InmParams(accel_noise_mps2=5e-4, gyro_drift_degph=0.005, gravimeter_sigma_mps2=1e-6,
-                     gravimeter_white_mps2=1e-4, altimeter_sigma_m=0.05, gnss_aiding=aided,
-                     gnss_horizontal_sigma_m=0.5, gnss_vertical_sigma_m=1.0, identify=False)
+    return InmParams(
+        accel_noise_mps2=5e-4,
+        gyro_drift_degph=0.005,
+        gravimeter_sigma_mps2=1e-6,
+        gravimeter_white_mps2=1e-4,
+        altimeter_sigma_m=0.05,
+        gnss_aiding=aided,
+        gnss_horizontal_sigma_m=0.5,
+        gnss_vertical_sigma_m=1.0,
+        identify=False,
+    )
 
 
 def test_gnss_aiding_bounds_position_and_estimates_gyro_bias(biased_grid):
@@ -208,10 +247,13 @@ def test_gnss_aiding_not_worse_on_seed_scenarios(field):
     """
     from scipy.ndimage import gaussian_filter1d
 
-    sensors = {"accelerometer": {"white_sigma_mps2": 1.0e-3},
-               "gravimeter": {"markov_sigma_mps2": 1.0e-6, "markov_lambda_per_s": 0.025},
-               "gyro": {"white_drift_degph": 0.01}, "altimeter": {"sigma_m": 1.0},
-               "gnss": {"horizontal_sigma_m": 1.0, "vertical_sigma_m": 1.0}}
+    sensors = {
+        "accelerometer": {"white_sigma_mps2": 1.0e-3},
+        "gravimeter": {"markov_sigma_mps2": 1.0e-6, "markov_lambda_per_s": 0.025},
+        "gyro": {"white_drift_degph": 0.01},
+        "altimeter": {"sigma_m": 1.0},
+        "gnss": {"horizontal_sigma_m": 1.0, "vertical_sigma_m": 1.0},
+    }
     s = simulate_flight(quick_sim(duration_s=5400, speed_mps=70.0, field=field, noise=sensors, seed=5))
     rec = _record(s)
     res = {}

@@ -68,8 +68,10 @@ def test_target_resolution_puts_the_half_power_point_there():
         p = I.prior_for_resolution(m, 80.0, res, 0.2)
         assert I.wiener_resolution_m(p, 80.0, 0.2) == pytest.approx(res, rel=1e-6)
     # finer = a wider prior (more noise passed), coarser = a narrower one
-    assert (I.prior_for_resolution(m, 80.0, 2000.0, 0.2).anomaly_sigma_mps2
-            > I.prior_for_resolution(m, 80.0, 5000.0, 0.2).anomaly_sigma_mps2)
+    assert (
+        I.prior_for_resolution(m, 80.0, 2000.0, 0.2).anomaly_sigma_mps2
+        > I.prior_for_resolution(m, 80.0, 5000.0, 0.2).anomaly_sigma_mps2
+    )
 
 
 def test_prior_risk_prefers_the_matched_prior():
@@ -114,8 +116,9 @@ def test_prior_holds_a_smooth_field_below_the_analysed_band():
     dt, n = 1.0, 1320
     t = np.arange(n) * dt
     rng = np.random.default_rng(2)
-    field = (30 * np.sin(2 * np.pi * t / 3600) + 20 * np.sin(2 * np.pi * t / 1500 + 1)
-             + 10 * np.sin(2 * np.pi * t / 900 + 2)) * MGAL
+    field = (
+        30 * np.sin(2 * np.pi * t / 3600) + 20 * np.sin(2 * np.pi * t / 1500 + 1) + 10 * np.sin(2 * np.pi * t / 900 + 2)
+    ) * MGAL
     noise = I.SpectralModel(1e-3, 3600.0, 1e-4, 0.05)
     report = {"spectral_model": dataclasses.asdict(noise), "height_dt_s": 0.2}
     params = InmParams()
@@ -135,8 +138,9 @@ def test_prior_holds_a_smooth_field_below_the_analysed_band():
     finally:
         I.FIELD_VAR_HELD = old
     tau_w = 1.0 / (weak.anomaly_lambda_per_m * 70.0)
-    held_w = I.windowed_variance(lambda f: I._markov_psd(f, weak.anomaly_sigma_mps2, tau_w), I.FIELD_VAR_WINDOW_S,
-                                 n * dt)
+    held_w = I.windowed_variance(
+        lambda f: I._markov_psd(f, weak.anomaly_sigma_mps2, tau_w), I.FIELD_VAR_WINDOW_S, n * dt
+    )
     assert held_w < 0.5 * held
 
 
@@ -145,19 +149,45 @@ def noisy_flight():
     """1 h straight platform flight over point masses and a dipole (3-10 km deep, 3-30 km
     wavelengths), 5 cm height noise at 5 Hz, gravimeter white 1 mGal/sqrt(Hz) plus a Markov
     error: the sensor values are NOT given to the estimator."""
-    sensors = {"accelerometer": {"white_sigma_mps2": 5e-4},
-               "gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 3e-6, "markov_lambda_per_s": 0.002},
-               "gyro": {"white_drift_degph": 0.01}, "altimeter": {"sigma_m": 0.05},
-               "gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0}}
-    field = {"type": "model",
-             "point_masses": [{"lat_deg": 45.01, "lon_deg": 135.0 + 0.35 * k, "depth_m": 3000.0 + 700.0 * (k % 4),
-                               "mass_kg": (4e13 if k % 2 else -3e13) * (1 + 0.3 * (k % 3))} for k in range(1, 9)],
-             "dipoles": [{"lat_deg": 44.99, "lon_deg": 136.1, "depth_m": 2500.0, "mass_kg": 1.5e13,
-                          "separation_m": 5000.0, "azimuth_deg": 60.0}]}
-    s = simulate_flight(quick_sim(duration_s=3600, speed_mps=70.0, altimeter_hz=5.0, field=field,
-                                  noise=sensors, seed=7))
-    rec = FlightRecord(s.start_unix_ns, ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
-                       AltimeterChannel(s.alt_time, s.alt_height), None, source="sim")
+    sensors = {
+        "accelerometer": {"white_sigma_mps2": 5e-4},
+        "gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 3e-6, "markov_lambda_per_s": 0.002},
+        "gyro": {"white_drift_degph": 0.01},
+        "altimeter": {"sigma_m": 0.05},
+        "gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0},
+    }
+    field = {
+        "type": "model",
+        "point_masses": [
+            {
+                "lat_deg": 45.01,
+                "lon_deg": 135.0 + 0.35 * k,
+                "depth_m": 3000.0 + 700.0 * (k % 4),
+                "mass_kg": (4e13 if k % 2 else -3e13) * (1 + 0.3 * (k % 3)),
+            }
+            for k in range(1, 9)
+        ],
+        "dipoles": [
+            {
+                "lat_deg": 44.99,
+                "lon_deg": 136.1,
+                "depth_m": 2500.0,
+                "mass_kg": 1.5e13,
+                "separation_m": 5000.0,
+                "azimuth_deg": 60.0,
+            }
+        ],
+    }
+    s = simulate_flight(
+        quick_sim(duration_s=3600, speed_mps=70.0, altimeter_hz=5.0, field=field, noise=sensors, seed=7)
+    )
+    rec = FlightRecord(
+        s.start_unix_ns,
+        ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
+        AltimeterChannel(s.alt_time, s.alt_height),
+        None,
+        source="sim",
+    )
     tr = s.truth
     init = InitialState(tr["lat"][0], tr["lon"][0], tr["height"][0], tr["vel_n"][0].copy(), tr["mat_nt"][0].copy())
     return s, rec, init

@@ -248,8 +248,10 @@ def test_generated_module_is_what_the_generator_writes():
     assert codegen.TARGET.read_text() == codegen.generate()
 
 
-@pytest.mark.parametrize("n,m,missing,mixed", [(8, 1, 0.1, False), (8, 2, 0.3, False), (8, 3, 0.2, True),
-                                                (8, 2, 1.0, False), (8, 4, 0.0, True)])
+@pytest.mark.parametrize(
+    "n,m,missing,mixed",
+    [(8, 1, 0.1, False), (8, 2, 0.3, False), (8, 3, 0.2, True), (8, 2, 1.0, False), (8, 4, 0.0, True)],
+)
 def test_unrolled_steps_equal_the_generic_loops_bit_for_bit(n, m, missing, mixed):
     """Same model through the generated steps and through the generic loops.
 
@@ -358,11 +360,17 @@ def _aided_model(duration_s=600.0, seed=6):
     p = InmParams()
     n = N_STATE_AIDED
     phi, q = discretise(epoch_geometry(nav, idx), p, 1.0, aided=True)
-    gn = GnssMeasurement(t1, tr["lat"][::10] + rng.normal(size=t1.size) / 6.4e6,
-                         tr["lon"][::10] + rng.normal(size=t1.size) / 4.5e6,
-                         tr["height"][::10] + 2.0 * rng.normal(size=t1.size), 1.0, 2.0)
-    z, h, r = stack_measurements([AltimeterMeasurement(t1, alt_h, 1.0).build(nav, idx, 0.5, n),
-                                  gn.build(nav, idx, 0.5, n)])
+    gn = GnssMeasurement(
+        t1,
+        tr["lat"][::10] + rng.normal(size=t1.size) / 6.4e6,
+        tr["lon"][::10] + rng.normal(size=t1.size) / 4.5e6,
+        tr["height"][::10] + 2.0 * rng.normal(size=t1.size),
+        1.0,
+        2.0,
+    )
+    z, h, r = stack_measurements(
+        [AltimeterMeasurement(t1, alt_h, 1.0).build(nav, idx, 0.5, n), gn.build(nav, idx, 0.5, n)]
+    )
     c = nav.mat_it[idx[0]]
     model = (np.zeros(n), initial_covariance(p, c.T @ nav.r_i[idx[0]], c.T @ nav.v_i[idx[0]]), phi, q, z, h, r)
     c = nav.mat_it[idx]

@@ -26,19 +26,25 @@ def test_defaults_are_seed_004():
     assert p.gyro_drift_radps == pytest.approx(0.01 * math.pi / 180 / 3600)
 
 
-@pytest.mark.parametrize("d,msg", [
-    ({"acel_noise_mps2": 1e-3}, "model.acel_noise_mps2: unknown key (did you mean 'accel_noise_mps2'?); valid keys"),
-    ({"altimeter_sigma_m": -1.0}, "model.altimeter_sigma_m: expected a number >= 0, got -1.0"),
-    ({"gravimeter_lambda_per_s": -0.1}, "model.gravimeter_lambda_per_s: expected a number >= 0, got -0.1"),
-    ({"filter_rate_hz": 0}, "model.filter_rate_hz: expected a number > 0, got 0"),
-    ({"anomaly_sigma_mps2": "big"}, "model.anomaly_sigma_mps2: expected a number >= 0, got 'big'"),
-    ({"accel_noise_mps2": True}, "model.accel_noise_mps2: expected a number >= 0, got True"),
-    ({"radius_source": "gps"}, "model.radius_source: expected one of altimeter, computed, got 'gps'"),
-    ({"gyro_drift_degph": float("nan")}, "model.gyro_drift_degph: expected a finite number >= 0, got nan"),
-    ({"attitude_passes": 2.0}, "model.attitude_passes: expected an integer in [1, 5], got 2.0"),
-    ({"attitude_passes": 6}, "model.attitude_passes: expected an integer in [1, 5], got 6"),
-    ({"target_resolution_m": 0}, "model.target_resolution_m: expected a number > 0, got 0"),
-])
+@pytest.mark.parametrize(
+    "d,msg",
+    [
+        (
+            {"acel_noise_mps2": 1e-3},
+            "model.acel_noise_mps2: unknown key (did you mean 'accel_noise_mps2'?); valid keys",
+        ),
+        ({"altimeter_sigma_m": -1.0}, "model.altimeter_sigma_m: expected a number >= 0, got -1.0"),
+        ({"gravimeter_lambda_per_s": -0.1}, "model.gravimeter_lambda_per_s: expected a number >= 0, got -0.1"),
+        ({"filter_rate_hz": 0}, "model.filter_rate_hz: expected a number > 0, got 0"),
+        ({"anomaly_sigma_mps2": "big"}, "model.anomaly_sigma_mps2: expected a number >= 0, got 'big'"),
+        ({"accel_noise_mps2": True}, "model.accel_noise_mps2: expected a number >= 0, got True"),
+        ({"radius_source": "gps"}, "model.radius_source: expected one of altimeter, computed, got 'gps'"),
+        ({"gyro_drift_degph": float("nan")}, "model.gyro_drift_degph: expected a finite number >= 0, got nan"),
+        ({"attitude_passes": 2.0}, "model.attitude_passes: expected an integer in [1, 5], got 2.0"),
+        ({"attitude_passes": 6}, "model.attitude_passes: expected an integer in [1, 5], got 6"),
+        ({"target_resolution_m": 0}, "model.target_resolution_m: expected a number > 0, got 0"),
+    ],
+)
 def test_from_dict_rejects_nonsense_naming_the_key(d, msg):
     with pytest.raises(ConfigError) as e:
         inm_params(d)
@@ -80,8 +86,11 @@ def test_attitude_convention_matches_simulator():
 
     rng = np.random.default_rng(0)
     for roll, pitch, heading in rng.uniform(-3, 3, size=(10, 3)):
-        np.testing.assert_allclose(mat_nb_from_attitude(roll, pitch, heading),
-                                   euler_to_mat_nb(np.array(roll), np.array(pitch), np.array(heading)), atol=1e-15)
+        np.testing.assert_allclose(
+            mat_nb_from_attitude(roll, pitch, heading),
+            euler_to_mat_nb(np.array(roll), np.array(pitch), np.array(heading)),
+            atol=1e-15,
+        )
     # physics of the convention: heading 90 deg -> nose east; roll +: right wing (-y) down
     m = mat_nb_from_attitude(math.radians(10), 0.0, math.radians(90))
     np.testing.assert_allclose(m[:, 0], [1, 0, 0], atol=1e-15)
@@ -89,8 +98,13 @@ def test_attitude_convention_matches_simulator():
 
 
 def test_initial_state():
-    d = {"lat_deg": 45.0, "lon_deg": 135.0, "height_m": 1000.0, "velocity_enu_mps": [50.0, 0.0, 0.0],
-         "attitude_deg": [0.0, 0.0, 90.0]}
+    d = {
+        "lat_deg": 45.0,
+        "lon_deg": 135.0,
+        "height_m": 1000.0,
+        "velocity_enu_mps": [50.0, 0.0, 0.0],
+        "attitude_deg": [0.0, 0.0, 90.0],
+    }
     st = initial_state(d, "strapdown")
     assert st.lat == pytest.approx(math.pi / 4) and st.height == 1000.0
     np.testing.assert_allclose(st.mat_nt @ [1, 0, 0], [1, 0, 0], atol=1e-15)
@@ -107,8 +121,9 @@ def test_initial_state():
 
 
 def test_initial_state_from_gnss_errors():
-    rec = FlightRecord(0, ImuChannel(np.arange(5.0), np.zeros((5, 3)), np.zeros((5, 3))),
-                       AltimeterChannel(np.arange(5.0), np.zeros(5)))
+    rec = FlightRecord(
+        0, ImuChannel(np.arange(5.0), np.zeros((5, 3)), np.zeros((5, 3))), AltimeterChannel(np.arange(5.0), np.zeros(5))
+    )
     with pytest.raises(ConfigError, match="no GNSS channel"):
         initial_state_from_gnss(rec, "platform")
 

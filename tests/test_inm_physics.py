@@ -17,11 +17,24 @@ W0 = math.sqrt(9.806 / 6.372e6)
 #: Filter settings matched to noiseless data: tiny but non-zero noise everywhere.
 # the filter's physics under a KNOWN model: identification from the data is off here
 # (it is tested in test_inm_identify.py)
-TINY = dict(accel_noise_mps2=1e-7, gyro_drift_degph=1e-5, gravimeter_sigma_mps2=1e-8, altimeter_sigma_m=1e-4,
-            initial_position_sigma_m=1.0, initial_velocity_sigma_mps=1e-3, identify=False)
+TINY = dict(
+    accel_noise_mps2=1e-7,
+    gyro_drift_degph=1e-5,
+    gravimeter_sigma_mps2=1e-8,
+    altimeter_sigma_m=1e-4,
+    initial_position_sigma_m=1.0,
+    initial_velocity_sigma_mps=1e-3,
+    identify=False,
+)
 
-GRID = {"kind": "grid", "origin_lat_deg": 45.0, "origin_lon_deg": 135.0, "altitude_m": 1000.0, "speed_mps": 50.0,
-        "lines": {"count": 3, "spacing_m": 3000.0, "length_m": 30000.0, "heading_deg": 90.0}}
+GRID = {
+    "kind": "grid",
+    "origin_lat_deg": 45.0,
+    "origin_lon_deg": 135.0,
+    "altitude_m": 1000.0,
+    "speed_mps": 50.0,
+    "lines": {"count": 3, "spacing_m": 3000.0, "length_m": 30000.0, "heading_deg": 90.0},
+}
 TURB = {"vertical_sigma_m": 2.0, "horizontal_sigma_m": 2.0, "attitude_sigma_deg": 1.0}
 
 
@@ -29,8 +42,13 @@ def record_of(s, gnss=False):
     g = None
     if gnss:
         g = GnssChannel(s.gnss_time, np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg), s.gnss_height)
-    return FlightRecord(s.start_unix_ns, ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
-                        AltimeterChannel(s.alt_time, s.alt_height), g, source="sim")
+    return FlightRecord(
+        s.start_unix_ns,
+        ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
+        AltimeterChannel(s.alt_time, s.alt_height),
+        g,
+        source="sim",
+    )
 
 
 def initial_of(s):

@@ -9,9 +9,13 @@ from gravsurvey.config import load_config
 from gravsurvey.errors import ConfigError
 from gravsurvey.simulate.run import quick_sim, simulate_to_dir
 
-NOISE = {"accelerometer": {"white_sigma_mps2": 1.0e-3}, "gravimeter": {"markov_sigma_mps2": 1.0e-6},
-         "gyro": {"white_drift_degph": 0.01}, "altimeter": {"sigma_m": 0.05},
-         "gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0}}
+NOISE = {
+    "accelerometer": {"white_sigma_mps2": 1.0e-3},
+    "gravimeter": {"markov_sigma_mps2": 1.0e-6},
+    "gyro": {"white_drift_degph": 0.01},
+    "altimeter": {"sigma_m": 0.05},
+    "gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0},
+}
 
 
 def _sim(tmp_path, processing=None):

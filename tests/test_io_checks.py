@@ -21,10 +21,21 @@ def simulated(triad):
     """A 400 s simulated flight (60 s static, then level flight with turbulence), noisy."""
     from gravsurvey.simulate.run import quick_sim, simulate_flight
 
-    sim = quick_sim(duration_s=400, imu_hz=50, noise=True, triad=triad, static_start_s=60,
-                    turbulence={"vertical_sigma_m": 1.5, "horizontal_sigma_m": 2.0,
-                                "attitude_sigma_deg": 1.0, "corner_period_s": 20.0,
-                                "min_period_s": 2.0, "max_period_s": 600.0})
+    sim = quick_sim(
+        duration_s=400,
+        imu_hz=50,
+        noise=True,
+        triad=triad,
+        static_start_s=60,
+        turbulence={
+            "vertical_sigma_m": 1.5,
+            "horizontal_sigma_m": 2.0,
+            "attitude_sigma_deg": 1.0,
+            "corner_period_s": 20.0,
+            "min_period_s": 2.0,
+            "max_period_s": 600.0,
+        },
+    )
     return simulate_flight(sim)
 
 
@@ -67,17 +78,23 @@ def test_unit_mistakes_stop_load_flight_with_channel_named(tmp_path):
     d = static_flight(seconds=40.0)
     _write_flight_csv(tmp_path, d, gyro_scale=180 / np.pi)  # deg/s in a rad/s column
     opts = ingest_options({"inputs": CSV_IN}, "flights[0]")
-    with pytest.raises(DataError, match=r"imu.csv: implausible data: imu: at rest .* "
-                                        r"deg/s declared as rad/s\?"):
+    with pytest.raises(
+        DataError,
+        match=r"imu.csv: implausible data: imu: at rest .* "
+        r"deg/s declared as rad/s\?",
+    ):
         load_flight(opts, tmp_path)
     # declaring the unit fixes it
     ok = ingest_options({"inputs": CSV_IN, "csv": {"units": {"gyro": "deg/s"}}}, "f")
     rec = load_flight(ok, tmp_path)
     np.testing.assert_allclose(rec.imu.angular_rate_t, d["w"], rtol=1e-15)
     _write_flight_csv(tmp_path, d, acc_scale=1 / 9.80665)  # g in an m/s^2 column
-    with pytest.raises(DataError, match=r"imu: median \|specific force\| is 0.99\d+ m/s\^2 after "
-                                        r"converting from m/s\^2, expected ~9.8: values are in "
-                                        r"g but declared as m/s\^2\?"):
+    with pytest.raises(
+        DataError,
+        match=r"imu: median \|specific force\| is 0.99\d+ m/s\^2 after "
+        r"converting from m/s\^2, expected ~9.8: values are in "
+        r"g but declared as m/s\^2\?",
+    ):
         load_flight(opts, tmp_path)
     # plausibility: warn -> processed, the finding is a warning and a note
     warn = ingest_options({"inputs": CSV_IN, "checks": {"plausibility": "warn"}}, "f")
@@ -103,8 +120,7 @@ def test_rest_rate_consistent_with_earth_rate_in_static_data():
 
 
 def test_height_and_latlon_ranges():
-    assert _levels(ck.check_height("altimeter", np.array([100.0, 40000.0])),
-                   "height range") == ["error"]
+    assert _levels(ck.check_height("altimeter", np.array([100.0, 40000.0])), "height range") == ["error"]
     assert ck.check_gnss(np.array([91.0]), np.array([0.0]))[0].level == "error"
     assert ck.check_gnss(np.array([45.0]), np.array([-179.0]))[0].level == "ok"
 
@@ -136,10 +152,11 @@ def _record():
     t = np.arange(0.0, 10.0, 0.5)
     alt_t = np.array([0.0, 1.0, 2.0, 6.0, 7.0])
     return FlightRecord(
-        0, ImuChannel(t, np.zeros((len(t), 3)), np.zeros((len(t), 3))),
+        0,
+        ImuChannel(t, np.zeros((len(t), 3)), np.zeros((len(t), 3))),
         AltimeterChannel(alt_t, 100.0 + 10.0 * alt_t),
-        GnssChannel(np.array([0.0, 2.0]), np.radians([10.0, 10.2]),
-                    np.radians([179.9, -179.9]), np.array([5.0, 7.0])))
+        GnssChannel(np.array([0.0, 2.0]), np.radians([10.0, 10.2]), np.radians([179.9, -179.9]), np.array([5.0, 7.0])),
+    )
 
 
 def test_epoch_helpers_interpolate_and_respect_gaps():

@@ -14,11 +14,9 @@ from gravsurvey.io.ingest import load_flight
 from gravsurvey.settings import ingest_options
 
 
-def _write_flight_csv(tmp, d, imu_cols=None, imu_fmt=None, acc_scale=1.0, gyro_scale=1.0,
-                      times=None):
+def _write_flight_csv(tmp, d, imu_cols=None, imu_fmt=None, acc_scale=1.0, gyro_scale=1.0, times=None):
     """CSV files per docs/formats.md (optionally other columns / scaled units / times)."""
-    cols = imu_cols or ["time_ns", "fx_mps2", "fy_mps2", "fz_mps2", "wx_radps", "wy_radps",
-                        "wz_radps"]
+    cols = imu_cols or ["time_ns", "fx_mps2", "fy_mps2", "fz_mps2", "wx_radps", "wy_radps", "wz_radps"]
     t = times if times is not None else [str(x) for x in d["imu_t"]]
     lines = ["# flight TEST", "# units SI", ",".join(cols)]
     for k in range(len(d["imu_t"])):
@@ -29,8 +27,9 @@ def _write_flight_csv(tmp, d, imu_cols=None, imu_fmt=None, acc_scale=1.0, gyro_s
     alt = ["time_ns,height_m"] + [f"{t},{h!r}" for t, h in zip(d["alt_t"], d["h"].tolist())]
     (tmp / "altimeter.csv").write_text("\n".join(alt) + "\n")
     g = ["time_ns,lat_deg,lon_deg,height_m"] + [
-        f"{t},{a!r},{b!r},{c!r}" for t, a, b, c in zip(d["gnss_t"], d["lat"].tolist(),
-                                                      d["lon"].tolist(), d["gh"].tolist())]
+        f"{t},{a!r},{b!r},{c!r}"
+        for t, a, b, c in zip(d["gnss_t"], d["lat"].tolist(), d["lon"].tolist(), d["gh"].tolist())
+    ]
     (tmp / "gnss.csv").write_text("\n".join(g) + "\n")
 
 
@@ -38,18 +37,20 @@ CSV_IN = {"csv": {"imu": "imu.csv", "altimeter": "altimeter.csv", "gnss": "gnss.
 
 
 def test_time_formats_give_the_same_integer_ns(tmp_path):
-    t = np.array([1_700_000_000_000_000_001, 1_700_000_000_010_000_000,
-                  1_700_000_000_999_999_999], dtype=np.int64)
+    t = np.array([1_700_000_000_000_000_001, 1_700_000_000_010_000_000, 1_700_000_000_999_999_999], dtype=np.int64)
     sec = ["1700000000.000000001", "1700000000.01", "1700000000.999999999"]
-    iso = ["2023-11-14T22:13:20.000000001Z", "2023-11-14T22:13:20.010000000+00:00",
-           "2023-11-14T22:13:20.999999999"]
+    iso = ["2023-11-14T22:13:20.000000001Z", "2023-11-14T22:13:20.010000000+00:00", "2023-11-14T22:13:20.999999999"]
     # GPS time = UTC + 18 s; 1980-01-06 + week * 7 d + sow
     gps = t + 18 * 10**9 - 315964800 * 10**9
     weeks = gps // (604800 * 10**9)
     sow = gps - weeks * 604800 * 10**9
     gps_rows = [f"{w},{s // 10**9}.{s % 10**9:09d}" for w, s in zip(weeks, sow)]
-    cases = {"ns": ("time_ns", [str(x) for x in t]), "s": ("t_s", sec), "iso": ("utc", iso),
-             "gps_week_sow": ("gps_week,gps_sow", gps_rows)}
+    cases = {
+        "ns": ("time_ns", [str(x) for x in t]),
+        "s": ("t_s", sec),
+        "iso": ("utc", iso),
+        "gps_week_sow": ("gps_week,gps_sow", gps_rows),
+    }
     for fmt, (hdr, vals) in cases.items():
         p = tmp_path / f"{fmt}.csv"
         p.write_text(f"{hdr},height_m\n" + "".join(f"{v},100.5\n" for v in vals))
@@ -63,11 +64,14 @@ def test_time_formats_give_the_same_integer_ns(tmp_path):
 def test_units_and_custom_columns(tmp_path):
     d = static_flight(seconds=4.0)
     cols = ["t", "ax", "ay", "az", "gx", "gy", "gz"]
-    _write_flight_csv(tmp_path, d, imu_cols=cols, acc_scale=1 / 9.80665,
-                      gyro_scale=180 / np.pi * 3600)
-    cfg = {"inputs": CSV_IN, "csv": {
-        "columns": {"imu": dict(zip(["time", "fx", "fy", "fz", "wx", "wy", "wz"], cols))},
-        "units": {"accel": "g", "gyro": "deg/h"}}}
+    _write_flight_csv(tmp_path, d, imu_cols=cols, acc_scale=1 / 9.80665, gyro_scale=180 / np.pi * 3600)
+    cfg = {
+        "inputs": CSV_IN,
+        "csv": {
+            "columns": {"imu": dict(zip(["time", "fx", "fy", "fz", "wx", "wy", "wz"], cols))},
+            "units": {"accel": "g", "gyro": "deg/h"},
+        },
+    }
     rec = load_flight(ingest_options(cfg, "f"), tmp_path)
     np.testing.assert_allclose(rec.imu.specific_force_t, d["f"], rtol=1e-15, atol=0)
     np.testing.assert_allclose(rec.imu.angular_rate_t, d["w"], rtol=1e-15, atol=0)
@@ -77,15 +81,21 @@ def test_units_and_custom_columns(tmp_path):
     np.testing.assert_allclose(v["height"], [304.8, 1000.000032], rtol=1e-12)
 
 
-@pytest.mark.parametrize("content, match", [
-    ("time_ns,height_m\n1,2\n2,abc\n", r"bad.csv: line 3, column 'height_m': expected a number, got 'abc'"),
-    ("# c\ntime_ns,height_m\n1,2\n2.5,3\n", r"bad.csv: line 4, column 'time_ns': expected integer nanoseconds, got '2.5'"),
-    ("time_ns,height_m\n1,2\n2,3,4\n", r"bad.csv: line 3: 3 fields, header has 2"),
-    ("time_ns,alt\n1,2\n", r"bad.csv: line 1: column 'height_m' missing from the header"),
-    ("# only comments\n", r"bad.csv: no header row"),
-    ("time_ns,height_m\n1,\n", r"bad.csv: line 2, column 'height_m': expected a number, got ''"),
-    ("time_ns,height_m\n99999999999999999999,1\n", r"line 2, column 'time_ns': expected integer"),
-])
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        ("time_ns,height_m\n1,2\n2,abc\n", r"bad.csv: line 3, column 'height_m': expected a number, got 'abc'"),
+        (
+            "# c\ntime_ns,height_m\n1,2\n2.5,3\n",
+            r"bad.csv: line 4, column 'time_ns': expected integer nanoseconds, got '2.5'",
+        ),
+        ("time_ns,height_m\n1,2\n2,3,4\n", r"bad.csv: line 3: 3 fields, header has 2"),
+        ("time_ns,alt\n1,2\n", r"bad.csv: line 1: column 'height_m' missing from the header"),
+        ("# only comments\n", r"bad.csv: no header row"),
+        ("time_ns,height_m\n1,\n", r"bad.csv: line 2, column 'height_m': expected a number, got ''"),
+        ("time_ns,height_m\n99999999999999999999,1\n", r"line 2, column 'time_ns': expected integer"),
+    ],
+)
 def test_garbage_csv_names_file_line_column(tmp_path, content, match):
     p = tmp_path / "bad.csv"
     p.write_text(content)
@@ -119,8 +129,11 @@ def test_mistyped_imu_csv_through_load_flight(tmp_path):
     parts[5] = "0x1F"
     text[10] = ",".join(parts)
     (tmp_path / "imu.csv").write_text("\n".join(text))
-    with pytest.raises(DataError, match=r"imu.csv: line 11, column 'wy_radps': expected a "
-                                        r"number, got '0x1F'"):
+    with pytest.raises(
+        DataError,
+        match=r"imu.csv: line 11, column 'wy_radps': expected a "
+        r"number, got '0x1F'",
+    ):
         load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
 
 
@@ -152,20 +165,28 @@ def test_config_errors_name_the_key_and_suggest(tmp_path):
         with pytest.raises(ConfigError, match=match):
             ingest_options(cfg, "flights[0]")
 
-    err({"inputs": CSV_IN, "csv": {"units": {"accel": "G"}}},
-        r"flights\[0\].csv.units.accel: expected one of m/s\^2, g, mGal, got 'G' \(did you mean 'g'\?\)")
-    err({"inputs": CSV_IN, "csv": {"unit": {}}},
-        r"flights\[0\].csv.unit: unknown key \(did you mean 'units'\?\)")
+    err(
+        {"inputs": CSV_IN, "csv": {"units": {"accel": "G"}}},
+        r"flights\[0\].csv.units.accel: expected one of m/s\^2, g, mGal, got 'G' \(did you mean 'g'\?\)",
+    )
+    err({"inputs": CSV_IN, "csv": {"unit": {}}}, r"flights\[0\].csv.unit: unknown key \(did you mean 'units'\?\)")
     err({"inputs": {"mcap": "a", "csv": {}}}, r"flights\[0\].inputs: expected exactly one")
     err({"inputs": {"csv": {"imu": "i.csv"}}}, r"flights\[0\].inputs.csv.altimeter: missing")
     err({"inputs": {"mcap": "a"}, "topics": {"imu": ""}}, r"flights\[0\].topics.imu: expected a non-empty string")
     err({"inputs": {"mcap": "a"}, "topcs": {}}, r"flights\[0\].topcs: unknown key \(did you mean 'topics'\?\)")
-    err({"inputs": {"mcap": "a"}, "checks": {"gap_factor": 1}}, r"flights\[0\].checks.gap_factor: expected a number in \[1.5")
+    err(
+        {"inputs": {"mcap": "a"}, "checks": {"gap_factor": 1}},
+        r"flights\[0\].checks.gap_factor: expected a number in \[1.5",
+    )
     err({"inputs": {"mcap": "a"}, "mcap": {"check_crc": "yes"}}, r"flights\[0\].mcap.check_crc: expected true or false")
-    err({"inputs": {"mcap": "a"}, "mcap": {"json_fields": {"imu": {"specific_force": ["a", "b"]}}}},
-        r"flights\[0\].mcap.json_fields.imu.specific_force: expected a field name or a list of 3")
-    err({"inputs": CSV_IN, "csv": {"time_format": "gps_week_sow", "columns": {"imu": {"time": "t"}}}},
-        r"flights\[0\].csv.columns.imu.time: time_format gps_week_sow needs two columns")
+    err(
+        {"inputs": {"mcap": "a"}, "mcap": {"json_fields": {"imu": {"specific_force": ["a", "b"]}}}},
+        r"flights\[0\].mcap.json_fields.imu.specific_force: expected a field name or a list of 3",
+    )
+    err(
+        {"inputs": CSV_IN, "csv": {"time_format": "gps_week_sow", "columns": {"imu": {"time": "t"}}}},
+        r"flights\[0\].csv.columns.imu.time: time_format gps_week_sow needs two columns",
+    )
     o = ingest_options({"inputs": {"mcap": "F/x.mcap"}}, "flights[0]", base_dir=tmp_path)
     assert o.input_paths() == [tmp_path / "F" / "x.mcap"]
     assert o.topics == {"imu": "/imu", "altimeter": "/altimeter", "gnss": "/gnss"}
@@ -199,7 +220,6 @@ def test_nonfinite_samples_dropped_with_warning(tmp_path):
 def test_header_only_csv_is_a_clear_error(tmp_path):
     d = static_flight(seconds=2.0)
     _write_flight_csv(tmp_path, d)
-    (tmp_path / "imu.csv").write_text("# nothing logged\ntime_ns,fx_mps2,fy_mps2,fz_mps2,"
-                                      "wx_radps,wy_radps,wz_radps\n")
+    (tmp_path / "imu.csv").write_text("# nothing logged\ntime_ns,fx_mps2,fy_mps2,fz_mps2,wx_radps,wy_radps,wz_radps\n")
     with pytest.raises(DataError, match=r"imu.csv: no usable imu samples"):
         load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)

@@ -29,20 +29,19 @@ def texts(seconds=3.0):
     """Clean CSV texts per docs/formats.md: role -> str."""
     d = static_flight(seconds=seconds)
     imu = ["time_ns,fx_mps2,fy_mps2,fz_mps2,wx_radps,wy_radps,wz_radps"] + [
-        ",".join([str(t)] + [repr(float(x)) for x in (*d["f"][k], *d["w"][k])])
-        for k, t in enumerate(d["imu_t"])]
+        ",".join([str(t)] + [repr(float(x)) for x in (*d["f"][k], *d["w"][k])]) for k, t in enumerate(d["imu_t"])
+    ]
     alt = ["time_ns,height_m"] + [f"{t},{h!r}" for t, h in zip(d["alt_t"], d["h"].tolist())]
     gnss = ["time_ns,lat_deg,lon_deg,height_m"] + [
-        f"{t},{a!r},{b!r},{c!r}" for t, a, b, c in zip(d["gnss_t"], d["lat"].tolist(),
-                                                      d["lon"].tolist(), d["gh"].tolist())]
-    return {"imu": "\n".join(imu) + "\n", "altimeter": "\n".join(alt) + "\n",
-            "gnss": "\n".join(gnss) + "\n"}
+        f"{t},{a!r},{b!r},{c!r}"
+        for t, a, b, c in zip(d["gnss_t"], d["lat"].tolist(), d["lon"].tolist(), d["gh"].tolist())
+    ]
+    return {"imu": "\n".join(imu) + "\n", "altimeter": "\n".join(alt) + "\n", "gnss": "\n".join(gnss) + "\n"}
 
 
 def _write(tmp, imu_bytes=None):
     for role, text in texts().items():
-        (Path(tmp) / f"{role}.csv").write_bytes(text.encode() if role != "imu" or imu_bytes is None
-                                                else imu_bytes)
+        (Path(tmp) / f"{role}.csv").write_bytes(text.encode() if role != "imu" or imu_bytes is None else imu_bytes)
 
 
 def test_bom_accepted_same_data(tmp_path):
@@ -60,8 +59,7 @@ def test_bom_accepted_same_data(tmp_path):
     assert "error" not in rep and rep["channels"][0]["samples"] == 300
 
 
-FUZZ = settings(max_examples=40, deadline=None, derandomize=True,
-                suppress_health_check=[HealthCheck.too_slow])
+FUZZ = settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 
 
 @FUZZ
@@ -145,16 +143,17 @@ def test_unterminated_complete_last_line_dropped_with_a_warning(tmp_path):
         warnings.simplefilter("always", DataWarning)
         rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
     assert rec.data_loss == []
-    assert any("imu.csv: last line (line 301" in str(w.message) and "has no line end" in
-               str(w.message) for w in caught)
+    assert any("imu.csv: last line (line 301" in str(w.message) and "has no line end" in str(w.message) for w in caught)
     assert len(rec.imu.time) == 299
     (rep,) = inspect_files([tmp_path / "imu.csv"])
     assert rep["damage"] == [] and rep["channels"][0]["messages"] == 299
 
 
 @FUZZ
-@given(rows=st.lists(st.integers(0, 299), min_size=1, max_size=5, unique=True),
-       bad=st.sampled_from(["nan", "inf", "-inf", "NaN", "2.6e21", "-1e300", "1e308"]))
+@given(
+    rows=st.lists(st.integers(0, 299), min_size=1, max_size=5, unique=True),
+    bad=st.sampled_from(["nan", "inf", "-inf", "NaN", "2.6e21", "-1e300", "1e308"]),
+)
 @example(rows=[150], bad="2.6e21")  # one corrupted digit: crashed the mechanization (ZeroDivisionError)
 @example(rows=[7], bad="1e308")  # issue 14: 1e308 values ended in exit 3
 def test_nonfinite_values_dropped_and_counted(rows, bad):

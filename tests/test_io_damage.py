@@ -83,8 +83,7 @@ def _recovered(data, **kw):
         except DataError:
             assert len(data) < 8 or data[:8] != MAGIC  # only "not MCAP" may raise here
             return None, Counter()
-        got = Counter((c.channels[ch].topic, lt, bytes(b)) for ch, _, lt, _, b in c.raw
-                      if ch in c.channels)
+        got = Counter((c.channels[ch].topic, lt, bytes(b)) for ch, _, lt, _, b in c.raw if ch in c.channels)
         # the whole pipeline front end: only our own error types
         try:
             with warnings.catch_warnings():
@@ -96,8 +95,9 @@ def _recovered(data, **kw):
 
 
 KINDS = ["ros2_zstd", "ros2_none", "json_lz4", "json_unchunked"]
-FUZZ = settings(max_examples=100, deadline=None,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+FUZZ = settings(
+    max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large]
+)
 
 
 @FUZZ
@@ -116,8 +116,7 @@ def test_truncation_salvages_every_message_before_the_cut(kind, frac):
 
 
 @FUZZ
-@given(kind=st.sampled_from(KINDS),
-       bits=st.lists(st.integers(0, 2**40), min_size=1, max_size=3))
+@given(kind=st.sampled_from(KINDS), bits=st.lists(st.integers(0, 2**40), min_size=1, max_size=3))
 # the bug of issue 14: flipping byte 11815 (a message record's opcode, 5 -> 4 or 1) of the
 # unchunked JSON file lost every message of the batch the record was in, back to byte 426:
 # definitions and messages were handled in one batch whose damage was reported at its start
@@ -135,15 +134,14 @@ def test_bit_flips_never_crash_and_keep_messages_before_damage(kind, bits):
 
 
 @FUZZ
-@given(kind=st.sampled_from(KINDS), frac=st.floats(0.0, 1.0),
-       junk=st.binary(min_size=1, max_size=64))
+@given(kind=st.sampled_from(KINDS), frac=st.floats(0.0, 1.0), junk=st.binary(min_size=1, max_size=64))
 # a ',' inside a JSON vector ("[1, 2, 3]" -> "[1, 2,, 3]"-like ragged arrays): numpy refused the
 # ragged column with ValueError in the bulk JSON decoder
 @example(kind="json_unchunked", frac=2216.5 / 160938, junk=b",")
 def test_random_garbage_overwrite_only_our_errors(kind, frac, junk):
     raw = bytearray(sample(kind))
     pos = int(frac * (len(raw) - 1))
-    raw[pos:pos + len(junk)] = junk
+    raw[pos : pos + len(junk)] = junk
     _, got = _recovered(bytes(raw))
     assert not (_expected_before(kind, pos) - got)
 
@@ -219,8 +217,13 @@ def test_garbage_record_length_refused_with_bounded_memory(tmp_path):
 
 def _chunk_record(payload_records, declared_size, compression="zstd", compressed=None):
     comp = compressed if compressed is not None else payload_records
-    body = (struct.pack("<QQQI", 0, 0, declared_size, 0) + struct.pack("<I", len(compression))
-            + compression.encode() + struct.pack("<Q", len(comp)) + comp)
+    body = (
+        struct.pack("<QQQI", 0, 0, declared_size, 0)
+        + struct.pack("<I", len(compression))
+        + compression.encode()
+        + struct.pack("<Q", len(comp))
+        + comp
+    )
     return bytes([6]) + struct.pack("<Q", len(body)) + body
 
 

@@ -31,8 +31,7 @@ from gravsurvey.io.ingest import load_flight
 from gravsurvey.io.mcap import OP_CHUNK, read_mcap, scan_records
 from gravsurvey.settings import ingest_options
 
-KINDS = ["ros2_zstd", "ros2_none", "json_lz4", "json_unchunked", "ros2_zstd_nocrc",
-         "ros2_none_nocrc"]
+KINDS = ["ros2_zstd", "ros2_none", "json_lz4", "json_unchunked", "ros2_zstd_nocrc", "ros2_none_nocrc"]
 FLIGHT_S = 6.0
 N_MESSAGES = 600 + 60 + 60
 
@@ -44,7 +43,7 @@ def _zero_chunk_crcs(data):
     n, _, _, arrs = scan_records(buf, 8, len(buf), stop_at_footer=True)
     for k in np.flatnonzero(arrs[0] == OP_CHUNK):
         p = int(arrs[1][k])
-        b[p + 24:p + 28] = b"\0\0\0\0"
+        b[p + 24 : p + 28] = b"\0\0\0\0"
     return bytes(b)
 
 
@@ -95,8 +94,7 @@ def records(kind):
 
 def intact(kind, damaged):
     """Messages of the records that no damaged byte range [a, b) touches."""
-    return Counter(m for s, e, msgs in records(kind)
-                   if not any(a < e and s < b for a, b in damaged) for m in msgs)
+    return Counter(m for s, e, msgs in records(kind) if not any(a < e and s < b for a, b in damaged) for m in msgs)
 
 
 def everything(kind):
@@ -114,8 +112,7 @@ def read_damaged(data):
         except DataError as exc:
             assert "not an MCAP file" in str(exc) or "empty file" in str(exc)
             return None, Counter()
-        got = Counter((c.channels[ch].topic, lt, bytes(b)) for ch, _, lt, _, b in c.raw
-                      if ch in c.channels)
+        got = Counter((c.channels[ch].topic, lt, bytes(b)) for ch, _, lt, _, b in c.raw if ch in c.channels)
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", DataWarning)
@@ -129,14 +126,15 @@ def check_outcome(kind, damaged, c, got):
     """The assertions every fault shares."""
     want = intact(kind, damaged)
     missing = want - got
-    assert not missing, (f"{sum(missing.values())} intact messages lost (damage {damaged}); "
-                         f"salvage: {c.salvage.describe('f') if c and c.salvage else None}")
+    assert not missing, (
+        f"{sum(missing.values())} intact messages lost (damage {damaged}); "
+        f"salvage: {c.salvage.describe('f') if c and c.salvage else None}"
+    )
     # (without a CRC a corrupted payload is a changed message, not a lost one)
     lost = sum(everything(kind).values()) - sum(got.values())
     if c is not None and lost > 0:
         # a loss is always said: a salvage report, or a note (records with unknown opcodes)
-        assert c.salvage is not None or any("unknown opcodes" in n or "no footer" in n
-                                            for n in c.notes), c.notes
+        assert c.salvage is not None or any("unknown opcodes" in n or "no footer" in n for n in c.notes), c.notes
     if c is not None and c.salvage is not None:
         regs = c.salvage.regions
         assert regs and all(r.start < r.end or r.start == r.end for r in regs)
@@ -144,13 +142,16 @@ def check_outcome(kind, damaged, c, got):
         assert c.salvage.recovered == len(c.raw)
 
 
-FUZZ = settings(max_examples=60, deadline=None, derandomize=True,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+FUZZ = settings(
+    max_examples=60,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 
 
 @FUZZ
-@given(kind=st.sampled_from(KINDS), bits=st.lists(st.integers(0, 2**40), min_size=1,
-                                                  max_size=3))
+@given(kind=st.sampled_from(KINDS), bits=st.lists(st.integers(0, 2**40), min_size=1, max_size=3))
 @example(kind="json_unchunked", bits=[11815 * 8])  # issue 14: a message opcode 5 -> 4
 @example(kind="json_unchunked", bits=[11815 * 8 + 1])  # 5 -> 7: a stray message index
 @example(kind="ros2_zstd", bits=[20000 * 8 + 3])
@@ -193,13 +194,12 @@ def test_zeroed_block(kind, frac, length):
 
 
 @FUZZ
-@given(kind=st.sampled_from(KINDS), frac=st.floats(0.0, 1.0), junk=st.binary(min_size=1,
-                                                                            max_size=64))
+@given(kind=st.sampled_from(KINDS), frac=st.floats(0.0, 1.0), junk=st.binary(min_size=1, max_size=64))
 def test_garbage_overwrite(kind, frac, junk):
     raw = bytearray(sample(kind))
     a = int(frac * (len(raw) - 1))
-    raw[a:a + len(junk)] = junk
-    del raw[len(sample(kind)):]
+    raw[a : a + len(junk)] = junk
+    del raw[len(sample(kind)) :]
     c, got = read_damaged(bytes(raw))
     check_outcome(kind, [(a, a + len(junk))], c, got)
 
@@ -229,7 +229,7 @@ def test_damaged_middle_chunk_reported_and_rest_kept(kind, tmp_path):
     chunks = [(s, e, m) for s, e, m in recs if len(m) > 1]
     s, e, lost = chunks[len(chunks) // 2]
     raw = bytearray(sample(kind))
-    raw[s + 9 + 60:e - 8] = bytes(e - 8 - s - 9 - 60)  # zero the compressed records
+    raw[s + 9 + 60 : e - 8] = bytes(e - 8 - s - 9 - 60)  # zero the compressed records
     p = tmp_path / "z.mcap"
     p.write_bytes(bytes(raw))
     c = read_mcap(p, keep_raw=True)
@@ -248,7 +248,7 @@ def test_two_damaged_regions_both_reported(tmp_path):
     raw = bytearray(sample("json_unchunked"))
     hit = [msgs[100], msgs[500]]
     for s, e, _ in hit:
-        raw[s + 1:s + 9] = b"\xff" * 8  # garbage length field
+        raw[s + 1 : s + 9] = b"\xff" * 8  # garbage length field
     p = tmp_path / "two.mcap"
     p.write_bytes(bytes(raw))
     c = read_mcap(p, keep_raw=True)
@@ -287,14 +287,18 @@ def test_crcless_corrupted_values_dropped_and_counted(tmp_path):
     np.testing.assert_array_equal(imu.time_ns, d["imu_t"][keep])
     np.testing.assert_array_equal(imu.values["specific_force"], d["f"][keep])
     opts = ingest_options({"inputs": {"mcap": "v.mcap"}}, "f")
-    with pytest.warns(DataWarning, match=r"imu: 3 messages .* dropped \(3 samples without a "
-                                         r"chunk CRC failed the damage checks"):
+    with pytest.warns(
+        DataWarning,
+        match=r"imu: 3 messages .* dropped \(3 samples without a "
+        r"chunk CRC failed the damage checks",
+    ):
         rec = load_flight(opts, tmp_path)
     assert len(rec.imu.time) == 597
     # with CRCs the same flips are caught by the CRC: the chunk is reported, not its values
-    assert read_mcap(_write(tmp_path, "crc.mcap", _flip_like(sample("ros2_none"), raw,
-                                                             sample("ros2_none_nocrc")))
-                     ).salvage is not None
+    assert (
+        read_mcap(_write(tmp_path, "crc.mcap", _flip_like(sample("ros2_none"), raw, sample("ros2_none_nocrc")))).salvage
+        is not None
+    )
 
 
 def _write(tmp_path, name, data):
@@ -305,8 +309,7 @@ def _write(tmp_path, name, data):
 def _flip_like(target, damaged, original):
     """Apply to ``target`` the byte differences between ``damaged`` and ``original``."""
     t = bytearray(target)
-    for i in np.flatnonzero(np.frombuffer(bytes(damaged), np.uint8)
-                            != np.frombuffer(original, np.uint8)):
+    for i in np.flatnonzero(np.frombuffer(bytes(damaged), np.uint8) != np.frombuffer(original, np.uint8)):
         t[i] = damaged[i]
     return bytes(t)
 
@@ -317,15 +320,17 @@ def test_damage_checks_leave_clean_data_alone():
 
     d = static_flight(seconds=20.0)
     n = len(d["imu_t"])
-    bad, why = damaged_values("imu", d["imu_t"], d["imu_t"], {"specific_force": d["f"],
-                                                              "angular_rate": d["w"]},
-                              np.ones(n, bool))
+    bad, why = damaged_values(
+        "imu", d["imu_t"], d["imu_t"], {"specific_force": d["f"], "angular_rate": d["w"]}, np.ones(n, bool)
+    )
     assert not bad.any(), why
     here = Path(__file__).resolve().parent
     # real ground-robot bags, and the simulated sample flights (turns, turbulence), read as if
     # they had no CRCs
-    for f in [*sorted((here / "data" / "ros2-imu").glob("*.mcap")),
-              *sorted((here.parent / "sample_data").glob("*/F01/*.mcap"))]:
+    for f in [
+        *sorted((here / "data" / "ros2-imu").glob("*.mcap")),
+        *sorted((here.parent / "sample_data").glob("*/F01/*.mcap")),
+    ]:
         c = read_mcap(f, check_crc=False)
         assert c.decoded
         for cid, blk in c.decoded.items():
@@ -352,16 +357,18 @@ def test_crcless_flip_that_crashed_mechanization(tmp_path):
     inside zstd data) decoded an IMU value of 2.6e21 m/s^2 that was processed as data and ended
     in ZeroDivisionError in mechanization.  The damage checks drop it; with CRCs the chunk is
     refused instead."""
-    bag = (Path(__file__).resolve().parents[1] / "sample_data" / "grid_ros2" / "F01"
-           / "F01_ros2.mcap")
+    bag = Path(__file__).resolve().parents[1] / "sample_data" / "grid_ros2" / "F01" / "F01_ros2.mcap"
     raw = bytearray(_zero_chunk_crcs(bag.read_bytes()))
     raw[866968] ^= 0x02
     (tmp_path / "d.mcap").write_bytes(bytes(raw))
-    opts = ingest_options({"inputs": {"mcap": "d.mcap"},
-                                     "topics": {"imu": "/imu", "altimeter": "/altimeter",
-                                                "gnss": "/gnss"}}, "f")
-    with pytest.warns(DataWarning, match=r"1 samples without a chunk CRC failed the damage "
-                                         r"checks \(1 non-finite/absurd\)"):
+    opts = ingest_options(
+        {"inputs": {"mcap": "d.mcap"}, "topics": {"imu": "/imu", "altimeter": "/altimeter", "gnss": "/gnss"}}, "f"
+    )
+    with pytest.warns(
+        DataWarning,
+        match=r"1 samples without a chunk CRC failed the damage "
+        r"checks \(1 non-finite/absurd\)",
+    ):
         rec = load_flight(opts, tmp_path)
     assert np.abs(rec.imu.specific_force_t).max() < 50.0
     assert np.abs(rec.imu.angular_rate_t).max() < 1.0
@@ -386,7 +393,7 @@ def test_damaged_opcode_posing_as_data_end_does_not_hide_later_damage(tmp_path):
     chunks = [(s, e, m) for s, e, m in recs if len(m) > 1]
     raw[mi[3]] ^= 0x08
     s, e, lost = chunks[10]
-    raw[s + 80:e - 8] = bytes(e - 8 - s - 80)
+    raw[s + 80 : e - 8] = bytes(e - 8 - s - 80)
     c, got = read_damaged(bytes(raw))
     check_outcome(kind, [(mi[3], mi[3] + 1), (s + 80, e - 8)], c, got)
     assert any(r.start == s and r.lost_messages == len(lost) for r in c.salvage.regions)
@@ -400,5 +407,4 @@ def test_damaged_summary_alone_is_a_note_not_data_loss(tmp_path):
     raw[data_end + 13 + 8] ^= 0x80  # top bit of the first summary record's length
     c, got = read_damaged(bytes(raw))
     assert c.salvage is None and got == everything(kind)
-    assert any("summary section damaged" in n and "all data records were read" in n
-               for n in c.notes)
+    assert any("summary section damaged" in n and "all data records were read" in n for n in c.notes)

@@ -15,8 +15,13 @@ from gravsurvey.io.inspect import inspect_files
 
 
 def gs(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "gravsurvey", *map(str, args)],
-                          capture_output=True, text=True, cwd=cwd, stdin=subprocess.DEVNULL)
+    return subprocess.run(
+        [sys.executable, "-m", "gravsurvey", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        stdin=subprocess.DEVNULL,
+    )
 
 
 def test_inspect_damaged_mcap_exits_1_and_says_where(tmp_path):
@@ -62,12 +67,13 @@ def test_inspect_config_applies_csv_columns_and_units(tmp_path):
     d = static_flight(seconds=3.0)
     (tmp_path / "F1").mkdir()
     lines = ["t,ax,ay,az,gx,gy,gz"] + [
-        ",".join([f"{t / 1e9:.9f}"] + [repr(float(x)) for x in (*d["f"][k] / 9.80665,
-                                                               *np.degrees(d["w"][k]) * 3600)])
-        for k, t in enumerate(d["imu_t"])]
+        ",".join([f"{t / 1e9:.9f}"] + [repr(float(x)) for x in (*d["f"][k] / 9.80665, *np.degrees(d["w"][k]) * 3600)])
+        for k, t in enumerate(d["imu_t"])
+    ]
     (tmp_path / "F1" / "imu.csv").write_text("\n".join(lines) + "\n")
     (tmp_path / "F1" / "alt.csv").write_text(
-        "time_ns,height_m\n" + "".join(f"{t},{h!r}\n" for t, h in zip(d["alt_t"], d["h"])))
+        "time_ns,height_m\n" + "".join(f"{t},{h!r}\n" for t, h in zip(d["alt_t"], d["h"]))
+    )
     (tmp_path / "survey.yaml").write_text(
         "flights:\n"
         "- name: F1\n"
@@ -77,7 +83,8 @@ def test_inspect_config_applies_csv_columns_and_units(tmp_path):
         "    columns: {imu: {time: t, fx: ax, fy: ay, fz: az, wx: gx, wy: gy, wz: gz}}\n"
         "    units: {accel: g, gyro: deg/h}\n"
         "  initial: {lat_deg: 45.0, lon_deg: 135.0, height_m: 250.0,\n"
-        "            velocity_enu_mps: [0, 0, 0], attitude_deg: [0, 0, 90]}\n")
+        "            velocity_enu_mps: [0, 0, 0], attitude_deg: [0, 0, 90]}\n"
+    )
     r = gs("inspect", tmp_path / "F1" / "imu.csv")
     assert r.returncode == 1 and "header matches no channel" in r.stdout
     r = gs("inspect", "--json", "--config", tmp_path / "survey.yaml", tmp_path / "F1" / "imu.csv")
@@ -112,7 +119,7 @@ def test_run_with_a_damaged_middle_chunk_reads_on_and_says_so(tmp_path):
     chunks = np.flatnonzero(a[0] == OP_CHUNK)
     k = chunks[len(chunks) // 2]
     p, ln = int(a[1][k]), int(a[2][k])
-    raw[p + 60:p + ln - 8] = bytes(ln - 68)
+    raw[p + 60 : p + ln - 8] = bytes(ln - 68)
     f.write_bytes(bytes(raw))
     c = read_mcap(f)
     (reg,) = c.salvage.regions

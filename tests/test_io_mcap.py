@@ -34,11 +34,12 @@ def test_conformance_corpus_messages_exact():
     keyerror_files = 0
     for f in _conformance_files():
         exp = json.loads(f.with_suffix(".json").read_text())["records"]
-        topics = {int(dict(r["fields"])["id"]): dict(r["fields"])["topic"]
-                  for r in exp if r["type"] == "Channel"}
+        topics = {int(dict(r["fields"])["id"]): dict(r["fields"])["topic"] for r in exp if r["type"] == "Channel"}
         msgs = [dict(r["fields"]) for r in exp if r["type"] == "Message"]
-        want = sorted(((topics[int(m["channel_id"])], int(m["log_time"]),
-                        bytes(int(x) for x in m["data"])) for m in msgs), key=lambda x: x[1])
+        want = sorted(
+            ((topics[int(m["channel_id"])], int(m["log_time"]), bytes(int(x) for x in m["data"])) for m in msgs),
+            key=lambda x: x[1],
+        )
         c = read_mcap(f, keep_raw=True)
         got = [(c.channels[ch].topic, lt, data) for ch, _, lt, _, data in c.raw]
         assert got == want, f.name
@@ -88,17 +89,16 @@ def ros2_reference():
                     a, w = m.linear_acceleration, m.angular_velocity
                     vals.setdefault(ch.topic, []).append((st, a.x, a.y, a.z, w.x, w.y, w.z))
                 else:
-                    vals.setdefault(ch.topic, []).append((st, m.latitude, m.longitude,
-                                                          m.altitude))
+                    vals.setdefault(ch.topic, []).append((st, m.latitude, m.longitude, m.altitude))
         out[name] = {k: np.array(v, dtype=object) for k, v in vals.items()}
     return out
 
 
 def test_ros2_real_recordings_counts_rates_values(ros2_reference):
-    counts = {"robot_localization_test1.mcap": {"/imu/data": 11865, "/fix": 989,
-                                                "/husky_velocity_controller/odom": 3952},
-              "robot_localization_test2.mcap": {"/imu/data": 3061,
-                                                "/jackal_velocity_controller/odom": 3060}}
+    counts = {
+        "robot_localization_test1.mcap": {"/imu/data": 11865, "/fix": 989, "/husky_velocity_controller/odom": 3952},
+        "robot_localization_test2.mcap": {"/imu/data": 3061, "/jackal_velocity_controller/odom": 3060},
+    }
     for name, want in counts.items():
         c = read_mcap(ROS2 / name)
         assert c.salvage is None and c.profile == "ros2" and c.compressions == {"zstd"}
@@ -129,8 +129,9 @@ def test_ros2_real_recordings_counts_rates_values(ros2_reference):
 
 
 def test_ros2_real_recording_load_flight_and_inspect():
-    opts = ingest_options({"inputs": {"mcap": "robot_localization_test1.mcap"},
-                                     "topics": {"altimeter": "/fix"}}, "flights[0]")
+    opts = ingest_options(
+        {"inputs": {"mcap": "robot_localization_test1.mcap"}, "topics": {"altimeter": "/fix"}}, "flights[0]"
+    )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         rec = load_flight(opts, ROS2)
@@ -139,8 +140,7 @@ def test_ros2_real_recording_load_flight_and_inspect():
     assert len(rec.imu.time) == 11865 and len(rec.gnss.time) == 989
     assert np.all(np.diff(rec.imu.time) > 0)
     assert abs(np.degrees(np.median(rec.gnss.lat)) - 42.3758) < 0.01  # Boston area
-    reps = inspect_files([ROS2 / "robot_localization_test1.mcap",
-                          ROS2 / "robot_localization_test2.mcap"])
+    reps = inspect_files([ROS2 / "robot_localization_test1.mcap", ROS2 / "robot_localization_test2.mcap"])
     text = format_inspect(reps)
     json.dumps(reps)
     imu = next(ch for ch in reps[0]["channels"] if ch["topic"] == "/imu/data")
@@ -153,12 +153,10 @@ def test_ros2_real_recording_load_flight_and_inspect():
     assert any(x["check"] == "epoch" and x["level"] == "warning" for x in imu2["checks"])
     # second bag has no GNSS/altimeter: clear error naming the file
     with pytest.raises(DataError, match="robot_localization_test2.mcap: no altimeter"):
-        load_flight(ingest_options({"inputs": {"mcap":
-                                              "robot_localization_test2.mcap"}}, "f"), ROS2)
+        load_flight(ingest_options({"inputs": {"mcap": "robot_localization_test2.mcap"}}, "f"), ROS2)
 
 
-@pytest.mark.parametrize("compression", [CompressionType.ZSTD, CompressionType.LZ4,
-                                         CompressionType.NONE])
+@pytest.mark.parametrize("compression", [CompressionType.ZSTD, CompressionType.LZ4, CompressionType.NONE])
 def test_ros2_roundtrip_exact(tmp_path, compression):
     d = static_flight(seconds=5.0)
     write_ros2(tmp_path / "f.mcap", d, compression=compression)
@@ -185,10 +183,16 @@ def test_json_roundtrip_exact_and_field_mapping(tmp_path, chunked):
     _assert_exact(rec, d)
     names = {"time": "t", "f": "acc", "w": "gyro", "h": "alt", "lat": "phi", "lon": "lam"}
     write_json(tmp_path / "g.mcap", d, names=names)
-    cfg = {"inputs": {"mcap": "g.mcap"}, "mcap": {"json_fields": {
-        "imu": {"time": "t", "specific_force": "acc", "angular_rate": "gyro"},
-        "altimeter": {"time": "t", "height": "alt"},
-        "gnss": {"time": "t", "lat_deg": "phi", "lon_deg": "lam", "height": "alt"}}}}
+    cfg = {
+        "inputs": {"mcap": "g.mcap"},
+        "mcap": {
+            "json_fields": {
+                "imu": {"time": "t", "specific_force": "acc", "angular_rate": "gyro"},
+                "altimeter": {"time": "t", "height": "alt"},
+                "gnss": {"time": "t", "lat_deg": "phi", "lon_deg": "lam", "height": "alt"},
+            }
+        },
+    }
     _assert_exact(load_flight(ingest_options(cfg, "f"), tmp_path), d)
 
 
@@ -200,10 +204,8 @@ def _assert_exact(rec, d):
     np.testing.assert_array_equal(rec.gnss.lat, np.radians(d["lat"]))
     np.testing.assert_array_equal(rec.gnss.lon, np.radians(d["lon"]))
     assert rec.t0_unix_ns == d["imu_t"][0]
-    np.testing.assert_array_equal(np.round(rec.imu.time * 1e9).astype(np.int64) + rec.t0_unix_ns,
-                                  d["imu_t"])
-    np.testing.assert_array_equal(np.round(rec.altimeter.time * 1e9).astype(np.int64)
-                                  + rec.t0_unix_ns, d["alt_t"])
+    np.testing.assert_array_equal(np.round(rec.imu.time * 1e9).astype(np.int64) + rec.t0_unix_ns, d["imu_t"])
+    np.testing.assert_array_equal(np.round(rec.altimeter.time * 1e9).astype(np.int64) + rec.t0_unix_ns, d["alt_t"])
 
 
 def test_simulator_writers_roundtrip_exact(tmp_path):
@@ -211,11 +213,27 @@ def test_simulator_writers_roundtrip_exact(tmp_path):
     from gravsurvey.simulate.logs import SensorLogs, write_flight_logs
 
     d = static_flight(seconds=10.0)
-    logs = SensorLogs(int(d["imu_t"][0]), d["imu_t"], d["f"], d["w"], d["alt_t"], d["h"],
-                      d["gnss_t"], d["lat"], d["lon"], d["gh"], 1e-3, 1e-7, 1.0)
+    logs = SensorLogs(
+        int(d["imu_t"][0]),
+        d["imu_t"],
+        d["f"],
+        d["w"],
+        d["alt_t"],
+        d["h"],
+        d["gnss_t"],
+        d["lat"],
+        d["lon"],
+        d["gh"],
+        1e-3,
+        1e-7,
+        1.0,
+    )
     write_flight_logs(tmp_path, "F01", ["mcap_json", "mcap_ros2", "csv"], logs)
-    inputs = [{"mcap": "F01_json.mcap"}, {"mcap": "F01_ros2.mcap"},
-              {"csv": {"imu": "imu.csv", "altimeter": "altimeter.csv", "gnss": "gnss.csv"}}]
+    inputs = [
+        {"mcap": "F01_json.mcap"},
+        {"mcap": "F01_ros2.mcap"},
+        {"csv": {"imu": "imu.csv", "altimeter": "altimeter.csv", "gnss": "gnss.csv"}},
+    ]
     for inp in inputs:
         opts = ingest_options({"inputs": inp}, "f")
         with warnings.catch_warnings():
@@ -269,13 +287,15 @@ def test_json_times_beyond_int64_clamped_not_a_crash():
     from gravsurvey.io.mcap.decode import DEFAULT_JSON_FIELDS, decode_json
 
     big, logt = 2**70, np.array([10, 20, 30], np.int64)
-    rows = {"imu": {"specific_force_t": [0.0, 0.0, 9.8], "angular_rate_t": [0.0, 0.0, 0.0]},
-            "gradient": {"gradient_t_eotvos": [1.0, 0.0, 0.0, 1.0, 0.0, -2.0]}}
+    rows = {
+        "imu": {"specific_force_t": [0.0, 0.0, 9.8], "angular_rate_t": [0.0, 0.0, 0.0]},
+        "gradient": {"gradient_t_eotvos": [1.0, 0.0, 0.0, 1.0, 0.0, -2.0]},
+    }
     for role, row in rows.items():
         payloads = [json.dumps({**row, "time_ns": t}).encode() for t in (5, big, -big)]
         blk = decode_json(role, payloads, logt, DEFAULT_JSON_FIELDS[role])
         assert blk.undecodable == 0, role
-        assert blk.time_ns.tolist() == [5, 2**63 - 1, -2**63], role
+        assert blk.time_ns.tolist() == [5, 2**63 - 1, -(2**63)], role
         np.testing.assert_array_equal(blk.log_time_ns, logt)
 
 
@@ -290,30 +310,41 @@ def test_json_bad_messages_dropped_and_counted(tmp_path):
         wr.start()
         sid = wr.register_schema("gravsurvey.Imu", "jsonschema", b"{}")
         imu = wr.register_channel("/imu", "json", sid)
-        alt = wr.register_channel("/altimeter", "json", wr.register_schema(
-            "gravsurvey.Altimeter", "jsonschema", b"{}"))
+        alt = wr.register_channel("/altimeter", "json", wr.register_schema("gravsurvey.Altimeter", "jsonschema", b"{}"))
         for k, t in enumerate(d["imu_t"]):
-            wr.add_message(imu, int(t), json.dumps({"time_ns": int(t), "specific_force_t":
-                           d["f"][k].tolist(), "angular_rate_t": d["w"][k].tolist()}).encode(),
-                           int(t))
+            wr.add_message(
+                imu,
+                int(t),
+                json.dumps(
+                    {"time_ns": int(t), "specific_force_t": d["f"][k].tolist(), "angular_rate_t": d["w"][k].tolist()}
+                ).encode(),
+                int(t),
+            )
         t = int(d["imu_t"][-1])
-        for i, junk in enumerate([b"{not json", b'{"time_ns": 5}', b'{"time_ns": 6, '
-                                  b'"specific_force_t": ["1", 2, 3], "angular_rate_t": [0, 0, 0]}']):
+        for i, junk in enumerate(
+            [
+                b"{not json",
+                b'{"time_ns": 5}',
+                b'{"time_ns": 6, "specific_force_t": ["1", 2, 3], "angular_rate_t": [0, 0, 0]}',
+            ]
+        ):
             wr.add_message(imu, t + 1 + i, junk, t + 1 + i)
         for k, ta in enumerate(d["alt_t"]):
-            wr.add_message(alt, int(ta), json.dumps({"time_ns": int(ta),
-                                                     "height_m": d["h"][k]}).encode(), int(ta))
+            wr.add_message(alt, int(ta), json.dumps({"time_ns": int(ta), "height_m": d["h"][k]}).encode(), int(ta))
         wr.finish()
-    with pytest.warns(DataWarning, match="imu: 3 messages of .*bad.mcap topic /imu could not be "
-                                         "decoded and were dropped"):
-        rec = load_flight(ingest_options({"inputs": {"mcap": "bad.mcap"}}, "f"),
-                          tmp_path)
+    with pytest.warns(
+        DataWarning, match="imu: 3 messages of .*bad.mcap topic /imu could not be decoded and were dropped"
+    ):
+        rec = load_flight(ingest_options({"inputs": {"mcap": "bad.mcap"}}, "f"), tmp_path)
     np.testing.assert_array_equal(rec.imu.specific_force_t, d["f"])
     assert rec.gnss is None
 
 
 def test_json_field_names_not_matching_mapping_is_a_clear_error(tmp_path):
     write_json(tmp_path / "n.mcap", static_flight(seconds=2.0), names={"f": "acc"})
-    with pytest.raises(DataError, match=r"n.mcap topic /imu: no usable imu samples \(imu: 200 "
-                                        r"messages .* could not be decoded .*specific_force_t"):
+    with pytest.raises(
+        DataError,
+        match=r"n.mcap topic /imu: no usable imu samples \(imu: 200 "
+        r"messages .* could not be decoded .*specific_force_t",
+    ):
         load_flight(ingest_options({"inputs": {"mcap": "n.mcap"}}, "f"), tmp_path)

@@ -15,6 +15,7 @@ from gravsurvey.ties import tie_flight
 from gravsurvey.settings import levelling_options, tie_config
 from levelling_truth import simulated_survey
 
+
 def test_levelling_recovers_relative_levels_and_noise():
     lines, _ = simulated_survey()
     xo = find_crossovers(lines)
@@ -48,9 +49,13 @@ def test_ties_and_levelling_give_absolute_level():
     for f, (off, drift, t_end) in flights.items():
         tt = np.concatenate([np.arange(0, 600.0, 1.0), np.arange(t_end - 600.0, t_end, 1.0)])
         z = dist_base + off + drift * tt / 3600.0 + rng.normal(0, 1.0, tt.size)
-        cfg = tie_config({"base_gravity_mgal": g_base,
-                                   "before": {"start_s": 0, "stop_s": 599},
-                                   "after": {"start_s": float(t_end - 600), "stop_s": float(t_end)}})
+        cfg = tie_config(
+            {
+                "base_gravity_mgal": g_base,
+                "before": {"start_s": 0, "stop_s": 599},
+                "after": {"start_s": float(t_end - 600), "stop_s": float(t_end)},
+            }
+        )
         tie = tie_flight(cfg, tt, np.full(tt.size, lat_b), np.full(tt.size, h_b), z)
         assert abs(tie.drift_mgal_per_h - drift) < 0.2
         tied[f] = tie
@@ -62,8 +67,12 @@ def test_ties_and_levelling_give_absolute_level():
     xo = find_crossovers(tied_lines)
     lev = level_survey(xo, tied_lines, LevellingOptions(model="constant"), tied_flights=list(flights))
     assert lev.datum == "tied flights"
-    err = np.concatenate([ln["value_mgal"] - lev.correction(ln["flight"], ln["line"], ln["time_s"]) - ln["truth_mgal"]
-                          for ln in tied_lines])
+    err = np.concatenate(
+        [
+            ln["value_mgal"] - lev.correction(ln["flight"], ln["line"], ln["time_s"]) - ln["truth_mgal"]
+            for ln in tied_lines
+        ]
+    )
     assert abs(err.mean()) < 0.3  # absolute level
     assert lev.after["rms_over_sqrt2_mgal"] < 0.3  # per-line noise is 0.2 mGal
     # without ties the level is off by the mean flight offset (~1.2 mGal here): the test can fail
@@ -90,8 +99,16 @@ def test_exact_constants_small_network():
     off = np.array([1.0, -2.0, 0.5, 0.5])
     pairs = [(0, 2), (0, 3), (1, 2), (1, 3)]
     d = np.array([off[a] - off[b] for a, b in pairs])
-    lev = level_crossovers(d, [p[0] for p in pairs], [p[1] for p in pairs], np.zeros(4), np.zeros(4),
-                           [("F", f"L{i}") for i in range(4)], np.zeros(4), robust=False)
+    lev = level_crossovers(
+        d,
+        [p[0] for p in pairs],
+        [p[1] for p in pairs],
+        np.zeros(4),
+        np.zeros(4),
+        [("F", f"L{i}") for i in range(4)],
+        np.zeros(4),
+        robust=False,
+    )
     np.testing.assert_allclose(lev.constant_mgal, off - off.mean(), atol=1e-9)
     assert lev.after["rms_mgal"] < 1e-9
 
@@ -109,7 +126,9 @@ def test_options_and_tie_config_errors():
         levelling_options({"model": "quadratic"})
     with pytest.raises(ConfigError, match="levelling.huber_kk: unknown key"):
         levelling_options({"huber_kk": 1})
-    with pytest.raises(ConfigError, match=r"^flights\[0\]\.tie\.base_gravity_mgal: expected a number in \[970000, 990000\], got 9\.81$"):
+    with pytest.raises(
+        ConfigError, match=r"^flights\[0\]\.tie\.base_gravity_mgal: expected a number in \[970000, 990000\], got 9\.81$"
+    ):
         tie_config({"base_gravity_mgal": 9.81, "before": {"reading_mgal": 980000.0}})
     with pytest.raises(ConfigError, match="missing required key"):
         tie_config({"before": {"reading_mgal": 980000.0}})
@@ -123,8 +142,13 @@ def test_options_and_tie_config_errors():
 
 
 def test_value_ties_linear_drift():
-    cfg = tie_config({"base_gravity_mgal": 980100.0, "before": {"reading_mgal": 980102.0, "time_s": 0},
-                               "after": {"reading_mgal": 980103.0, "time_s": 7200}})
+    cfg = tie_config(
+        {
+            "base_gravity_mgal": 980100.0,
+            "before": {"reading_mgal": 980102.0, "time_s": 0},
+            "after": {"reading_mgal": 980103.0, "time_s": 7200},
+        }
+    )
     t = np.array([0.0, 3600.0, 7200.0])
     tie = tie_flight(cfg, t, np.zeros(3), np.zeros(3), np.zeros(3))
     np.testing.assert_allclose(tie.correction(t), [2.0, 2.5, 3.0])
@@ -166,12 +190,23 @@ def test_survey_outputs_tie_level_grid_and_metadata(tmp_path):
     r = synthetic_flight(0, n_main=8, n_tie=3)  # 24 crossovers for 10 unknowns: levelled
     cfg_path = tmp_path / "survey.yaml"
     cfg_path.write_text("survey: {name: t}\n")
-    tie = tie_config({"base_gravity_mgal": 980_800.0, "before": {"reading_mgal": 980_802.0},
-                               "after": {"reading_mgal": 980_802.0}})
-    cfg = SurveyConfig(path=cfg_path, base_dir=tmp_path, raw={"survey": {"name": "t"}}, name="t", ellipsoid=WGS84,
-                       flights=[SimpleNamespace(name=r.name, tie=tie, index=0)], model=None, lines=None,
-                       postprocess=None, plots=True, levelling=LevellingOptions(),
-                       grid=GridOptions(damping=1.0, cv_folds=2))  # one damping, 2 folds: fast
+    tie = tie_config(
+        {"base_gravity_mgal": 980_800.0, "before": {"reading_mgal": 980_802.0}, "after": {"reading_mgal": 980_802.0}}
+    )
+    cfg = SurveyConfig(
+        path=cfg_path,
+        base_dir=tmp_path,
+        raw={"survey": {"name": "t"}},
+        name="t",
+        ellipsoid=WGS84,
+        flights=[SimpleNamespace(name=r.name, tie=tie, index=0)],
+        model=None,
+        lines=None,
+        postprocess=None,
+        plots=True,
+        levelling=LevellingOptions(),
+        grid=GridOptions(damping=1.0, cv_folds=2),
+    )  # one damping, 2 folds: fast
     out = tmp_path / "out"
     summary = write_survey_outputs(cfg, out, [r])
     assert summary["level"]["state"] == "absolute"
@@ -218,8 +253,11 @@ def test_config_sections_validated_with_key_paths(tmp_path):
         p.write_text(yaml.safe_dump(d))
         return load_config(p)
 
-    cfg = load(levelling={"model": "flight_trend"}, grid={"spacing_m": 250},
-               tie={"base_gravity_mgal": 980500.0, "before": {"start_s": 0, "stop_s": 60}})
+    cfg = load(
+        levelling={"model": "flight_trend"},
+        grid={"spacing_m": 250},
+        tie={"base_gravity_mgal": 980500.0, "before": {"start_s": 0, "stop_s": 60}},
+    )
     assert cfg.levelling.model == "flight_trend" and cfg.grid.spacing_m == 250.0
     assert cfg.flights[0].tie.before.stop_s == 60.0
     default = load()
@@ -251,11 +289,18 @@ def _decide(d, a, b, t, keys, **opt):
 
     from gravsurvey.levelling import choose_levelling
 
-    xo = SimpleNamespace(flight_a=np.array([keys[i][0] for i in a]), line_a=np.array([keys[i][1] for i in a]),
-                         flight_b=np.array([keys[i][0] for i in b]), line_b=np.array([keys[i][1] for i in b]),
-                         time_a_s=t, time_b_s=t, diff_mgal=d)
-    lines = [{"flight": f, "line": ln, "time_s": np.array([0.0, 1.0]), "sigma_mgal": np.array([0.2, 0.2])}
-             for f, ln in keys]
+    xo = SimpleNamespace(
+        flight_a=np.array([keys[i][0] for i in a]),
+        line_a=np.array([keys[i][1] for i in a]),
+        flight_b=np.array([keys[i][0] for i in b]),
+        line_b=np.array([keys[i][1] for i in b]),
+        time_a_s=t,
+        time_b_s=t,
+        diff_mgal=d,
+    )
+    lines = [
+        {"flight": f, "line": ln, "time_s": np.array([0.0, 1.0]), "sigma_mgal": np.array([0.2, 0.2])} for f, ln in keys
+    ]
     return choose_levelling(xo, lines, LevellingOptions(**opt))
 
 
@@ -285,8 +330,9 @@ def test_too_few_crossovers_fall_back_to_one_constant_per_flight():
     rng = np.random.default_rng(3)
     # flight A flies 3 lines, flight B 2 ties: 6 crossovers for 4 line unknowns (too few);
     # the flights differ by 2.5 mGal, lines by 0.1 mGal, noise 0.3 mGal
-    d, a, b, t, keys, off = _grid_crossovers(3, 2, 1.0 + rng.normal(0, 0.1, 3), -1.5 + rng.normal(0, 0.1, 2), 0.3,
-                                             rng, flights=("A", "B"))
+    d, a, b, t, keys, off = _grid_crossovers(
+        3, 2, 1.0 + rng.normal(0, 0.1, 3), -1.5 + rng.normal(0, 0.1, 2), 0.3, rng, flights=("A", "B")
+    )
     lev = _decide(d, a, b, t, keys)
     dec = lev.decision
     assert [x["model"] for x in dec["tried"]] == ["constant", "flight_constant"]

@@ -155,9 +155,7 @@ def test_ros2_decodes_to_the_inputs_exactly(written, logs):
     assert_bitwise([x.altitude for _, _, x in gnss], logs.gnss_height_m)
     x = gnss[0][2]
     assert (x.status.status, x.status.service, x.position_covariance_type) == (0, 1, 2)
-    np.testing.assert_array_equal(
-        np.reshape(x.position_covariance, (3, 3)), np.diag(np.array([0.02, 0.03, 0.05]) ** 2)
-    )
+    np.testing.assert_array_equal(np.reshape(x.position_covariance, (3, 3)), np.diag(np.array([0.02, 0.03, 0.05]) ** 2))
 
 
 def test_ros2_payloads_equal_the_reference_encoder(written):
@@ -213,7 +211,11 @@ def test_json_decodes_to_the_inputs_exactly(written, logs):
         schema_doc = json.loads(schema.data)
         assert schema_doc["title"] == schema.name and set(schema_doc["required"]) == set(obj)
         rows.setdefault((channel.topic, schema.name), []).append(obj)
-    assert set(rows) == {("/imu", "gravsurvey.Imu"), ("/altimeter", "gravsurvey.Altimeter"), ("/gnss", "gravsurvey.Gnss")}
+    assert set(rows) == {
+        ("/imu", "gravsurvey.Imu"),
+        ("/altimeter", "gravsurvey.Altimeter"),
+        ("/gnss", "gravsurvey.Gnss"),
+    }
     imu = rows[("/imu", "gravsurvey.Imu")]
     np.testing.assert_array_equal([o["time_ns"] for o in imu], logs.imu_time_ns)
     assert_bitwise([o["specific_force_t"] for o in imu], logs.specific_force_t)
@@ -387,14 +389,22 @@ def _replace(lg, **kw):
     [
         (lambda lg: dict(imu_time_ns=lg.imu_time_ns.astype(float)), "imu time_ns: expected integer"),
         (lambda lg: dict(alt_time_ns=lg.alt_time_ns[::-1].copy()), "altimeter time_ns: times must strictly increase"),
-        (lambda lg: dict(height_m=np.where(np.arange(lg.height_m.size) == 5, np.nan, lg.height_m)),
-         "altimeter height_m: non-finite value at sample 5"),
-        (lambda lg: dict(specific_force_t=lg.specific_force_t[:, :2]), r"imu specific_force_t: expected shape \(50, 3\)"),
+        (
+            lambda lg: dict(height_m=np.where(np.arange(lg.height_m.size) == 5, np.nan, lg.height_m)),
+            "altimeter height_m: non-finite value at sample 5",
+        ),
+        (
+            lambda lg: dict(specific_force_t=lg.specific_force_t[:, :2]),
+            r"imu specific_force_t: expected shape \(50, 3\)",
+        ),
         (lambda lg: dict(gnss_height_m=None), "gnss: .* all given or all None"),
         (lambda lg: dict(lat_deg=lg.lat_deg + 200.0), "gnss lat_deg: latitude outside"),
         (lambda lg: dict(start_unix_ns=START_NS + 1), "imu time_ns: first sample .* before start_unix_ns"),
         (lambda lg: dict(gyro_sigma_radps=-1.0), "gyro_sigma_radps"),
-        (lambda lg: dict(imu_time_ns=lg.imu_time_ns[:0], specific_force_t=np.zeros((0, 3))), "imu time_ns: expected a non-empty"),
+        (
+            lambda lg: dict(imu_time_ns=lg.imu_time_ns[:0], specific_force_t=np.zeros((0, 3))),
+            "imu time_ns: expected a non-empty",
+        ),
     ],
 )
 def test_bad_samples_raise_data_error_naming_the_channel(tmp_path, change, match):
@@ -408,18 +418,26 @@ def test_bad_samples_raise_data_error_naming_the_channel(tmp_path, change, match
 def test_ros2_needs_int32_seconds(tmp_path):
     lg = make_logs(np.random.default_rng(9), n_imu=5, n_slow=2, gnss=False)
     shift = 2**31 * 10**9 - START_NS  # first IMU sample exactly at 2**31 s (2038-01-19T03:14:08Z)
-    late = _replace(lg, start_unix_ns=START_NS + shift, imu_time_ns=lg.imu_time_ns + shift, alt_time_ns=lg.alt_time_ns + shift)
+    late = _replace(
+        lg, start_unix_ns=START_NS + shift, imu_time_ns=lg.imu_time_ns + shift, alt_time_ns=lg.alt_time_ns + shift
+    )
     with pytest.raises(DataError, match="imu time_ns: .* int32 seconds"):
         write_flight_logs(tmp_path, "F", ["mcap_ros2"], late)
     assert [p.name for p in write_flight_logs(tmp_path, "F", ["mcap_json", "csv"], late)] == [
-        "F_json.mcap", "imu.csv", "altimeter.csv"]
+        "F_json.mcap",
+        "imu.csv",
+        "altimeter.csv",
+    ]
 
 
-@pytest.mark.parametrize("formats,name,match", [
-    (["mcap"], "F", "log format 'mcap' unknown"),
-    (["csv"], "a/b", "flight name 'a/b'"),
-    (["csv"], "", "flight name ''"),
-])
+@pytest.mark.parametrize(
+    "formats,name,match",
+    [
+        (["mcap"], "F", "log format 'mcap' unknown"),
+        (["csv"], "a/b", "flight name 'a/b'"),
+        (["csv"], "", "flight name ''"),
+    ],
+)
 def test_bad_formats_or_names_raise_config_error(tmp_path, logs, formats, name, match):
     with pytest.raises(ConfigError, match=match):
         write_flight_logs(tmp_path, name, formats, logs)
@@ -430,8 +448,11 @@ def truth_columns(rng, n):
     cols = {c: rng.normal(size=n) * 100 for c in L.TRUTH_COLUMNS[2:]}
     cols["anomaly_u_mgal"] = -cols["disturbance_mgal"]
     # contract order is enforced by the writer, whatever the mapping order
-    return {"line": np.array(["static"] * 3 + ["L01"] * (n - 6) + ["turn"] * 3),
-            "time_ns": contract_times(START_NS, 1.0, n), **cols}
+    return {
+        "line": np.array(["static"] * 3 + ["L01"] * (n - 6) + ["turn"] * 3),
+        "time_ns": contract_times(START_NS, 1.0, n),
+        **cols,
+    }
 
 
 def test_truth_csv_round_trip(tmp_path):
@@ -461,13 +482,16 @@ def test_truth_csv_round_trip(tmp_path):
     assert path.read_bytes() == before
 
 
-@pytest.mark.parametrize("edit,match", [
-    (lambda c: c.pop("disturbance_mgal"), "truth columns missing: disturbance_mgal"),
-    (lambda c: c.__setitem__("time_ns", c["time_ns"] * 1.0), "'time_ns' must be integer"),
-    (lambda c: c.__setitem__("line", np.array(["L,01"] * 40)), "'line' row 0"),
-    (lambda c: c.__setitem__("ve_mps", np.zeros(39)), "'ve_mps' has 39 rows, expected 40"),
-    (lambda c: c.__setitem__("vn_mps", np.full(40, np.inf)), "'vn_mps' not finite at row 0"),
-])
+@pytest.mark.parametrize(
+    "edit,match",
+    [
+        (lambda c: c.pop("disturbance_mgal"), "truth columns missing: disturbance_mgal"),
+        (lambda c: c.__setitem__("time_ns", c["time_ns"] * 1.0), "'time_ns' must be integer"),
+        (lambda c: c.__setitem__("line", np.array(["L,01"] * 40)), "'line' row 0"),
+        (lambda c: c.__setitem__("ve_mps", np.zeros(39)), "'ve_mps' has 39 rows, expected 40"),
+        (lambda c: c.__setitem__("vn_mps", np.full(40, np.inf)), "'vn_mps' not finite at row 0"),
+    ],
+)
 def test_truth_csv_bad_columns(tmp_path, edit, match):
     cols = truth_columns(np.random.default_rng(2), 40)
     edit(cols)

@@ -62,13 +62,29 @@ def grid_lines():
     for i in range(4):
         e = np.linspace(0, 12000, 200)
         nn = np.full(200, 1000.0 + 3000 * i)
-        out.append({"flight": "F01", "line": f"L{i+1:02d}", "easting_m": e, "northing_m": nn,
-                    "value_mgal": f(e, nn) + 0.2 * i, "time_s": np.arange(200.0) + 1000 * i})
+        out.append(
+            {
+                "flight": "F01",
+                "line": f"L{i + 1:02d}",
+                "easting_m": e,
+                "northing_m": nn,
+                "value_mgal": f(e, nn) + 0.2 * i,
+                "time_s": np.arange(200.0) + 1000 * i,
+            }
+        )
     for j in range(2):
         nn = np.linspace(0, 12000, 200)
         e = np.full(200, 2000.0 + 6000 * j)
-        out.append({"flight": "F01", "line": f"T{j+1:02d}", "easting_m": e, "northing_m": nn,
-                    "value_mgal": f(e, nn), "time_s": np.arange(200.0) + 9000 + 1000 * j})
+        out.append(
+            {
+                "flight": "F01",
+                "line": f"T{j + 1:02d}",
+                "easting_m": e,
+                "northing_m": nn,
+                "value_mgal": f(e, nn),
+                "time_s": np.arange(200.0) + 9000 + 1000 * j,
+            }
+        )
     return out
 
 

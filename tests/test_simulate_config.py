@@ -15,7 +15,9 @@ CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 def grid_sim():
     sim = quick_sim()
     sim["flights"][0]["plan"] = {
-        "kind": "grid", "origin_lat_deg": 45.0, "origin_lon_deg": 135.0,
+        "kind": "grid",
+        "origin_lat_deg": 45.0,
+        "origin_lon_deg": 135.0,
         "lines": {"count": 3, "spacing_m": 2000.0, "length_m": 8000.0},
         "ties": {"count": 2, "spacing_m": 4000.0},
     }
@@ -48,10 +50,20 @@ CASES = [
     (("flights", 0, "start_utc"), "yesterday", "flights[0].start_utc", "ISO 8601"),
     (("flights", 0, "start_utc"), "2024-06-01T08:00:00", "flights[0].start_utc", "time zone"),
     (("flights", 0, "start_utc"), KeyError, "flights[0].start_utc", "missing"),
-    (("flights", 0, "sensors", "gyro", "white_drift_degph"), -0.01, "flights[0].sensors.gyro.white_drift_degph", ">= 0"),
+    (
+        ("flights", 0, "sensors", "gyro", "white_drift_degph"),
+        -0.01,
+        "flights[0].sensors.gyro.white_drift_degph",
+        ">= 0",
+    ),
     (("flights", 0, "sensors", "gyro", "bias_degph"), [0.1, 0.2], "flights[0].sensors.gyro.bias_degph", "3 numbers"),
     (("flights", 0, "sensors", "barometer"), {}, "flights[0].sensors.barometer", "unknown key"),
-    (("flights", 0, "turbulence"), {"vertical_sigma_m": 1.0, "min_period_s": 0.1}, "flights[0].turbulence.min_period_s", "IMU samples"),
+    (
+        ("flights", 0, "turbulence"),
+        {"vertical_sigma_m": 1.0, "min_period_s": 0.1},
+        "flights[0].turbulence.min_period_s",
+        "IMU samples",
+    ),
     (("formats",), ["mcap_json", "hdf5"], "formats[1]", "mcap_ros2"),
     (("seeed",), 3, "seeed", "seed"),
     (("seed",), -1, "seed", ">= 0"),

@@ -35,7 +35,10 @@ def test_point_mass_below_the_track_adds_gm_over_r2_to_the_vertical_force():
     base = quick_sim(duration_s=400.0)
     clean = simulate_flight(base)
     lon_src = math.degrees(clean.truth["lon"][2000])
-    field = {"type": "model", "point_masses": [{"lat_deg": 45.0, "lon_deg": lon_src, "depth_m": depth, "mass_kg": mass}]}
+    field = {
+        "type": "model",
+        "point_masses": [{"lat_deg": 45.0, "lon_deg": lon_src, "depth_m": depth, "mass_kg": mass}],
+    }
     s = simulate_flight(quick_sim(duration_s=400.0, field=field))
     d_up = s.specific_force_t[:, 2] - clean.specific_force_t[:, 2]
     expected = G_NEWTON * mass / (h + depth) ** 2
@@ -69,7 +72,12 @@ def test_sensor_error_statistics():
     rate, n = 10.0, 360_000
     cfg = {
         "accelerometer": {"white_sigma_mps2": 1e-3, "bias_mps2": [2e-4, -3e-4]},
-        "gravimeter": {"bias_mps2": 5e-5, "markov_sigma_mps2": 1e-5, "markov_lambda_per_s": 0.025, "white_sigma_mps2": 0.0},
+        "gravimeter": {
+            "bias_mps2": 5e-5,
+            "markov_sigma_mps2": 1e-5,
+            "markov_lambda_per_s": 0.025,
+            "white_sigma_mps2": 0.0,
+        },
         "gyro": {"bias_degph": [0.1, 0.0, -0.2], "white_drift_degph": 0.01},
     }
     e = sn.imu_errors(n, rate, cfg, np.random.default_rng(5))
@@ -99,7 +107,10 @@ def test_noise_switches_and_altimeter_gnss_errors():
     quiet = simulate_flight(quick_sim(duration_s=600.0))
     assert np.array_equal(quiet.specific_force_t, quiet.noise_free_specific_force_t)
     assert np.array_equal(quiet.angular_rate_t, quiet.noise_free_angular_rate_t)
-    noisy_cfg = {"altimeter": {"sigma_m": 1.0, "mean_m": 3.0}, "gnss": {"horizontal_sigma_m": 2.0, "vertical_sigma_m": 1.5}}
+    noisy_cfg = {
+        "altimeter": {"sigma_m": 1.0, "mean_m": 3.0},
+        "gnss": {"horizontal_sigma_m": 2.0, "vertical_sigma_m": 1.5},
+    }
     s = simulate_flight(quick_sim(duration_s=3000.0, altimeter_hz=10.0, gnss_hz=10.0, noise=noisy_cfg))
     kin_h = quiet.truth["height"][0]
     err = s.alt_height - kin_h
@@ -115,9 +126,16 @@ def test_noise_switches_and_altimeter_gnss_errors():
 
 def test_one_error_source_does_not_change_another():
     a = simulate_flight(quick_sim(duration_s=300.0, noise={"gyro": {"white_drift_degph": 0.01}}))
-    b = simulate_flight(quick_sim(duration_s=300.0, noise={"gyro": {"white_drift_degph": 0.01},
-                                                          "altimeter": {"sigma_m": 1.0},
-                                                          "accelerometer": {"white_sigma_mps2": 1e-3}}))
+    b = simulate_flight(
+        quick_sim(
+            duration_s=300.0,
+            noise={
+                "gyro": {"white_drift_degph": 0.01},
+                "altimeter": {"sigma_m": 1.0},
+                "accelerometer": {"white_sigma_mps2": 1e-3},
+            },
+        )
+    )
     assert np.array_equal(a.angular_rate_t, b.angular_rate_t)
     assert not np.array_equal(a.alt_height, b.alt_height)
 
@@ -127,15 +145,29 @@ def _tree_bytes(d):
 
 
 def test_determinism_same_config_same_bytes(tmp_path):
-    sim = quick_sim(duration_s=120.0, noise=True, formats=["mcap_json", "mcap_ros2", "csv"], field="seed_smooth",
-                    triad="strapdown", turbulence={"vertical_sigma_m": 1.0, "attitude_sigma_deg": 0.5}, seed=3)
+    sim = quick_sim(
+        duration_s=120.0,
+        noise=True,
+        formats=["mcap_json", "mcap_ros2", "csv"],
+        field="seed_smooth",
+        triad="strapdown",
+        turbulence={"vertical_sigma_m": 1.0, "attitude_sigma_deg": 0.5},
+        seed=3,
+    )
     p = tmp_path / "sim.yaml"
     p.write_text(yaml.safe_dump(sim))
     simulate_to_dir(p, tmp_path / "a")
     simulate_to_dir(p, tmp_path / "b")
     a, b = _tree_bytes(tmp_path / "a"), _tree_bytes(tmp_path / "b")
-    assert sorted(a) == ["F01/F01_json.mcap", "F01/F01_ros2.mcap", "F01/altimeter.csv", "F01/gnss.csv",
-                         "F01/imu.csv", "F01/truth.csv", "survey.yaml"]
+    assert sorted(a) == [
+        "F01/F01_json.mcap",
+        "F01/F01_ros2.mcap",
+        "F01/altimeter.csv",
+        "F01/gnss.csv",
+        "F01/imu.csv",
+        "F01/truth.csv",
+        "survey.yaml",
+    ]
     assert a == b
     sim["seed"] = 4
     p.write_text(yaml.safe_dump(sim))
@@ -263,9 +295,16 @@ def test_regenerate_script_uses_the_cli(tmp_path):
 
 
 def test_survey_yaml_and_truth_csv(tmp_path):
-    plan = {"kind": "grid", "origin_lat_deg": 45.0, "origin_lon_deg": 135.0, "altitude_m": 700.0, "speed_mps": 60.0,
-            "lines": {"count": 2, "spacing_m": 3000.0, "length_m": 3000.0, "heading_deg": 90.0},
-            "static_start_s": 30.0, "ramp_s": 30.0}
+    plan = {
+        "kind": "grid",
+        "origin_lat_deg": 45.0,
+        "origin_lon_deg": 135.0,
+        "altitude_m": 700.0,
+        "speed_mps": 60.0,
+        "lines": {"count": 2, "spacing_m": 3000.0, "length_m": 3000.0, "heading_deg": 90.0},
+        "static_start_s": 30.0,
+        "ramp_s": 30.0,
+    }
     noise = {**SEED_SENSORS, "gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0}}
     sim = quick_sim(plan=plan, triad="strapdown", formats=["csv"], noise=noise, imu_hz=20.0, altimeter_hz=2.0)
     paths = simulate_to_dir(sim, tmp_path, oracle=True)
@@ -286,7 +325,9 @@ def test_survey_yaml_and_truth_csv(tmp_path):
     assert oracle["output"]["dir"] != cfg["output"]["dir"]
     for rel in ("F01/imu.csv", "F01/altimeter.csv", "F01/gnss.csv", "F01/truth.csv"):
         assert (tmp_path / rel).is_file()
-    rows = [r for r in csv.reader(l for l in (tmp_path / "F01/truth.csv").read_text().splitlines() if not l.startswith("#"))]
+    rows = [
+        r for r in csv.reader(l for l in (tmp_path / "F01/truth.csv").read_text().splitlines() if not l.startswith("#"))
+    ]
     header, rows = rows[0], rows[1:]
     col = {k: i for i, k in enumerate(header)}
     assert len(rows) == len(s.alt_time)  # truth at the altimeter rate by default
@@ -295,8 +336,11 @@ def test_survey_yaml_and_truth_csv(tmp_path):
     np.testing.assert_array_equal([float(r[col["roll_deg"]]) for r in rows], np.degrees(s.truth["roll"][k]))
     assert [r[col["line"]] for r in rows] == list(s.truth["line"][k])
     assert {r[col["line"]] for r in rows} == {"static", "turn", "L01", "L02"}
-    assert [int(r[col["time_ns"]]) for r in rows[:3]] == [s.start_unix_ns, s.start_unix_ns + 500_000_000,
-                                                          s.start_unix_ns + 1_000_000_000]
+    assert [int(r[col["time_ns"]]) for r in rows[:3]] == [
+        s.start_unix_ns,
+        s.start_unix_ns + 500_000_000,
+        s.start_unix_ns + 1_000_000_000,
+    ]
 
 
 @pytest.mark.parametrize("sample", sorted(SAMPLES))
@@ -318,8 +362,9 @@ def test_cli_oracle_config_flag(tmp_path):
     r = subprocess.run(exe + ["-o", str(tmp_path / "a")], capture_output=True, text=True, timeout=300, check=False)
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "a" / "survey.yaml").is_file() and not (tmp_path / "a" / "oracle.yaml").exists()
-    r = subprocess.run(exe + ["-o", str(tmp_path / "b"), "--oracle-config"], capture_output=True, text=True, timeout=300,
-                       check=False)
+    r = subprocess.run(
+        exe + ["-o", str(tmp_path / "b"), "--oracle-config"], capture_output=True, text=True, timeout=300, check=False
+    )
     assert r.returncode == 0, r.stderr
     oracle = yaml.safe_load((tmp_path / "b" / "oracle.yaml").read_text())
     assert oracle["model"]["accel_noise_mps2"] == 1e-3

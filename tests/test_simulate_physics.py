@@ -40,7 +40,9 @@ def test_rest_on_surface_reads_normal_gravity_and_earth_rate(lat_deg):
     assert np.abs(f[:, 1]).max() < 1e-9
     assert np.abs(f[:, 2] - boule_gamma(lat, 0.0)).max() < 1e-9
     w = out.angular_rate_t[m]
-    np.testing.assert_allclose(w, np.tile([0.0, W * math.cos(lat), W * math.sin(lat)], (w.shape[0], 1)), rtol=0, atol=1e-18)
+    np.testing.assert_allclose(
+        w, np.tile([0.0, W * math.cos(lat), W * math.sin(lat)], (w.shape[0], 1)), rtol=0, atol=1e-18
+    )
     # at rest nothing moves
     assert np.abs(out.truth["vel_n"][m]).max() == 0.0
 
@@ -104,9 +106,15 @@ def test_level_straight_flight_any_heading(heading_deg):
 
 def _turbulent_grid(triad, imu_hz=50.0, static=20.0):
     plan = {
-        "kind": "grid", "origin_lat_deg": 52.0, "origin_lon_deg": 10.0, "altitude_m": 600.0, "speed_mps": 60.0,
+        "kind": "grid",
+        "origin_lat_deg": 52.0,
+        "origin_lon_deg": 10.0,
+        "altitude_m": 600.0,
+        "speed_mps": 60.0,
         "lines": {"count": 2, "spacing_m": 3000.0, "length_m": 2500.0, "heading_deg": 20.0},
-        "static_start_s": static, "ramp_s": 30.0, "max_bank_deg": 28.0,
+        "static_start_s": static,
+        "ramp_s": 30.0,
+        "max_bank_deg": 28.0,
     }
     turb = {"vertical_sigma_m": 2.0, "horizontal_sigma_m": 2.0, "attitude_sigma_deg": 1.0, "min_period_s": 2.0}
     return simulate_flight(quick_sim(plan=plan, triad=triad, imu_hz=imu_hz, turbulence=turb, seed=7))
@@ -147,15 +155,15 @@ def test_derivatives_integrate_to_positions():
     n = (len(s.imu_time) - 1) // 2 * 2
 
     def simpson_steps(y):
-        return dt / 3.0 * (y[0:n - 1:2] + 4 * y[1:n:2] + y[2:n + 1:2])
+        return dt / 3.0 * (y[0 : n - 1 : 2] + 4 * y[1:n:2] + y[2 : n + 1 : 2])
 
-    dr = r_e[2:n + 1:2] - r_e[0:n - 1:2]
-    dv = v_e[2:n + 1:2] - v_e[0:n - 1:2]
+    dr = r_e[2 : n + 1 : 2] - r_e[0 : n - 1 : 2]
+    dv = v_e[2 : n + 1 : 2] - v_e[0 : n - 1 : 2]
     assert np.abs(v_e).max() > 50 and np.abs(a_e).max() > 2.0
     assert np.abs(simpson_steps(v_e) - dr).max() < 1e-6  # m per 0.02 s
     assert np.abs(simpson_steps(a_e) - dv).max() < 1e-7  # m/s per 0.02 s
     # cumulative over the whole flight
-    assert np.abs(np.cumsum(simpson_steps(v_e), axis=0) - (r_e[2:n + 1:2] - r_e[0])).max() < 1e-4
+    assert np.abs(np.cumsum(simpson_steps(v_e), axis=0) - (r_e[2 : n + 1 : 2] - r_e[0])).max() < 1e-4
 
 
 def test_strapdown_navigation_reproduces_the_trajectory():
@@ -205,8 +213,13 @@ def test_strapdown_navigation_reproduces_the_trajectory():
 
 def test_coordinated_turns_have_no_side_force():
     plan = {
-        "kind": "grid", "origin_lat_deg": 45.0, "origin_lon_deg": 135.0, "altitude_m": 800.0, "speed_mps": 80.0,
-        "lines": {"count": 2, "spacing_m": 6000.0, "length_m": 3000.0, "heading_deg": 90.0}, "max_bank_deg": 25.0,
+        "kind": "grid",
+        "origin_lat_deg": 45.0,
+        "origin_lon_deg": 135.0,
+        "altitude_m": 800.0,
+        "speed_mps": 80.0,
+        "lines": {"count": 2, "spacing_m": 6000.0, "length_m": 3000.0, "heading_deg": 90.0},
+        "max_bank_deg": 25.0,
     }
     s = simulate_flight(quick_sim(plan=plan, triad="strapdown", imu_hz=10.0))
     m = s.truth["line"] == "turn"
@@ -219,7 +232,11 @@ def test_coordinated_turns_have_no_side_force():
 
 def test_grid_lines_are_flown_where_planned():
     plan = {
-        "kind": "grid", "origin_lat_deg": 45.0, "origin_lon_deg": 135.0, "altitude_m": 800.0, "speed_mps": 70.0,
+        "kind": "grid",
+        "origin_lat_deg": 45.0,
+        "origin_lon_deg": 135.0,
+        "altitude_m": 800.0,
+        "speed_mps": 70.0,
         "lines": {"count": 3, "spacing_m": 2000.0, "length_m": 8000.0, "heading_deg": 0.0},
         "ties": {"count": 2, "spacing_m": 4000.0, "altitude_m": 900.0},
     }
@@ -261,8 +278,13 @@ def test_attitude_matrix_conventions():
 
 
 def test_turbulence_amplitude_and_compiled_sum():
-    turb = {"vertical_sigma_m": 2.0, "horizontal_sigma_m": 3.0, "attitude_sigma_deg": 0.5, "min_period_s": 4.0,
-            "max_period_s": 300.0}
+    turb = {
+        "vertical_sigma_m": 2.0,
+        "horizontal_sigma_m": 3.0,
+        "attitude_sigma_deg": 0.5,
+        "min_period_s": 4.0,
+        "max_period_s": 300.0,
+    }
     s = simulate_flight(quick_sim(duration_s=6 * 3600.0, imu_hz=1.0, turbulence=turb))
     tr = s.truth
     assert np.std(tr["height"] - 1000.0) == pytest.approx(2.0, rel=0.05)
@@ -273,5 +295,9 @@ def test_turbulence_amplitude_and_compiled_sum():
     assert 0.05 < np.std(tr["acc_n"][:, 2]) < 1.0
     tb = s.plan.turbulence
     t = np.linspace(0.0, 500.0, 2001)
-    np.testing.assert_allclose(tj._sinusum(t, tb.amp[2], tb.omega[2], tb.phase[2]),
-                               tj.sinusum_reference(t, tb.amp[2], tb.omega[2], tb.phase[2]), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        tj._sinusum(t, tb.amp[2], tb.omega[2], tb.phase[2]),
+        tj.sinusum_reference(t, tb.amp[2], tb.omega[2], tb.phase[2]),
+        rtol=0,
+        atol=1e-12,
+    )

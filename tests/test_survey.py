@@ -117,7 +117,13 @@ def lawnmower(n_lines=5, line_s=600.0, rate=3.0):
         h = (h + 180.0) % 360.0
     # last turn of the loop brought us around; turn to north for a tie line across all lines
     legs[-1] = ("turn", rate, 90.0 if h == 90.0 else -90.0)
-    legs += [("tie", 0.0, 700.0), ("turn", rate, 90.0), ("climb", 90.0, 200.0, -5.0), ("accel", 90.0, 60.0, 0.0, 60.0, 0.0), ("static", 200.0)]
+    legs += [
+        ("tie", 0.0, 700.0),
+        ("turn", rate, 90.0),
+        ("climb", 90.0, 200.0, -5.0),
+        ("accel", 90.0, 60.0, 0.0, 60.0, 0.0),
+        ("static", 200.0),
+    ]
     return legs
 
 
@@ -161,6 +167,7 @@ def test_options_object_replaces_keywords():
     t, lat, lon, vel, lab = build_track(lawnmower(n_lines=2), seed=3)
     opts = segmentation_options({"min_line_s": 800.0})  # longer than the 600-s lines
     assert [s.kind for s in segment_lines(t, lat, lon, vel, options=opts)].count("line") == 0
+
     def key(segs):
         return [(s.name, s.kind, s.start_index, s.stop_index) for s in segs]
 
@@ -170,12 +177,17 @@ def test_options_object_replaces_keywords():
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_level_speed_ramps_are_not_lines(seed):
-    legs = [("static", 100.0), ("ramp", 90.0, 0.0, 60.0, 60.0), ("line", 90.0, 600.0), ("ramp", 90.0, 60.0, 0.0, 60.0),
-            ("static", 100.0)]
+    legs = [
+        ("static", 100.0),
+        ("ramp", 90.0, 0.0, 60.0, 60.0),
+        ("line", 90.0, 600.0),
+        ("ramp", 90.0, 60.0, 0.0, 60.0),
+        ("static", 100.0),
+    ]
     t, lat, lon, vel, lab = build_track(legs, seed=seed)
     segs = segment_lines(t, lat, lon, vel)
     assert [s.kind for s in segs] == ["static", "turn", "line", "turn", "static"]
-    (a, b), = true_runs(lab, "line")
+    ((a, b),) = true_runs(lab, "line")
     line = segs[2]
     # The line may take the end of a ramp where the speed is within the turbulence band of
     # cruise (~10 % here). Measured over seeds 0..19 at 1 and 5 Hz: |error| <= 16 s, mean 0.2 s.
@@ -209,7 +221,13 @@ def test_gust_does_not_split_a_line():
 
 
 def test_short_straights_and_slow_curves_are_turns():
-    legs = [("line", 0.0, 300.0), ("turn", 3.0, 90.0), ("line", 90.0, 25.0), ("turn", 0.3, 60.0), ("line", 150.0, 300.0)]
+    legs = [
+        ("line", 0.0, 300.0),
+        ("turn", 3.0, 90.0),
+        ("line", 90.0, 25.0),
+        ("turn", 0.3, 60.0),
+        ("line", 150.0, 300.0),
+    ]
     t, lat, lon, vel, lab = build_track(legs, heading_noise_deg=1.0)
     segs = segment_lines(t, lat, lon, vel)
     kinds = [s.kind for s in segs]
@@ -252,7 +270,10 @@ def test_windows():
 def test_options_validation():
     o = segmentation_options({"min_line_s": 200, "heading_tol_deg": 8.0, "max_vertical_speed_mps": None})
     assert o.min_line_s == 200.0 and o.heading_tol_deg == 8.0 and o.max_vertical_speed_mps is None
-    with pytest.raises(ConfigError, match=r"^lines\.min_lin_s: unknown key \(did you mean 'min_line_s'\?\); valid keys here: mode, min_line_m, min_line_s, "):
+    with pytest.raises(
+        ConfigError,
+        match=r"^lines\.min_lin_s: unknown key \(did you mean 'min_line_s'\?\); valid keys here: mode, min_line_m, min_line_s, ",
+    ):
         segmentation_options({"min_lin_s": 3})
     with pytest.raises(ConfigError, match=r"lines\.mode: expected one of auto, windows, whole, got 'bogus'"):
         segmentation_options({"mode": "bogus"})
@@ -262,7 +283,9 @@ def test_options_validation():
         segmentation_options({"min_line_s": 0})
     with pytest.raises(ConfigError, match=r"lines\.windows: required"):
         segmentation_options({"mode": "windows"})
-    with pytest.raises(ConfigError, match=r"^flights\[0\]\.lines\.windows\[0\]\.stop: unknown key \(did you mean 'stop_s'\?\)"):
+    with pytest.raises(
+        ConfigError, match=r"^flights\[0\]\.lines\.windows\[0\]\.stop: unknown key \(did you mean 'stop_s'\?\)"
+    ):
         segmentation_options({"windows": [{"name": "a", "start_s": 0, "stop": 1}]}, key_path="flights[0].lines")
 
 
@@ -275,8 +298,14 @@ def test_bad_time_is_data_error():
 
 # ------------------------------------------------------------------------------- crossovers
 def line(flight, name, e, n, v, t):
-    return {"flight": flight, "line": name, "easting_m": np.asarray(e, float), "northing_m": np.asarray(n, float),
-            "value_mgal": np.asarray(v, float), "time_s": np.asarray(t, float)}
+    return {
+        "flight": flight,
+        "line": name,
+        "easting_m": np.asarray(e, float),
+        "northing_m": np.asarray(n, float),
+        "value_mgal": np.asarray(v, float),
+        "time_s": np.asarray(t, float),
+    }
 
 
 def test_two_orthogonal_lines_hand_computed():
@@ -300,7 +329,8 @@ def test_two_orthogonal_lines_hand_computed():
     st = x.statistics()
     assert st["count"] == 1 and st["mean_mgal"] == pytest.approx(-91.5)
     assert st["per_line"]["F2/T01"] == pytest.approx(
-        {"count": 1, "mean_mgal": 91.5, "rms_mgal": 91.5, "rms_over_sqrt2_mgal": 91.5 / math.sqrt(2)})
+        {"count": 1, "mean_mgal": 91.5, "rms_mgal": 91.5, "rms_over_sqrt2_mgal": 91.5 / math.sqrt(2)}
+    )
 
 
 def test_crossing_through_a_vertex_counted_once_and_oblique():
@@ -353,11 +383,11 @@ def test_grid_survey_statistics_and_prefilter_invariance():
         x = np.linspace(-500, 20500, 2101)
         y = 1000.0 + 2500.0 * i + 5 * np.sin(x / 700.0)
         e = rng.normal(0, 0.5, x.size)
-        lines.append(line("F1", f"L{i+1:02d}", x, y, f(x, y) + e, np.arange(x.size) * 1.0 + 1e4 * i))
+        lines.append(line("F1", f"L{i + 1:02d}", x, y, f(x, y) + e, np.arange(x.size) * 1.0 + 1e4 * i))
     for j in range(6):
         y = np.linspace(-500, 20500, 2101)
         x = 1500.0 + 3500.0 * j + 5 * np.cos(y / 500.0)
-        lines.append(line("F2", f"T{j+1:02d}", x, y, f(x, y) + 0.3, np.arange(y.size) * 1.0))
+        lines.append(line("F2", f"T{j + 1:02d}", x, y, f(x, y) + 0.3, np.arange(y.size) * 1.0))
     x = find_crossovers(lines)
     assert len(x) == 48
     # the field is smooth: interpolation error at 10-m sampling is < 1e-3 mGal, so each difference
@@ -365,8 +395,8 @@ def test_grid_survey_statistics_and_prefilter_invariance():
     assert abs(x.mean_mgal + 0.3) < 0.25
     assert np.all(x.line_a.astype(str) < "T")  # lines come first in the input list
     pl = {p["line"]: p for p in x.per_line}
-    assert all(pl[f"T{j+1:02d}"]["count"] == 8 for j in range(6))
-    assert all(pl[f"L{i+1:02d}"]["count"] == 6 for i in range(8))
+    assert all(pl[f"T{j + 1:02d}"]["count"] == 8 for j in range(6))
+    assert all(pl[f"L{i + 1:02d}"]["count"] == 6 for i in range(8))
     d = x.diff_mgal
     assert x.rms_mgal == pytest.approx(np.sqrt(np.mean(d**2)))
     # exact field check: differences equal interpolated truth differences
@@ -398,14 +428,24 @@ def test_velocity_gap_splits_a_line():
     v[:, 0] = 60.0
     v[140:150] = np.nan
     segs = segment_lines(t, 0.0, 0.0, v, min_line_s=60)
-    assert [(s.name, s.start_index, s.stop_index) for s in segs] == [("L01", 0, 140), ("turn01", 140, 150), ("L02", 150, 300)]
+    assert [(s.name, s.start_index, s.stop_index) for s in segs] == [
+        ("L01", 0, 140),
+        ("turn01", 140, 150),
+        ("L02", 150, 300),
+    ]
     assert segs[0].heading_deg == pytest.approx(90.0)
 
 
 def test_line_length_is_by_distance_not_time():
     # 100-s lines at 60 m/s (6 km) and a 90-s tie (5.4 km): a 120-s time limit dropped them all
-    legs = [("line", 0.0, 100.0), ("turn", 3.0, 180.0), ("line", 180.0, 100.0), ("turn", 3.0, 90.0),
-            ("tie", 90.0, 90.0), ("turn", 3.0, 90.0)]
+    legs = [
+        ("line", 0.0, 100.0),
+        ("turn", 3.0, 180.0),
+        ("line", 180.0, 100.0),
+        ("turn", 3.0, 90.0),
+        ("tie", 90.0, 90.0),
+        ("turn", 3.0, 90.0),
+    ]
     t, lat, lon, vel, lab = build_track(legs, heading_noise_deg=1.0)
     segs = segment_lines(t, lat, lon, vel)
     assert [s.kind for s in segs if s.kind in ("line", "tie")] == ["line", "line", "tie"]
@@ -419,8 +459,15 @@ def test_line_length_is_by_distance_not_time():
 
 def test_transit_is_recognised_by_heading():
     # two north-south lines, one east-west tie, and a straight transit at 45 deg
-    legs = [("line", 0.0, 300.0), ("turn", 3.0, 180.0), ("line", 180.0, 300.0), ("turn", 3.0, 90.0),
-            ("tie", 90.0, 200.0), ("turn", 3.0, 315.0), ("line", 45.0, 200.0)]
+    legs = [
+        ("line", 0.0, 300.0),
+        ("turn", 3.0, 180.0),
+        ("line", 180.0, 300.0),
+        ("turn", 3.0, 90.0),
+        ("tie", 90.0, 200.0),
+        ("turn", 3.0, 315.0),
+        ("line", 45.0, 200.0),
+    ]
     t, lat, lon, vel, lab = build_track(legs, heading_noise_deg=1.0)
     segs = segment_lines(t, lat, lon, vel)
     straight = [(s.name, s.kind) for s in segs if s.kind in ("line", "tie", "transit")]

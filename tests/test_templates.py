@@ -17,8 +17,16 @@ SAMPLE = ROOT / "sample_data" / "grid_ros2"
 
 
 def _gs(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "gravsurvey", *map(str, args)], capture_output=True, text=True,
-                          timeout=900, env=dict(os.environ), stdin=subprocess.DEVNULL, cwd=cwd, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "gravsurvey", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        env=dict(os.environ),
+        stdin=subprocess.DEVNULL,
+        cwd=cwd,
+        check=False,
+    )
 
 
 def _truth(path):

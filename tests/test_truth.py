@@ -41,8 +41,12 @@ def reference(tmp_path):
 
 def test_mapped_columns_read_like_the_simulator_truth(tmp_path, reference):
     p, t = reference
-    truth = {"file": str(p), "columns": {"time": "t_unix", "disturbance_mgal": "dg"}, "time_format": "s",
-             "delimiter": ";"}
+    truth = {
+        "file": str(p),
+        "columns": {"time": "t_unix", "disturbance_mgal": "dg"},
+        "time_format": "s",
+        "delimiter": ";",
+    }
     fl = load_config(_config(tmp_path, truth)).flights[0]
     assert fl.truth == p
     got = read_truth_csv(fl.truth_spec)
@@ -55,17 +59,27 @@ def test_a_plain_path_is_the_simulator_layout(tmp_path):
     assert fl.truth_spec == TruthSpec(SAMPLE / "F01" / "truth.csv")
 
 
-@pytest.mark.parametrize("truth, message", [
-    ({"columns": {"time": "t_unix"}}, r"^flights\[0\]\.truth\.file: missing required key"),
-    ({"file": "REF", "columns": {"disturbance": "dg"}},
-     r"^flights\[0\]\.truth\.columns\.disturbance: unknown key \(did you mean 'disturbance_mgal'\?\)"),
-    ({"file": "REF", "time_format": "iso"}, r"^flights\[0\]\.truth\.time_format: expected one of ns, s"),
-    ({"file": "REF", "columns": {"time": "t_unix", "disturbance_mgal": "dgx"}, "delimiter": ";"},
-     r"^flights\[0\]\.truth: .*ref\.csv: truth file lacks column\(s\) dgx; header has t_unix, dg, other$"),
-    ("REF", r"^flights\[0\]\.truth: .*ref\.csv: truth file lacks column\(s\) time_ns, disturbance_mgal; .*"
-            r"other names: flights\[0\]\.truth: \{file: \.\.\., columns:"),
-    (3, r"^flights\[0\]\.truth: expected a string"),
-])
+@pytest.mark.parametrize(
+    "truth, message",
+    [
+        ({"columns": {"time": "t_unix"}}, r"^flights\[0\]\.truth\.file: missing required key"),
+        (
+            {"file": "REF", "columns": {"disturbance": "dg"}},
+            r"^flights\[0\]\.truth\.columns\.disturbance: unknown key \(did you mean 'disturbance_mgal'\?\)",
+        ),
+        ({"file": "REF", "time_format": "iso"}, r"^flights\[0\]\.truth\.time_format: expected one of ns, s"),
+        (
+            {"file": "REF", "columns": {"time": "t_unix", "disturbance_mgal": "dgx"}, "delimiter": ";"},
+            r"^flights\[0\]\.truth: .*ref\.csv: truth file lacks column\(s\) dgx; header has t_unix, dg, other$",
+        ),
+        (
+            "REF",
+            r"^flights\[0\]\.truth: .*ref\.csv: truth file lacks column\(s\) time_ns, disturbance_mgal; .*"
+            r"other names: flights\[0\]\.truth: \{file: \.\.\., columns:",
+        ),
+        (3, r"^flights\[0\]\.truth: expected a string"),
+    ],
+)
 def test_truth_mistakes_are_config_errors_before_processing(tmp_path, reference, truth, message):
     p, _ = reference
     if isinstance(truth, dict) and truth.get("file") == "REF":

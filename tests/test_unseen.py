@@ -53,9 +53,12 @@ def test_drawn_flights_stay_in_their_ranges(specs):
         # every sensor number is its nominal value times its factor
         s = f["sensors"]
         assert s["accelerometer"]["white_sigma_mps2"] == pytest.approx(
-            U.NOMINAL_SENSORS["accelerometer"]["white_sigma_mps2"] * sp["noise_factors"]["accelerometer.white_sigma_mps2"])
+            U.NOMINAL_SENSORS["accelerometer"]["white_sigma_mps2"]
+            * sp["noise_factors"]["accelerometer.white_sigma_mps2"]
+        )
         assert s["altimeter"]["sigma_m"] == pytest.approx(
-            U.NOMINAL_SENSORS["altimeter"]["sigma_m"] * sp["noise_factors"]["altimeter.sigma_m"])
+            U.NOMINAL_SENSORS["altimeter"]["sigma_m"] * sp["noise_factors"]["altimeter.sigma_m"]
+        )
         assert _in(s["gravimeter"]["markov_lambda_per_s"], r["gravimeter_lambda_per_s"])
 
 
@@ -108,7 +111,9 @@ def test_survey_yaml_holds_no_oracle_values(tmp_path):
     for key in ("anomaly_", "gravimeter_", "accel_noise", "altimeter_sigma", "gnss_horizontal", "gyro_drift"):
         assert key not in text
     oracle = yaml.safe_load((tmp_path / "oracle.yaml").read_text())
-    assert oracle["model"]["altimeter_sigma_m"] == pytest.approx(sp["sim"]["flights"][0]["sensors"]["altimeter"]["sigma_m"])
+    assert oracle["model"]["altimeter_sigma_m"] == pytest.approx(
+        sp["sim"]["flights"][0]["sensors"]["altimeter"]["sigma_m"]
+    )
     assert "initial" in oracle["flights"][0]
 
 
@@ -117,8 +122,10 @@ def test_noise_psd_matches_the_simulated_errors():
     the simulator's own error realisations: gravimeter error averaged to 1 s, altimeter error."""
     from scipy.signal import welch
 
-    sensors = {"gravimeter": {"white_sigma_mps2": 2e-5, "markov_sigma_mps2": 1e-5, "markov_lambda_per_s": 0.01},
-               "altimeter": {"sigma_m": 0.1}}
+    sensors = {
+        "gravimeter": {"white_sigma_mps2": 2e-5, "markov_sigma_mps2": 1e-5, "markov_lambda_per_s": 0.01},
+        "altimeter": {"sigma_m": 0.1},
+    }
     sim = quick_sim(duration_s=20000.0, imu_hz=10.0, altimeter_hz=5.0, noise=sensors, seed=3)
     s = simulate_flight(sim)
     g1 = s.truth["gravimeter_error"][:-1].reshape(-1, 10).mean(axis=1)  # 1 s averages
@@ -143,9 +150,13 @@ def test_wiener_bound_formula_equals_the_optimal_filter_on_a_realisation():
     n, dt = 2**17, 1.0
     f = np.fft.rfftfreq(n, dt)
     s_s = 4 * 0.002 * (5 * MGAL) ** 2 / (0.002**2 + (2 * math.pi * f) ** 2)  # Markov signal, one-sided
-    flight = {"sensors": {"gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 1e-5,
-                                         "markov_lambda_per_s": 0.005},
-                          "altimeter": {"sigma_m": 0.05}}, "rates": {"altimeter_hz": 5.0, "gnss_hz": 1.0}}
+    flight = {
+        "sensors": {
+            "gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 1e-5, "markov_lambda_per_s": 0.005},
+            "altimeter": {"sigma_m": 0.05},
+        },
+        "rates": {"altimeter_hz": 5.0, "gnss_hz": 1.0},
+    }
     s_n = U.noise_psd(flight, f)
 
     def realise(psd):
@@ -168,7 +179,8 @@ def _bench():
     from pathlib import Path
 
     spec = importlib.util.spec_from_file_location(
-        "bench_unseen", Path(__file__).resolve().parents[1] / "benchmarks" / "bench_unseen.py")
+        "bench_unseen", Path(__file__).resolve().parents[1] / "benchmarks" / "bench_unseen.py"
+    )
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     return bench
@@ -190,10 +202,14 @@ def test_truth_spectrum_of_short_lines_gives_the_bound_of_the_true_spectrum():
     x = np.fft.irfft(amp * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)) / math.sqrt(2), n)
     phase = np.arange(n) % 800
     mask = (phase < 480) | ((phase >= 600) & (phase < 664))
-    flight = {"sensors": {"gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 5e-6,
-                                         "markov_lambda_per_s": 0.004},
-                          "altimeter": {"sigma_m": 0.1}, "gnss": {"vertical_sigma_m": 0.4}},
-              "rates": {"altimeter_hz": 14.0, "gnss_hz": 2.0}}
+    flight = {
+        "sensors": {
+            "gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 5e-6, "markov_lambda_per_s": 0.004},
+            "altimeter": {"sigma_m": 0.1},
+            "gnss": {"vertical_sigma_m": 0.4},
+        },
+        "rates": {"altimeter_hz": 14.0, "gnss_hz": 2.0},
+    }
     f_est, s_est = bench.truth_psd(x / MGAL, mask, dt)
     b_est, _ = bench.wiener_bound(f_est, s_est, U.noise_psd(flight, f_est), 100.0)
     b_true, _ = bench.wiener_bound(f, s_true, U.noise_psd(flight, f), 100.0)

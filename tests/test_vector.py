@@ -9,8 +9,16 @@ import pytest
 import yaml
 
 from gravsurvey.geodesy import MGAL, geodetic_to_ecef, mat_en
-from gravsurvey.inm.errormodel import (GE, GN, N_STATE_AIDED, N_STATE_VECTOR, continuous_model_n, discretise,
-                                       epoch_geometry, initial_covariance)
+from gravsurvey.inm.errormodel import (
+    GE,
+    GN,
+    N_STATE_AIDED,
+    N_STATE_VECTOR,
+    continuous_model_n,
+    discretise,
+    epoch_geometry,
+    initial_covariance,
+)
 from gravsurvey.inm.identify import horizontal_prior
 from gravsurvey.inm.mechanization import mechanize
 from gravsurvey.inm.params import InitialState, InmParams
@@ -57,7 +65,9 @@ def test_point_mass_horizontal_truth_analytic_and_finite_differences():
     step = 5.0
     for comp, col in ((0, "dg_east"), (1, "dg_north")):
         axis = mat_en(tr["lat"][k], tr["lon"][k])[:, :, comp]
-        fd = (anomalous_potential(model, r_e[k] + step * axis) - anomalous_potential(model, r_e[k] - step * axis)) / (2 * step)
+        fd = (anomalous_potential(model, r_e[k] + step * axis) - anomalous_potential(model, r_e[k] - step * axis)) / (
+            2 * step
+        )
         np.testing.assert_allclose(tr[col][k], fd, rtol=1e-6, atol=1e-11)
 
 
@@ -97,10 +107,18 @@ def test_harmonic_prior_relation():
 
 
 def _grid_flight():
-    sim = quick_sim(plan={"kind": "grid", "origin_lat_deg": 47.0, "origin_lon_deg": 11.0, "altitude_m": 800.0,
-                          "speed_mps": 70.0, "lines": {"count": 2, "spacing_m": 3000.0, "length_m": 6000.0,
-                                                       "heading_deg": 0.0}},
-                    triad="strapdown", imu_hz=10.0)
+    sim = quick_sim(
+        plan={
+            "kind": "grid",
+            "origin_lat_deg": 47.0,
+            "origin_lon_deg": 11.0,
+            "altitude_m": 800.0,
+            "speed_mps": 70.0,
+            "lines": {"count": 2, "spacing_m": 3000.0, "length_m": 6000.0, "heading_deg": 0.0},
+        },
+        triad="strapdown",
+        imu_hz=10.0,
+    )
     return simulate_flight(sim)
 
 
@@ -118,8 +136,9 @@ def test_vector_discretisation_matches_reference_and_extends_the_aided_model():
     assert phi.shape == (idx.size, N_STATE_VECTOR, N_STATE_VECTOR)
     # natural units of each state (m, m/s, m/s^2, rad, rad/s, m/s^2), as tests/test_inm_gnss.py:
     # the Taylor and Pade exponentials agree to round-off of the largest terms (|q| ~ 6.4e6 m)
-    u = np.array([1.0, 1e-2, 1.0, 1e-2, 1.0, 1e-2, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-7, 1e-7, 1e-7,
-                  1e-5, 1e-5, 1e-4, 1e-4])
+    u = np.array(
+        [1.0, 1e-2, 1.0, 1e-2, 1.0, 1e-2, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-7, 1e-7, 1e-7, 1e-5, 1e-5, 1e-4, 1e-4]
+    )
     sa = phi / u[:, None] * u[None, :]
     sb = phr / u[:, None] * u[None, :]
     assert np.max(np.abs(sa - sb)) < 1e-8 * np.max(np.abs(sb))
@@ -139,8 +158,18 @@ def test_vector_discretisation_matches_reference_and_extends_the_aided_model():
     # south: d(dv)/dt = -dg_north * North
     c = np.zeros(12)
     c[10], c[11] = hp[1], hp[0]
-    a, _ = continuous_model_n.py_func(geom.r_i[k], geom.v_i[k], geom.up_i[k], geom.e1_i[k], geom.e2_i[k],
-                                      geom.e3_i[k], geom.w02[k], geom.speed[k], c, 18)
+    a, _ = continuous_model_n.py_func(
+        geom.r_i[k],
+        geom.v_i[k],
+        geom.up_i[k],
+        geom.e1_i[k],
+        geom.e2_i[k],
+        geom.e3_i[k],
+        geom.w02[k],
+        geom.speed[k],
+        c,
+        18,
+    )
     north_i = a[3:6, 14]
     assert np.dot(north_i, -geom.up_i[k]) == pytest.approx(0.0, abs=1e-12)
     assert np.linalg.norm(north_i) == pytest.approx(1.0, abs=1e-12)
@@ -166,12 +195,21 @@ def test_deflections_sign():
 #: A navigation-grade strapdown IMU and PPK GNSS (datasheet-like figures, also what the
 #: config says); the sample survey's own 0.5 m GNSS and 5e-4 m/s^2 accelerometers do not
 #: resolve a 2 mGal horizontal field (docs/benchmarks.md, "Vector gravimetry").
-NAV_SENSORS = {"accelerometer": {"white_sigma_mps2": 1e-4},
-               "gravimeter": {"bias_mps2": 1.0e-5, "markov_sigma_mps2": 5.0e-6, "markov_lambda_per_s": 0.01},
-               "gyro": {"bias_degph": [0.002, -0.002, 0.001], "white_drift_degph": 0.001},
-               "altimeter": {"sigma_m": 0.05}, "gnss": {"horizontal_sigma_m": 0.05, "vertical_sigma_m": 0.1}}
-NAV_MODEL = {"horizontal": True, "gnss_horizontal_sigma_m": 0.05, "gnss_vertical_sigma_m": 0.1,
-             "accel_noise_mps2": 1e-4, "gyro_drift_degph": 0.001, "gyro_bias_sigma_degph": 0.005}
+NAV_SENSORS = {
+    "accelerometer": {"white_sigma_mps2": 1e-4},
+    "gravimeter": {"bias_mps2": 1.0e-5, "markov_sigma_mps2": 5.0e-6, "markov_lambda_per_s": 0.01},
+    "gyro": {"bias_degph": [0.002, -0.002, 0.001], "white_drift_degph": 0.001},
+    "altimeter": {"sigma_m": 0.05},
+    "gnss": {"horizontal_sigma_m": 0.05, "vertical_sigma_m": 0.1},
+}
+NAV_MODEL = {
+    "horizontal": True,
+    "gnss_horizontal_sigma_m": 0.05,
+    "gnss_vertical_sigma_m": 0.1,
+    "accel_noise_mps2": 1e-4,
+    "gyro_drift_degph": 0.001,
+    "gyro_bias_sigma_degph": 0.005,
+}
 
 
 def _sample_like(plan=None, mass_scale=1.0):
@@ -187,8 +225,13 @@ def _sample_like(plan=None, mass_scale=1.0):
 
 def _record(s):
     g = GnssChannel(s.gnss_time, np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg), s.gnss_height)
-    return FlightRecord(s.start_unix_ns, ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
-                        AltimeterChannel(s.alt_time, s.alt_height), g, source="sim")
+    return FlightRecord(
+        s.start_unix_ns,
+        ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
+        AltimeterChannel(s.alt_time, s.alt_height),
+        g,
+        source="sim",
+    )
 
 
 def _errors(s, sol):
@@ -206,14 +249,25 @@ def grid_flight():
 @pytest.fixture(scope="module")
 def straight_flight():
     """One constant-heading line (20 min) across the same field, same sensors."""
-    return _sample_like({"kind": "line", "origin_lat_deg": 49.70, "origin_lon_deg": 8.045, "altitude_m": 600.0,
-                         "speed_mps": 70.0, "heading_deg": 0.0, "duration_s": 1100.0, "static_start_s": 60.0,
-                         "ramp_s": 40.0})
+    return _sample_like(
+        {
+            "kind": "line",
+            "origin_lat_deg": 49.70,
+            "origin_lon_deg": 8.045,
+            "altitude_m": 600.0,
+            "speed_mps": 70.0,
+            "heading_deg": 0.0,
+            "duration_s": 1100.0,
+            "static_start_s": 60.0,
+            "ramp_s": 40.0,
+        }
+    )
 
 
 def test_default_run_has_no_horizontal_outputs(grid_flight):
-    sol = estimate_anomaly(_record(grid_flight), inm_params({k: v for k, v in NAV_MODEL.items()
-                                                                      if k != "horizontal"}), None, "strapdown")
+    sol = estimate_anomaly(
+        _record(grid_flight), inm_params({k: v for k, v in NAV_MODEL.items() if k != "horizontal"}), None, "strapdown"
+    )
     assert sol.dg_horizontal is None and sol.dg_horizontal_sigma is None and sol.horizontal_observable is None
     assert sol.x_smooth.shape[1] == N_STATE_AIDED
 
@@ -293,8 +347,16 @@ def test_gravsurvey_run_with_the_switch(tmp_path):
     survey["model"] = {"horizontal": True}
     cfg = tmp_path / "survey.yaml"
     cfg.write_text(yaml.safe_dump(survey))
-    r = subprocess.run([sys.executable, "-m", "gravsurvey", "run", str(cfg)], capture_output=True, text=True,
-                       timeout=600, env=dict(os.environ), stdin=subprocess.DEVNULL, cwd=tmp_path, check=False)
+    r = subprocess.run(
+        [sys.executable, "-m", "gravsurvey", "run", str(cfg)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=dict(os.environ),
+        stdin=subprocess.DEVNULL,
+        cwd=tmp_path,
+        check=False,
+    )
     assert r.returncode == 0, r.stderr
     est = json.loads((tmp_path / "out" / "summary.json").read_text())["flights"]["F01"]["estimator"]
     hp = est["identification"]["horizontal_prior"]

@@ -21,14 +21,16 @@ def _coloured_noise(n, rng, sigma=4 * MGAL, band_s=(100.0, 400.0)):
     most power at periods 100-400 s at 1 Hz.  Generated longer and cropped (no end effects)."""
     w = rng.standard_normal(n + 4000)
     sos = sps.butter(2, [2.0 / band_s[1], 2.0 / band_s[0]], btype="band", output="sos")
-    x = sps.sosfiltfilt(sos, w)[2000:2000 + n]
+    x = sps.sosfiltfilt(sos, w)[2000 : 2000 + n]
     return sigma * x / np.std(x)
 
 
 def _smooth_truth(t, phases=(0.0, 1.0, 2.0)):
-    return MGAL * (30 * np.sin(2 * np.pi * t / 3600 + phases[0])
-                   + 20 * np.sin(2 * np.pi * t / 1500 + phases[1])
-                   + 10 * np.sin(2 * np.pi * t / 900 + phases[2]))
+    return MGAL * (
+        30 * np.sin(2 * np.pi * t / 3600 + phases[0])
+        + 20 * np.sin(2 * np.pi * t / 1500 + phases[1])
+        + 10 * np.sin(2 * np.pi * t / 900 + phases[2])
+    )
 
 
 def _rms(x):
@@ -102,8 +104,9 @@ def test_phi_matches_direct_numpy_for_random_vectors():
     assert math.isnan(W.phi_criterion(np.ones(5), np.ones(5)))  # nothing removed: undefined
 
 
-@pytest.mark.parametrize("mode,kind", [("symmetric", "soft"), ("symmetric", "hard"),
-                                        ("smooth", "soft"), ("periodization", "soft")])
+@pytest.mark.parametrize(
+    "mode,kind", [("symmetric", "soft"), ("symmetric", "hard"), ("smooth", "soft"), ("periodization", "soft")]
+)
 def test_cosphi_search_phi_is_signal_domain_phi(mode, kind):
     """The Gram/numba search reports, per level, the Phi of the signal-domain vectors, equal to
     the pure-numpy reference search that evaluates every candidate directly."""
@@ -120,9 +123,16 @@ def test_cosphi_search_phi_is_signal_domain_phi(mode, kind):
     assert info["phi_deg"] == pytest.approx(math.degrees(math.acos(info["Phi"])))
 
 
-@pytest.mark.parametrize("mode,kind", [("symmetric", "soft"), ("symmetric", "hard"),
-                                        ("smooth", "soft"), ("periodization", "soft"),
-                                        ("periodization", "hard")])
+@pytest.mark.parametrize(
+    "mode,kind",
+    [
+        ("symmetric", "soft"),
+        ("symmetric", "hard"),
+        ("smooth", "soft"),
+        ("periodization", "soft"),
+        ("periodization", "hard"),
+    ],
+)
 def test_cosphi_search_never_returns_a_degenerate_candidate(mode, kind):
     """Issue 14.12: the candidate that removes nothing (all thresholds 0) has Phi = rounding
     (4.7e-10 on numpy 2.4.6 / PyWavelets 1.9.0) in the Gram search and must never win; nor may
@@ -196,10 +206,10 @@ def test_ti_response_is_cycle_spun_decimated_projection(wavelet):
     n, level = 512, 3
     z = rng.standard_normal(n)
     acc = np.zeros(n)
-    for s in range(2 ** level):
+    for s in range(2**level):
         zs = np.roll(z, -s)
         acc += np.roll(W.approximation(zs, wavelet, level, "periodization"), s)
-    acc /= 2 ** level
+    acc /= 2**level
     f = np.fft.rfftfreq(n)
     ref = np.fft.irfft(np.fft.rfft(z) * W.ti_response(wavelet, level, f), n)
     assert np.max(np.abs(acc - ref)) < 1e-12 * np.max(np.abs(z)) * 10
@@ -224,8 +234,7 @@ def test_lowpass_half_amplitude_at_the_filter_length():
     t = np.arange(n) * dt
     z = np.sin(2 * np.pi * t / period)
     mid = slice(n // 4, 3 * n // 4)
-    for f in (lambda x: F.butterworth_lowpass(x, dt, period, 4),
-              lambda x: F.gaussian_lowpass(x, dt, period)):
+    for f in (lambda x: F.butterworth_lowpass(x, dt, period, 4), lambda x: F.gaussian_lowpass(x, dt, period)):
         assert np.sqrt(2) * _rms(f(z)[mid]) == pytest.approx(0.5, abs=0.01)
     _, info = W.postprocess(z, dt, 50.0, "butterworth", resolution_m=7500.0)
     assert info["filter_length_s"] == pytest.approx(300.0)
@@ -237,9 +246,11 @@ def test_linear_operators_are_time_reversal_equivariant():
     P(z reversed) = P(z) reversed, i.e. it cannot shift anything in time."""
     rng = np.random.default_rng(8)
     z = np.cumsum(rng.standard_normal(5001)) * MGAL
-    ops = [lambda x: W.ti_approximation(x, "db10", 7),
-           lambda x: F.butterworth_lowpass(x, 1.0, 400.0),
-           lambda x: F.gaussian_lowpass(x, 1.0, 400.0)]
+    ops = [
+        lambda x: W.ti_approximation(x, "db10", 7),
+        lambda x: F.butterworth_lowpass(x, 1.0, 400.0),
+        lambda x: F.gaussian_lowpass(x, 1.0, 400.0),
+    ]
     for op in ops:
         np.testing.assert_allclose(op(z[::-1]), op(z)[::-1], rtol=0, atol=1e-9 * np.max(np.abs(z)))
 
@@ -262,8 +273,7 @@ def test_default_is_the_smoothed_estimate_itself():
     assert np.array_equal(out, z) and out is not z
 
 
-@pytest.mark.parametrize("method", ["ti_cosphi", "visushrink", "sure", "bayes",
-                                    "butterworth", "gaussian"])
+@pytest.mark.parametrize("method", ["ti_cosphi", "visushrink", "sure", "bayes", "butterworth", "gaussian"])
 def test_step_stays_centred(method):
     """A 40 mGal step at a non-dyadic time, plus white noise; the half-height crossing of the
     output, averaged over noise realisations, sits within one sample of the true step."""
@@ -423,8 +433,7 @@ def test_cosphi_faithful_runs_and_reports():
     t = np.arange(n, dtype=float)
     g = _smooth_truth(t * 4)
     z = g + _coloured_noise(n, rng)
-    out, info = W.postprocess(z, 1.0, 50.0, "cosphi", wavelet="auto", boundary="symmetric",
-                              thresholding="hard")
+    out, info = W.postprocess(z, 1.0, 50.0, "cosphi", wavelet="auto", boundary="symmetric", thresholding="hard")
     assert info["wavelet"] in ("db10", "coif4")
     assert 1 <= info["n"] <= W.n_levels(n)
     assert len(info["p"]) == info["n"]
@@ -440,7 +449,9 @@ def test_options_defaults_and_validation():
     assert o.method == "default" and o.wavelet == "auto" and o.boundary == "symmetric"
     o = postprocess_options({"method": "butterworth", "resolution_m": 5000})
     assert o.resolution_m == 5000.0
-    with pytest.raises(ConfigError, match=r"^postprocess\.method: expected one of default, ti_cosphi, .*, got 'wavelets'$"):
+    with pytest.raises(
+        ConfigError, match=r"^postprocess\.method: expected one of default, ti_cosphi, .*, got 'wavelets'$"
+    ):
         postprocess_options({"method": "wavelets"})
     with pytest.raises(ConfigError, match=r"postprocess\.wavelet.*db10, coif4, auto"):
         postprocess_options({"wavelet": "db4"})

@@ -75,8 +75,9 @@ def test_profiles_csv_columns_as_documented_and_values(tmp_path):
     assert [c for c in documented if c in w.ESTIMATE_COLUMNS] == list(w.ESTIMATE_COLUMNS)
     optional = w.ATTITUDE_COLUMNS + w.HORIZONTAL_COLUMNS + ("unfiltered_mgal",)
     assert rows[0] == [c for c in documented if c not in optional]
-    assert rows[0] == list(w.PROFILE_COLUMNS[:10] + ("kalman_mgal",) + w.PROFILE_COLUMNS[10:] + w.LEVEL_COLUMNS
-                           + w.TRUTH_COLUMNS)
+    assert rows[0] == list(
+        w.PROFILE_COLUMNS[:10] + ("kalman_mgal",) + w.PROFILE_COLUMNS[10:] + w.LEVEL_COLUMNS + w.TRUTH_COLUMNS
+    )
     assert len(rows) == 1 + 9
     r = dict(zip(rows[0], rows[3]))
     # 10:00:02.123456789 -> nearest ms .123; independent check with datetime
@@ -94,8 +95,9 @@ def test_profiles_csv_columns_as_documented_and_values(tmp_path):
     # without truth: the two optional columns are absent
     t2 = make_table(truth=False)
     w.write_profiles_csv(p, t2)
-    assert p.read_text().splitlines()[0].split(",") == list(w.PROFILE_COLUMNS[:10] + ("kalman_mgal",)
-                                                             + w.PROFILE_COLUMNS[10:] + w.LEVEL_COLUMNS)
+    assert p.read_text().splitlines()[0].split(",") == list(
+        w.PROFILE_COLUMNS[:10] + ("kalman_mgal",) + w.PROFILE_COLUMNS[10:] + w.LEVEL_COLUMNS
+    )
     with pytest.raises(ValueError, match="truth_mgal and error_mgal go together"):
         w.write_profiles_csv(p, dict(t2, truth_mgal=t["truth_mgal"]))
     with pytest.raises(ValueError, match="lacks columns"):
@@ -112,10 +114,22 @@ def test_utc_rounding_half_up_and_before_epoch_free():
 
 
 def test_crossovers_csv_as_documented(tmp_path):
-    a = {"flight": "F1", "line": "L01", "easting_m": np.arange(11.0), "northing_m": np.full(11, 3.0),
-         "value_mgal": np.arange(11.0), "time_s": np.arange(11.0)}
-    b = {"flight": "F2", "line": "T01", "easting_m": np.full(11, 2.5), "northing_m": np.arange(11.0),
-         "value_mgal": 100 - 2 * np.arange(11.0), "time_s": np.arange(11.0)}
+    a = {
+        "flight": "F1",
+        "line": "L01",
+        "easting_m": np.arange(11.0),
+        "northing_m": np.full(11, 3.0),
+        "value_mgal": np.arange(11.0),
+        "time_s": np.arange(11.0),
+    }
+    b = {
+        "flight": "F2",
+        "line": "T01",
+        "easting_m": np.full(11, 2.5),
+        "northing_m": np.arange(11.0),
+        "value_mgal": 100 - 2 * np.arange(11.0),
+        "time_s": np.arange(11.0),
+    }
     p = tmp_path / "crossovers.csv"
     w.write_crossovers_csv(p, find_crossovers([a, b]))
     rows = list(csv.DictReader(open(p, newline="")))
@@ -138,8 +152,9 @@ def test_xyz_round_trip_and_format(tmp_path):
     assert "/ Line 1001 = flight F01 line L01" in lines and "/ Tie 2001 = flight F02 line T01" in lines
     # every non-comment, non-header line has one field per column; the NaN is a '*'
     x = w.read_xyz(p)
-    assert x.columns == list(w.XYZ_COLUMNS[:7] + ("kalman_mgal",) + w.XYZ_COLUMNS[7:] + w.LEVEL_COLUMNS
-                             + w.TRUTH_COLUMNS)
+    assert x.columns == list(
+        w.XYZ_COLUMNS[:7] + ("kalman_mgal",) + w.XYZ_COLUMNS[7:] + w.LEVEL_COLUMNS + w.TRUTH_COLUMNS
+    )
     data_lines = [ln for ln in lines if not ln.startswith("/") and not re.match(r"(Line|Tie) \d+$", ln)]
     assert all(len(ln.split()) == len(x.columns) for ln in data_lines)
     assert sum(ln.split().count("*") for ln in data_lines) == 2  # lat and kalman NaN
@@ -189,14 +204,23 @@ def test_xyz_reader_rejects_damaged_files(tmp_path):
 def _strict_json(path):
     def bad(c):
         raise AssertionError(f"non-standard JSON constant {c}")
+
     return json.loads(Path(path).read_text(), parse_constant=bad)
 
 
 def test_geojson_rfc7946(tmp_path):
     t = make_table()
     p = tmp_path / "lines.geojson"
-    stats = [{"flight": "F01", "line": "L01", "rms_vs_truth_mgal": np.float64(0.4), "method": "db4", "n": np.int64(5),
-              "crossover_rms_mgal": float("nan")}]
+    stats = [
+        {
+            "flight": "F01",
+            "line": "L01",
+            "rms_vs_truth_mgal": np.float64(0.4),
+            "method": "db4",
+            "n": np.int64(5),
+            "crossover_rms_mgal": float("nan"),
+        }
+    ]
     w.write_geojson(p, t, stats, 32653)
     g = _strict_json(p)
     assert g["type"] == "FeatureCollection" and "crs" not in g
@@ -211,8 +235,7 @@ def test_geojson_rfc7946(tmp_path):
     assert f1["properties"]["crossover_rms_mgal"] is None
     assert f1["properties"]["projected_crs"] == "EPSG:32653"
     assert f1["properties"]["start_utc"] == "2024-05-01T10:00:00.123Z"
-    assert f1["properties"]["length_km"] == pytest.approx(
-        np.hypot(1000.0 * 4 / 8, 1050.0 * 4 / 8) / 1e3, rel=1e-9)
+    assert f1["properties"]["length_km"] == pytest.approx(np.hypot(1000.0 * 4 / 8, 1050.0 * 4 / 8) / 1e3, rel=1e-9)
     assert f2["properties"]["line"] == "T01" and "method" not in f2["properties"]
     for f in g["features"]:
         for lon, lat in f["geometry"]["coordinates"]:
@@ -223,9 +246,15 @@ def test_geojson_antimeridian_thinning_and_null_geometry(tmp_path):
     n = 5001
     lon = np.linspace(179.0, 181.0, n)  # crosses 180 at the middle
     lat = np.linspace(-10.0, -12.0, n)
-    t = {"flight": np.array(["F"] * n + ["F"] * 2, dtype=object), "line": np.array(["L01"] * n + ["L02"] * 2, dtype=object),
-         "lat_deg": np.concatenate([lat, [np.nan, 1.0]]), "lon_deg": np.concatenate([lon, [1.0, 1.0]]),
-         "time_unix_ns": np.arange(n + 2, dtype=np.int64), "easting_m": np.zeros(n + 2), "northing_m": np.zeros(n + 2)}
+    t = {
+        "flight": np.array(["F"] * n + ["F"] * 2, dtype=object),
+        "line": np.array(["L01"] * n + ["L02"] * 2, dtype=object),
+        "lat_deg": np.concatenate([lat, [np.nan, 1.0]]),
+        "lon_deg": np.concatenate([lon, [1.0, 1.0]]),
+        "time_unix_ns": np.arange(n + 2, dtype=np.int64),
+        "easting_m": np.zeros(n + 2),
+        "northing_m": np.zeros(n + 2),
+    }
     p = tmp_path / "am.geojson"
     w.write_geojson(p, t, None, None, max_vertices=1000)
     g = _strict_json(p)
@@ -241,8 +270,9 @@ def test_geojson_antimeridian_thinning_and_null_geometry(tmp_path):
 
 def test_write_json_converts_numpy(tmp_path):
     p = tmp_path / "summary.json"
-    w.write_json(p, {"a": np.float32(1.5), "b": np.arange(3), "c": (np.nan, np.inf), "d": np.bool_(True),
-                     "e": {1: Path("x/y")}})
+    w.write_json(
+        p, {"a": np.float32(1.5), "b": np.arange(3), "c": (np.nan, np.inf), "d": np.bool_(True), "e": {1: Path("x/y")}}
+    )
     assert _strict_json(p) == {"a": 1.5, "b": [0, 1, 2], "c": [None, None], "d": True, "e": {"1": "x/y"}}
     with pytest.raises(TypeError, match="cannot write object to JSON"):
         w.write_json(p, {"x": object()})
@@ -317,13 +347,21 @@ CHILD = textwrap.dedent(
 
 
 def run_child(out, run, mode="normal", **kw):
-    return subprocess.Popen([sys.executable, "-c", CHILD, str(out), str(run), mode], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True, **kw)
+    return subprocess.Popen(
+        [sys.executable, "-c", CHILD, str(out), str(run), mode],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        **kw,
+    )
 
 
 def snapshot(out):
-    return {str(p.relative_to(out)): p.read_bytes() for p in Path(out).rglob("*")
-            if p.is_file() and not p.relative_to(out).parts[0].startswith(".")}
+    return {
+        str(p.relative_to(out)): p.read_bytes()
+        for p in Path(out).rglob("*")
+        if p.is_file() and not p.relative_to(out).parts[0].startswith(".")
+    }
 
 
 def test_sigkill_mid_write_leaves_previous_outputs(tmp_path):
@@ -362,6 +400,7 @@ def test_sigkill_during_publish_no_partial_files_summary_old(tmp_path):
     summary = json.loads(now["summary.json"])
     assert summary["run"] == 1  # summary.json is published last: still the previous run's
     import hashlib
+
     mixed = 0
     for name, data in now.items():
         if name == "summary.json":
@@ -404,7 +443,9 @@ HOLDER = textwrap.dedent(
 
 def test_lock_refuses_second_run_with_message(tmp_path):
     out = tmp_path / "out"
-    h = subprocess.Popen([sys.executable, "-c", HOLDER, str(out)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    h = subprocess.Popen(
+        [sys.executable, "-c", HOLDER, str(out)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
     try:
         assert h.stdout.readline().strip() == "HELD"
         with pytest.raises(w.LockedError) as ei:
@@ -434,7 +475,9 @@ def test_lock_refuses_second_run_with_message(tmp_path):
 
 def test_lock_waiter_gets_it_when_holder_finishes(tmp_path):
     out = tmp_path / "out"
-    h = subprocess.Popen([sys.executable, "-c", HOLDER, str(out)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    h = subprocess.Popen(
+        [sys.executable, "-c", HOLDER, str(out)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
     assert h.stdout.readline().strip() == "HELD"
     h.stdin.write("go\n")
     h.stdin.flush()
@@ -445,8 +488,12 @@ def test_lock_waiter_gets_it_when_holder_finishes(tmp_path):
 
 
 def test_metadata_in_csv_xyz_geojson(tmp_path):
-    meta = {"survey": "S1", "crs": {"projected": "EPSG:32653 WGS 84 / UTM zone 53N", "projected_epsg": 32653},
-            "software": "gravsurvey 9.9", "processing": {"model": {"a": 1.5}}}
+    meta = {
+        "survey": "S1",
+        "crs": {"projected": "EPSG:32653 WGS 84 / UTM zone 53N", "projected_epsg": 32653},
+        "software": "gravsurvey 9.9",
+        "processing": {"model": {"a": 1.5}},
+    }
     t = make_table()
     w.write_profiles_csv(tmp_path / "p.csv", t, metadata=meta)
     lines = (tmp_path / "p.csv").read_text().splitlines()

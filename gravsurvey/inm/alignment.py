@@ -199,8 +199,9 @@ def static_span(time, f_t, w_t) -> float:
     have = cnt > 0
     fm[have] /= cnt[have, None]
     wm[have] /= cnt[have, None]
-    moving = have & ((np.linalg.norm(fm - fm[0], axis=1) > STATIC_FORCE_TOL)
-                     | (np.linalg.norm(wm - wm[0], axis=1) > STATIC_RATE_TOL))
+    moving = have & (
+        (np.linalg.norm(fm - fm[0], axis=1) > STATIC_FORCE_TOL) | (np.linalg.norm(wm - wm[0], axis=1) > STATIC_RATE_TOL)
+    )
     first = int(np.argmax(moving)) if moving.any() else nb
     # the blocks just before motion may hold its smooth start: leave them out
     span = max(0.0, (first - STATIC_MARGIN_BLOCKS) * STATIC_BLOCK_S) if moving.any() else float(t[-1] - t[0])
@@ -252,9 +253,17 @@ def level(f_mean_t):
     return up, roll, pitch
 
 
-def gyrocompass(f_mean_t, w_mean_t, lat, duration_s, gyro_bias_sigma_radps, gyro_noise_radps,
-                accel_bias_sigma_mps2=ACCEL_BIAS_SIGMA_MPS2, accel_noise_mps2=0.0,
-                omega=WGS84.omega) -> tuple:
+def gyrocompass(
+    f_mean_t,
+    w_mean_t,
+    lat,
+    duration_s,
+    gyro_bias_sigma_radps,
+    gyro_noise_radps,
+    accel_bias_sigma_mps2=ACCEL_BIAS_SIGMA_MPS2,
+    accel_noise_mps2=0.0,
+    omega=WGS84.omega,
+) -> tuple:
     """Static alignment: levelling from the accelerometers and north from the Earth rate.
 
     Parameters
@@ -294,12 +303,14 @@ def gyrocompass(f_mean_t, w_mean_t, lat, duration_s, gyro_bias_sigma_radps, gyro
         warn.append(
             f"gyro too noisy for gyrocompassing: gyro error {gyro_err / degph:.3g} deg/h against the Earth rate's "
             f"horizontal {earth_h / degph:.3g} deg/h gives a heading sigma of {math.degrees(s_head):.3g} deg "
-            f"(> {GYROCOMPASS_MAX_SIGMA_DEG} deg)")
+            f"(> {GYROCOMPASS_MAX_SIGMA_DEG} deg)"
+        )
     elif abs(np.linalg.norm(w_h) - earth_h) > 4.0 * gyro_err + 0.2 * earth_h:
         warn.append(
             f"gyrocompassing refused: horizontal rate {np.linalg.norm(w_h) / degph:.3g} deg/h at rest, expected the "
             f"Earth rate's {earth_h / degph:.3g} deg/h (gyro bias beyond its sigma {gyro_bias_sigma_radps / degph:.3g} "
-            "deg/h, or the platform was moving)")
+            "deg/h, or the platform was moving)"
+        )
     north = w_h / np.linalg.norm(w_h) if np.linalg.norm(w_h) > 0 else _any_perpendicular(up)
     east = np.cross(north, up)
     mat_nt = np.stack([east, north, up])
@@ -410,8 +421,17 @@ def wahba(a, b):
     return u @ np.diag([1.0, 1.0, d]) @ vt
 
 
-def velocity_matching(time, f_t, w_t, gnss, window_s, ellipsoid: Ellipsoid = WGS84, spacing_s=MATCH_SPACING_S,
-                      c_t0=None, gyro_bias_sigma_radps=0.0):
+def velocity_matching(
+    time,
+    f_t,
+    w_t,
+    gnss,
+    window_s,
+    ellipsoid: Ellipsoid = WGS84,
+    spacing_s=MATCH_SPACING_S,
+    c_t0=None,
+    gyro_bias_sigma_radps=0.0,
+):
     """In-motion alignment over ``[time[0], time[0] + window_s]`` by velocity matching.
 
     Parameters
@@ -458,7 +478,9 @@ def velocity_matching(time, f_t, w_t, gnss, window_s, ellipsoid: Ellipsoid = WGS
     ok = np.all(np.isfinite(v_q), axis=1)
     tq, r_q, v_q = tq[ok], r_q[ok], v_q[ok]
     if tq.size < 4:
-        raise DataError("alignment: too little gap-free GNSS data at the start of the flight for an in-motion alignment")
+        raise DataError(
+            "alignment: too little gap-free GNSS data at the start of the flight for an in-motion alignment"
+        )
     # gravitation along the GNSS track (inertial axes), integrated by the trapezoid rule
     m_ie = mat_ie(tq, ellipsoid.omega)
     r_e = np.einsum("nji,nj->ni", m_ie, r_q)
@@ -535,8 +557,16 @@ def align(record, params=None, ellipsoid: Ellipsoid = WGS84, lat=None) -> Alignm
         if lat is None:
             warn.append("no GNSS latitude: gyrocompassing assumes 45 deg")
             lat = math.radians(45.0)
-        mat, cov, gw = gyrocompass(f[sel].mean(axis=0), w[sel].mean(axis=0), lat, static, s_b, s_n,
-                                   accel_noise_mps2=p.accel_noise_mps2, omega=ellipsoid.omega)
+        mat, cov, gw = gyrocompass(
+            f[sel].mean(axis=0),
+            w[sel].mean(axis=0),
+            lat,
+            static,
+            s_b,
+            s_n,
+            accel_noise_mps2=p.accel_noise_mps2,
+            omega=ellipsoid.omega,
+        )
         warn += gw
         # the Earth turns under the static triad: C_it(t0) uses ENU at t0 (mean taken at mid-span;
         # the heading moves by W sin(lat) T/2, below 0.01 deg for 10 min)
@@ -553,8 +583,7 @@ def align(record, params=None, ellipsoid: Ellipsoid = WGS84, lat=None) -> Alignm
         for win in MATCH_WINDOWS_S:
             span = min(win, tw[-1] - tw[0])
             try:
-                rot, cov_t, _ = velocity_matching(tw, fw, ww, gn, span, ellipsoid, c_t0=c_t0,
-                                                  gyro_bias_sigma_radps=s_b)
+                rot, cov_t, _ = velocity_matching(tw, fw, ww, gn, span, ellipsoid, c_t0=c_t0, gyro_bias_sigma_radps=s_b)
             except DataError:
                 if span >= tw[-1] - tw[0]:
                     break
@@ -568,8 +597,10 @@ def align(record, params=None, ellipsoid: Ellipsoid = WGS84, lat=None) -> Alignm
         if best is not None:
             candidates.append(best)
     if not candidates:
-        raise DataError(f"{src}: alignment: no static period at the start and no GNSS to align a strapdown triad "
-                        "with; give flights[].initial.attitude_deg")
+        raise DataError(
+            f"{src}: alignment: no static period at the start and no GNSS to align a strapdown triad "
+            "with; give flights[].initial.attitude_deg"
+        )
     out = min(candidates, key=lambda c: c.sigma_heading_rad)
     stat = candidates[0] if candidates[0].method.startswith("static") else None
     if stat is not None and out is not stat and stat.sigma_level_rad < out.sigma_level_rad:
@@ -581,11 +612,15 @@ def align(record, params=None, ellipsoid: Ellipsoid = WGS84, lat=None) -> Alignm
         cov = np.diag([stat.cov_n[0, 0], stat.cov_n[1, 1], out.cov_n[2, 2]])
         out = Alignment(mat, cov, "static-levelling+" + out.method, out.converge_s, static)
     if out.method == "static-levelling":
-        raise DataError(f"{src}: alignment: heading unknown (gyros too noisy to gyrocompass and no GNSS to align "
-                        "in motion); give flights[].initial.attitude_deg")
+        raise DataError(
+            f"{src}: alignment: heading unknown (gyros too noisy to gyrocompass and no GNSS to align "
+            "in motion); give flights[].initial.attitude_deg"
+        )
     if math.degrees(out.sigma_heading_rad) > POOR_HEADING_DEG:
-        warn.append(f"poor alignment: heading sigma {math.degrees(out.sigma_heading_rad):.2g} deg after "
-                    f"{out.converge_s:.0f} s (no motion: straight, steady flight does not show the heading)")
+        warn.append(
+            f"poor alignment: heading sigma {math.degrees(out.sigma_heading_rad):.2g} deg after "
+            f"{out.converge_s:.0f} s (no motion: straight, steady flight does not show the heading)"
+        )
     out.warnings = warn
     return out
 

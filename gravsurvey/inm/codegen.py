@@ -105,8 +105,9 @@ class _Gen:
     def col(self, ind, var, arr, base, j):
         """Column ``j`` of the n x n matrix at flat offset ``base``."""
         n = self.n
-        self.assign(ind, var, lambda c: f"vcol({arr}, {base} + {self.row.chunks[c][0] * n + j}, {n}, "
-                                        f"{self.row.chunks[c][1]})")
+        self.assign(
+            ind, var, lambda c: f"vcol({arr}, {base} + {self.row.chunks[c][0] * n + j}, {n}, {self.row.chunks[c][1]})"
+        )
 
     def mirror(self, ind, src, dst):
         """Rows ``dst{i}`` of the symmetric matrix whose upper triangle is in rows ``src{i}``.
@@ -147,13 +148,17 @@ def _filter_step(n):
     for i in range(n):
         g.load("    ", f"c{i}", "p_f", f"kb - {nn - n * i}")
     # x = phi x: lane i accumulates phi[i, j] x[j] over j
-    g.assign("    ", "x", lambda c: _sum(g.zero(c), [f"vmul(fc{j}_{c}, {g.splat(f'x_f[k - 1, {j}]', c)})"
-                                                      for j in range(n)]))
+    g.assign(
+        "    ", "x", lambda c: _sum(g.zero(c), [f"vmul(fc{j}_{c}, {g.splat(f'x_f[k - 1, {j}]', c)})" for j in range(n)])
+    )
     g.store("    ", "x_p", f"k * {n}", "x")
     # t = phi @ p_prev: row i = sum_l phi[i, l] p_prev[l, :]
     for i in range(n):
-        g.assign("    ", f"t{i}", lambda c, i=i: _sum(g.zero(c), [f"vmul({g.splat(f'phi[k, {i}, {l}]', c)}, c{l}_{c})"
-                                                                for l in range(n)]))
+        g.assign(
+            "    ",
+            f"t{i}",
+            lambda c, i=i: _sum(g.zero(c), [f"vmul({g.splat(f'phi[k, {i}, {l}]', c)}, c{l}_{c})" for l in range(n)]),
+        )
         g.store("    ", "phi_pf", f"kpf * {nn} + {n * i}", f"t{i}")
     # p = t @ phi^T + sym(q): row i = sum_l t[i, l] phi[:, l]
     for i in range(n):
@@ -186,9 +191,14 @@ def _filter_step(n):
     g.assign("        ", "x", lambda c: f"vadd(x_{c}, vmul(kg_{c}, {g.splat('nu', c)}))")
     g.assign("        ", "sk", lambda c: f"vmul({g.splat('sc', c)}, kg_{c})")
     for i in range(n):
-        g.assign("        ", f"u{i}", lambda c, i=i: (
-            f"vadd(vsub(vsub(s{i}_{c}, vmul({g.splat(g.get('kg', i), c)}, g_{c})), "
-            f"vmul({g.splat(g.get('g', i), c)}, kg_{c})), vmul({g.splat(g.get('sk', i), c)}, kg_{c}))"))
+        g.assign(
+            "        ",
+            f"u{i}",
+            lambda c, i=i: (
+                f"vadd(vsub(vsub(s{i}_{c}, vmul({g.splat(g.get('kg', i), c)}, g_{c})), "
+                f"vmul({g.splat(g.get('g', i), c)}, kg_{c})), vmul({g.splat(g.get('sk', i), c)}, kg_{c}))"
+            ),
+        )
     g.mirror("        ", "u", "s")
     e("        innov[k, m] = nu / math.sqrt(sc)")
     g.store("    ", "x_f", f"k * {n}", "x")
@@ -234,6 +244,7 @@ def _rts_step(n):
         g.assign("    ", f"b{i}", lambda c, i=i: f"vmul(a{i}_{c}, {g.splat(f'd{i}', c)})")
     # forward substitution (rows ascending), then backward (rows descending)
     for i in range(n):
+
         def fwd(c, i=i):
             expr = f"b{i}_{c}"
             for l in range(i):
@@ -242,6 +253,7 @@ def _rts_step(n):
 
         g.assign("    ", f"b{i}", fwd)
     for i in range(n - 1, -1, -1):
+
         def bwd(c, i=i):
             expr = f"b{i}_{c}"
             for l in range(i + 1, n):
@@ -256,8 +268,9 @@ def _rts_step(n):
     g.load("    ", "xp1", "x_p", f"k * {n} + {n}")
     g.assign("    ", "dx", lambda c: f"vsub(xs1_{c}, xp1_{c})")
     g.load("    ", "xf", "x_f", f"k * {n}")
-    g.assign("    ", "xs", lambda c: _sum(f"xf_{c}", [f"vmul(b{l}_{c}, {g.splat(g.get('dx', l), c)})"
-                                                        for l in range(n)]))
+    g.assign(
+        "    ", "xs", lambda c: _sum(f"xf_{c}", [f"vmul(b{l}_{c}, {g.splat(g.get('dx', l), c)})" for l in range(n)])
+    )
     g.store("    ", "x_s", f"k * {n}", "xs")
     # dp = P_s1 - P_p; tmp = G dp (row i = sum_l b[l, i] dp[l, :]); dp2 = tmp G^T (row i =
     # sum_l tmp[i, l] b[l, :])
@@ -265,12 +278,20 @@ def _rts_step(n):
         g.load("    ", f"ps{i}", "p_s", f"kb + {nn + n * i}")
         g.assign("    ", f"e{i}", lambda c, i=i: f"vsub(ps{i}_{c}, pp{i}_{c})")
     for i in range(n):
-        g.assign("    ", f"t{i}", lambda c, i=i: _sum(g.zero(c), [f"vmul({g.splat(g.get(f'b{l}', i), c)}, e{l}_{c})"
-                                                                for l in range(n)]))
+        g.assign(
+            "    ",
+            f"t{i}",
+            lambda c, i=i: _sum(g.zero(c), [f"vmul({g.splat(g.get(f'b{l}', i), c)}, e{l}_{c})" for l in range(n)]),
+        )
     for i in range(n):
         g.load("    ", f"pf{i}", "p_f", f"kb + {n * i}")
-        g.assign("    ", f"u{i}", lambda c, i=i: "vadd(pf{0}_{1}, {2})".format(
-            i, c, _sum(g.zero(c), [f"vmul({g.splat(g.get(f't{i}', l), c)}, b{l}_{c})" for l in range(n)])))
+        g.assign(
+            "    ",
+            f"u{i}",
+            lambda c, i=i: "vadd(pf{0}_{1}, {2})".format(
+                i, c, _sum(g.zero(c), [f"vmul({g.splat(g.get(f't{i}', l), c)}, b{l}_{c})" for l in range(n)])
+            ),
+        )
     g.mirror("    ", "u", "s")
     for i in range(n):
         g.store("    ", "p_s", f"kb + {n * i}", f"s{i}")
@@ -295,8 +316,13 @@ def _matmul(n):
     g.assign("        ", "o", g.zero)
     e(f"        for j in range({n}):")
     e("            c = a[i, j]")
-    g.assign("            ", "o", lambda c: f"vadd(o_{c}, vmul({g.splat('c', c)}, "
-                                          f"vload(b, {n} * j + {g.row.chunks[c][0]}, {g.row.chunks[c][1]})))")
+    g.assign(
+        "            ",
+        "o",
+        lambda c: (
+            f"vadd(o_{c}, vmul({g.splat('c', c)}, vload(b, {n} * j + {g.row.chunks[c][0]}, {g.row.chunks[c][1]})))"
+        ),
+    )
     g.store("        ", "out", f"{n} * i", "o")
     return g.lines
 
@@ -320,8 +346,13 @@ def _tri_solve(n):
     g.load("        ", "s", "b", f"{n} * i")
     e("        for l in range(lo, hi):")
     e("            c = lch[i, l] if forward else lch[l, i]")
-    g.assign("            ", "s", lambda c: f"vsub(s_{c}, vmul({g.splat('c', c)}, "
-                                          f"vload(b, {n} * l + {g.row.chunks[c][0]}, {g.row.chunks[c][1]})))")
+    g.assign(
+        "            ",
+        "s",
+        lambda c: (
+            f"vsub(s_{c}, vmul({g.splat('c', c)}, vload(b, {n} * l + {g.row.chunks[c][0]}, {g.row.chunks[c][1]})))"
+        ),
+    )
     e("        gi = idg[i]")
     g.assign("        ", "s", lambda c: f"vmul(s_{c}, {g.splat('gi', c)})")
     g.store("        ", "b", f"{n} * i", "s")

@@ -135,9 +135,18 @@ def epoch_geometry(nav, idx, use_ext: bool = True, ellipsoid: Ellipsoid = WGS84)
     v_n = np.einsum("nji,nj->ni", m_in, np.einsum("nij,nj->ni", m_ie, v_e))
     speed = np.hypot(v_n[:, 0], v_n[:, 1])
     c_mid = nav.mat_it[mid]
-    return EpochGeometry(dt, r, v, up_i, np.ascontiguousarray(c_mid[:, :, 2]),
-                         np.ascontiguousarray(c_mid[:, :, 0]), np.ascontiguousarray(c_mid[:, :, 1]),
-                         w02, speed, np.ascontiguousarray(nav.mat_it[idx]))
+    return EpochGeometry(
+        dt,
+        r,
+        v,
+        up_i,
+        np.ascontiguousarray(c_mid[:, :, 2]),
+        np.ascontiguousarray(c_mid[:, :, 0]),
+        np.ascontiguousarray(c_mid[:, :, 1]),
+        w02,
+        speed,
+        np.ascontiguousarray(nav.mat_it[idx]),
+    )
 
 
 def _noise_params(params, alt_dt, hprior=None):
@@ -146,22 +155,25 @@ def _noise_params(params, alt_dt, hprior=None):
     ``hprior``: (sigma m/s^2, lambda 1/m) of the horizontal disturbance; None: from the
     vertical prior (:func:`gravsurvey.inm.identify.horizontal_prior`).
     """
-    sig_h, lam_h = hprior if hprior is not None else horizontal_prior(params.anomaly_sigma_mps2,
-                                                                      params.anomaly_lambda_per_m)
-    return np.array([
-        params.gyro_drift_radps**2,  # gyro PSD, rad^2/s
-        params.accel_noise_mps2**2,  # accel PSD, (m/s^2)^2 s
-        params.gravimeter_white_mps2**2,
-        params.gravimeter_lambda_per_s,
-        params.gravimeter_sigma_mps2,
-        params.anomaly_lambda_per_m,
-        params.anomaly_sigma_mps2,
-        params.altimeter_sigma_m**2 * alt_dt,  # altimeter error as a white noise in the dynamics
-        1.0 if params.radius_source == "altimeter" else 0.0,
-        0.0,  # gyro-bias random walk PSD (the bias is a constant)
-        lam_h,  # horizontal disturbance: spatial rate, 1/m (18 states only)
-        sig_h,  # ... and stationary sigma, m/s^2
-    ])
+    sig_h, lam_h = (
+        hprior if hprior is not None else horizontal_prior(params.anomaly_sigma_mps2, params.anomaly_lambda_per_m)
+    )
+    return np.array(
+        [
+            params.gyro_drift_radps**2,  # gyro PSD, rad^2/s
+            params.accel_noise_mps2**2,  # accel PSD, (m/s^2)^2 s
+            params.gravimeter_white_mps2**2,
+            params.gravimeter_lambda_per_s,
+            params.gravimeter_sigma_mps2,
+            params.anomaly_lambda_per_m,
+            params.anomaly_sigma_mps2,
+            params.altimeter_sigma_m**2 * alt_dt,  # altimeter error as a white noise in the dynamics
+            1.0 if params.radius_source == "altimeter" else 0.0,
+            0.0,  # gyro-bias random walk PSD (the bias is a constant)
+            lam_h,  # horizontal disturbance: spatial rate, 1/m (18 states only)
+            sig_h,  # ... and stationary sigma, m/s^2
+        ]
+    )
 
 
 @njit(cache=True)
@@ -353,8 +365,15 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     return phi, q
 
 
-def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = False, aided: bool = False,
-               horizontal: bool = False, hprior=None):
+def discretise(
+    geom: EpochGeometry,
+    params,
+    alt_dt: float,
+    reference: bool = False,
+    aided: bool = False,
+    horizontal: bool = False,
+    hprior=None,
+):
     """Phi, Q sequences ``(N, n, n)`` for the filter (seed state order).
 
     Parameters
@@ -378,8 +397,7 @@ def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = Fal
     c = _noise_params(params, alt_dt, hprior)
     perm = (_PERM_VECTOR if horizontal else _PERM_AIDED) if aided else _PERM
     n = perm.size
-    args = (geom.dt, geom.r_i, geom.v_i, geom.up_i, geom.e1_i, geom.e2_i, geom.e3_i, geom.w02,
-            geom.speed, geom.mat_it)
+    args = (geom.dt, geom.r_i, geom.v_i, geom.up_i, geom.e1_i, geom.e2_i, geom.e3_i, geom.w02, geom.speed, geom.mat_it)
     if not reference:
         return discretise_kernel(*[np.ascontiguousarray(x) for x in args], c, perm)
     nep = geom.dt.size
@@ -387,8 +405,18 @@ def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = Fal
     q = np.zeros((nep, n, n))
     phi[0] = np.eye(n)
     for k in range(1, nep):
-        a, qc = continuous_model_n.py_func(geom.r_i[k], geom.v_i[k], geom.up_i[k], geom.e1_i[k], geom.e2_i[k],
-                                           geom.e3_i[k], geom.w02[k], geom.speed[k], c, n)
+        a, qc = continuous_model_n.py_func(
+            geom.r_i[k],
+            geom.v_i[k],
+            geom.up_i[k],
+            geom.e1_i[k],
+            geom.e2_i[k],
+            geom.e3_i[k],
+            geom.w02[k],
+            geom.speed[k],
+            c,
+            n,
+        )
         m = np.zeros((2 * n, 2 * n))
         dt = geom.dt[k]
         m[:n, :n], m[:n, n:], m[n:, n:] = -a * dt, qc * dt, a.T * dt
@@ -411,8 +439,9 @@ def discretise(geom: EpochGeometry, params, alt_dt: float, reference: bool = Fal
     return phi, q
 
 
-def initial_covariance(params, q_t=None, p_t=None, attitude_cov_t=None, horizontal: bool = False,
-                       hprior=None) -> np.ndarray:
+def initial_covariance(
+    params, q_t=None, p_t=None, attitude_cov_t=None, horizontal: bool = False, hprior=None
+) -> np.ndarray:
     """Prior covariance at the first epoch (zero prior mean).
 
     Parameters
@@ -444,8 +473,9 @@ def initial_covariance(params, q_t=None, p_t=None, attitude_cov_t=None, horizont
         return np.diag(d)
     # linear map from independent (dr, dv, theta) to (dq, dp, theta), block order
     sq, sv = params.initial_position_sigma_m, params.initial_velocity_sigma_mps
-    sa = math.radians(GIVEN_ATTITUDE_SIGMA_DEG if params.initial_attitude_sigma_deg is None
-                      else params.initial_attitude_sigma_deg)
+    sa = math.radians(
+        GIVEN_ATTITUDE_SIGMA_DEG if params.initial_attitude_sigma_deg is None else params.initial_attitude_sigma_deg
+    )
     m = np.zeros((9, 9))
     m[0:3, 0:3] = np.eye(3)
     m[3:6, 3:6] = np.eye(3)
@@ -466,8 +496,11 @@ def initial_covariance(params, q_t=None, p_t=None, attitude_cov_t=None, horizont
         blk[i, i] = sb**2
     p = blk[np.ix_(_PERM_AIDED, _PERM_AIDED)]
     if horizontal:
-        sig_h = hprior[0] if hprior is not None else horizontal_prior(params.anomaly_sigma_mps2,
-                                                                      params.anomaly_lambda_per_m)[0]
+        sig_h = (
+            hprior[0]
+            if hprior is not None
+            else horizontal_prior(params.anomaly_sigma_mps2, params.anomaly_lambda_per_m)[0]
+        )
         big = np.zeros((N_STATE_VECTOR, N_STATE_VECTOR))
         big[:N_STATE_AIDED, :N_STATE_AIDED] = p
         big[GN, GN] = big[GE, GE] = sig_h**2
@@ -505,8 +538,9 @@ def _hermite(nav, tq):
     s = ((tq - t[j]) / h)[:, None]
     p0, p1 = nav.r_i[j], nav.r_i[j + 1]
     m0, m1 = nav.v_i[j] * h[:, None], nav.v_i[j + 1] * h[:, None]
-    return ((2 * s**3 - 3 * s**2 + 1) * p0 + (s**3 - 2 * s**2 + s) * m0 + (-2 * s**3 + 3 * s**2) * p1
-            + (s**3 - s**2) * m1)
+    return (
+        (2 * s**3 - 3 * s**2 + 1) * p0 + (s**3 - 2 * s**2 + s) * m0 + (-2 * s**3 + 3 * s**2) * p1 + (s**3 - s**2) * m1
+    )
 
 
 class AltimeterMeasurement:
@@ -635,8 +669,17 @@ class GnssMeasurement:
         ``C_true = C (I + [theta x])`` adds ``M_in^T C [l x]`` on ``theta``.
     """
 
-    def __init__(self, time, lat, lon, height, horizontal_sigma_m, vertical_sigma_m, ellipsoid: Ellipsoid = WGS84,
-                 lever_arm_t=None):
+    def __init__(
+        self,
+        time,
+        lat,
+        lon,
+        height,
+        horizontal_sigma_m,
+        vertical_sigma_m,
+        ellipsoid: Ellipsoid = WGS84,
+        lever_arm_t=None,
+    ):
         self.lever_arm_t = None if lever_arm_t is None else np.asarray(lever_arm_t, float)
         self.time = np.asarray(time, float)
         self.lat = np.asarray(lat, float)
@@ -656,8 +699,13 @@ class GnssMeasurement:
         z = np.full((nep, 3), np.nan)
         h = np.zeros((nep, 3, n_state))
         r = np.broadcast_to(np.diag(self.sigma**2), (nep, 3, 3)).copy()
-        ok = ((self.time >= nav.time[0]) & (self.time <= nav.time[-1]) & np.isfinite(self.lat)
-              & np.isfinite(self.lon) & np.isfinite(self.height))
+        ok = (
+            (self.time >= nav.time[0])
+            & (self.time <= nav.time[-1])
+            & np.isfinite(self.lat)
+            & np.isfinite(self.lon)
+            & np.isfinite(self.height)
+        )
         if not ok.any():
             return z, h, r
         ts, lat, lon, hh = self.time[ok], self.lat[ok], self.lon[ok], self.height[ok]

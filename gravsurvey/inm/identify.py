@@ -207,8 +207,9 @@ def _horizontal_specific_force(nav, f_t, times):
     return np.interp(times, nav.time, f_h)
 
 
-def straight_runs(time, manoeuvring, *, min_run_s: float = MIN_RUN_S,
-                  margin_s: float = MANOEUVRE_MARGIN_S) -> list[tuple[int, int]]:
+def straight_runs(
+    time, manoeuvring, *, min_run_s: float = MIN_RUN_S, margin_s: float = MANOEUVRE_MARGIN_S
+) -> list[tuple[int, int]]:
     """Index ranges ``[a, b)`` of evenly sampled, non-manoeuvring stretches.
 
     Parameters
@@ -237,7 +238,7 @@ def straight_runs(time, manoeuvring, *, min_run_s: float = MIN_RUN_S,
     edge = np.diff(np.concatenate([[0], (~bad).astype(np.int8), [0]]))
     runs = []
     for a, b in zip(np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)):
-        cuts = np.flatnonzero(broken[a:b - 1]) + a + 1
+        cuts = np.flatnonzero(broken[a : b - 1]) + a + 1
         bounds = [int(a), *[int(c) for c in cuts], int(b)]
         runs += [(s, e) for s, e in zip(bounds[:-1], bounds[1:]) if (e - s) * dt >= min_run_s]
     return runs
@@ -326,9 +327,9 @@ def _nll(v, f, i_f, dt, fixed_mask, fixed_v):
     return float(np.sum(np.log(s) + i_f / s))
 
 
-def fit_vertical_spectrum(time, residual_m, manoeuvring=None, *,
-                          fixed: dict | None = None,
-                          start: SpectralModel | None = None) -> VerticalFit | None:
+def fit_vertical_spectrum(
+    time, residual_m, manoeuvring=None, *, fixed: dict | None = None, start: SpectralModel | None = None
+) -> VerticalFit | None:
     """Whittle fit of the vertical-channel spectrum (module docstring).
 
     Parameters
@@ -396,13 +397,13 @@ def fit_vertical_spectrum(time, residual_m, manoeuvring=None, *,
     best = None
     for v0 in starts:
         v0 = np.clip(np.where(fixed_mask, fixed_v, v0), lo, hi)
-        res = minimize(_nll, v0, args=(f, i_f, dt, fixed_mask, fixed_v), method="L-BFGS-B",
-                       bounds=list(zip(lo, hi)))
+        res = minimize(_nll, v0, args=(f, i_f, dt, fixed_mask, fixed_v), method="L-BFGS-B", bounds=list(zip(lo, hi)))
         if best is None or res.fun < best.fun:
             best = res
     v = np.where(fixed_mask, fixed_v, best.x)
-    at_bound = tuple(k for k, x, a, b in zip(_ORDER, v, lo, hi)
-                     if not fixed_mask[_ORDER.index(k)] and (x - a < 1e-3 or b - x < 1e-3))
+    at_bound = tuple(
+        k for k, x, a, b in zip(_ORDER, v, lo, hi) if not fixed_mask[_ORDER.index(k)] and (x - a < 1e-3 or b - x < 1e-3)
+    )
     free = [i for i, k in enumerate(_ORDER) if not fixed_mask[i] and k not in at_bound]
     factors = {k: None for k in _ORDER}
     if free:
@@ -488,13 +489,18 @@ def model_resolution_m(params, speed_mps: float, height_dt_s: float) -> float:
     (``altimeter_sigma_m`` per sample at spacing ``height_dt_s``); see :func:`wiener_resolution_m`.
     """
     v = max(float(speed_mps), 1.0)
-    m = SpectralModel(max(params.anomaly_sigma_mps2, 1e-12), 1.0 / max(params.anomaly_lambda_per_m * v, 1e-12),
-                      max(params.gravimeter_white_mps2, 1e-12), max(params.altimeter_sigma_m, 1e-9))
+    m = SpectralModel(
+        max(params.anomaly_sigma_mps2, 1e-12),
+        1.0 / max(params.anomaly_lambda_per_m * v, 1e-12),
+        max(params.gravimeter_white_mps2, 1e-12),
+        max(params.altimeter_sigma_m, 1e-9),
+    )
     return wiener_resolution_m(m, v, height_dt_s)
 
 
-def prior_for_resolution(model: SpectralModel, speed_mps: float, resolution_m: float,
-                         dt_s: float = 1.0) -> SpectralModel:
+def prior_for_resolution(
+    model: SpectralModel, speed_mps: float, resolution_m: float, dt_s: float = 1.0
+) -> SpectralModel:
     """The anomaly sigma that puts the smoother's half-power point at ``resolution_m``.
 
     Keeps the correlation time and the noise; solves ``S_g(f_c) = S_n(f_c)`` with
@@ -508,8 +514,7 @@ def prior_for_resolution(model: SpectralModel, speed_mps: float, resolution_m: f
     return dataclasses.replace(model, anomaly_sigma_mps2=sigma)
 
 
-def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
-                    ellipsoid: Ellipsoid = WGS84):
+def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, ellipsoid: Ellipsoid = WGS84):
     """Identify the ``model:`` noise levels and anomaly prior of one flight.
 
     Keys the user set in the config (``params.given``) are held fixed; the others are
@@ -563,19 +568,25 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
         if fit is not None:
             report["warnings"].append(
                 f"model identification: straight stretches shorter than {MIN_RUN_S:.0f} s in all; noise "
-                "levels identified over the whole flight, turns included")
+                "levels identified over the whole flight, turns included"
+            )
     elif fit.short_runs:
         report["warnings"].append(
             f"model identification: no straight stretch of {MIN_RUN_S:.0f} s; {fit.n_runs} stretches of "
-            f"{SHORT_RUN_S:.0f} s or more pooled ({fit.seconds_used:.0f} s)")
+            f"{SHORT_RUN_S:.0f} s or more pooled ({fit.seconds_used:.0f} s)"
+        )
     if fit is None:
         report["method"] = "none"
         report["warnings"].append(
             f"model identification: no straight stretch of {MIN_RUN_S:.0f} s with evenly sampled "
-            "heights; the configured or default noise levels and anomaly prior are used")
+            "heights; the configured or default noise levels and anomaly prior are used"
+        )
         for k in IDENTIFIED_KEYS:
-            report[k] = {"value": getattr(params, k), "sigma_factor": None,
-                         "how": "config" if k in given else "default"}
+            report[k] = {
+                "value": getattr(params, k),
+                "sigma_factor": None,
+                "how": "config" if k in given else "default",
+            }
         return params, report
     m = fit.model
     white_how = "identified"
@@ -595,14 +606,22 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
         white_how = "default (whole-flight fit: turns dominate the white level)"
     if params.target_resolution_m is not None:
         m = prior_for_resolution(m, v, params.target_resolution_m, fit.dt_s)
-    found = {"anomaly_sigma_mps2": m.anomaly_sigma_mps2, "anomaly_lambda_per_m": 1.0 / (m.anomaly_tau_s * v),
-             "gravimeter_white_mps2": m.white_mps2, "altimeter_sigma_m": m.height_sigma_m}
+    found = {
+        "anomaly_sigma_mps2": m.anomaly_sigma_mps2,
+        "anomaly_lambda_per_m": 1.0 / (m.anomaly_tau_s * v),
+        "gravimeter_white_mps2": m.white_mps2,
+        "altimeter_sigma_m": m.height_sigma_m,
+    }
     if params.target_resolution_m is None:
         # a configured value is used exactly as written (the fit held it, up to rounding)
         found.update({k: getattr(params, k) for k in IDENTIFIED_KEYS if k in given})
     new = dataclasses.replace(params, **found)
-    src = {"anomaly_sigma_mps2": "anomaly_sigma_mps2", "anomaly_lambda_per_m": "anomaly_tau_s",
-           "gravimeter_white_mps2": "white_mps2", "altimeter_sigma_m": "height_sigma_m"}
+    src = {
+        "anomaly_sigma_mps2": "anomaly_sigma_mps2",
+        "anomaly_lambda_per_m": "anomaly_tau_s",
+        "gravimeter_white_mps2": "white_mps2",
+        "altimeter_sigma_m": "height_sigma_m",
+    }
     for k in IDENTIFIED_KEYS:
         how = "config" if k in given else "identified"
         if k == "anomaly_sigma_mps2" and params.target_resolution_m is not None:
@@ -611,8 +630,9 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float,
             how = white_how
         report[k] = {"value": getattr(new, k), "sigma_factor": fit.sigma_factor.get(src[k]), "how": how}
     for k in fit.at_bound:
-        report["warnings"].append(f"model identification: {k} ended on its bound {BOUNDS[k]} (SI); "
-                                  "the data say little about it")
+        report["warnings"].append(
+            f"model identification: {k} ended on its bound {BOUNDS[k]} (SI); the data say little about it"
+        )
     if fit.unresolved:
         report["anomaly_lambda_per_m"]["how"] = "identified (lower bound: straight stretches too short)"
     report["seconds_used"] = fit.seconds_used
@@ -647,8 +667,9 @@ def wide_prior_params(params, report, speed_mps: float):
     v = max(float(speed_mps), 1.0)
     m = dataclasses.replace(_model_of(report), anomaly_tau_s=WIDE_TAU_S)
     m = prior_for_resolution(m, v, WIDE_RESOLUTION_M, report["height_dt_s"])
-    return dataclasses.replace(params, anomaly_sigma_mps2=m.anomaly_sigma_mps2,
-                               anomaly_lambda_per_m=1.0 / (m.anomaly_tau_s * v))
+    return dataclasses.replace(
+        params, anomaly_sigma_mps2=m.anomaly_sigma_mps2, anomaly_lambda_per_m=1.0 / (m.anomaly_tau_s * v)
+    )
 
 
 def _noise_psd_g(f, m: SpectralModel, dt_h: float):
@@ -680,16 +701,24 @@ def keep_default_prior(params, report, speed_mps: float, min_s: float):
     """
     defaults = type(params)()
     given = set(getattr(params, "given", ()))
-    new = dataclasses.replace(params, **{k: getattr(params if k in given else defaults, k)
-                                         for k in ("anomaly_sigma_mps2", "anomaly_lambda_per_m")})
+    new = dataclasses.replace(
+        params,
+        **{k: getattr(params if k in given else defaults, k) for k in ("anomaly_sigma_mps2", "anomaly_lambda_per_m")},
+    )
     report = dict(report)
     for k in ("anomaly_sigma_mps2", "anomaly_lambda_per_m"):
-        report[k] = {"value": getattr(new, k), "sigma_factor": None,
-                     "how": "config" if k in given else f"default (record shorter than {min_s:.0f} s)"}
+        report[k] = {
+            "value": getattr(new, k),
+            "sigma_factor": None,
+            "how": "config" if k in given else f"default (record shorter than {min_s:.0f} s)",
+        }
     if "spectral_model" in report:
         v = max(float(speed_mps), 1.0)
-        m = dataclasses.replace(SpectralModel(**report["spectral_model"]), anomaly_sigma_mps2=new.anomaly_sigma_mps2,
-                                anomaly_tau_s=1.0 / (new.anomaly_lambda_per_m * v))
+        m = dataclasses.replace(
+            SpectralModel(**report["spectral_model"]),
+            anomaly_sigma_mps2=new.anomaly_sigma_mps2,
+            anomaly_tau_s=1.0 / (new.anomaly_lambda_per_m * v),
+        )
         report["spectral_model"] = dataclasses.asdict(m)
         report["resolution_m"] = wiener_resolution_m(m, v, report["height_dt_s"])
     return new, report
@@ -854,8 +883,9 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
         sg = _markov_psd(x, wide.anomaly_sigma_mps2, tau1)
         return sn * (sg / (sg + sn)) ** 2
 
-    var_field = max(var_seen - FIELD_VAR_NOISE_MARGIN * windowed_variance(first_pass_noise, FIELD_VAR_WINDOW_S, span),
-                    0.0)
+    var_field = max(
+        var_seen - FIELD_VAR_NOISE_MARGIN * windowed_variance(first_pass_noise, FIELD_VAR_WINDOW_S, span), 0.0
+    )
     # bands of >= 8 bins, log-spaced: the periodogram's scatter (100 % per bin) averages down
     s_sig = np.zeros_like(f)
     edges = np.unique(np.concatenate([[0], np.geomspace(8, max(valid.sum(), 9), 24).astype(int)]))
@@ -911,17 +941,23 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     model = dataclasses.replace(noise, anomaly_sigma_mps2=sg, anomaly_tau_s=tau)
     if params.target_resolution_m is not None:
         model = prior_for_resolution(model, v, params.target_resolution_m, dt_h)
-    new = dataclasses.replace(params, anomaly_sigma_mps2=model.anomaly_sigma_mps2,
-                              anomaly_lambda_per_m=1.0 / (model.anomaly_tau_s * v))
+    new = dataclasses.replace(
+        params, anomaly_sigma_mps2=model.anomaly_sigma_mps2, anomaly_lambda_per_m=1.0 / (model.anomaly_tau_s * v)
+    )
     # expected error variance of the chosen smoother: the risk as a variance (two-sided
     # periodogram bins of width 1/(n dt), both signs of frequency)
     expected = prior_risk(f, s_sig, s_n, model.anomaly_sigma_mps2, model.anomaly_tau_s) * 2.0 / (n * dt_s)
-    how_sigma = "target_resolution_m" if params.target_resolution_m is not None else (
-        "config" if "anomaly_sigma_mps2" in given else "least expected error (first-pass spectrum)")
+    how_sigma = (
+        "target_resolution_m"
+        if params.target_resolution_m is not None
+        else ("config" if "anomaly_sigma_mps2" in given else "least expected error (first-pass spectrum)")
+    )
     report["anomaly_sigma_mps2"] = {"value": new.anomaly_sigma_mps2, "sigma_factor": None, "how": how_sigma}
     report["anomaly_lambda_per_m"] = {
-        "value": new.anomaly_lambda_per_m, "sigma_factor": None,
-        "how": "config" if "anomaly_lambda_per_m" in given else "least expected error (first-pass spectrum)"}
+        "value": new.anomaly_lambda_per_m,
+        "sigma_factor": None,
+        "how": "config" if "anomaly_lambda_per_m" in given else "least expected error (first-pass spectrum)",
+    }
     report["spectral_model"] = dataclasses.asdict(model)
     report["resolution_m"] = wiener_resolution_m(model, v, dt_h)
     report["expected_error_mgal"] = math.sqrt(max(expected, 0.0)) / 1e-5
@@ -930,8 +966,9 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     return new, report
 
 
-def horizontal_prior(anomaly_sigma_mps2: float, anomaly_lambda_per_m: float,
-                     g_vertical=None, spacing_m: float | None = None) -> tuple[float, float]:
+def horizontal_prior(
+    anomaly_sigma_mps2: float, anomaly_lambda_per_m: float, g_vertical=None, spacing_m: float | None = None
+) -> tuple[float, float]:
     """Gauss-Markov prior of each horizontal disturbance component, from the vertical one.
 
     A field that is harmonic above its sources (point masses, dipoles, prisms, real terrain

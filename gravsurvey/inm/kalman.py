@@ -677,8 +677,7 @@ def _rts_loop(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s):
         k0 = max(k1 - _BLOCK + 1, 0)
         sink += _prefetch_block(p_p, p_f, p_s, phi, phi_pf, have_phi_pf, k0, k1)
         for kk in range(k1 - k0 + 1):
-            _rts_step(k1 - kk, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg, lch, b, bt, dx, dp,
-                      tmp)
+            _rts_step(k1 - kk, x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, d, idg, lch, b, bt, dx, dp, tmp)
     return sink
 
 

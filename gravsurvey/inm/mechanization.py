@@ -117,27 +117,35 @@ def check_mechanization_inputs(time, f_t, w_t, h_ext, use_ext: bool) -> None:
     """
     if time.size and not np.isfinite(time).all():
         k = _first_bad(~np.isfinite(time))
-        raise DataError(f"imu time: sample {k} is {time[k]!r}: expected finite times "
-                        "(damaged input that passed the ingestion checks)")
-    for name, v_n3, limit, unit in (("imu specific_force", f_t, MAX_SPECIFIC_FORCE_MPS2, "m/s^2"),
-                                    ("imu angular_rate", w_t, MAX_ANGULAR_RATE_RADPS, "rad/s")):
+        raise DataError(
+            f"imu time: sample {k} is {time[k]!r}: expected finite times "
+            "(damaged input that passed the ingestion checks)"
+        )
+    for name, v_n3, limit, unit in (
+        ("imu specific_force", f_t, MAX_SPECIFIC_FORCE_MPS2, "m/s^2"),
+        ("imu angular_rate", w_t, MAX_ANGULAR_RATE_RADPS, "rad/s"),
+    ):
         # NaN fails the comparison too: one pass finds both
         ok_n = (np.abs(v_n3) <= limit).all(axis=1)
         if not ok_n.all():
             k = _first_bad(~ok_n)
-            raise DataError(f"{name}: sample {k} at t = {time[k]:.3f} s is "
-                            f"[{', '.join(f'{x:.6g}' for x in v_n3[k])}] {unit}: expected finite "
-                            f"values within +-{limit:g} {unit} (damaged input that passed the "
-                            "ingestion checks); the mechanization stops")
+            raise DataError(
+                f"{name}: sample {k} at t = {time[k]:.3f} s is "
+                f"[{', '.join(f'{x:.6g}' for x in v_n3[k])}] {unit}: expected finite "
+                f"values within +-{limit:g} {unit} (damaged input that passed the "
+                "ingestion checks); the mechanization stops"
+            )
     if use_ext:
         lo, hi = EXT_HEIGHT_RANGE_M
         ok_n = (h_ext >= lo) & (h_ext <= hi)
         if not ok_n.all():
             k = _first_bad(~ok_n)
-            raise DataError(f"altimeter height: {h_ext[k]:.6g} m at t = {time[k]:.3f} s "
-                            f"(interpolated to IMU sample {k}): expected finite heights within "
-                            f"{lo:g}..{hi:g} m (damaged input that passed the ingestion checks); "
-                            "the mechanization stops")
+            raise DataError(
+                f"altimeter height: {h_ext[k]:.6g} m at t = {time[k]:.3f} s "
+                f"(interpolated to IMU sample {k}): expected finite heights within "
+                f"{lo:g}..{hi:g} m (damaged input that passed the ingestion checks); "
+                "the mechanization stops"
+            )
 
 
 def check_navigation_state(time, r_i, v_i, mat_it) -> None:
@@ -163,20 +171,35 @@ def check_navigation_state(time, r_i, v_i, mat_it) -> None:
     radius_n = np.sqrt(np.einsum("ni,ni->n", r_i, r_i))
     speed_n = np.sqrt(np.einsum("ni,ni->n", v_i, v_i))
     att_ok_n = np.isfinite(mat_it.reshape(len(mat_it), 9)).all(axis=1)
-    checks = (("navigation position", "geocentric radius", radius_n, "m",
-               (radius_n >= lo) & (radius_n <= hi), f"{lo:.3g}..{hi:.3g} m"),
-              ("navigation velocity", "inertial speed", speed_n, "m/s",
-               speed_n <= MAX_INERTIAL_SPEED_MPS, f"at most {MAX_INERTIAL_SPEED_MPS:g} m/s"),
-              ("navigation attitude", "triad->inertial matrix", None, "", att_ok_n,
-               "finite"))
+    checks = (
+        (
+            "navigation position",
+            "geocentric radius",
+            radius_n,
+            "m",
+            (radius_n >= lo) & (radius_n <= hi),
+            f"{lo:.3g}..{hi:.3g} m",
+        ),
+        (
+            "navigation velocity",
+            "inertial speed",
+            speed_n,
+            "m/s",
+            speed_n <= MAX_INERTIAL_SPEED_MPS,
+            f"at most {MAX_INERTIAL_SPEED_MPS:g} m/s",
+        ),
+        ("navigation attitude", "triad->inertial matrix", None, "", att_ok_n, "finite"),
+    )
     first = [(_first_bad(~ok_n), c) for c in checks for ok_n in [c[4]] if not ok_n.all()]
     if not first:
         return
     k, (name, what, val_n, unit, _, expected) = min(first, key=lambda x: x[0])
     value = f" {val_n[k]:.6g} {unit}" if val_n is not None else " non-finite"
-    raise DataError(f"{name}: {what}{value} at t = {time[k]:.3f} s (IMU sample {k}): "
-                    f"expected {expected}; damaged or inconsistent input (imu, altimeter or "
-                    "initial state) made the mechanization run away")
+    raise DataError(
+        f"{name}: {what}{value} at t = {time[k]:.3f} s (IMU sample {k}): "
+        f"expected {expected}; damaged or inconsistent input (imu, altimeter or "
+        "initial state) made the mechanization run away"
+    )
 
 
 # --------------------------------------------------------------------------
@@ -267,8 +290,9 @@ def _attitude_kernel(t, w, c0, c_out):
         _rot_into(phi, rot)
         for i in range(3):
             for j in range(3):
-                c_out[k + 1, i, j] = (c_out[k, i, 0] * rot[0, j] + c_out[k, i, 1] * rot[1, j]
-                                      + c_out[k, i, 2] * rot[2, j])
+                c_out[k + 1, i, j] = (
+                    c_out[k, i, 0] * rot[0, j] + c_out[k, i, 1] * rot[1, j] + c_out[k, i, 2] * rot[2, j]
+                )
 
 
 @njit(cache=True)
@@ -457,8 +481,12 @@ def mechanize_reference(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, elli
             n_i = mat_ie(t[k], om) @ mat_en(lat, lon)[:, 2]
             cosa = n_i @ r[k] / np.linalg.norm(r[k])
         y = np.concatenate([r[k], v[k]])
-        stages = [(0.0, t[k], a_i[k], h_ext[k]), (0.5 * dt, tm, amid, h_ext_mid[k]),
-                  (0.5 * dt, tm, amid, h_ext_mid[k]), (dt, t[k + 1], a_i[k + 1], h_ext[k + 1])]
+        stages = [
+            (0.0, t[k], a_i[k], h_ext[k]),
+            (0.5 * dt, tm, amid, h_ext_mid[k]),
+            (0.5 * dt, tm, amid, h_ext_mid[k]),
+            (dt, t[k + 1], a_i[k + 1], h_ext[k + 1]),
+        ]
         kprev = np.zeros(6)
         ks = []
         for hs, ts, acc, hx in stages:
@@ -550,8 +578,9 @@ def propagate_attitude(time, w_t, mat_0) -> np.ndarray:
     return out
 
 
-def mechanize(time, f_t, w_t, initial, alt_time=None, alt_height=None, use_ext=True,
-              ellipsoid: Ellipsoid = WGS84, reference=False) -> Navigation:
+def mechanize(
+    time, f_t, w_t, initial, alt_time=None, alt_height=None, use_ext=True, ellipsoid: Ellipsoid = WGS84, reference=False
+) -> Navigation:
     """Mechanize a flight from its initial state.
 
     Parameters
@@ -587,21 +616,23 @@ def mechanize(time, f_t, w_t, initial, alt_time=None, alt_height=None, use_ext=T
         h_ext = np.zeros_like(t)
         h_mid = np.zeros(max(t.size - 1, 0))
     check_mechanization_inputs(t, f_t, w_t, h_ext, bool(use_ext))
-    r0, v0, c0 = initial_inertial_state(t[0], initial.lat, initial.lon, initial.height,
-                                        initial.vel_n, initial.mat_nt, ellipsoid)
+    r0, v0, c0 = initial_inertial_state(
+        t[0], initial.lat, initial.lon, initial.height, initial.vel_n, initial.mat_nt, ellipsoid
+    )
     check_navigation_state(t[:1], r0[None], v0[None], c0[None])
     try:
         if reference:
             r, v, c = mechanize_reference(t, f_t, w_t, h_ext, h_mid, use_ext, r0, v0, c0, ellipsoid)
         else:
-            r, v, c = mechanize_kernel(t, f_t, w_t, h_ext, h_mid, bool(use_ext), r0, v0, c0,
-                                       *ellipsoid.params())
+            r, v, c = mechanize_kernel(t, f_t, w_t, h_ext, h_mid, bool(use_ext), r0, v0, c0, *ellipsoid.params())
     except ZeroDivisionError:
         # only a state far outside any flight divides by zero (the guard's limits keep the
         # inputs in range, but a long run-away can still get there): say so, as for the rest
-        raise DataError("navigation state: the mechanization divided by zero (a run-away "
-                        "state from damaged or inconsistent input: imu, altimeter or initial "
-                        "state)") from None
+        raise DataError(
+            "navigation state: the mechanization divided by zero (a run-away "
+            "state from damaged or inconsistent input: imu, altimeter or initial "
+            "state)"
+        ) from None
     check_navigation_state(t, r, v, c)
     return Navigation(t, r, v, c, h_ext)
 

@@ -138,9 +138,10 @@ class InmParams:
         self.validate()
         if self.given is None:
             self.given = frozenset(
-                f.name for f in dataclasses.fields(self)
-                if f.name not in _INTERNAL and f.name not in _BOOL_KEYS
-                and getattr(self, f.name) != f.default)
+                f.name
+                for f in dataclasses.fields(self)
+                if f.name not in _INTERNAL and f.name not in _BOOL_KEYS and getattr(self, f.name) != f.default
+            )
 
     def validate(self, key_path: str = "model") -> None:
         """Raise :class:`ConfigError` naming the key for a value the ``model`` section refuses
@@ -323,8 +324,9 @@ def _gnss_fit_velocity_factor(record) -> float:
     return float(math.sqrt(max(cov[1, 1], 0.0)))
 
 
-def resolve_initial_state(record, triad: str, params: InmParams | None = None, ellipsoid=None, given=None,
-                          key_path: str = "initial") -> InitialState:
+def resolve_initial_state(
+    record, triad: str, params: InmParams | None = None, ellipsoid=None, given=None, key_path: str = "initial"
+) -> InitialState:
     """Initial state from the data, with the config's ``initial`` keys as checked overrides.
 
     Position, velocity (GNSS fit) and, for a strapdown triad, attitude (coarse alignment)
@@ -356,14 +358,17 @@ def resolve_initial_state(record, triad: str, params: InmParams | None = None, e
     have_gnss = gn is not None and len(gn.time) >= 3
     from .errormodel import GIVEN_ATTITUDE_SIGMA_DEG
 
-    s_att = math.radians(GIVEN_ATTITUDE_SIGMA_DEG if p.initial_attitude_sigma_deg is None
-                         else p.initial_attitude_sigma_deg)
+    s_att = math.radians(
+        GIVEN_ATTITUDE_SIGMA_DEG if p.initial_attitude_sigma_deg is None else p.initial_attitude_sigma_deg
+    )
     att_given = given.get("attitude_deg")
     if not have_gnss:
         for k in ("lat_deg", "lon_deg", "height_m", "velocity_enu_mps"):
             if k not in given:
-                raise ConfigError(f"{key_path}.{k}: missing; the record has no GNSS (>= 3 samples) to take the initial "
-                                  "position and velocity from")
+                raise ConfigError(
+                    f"{key_path}.{k}: missing; the record has no GNSS (>= 3 samples) to take the initial "
+                    "position and velocity from"
+                )
         mat_nt, cov, alignment = np.eye(3), None, None
         if triad == "strapdown":
             if att_given is not None:
@@ -373,8 +378,15 @@ def resolve_initial_state(record, triad: str, params: InmParams | None = None, e
 
                 alignment = align(record, p, ell, lat=math.radians(given["lat_deg"]))
                 mat_nt, cov = alignment.mat_nt, alignment.cov_t
-        return InitialState(math.radians(given["lat_deg"]), math.radians(given["lon_deg"]), given["height_m"],
-                            np.asarray(given["velocity_enu_mps"], float), mat_nt, cov, alignment)
+        return InitialState(
+            math.radians(given["lat_deg"]),
+            math.radians(given["lon_deg"]),
+            given["height_m"],
+            np.asarray(given["velocity_enu_mps"], float),
+            mat_nt,
+            cov,
+            alignment,
+        )
     try:
         base = initial_state_from_gnss(record, triad, None, params=p, ellipsoid=ell)
     except DataError:
@@ -400,13 +412,17 @@ def resolve_initial_state(record, triad: str, params: InmParams | None = None, e
     d_e = (((lon - base.lon + math.pi) % (2 * math.pi)) - math.pi) * (n + base.height) * math.cos(base.lat)
     for key, dist in (("lat_deg", abs(d_n)), ("lon_deg", abs(d_e))):
         if key in given and dist > k * s_h:
-            raise ConfigError(f"{key_path}.{key}: {given[key]} deg is {dist:.4g} m from the GNSS position at the first "
-                              f"IMU sample (allowed {k:g} x {s_h:.3g} m from model.initial_position_sigma_m and "
-                              "model.gnss_horizontal_sigma_m); fix or remove it")
+            raise ConfigError(
+                f"{key_path}.{key}: {given[key]} deg is {dist:.4g} m from the GNSS position at the first "
+                f"IMU sample (allowed {k:g} x {s_h:.3g} m from model.initial_position_sigma_m and "
+                "model.gnss_horizontal_sigma_m); fix or remove it"
+            )
     height = given.get("height_m", base.height)
     if abs(height - base.height) > k * s_v:
-        raise ConfigError(f"{key_path}.height_m: {height} m differs from the GNSS height {base.height:.2f} m by more "
-                          f"than {k:g} x {s_v:.3g} m; fix or remove it")
+        raise ConfigError(
+            f"{key_path}.height_m: {height} m differs from the GNSS height {base.height:.2f} m by more "
+            f"than {k:g} x {s_v:.3g} m; fix or remove it"
+        )
     vel = np.asarray(given.get("velocity_enu_mps", base.vel_n), float)
     dv = np.abs(vel - base.vel_n)
     if dv[0] > k * s_vel_h or dv[1] > k * s_vel_h or dv[2] > k * s_vel_v:
@@ -414,7 +430,8 @@ def resolve_initial_state(record, triad: str, params: InmParams | None = None, e
         raise ConfigError(
             f"{key_path}.velocity_enu_mps: [{fmt(f'{x:.3f}' for x in vel)}] m/s differs from the GNSS velocity "
             f"[{fmt(f'{x:.3f}' for x in base.vel_n)}] m/s by more than {k:g} sigma ({s_vel_h:.3g} m/s horizontal, "
-            f"{s_vel_v:.3g} m/s up, from model.initial_velocity_sigma_mps and the GNSS fit); fix or remove it")
+            f"{s_vel_v:.3g} m/s up, from model.initial_velocity_sigma_mps and the GNSS fit); fix or remove it"
+        )
     mat_nt, cov, alignment = base.mat_nt, base.attitude_cov_t, base.alignment
     if triad == "strapdown" and att_given is not None and alignment is None:
         mat_nt, cov = mat_nb_from_attitude(*np.radians(att_given)), None
@@ -432,7 +449,8 @@ def resolve_initial_state(record, triad: str, params: InmParams | None = None, e
                 f"{key_path}.attitude_deg: {list(np.round(att_given, 3))} (roll, pitch, heading) disagrees with the "
                 f"alignment from the data ({al[0]:.3f}, {al[1]:.3f}, {al[2] % 360:.3f}) by {math.degrees(lev):.3g} deg "
                 f"level, {math.degrees(head):.3g} deg heading (allowed {k:g} x {math.degrees(s_lev):.2g} / "
-                f"{math.degrees(s_head):.2g} deg with model.initial_attitude_sigma_deg); fix or remove it")
+                f"{math.degrees(s_head):.2g} deg with model.initial_attitude_sigma_deg); fix or remove it"
+            )
         if s_att < alignment.sigma_heading_rad:
             mat_nt, cov = m_given, None
     return InitialState(lat, lon, height, vel, mat_nt, cov, alignment)

@@ -9,10 +9,31 @@ import numpy as np
 
 from ..errors import ConfigError, DataError
 from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, mat_en, mat_ie
-from .errormodel import (DP, DQ, F3, G, N_STATE, N_STATE_AIDED, N_STATE_VECTOR, TH, AltimeterMeasurement,
-                         GnssMeasurement, discretise, epoch_geometry, initial_covariance, initial_mean)
-from .identify import (horizontal_prior, identify_params, keep_default_prior, model_resolution_m, refine_prior,
-                       straight_weight, wide_prior_params)
+from .errormodel import (
+    DP,
+    DQ,
+    F3,
+    G,
+    N_STATE,
+    N_STATE_AIDED,
+    N_STATE_VECTOR,
+    TH,
+    AltimeterMeasurement,
+    GnssMeasurement,
+    discretise,
+    epoch_geometry,
+    initial_covariance,
+    initial_mean,
+)
+from .identify import (
+    horizontal_prior,
+    identify_params,
+    keep_default_prior,
+    model_resolution_m,
+    refine_prior,
+    straight_weight,
+    wide_prior_params,
+)
 from .kalman import filter_and_smooth
 from .mechanization import mechanize, navigation_to_geodetic, rodrigues
 from .params import TRIADS, InitialState, InmParams, initial_state_from_gnss, solvability_warnings
@@ -169,7 +190,7 @@ def stack_measurements(parts):
     o = 0
     for p in parts:
         k = p[0].shape[1]
-        r[:, o:o + k, o:o + k] = p[2]
+        r[:, o : o + k, o : o + k] = p[2]
         o += k
     return z, h, r
 
@@ -185,9 +206,16 @@ ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
 REIDENTIFY_RAD = math.radians(0.5)
 
 
-def estimate_anomaly(record, params: InmParams, initial: InitialState | None, triad: str,
-                     ellipsoid: Ellipsoid = WGS84, attitude_deg=None, reference: bool = False,
-                     gnss_lever_arm_t=None) -> InmSolution:
+def estimate_anomaly(
+    record,
+    params: InmParams,
+    initial: InitialState | None,
+    triad: str,
+    ellipsoid: Ellipsoid = WGS84,
+    attitude_deg=None,
+    reference: bool = False,
+    gnss_lever_arm_t=None,
+) -> InmSolution:
     """Estimate the gravity disturbance along a flight (3D-INM + Kalman + RTS).
 
     A GNSS-aided strapdown flight runs up to ``params.attitude_passes`` passes: after each,
@@ -223,8 +251,10 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     if triad not in TRIADS:
         raise ConfigError(f"triad: expected 'platform' or 'strapdown', got {triad!r}")
     if gnss_lever_arm_t is not None and np.any(np.asarray(gnss_lever_arm_t, float) != 0.0) and triad != "strapdown":
-        raise ConfigError("gnss_lever_arm_m: a lever arm on body axes needs a strapdown triad (a platform's axes are "
-                          "ENU, not the aircraft's)")
+        raise ConfigError(
+            "gnss_lever_arm_m: a lever arm on body axes needs a strapdown triad (a platform's axes are "
+            "ENU, not the aircraft's)"
+        )
     _check_record(record)
     if initial is None:
         initial = initial_state_from_gnss(record, triad, attitude_deg, params=params, ellipsoid=ellipsoid)
@@ -235,18 +265,21 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     ident = {}
     given_params, reidentify = params, True
     for k in range(passes):
-        cur = InitialState(initial.lat, initial.lon, initial.height, initial.vel_n, mat_nt0,
-                           initial.attitude_cov_t, initial.alignment)
+        cur = InitialState(
+            initial.lat, initial.lon, initial.height, initial.vel_n, mat_nt0, initial.attitude_cov_t, initial.alignment
+        )
         nav = _mechanize(record, params, cur, ellipsoid, reference)
         if k == 0:
             speed0 = _typical_speed(record, nav, ellipsoid)
         if given_params.identify and reidentify:
-            params, ident = _identify(record, given_params, cur, nav, ellipsoid, reference, theta_prior,
-                                      gnss_lever_arm_t, speed0)
+            params, ident = _identify(
+                record, given_params, cur, nav, ellipsoid, reference, theta_prior, gnss_lever_arm_t, speed0
+            )
             ident["identified_in_pass"] = k + 1
             reidentify = False
-        idx, c, gnss_used, n_state, out = _one_pass(record, params, cur, nav, ellipsoid, reference, theta_prior,
-                                                    gnss_lever_arm_t)
+        idx, c, gnss_used, n_state, out = _one_pass(
+            record, params, cur, nav, ellipsoid, reference, theta_prior, gnss_lever_arm_t
+        )
         if not (gnss_used and triad == "strapdown") or k == passes - 1:
             break
         th0 = out["x_s"][0, TH]
@@ -265,26 +298,35 @@ def estimate_anomaly(record, params: InmParams, initial: InitialState | None, tr
     hsol = None
     if params.horizontal:
         if gnss_used:
-            hsol = _horizontal_pass(record, params, cur, nav, ellipsoid, reference, theta_prior, gnss_lever_arm_t,
-                                    out["x_s"][:, G])
+            hsol = _horizontal_pass(
+                record, params, cur, nav, ellipsoid, reference, theta_prior, gnss_lever_arm_t, out["x_s"][:, G]
+            )
             idx, c, gnss_used, n_state, out, hprior = hsol
         else:
             ident.setdefault("warnings", []).append(
                 "model.horizontal: the horizontal disturbance needs GNSS position aiding (model.gnss_aiding and "
-                "a GNSS channel); not estimated")
+                "a GNSS channel); not estimated"
+            )
     sol = _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, k + 1, corrections)
     if hsol is not None:
         sol.dg_horizontal, sol.dg_horizontal_sigma, sol.horizontal_observable = horizontal_outputs(
-            out["x_s"], out["p_s"], hprior[0])
-        ident["horizontal_prior"] = {"sigma_mps2": hprior[0], "lambda_per_m": hprior[1],
-                                     "observable_fraction": float(np.mean(sol.horizontal_observable))}
+            out["x_s"], out["p_s"], hprior[0]
+        )
+        ident["horizontal_prior"] = {
+            "sigma_mps2": hprior[0],
+            "lambda_per_m": hprior[1],
+            "observable_fraction": float(np.mean(sol.horizontal_observable)),
+        }
     sol.alignment = initial.alignment
     sol.params = params
     sol.identification = ident
     sol.warnings = sol.warnings + list(ident.get("warnings", []))
     alt_t = np.asarray(record.altimeter.time, float)
-    sol.resolution_m = float(ident["resolution_m"]) if ident.get("resolution_m") else model_resolution_m(
-        params, speed0, float(np.median(np.diff(alt_t))) if alt_t.size > 1 else 1.0)
+    sol.resolution_m = (
+        float(ident["resolution_m"])
+        if ident.get("resolution_m")
+        else model_resolution_m(params, speed0, float(np.median(np.diff(alt_t))) if alt_t.size > 1 else 1.0)
+    )
     if gnss_used:
         _check_track(record, params, sol, ellipsoid)
     return sol
@@ -317,10 +359,12 @@ def _check_track(record, params, sol, ellipsoid):
     med = float(np.median(d))
     limit = TRACK_RESIDUAL_SIGMAS * params.gnss_horizontal_sigma_m + 0.05 * float(np.median(sol.speed))
     if not med <= limit:
-        raise DataError(f"{record.source or 'record'}: the navigation leaves the GNSS track: corrected positions are "
-                        f"{med:.3g} m (median; RMS {rms:.3g} m) from the GNSS positions (expected about "
-                        f"model.gnss_horizontal_sigma_m = {params.gnss_horizontal_sigma_m:g} m); check triad, imu_axes "
-                        "and the initial attitude")
+        raise DataError(
+            f"{record.source or 'record'}: the navigation leaves the GNSS track: corrected positions are "
+            f"{med:.3g} m (median; RMS {rms:.3g} m) from the GNSS positions (expected about "
+            f"model.gnss_horizontal_sigma_m = {params.gnss_horizontal_sigma_m:g} m); check triad, imu_axes "
+            "and the initial attitude"
+        )
 
 
 def _altimeter(record):
@@ -337,8 +381,17 @@ def _mechanize(record, params, initial, ellipsoid, reference):
     """Mechanize the record about ``initial`` (gravity with the altimeter radius by default)."""
     imu = record.imu
     alt_t, alt_h = _altimeter(record)
-    return mechanize(np.asarray(imu.time, float), imu.specific_force_t, imu.angular_rate_t, initial, alt_t, alt_h,
-                     use_ext=params.radius_source == "altimeter", ellipsoid=ellipsoid, reference=reference)
+    return mechanize(
+        np.asarray(imu.time, float),
+        imu.specific_force_t,
+        imu.angular_rate_t,
+        initial,
+        alt_t,
+        alt_h,
+        use_ext=params.radius_source == "altimeter",
+        ellipsoid=ellipsoid,
+        reference=reference,
+    )
 
 
 def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, speed0):
@@ -357,8 +410,9 @@ def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, l
         wide = wide_prior_params(params, ident, speed0)
         idx, _, _, _, first = _one_pass(record, wide, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t)
         weight = straight_weight(nav, record.imu.specific_force_t, nav.time[idx])
-        params, ident = refine_prior(params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))),
-                                     wide, speed0, weight)
+        params, ident = refine_prior(
+            params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))), wide, speed0, weight
+        )
     return params, ident
 
 
@@ -399,13 +453,24 @@ def _one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, l
     horizontal = gnss_used and hprior is not None
     if horizontal:
         n_state = N_STATE_VECTOR
-    phi, q = discretise(geom, params, alt_dt, reference=reference, aided=gnss_used, horizontal=horizontal,
-                        hprior=hprior)
+    phi, q = discretise(
+        geom, params, alt_dt, reference=reference, aided=gnss_used, horizontal=horizontal, hprior=hprior
+    )
     meas = [AltimeterMeasurement(alt_t, alt_h, params.altimeter_sigma_m, ellipsoid)]
     if gnss_used:
         gn = record.gnss
-        meas.append(GnssMeasurement(gn.time, gn.lat, gn.lon, gn.height, params.gnss_horizontal_sigma_m,
-                                    params.gnss_vertical_sigma_m, ellipsoid, lever_arm_t))
+        meas.append(
+            GnssMeasurement(
+                gn.time,
+                gn.lat,
+                gn.lon,
+                gn.height,
+                params.gnss_horizontal_sigma_m,
+                params.gnss_vertical_sigma_m,
+                ellipsoid,
+                lever_arm_t,
+            )
+        )
     z, h, r = stack_measurements([m.build(nav, idx, half, n_state) for m in meas])
     c = nav.mat_it[idx]
     att_cov = initial.attitude_cov_t if params.initial_attitude_sigma_deg is None else None
@@ -419,6 +484,7 @@ def _one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, l
         x0 = np.zeros(n_state)
     out = filter_and_smooth(x0, p0, phi, q, z, h, r, reference=reference)
     return idx, c, gnss_used, n_state, out
+
 
 def _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, passes, corrections):
     """Corrected navigation, attitude and the anomaly from the last pass's smoother output."""
@@ -457,8 +523,9 @@ def _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state,
         innov = innov[:, 0]
     warn = solvability_warnings(params, float(np.median(speed)))
     att, att_sig = _attitude(nav, idx, c, x_s, p_s, lat, lon, gnss_used, triad, ellipsoid)
-    conv = (_heading_converge_s(t[idx], c, p_f, lat, lon, ellipsoid) if gnss_used and triad == "strapdown"
-            else float("nan"))
+    conv = (
+        _heading_converge_s(t[idx], c, p_f, lat, lon, ellipsoid) if gnss_used and triad == "strapdown" else float("nan")
+    )
     return InmSolution(
         time=t[idx].copy(),
         g_forward=x_f[:, G].copy(),
@@ -541,8 +608,9 @@ def _typical_speed(record, nav, ellipsoid):
     """Median ground speed of the flight, m/s: from GNSS positions, else the mechanization."""
     gn = record.gnss
     if gn is not None and len(gn.time) > 2:
-        r_e = geodetic_to_ecef(np.asarray(gn.lat, float), np.asarray(gn.lon, float),
-                               np.asarray(gn.height, float), ellipsoid)
+        r_e = geodetic_to_ecef(
+            np.asarray(gn.lat, float), np.asarray(gn.lon, float), np.asarray(gn.height, float), ellipsoid
+        )
         dt = np.diff(np.asarray(gn.time, float))
         ok = dt > 0
         v = np.linalg.norm(np.diff(r_e, axis=0)[ok], axis=1) / dt[ok]

@@ -141,29 +141,54 @@ def time_findings(channel, rep: TimeReport, t0_ns=0):
         return (tns - t0_ns) * 1e-9
 
     if rep.duplicates:
-        out.append(Finding(channel, "duplicates", "warning",
-                           f"{channel}: dropped {rep.duplicates} duplicate samples"))
+        out.append(Finding(channel, "duplicates", "warning", f"{channel}: dropped {rep.duplicates} duplicate samples"))
     if rep.conflicting_duplicates:
-        out.append(Finding(channel, "duplicates", "warning",
-                           f"{channel}: {rep.conflicting_duplicates} samples share a time stamp "
-                           "with different values; kept the first of each"))
+        out.append(
+            Finding(
+                channel,
+                "duplicates",
+                "warning",
+                f"{channel}: {rep.conflicting_duplicates} samples share a time stamp "
+                "with different values; kept the first of each",
+            )
+        )
     if rep.n_backward:
         lst = ", ".join(f"{s(a):.6f}->{s(b):.6f} s" for _, a, b in rep.backward)
-        out.append(Finding(channel, "backward", "warning",
-                           f"{channel}: {rep.n_backward} backward time steps (re-sorted): {lst}"
-                           + (" ..." if rep.n_backward > len(rep.backward) else "")))
+        out.append(
+            Finding(
+                channel,
+                "backward",
+                "warning",
+                f"{channel}: {rep.n_backward} backward time steps (re-sorted): {lst}"
+                + (" ..." if rep.n_backward > len(rep.backward) else ""),
+            )
+        )
     if rep.n_gaps:
         lst = ", ".join(f"{s(a):.3f}-{s(b):.3f} s" for a, b in rep.gaps)
-        out.append(Finding(channel, "gaps", "warning",
-                           f"{channel}: {rep.n_gaps} gaps longer than the threshold: {lst}"
-                           + (" ..." if rep.n_gaps > len(rep.gaps) else ""), rep.n_gaps))
+        out.append(
+            Finding(
+                channel,
+                "gaps",
+                "warning",
+                f"{channel}: {rep.n_gaps} gaps longer than the threshold: {lst}"
+                + (" ..." if rep.n_gaps > len(rep.gaps) else ""),
+                rep.n_gaps,
+            )
+        )
     if rep.n_out > 1:
         rate = 1e9 / rep.nominal_step_ns
         lvl = "warning" if rep.irregular_fraction > RATE_IRREGULAR_WARN else "ok"
-        out.append(Finding(channel, "rate", lvl,
-                           f"{channel}: nominal rate {rate:.6g} Hz, "
-                           f"{100 * rep.irregular_fraction:.2f} % of steps off by > "
-                           f"{100 * RATE_TOL:.0f} %, jitter {100 * rep.jitter:.2f} %", rate))
+        out.append(
+            Finding(
+                channel,
+                "rate",
+                lvl,
+                f"{channel}: nominal rate {rate:.6g} Hz, "
+                f"{100 * rep.irregular_fraction:.2f} % of steps off by > "
+                f"{100 * RATE_TOL:.0f} %, jitter {100 * rep.jitter:.2f} %",
+                rate,
+            )
+        )
     return out
 
 
@@ -180,10 +205,10 @@ def _rest_mask(f_norm, time_ns, nominal_step_ns):
     nw = n // w
     if nw == 0:
         return np.zeros(n, bool)
-    blocks = f_norm[:nw * w].reshape(nw, w)
+    blocks = f_norm[: nw * w].reshape(nw, w)
     rest = (blocks.std(axis=1) < REST_ACCEL_STD) & (np.abs(blocks.mean(axis=1) - G_STD) < 0.3)
     # windows must also be contiguous in time (no gap inside the run)
-    tb = time_ns[:nw * w].reshape(nw, w)
+    tb = time_ns[: nw * w].reshape(nw, w)
     contiguous = np.ones(nw, bool)
     contiguous[1:] = (tb[1:, 0] - tb[:-1, -1]) < 3 * nominal_step_ns
     best, best_len, start = None, 0, None
@@ -197,7 +222,7 @@ def _rest_mask(f_norm, time_ns, nominal_step_ns):
             start = i if i < nw and rest[i] else None
     mask = np.zeros(n, bool)
     if best is not None:
-        mask[best * w:(best + best_len) * w] = True
+        mask[best * w : (best + best_len) * w] = True
     return mask
 
 
@@ -230,23 +255,44 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
         return out
     med = float(np.median(fn))
     if ACCEL_OK[0] <= med <= ACCEL_OK[1]:
-        out.append(Finding("imu", "accel magnitude", "ok",
-                           f"imu: median |specific force| {med:.4f} m/s^2 (expected ~9.8)", med))
+        out.append(
+            Finding(
+                "imu", "accel magnitude", "ok", f"imu: median |specific force| {med:.4f} m/s^2 (expected ~9.8)", med
+            )
+        )
     else:
-        hint = _ratio_name(med, [("values are in g but declared as m/s^2", 1.0),
-                                 ("values are in mGal but declared as m/s^2", 9.80665e5),
-                                 ("values are in m/s^2 but declared as g", G_STD ** 2),
-                                 ("values are in m/s^2 but declared as mGal", 9.80665e-5)])
-        out.append(Finding("imu", "accel magnitude", "error",
-                           f"imu: median |specific force| is {med:.6g} m/s^2 after converting "
-                           f"from {accel_unit}, expected ~9.8"
-                           + (f": {hint}?" if hint else ": wrong unit or axis scaling?"), med))
+        hint = _ratio_name(
+            med,
+            [
+                ("values are in g but declared as m/s^2", 1.0),
+                ("values are in mGal but declared as m/s^2", 9.80665e5),
+                ("values are in m/s^2 but declared as g", G_STD**2),
+                ("values are in m/s^2 but declared as mGal", 9.80665e-5),
+            ],
+        )
+        out.append(
+            Finding(
+                "imu",
+                "accel magnitude",
+                "error",
+                f"imu: median |specific force| is {med:.6g} m/s^2 after converting "
+                f"from {accel_unit}, expected ~9.8" + (f": {hint}?" if hint else ": wrong unit or axis scaling?"),
+                med,
+            )
+        )
     wmax = float(np.percentile(wn, 99.9))
     if wmax > GYRO_MAX_OK:
-        out.append(Finding("imu", "gyro magnitude", "error",
-                           f"imu: angular rate reaches {wmax:.4g} rad/s (99.9th percentile) after "
-                           f"converting from {gyro_unit}; more than {GYRO_MAX_OK} rad/s is not a "
-                           "vehicle: deg/s or deg/h declared as rad/s?", wmax))
+        out.append(
+            Finding(
+                "imu",
+                "gyro magnitude",
+                "error",
+                f"imu: angular rate reaches {wmax:.4g} rad/s (99.9th percentile) after "
+                f"converting from {gyro_unit}; more than {GYRO_MAX_OK} rad/s is not a "
+                "vehicle: deg/s or deg/h declared as rad/s?",
+                wmax,
+            )
+        )
     rest = _rest_mask(fn, time_ns, nominal_step_ns)
     # |F| steady near g is also true in straight flight and in the gentle parts of turns
     # (bank < ~14 deg): a run of such windows spanning a turn's roll-in has a mean rate of
@@ -260,7 +306,7 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
         win = max(4, int(round(REST_WINDOW_S * 1e9 / nominal_step_ns)))
         nw_all = idx.size // win
         if nw_all >= 1:
-            blocks = w[idx[:nw_all * win]].reshape(nw_all, win, 3)
+            blocks = w[idx[: nw_all * win]].reshape(nw_all, win, 3)
             means = blocks.mean(axis=1)  # (nw, 3) rad/s
             se_win = np.linalg.norm(blocks.std(axis=1), axis=1) / np.sqrt(win)  # (nw,)
             centre = np.median(means, axis=0)
@@ -268,51 +314,78 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
             steady = np.linalg.norm(means - centre, axis=1) <= tol
             steady_windows = int(steady.sum())
             keep = np.zeros(len(fn), bool)
-            keep[idx[:nw_all * win].reshape(nw_all, win)[steady].ravel()] = True
+            keep[idx[: nw_all * win].reshape(nw_all, win)[steady].ravel()] = True
             rest = keep
     if nw_all and steady_windows < REST_STEADY_MIN_FRACTION * nw_all:
-        out.append(Finding("imu", "gyro at rest", "info",
-                           f"imu: angular rate not steady in the quiet windows ({steady_windows} of "
-                           f"{nw_all} windows steady: turning?); gyro unit checked by range only"))
+        out.append(
+            Finding(
+                "imu",
+                "gyro at rest",
+                "info",
+                f"imu: angular rate not steady in the quiet windows ({steady_windows} of "
+                f"{nw_all} windows steady: turning?); gyro unit checked by range only",
+            )
+        )
     elif rest.sum() >= 8:
         wr = w[rest]
         wmean = float(np.linalg.norm(wr.mean(axis=0)))
         # standard error of the mean rate vector: is the rest rate measured well enough?
         se = float(np.linalg.norm(wr.std(axis=0)) / np.sqrt(len(wr)))
         ratio = wmean / OMEGA_E
-        msg = (f"imu: at rest ({int(rest.sum())} samples) mean angular rate {wmean:.4g} rad/s "
-               f"= {ratio:.4g} x Earth rate")
+        msg = f"imu: at rest ({int(rest.sum())} samples) mean angular rate {wmean:.4g} rad/s = {ratio:.4g} x Earth rate"
         # candidates are >= 57x apart, so "within a factor of 2" is unambiguous and tolerates
         # transport rate and slow heading changes in steady level flight
         name = None
-        for label, k in (("deg/s declared as rad/s", 1 / DEG),
-                         ("rad/s declared as deg/s", DEG),
-                         ("deg/h declared as rad/s", 3600 / DEG),
-                         ("rad/s declared as deg/h", DEG / 3600)):
+        for label, k in (
+            ("deg/s declared as rad/s", 1 / DEG),
+            ("rad/s declared as deg/s", DEG),
+            ("deg/h declared as rad/s", 3600 / DEG),
+            ("rad/s declared as deg/h", DEG / 3600),
+        ):
             if 0.5 < ratio / k < 2.0:
                 name = label
         if wmean < 10 * se:
-            out.append(Finding("imu", "gyro at rest", "info",
-                               msg + f"; gyro noise (standard error {se:.2g} rad/s) too large to "
-                               "check the unit against Earth rate", ratio))
+            out.append(
+                Finding(
+                    "imu",
+                    "gyro at rest",
+                    "info",
+                    msg + f"; gyro noise (standard error {se:.2g} rad/s) too large to "
+                    "check the unit against Earth rate",
+                    ratio,
+                )
+            )
         elif 0.5 < ratio < 2.0:
             out.append(Finding("imu", "gyro at rest", "ok", msg + " (expected ~1)", ratio))
         elif name and rest.sum() * nominal_step_ns * 1e-9 < REST_MIN_VERDICT_S:
             # a few seconds of steady |F| in flight (turbulence, a gentle turn) are not a rest;
             # an error needs a quiet period a real static start gives
-            out.append(Finding("imu", "gyro at rest", "info",
-                               msg + f": would read as {name}, but the quiet period is shorter than "
-                               f"{REST_MIN_VERDICT_S:g} s; gyro unit checked by range only", ratio))
+            out.append(
+                Finding(
+                    "imu",
+                    "gyro at rest",
+                    "info",
+                    msg + f": would read as {name}, but the quiet period is shorter than "
+                    f"{REST_MIN_VERDICT_S:g} s; gyro unit checked by range only",
+                    ratio,
+                )
+            )
         elif name:
-            out.append(Finding("imu", "gyro at rest", "error",
-                               msg + f" after converting from {gyro_unit}: {name}?", ratio))
+            out.append(
+                Finding("imu", "gyro at rest", "error", msg + f" after converting from {gyro_unit}: {name}?", ratio)
+            )
         else:
-            out.append(Finding("imu", "gyro at rest", "warning",
-                               msg + f", expected ~1: gyro bias, low-grade gyro or wrong unit "
-                               f"({gyro_unit})?", ratio))
+            out.append(
+                Finding(
+                    "imu",
+                    "gyro at rest",
+                    "warning",
+                    msg + f", expected ~1: gyro bias, low-grade gyro or wrong unit ({gyro_unit})?",
+                    ratio,
+                )
+            )
     else:
-        out.append(Finding("imu", "gyro at rest", "info",
-                           "imu: no rest period found; gyro unit checked by range only"))
+        out.append(Finding("imu", "gyro at rest", "info", "imu: no rest period found; gyro unit checked by range only"))
     return out
 
 
@@ -324,28 +397,40 @@ def check_height(channel, h, unit="m", ref=None):
         return out
     lo, hi = float(np.min(h)), float(np.max(h))
     if lo < HEIGHT_OK[0] or hi > HEIGHT_OK[1]:
-        out.append(Finding(channel, "height range", "error",
-                           f"{channel}: heights {lo:.6g}..{hi:.6g} m (after converting from "
-                           f"{unit}) outside {HEIGHT_OK[0]:g}..{HEIGHT_OK[1]:g} m: wrong unit "
-                           "or not an ellipsoidal height?", hi))
+        out.append(
+            Finding(
+                channel,
+                "height range",
+                "error",
+                f"{channel}: heights {lo:.6g}..{hi:.6g} m (after converting from "
+                f"{unit}) outside {HEIGHT_OK[0]:g}..{HEIGHT_OK[1]:g} m: wrong unit "
+                "or not an ellipsoidal height?",
+                hi,
+            )
+        )
     else:
-        out.append(Finding(channel, "height range", "ok",
-                           f"{channel}: heights {lo:.6g}..{hi:.6g} m", hi))
+        out.append(Finding(channel, "height range", "ok", f"{channel}: heights {lo:.6g}..{hi:.6g} m", hi))
     if ref is not None and len(ref) == len(h) and len(h) > 0:
         sel = np.abs(ref) > 100.0
         if sel.sum() > 10:
             r = float(np.median(h[sel] / ref[sel]))
-            name = _ratio_name(r, [("feet declared as metres", 1 / 0.3048),
-                                   ("metres declared as feet", 0.3048)])
+            name = _ratio_name(r, [("feet declared as metres", 1 / 0.3048), ("metres declared as feet", 0.3048)])
             if name:
-                out.append(Finding(channel, "height vs GNSS", "error",
-                                   f"{channel}: heights are {r:.4g} x the GNSS heights: {name}?",
-                                   r))
+                out.append(
+                    Finding(
+                        channel,
+                        "height vs GNSS",
+                        "error",
+                        f"{channel}: heights are {r:.4g} x the GNSS heights: {name}?",
+                        r,
+                    )
+                )
             else:
                 d = float(np.median(np.abs(h - ref)))
                 lvl = "ok" if d < 100.0 else "warning"
-                out.append(Finding(channel, "height vs GNSS", lvl,
-                                   f"{channel}: median |height - GNSS height| {d:.3g} m", d))
+                out.append(
+                    Finding(channel, "height vs GNSS", lvl, f"{channel}: median |height - GNSS height| {d:.3g} m", d)
+                )
     return out
 
 
@@ -354,19 +439,31 @@ def check_gnss(lat_deg, lon_deg):
     if len(lat_deg) == 0:
         return []
     if np.any(np.abs(lat_deg) > 90) or np.any(lon_deg < -180) or np.any(lon_deg > 360):
-        return [Finding("gnss", "lat/lon range", "error",
-                        f"gnss: latitude {np.min(lat_deg):.6g}..{np.max(lat_deg):.6g}, longitude "
-                        f"{np.min(lon_deg):.6g}..{np.max(lon_deg):.6g}: expected degrees in "
-                        "[-90, 90] and [-180, 360]")]
+        return [
+            Finding(
+                "gnss",
+                "lat/lon range",
+                "error",
+                f"gnss: latitude {np.min(lat_deg):.6g}..{np.max(lat_deg):.6g}, longitude "
+                f"{np.min(lon_deg):.6g}..{np.max(lon_deg):.6g}: expected degrees in "
+                "[-90, 90] and [-180, 360]",
+            )
+        ]
     return [Finding("gnss", "lat/lon range", "ok", "gnss: latitude/longitude in range")]
 
 
 def check_epoch(channel, time_ns):
     """Warn when stamps are before 2000 (simulation clock or unset time?)."""
     if len(time_ns) and time_ns[0] < 946684800 * 10**9:
-        return [Finding(channel, "epoch", "warning",
-                        f"{channel}: time stamps start at {time_ns[0] * 1e-9:.3f} s after "
-                        "1970-01-01, before 2000: simulation clock or unset time?")]
+        return [
+            Finding(
+                channel,
+                "epoch",
+                "warning",
+                f"{channel}: time stamps start at {time_ns[0] * 1e-9:.3f} s after "
+                "1970-01-01, before 2000: simulation clock or unset time?",
+            )
+        ]
     return []
 
 
@@ -433,7 +530,7 @@ def _corrupted_runs(x, k_scale, rel, max_len):
     while a + 1 < len(big):
         i, j = int(big[a]), int(big[a + 1])
         if j - i <= max_len and abs(x[j + 1] - x[i]) < rel * abs(dx[i]):
-            out[i + 1:j + 1] = True
+            out[i + 1 : j + 1] = True
             runs += 1
             a += 2
         else:
@@ -487,8 +584,7 @@ def damaged_values(role, time_ns, log_time_ns, values, candidates):
     for k, v in values.items():
         v2 = np.asarray(v, np.float64).reshape(n, -1)
         with np.errstate(invalid="ignore"):
-            add("non-finite/absurd", ~np.isfinite(v2).all(axis=1)
-                | (np.abs(v2) > DAMAGE_ABS_MAX).any(axis=1), False)
+            add("non-finite/absurd", ~np.isfinite(v2).all(axis=1) | (np.abs(v2) > DAMAGE_ABS_MAX).any(axis=1), False)
         if k == "lat_deg":
             add("latitude out of range", (np.abs(v2[:, 0]) > 90.0), True)
         elif k == "lon_deg":

@@ -33,20 +33,33 @@ UNITS = {
 
 # quantities per channel: name -> (unit kind or None, width)
 QUANTITIES = {
-    "imu": (("fx", "accel"), ("fy", "accel"), ("fz", "accel"),
-            ("wx", "gyro"), ("wy", "gyro"), ("wz", "gyro")),
+    "imu": (("fx", "accel"), ("fy", "accel"), ("fz", "accel"), ("wx", "gyro"), ("wy", "gyro"), ("wz", "gyro")),
     "altimeter": (("height", "height"),),
     "gnss": (("lat", None), ("lon", None), ("height", "height")),
     "gradient": tuple((c, "gradient") for c in ("txx", "txy", "txz", "tyy", "tyz", "tzz")),
 }
 
 DEFAULT_COLUMNS = {
-    "imu": {"time": "time_ns", "fx": "fx_mps2", "fy": "fy_mps2", "fz": "fz_mps2",
-            "wx": "wx_radps", "wy": "wy_radps", "wz": "wz_radps"},
+    "imu": {
+        "time": "time_ns",
+        "fx": "fx_mps2",
+        "fy": "fy_mps2",
+        "fz": "fz_mps2",
+        "wx": "wx_radps",
+        "wy": "wy_radps",
+        "wz": "wz_radps",
+    },
     "altimeter": {"time": "time_ns", "height": "height_m"},
     "gnss": {"time": "time_ns", "lat": "lat_deg", "lon": "lon_deg", "height": "height_m"},
-    "gradient": {"time": "time_ns", "txx": "txx_eotvos", "txy": "txy_eotvos", "txz": "txz_eotvos",
-                 "tyy": "tyy_eotvos", "tyz": "tyz_eotvos", "tzz": "tzz_eotvos"},
+    "gradient": {
+        "time": "time_ns",
+        "txx": "txx_eotvos",
+        "txy": "txy_eotvos",
+        "txz": "txz_eotvos",
+        "tyy": "tyy_eotvos",
+        "tyz": "tyz_eotvos",
+        "tzz": "tzz_eotvos",
+    },
 }
 #: Optional lower-triangle columns of a gradient CSV (a full 9-component tensor): when all
 #: three are in the header they are read and the tensor's symmetry is checked at ingestion.
@@ -62,10 +75,16 @@ def _seconds_to_ns(strs, path, lines, col):
         neg = s.startswith("-")
         body = s[1:] if neg or s.startswith("+") else s
         ip, dot, fp = body.partition(".")
-        if not (ip.isdigit() or (ip == "" and fp.isdigit())) or (fp and not fp.isdigit()) \
-                or len(fp) > 9 or (not ip and not fp):
-            raise DataError(f"{path}: line {lines[k]}, column {col!r}: expected seconds "
-                            f"(decimal, at most 9 fractional digits), got {s!r}")
+        if (
+            not (ip.isdigit() or (ip == "" and fp.isdigit()))
+            or (fp and not fp.isdigit())
+            or len(fp) > 9
+            or (not ip and not fp)
+        ):
+            raise DataError(
+                f"{path}: line {lines[k]}, column {col!r}: expected seconds "
+                f"(decimal, at most 9 fractional digits), got {s!r}"
+            )
         v = int(ip or "0") * 10**9 + int((fp + "000000000")[:9])
         out[k] = -v if neg else v
     return out
@@ -78,11 +97,12 @@ def _ns(strs, path, lines, col):
         for k, s in enumerate(strs):
             try:
                 v = int(s.strip())
-                if not -2**63 <= v < 2**63:
+                if not -(2**63) <= v < 2**63:
                     raise ValueError
             except ValueError:
-                raise DataError(f"{path}: line {lines[k]}, column {col!r}: expected integer "
-                                f"nanoseconds, got {s.strip()!r}") from None
+                raise DataError(
+                    f"{path}: line {lines[k]}, column {col!r}: expected integer nanoseconds, got {s.strip()!r}"
+                ) from None
         raise
 
 
@@ -95,8 +115,10 @@ def _iso(strs, path, lines, col):
         elif s.endswith("+00:00"):
             s = s[:-6]
         if "+" in s[10:] or "-" in s[10:]:
-            raise DataError(f"{path}: line {lines[k]}, column {col!r}: expected ISO 8601 UTC "
-                            f"time (ending in Z or +00:00 or no offset), got {strs[k].strip()!r}")
+            raise DataError(
+                f"{path}: line {lines[k]}, column {col!r}: expected ISO 8601 UTC "
+                f"time (ending in Z or +00:00 or no offset), got {strs[k].strip()!r}"
+            )
         clean.append(s)
     try:
         return np.array(clean, dtype="datetime64[ns]").astype(np.int64)
@@ -105,14 +127,26 @@ def _iso(strs, path, lines, col):
             try:
                 np.datetime64(s, "ns")
             except ValueError:
-                raise DataError(f"{path}: line {lines[k]}, column {col!r}: expected ISO 8601 "
-                                f"UTC time like 2024-05-01T10:00:00.123456789Z, got "
-                                f"{strs[k].strip()!r}") from None
+                raise DataError(
+                    f"{path}: line {lines[k]}, column {col!r}: expected ISO 8601 "
+                    f"UTC time like 2024-05-01T10:00:00.123456789Z, got "
+                    f"{strs[k].strip()!r}"
+                ) from None
         raise
 
 
-def read_csv_channel(path, role, columns=None, time_format="ns", units=None, delimiter=",",
-                     gps_leap_seconds=18, *, notes=None, data_loss=None):
+def read_csv_channel(
+    path,
+    role,
+    columns=None,
+    time_format="ns",
+    units=None,
+    delimiter=",",
+    gps_leap_seconds=18,
+    *,
+    notes=None,
+    data_loss=None,
+):
     """Read one channel's CSV file.
 
     Parameters
@@ -192,13 +226,14 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
         if header is not None and len(data_lines[-1].split(delimiter)) <= len(header):
             cut = (line_no.pop(), data_lines.pop())
     if header is None:
-        raise DataError(f"{path}: no header row (expected columns "
-                        f"{', '.join(_flat(cols.values()))})")
+        raise DataError(f"{path}: no header row (expected columns {', '.join(_flat(cols.values()))})")
     index = {}
     for name in _flat(cols.values()):
         if name not in header:
-            raise DataError(f"{path}: line {header_line}: column {name!r} missing from the "
-                            f"header (has {', '.join(header)}); set csv.columns.{role}")
+            raise DataError(
+                f"{path}: line {header_line}: column {name!r} missing from the "
+                f"header (has {', '.join(header)}); set csv.columns.{role}"
+            )
         index[name] = header.index(name)
     ncol = len(header)
     if cut is not None:
@@ -211,8 +246,10 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
             raise DataError(f"{path}: line {line_no[k]}: {len(r)} fields, header has {ncol}")
     tcols = cols["time"] if isinstance(cols["time"], list) else [cols["time"]]
     if time_format == "gps_week_sow" and len(tcols) not in (2, 3):
-        raise DataError(f"{path}: time format gps_week_sow needs two time columns "
-                        "[week, seconds_of_week] or three [cycle, week, seconds_of_week]")
+        raise DataError(
+            f"{path}: time format gps_week_sow needs two time columns "
+            "[week, seconds_of_week] or three [cycle, week, seconds_of_week]"
+        )
     if time_format != "gps_week_sow" and len(tcols) != 1:
         raise DataError(f"{path}: time format {time_format} needs one time column")
     tstr = [[r[index[c]] for r in rows] for c in tcols]
@@ -230,8 +267,10 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
             bad = np.flatnonzero((week < 0) | (week > 1023) | (cycle < 0))
             if bad.size:
                 k = int(bad[0])
-                raise DataError(f"{path}: line {line_no[k]}: columns {tcols[0]!r}, {tcols[1]!r}: expected a "
-                                f"roll-over count >= 0 and a 10-bit week 0-1023, got {cycle[k]}, {week[k]}")
+                raise DataError(
+                    f"{path}: line {line_no[k]}: columns {tcols[0]!r}, {tcols[1]!r}: expected a "
+                    f"roll-over count >= 0 and a 10-bit week 0-1023, got {cycle[k]}, {week[k]}"
+                )
             week = cycle * 1024 + week
         sow = _seconds_to_ns(tstr[-1], path, line_no, tcols[-1])
         t = (GPS_EPOCH_UNIX_S - gps_leap_seconds) * 10**9 + week * WEEK_NS + sow
@@ -246,8 +285,9 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
                 try:
                     float(s)
                 except ValueError:
-                    raise DataError(f"{path}: line {line_no[k]}, column {c!r}: expected a "
-                                    f"number, got {s.strip()!r}") from None
+                    raise DataError(
+                        f"{path}: line {line_no[k]}, column {c!r}: expected a number, got {s.strip()!r}"
+                    ) from None
             raise
         if kind is not None:
             unit = units.get(kind, next(iter(UNITS[kind])))
@@ -256,8 +296,10 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
                 v = v * factor
         vals[q] = v
     if role == "imu":
-        values = {"specific_force": np.stack([vals["fx"], vals["fy"], vals["fz"]], axis=1),
-                  "angular_rate": np.stack([vals["wx"], vals["wy"], vals["wz"]], axis=1)}
+        values = {
+            "specific_force": np.stack([vals["fx"], vals["fy"], vals["fz"]], axis=1),
+            "angular_rate": np.stack([vals["wx"], vals["wy"], vals["wz"]], axis=1),
+        }
     elif role == "altimeter":
         values = {"height": vals["height"]}
     elif role == "gradient":
@@ -267,15 +309,28 @@ def read_csv_channel(path, role, columns=None, time_format="ns", units=None, del
             for q, c in GRADIENT_LOWER_COLUMNS.items():
                 strs = [r[header.index(c)] for r in rows]
                 try:
-                    lower[q] = np.array(strs, dtype=np.float64) * UNITS["gradient"][unit] if n \
-                        else np.zeros(0)
+                    lower[q] = np.array(strs, dtype=np.float64) * UNITS["gradient"][unit] if n else np.zeros(0)
                 except ValueError:
                     k = next(k for k, s_ in enumerate(strs) if not _is_float(s_))
-                    raise DataError(f"{path}: line {line_no[k]}, column {c!r}: expected a "
-                                    f"number, got {strs[k].strip()!r}") from None
-        values = {"gradient": np.stack([vals["txx"], vals["txy"], vals["txz"],
-                                        lower["txy"], vals["tyy"], vals["tyz"],
-                                        lower["txz"], lower["tyz"], vals["tzz"]], axis=1)}
+                    raise DataError(
+                        f"{path}: line {line_no[k]}, column {c!r}: expected a number, got {strs[k].strip()!r}"
+                    ) from None
+        values = {
+            "gradient": np.stack(
+                [
+                    vals["txx"],
+                    vals["txy"],
+                    vals["txz"],
+                    lower["txy"],
+                    vals["tyy"],
+                    vals["tyz"],
+                    lower["txz"],
+                    lower["tyz"],
+                    vals["tzz"],
+                ],
+                axis=1,
+            )
+        }
     else:
         values = {"lat_deg": vals["lat"], "lon_deg": vals["lon"], "height": vals["height"]}
     return t, values
@@ -303,8 +358,10 @@ def _report_cut_line(path, cut, ncol, cols, index, time_format, delimiter, notes
         unit = "byte" if nbytes == 1 else "bytes"
         msg = f"{path}: last line (line {line}) cut after {nbytes} {unit}, 1 row dropped"
     else:
-        msg = (f"{path}: last line (line {line}, {nbytes} bytes) has no line end, so its last "
-               f"value may be cut short: 1 row dropped")
+        msg = (
+            f"{path}: last line (line {line}, {nbytes} bytes) has no line end, so its last "
+            f"value may be cut short: 1 row dropped"
+        )
     if notes is None and data_loss is None:
         warnings.warn(msg, DataWarning, stacklevel=3)
     if notes is not None:

@@ -19,12 +19,9 @@ import numpy as np
 
 from gravsurvey.errors import ConfigError, DataError, DataWarning
 from gravsurvey.io import checks as ck
-from gravsurvey.io.csv import (UNITS,
-                               read_csv_channel)
-from gravsurvey.io.mcap import (DEFAULT_JSON_FIELDS, DEFAULT_MAX_RECORD_BYTES, ROLE_SCHEMAS,
-                                McapContent, read_mcap)
-from gravsurvey.io.record import (AltimeterChannel, FlightRecord, GnssChannel, GradientChannel,
-                                  ImuChannel)
+from gravsurvey.io.csv import UNITS, read_csv_channel
+from gravsurvey.io.mcap import DEFAULT_JSON_FIELDS, DEFAULT_MAX_RECORD_BYTES, ROLE_SCHEMAS, McapContent, read_mcap
+from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, GradientChannel, ImuChannel
 
 ROLES = ("imu", "altimeter", "gnss")
 #: Channels a flight may have in addition (read when present, never required).
@@ -60,17 +57,14 @@ class IngestOptions:
     csv_paths: dict = field(default_factory=dict)  # role -> path
     topics: dict = field(default_factory=lambda: dict(DEFAULT_TOPICS))
     topics_explicit: tuple = ()
-    json_fields: dict = field(default_factory=lambda: {r: dict(m) for r, m in
-                                                       DEFAULT_JSON_FIELDS.items()})
-    mcap_units: dict = field(default_factory=lambda: {"accel": "m/s^2", "gyro": "rad/s",
-                                                      "height": "m"})
+    json_fields: dict = field(default_factory=lambda: {r: dict(m) for r, m in DEFAULT_JSON_FIELDS.items()})
+    mcap_units: dict = field(default_factory=lambda: {"accel": "m/s^2", "gyro": "rad/s", "height": "m"})
     time_source: str = "auto"  # "auto" (header.stamp / JSON time, else log_time) | "log_time"
     check_crc: bool = True
     max_record_bytes: int = DEFAULT_MAX_RECORD_BYTES
     csv_columns: dict = field(default_factory=dict)  # role -> {quantity: column}
     csv_time_format: str = "ns"
-    csv_units: dict = field(default_factory=lambda: {"accel": "m/s^2", "gyro": "rad/s",
-                                                     "height": "m"})
+    csv_units: dict = field(default_factory=lambda: {"accel": "m/s^2", "gyro": "rad/s", "height": "m"})
     csv_delimiter: str = ","
     gps_leap_seconds: int = 18
     #: sensor axes -> forward-left-up triad axes, (3, 3) proper rotation (``imu_axes``)
@@ -95,8 +89,11 @@ class IngestOptions:
         ``base_dir`` (default: the one given to :func:`gravsurvey.settings.ingest_options`)."""
         if self.kind == "gravimeter":
             return self.gravimeter.paths(base_dir if base_dir is not None else self.base_dir)
-        paths = [self._resolve(self.csv_paths[r], base_dir) for r in ROLES + OPTIONAL_ROLES
-                 if r in self.csv_paths] if self.kind == "csv" else [self._resolve(self.mcap_path, base_dir)]
+        paths = (
+            [self._resolve(self.csv_paths[r], base_dir) for r in ROLES + OPTIONAL_ROLES if r in self.csv_paths]
+            if self.kind == "csv"
+            else [self._resolve(self.mcap_path, base_dir)]
+        )
         return paths + ([self._resolve(self.nav["file"], base_dir)] if self.nav else [])
 
 
@@ -126,8 +123,10 @@ def imu_axes_matrix(value, key_path="imu_axes") -> np.ndarray:
     if m is None or m.shape != (3, 3) or not np.all(np.isfinite(m)):
         raise ConfigError(f"{key_path}: expected one of {', '.join(IMU_AXES)} or a 3x3 matrix, got {value!r}")
     if not np.allclose(m @ m.T, np.eye(3), atol=1e-6) or np.linalg.det(m) < 0:
-        raise ConfigError(f"{key_path}: the matrix must be a proper rotation (orthonormal rows, determinant +1; a "
-                          f"mirrored axis set cannot be a sensor triad), got {value!r}")
+        raise ConfigError(
+            f"{key_path}: the matrix must be a proper rotation (orthonormal rows, determinant +1; a "
+            f"mirrored axis set cannot be a sensor triad), got {value!r}"
+        )
     return m
 
 
@@ -199,22 +198,21 @@ def select_gradient_channels(content: McapContent, options: IngestOptions, notes
     if ids:
         dec = [c for c in ids if c in content.decoded]
         if not dec:
-            raise DataError(f"{path}: topic {topic} (gradient) has schema "
-                            f"{content.schema_name(ids[0]) or 'none'!r}, encoding "
-                            f"{content.channels[ids[0]].message_encoding!r}; expected "
-                            f"{ROLE_SCHEMAS['gradient'][0]} (JSON)")
+            raise DataError(
+                f"{path}: topic {topic} (gradient) has schema "
+                f"{content.schema_name(ids[0]) or 'none'!r}, encoding "
+                f"{content.channels[ids[0]].message_encoding!r}; expected "
+                f"{ROLE_SCHEMAS['gradient'][0]} (JSON)"
+            )
         return {"gradient": dec}
     if "gradient" in options.topics_explicit:
         raise DataError(f"{path}: configured topic {topic} for gradient not in the file")
-    cands = sorted({content.channels[c].topic for c in content.decoded
-                    if content.role_of_schema(c) == "gradient"})
+    cands = sorted({content.channels[c].topic for c in content.decoded if content.role_of_schema(c) == "gradient"})
     if len(cands) > 1:
-        raise DataError(f"{path}: several gradient topics ({', '.join(cands)}); "
-                        "set topics.gradient")
+        raise DataError(f"{path}: several gradient topics ({', '.join(cands)}); set topics.gradient")
     if cands:
         notes.append(f"gradient: topic {topic} absent; using {cands[0]}")
-        return {"gradient": [c for c, ch in content.channels.items()
-                             if ch.topic == cands[0] and c in content.decoded]}
+        return {"gradient": [c for c, ch in content.channels.items() if ch.topic == cands[0] and c in content.decoded]}
     return {}
 
 
@@ -236,17 +234,21 @@ def gradient_tensors(values_si, source):
     med_asym = float(np.median(asym))
     if med_asym > GRADIENT_ASYMMETRY_TOL_E:
         k = int(np.argmax(asym))
-        raise DataError(f"{source}: gravity-gradient tensor not symmetric: median "
-                        f"max|T_ij - T_ji| = {med_asym:.4g} E (sample {k}: {asym[k]:.4g} E); "
-                        f"expected a symmetric tensor (<= {GRADIENT_ASYMMETRY_TOL_E:g} E)")
+        raise DataError(
+            f"{source}: gravity-gradient tensor not symmetric: median "
+            f"max|T_ij - T_ji| = {med_asym:.4g} E (sample {k}: {asym[k]:.4g} E); "
+            f"expected a symmetric tensor (<= {GRADIENT_ASYMMETRY_TOL_E:g} E)"
+        )
     sym = 0.5 * (gam + gam.transpose(0, 2, 1))
     vert = float(np.median(np.abs(np.linalg.eigvalsh(sym / 1e-9)).max(axis=1)))
     lo, hi = GRADIENT_VERTICAL_RANGE_E
     if not lo <= vert <= hi:
-        raise DataError(f"{source}: gravity gradient: median largest |eigenvalue| is {vert:.4g} E "
-                        f"after unit conversion; expected ~3080 E ({lo:g}..{hi:g}): wrong unit? "
-                        "(files carry Eotvos, 1 E = 1e-9 1/s^2, unless csv/mcap.units.gradient "
-                        "says 1/s^2)")
+        raise DataError(
+            f"{source}: gravity gradient: median largest |eigenvalue| is {vert:.4g} E "
+            f"after unit conversion; expected ~3080 E ({lo:g}..{hi:g}): wrong unit? "
+            "(files carry Eotvos, 1 E = 1e-9 1/s^2, unless csv/mcap.units.gradient "
+            "says 1/s^2)"
+        )
     return sym
 
 
@@ -268,8 +270,10 @@ def select_channels(content: McapContent, options: IngestOptions, notes: list):
     by_topic = {}
     for cid, ch in content.channels.items():
         by_topic.setdefault(ch.topic, []).append(cid)
-    avail = ", ".join(f"{t} ({content.schema_name(ids[0]) or 'schemaless'})"
-                      for t, ids in sorted(by_topic.items())) or "none"
+    avail = (
+        ", ".join(f"{t} ({content.schema_name(ids[0]) or 'schemaless'})" for t, ids in sorted(by_topic.items()))
+        or "none"
+    )
     out = {}
     for role in ROLES:
         topic = options.topics[role]
@@ -282,28 +286,28 @@ def select_channels(content: McapContent, options: IngestOptions, notes: list):
                     f"{path}: topic {topic} ({role}) has schema "
                     f"{content.schema_name(ids[0]) or 'none'!r}, encoding "
                     f"{ch.message_encoding!r}; expected one of "
-                    f"{', '.join(ROLE_SCHEMAS[role])} (cdr) or JSON")
+                    f"{', '.join(ROLE_SCHEMAS[role])} (cdr) or JSON"
+                )
             out[role] = dec
             continue
         if role in options.topics_explicit:
-            raise DataError(f"{path}: configured topic {topic} for {role} not in the file; "
-                            f"topics: {avail}")
-        cands = sorted({content.channels[c].topic for c in content.decoded
-                        if content.role_of_schema(c) == role})
+            raise DataError(f"{path}: configured topic {topic} for {role} not in the file; topics: {avail}")
+        cands = sorted({content.channels[c].topic for c in content.decoded if content.role_of_schema(c) == role})
         if len(cands) == 1:
             out[role] = [c for c in by_topic[cands[0]] if c in content.decoded]
-            notes.append(f"{role}: topic {topic} absent; using {cands[0]} (schema "
-                         f"{content.schema_name(out[role][0])})")
+            notes.append(f"{role}: topic {topic} absent; using {cands[0]} (schema {content.schema_name(out[role][0])})")
         elif len(cands) > 1:
-            raise DataError(f"{path}: topic {topic} absent and several {role} topics found "
-                            f"({', '.join(cands)}); set topics.{role}")
+            raise DataError(
+                f"{path}: topic {topic} absent and several {role} topics found ({', '.join(cands)}); set topics.{role}"
+            )
         elif role == "gnss":
             out[role] = []
         else:
-            raise DataError(f"{path}: no {role} channel: topic {topic} absent and no channel "
-                            f"with schema {' / '.join(ROLE_SCHEMAS[role])}; topics: {avail}"
-                            + ("; set topics.altimeter to a NavSatFix topic to use GNSS "
-                               "heights" if role == "altimeter" else ""))
+            raise DataError(
+                f"{path}: no {role} channel: topic {topic} absent and no channel "
+                f"with schema {' / '.join(ROLE_SCHEMAS[role])}; topics: {avail}"
+                + ("; set topics.altimeter to a NavSatFix topic to use GNSS heights" if role == "altimeter" else "")
+            )
     return out
 
 
@@ -316,15 +320,18 @@ def read_raw_channels(options: IngestOptions, base_dir, notes: list, data_loss: 
     raw = {}
     if options.kind == "mcap":
         path = options._resolve(options.mcap_path, base_dir)
-        content = read_mcap(path, topics=options.topics, json_fields=options.json_fields,
-                            check_crc=options.check_crc,
-                            max_record_bytes=options.max_record_bytes)
+        content = read_mcap(
+            path,
+            topics=options.topics,
+            json_fields=options.json_fields,
+            check_crc=options.check_crc,
+            max_record_bytes=options.max_record_bytes,
+        )
         notes.extend(content.notes)
         if content.salvage is not None:
             notes.append(content.salvage.describe(path))
         if content.orphan_messages:
-            notes.append(f"{path}: {content.orphan_messages} messages on undefined channels "
-                         "ignored")
+            notes.append(f"{path}: {content.orphan_messages} messages on undefined channels ignored")
         try:
             chosen = select_channels(content, options, notes)
             chosen.update(select_gradient_channels(content, options, notes))
@@ -344,19 +351,22 @@ def read_raw_channels(options: IngestOptions, base_dir, notes: list, data_loss: 
                 vals = {"height": vals["height"]}
             enc = content.channels[ids[0]].message_encoding
             used = sum(b.log_time_used for b in blocks)
-            tsrc = "header.stamp" if enc == "cdr" else "JSON " + str(
-                options.json_fields[role].get("time"))
+            tsrc = "header.stamp" if enc == "cdr" else "JSON " + str(options.json_fields[role].get("time"))
             if options.time_source == "log_time":
                 t, tsrc = lt, "log_time (configured)"
             elif used:
                 tsrc += f" ({used} messages fell back to log_time)"
-                notes.append(f"{role}: {used} of {len(t)} messages from {src} carry no "
-                             f"measurement time ({tsrc.split(' (')[0]}); used the MCAP log_time")
+                notes.append(
+                    f"{role}: {used} of {len(t)} messages from {src} carry no "
+                    f"measurement time ({tsrc.split(' (')[0]}); used the MCAP log_time"
+                )
             bad = sum(b.undecodable for b in blocks)
             if bad:
                 probs = "; ".join(p for b in blocks for p in b.problems[:1])
-                notes.append(f"{role}: {bad} messages of {src} could not be decoded and were "
-                             f"dropped" + (f" ({probs})" if probs else ""))
+                notes.append(
+                    f"{role}: {bad} messages of {src} could not be decoded and were "
+                    f"dropped" + (f" ({probs})" if probs else "")
+                )
             vals = apply_units(role, vals, options.mcap_units)
             raw[role] = RawChannel(role, t, vals, src, content.schema_name(ids[0]), enc, tsrc)
         if options.nav:
@@ -364,10 +374,17 @@ def read_raw_channels(options: IngestOptions, base_dir, notes: list, data_loss: 
         return raw, content
     for role, rel in options.csv_paths.items():
         path = options._resolve(rel, base_dir)
-        t, vals = read_csv_channel(path, role, options.csv_columns.get(role),
-                                   options.csv_time_format, options.csv_units,
-                                   options.csv_delimiter, options.gps_leap_seconds, notes=notes,
-                                   data_loss=data_loss if data_loss is not None else [])
+        t, vals = read_csv_channel(
+            path,
+            role,
+            options.csv_columns.get(role),
+            options.csv_time_format,
+            options.csv_units,
+            options.csv_delimiter,
+            options.gps_leap_seconds,
+            notes=notes,
+            data_loss=data_loss if data_loss is not None else [],
+        )
         raw[role] = RawChannel(role, t, vals, str(path), "csv", "csv", options.csv_time_format)
     if options.nav:
         raw["gnss"] = read_gnss_file(options, base_dir, notes, replaces=raw.get("gnss"))
@@ -396,14 +413,22 @@ def read_gnss_file(options: IngestOptions, base_dir, notes: list, replaces=None)
     notes.extend(f"gnss: {n}" for n in tab.notes if not any(k in n for k in info))
     h = np.asarray(tab.columns["height"], float)
     if not np.isfinite(h).any():
-        what = ("GGA sentences with the geoid separation (field 11)" if fmt == "nmea"
-                else "an ellipsoidal height column (ell_ht, h_ell, ...)")
-        raise DataError(f"{path}: no ellipsoidal heights; expected {what}: the INS needs heights above "
-                        f"the ellipsoid (orthometric heights would bias the anomaly by 0.3 mGal/m)")
+        what = (
+            "GGA sentences with the geoid separation (field 11)"
+            if fmt == "nmea"
+            else "an ellipsoidal height column (ell_ht, h_ell, ...)"
+        )
+        raise DataError(
+            f"{path}: no ellipsoidal heights; expected {what}: the INS needs heights above "
+            f"the ellipsoid (orthometric heights would bias the anomaly by 0.3 mGal/m)"
+        )
     if replaces is not None and len(replaces.time_ns):
         notes.append(f"gnss: {path} ({fmt}) used instead of the GNSS channel of {replaces.source}")
-    vals = {"lat_deg": np.degrees(np.asarray(tab.columns["lat"], float)),
-            "lon_deg": np.degrees(np.asarray(tab.columns["lon"], float)), "height": h}
+    vals = {
+        "lat_deg": np.degrees(np.asarray(tab.columns["lat"], float)),
+        "lon_deg": np.degrees(np.asarray(tab.columns["lon"], float)),
+        "height": h,
+    }
     tsrc = str(tab.meta.get("time_source", tab.meta.get("time_system", "file")))
     return RawChannel("gnss", np.asarray(tab.time_ns, np.int64), vals, f"{path} ({fmt})", fmt, "text", tsrc)
 
@@ -420,8 +445,10 @@ def _drop_nonfinite(ch: RawChannel, notes):
             v2 = np.asarray(v, float).reshape(len(ok), -1)
             ok &= (np.isfinite(v2) & (np.abs(v2) <= DAMAGE_ABS_MAX)).all(axis=1)
     if not ok.all():
-        notes.append(f"{ch.role}: dropped {int((~ok).sum())} samples with NaN/inf or absurd "
-                     f"(> {DAMAGE_ABS_MAX:g}) values ({ch.source})")
+        notes.append(
+            f"{ch.role}: dropped {int((~ok).sum())} samples with NaN/inf or absurd "
+            f"(> {DAMAGE_ABS_MAX:g}) values ({ch.source})"
+        )
         ch.time_ns = ch.time_ns[ok]
         ch.values = {k: v[ok] for k, v in ch.values.items()}
 
@@ -441,20 +468,21 @@ def repair_and_check(raw: dict, options: IngestOptions):
     t0 = min((int(ch.time_ns[0]) for ch in raw.values() if len(ch.time_ns)), default=0)
     for role, ch in raw.items():
         keys = list(ch.values)
-        t, vals, rep = ck.repair_time(ch.time_ns, [ch.values[k] for k in keys],
-                                      options.gap_factor)
+        t, vals, rep = ck.repair_time(ch.time_ns, [ch.values[k] for k in keys], options.gap_factor)
         ch.time_ns, ch.values = t, dict(zip(keys, vals))
         reports[role] = rep
         findings += ck.time_findings(role, rep, t0)
         findings += ck.check_epoch(role, t)
     if "imu" in raw:
         ch = raw["imu"]
-        findings += ck.check_imu(ch.time_ns, ch.values["specific_force"],
-                                 ch.values["angular_rate"], reports["imu"].nominal_step_ns,
-                                 options.csv_units["accel"] if options.kind == "csv"
-                                 else options.mcap_units["accel"],
-                                 options.csv_units["gyro"] if options.kind == "csv"
-                                 else options.mcap_units["gyro"])
+        findings += ck.check_imu(
+            ch.time_ns,
+            ch.values["specific_force"],
+            ch.values["angular_rate"],
+            reports["imu"].nominal_step_ns,
+            options.csv_units["accel"] if options.kind == "csv" else options.mcap_units["accel"],
+            options.csv_units["gyro"] if options.kind == "csv" else options.mcap_units["gyro"],
+        )
     hunit = options.csv_units["height"] if options.kind == "csv" else options.mcap_units["height"]
     g = raw.get("gnss")
     if g is not None:
@@ -470,8 +498,7 @@ def repair_and_check(raw: dict, options: IngestOptions):
             ref = np.interp(ta, tg, g.values["height"], left=np.nan, right=np.nan)
             sel = np.isfinite(ref)
             ref, h = ref[sel], a.values["height"][sel]
-            findings += [f for f in ck.check_height("altimeter", h, hunit, ref)
-                         if f.check == "height vs GNSS"]
+            findings += [f for f in ck.check_height("altimeter", h, hunit, ref) if f.check == "height vs GNSS"]
     return raw, findings, reports
 
 
@@ -500,8 +527,12 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
     if options.kind == "gravimeter":
         from gravsurvey.io.formats.flight import gravimeter_record
 
-        return gravimeter_record(options.gravimeter, base_dir if base_dir is not None else options.base_dir,
-                                 gap_factor=options.gap_factor, plausibility=options.plausibility)
+        return gravimeter_record(
+            options.gravimeter,
+            base_dir if base_dir is not None else options.base_dir,
+            gap_factor=options.gap_factor,
+            plausibility=options.plausibility,
+        )
     notes, csv_loss = [], []
     raw, content = read_raw_channels(options, base_dir, notes, csv_loss)
     for ch in raw.values():
@@ -518,14 +549,14 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
         if role not in raw or len(raw[role].time_ns) == 0:
             src = raw[role].source if role in raw else (options.mcap_path or "")
             why = [n for n in notes if n.startswith(f"{role}: ")]
-            raise DataError(f"{src}: no usable {role} samples" + (f" ({'; '.join(why)})"
-                                                                   if why else ""))
+            raise DataError(f"{src}: no usable {role} samples" + (f" ({'; '.join(why)})" if why else ""))
     raw, findings, _ = repair_and_check(raw, options)
     errors = [f.message for f in findings if f.level == "error"]
     if errors and options.plausibility == "error":
         src = options.mcap_path if options.kind == "mcap" else raw["imu"].source
-        raise DataError(f"{src}: implausible data: " + "; ".join(errors)
-                        + " (set checks.plausibility: warn to process anyway)")
+        raise DataError(
+            f"{src}: implausible data: " + "; ".join(errors) + " (set checks.plausibility: warn to process anyway)"
+        )
     notes += [f.message for f in findings if f.level in ("warning", "error")]
     for n in notes:
         warnings.warn(n, DataWarning, stacklevel=2)
@@ -539,22 +570,24 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
     gnss = None
     if "gnss" in raw and len(raw["gnss"].time_ns):
         g = raw["gnss"]
-        gnss = GnssChannel(rel(g.time_ns), np.radians(g.values["lat_deg"]),
-                           np.radians(g.values["lon_deg"]), g.values["height"])
+        gnss = GnssChannel(
+            rel(g.time_ns), np.radians(g.values["lat_deg"]), np.radians(g.values["lon_deg"]), g.values["height"]
+        )
     gradient = None
     if "gradient" in raw and len(raw["gradient"].time_ns):
         gr = raw["gradient"]
-        gradient = GradientChannel(rel(gr.time_ns), gradient_tensors(gr.values["gradient"],
-                                                                     gr.source))
+        gradient = GradientChannel(rel(gr.time_ns), gradient_tensors(gr.values["gradient"], gr.source))
     src = ", ".join(os.fspath(p) for p in options.input_paths(base_dir))
     return FlightRecord(
         t0_unix_ns=t0,
-        imu=ImuChannel(rel(imu.time_ns), imu.values["specific_force"],
-                       imu.values["angular_rate"]),
+        imu=ImuChannel(rel(imu.time_ns), imu.values["specific_force"], imu.values["angular_rate"]),
         altimeter=AltimeterChannel(rel(alt.time_ns), alt.values["height"]),
-        gnss=gnss, source=src, notes=notes,
+        gnss=gnss,
+        source=src,
+        notes=notes,
         data_loss=_data_loss(options, base_dir, content) + csv_loss + clock_loss,
-        gradient=gradient)
+        gradient=gradient,
+    )
 
 
 def _data_loss(options: IngestOptions, base_dir, content) -> list:

@@ -32,8 +32,11 @@ def _iso(ns):
 def _span(t):
     if len(t) == 0:
         return {"start_utc": None, "end_utc": None, "duration_s": 0.0}
-    return {"start_utc": _iso(t.min()), "end_utc": _iso(t.max()),
-            "duration_s": float((int(t.max()) - int(t.min())) * 1e-9)}
+    return {
+        "start_utc": _iso(t.min()),
+        "end_utc": _iso(t.max()),
+        "duration_s": float((int(t.max()) - int(t.min())) * 1e-9),
+    }
 
 
 def _channel_report(role, time_ns, values, units):
@@ -43,8 +46,9 @@ def _channel_report(role, time_ns, values, units):
     values = dict(zip(keys, vals))
     f = ck.time_findings(role, rep, int(t[0]) if len(t) else 0) + ck.check_epoch(role, t)
     if role == "imu":
-        f += ck.check_imu(t, values["specific_force"], values["angular_rate"],
-                          rep.nominal_step_ns, units["accel"], units["gyro"])
+        f += ck.check_imu(
+            t, values["specific_force"], values["angular_rate"], rep.nominal_step_ns, units["accel"], units["gyro"]
+        )
     elif role == "gnss":
         f += ck.check_gnss(values["lat_deg"], values["lon_deg"])
         f += ck.check_height(role, values["height"], units["height"])
@@ -90,11 +94,9 @@ def options_for(path, config):
             return fl.ingest, f"settings of flights[{fl.index}] ({fl.name}) in {config.path}"
     for fl in flights:
         if any(Path(q).name == p.name for q in fl.ingest.input_paths(config.base_dir)):
-            return fl.ingest, (f"settings of flights[{fl.index}] ({fl.name}) in {config.path} "
-                               "(matched by file name)")
+            return fl.ingest, (f"settings of flights[{fl.index}] ({fl.name}) in {config.path} (matched by file name)")
     fl = flights[0]
-    return fl.ingest, (f"not an input of {config.path}; settings of flights[{fl.index}] "
-                       f"({fl.name}) used")
+    return fl.ingest, (f"not an input of {config.path}; settings of flights[{fl.index}] ({fl.name}) used")
 
 
 def damage_lines(rep) -> list[str]:
@@ -108,8 +110,10 @@ def damage_lines(rep) -> list[str]:
     out += rep.get("csv_damage", [])  # a CSV's last line cut short
     for ch in rep.get("channels", []):
         if ch.get("value_check_dropped"):
-            out.append(f"{ch['topic']}: {ch['value_check_dropped']} samples without a chunk CRC "
-                       "failed the damage checks (corrupted values or time stamps)")
+            out.append(
+                f"{ch['topic']}: {ch['value_check_dropped']} samples without a chunk CRC "
+                "failed the damage checks (corrupted values or time stamps)"
+            )
     return out
 
 
@@ -161,36 +165,52 @@ def inspect_files(paths, options: IngestOptions | None = None, config=None) -> l
 
 
 def _inspect_mcap(path, o):
-    c = read_mcap(path, topics=o.topics, json_fields=o.json_fields, check_crc=o.check_crc,
-                  max_record_bytes=o.max_record_bytes)
-    rep = {"format": "mcap", "profile": c.profile, "library": c.library, "chunks": c.chunks,
-           "compression": sorted(c.compressions), "notes": list(c.notes),
-           "salvage": None, "channels": []}
+    c = read_mcap(
+        path, topics=o.topics, json_fields=o.json_fields, check_crc=o.check_crc, max_record_bytes=o.max_record_bytes
+    )
+    rep = {
+        "format": "mcap",
+        "profile": c.profile,
+        "library": c.library,
+        "chunks": c.chunks,
+        "compression": sorted(c.compressions),
+        "notes": list(c.notes),
+        "salvage": None,
+        "channels": [],
+    }
     if c.salvage:
         s = c.salvage
-        rep["salvage"] = {"damaged_at_byte": s.offset, "reason": s.reason,
-                          "recovered_messages": s.recovered,
-                          "lost_messages": s.lost_messages, "summary": s.describe(path),
-                          "regions": [r.as_dict() for r in s.regions]}
+        rep["salvage"] = {
+            "damaged_at_byte": s.offset,
+            "reason": s.reason,
+            "recovered_messages": s.recovered,
+            "lost_messages": s.lost_messages,
+            "summary": s.describe(path),
+            "regions": [r.as_dict() for r in s.regions],
+        }
     if c.orphan_messages:
         rep["notes"].append(f"{c.orphan_messages} messages on undefined channels")
     for cid in sorted(c.channels):
         ch = c.channels[cid]
         lt = c.log_times.get(cid, np.zeros(0, np.int64))
-        entry = {"topic": ch.topic, "channel_id": cid, "schema": c.schema_name(cid),
-                 "encoding": ch.message_encoding, "messages": c.counts.get(cid, 0),
-                 "log_time": _span(lt), "role": None}
+        entry = {
+            "topic": ch.topic,
+            "channel_id": cid,
+            "schema": c.schema_name(cid),
+            "encoding": ch.message_encoding,
+            "messages": c.counts.get(cid, 0),
+            "log_time": _span(lt),
+            "role": None,
+        }
         blk = c.decoded.get(cid)
         if blk is not None and len(blk.time_ns):
-            role = next((r for r, t in o.topics.items() if t == ch.topic), None) \
-                or c.role_of_schema(cid)
+            role = next((r for r, t in o.topics.items() if t == ch.topic), None) or c.role_of_schema(cid)
             vals = dict(blk.values)
             if role == "altimeter":
                 vals = {"height": vals["height"]}
             vals = apply_units(role, vals, o.mcap_units)
             entry.update(_channel_report(role, blk.time_ns, vals, o.mcap_units))
-            entry["time_source"] = ("header.stamp" if ch.message_encoding == "cdr"
-                                    else "JSON field")
+            entry["time_source"] = "header.stamp" if ch.message_encoding == "cdr" else "JSON field"
             if blk.log_time_used:
                 entry["time_source"] += f" ({blk.log_time_used} fell back to log_time)"
             entry["undecodable"] = blk.undecodable
@@ -206,20 +226,37 @@ def _inspect_csv(path, o):
             role = r
     role = role or sniff_csv_role(path)
     if role == "truth":
-        return {"format": "csv", "channels": [],
-                "notes": ["simulator truth file (docs/formats.md, truth.csv), not a sensor log"]}
+        return {
+            "format": "csv",
+            "channels": [],
+            "notes": ["simulator truth file (docs/formats.md, truth.csv), not a sensor log"],
+        }
     if role is None:
-        return {"format": "csv", "error": f"{path}: header matches no channel (imu, altimeter, "
-                                          "gnss columns of docs/input-formats.md)"}
+        return {
+            "format": "csv",
+            "error": f"{path}: header matches no channel (imu, altimeter, gnss columns of docs/input-formats.md)",
+        }
     notes, damage = [], []
-    t, vals = read_csv_channel(path, role, o.csv_columns.get(role), o.csv_time_format,
-                               o.csv_units, o.csv_delimiter, o.gps_leap_seconds, notes=notes,
-                               data_loss=damage)
-    entry = {"topic": None, "schema": "csv", "encoding": "csv", "messages": len(t),
-             "time_source": f"column ({o.csv_time_format})"}
+    t, vals = read_csv_channel(
+        path,
+        role,
+        o.csv_columns.get(role),
+        o.csv_time_format,
+        o.csv_units,
+        o.csv_delimiter,
+        o.gps_leap_seconds,
+        notes=notes,
+        data_loss=damage,
+    )
+    entry = {
+        "topic": None,
+        "schema": "csv",
+        "encoding": "csv",
+        "messages": len(t),
+        "time_source": f"column ({o.csv_time_format})",
+    }
     entry.update(_channel_report(role, t, vals, o.csv_units))
-    return {"format": "csv", "channels": [entry], "csv_damage": damage,
-            "notes": [n for n in notes if n not in damage]}
+    return {"format": "csv", "channels": [entry], "csv_damage": damage, "notes": [n for n in notes if n not in damage]}
 
 
 def format_inspect(reports) -> str:
@@ -230,8 +267,10 @@ def format_inspect(reports) -> str:
         if "format" in rep:
             head += f"  [{rep['format']}"
             if rep.get("profile") is not None and rep["format"] == "mcap":
-                head += (f", profile {rep['profile'] or '-'}, {rep.get('chunks', 0)} chunks "
-                         f"({', '.join(rep.get('compression', [])) or 'unchunked'})")
+                head += (
+                    f", profile {rep['profile'] or '-'}, {rep.get('chunks', 0)} chunks "
+                    f"({', '.join(rep.get('compression', [])) or 'unchunked'})"
+                )
             head += f", {rep.get('size_bytes', 0)} bytes]"
         lines.append(head)
         if rep.get("settings"):
@@ -246,8 +285,10 @@ def format_inspect(reports) -> str:
         if not rep.get("channels"):
             lines.append("  (no channels)")
             continue
-        lines.append(f"  {'topic':<34} {'schema':<30} {'enc':<5} {'msgs':>8} {'span_s':>10} "
-                     f"{'rate_hz':>9} {'gaps':>5}  start (UTC)")
+        lines.append(
+            f"  {'topic':<34} {'schema':<30} {'enc':<5} {'msgs':>8} {'span_s':>10} "
+            f"{'rate_hz':>9} {'gaps':>5}  start (UTC)"
+        )
         for ch in rep.get("channels", []):
             span = ch.get("measurement_time") or ch.get("log_time") or {}
             rate = ch.get("nominal_rate_hz")
@@ -256,11 +297,11 @@ def format_inspect(reports) -> str:
                 f"{str(ch.get('encoding')):<5} {ch.get('messages', 0):>8} "
                 f"{span.get('duration_s', 0.0):>10.3f} "
                 f"{(f'{rate:.4g}' if rate else '-'):>9} {str(ch.get('gaps', '-')):>5}  "
-                f"{span.get('start_utc') or '-'}")
+                f"{span.get('start_utc') or '-'}"
+            )
         for ch in rep.get("channels", []):
             if ch.get("role"):
-                lines.append(f"  {ch['role']} ({ch.get('topic') or 'csv'}, time from "
-                             f"{ch.get('time_source')}):")
+                lines.append(f"  {ch['role']} ({ch.get('topic') or 'csv'}, time from {ch.get('time_source')}):")
                 for x in ch.get("checks", []):
                     lines.append(f"    [{x['level']}] {x['message']}")
     return "\n".join(lines)

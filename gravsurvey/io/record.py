@@ -184,19 +184,24 @@ def slice_record(record: FlightRecord, t0: float, t1: float, margin_s: float = 0
     FlightRecord
         Arrays are copies.
     """
+
     def cut(time, lo, hi):
         t = np.asarray(time, dtype=np.float64)
         return (t >= lo) & (t <= hi)
 
     m = cut(record.imu.time, t0, t1)
-    imu = ImuChannel(record.imu.time[m].copy(), record.imu.specific_force_t[m].copy(),
-                     record.imu.angular_rate_t[m].copy())
+    imu = ImuChannel(
+        record.imu.time[m].copy(), record.imu.specific_force_t[m].copy(), record.imu.angular_rate_t[m].copy()
+    )
     a = cut(record.altimeter.time, t0 - margin_s, t1 + margin_s)
     alt = AltimeterChannel(record.altimeter.time[a].copy(), record.altimeter.height[a].copy())
     gnss = None
     if record.gnss is not None:
         g = cut(record.gnss.time, t0 - margin_s, t1 + margin_s)
-        gnss = GnssChannel(record.gnss.time[g].copy(), record.gnss.lat[g].copy(),
-                           record.gnss.lon[g].copy(), record.gnss.height[g].copy())
-    return FlightRecord(t0_unix_ns=record.t0_unix_ns, imu=imu, altimeter=alt, gnss=gnss,
-                        source=record.source)
+        gnss = GnssChannel(
+            record.gnss.time[g].copy(),
+            record.gnss.lat[g].copy(),
+            record.gnss.lon[g].copy(),
+            record.gnss.height[g].copy(),
+        )
+    return FlightRecord(t0_unix_ns=record.t0_unix_ns, imu=imu, altimeter=alt, gnss=gnss, source=record.source)

@@ -240,7 +240,9 @@ def _prism_corners(e, n, u, bounds):
 def _check_bounds(bounds):
     b = np.asarray(bounds, dtype=float)
     if b.shape != (6,) or not np.all(np.isfinite(b)):
-        raise DataError(f"prism bounds: expected 6 finite numbers (west, east, south, north, bottom, top), got {bounds!r}")
+        raise DataError(
+            f"prism bounds: expected 6 finite numbers (west, east, south, north, bottom, top), got {bounds!r}"
+        )
     if not (b[0] < b[1] and b[2] < b[3] and b[4] < b[5]):
         raise DataError(f"prism bounds: expected west < east, south < north, bottom < top, got {tuple(b)}")
     return b
@@ -478,9 +480,7 @@ def _prism_kernel(e, n, u, b, r_switch, potential, out):
                     ty = _atan_scalar(z * x, y * r)
                     tz = _atan_scalar(x * y, z * r)
                     if potential:
-                        v += sgn * (
-                            x * y * lz + y * z * lx + z * x * ly - 0.5 * (x * x * tx + y * y * ty + z * z * tz)
-                        )
+                        v += sgn * (x * y * lz + y * z * lx + z * x * ly - 0.5 * (x * x * tx + y * y * ty + z * z * tz))
                     else:
                         gx -= sgn * (y * lz + z * ly - x * tx)
                         gy -= sgn * (z * lx + x * lz - y * ty)
@@ -591,7 +591,9 @@ def _point_sources(model: FieldModel):
         src.append(_source_point_e(p.lat_deg, p.lon_deg, p.depth_m, model.ellipsoid)[None, :])
         mass.append(np.array([p.mass_kg], dtype=float))
     for d in model.dipoles:
-        s, m = dipole_sources(d.lat_deg, d.lon_deg, d.depth_m, d.mass_kg, d.separation_m, d.azimuth_deg, model.ellipsoid)
+        s, m = dipole_sources(
+            d.lat_deg, d.lon_deg, d.depth_m, d.mass_kg, d.separation_m, d.azimuth_deg, model.ellipsoid
+        )
         src.append(s)
         mass.append(m)
     if not src:
@@ -731,7 +733,9 @@ def point_mass_gradient(r_e, source_e, mass):
         d = s[None, :, :] - r[k0 : k0 + step, None, :]  # (k, m, 3)
         dist2 = np.einsum("kmi,kmi->km", d, d)
         inv3 = gm / (dist2 * np.sqrt(dist2))  # G m / |d|^3
-        out[k0 : k0 + step] = np.einsum("km,kmi,kmj->kij", 3.0 * inv3 / dist2, d, d) - inv3.sum(axis=1)[:, None, None] * eye
+        out[k0 : k0 + step] = (
+            np.einsum("km,kmi,kmj->kij", 3.0 * inv3 / dist2, d, d) - inv3.sum(axis=1)[:, None, None] * eye
+        )
     return out
 
 
@@ -841,7 +845,9 @@ def normal_gradient_ecef(r_e, ellipsoid: Ellipsoid = WGS84):
     for j in range(3):
         dr = np.zeros(3)
         dr[j] = h
-        out[:, :, j] = (normal_gravitation_ecef(r + dr, ellipsoid) - normal_gravitation_ecef(r - dr, ellipsoid)) / (2.0 * h)
+        out[:, :, j] = (normal_gravitation_ecef(r + dr, ellipsoid) - normal_gravitation_ecef(r - dr, ellipsoid)) / (
+            2.0 * h
+        )
     return 0.5 * (out + np.transpose(out, (0, 2, 1)))
 
 
@@ -1024,7 +1030,6 @@ def _describe(v):
     return f"{type(v).__name__} {v!r}" if not isinstance(v, str) else repr(v)
 
 
-
 def _parse_float_str(v):
     # PyYAML (YAML 1.1) reads 5.0e11 (no sign after e) as a string: accept such
     # numeric strings; words, nan and inf stay errors.
@@ -1091,7 +1096,11 @@ def _parse_prism(item, path):
     north = _interval(item["north_m"], f"{path}.north_m", "m north of the reference point")
     depth = _interval(item["depth_m"], f"{path}.depth_m", "m below the ellipsoid, [top, bottom]")
     rho = _number(
-        item["density_kgm3"], f"{path}.density_kgm3", "kg/m^3 density contrast", -MAX_DENSITY_KGM3, MAX_DENSITY_KGM3,
+        item["density_kgm3"],
+        f"{path}.density_kgm3",
+        "kg/m^3 density contrast",
+        -MAX_DENSITY_KGM3,
+        MAX_DENSITY_KGM3,
         nonzero=True,
     )
     return Prism(lat, lon, east, north, depth, rho)
@@ -1133,7 +1142,9 @@ def field_model_from_dict(d, key_path: str = "field", ellipsoid: Ellipsoid = WGS
     allowed = _TOP_KEYS[ftype]
     for k in d:
         if k not in allowed and k in _ALL_TOP_KEYS:
-            raise ConfigError(f"{key_path}.{k}: not allowed with {key_path}.type {ftype!r}; allowed keys {list(allowed)}")
+            raise ConfigError(
+                f"{key_path}.{k}: not allowed with {key_path}.type {ftype!r}; allowed keys {list(allowed)}"
+            )
     check_keys(d, allowed, key_path)
 
     if ftype == "markov":

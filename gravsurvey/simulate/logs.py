@@ -151,8 +151,7 @@ def _times(value, what: str) -> np.ndarray:
     if a.size > 1 and not np.all(np.diff(a) > 0):
         k = int(np.flatnonzero(np.diff(a) <= 0)[0])
         raise DataError(
-            f"{what}: times must strictly increase; sample {k + 1} ({int(a[k + 1])}) "
-            f"<= sample {k} ({int(a[k])})"
+            f"{what}: times must strictly increase; sample {k + 1} ({int(a[k + 1])}) <= sample {k} ({int(a[k])})"
         )
     return a
 
@@ -219,9 +218,7 @@ def _check_logs(logs: SensorLogs, need_int32_seconds: bool) -> _Checked:
     if all(v is None for v in gnss_fields):
         gnss_t = lat = lon = gnss_h = None
     elif any(v is None for v in gnss_fields):
-        raise DataError(
-            "gnss: gnss_time_ns, lat_deg, lon_deg, gnss_height_m must be all given or all None"
-        )
+        raise DataError("gnss: gnss_time_ns, lat_deg, lon_deg, gnss_height_m must be all given or all None")
     else:
         gnss_t = _times(logs.gnss_time_ns, "gnss time_ns")
         k = gnss_t.size
@@ -235,13 +232,9 @@ def _check_logs(logs: SensorLogs, need_int32_seconds: bool) -> _Checked:
         if t is None:
             continue
         if t[0] < start:
-            raise DataError(
-                f"{name} time_ns: first sample {int(t[0])} before start_unix_ns {start}"
-            )
+            raise DataError(f"{name} time_ns: first sample {int(t[0])} before start_unix_ns {start}")
         if need_int32_seconds and t[-1] // _NS > _INT32_MAX:
-            raise DataError(
-                f"{name} time_ns: {int(t[-1])} beyond the ROS 2 int32 seconds stamp (year 2038)"
-            )
+            raise DataError(f"{name} time_ns: {int(t[-1])} beyond the ROS 2 int32 seconds stamp (year 2038)")
 
     if (logs.gradient_time_ns is None) != (logs.gradient_t_eotvos is None):
         raise DataError("gradient: gradient_time_ns and gradient_t_eotvos must be both given or both None")
@@ -277,21 +270,14 @@ def _check_formats(formats: Iterable[str]) -> list[str]:
     wanted = []
     for f in formats:
         if f not in FORMATS:
-            raise ConfigError(
-                f"log format {f!r} unknown (expected some of {', '.join(FORMATS)})"
-            )
+            raise ConfigError(f"log format {f!r} unknown (expected some of {', '.join(FORMATS)})")
         if f not in wanted:
             wanted.append(f)
     return [f for f in FORMATS if f in wanted]  # fixed order: deterministic file list
 
 
 def _check_flight_name(name: str) -> str:
-    if (
-        not isinstance(name, str)
-        or not name
-        or name in (".", "..")
-        or any(c in name for c in "/\\\0\n\r")
-    ):
+    if not isinstance(name, str) or not name or name in (".", "..") or any(c in name for c in "/\\\0\n\r"):
         raise ConfigError(f"flight name {name!r}: expected a plain file-name stem (no / \\ NUL)")
     return name
 
@@ -488,9 +474,7 @@ def _json_alt(t, h) -> list[bytes]:
 
 def _json_gnss(t, lat, lon, h) -> list[bytes]:
     fmt = '{{"time_ns":{},"lat_deg":{},"lon_deg":{},"height_m":{}}}'.format
-    return [
-        s.encode("ascii") for s in map(fmt, _ints(t), _reprs(lat), _reprs(lon), _reprs(h))
-    ]
+    return [s.encode("ascii") for s in map(fmt, _ints(t), _reprs(lat), _reprs(lon), _reprs(h))]
 
 
 # --------------------------------------------------------------------------------------------
@@ -758,8 +742,15 @@ def _metadata(flight_name: str, c: _Checked, comments: Sequence[str]) -> dict[st
     return md
 
 
-def _write_mcap(fh, profile: str, encoding: str, schema_encoding: str, schemas: dict,
-                topics: list[tuple[str, np.ndarray, list[bytes]]], metadata: dict) -> None:
+def _write_mcap(
+    fh,
+    profile: str,
+    encoding: str,
+    schema_encoding: str,
+    schemas: dict,
+    topics: list[tuple[str, np.ndarray, list[bytes]]],
+    metadata: dict,
+) -> None:
     """Write one MCAP file: messages of all topics interleaved in time order (ties: topic order)."""
     w = Writer(
         fh,
@@ -801,9 +792,7 @@ def _mcap_json_topics(c: _Checked):
     ]
     if c.gnss_t is not None:
         tg, lat, lon, hg = c.gnss_t, c.lat, c.lon, c.gnss_h
-        topics.append(
-            ("/gnss", tg, _blocked(tg.size, lambda a, b: _json_gnss(tg[a:b], lat[a:b], lon[a:b], hg[a:b])))
-        )
+        topics.append(("/gnss", tg, _blocked(tg.size, lambda a, b: _json_gnss(tg[a:b], lat[a:b], lon[a:b], hg[a:b]))))
     if c.grad_t is not None:
         tq, gq = c.grad_t, c.grad
         topics.append(("/gradient", tq, _blocked(tq.size, lambda a, b: _json_gradient(tq[a:b], gq[a:b]))))
@@ -871,9 +860,7 @@ def _csv_files(flight: str, c: _Checked, comments) -> list[tuple[str, Iterable[b
         ),
         ["time_ns", "fx_mps2", "fy_mps2", "fz_mps2", "wx_radps", "wy_radps", "wz_radps"],
         t.size,
-        lambda a, b: [_ints(t[a:b])]
-        + [_reprs(f[a:b, j]) for j in range(3)]
-        + [_reprs(w[a:b, j]) for j in range(3)],
+        lambda a, b: [_ints(t[a:b])] + [_reprs(f[a:b, j]) for j in range(3)] + [_reprs(w[a:b, j]) for j in range(3)],
     )
     alt = _csv_stream(
         _csv_comments(flight, "altimeter", c, ["height_m: ellipsoidal height, m"], comments),

@@ -39,8 +39,18 @@ from .sensors import (
 from .simconfig import SimConfig, load_sim_config
 from .trajectory import FlightPlan, Kinematics, build_plan, earth_rate_n, kinematics, mat_ne
 
-__all__ = ["FlightSimulation", "simulate_flight", "simulate_to_dir", "quick_sim", "load_sim_config", "sample_times_ns",
-           "oracle_model_block", "matched_anomaly_prior", "user_model_block", "user_initial_block"]
+__all__ = [
+    "FlightSimulation",
+    "simulate_flight",
+    "simulate_to_dir",
+    "quick_sim",
+    "load_sim_config",
+    "sample_times_ns",
+    "oracle_model_block",
+    "matched_anomaly_prior",
+    "user_model_block",
+    "user_initial_block",
+]
 
 MGAL = 1e-5
 _STREAM_TURBULENCE, _STREAM_IMU, _STREAM_ALT, _STREAM_GNSS, _STREAM_FIELD = range(5)
@@ -257,10 +267,26 @@ def _imu_truth(plan, t, anomaly: _Anomaly, ell, triad):
 
 def _truth_table(plan, t_rel, start_ns, t_ns, anomaly: _Anomaly):
     """truth.csv columns (docs/formats.md) at the times ``t_rel`` (s)."""
-    cols = {k: np.empty(t_rel.shape[0]) for k in (
-        "lat_deg", "lon_deg", "height_m", "ve_mps", "vn_mps", "vu_mps", "roll_deg", "pitch_deg", "heading_deg",
-        "disturbance_mgal", "anomaly_e_mgal", "anomaly_n_mgal", "anomaly_u_mgal", "dg_north_mgal",
-        "dg_east_mgal")}
+    cols = {
+        k: np.empty(t_rel.shape[0])
+        for k in (
+            "lat_deg",
+            "lon_deg",
+            "height_m",
+            "ve_mps",
+            "vn_mps",
+            "vu_mps",
+            "roll_deg",
+            "pitch_deg",
+            "heading_deg",
+            "disturbance_mgal",
+            "anomaly_e_mgal",
+            "anomaly_n_mgal",
+            "anomaly_u_mgal",
+            "dg_north_mgal",
+            "dg_east_mgal",
+        )
+    }
     line = np.empty(t_rel.shape[0], dtype=object)
     for sl in _chunks(t_rel.shape[0]):
         kin = kinematics(plan, t_rel[sl])
@@ -351,8 +377,12 @@ def simulate_flight(sim, flight_index: int = 0) -> FlightSimulation:
     grad = {}
     if f["sensors"]["gradiometer"]["rate_hz"] > 0:
         g_ns, g_val, g_err = _gradient_channel(plan, cfg, f, flight_index, ell)
-        grad = {"gradient_time_ns": g_ns + start, "gradient_time": g_ns / 1e9,
-                "gradient_t_eotvos": g_val, "gradient_error_eotvos": g_err}
+        grad = {
+            "gradient_time_ns": g_ns + start,
+            "gradient_time": g_ns / 1e9,
+            "gradient_t_eotvos": g_val,
+            "gradient_error_eotvos": g_err,
+        }
     tr_ns = sample_times_ns(dur, rates["truth_hz"])
     truth_table = _truth_table(plan, tr_ns / 1e9, start, tr_ns, anomaly)
     return FlightSimulation(
@@ -409,9 +439,27 @@ def quick_sim(**overrides) -> dict:
     """
     o = dict(overrides)
     unknown = set(o) - {
-        "duration_s", "imu_hz", "altimeter_hz", "gnss_hz", "truth_hz", "triad", "speed_mps", "altitude_m",
-        "heading_deg", "lat_deg", "lon_deg", "field", "noise", "turbulence", "plan", "seed", "formats",
-        "start_utc", "name", "static_start_s", "static_end_s",
+        "duration_s",
+        "imu_hz",
+        "altimeter_hz",
+        "gnss_hz",
+        "truth_hz",
+        "triad",
+        "speed_mps",
+        "altitude_m",
+        "heading_deg",
+        "lat_deg",
+        "lon_deg",
+        "field",
+        "noise",
+        "turbulence",
+        "plan",
+        "seed",
+        "formats",
+        "start_utc",
+        "name",
+        "static_start_s",
+        "static_end_s",
     }
     if unknown:
         raise TypeError(f"quick_sim: unknown overrides {sorted(unknown)}")
@@ -426,7 +474,11 @@ def quick_sim(**overrides) -> dict:
         "static_start_s": o.get("static_start_s", 0.0),
         "static_end_s": o.get("static_end_s", 0.0),
     }
-    rates = {"imu_hz": o.get("imu_hz", 10.0), "altimeter_hz": o.get("altimeter_hz", 1.0), "gnss_hz": o.get("gnss_hz", 1.0)}
+    rates = {
+        "imu_hz": o.get("imu_hz", 10.0),
+        "altimeter_hz": o.get("altimeter_hz", 1.0),
+        "gnss_hz": o.get("gnss_hz", 1.0),
+    }
     if "truth_hz" in o:
         rates["truth_hz"] = o["truth_hz"]
     noise = o.get("noise", False)
@@ -441,8 +493,12 @@ def quick_sim(**overrides) -> dict:
     }
     if o.get("turbulence"):
         flight["turbulence"] = copy.deepcopy(o["turbulence"])
-    sim = {"name": o.get("name", "quick"), "seed": o.get("seed", 0), "formats": list(o.get("formats", ["mcap_json"])),
-           "flights": [flight]}
+    sim = {
+        "name": o.get("name", "quick"),
+        "seed": o.get("seed", 0),
+        "formats": list(o.get("formats", ["mcap_json"])),
+        "flights": [flight],
+    }
     fld = o.get("field")
     if isinstance(fld, str):
         sim["field"] = {"type": fld}
@@ -660,7 +716,11 @@ def simulate_to_dir(sim_path, out_dir, oracle: bool = False) -> list[Path]:
                 s["gravimeter"]["white_sigma_mps2"] * math.sqrt(rate),
             ],
             gyro_sigma_radps=s["gyro"]["white_drift_degph"] * DEGPH * math.sqrt(rate),
-            gnss_sigma_m=[s["gnss"]["horizontal_sigma_m"], s["gnss"]["horizontal_sigma_m"], s["gnss"]["vertical_sigma_m"]],
+            gnss_sigma_m=[
+                s["gnss"]["horizontal_sigma_m"],
+                s["gnss"]["horizontal_sigma_m"],
+                s["gnss"]["vertical_sigma_m"],
+            ],
             gradient_time_ns=sim.gradient_time_ns,
             gradient_t_eotvos=sim.gradient_t_eotvos,
         )
@@ -672,8 +732,13 @@ def simulate_to_dir(sim_path, out_dir, oracle: bool = False) -> list[Path]:
         written.append(Path(truth_path))
         first = cfg.formats[0]
         if first == "csv":
-            inputs = {"csv": {"imu": f"{sim.name}/imu.csv", "altimeter": f"{sim.name}/altimeter.csv",
-                              "gnss": f"{sim.name}/gnss.csv"}}
+            inputs = {
+                "csv": {
+                    "imu": f"{sim.name}/imu.csv",
+                    "altimeter": f"{sim.name}/altimeter.csv",
+                    "gnss": f"{sim.name}/gnss.csv",
+                }
+            }
         else:
             suffix = "json" if first == "mcap_json" else "ros2"
             inputs = {"mcap": f"{sim.name}/{sim.name}_{suffix}.mcap"}
@@ -702,17 +767,27 @@ def simulate_to_dir(sim_path, out_dir, oracle: bool = False) -> list[Path]:
     if oracle:
         doc = {**head, "flights": oracle_flights, "model": oracle_model, **tail}
         doc["output"] = {"dir": proc["output_dir"] + "_oracle"}
-        written.append(_write_yaml(out_dir / "oracle.yaml", doc,
-                                   "# written by gravsurvey simulate --oracle-config: ORACLE values derived from the\n"
-                                   "# simulated truth (matched noise model, anomaly prior, exact initial state), which\n"
-                                   "# no user has; the reference of the benchmarks. Process with: gravsurvey run oracle.yaml\n"))
+        written.append(
+            _write_yaml(
+                out_dir / "oracle.yaml",
+                doc,
+                "# written by gravsurvey simulate --oracle-config: ORACLE values derived from the\n"
+                "# simulated truth (matched noise model, anomaly prior, exact initial state), which\n"
+                "# no user has; the reference of the benchmarks. Process with: gravsurvey run oracle.yaml\n",
+            )
+        )
     survey = {**head, "flights": flights_yaml}
     model = user_model_block(cfg)
     if model is not None:
         survey["model"] = model
     survey.update(tail)
-    written.append(_write_yaml(out_dir / "survey.yaml", survey,
-                               "# written by gravsurvey simulate; process with: gravsurvey run survey.yaml\n"))
+    written.append(
+        _write_yaml(
+            out_dir / "survey.yaml",
+            survey,
+            "# written by gravsurvey simulate; process with: gravsurvey run survey.yaml\n",
+        )
+    )
     return written
 
 

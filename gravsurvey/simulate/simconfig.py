@@ -174,7 +174,9 @@ def _vector(v, path, n, unit):
 def parse_utc(v, path):
     """ISO 8601 UTC epoch string -> integer ns since the Unix epoch."""
     if not isinstance(v, str):
-        raise ConfigError(f"{path}: expected an ISO 8601 UTC time string like '2024-06-01T08:00:00Z', got {_describe(v)}")
+        raise ConfigError(
+            f"{path}: expected an ISO 8601 UTC time string like '2024-06-01T08:00:00Z', got {_describe(v)}"
+        )
     s = v.strip()
     if s.endswith("Z") or s.endswith("z"):
         s = s[:-1] + "+00:00"
@@ -205,8 +207,12 @@ def _validate_plan(p, path, rates):
     p["speed_mps"] = number(p["speed_mps"], f"{path}.speed_mps", "m/s", 1.0, 300.0)
     p["heading_deg"] = number(p["heading_deg"], f"{path}.heading_deg", "deg", -360.0, 360.0)
     p["max_bank_deg"] = number(p["max_bank_deg"], f"{path}.max_bank_deg", "deg", 0.0, 35.0, lo_open=True)
-    p["max_roll_rate_degps"] = number(p["max_roll_rate_degps"], f"{path}.max_roll_rate_degps", "deg/s", 0.0, 30.0, lo_open=True)
-    p["max_climb_rate_mps"] = number(p["max_climb_rate_mps"], f"{path}.max_climb_rate_mps", "m/s", 0.0, 30.0, lo_open=True)
+    p["max_roll_rate_degps"] = number(
+        p["max_roll_rate_degps"], f"{path}.max_roll_rate_degps", "deg/s", 0.0, 30.0, lo_open=True
+    )
+    p["max_climb_rate_mps"] = number(
+        p["max_climb_rate_mps"], f"{path}.max_climb_rate_mps", "m/s", 0.0, 30.0, lo_open=True
+    )
     p["static_start_s"] = number(p["static_start_s"], f"{path}.static_start_s", "s", 0.0, 86400.0)
     p["static_end_s"] = number(p["static_end_s"], f"{path}.static_end_s", "s", 0.0, 86400.0)
     p["ramp_s"] = number(p["ramp_s"], f"{path}.ramp_s", "s", 1.0, 3600.0)
@@ -231,7 +237,9 @@ def _validate_plan(p, path, rates):
             if p[k] is not None:
                 raise ConfigError(f"{path}.{k}: only allowed with {path}.kind 'line' (grids use lines.length_m)")
         if p["lines"] is None:
-            raise ConfigError(f"{path}.lines: missing required key for kind 'grid' (count, spacing_m, length_m, heading_deg)")
+            raise ConfigError(
+                f"{path}.lines: missing required key for kind 'grid' (count, spacing_m, length_m, heading_deg)"
+            )
         g = _merge(p["lines"], DEFAULT_LINES, f"{path}.lines")
         for k in ("count", "spacing_m", "length_m"):
             if g[k] is None:
@@ -267,7 +275,9 @@ def _validate_plan(p, path, rates):
         )
     lat_reach = p["origin_lat_deg"] + math.degrees(north / 6.36e6) * (1 if p["origin_lat_deg"] >= 0 else -1)
     if abs(lat_reach) > 85.0:
-        raise ConfigError(f"{path}.{key}: the planned lines reach latitude {lat_reach:.1f} deg; the survey map allows |lat| <= 85 deg")
+        raise ConfigError(
+            f"{path}.{key}: the planned lines reach latitude {lat_reach:.1f} deg; the survey map allows |lat| <= 85 deg"
+        )
     return p
 
 
@@ -410,5 +420,15 @@ def _validate(raw, path):
     for i, nm in enumerate(names):
         if names.index(nm) != i:
             raise ConfigError(f"flights[{i}].name: duplicate flight name {nm!r}")
-    return SimConfig(name=name, seed=seed, ellipsoid=ell, formats=list(formats), field=fld, field_model=fmodel,
-                     processing=proc, flights=out, source=path, raw=raw)
+    return SimConfig(
+        name=name,
+        seed=seed,
+        ellipsoid=ell,
+        formats=list(formats),
+        field=fld,
+        field_model=fmodel,
+        processing=proc,
+        flights=out,
+        source=path,
+        raw=raw,
+    )

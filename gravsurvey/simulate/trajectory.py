@@ -373,8 +373,9 @@ def _sinusum(t, amp, omega, phase):
     out = np.zeros((4, t.shape[0]))
     keep = amp != 0.0
     if np.any(keep):
-        _sinusum_kernel(np.ascontiguousarray(t, dtype=float), amp[keep].copy(), omega[keep].copy(),
-                        phase[keep].copy(), out)
+        _sinusum_kernel(
+            np.ascontiguousarray(t, dtype=float), amp[keep].copy(), omega[keep].copy(), phase[keep].copy(), out
+        )
     return out
 
 
@@ -768,8 +769,14 @@ def connector(p, psi_a, q, psi_b, speed, max_rate, min_duration=0.0, step_m=None
                     if cross[i] == 0.0:
                         pm = grid[i]
                     else:
-                        pm = brentq(lambda x: float(parts(np.array([x]), s1, s2, target)[3][0]),
-                                    grid[i], grid[i + 1], xtol=1e-15, rtol=1e-15, maxiter=200)
+                        pm = brentq(
+                            lambda x: float(parts(np.array([x]), s1, s2, target)[3][0]),
+                            grid[i],
+                            grid[i + 1],
+                            xtol=1e-15,
+                            rtol=1e-15,
+                            maxiter=200,
+                        )
                     e1, e2, al, _, tt = parts(np.array([pm]), s1, s2, target)
                     if al[0] < 0.0:
                         continue
@@ -809,8 +816,9 @@ class _PlanBuilder:
         self.max_roll_rate = max_roll_rate
 
     def add(self, label, kind, duration, speed=None, delta=0.0):
-        seg = Segment(label, kind, self.t, duration, self.x, self.y, self.psi,
-                      self.speed if speed is None else speed, delta)
+        seg = Segment(
+            label, kind, self.t, duration, self.x, self.y, self.psi, self.speed if speed is None else speed, delta
+        )
         self.segments.append(seg)
         self.t += duration
         if kind == "turn":
@@ -838,8 +846,16 @@ class _PlanBuilder:
     def goto(self, q, psi_b, min_duration=0.0):
         """Connector to map point ``q`` arriving with heading ``psi_b``; returns its duration."""
         t0 = self.t
-        for kind, val in connector((self.x, self.y), self.psi, q, psi_b, self.speed, self.max_rate,
-                                   min_duration=min_duration, max_roll_rate=self.max_roll_rate):
+        for kind, val in connector(
+            (self.x, self.y),
+            self.psi,
+            q,
+            psi_b,
+            self.speed,
+            self.max_rate,
+            min_duration=min_duration,
+            max_roll_rate=self.max_roll_rate,
+        ):
             if kind == "turn":
                 self.turn("turn", val)
             else:

@@ -178,13 +178,23 @@ def _unit_source(kind, rng, lat, lon, z, altitude):
     if kind == "point_masses":
         return {**pos, "depth_m": depth, "mass_kg": 1.0e12}
     if kind == "dipoles":
-        return {**pos, "depth_m": depth, "mass_kg": 1.0e12, "separation_m": float(z * rng.uniform(0.5, 2.0)),
-                "azimuth_deg": float(rng.uniform(0.0, 360.0))}
+        return {
+            **pos,
+            "depth_m": depth,
+            "mass_kg": 1.0e12,
+            "separation_m": float(z * rng.uniform(0.5, 2.0)),
+            "azimuth_deg": float(rng.uniform(0.0, 360.0)),
+        }
     half_e, half_n = (float(z * rng.uniform(0.5, 1.5)) for _ in range(2))
     thick = float(z * rng.uniform(0.2, 0.6))
     top = max(0.0, depth - 0.5 * thick)
-    return {**pos, "east_m": [-half_e, half_e], "north_m": [-half_n, half_n], "depth_m": [top, top + thick],
-            "density_kgm3": 100.0}
+    return {
+        **pos,
+        "east_m": [-half_e, half_e],
+        "north_m": [-half_n, half_n],
+        "depth_m": [top, top + thick],
+        "density_kgm3": 100.0,
+    }
 
 
 def peak_disturbance(key, item, altitude, z, ell):
@@ -231,8 +241,9 @@ def _random_field(rng, plan, altitude, ell, sources_out: list) -> dict:
                 item["azimuth_deg"] = float((item["azimuth_deg"] + (180.0 if sign < 0 else 0.0)) % 360.0)
             amp = target
         field[kind].append(item)
-        sources_out.append({"kind": kind, "peak_mgal": amp / MGAL, "wavelength_m": wavelength,
-                            "distance_below_aircraft_m": z})
+        sources_out.append(
+            {"kind": kind, "peak_mgal": amp / MGAL, "wavelength_m": wavelength, "distance_below_aircraft_m": z}
+        )
     return {k: v for k, v in field.items() if v or k == "type"}, scale
 
 
@@ -288,16 +299,22 @@ def draw_flight_spec(seed: int) -> dict:
         "seed": seed,
         "formats": ["mcap_ros2"],
         "field": field,
-        "flights": [{
-            "name": "F01",
-            "start_utc": f"2025-03-{day:02d}T07:00:00Z",
-            "triad": triad,
-            "rates": {"imu_hz": float(imu_hz), "altimeter_hz": float(alt_hz), "gnss_hz": float(gnss_hz),
-                      "truth_hz": 1.0},
-            "plan": plan,
-            "turbulence": turb,
-            "sensors": sensors,
-        }],
+        "flights": [
+            {
+                "name": "F01",
+                "start_utc": f"2025-03-{day:02d}T07:00:00Z",
+                "triad": triad,
+                "rates": {
+                    "imu_hz": float(imu_hz),
+                    "altimeter_hz": float(alt_hz),
+                    "gnss_hz": float(gnss_hz),
+                    "truth_hz": 1.0,
+                },
+                "plan": plan,
+                "turbulence": turb,
+                "sensors": sensors,
+            }
+        ],
     }
     load_sim_config(sim)  # the draw is a valid SIM config by construction; checked here
     built = _built_plan(plan, ell, turb)
@@ -350,8 +367,13 @@ def limit_spec(spec: dict, max_duration_s: float | None = None, max_imu_hz: floa
         g["count"] = count
         g["length_m"] = float(max(MIN_LINE_S * plan["speed_mps"], length))
         built = _built_plan(plan, WGS84, f["turbulence"])
-        out.update(duration_s=float(built.duration), line_count=g["count"], line_length_m=g["length_m"],
-                   static_start_s=plan["static_start_s"], static_end_s=plan["static_end_s"])
+        out.update(
+            duration_s=float(built.duration),
+            line_count=g["count"],
+            line_length_m=g["length_m"],
+            static_start_s=plan["static_start_s"],
+            static_end_s=plan["static_end_s"],
+        )
     return out
 
 
@@ -372,11 +394,13 @@ def write_flight(spec: dict, out_dir, oracle: bool = True) -> Path:
 
 def spec_summary(spec: dict) -> str:
     """One line describing a drawn flight (for tables and logs)."""
-    return (f"{spec['name']} {spec['triad']} imu {spec['imu_hz']} Hz gnss {spec['gnss_hz']} Hz "
-            f"alt {spec['altimeter_hz']} Hz, {spec['speed_mps']:.0f} m/s, {spec['altitude_m']:.0f} m, "
-            f"{spec['duration_s'] / 60:.0f} min ({spec['line_count']} x {spec['line_length_m'] / 1000:.0f} km"
-            f"{', static start' if spec['static_start_s'] > 0 else ''}), "
-            f"field {spec['field_scale_mgal']:.1f} mGal ({len(spec['sources'])} sources)")
+    return (
+        f"{spec['name']} {spec['triad']} imu {spec['imu_hz']} Hz gnss {spec['gnss_hz']} Hz "
+        f"alt {spec['altimeter_hz']} Hz, {spec['speed_mps']:.0f} m/s, {spec['altitude_m']:.0f} m, "
+        f"{spec['duration_s'] / 60:.0f} min ({spec['line_count']} x {spec['line_length_m'] / 1000:.0f} km"
+        f"{', static start' if spec['static_start_s'] > 0 else ''}), "
+        f"field {spec['field_scale_mgal']:.1f} mGal ({len(spec['sources'])} sources)"
+    )
 
 
 def noise_psd(flight: dict, f_hz) -> np.ndarray:

@@ -193,7 +193,9 @@ def civil_to_ns(year: int, month: int, day: int, hour: int, minute: int, sec: st
     ValueError
         A field out of range (month 13, minute 60, ...).
     """
-    if not (YEARS[0] <= year <= YEARS[1] and 1 <= month <= 12 and 1 <= day <= 31 and 0 <= hour <= 23 and 0 <= minute <= 59):
+    if not (
+        YEARS[0] <= year <= YEARS[1] and 1 <= month <= 12 and 1 <= day <= 31 and 0 <= hour <= 23 and 0 <= minute <= 59
+    ):
         raise ValueError("date/time field out of range")
     sec_ns = seconds_str_to_ns(sec) if isinstance(sec, str) else int(round(float(sec) * NS))
     if not 0 <= sec_ns < 61 * NS:

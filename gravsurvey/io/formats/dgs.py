@@ -80,7 +80,21 @@ LAPTOP_FIELDS = (
 )
 N_LAPTOP = 26
 #: Raw serial integer fields after the ``$AT1M_..`` tag (A/D counts).
-RAW_FIELDS = ("gravity", "long_accel", "cross_accel", "beam", "temp", "pressure", "etemp", "vcc", "ve", "al", "ax", "status", "checksum")
+RAW_FIELDS = (
+    "gravity",
+    "long_accel",
+    "cross_accel",
+    "beam",
+    "temp",
+    "pressure",
+    "etemp",
+    "vcc",
+    "ve",
+    "al",
+    "ax",
+    "status",
+    "checksum",
+)
 TIME_SOURCES = ("auto", "meter", "logger")
 _NONE = np.iinfo(np.int64).min
 
@@ -104,7 +118,9 @@ def _pick_time(path, meter_ns, logger_ns, time_source, what="meter"):
     src = meter_ns if use == what else logger_ns
     have = have_m if use == what else have_l
     if not have.all():
-        raise DataError(f"{path}: {int((~have).sum())} of {len(src)} records have no {use} time stamp (time_source {time_source})")
+        raise DataError(
+            f"{path}: {int((~have).sum())} of {len(src)} records have no {use} time stamp (time_source {time_source})"
+        )
     notes, meta = [], {"time_source": use}
     both = have_m & have_l
     if both.any():
@@ -282,7 +298,9 @@ def read_dgs_raw(path, *, time_source: str = "auto") -> "FormatTable":  # noqa: 
     nopos = (pos[:, 0] == 0) & (pos[:, 1] == 0)
     lat = np.where(nopos, np.nan, np.radians(pos[:, 0]))
     lon = np.where(nopos, np.nan, np.radians(pos[:, 1]))
-    cols.update(counter=np.asarray(counter, float), lat=lat, lon=lon, speed=pos[:, 2] * KNOT, course=np.radians(pos[:, 3]))
+    cols.update(
+        counter=np.asarray(counter, float), lat=lat, lon=lon, speed=pos[:, 2] * KNOT, course=np.radians(pos[:, 3])
+    )
     units.update(counter="1", lat="rad", lon="rad", speed="m/s", course="rad")
     if nopos.any():
         notes.append(f"{path}: {int(nopos.sum())} of {len(nopos)} records have position 0/0 (no GNSS): set to NaN")
@@ -345,4 +363,12 @@ def read_at1a(path) -> "FormatTable":  # noqa: F821
             vals[i].append(v)
     cols = {name: np.asarray(v, float) * fac for (name, _, fac), v in zip(AT1A_FIELDS, vals)}
     units = {name: unit for name, unit, _ in AT1A_FIELDS}
-    return finish(path, "at1a", tally, times, cols, units, pre_notes + [f"{path}: time: GPS week/seconds of week, converted to UTC"])
+    return finish(
+        path,
+        "at1a",
+        tally,
+        times,
+        cols,
+        units,
+        pre_notes + [f"{path}: time: GPS week/seconds of week, converted to UTC"],
+    )

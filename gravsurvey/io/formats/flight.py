@@ -115,6 +115,7 @@ class GravimeterOptions:
 
     def paths(self, base_dir=None) -> list:
         """Gravimeter file(s) then the navigation file, resolved against ``base_dir``."""
+
         def res(p):
             return Path(base_dir) / p if base_dir is not None else Path(p)
 
@@ -173,7 +174,9 @@ def absolute_gravity(table: FormatTable, o: GravimeterOptions, notes: list) -> n
     return (o.scale * reading_mgal + o.offset_mgal) * MGAL
 
 
-def gravimeter_record(o: GravimeterOptions, base_dir=None, *, gap_factor: float = 5.0, plausibility: str = "error") -> FlightRecord:
+def gravimeter_record(
+    o: GravimeterOptions, base_dir=None, *, gap_factor: float = 5.0, plausibility: str = "error"
+) -> FlightRecord:
     """Read a gravimeter file and its navigation into a checked :class:`FlightRecord`.
 
     Parameters
@@ -222,9 +225,13 @@ def gravimeter_record(o: GravimeterOptions, base_dir=None, *, gap_factor: float 
     elif not np.isfinite(height).any():
         if GRAVIMETER_FORMATS[o.format]["marine"]:
             height = np.zeros(lat.shape)
-            notes.append(f"{nav_src}: no heights: the meter is taken at 0 m (sea level on the ellipsoid); set height_m to change")
+            notes.append(
+                f"{nav_src}: no heights: the meter is taken at 0 m (sea level on the ellipsoid); set height_m to change"
+            )
         else:
-            raise DataError(f"{nav_src}: no ellipsoidal heights for the {o.format} flight: give a nav file with heights or height_m")
+            raise DataError(
+                f"{nav_src}: no ellipsoidal heights for the {o.format} flight: give a nav file with heights or height_m"
+            )
     else:
         hok = np.isfinite(height)
         if not hok.all():
@@ -250,10 +257,15 @@ def gravimeter_record(o: GravimeterOptions, base_dir=None, *, gap_factor: float 
     jumps, jv = position_jumps(nav_t, lat, lon, vmax)
     if jumps.size:
         listed = ", ".join(f"{(nav_t[i] - t0) / NS:.0f} s ({v:.0f} m/s)" for i, v in zip(jumps[:10], jv[:10]))
-        findings.append(ck.Finding(
-            "navigation", "position jumps", "warning",
-            f"navigation: {jumps.size} position jump(s) implying more than {vmax:g} m/s at {listed}: the Eotvos "
-            "correction and the profile are wrong within a filter length of them (check the navigation)"))
+        findings.append(
+            ck.Finding(
+                "navigation",
+                "position jumps",
+                "warning",
+                f"navigation: {jumps.size} position jump(s) implying more than {vmax:g} m/s at {listed}: the Eotvos "
+                "correction and the profile are wrong within a filter length of them (check the navigation)",
+            )
+        )
     findings += ck.check_height("navigation", height)
     if min(g_t[-1], nav_t[-1]) <= max(g_t[0], nav_t[0]):
         raise DataError(
@@ -262,13 +274,23 @@ def gravimeter_record(o: GravimeterOptions, base_dir=None, *, gap_factor: float 
         )
     med = float(np.median(f_up))
     if not GRAVITY_OK[0] <= med <= GRAVITY_OK[1]:
-        findings.append(ck.Finding(
-            "gravimeter", "gravity level", "error",
-            f"gravimeter: median absolute gravity {med / MGAL:.1f} mGal is outside "
-            f"{GRAVITY_OK[0] / MGAL:.0f}..{GRAVITY_OK[1] / MGAL:.0f} mGal: check {o.key_path}.offset_mgal and scale", med))
+        findings.append(
+            ck.Finding(
+                "gravimeter",
+                "gravity level",
+                "error",
+                f"gravimeter: median absolute gravity {med / MGAL:.1f} mGal is outside "
+                f"{GRAVITY_OK[0] / MGAL:.0f}..{GRAVITY_OK[1] / MGAL:.0f} mGal: check {o.key_path}.offset_mgal and scale",
+                med,
+            )
+        )
     errors = [f.message for f in findings if f.level == "error"]
     if errors and plausibility == "error":
-        raise DataError(f"{gt.source}: implausible data: " + "; ".join(errors) + " (set checks.plausibility: warn to process anyway)")
+        raise DataError(
+            f"{gt.source}: implausible data: "
+            + "; ".join(errors)
+            + " (set checks.plausibility: warn to process anyway)"
+        )
     notes += [f.message for f in findings if f.level in ("warning", "error")]
     for n in notes:
         warnings.warn(n, DataWarning, stacklevel=2)

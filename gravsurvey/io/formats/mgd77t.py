@@ -46,10 +46,32 @@ from gravsurvey.errors import DataError
 from .common import MGAL, NS, LineTally, civil_to_ns, finish, read_lines
 
 FIELDS = (
-    "SURVEY_ID", "TIMEZONE", "DATE", "TIME", "LAT", "LON", "POS_TYPE", "NAV_QUALCO", "BAT_TTIME",
-    "CORR_DEPTH", "BAT_CPCO", "BAT_TYPCO", "BAT_QUALCO", "MAG_TOT", "MAG_TOT2", "MAG_RES",
-    "MAG_RESSEN", "MAG_DICORR", "MAG_SDEPTH", "MAG_QUALCO", "GRA_OBS", "EOTVOS", "FREEAIR",
-    "GRA_QUALCO", "LINEID", "POINTID",
+    "SURVEY_ID",
+    "TIMEZONE",
+    "DATE",
+    "TIME",
+    "LAT",
+    "LON",
+    "POS_TYPE",
+    "NAV_QUALCO",
+    "BAT_TTIME",
+    "CORR_DEPTH",
+    "BAT_CPCO",
+    "BAT_TYPCO",
+    "BAT_QUALCO",
+    "MAG_TOT",
+    "MAG_TOT2",
+    "MAG_RES",
+    "MAG_RESSEN",
+    "MAG_DICORR",
+    "MAG_SDEPTH",
+    "MAG_QUALCO",
+    "GRA_OBS",
+    "EOTVOS",
+    "FREEAIR",
+    "GRA_QUALCO",
+    "LINEID",
+    "POINTID",
 )
 #: Numeric fields -> (unit of the column returned, factor from the file's unit).
 NUMERIC = {

@@ -304,10 +304,16 @@ def read_nmea(path, *, time_source: str = "auto") -> "FormatTable":  # noqa: F82
         t_ns = fix_ns
     else:
         if not have_log.all():
-            raise DataError(f"{path}: time_source logger but {int((~have_log).sum())} of {n} fixes have no logger time stamp")
+            raise DataError(
+                f"{path}: time_source logger but {int((~have_log).sum())} of {n} fixes have no logger time stamp"
+            )
         t_ns = log_ns
-    meta = {"time_source": use, "fix_sentence": "GGA" if base is gga else "RMC", "ignored_sentences": ignored,
-            "logger_stamp": stamp_kind}
+    meta = {
+        "time_source": use,
+        "fix_sentence": "GGA" if base is gga else "RMC",
+        "ignored_sentences": ignored,
+        "logger_stamp": stamp_kind,
+    }
     if (have_fix & have_log).any():
         off = np.median((log_ns - fix_ns)[have_fix & have_log]) / NS
         meta["logger_minus_fix_s"] = float(off)
@@ -315,13 +321,33 @@ def read_nmea(path, *, time_source: str = "auto") -> "FormatTable":  # noqa: F82
     else:
         notes.append(f"{path}: time from the {use} clock")
     if base is gga and np.isnan(height).any():
-        notes.append(f"{path}: {int(np.isnan(height).sum())} of {n} GGA fixes have no geoid separation: ellipsoidal height NaN")
+        notes.append(
+            f"{path}: {int(np.isnan(height).sum())} of {n} GGA fixes have no geoid separation: ellipsoidal height NaN"
+        )
     if np.isnan(speed).all():
         notes.append(f"{path}: no RMC/VTG speed and course")
-    cols = {"lat": lat, "lon": lon, "height": height, "height_msl": h_msl, "quality": qual, "n_sat": nsat,
-            "hdop": hdop, "speed": speed, "course": course}
-    units = {"lat": "rad", "lon": "rad", "height": "m", "height_msl": "m", "quality": "1", "n_sat": "1",
-             "hdop": "1", "speed": "m/s", "course": "rad"}
+    cols = {
+        "lat": lat,
+        "lon": lon,
+        "height": height,
+        "height_msl": h_msl,
+        "quality": qual,
+        "n_sat": nsat,
+        "hdop": hdop,
+        "speed": speed,
+        "course": course,
+    }
+    units = {
+        "lat": "rad",
+        "lon": "rad",
+        "height": "m",
+        "height_msl": "m",
+        "quality": "1",
+        "n_sat": "1",
+        "hdop": "1",
+        "speed": "m/s",
+        "course": "rad",
+    }
     # the line tally decides "not NMEA"; fixes are fewer than lines by design
     tally.n_lines, saved = 0, tally.n_lines
     out = finish(path, "nmea", tally, list(t_ns), cols, units, notes, meta)

@@ -28,8 +28,27 @@ from .common import MGAL, FormatTable, LineTally, doy_to_ns, read_lines
 
 WIDTHS = (10, 4, 3, 2, 2, 2, 8, 8, 7, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 6)
 NAMES = (
-    "line", "year", "day", "hour", "minute", "second", "gravity", "spring_tension", "cross_coupling", "beam",
-    "vcc", "al", "ax", "ve2", "ax2", "xacc2", "lacc2", "xacc", "lacc", "par_port", "platform_period",
+    "line",
+    "year",
+    "day",
+    "hour",
+    "minute",
+    "second",
+    "gravity",
+    "spring_tension",
+    "cross_coupling",
+    "beam",
+    "vcc",
+    "al",
+    "ax",
+    "ve2",
+    "ax2",
+    "xacc2",
+    "lacc2",
+    "xacc",
+    "lacc",
+    "par_port",
+    "platform_period",
 )
 _MGAL_COLS = ("gravity", "spring_tension", "cross_coupling")
 _NUM_COLS = NAMES[6:19] + ("platform_period",)

@@ -15,8 +15,7 @@ import numpy as np
 #: Schema names by role, for topic auto-detection.
 ROLE_SCHEMAS = {
     "imu": ("sensor_msgs/msg/Imu", "sensor_msgs/Imu", "gravsurvey.Imu"),
-    "altimeter": ("geometry_msgs/msg/PointStamped", "geometry_msgs/PointStamped",
-                  "gravsurvey.Altimeter"),
+    "altimeter": ("geometry_msgs/msg/PointStamped", "geometry_msgs/PointStamped", "gravsurvey.Altimeter"),
     "gnss": ("sensor_msgs/msg/NavSatFix", "sensor_msgs/NavSatFix", "gravsurvey.Gnss"),
     # optional gravity-gradient channel (JSON only; docs/formats.md)
     "gradient": ("gravsurvey.GravityGradient",),
@@ -50,11 +49,9 @@ class DecodedBlock:
 
 #: Per role, the JSON key path of each quantity (``read_mcap(json_fields=...)`` overrides keys).
 DEFAULT_JSON_FIELDS = {
-    "imu": {"time": "time_ns", "specific_force": "specific_force_t",
-            "angular_rate": "angular_rate_t"},
+    "imu": {"time": "time_ns", "specific_force": "specific_force_t", "angular_rate": "angular_rate_t"},
     "altimeter": {"time": "time_ns", "height": "height_m"},
-    "gnss": {"time": "time_ns", "lat_deg": "lat_deg", "lon_deg": "lon_deg",
-             "height": "height_m"},
+    "gnss": {"time": "time_ns", "lat_deg": "lat_deg", "lon_deg": "lon_deg", "height": "height_m"},
     "gradient": {"time": "time_ns", "gradient": "gradient_t_eotvos"},
 }
 
@@ -233,7 +230,7 @@ def _int64_times(times):
     try:
         return np.array(times, dtype=np.int64)
     except OverflowError:
-        return np.array([min(max(t, -2**63), 2**63 - 1) for t in times], dtype=np.int64)
+        return np.array([min(max(t, -(2**63)), 2**63 - 1) for t in times], dtype=np.int64)
 
 
 def _column(objs, spec):
@@ -274,8 +271,9 @@ def _decode_json_fast(objs, fields, mapping, logt):
                 return None
             t = t.astype(np.int64)
         else:
-            return DecodedBlock(np.asarray(logt, np.int64).copy(), values, len(objs), 0, [],
-                                np.asarray(logt, np.int64).copy())
+            return DecodedBlock(
+                np.asarray(logt, np.int64).copy(), values, len(objs), 0, [], np.asarray(logt, np.int64).copy()
+            )
     except (KeyError, TypeError, IndexError):
         return None
     return DecodedBlock(t, values, 0, 0, [], np.asarray(logt, np.int64).copy())
@@ -313,9 +311,11 @@ def decode_json(role, payloads, logt, mapping):
                 objs.append(json.loads(p))
             except (ValueError, RecursionError):
                 objs.append(None)
-    fields = {"imu": (("specific_force", 3), ("angular_rate", 3)),
-              "altimeter": (("height", 1),),
-              "gnss": (("lat_deg", 1), ("lon_deg", 1), ("height", 1))}[role]
+    fields = {
+        "imu": (("specific_force", 3), ("angular_rate", 3)),
+        "altimeter": (("height", 1),),
+        "gnss": (("lat_deg", 1), ("lon_deg", 1), ("height", 1)),
+    }[role]
     fast = _decode_json_fast(objs, fields, mapping, logt)
     if fast is not None:
         return fast
@@ -352,10 +352,10 @@ def decode_json(role, payloads, logt, mapping):
         lts.append(int(logt[k]))
     values = {}
     for name, w in fields:
-        values[name] = np.array(vals[name], dtype=np.float64).reshape(-1, w) if w == 3 \
-            else np.array(vals[name], dtype=np.float64)
-    return DecodedBlock(_int64_times(times), values, keep_lt, bad, problems,
-                        np.array(lts, dtype=np.int64))
+        values[name] = (
+            np.array(vals[name], dtype=np.float64).reshape(-1, w) if w == 3 else np.array(vals[name], dtype=np.float64)
+        )
+    return DecodedBlock(_int64_times(times), values, keep_lt, bad, problems, np.array(lts, dtype=np.int64))
 
 
 #: Row-major positions of the 6 independent components ``xx, xy, xz, yy, yz, zz`` in a 3x3 tensor.
@@ -392,8 +392,7 @@ def _decode_json_gradient(payloads, logt, mapping):
         times.append(t)
         lts.append(int(logt[k]))
     vals = {"gradient": np.array(rows, dtype=np.float64).reshape(-1, 9)}
-    return DecodedBlock(_int64_times(times), vals, keep_lt, bad, problems,
-                        np.array(lts, dtype=np.int64))
+    return DecodedBlock(_int64_times(times), vals, keep_lt, bad, problems, np.array(lts, dtype=np.int64))
 
 
 def concat_blocks(blocks):
@@ -415,7 +414,12 @@ def concat_blocks(blocks):
         return blocks[0]
     vals = {k: np.concatenate([b.values[k] for b in blocks]) for k in blocks[0].values}
     probs = [p for b in blocks for p in b.problems][:3]
-    return DecodedBlock(np.concatenate([b.time_ns for b in blocks]), vals,
-                        sum(b.log_time_used for b in blocks), sum(b.undecodable for b in blocks),
-                        probs, np.concatenate([b.log_time_ns for b in blocks]),
-                        np.concatenate([b.verified for b in blocks]))
+    return DecodedBlock(
+        np.concatenate([b.time_ns for b in blocks]),
+        vals,
+        sum(b.log_time_used for b in blocks),
+        sum(b.undecodable for b in blocks),
+        probs,
+        np.concatenate([b.log_time_ns for b in blocks]),
+        np.concatenate([b.verified for b in blocks]),
+    )

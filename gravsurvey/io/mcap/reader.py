@@ -17,17 +17,49 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gravsurvey.errors import DataError
-from gravsurvey.io.mcap.decode import (DEFAULT_JSON_FIELDS, ROLE_SCHEMAS, concat_blocks,
-                                       decode_json, decode_ros2, decoder_kind)
-from gravsurvey.io.mcap.records import (DamagedRecord, chunk_index, decompress_chunk,
-                                        message_index_count, parse_channel, parse_schema,
-                                        parse_statistics, plausible_name, read_string,
-                                        summary_records, summary_statistics)
-from gravsurvey.io.mcap.scan import (MAGIC, MESSAGE_HEADER_BYTES, OP_CHANNEL, OP_CHUNK, OP_DATA_END,
-                                     OP_FOOTER, OP_HEADER, OP_MESSAGE, OP_MESSAGE_INDEX, OP_SCHEMA,
-                                     OP_STATISTICS, SCAN_BEYOND_END, SCAN_EARLY_FOOTER, SCAN_OK,
-                                     SCAN_REASONS, SCAN_SHORT_HEADER, SUMMARY_ONLY_OPS, chain_at,
-                                     find_resync, scan_records)
+from gravsurvey.io.mcap.decode import (
+    DEFAULT_JSON_FIELDS,
+    ROLE_SCHEMAS,
+    concat_blocks,
+    decode_json,
+    decode_ros2,
+    decoder_kind,
+)
+from gravsurvey.io.mcap.records import (
+    DamagedRecord,
+    chunk_index,
+    decompress_chunk,
+    message_index_count,
+    parse_channel,
+    parse_schema,
+    parse_statistics,
+    plausible_name,
+    read_string,
+    summary_records,
+    summary_statistics,
+)
+from gravsurvey.io.mcap.scan import (
+    MAGIC,
+    MESSAGE_HEADER_BYTES,
+    OP_CHANNEL,
+    OP_CHUNK,
+    OP_DATA_END,
+    OP_FOOTER,
+    OP_HEADER,
+    OP_MESSAGE,
+    OP_MESSAGE_INDEX,
+    OP_SCHEMA,
+    OP_STATISTICS,
+    SCAN_BEYOND_END,
+    SCAN_EARLY_FOOTER,
+    SCAN_OK,
+    SCAN_REASONS,
+    SCAN_SHORT_HEADER,
+    SUMMARY_ONLY_OPS,
+    chain_at,
+    find_resync,
+    scan_records,
+)
 from gravsurvey.io.mcap.value_checks import check_values
 
 DEFAULT_MAX_RECORD_BYTES = 256 * 2**20
@@ -82,9 +114,14 @@ class SkippedRegion:
 
     def as_dict(self) -> dict:
         """JSON-serialisable form (times as ns and ISO UTC)."""
-        d = {"byte_start": self.start, "byte_end": self.end, "bytes": self.end - self.start,
-             "reason": self.reason, "resumed": self.resumed,
-             "lost_messages": self.lost_messages}
+        d = {
+            "byte_start": self.start,
+            "byte_end": self.end,
+            "bytes": self.end - self.start,
+            "reason": self.reason,
+            "resumed": self.resumed,
+            "lost_messages": self.lost_messages,
+        }
         for k in ("log_time_before_ns", "log_time_after_ns", "lost_start_ns", "lost_end_ns"):
             v = getattr(self, k)
             d[k] = v
@@ -95,16 +132,19 @@ class SkippedRegion:
         """One clause for :meth:`SalvageInfo.describe`."""
         s = f"bytes {self.start}-{self.end} skipped ({self.reason})"
         if self.lost_start_ns is not None and self.lost_end_ns is not None:
-            s += (f", log time {_utc(self.lost_start_ns)} to {_utc(self.lost_end_ns)} "
-                  "lost")
-        elif self.resumed and self.log_time_before_ns is not None \
-                and self.log_time_after_ns is not None:
+            s += f", log time {_utc(self.lost_start_ns)} to {_utc(self.lost_end_ns)} lost"
+        elif self.resumed and self.log_time_before_ns is not None and self.log_time_after_ns is not None:
             gap = (self.log_time_after_ns - self.log_time_before_ns) * 1e-9
-            s += (f", no data between log time {_utc(self.log_time_before_ns)} and "
-                  f"{_utc(self.log_time_after_ns)} ({gap:.3f} s)")
+            s += (
+                f", no data between log time {_utc(self.log_time_before_ns)} and "
+                f"{_utc(self.log_time_after_ns)} ({gap:.3f} s)"
+            )
         if self.resumed:
-            s += (f", {self.lost_messages} messages lost" if self.lost_messages is not None
-                  else ", messages lost: not countable")
+            s += (
+                f", {self.lost_messages} messages lost"
+                if self.lost_messages is not None
+                else ", messages lost: not countable"
+            )
         return s
 
 
@@ -162,15 +202,18 @@ class SalvageInfo:
 
     def describe(self, path) -> str:
         """One line for warnings and notes."""
-        regions = self.regions or [SkippedRegion(self.offset, self.file_size, self.reason,
-                                                 resumed=False)]
+        regions = self.regions or [SkippedRegion(self.offset, self.file_size, self.reason, resumed=False)]
         tail = regions[-1] if not regions[-1].resumed else None
         if len(regions) == 1:
-            s = (f"{path}: damaged at byte {self.offset} of {self.file_size} ({self.reason}); "
-                 f"salvaged {self.recovered} messages")
+            s = (
+                f"{path}: damaged at byte {self.offset} of {self.file_size} ({self.reason}); "
+                f"salvaged {self.recovered} messages"
+            )
         else:
-            s = (f"{path}: damaged in {len(regions)} places, {self.bytes_skipped} of "
-                 f"{self.file_size} bytes skipped; salvaged {self.recovered} messages")
+            s = (
+                f"{path}: damaged in {len(regions)} places, {self.bytes_skipped} of "
+                f"{self.file_size} bytes skipped; salvaged {self.recovered} messages"
+            )
         if tail is None or len(regions) > 1:
             s += "; " + "; ".join(r.describe() for r in regions if r.resumed)
             if self.lost_messages is not None:
@@ -184,11 +227,15 @@ class SalvageInfo:
             span = max(0, self.lost_until_ns - self.last_log_time_ns) * 1e-9
             s += f"; lost at least {span:.3f} s of data"
         elif self.truncated:
-            s += ("; the file ends there (truncated or unfinished recording, no summary): the "
-                  "time span lost after it is unknown")
+            s += (
+                "; the file ends there (truncated or unfinished recording, no summary): the "
+                "time span lost after it is unknown"
+            )
         elif self.estimated_lost_s is not None:
-            s += (f"; lost ~{self.estimated_lost_s:.3f} s ({lost_bytes} bytes unread, no summary: "
-                  "estimated from the data rate of the part read)")
+            s += (
+                f"; lost ~{self.estimated_lost_s:.3f} s ({lost_bytes} bytes unread, no summary: "
+                "estimated from the data rate of the part read)"
+            )
         else:
             s += f"; lost time span unknown ({lost_bytes} bytes unread, no summary)"
         if self.lost_messages is not None and len(regions) == 1:
@@ -253,8 +300,7 @@ class McapContent:
 
 
 class _Reader:
-    def __init__(self, path, buf, content, roles, json_fields, check_crc, max_record_bytes,
-                 keep_raw):
+    def __init__(self, path, buf, content, roles, json_fields, check_crc, max_record_bytes, keep_raw):
         self.path = path
         self.buf = buf
         self.c = content
@@ -313,11 +359,12 @@ class _Reader:
             if (old.name, old.encoding, old.data) != (s.name, s.encoding, s.data):
                 # two copies disagree: one is damaged; a CRC-checked or the only plausible
                 # copy wins, else the summary's (first) copy stays
-                take = self.verified or (plausible_name(s.name) and not
-                                         plausible_name(old.name))
-                self.c.notes.append(f"{self.path}: schema id {s.id}: the summary's copy differs "
-                                    f"from the data section's; the "
-                                    f"{'data section' if take else 'summary'}'s kept")
+                take = self.verified or (plausible_name(s.name) and not plausible_name(old.name))
+                self.c.notes.append(
+                    f"{self.path}: schema id {s.id}: the summary's copy differs "
+                    f"from the data section's; the "
+                    f"{'data section' if take else 'summary'}'s kept"
+                )
                 if take:
                     self.c.schemas[s.id] = s
             return
@@ -333,22 +380,27 @@ class _Reader:
         old = self.c.channels.get(ch.id)
         if old is not None and ch.id in self.preloaded_channels and not preload:
             self.preloaded_channels.discard(ch.id)
-            if (old.topic, old.schema_id, old.message_encoding) != (
-                    ch.topic, ch.schema_id, ch.message_encoding):
+            if (old.topic, old.schema_id, old.message_encoding) != (ch.topic, ch.schema_id, ch.message_encoding):
                 # two copies disagree: one is damaged; a CRC-checked or the only plausible
                 # copy wins, else the summary's (first) copy stays
                 take = self.verified or (
-                    plausible_name(ch.topic) and plausible_name(ch.message_encoding)
-                    and not (plausible_name(old.topic)
-                             and plausible_name(old.message_encoding)))
-                self.c.notes.append(f"{self.path}: channel id {ch.id}: the summary's copy "
-                                    "differs from the data section's; the "
-                                    f"{'data section' if take else 'summary'}'s kept")
+                    plausible_name(ch.topic)
+                    and plausible_name(ch.message_encoding)
+                    and not (plausible_name(old.topic) and plausible_name(old.message_encoding))
+                )
+                self.c.notes.append(
+                    f"{self.path}: channel id {ch.id}: the summary's copy "
+                    "differs from the data section's; the "
+                    f"{'data section' if take else 'summary'}'s kept"
+                )
                 if take:
                     self.c.channels[ch.id] = ch
             return
         if old is not None and (old.topic, old.schema_id, old.message_encoding) != (
-                ch.topic, ch.schema_id, ch.message_encoding):
+            ch.topic,
+            ch.schema_id,
+            ch.message_encoding,
+        ):
             self.c.notes.append(f"{self.path}: channel id {ch.id} redefined; first kept")
             return
         if old is None and preload:
@@ -375,16 +427,16 @@ class _Reader:
         mlen = lens[m] - MESSAGE_HEADER_BYTES
         self.n_msgs += int(m.sum())
         self.last_lt = int(mlt.max()) if self.last_lt is None else max(self.last_lt, int(mlt.max()))
-        self.first_lt = int(mlt.min()) if self.first_lt is None else min(self.first_lt,
-                                                                           int(mlt.min()))
+        self.first_lt = int(mlt.min()) if self.first_lt is None else min(self.first_lt, int(mlt.min()))
         for reg in self.waiting:
             reg.log_time_after_ns = int(mlt.min())
         self.waiting = []
         if self.keep_raw:
             mpt, msq = pubt[m], seq[m]
             for k in range(len(mc)):
-                self.c.raw.append((int(mc[k]), int(msq[k]), int(mlt[k]), int(mpt[k]),
-                                   bytes(buf[mpos[k]:mpos[k] + mlen[k]])))
+                self.c.raw.append(
+                    (int(mc[k]), int(msq[k]), int(mlt[k]), int(mpt[k]), bytes(buf[mpos[k] : mpos[k] + mlen[k]]))
+                )
         for cid in np.unique(mc):
             sel = mc == cid
             cid = int(cid)
@@ -393,10 +445,15 @@ class _Reader:
                 if not self.verified and self.cur_range is not None:
                     # no CRC: an undefined channel id is more likely a damaged one
                     a, b = self.cur_range
-                    self.extra_regions.append(SkippedRegion(
-                        a, b, f"{int(sel.sum())} messages on undefined channel id {cid} in a "
-                              "chunk without CRC (damaged channel id?)",
-                        lost_messages=int(sel.sum())))
+                    self.extra_regions.append(
+                        SkippedRegion(
+                            a,
+                            b,
+                            f"{int(sel.sum())} messages on undefined channel id {cid} in a "
+                            "chunk without CRC (damaged channel id?)",
+                            lost_messages=int(sel.sum()),
+                        )
+                    )
                 continue
             self.c.counts[cid] = self.c.counts.get(cid, 0) + int(sel.sum())
             self.lt_parts.setdefault(cid, []).append(mlt[sel])
@@ -406,7 +463,7 @@ class _Reader:
             role, kind = dec
             if kind == "json":
                 o, ln_ = mpos[sel], mlen[sel]
-                payloads = [bytes(buf[o[k]:o[k] + ln_[k]]) for k in range(len(o))]
+                payloads = [bytes(buf[o[k] : o[k] + ln_[k]]) for k in range(len(o))]
                 blk = decode_json(role, payloads, mlt[sel], self.json_fields[role])
             else:
                 blk = decode_ros2(kind, buf, mpos[sel], mlen[sel], mlt[sel])
@@ -429,12 +486,14 @@ class _Reader:
         (rlen,) = struct.unpack_from("<Q", b, p)
         p += 8
         if usize > self.max_record_bytes:
-            raise DamagedRecord(f"chunk declares {usize} uncompressed bytes, above the "
-                           f"{self.max_record_bytes}-byte limit (max_record_bytes)")
+            raise DamagedRecord(
+                f"chunk declares {usize} uncompressed bytes, above the "
+                f"{self.max_record_bytes}-byte limit (max_record_bytes)"
+            )
         avail = end - p
         if complete and rlen > avail:
             raise DamagedRecord("chunk records beyond record")
-        data = b[p:p + min(rlen, avail)]
+        data = b[p : p + min(rlen, avail)]
         self.chunk_content_end = p + rlen
         out = decompress_chunk(comp, data, usize, complete)
         self.verified = False
@@ -473,8 +532,10 @@ class _Reader:
             except DamagedRecord:
                 continue
         if got:
-            self.c.notes.append(f"{self.path}: definitions taken from a chunk that failed its "
-                                f"CRC (its messages dropped): {', '.join(got)}")
+            self.c.notes.append(
+                f"{self.path}: definitions taken from a chunk that failed its "
+                f"CRC (its messages dropped): {', '.join(got)}"
+            )
 
     def _inner(self, cbuf, complete):
         n, _, status, arrs = scan_records(cbuf, 0, len(cbuf))
@@ -532,8 +593,7 @@ class _Reader:
                     before = self.n_msgs
                     self.cur_range = (p - 9, p + ln)
                     self._inner(self._chunk(buf, p, ln, True), True)
-                    self.cur_chunk = (p - 9, p + ln, self.n_msgs - before,
-                                      self.chunk_start_time, self.chunk_end_time)
+                    self.cur_chunk = (p - 9, p + ln, self.n_msgs - before, self.chunk_start_time, self.chunk_end_time)
                 elif op == OP_MESSAGE_INDEX and self.cur_chunk is not None:
                     cnt = message_index_count(buf, p - 9)
                     self.cur_index_count += cnt or 0
@@ -556,8 +616,9 @@ class _Reader:
         if ch is None or idx <= ch[2]:
             return
         start, end, found, t0, t1 = ch
-        reg = SkippedRegion(start, end, f"chunk gave {found} messages, its message index "
-                                        f"records list {idx}", lost_messages=idx - found)
+        reg = SkippedRegion(
+            start, end, f"chunk gave {found} messages, its message index records list {idx}", lost_messages=idx - found
+        )
         if t0 is not None and t1 is not None and t0 <= t1:
             reg.lost_start_ns, reg.lost_end_ns = t0, t1
         self.extra_regions.append(reg)
@@ -583,8 +644,10 @@ class _Reader:
             s, cand = cand + 1, -1
         for e in self._chunk_index():
             if e.offset >= start and e.offset != exclude and (cand == -1 or e.offset < cand):
-                if self.buf[e.offset] == OP_CHUNK and struct.unpack_from(
-                        "<Q", self.buf, e.offset + 1)[0] == e.length - 9:
+                if (
+                    self.buf[e.offset] == OP_CHUNK
+                    and struct.unpack_from("<Q", self.buf, e.offset + 1)[0] == e.length - 9
+                ):
                     cand = e.offset
                 break
         return cand
@@ -592,13 +655,11 @@ class _Reader:
     def _lost_in(self, region, damaged_chunk_end=None):
         """Fill in a region's lost-message count and span from the chunk index, else from the
         message index records after a damaged chunk whose own length was intact."""
-        idx = [e for e in self._chunk_index()
-               if e.offset < region.end and e.offset + e.length > region.start]
+        idx = [e for e in self._chunk_index() if e.offset < region.end and e.offset + e.length > region.start]
         counts = []
         if idx:
             for e in idx:
-                counts += [message_index_count(self.buf, o)
-                           for o in e.message_index_offsets.values()]
+                counts += [message_index_count(self.buf, o) for o in e.message_index_offsets.values()]
             region.lost_start_ns = min(e.start_time for e in idx)
             region.lost_end_ns = max(e.end_time for e in idx)
         elif damaged_chunk_end is not None:
@@ -633,17 +694,21 @@ class _Reader:
             # a damaged start: still MCAP if a chain of records follows soon, or the file
             # ends with the MCAP magic and a chain of records is found at all
             cand = find_resync(buf, 8, size, self.known, RESYNC_MIN_CHAIN) if size > 17 else -1
-            if cand == -1 or (cand > DAMAGED_START_MAX and bytes(buf[size - 8:]) != MAGIC):
+            if cand == -1 or (cand > DAMAGED_START_MAX and bytes(buf[size - 8 :]) != MAGIC):
                 raise DataError(f"{self.path}: not an MCAP file (no MCAP magic at the start)")
-            regions.append(SkippedRegion(0, cand, "damaged magic at the start of the file",
-                                         lost_messages=0 if cand == 8 else None))
+            regions.append(
+                SkippedRegion(0, cand, "damaged magic at the start of the file", lost_messages=0 if cand == 8 else None)
+            )
             pos = cand
         while pos < size:
-            n, endpos, status, arrs = scan_records(buf, pos, size, stop_at_footer=True,
-                                                   known=self.known)
+            n, endpos, status, arrs = scan_records(buf, pos, size, stop_at_footer=True, known=self.known)
             ops, rpos = arrs[0], arrs[1]
-            if status == SCAN_OK and n >= 1 and ops[n - 1] == OP_FOOTER and \
-                    (arrs[2][n - 1] != 20 or endpos + 8 != size):
+            if (
+                status == SCAN_OK
+                and n >= 1
+                and ops[n - 1] == OP_FOOTER
+                and (arrs[2][n - 1] != 20 or endpos + 8 != size)
+            ):
                 # a footer must end the file (then the closing magic): a damaged opcode
                 status, n, endpos = SCAN_EARLY_FOOTER, n - 1, int(rpos[n - 1]) - 9
             # a wrong length in the record before a break would make the break itself: that
@@ -658,11 +723,17 @@ class _Reader:
                     look = (x, cand)
                 else:
                     later = cand
-                    k1, why = self._process([a[n - 1:n] for a in arrs], 1)
+                    k1, why = self._process([a[n - 1 : n] for a in arrs], 1)
                     kfail = None if k1 is None else n - 1
-            if kfail is None and look is None and status != SCAN_OK and n >= 1 and \
-                    ops[n - 1] == OP_CHUNK and self.chunk_content_end is not None and \
-                    self.chunk_content_end < endpos:
+            if (
+                kfail is None
+                and look is None
+                and status != SCAN_OK
+                and n >= 1
+                and ops[n - 1] == OP_CHUNK
+                and self.chunk_content_end is not None
+                and self.chunk_content_end < endpos
+            ):
                 # a chunk whose length field says more than its content: if records chain up
                 # inside that excess, the length is damaged (the content passed its checks)
                 cand = self._resync(self.chunk_content_end, exclude=endpos)
@@ -676,29 +747,36 @@ class _Reader:
                     damaged_chunk_end = int(rpos[kfail] + arrs[2][kfail])
                     # its length is sound when records chain up right after it: resume there
                     # (not inside it, where an uncompressed chunk's own records would chain)
-                    if damaged_chunk_end == size or chain_at(buf, damaged_chunk_end, size,
-                                                              self.known, RESYNC_MIN_CHAIN):
+                    if damaged_chunk_end == size or chain_at(
+                        buf, damaged_chunk_end, size, self.known, RESYNC_MIN_CHAIN
+                    ):
                         resume = damaged_chunk_end
                 if resume == -1:
                     resume = self._resync(dstart + 1, exclude=dstart)
             elif look is not None:
                 dstart, resume = look
-                why = ("a record's declared length disagrees with the records that follow "
-                       f"(break at byte {endpos}: {SCAN_REASONS.get(status, 'bad record')})")
+                why = (
+                    "a record's declared length disagrees with the records that follow "
+                    f"(break at byte {endpos}: {SCAN_REASONS.get(status, 'bad record')})"
+                )
             elif status != SCAN_OK:
                 dstart = endpos
                 why = SCAN_REASONS.get(status, "bad record")
                 if status == SCAN_BEYOND_END:
                     (ln,) = struct.unpack_from("<Q", buf, endpos + 1)
                     if ln > self.max_record_bytes and ln > size:
-                        why = (f"record at byte {endpos} declares {ln} bytes, more than the "
-                               f"file ({size}); garbage length or truncated file")
-                if status == SCAN_BEYOND_END and _opcode_at(buf, endpos) == OP_CHUNK and \
-                        bytes(buf[size - 8:]) != MAGIC:
+                        why = (
+                            f"record at byte {endpos} declares {ln} bytes, more than the "
+                            f"file ({size}); garbage length or truncated file"
+                        )
+                if (
+                    status == SCAN_BEYOND_END
+                    and _opcode_at(buf, endpos) == OP_CHUNK
+                    and bytes(buf[size - 8 :]) != MAGIC
+                ):
                     resume = -1  # a file cut inside a chunk: salvage the chunk's start below
                 else:
-                    resume = later if later is not None else self._resync(endpos + 1,
-                                                                          exclude=endpos)
+                    resume = later if later is not None else self._resync(endpos + 1, exclude=endpos)
                 tail_status, tail_at = status, endpos
             else:
                 break
@@ -709,8 +787,7 @@ class _Reader:
                 self.summary_regions.append((reg, self.n_msgs))
             if resume == -1:
                 reg.resumed = False
-                if dstart == endpos and status == SCAN_BEYOND_END and \
-                        _opcode_at(buf, endpos) == OP_CHUNK:
+                if dstart == endpos and status == SCAN_BEYOND_END and _opcode_at(buf, endpos) == OP_CHUNK:
                     self._salvage_cut_chunk(endpos, reg)
             else:
                 tail_status = SCAN_OK
@@ -720,8 +797,11 @@ class _Reader:
             elif regions and regions[-1].end == reg.start:  # one stretch, found in two steps
                 prev = regions[-1]
                 prev.end, prev.resumed = reg.end, reg.resumed
-                prev.lost_messages = (None if prev.lost_messages is None or reg.lost_messages
-                                      is None else prev.lost_messages + reg.lost_messages)
+                prev.lost_messages = (
+                    None
+                    if prev.lost_messages is None or reg.lost_messages is None
+                    else prev.lost_messages + reg.lost_messages
+                )
                 if reg.lost_end_ns is not None and prev.lost_end_ns is not None:
                     prev.lost_end_ns = max(prev.lost_end_ns, reg.lost_end_ns)
                 reg = prev
@@ -776,29 +856,30 @@ class _Reader:
         for r, n_then in self.summary_regions:
             if self.n_msgs == n_then:
                 # only the summary section is damaged: every data record has been read
-                c.notes.append(f"{self.path}: summary section damaged at byte {r.start} "
-                               f"({r.reason}); all data records were read")
+                c.notes.append(
+                    f"{self.path}: summary section damaged at byte {r.start} ({r.reason}); all data records were read"
+                )
             else:  # messages after it: the "data end" record was a damaged opcode
                 regions.append(r)
         if self.extra_regions:
             tail = [regions.pop()] if regions and not regions[-1].resumed else []
             regions = sorted(regions + self.extra_regions, key=lambda r: r.start) + tail
         if self.unknown_records:
-            c.notes.append(f"{self.path}: skipped {self.unknown_records} records with unknown "
-                           "opcodes (16-255: reserved/private per the MCAP specification, or a "
-                           "damaged opcode byte)")
+            c.notes.append(
+                f"{self.path}: skipped {self.unknown_records} records with unknown "
+                "opcodes (16-255: reserved/private per the MCAP specification, or a "
+                "damaged opcode byte)"
+            )
         if not regions:
             if not self.footer_seen:
-                c.notes.append(f"{self.path}: no footer (unfinished recording?); all records "
-                               "read")
-            elif bytes(buf[size - 8:size]) != MAGIC:
+                c.notes.append(f"{self.path}: no footer (unfinished recording?); all records read")
+            elif bytes(buf[size - 8 : size]) != MAGIC:
                 c.notes.append(f"{self.path}: no closing magic after the footer")
         else:
             first = regions[0]
             if c.statistics is None:
                 c.statistics = summary_statistics(buf)
-            info = SalvageInfo(first.start, size, first.reason, self.n_msgs, self.last_lt,
-                               regions=regions)
+            info = SalvageInfo(first.start, size, first.reason, self.n_msgs, self.last_lt, regions=regions)
             tail = regions[-1] if not regions[-1].resumed else None
             if c.statistics:
                 info.lost_messages = max(0, c.statistics["message_count"] - self.n_msgs)
@@ -811,16 +892,22 @@ class _Reader:
                 elif cet and self.last_lt is not None and cet > self.last_lt:
                     info.lost_until_ns = cet
                 # cut short = the damage is the file's end and the file has no closing magic
-                info.truncated = (tail_status in (SCAN_SHORT_HEADER, SCAN_BEYOND_END)
-                                  and "garbage length" not in tail.reason
-                                  and tail.start == tail_at
-                                  and bytes(buf[size - 8:]) != MAGIC)
+                info.truncated = (
+                    tail_status in (SCAN_SHORT_HEADER, SCAN_BEYOND_END)
+                    and "garbage length" not in tail.reason
+                    and tail.start == tail_at
+                    and bytes(buf[size - 8 :]) != MAGIC
+                )
                 read = tail.start - 8 - sum(r.end - r.start for r in regions[:-1])
-                if not info.truncated and self.last_lt is not None and \
-                        self.first_lt is not None and read > 0 and self.last_lt > self.first_lt:
+                if (
+                    not info.truncated
+                    and self.last_lt is not None
+                    and self.first_lt is not None
+                    and read > 0
+                    and self.last_lt > self.first_lt
+                ):
                     # bytes per second of what was read, applied to the unread bytes
-                    info.estimated_lost_s = ((size - tail.start) / read
-                                             * (self.last_lt - self.first_lt) * 1e-9)
+                    info.estimated_lost_s = (size - tail.start) / read * (self.last_lt - self.first_lt) * 1e-9
             c.salvage = info
         for cid, parts in self.lt_parts.items():
             c.log_times[cid] = np.concatenate(parts)
@@ -837,8 +924,9 @@ def _opcode_at(buf, p):
     return int(buf[p]) if 0 <= p < len(buf) else -1
 
 
-def read_mcap(path, *, topics=None, json_fields=None, check_crc=True,
-              max_record_bytes=DEFAULT_MAX_RECORD_BYTES, keep_raw=False) -> McapContent:
+def read_mcap(
+    path, *, topics=None, json_fields=None, check_crc=True, max_record_bytes=DEFAULT_MAX_RECORD_BYTES, keep_raw=False
+) -> McapContent:
     """Read an MCAP file: every message indexed, known sensor channels decoded in bulk.
 
     Parameters

@@ -13,8 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gravsurvey.io.mcap.scan import (MAGIC, OP_CHUNK_INDEX, OP_FOOTER, OP_MESSAGE_INDEX,
-                                     OP_STATISTICS, scan_records)
+from gravsurvey.io.mcap.scan import MAGIC, OP_CHUNK_INDEX, OP_FOOTER, OP_MESSAGE_INDEX, OP_STATISTICS, scan_records
 
 
 class DamagedRecord(Exception):
@@ -52,7 +51,7 @@ def read_string(b, pos, end):
     if pos + 4 + n > end:
         raise DamagedRecord("string beyond record")
     try:
-        return bytes(b[pos + 4:pos + 4 + n]).decode("utf-8"), pos + 4 + n
+        return bytes(b[pos + 4 : pos + 4 + n]).decode("utf-8"), pos + 4 + n
     except UnicodeDecodeError as exc:
         raise DamagedRecord("string not UTF-8") from exc
 
@@ -63,7 +62,7 @@ def _bytes32(b, pos, end):
     (n,) = struct.unpack_from("<I", b, pos)
     if pos + 4 + n > end:
         raise DamagedRecord("byte array beyond record")
-    return bytes(b[pos + 4:pos + 4 + n]), pos + 4 + n
+    return bytes(b[pos + 4 : pos + 4 + n]), pos + 4 + n
 
 
 def plausible_name(s):
@@ -189,16 +188,14 @@ def decompress_chunk(compression, data, size, complete):
     if compression == "zstd":
         import zstandard
 
-        reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data),
-                                                             read_across_frames=True)
+        reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data), read_across_frames=True)
         if complete:
             try:
                 out = reader.read(size + 1) if size else b""
             except zstandard.ZstdError as exc:
                 raise DamagedRecord(f"zstd: {exc}") from exc
             if len(out) != size:
-                raise DamagedRecord(f"zstd chunk decompressed to {len(out)} bytes, header says "
-                                    f"{size}")
+                raise DamagedRecord(f"zstd chunk decompressed to {len(out)} bytes, header says {size}")
             return out
         parts, total = [], 0
         while total < size:
@@ -242,7 +239,7 @@ def parse_statistics(buf, p):
         ``message_count``, ``message_start_time`` and ``message_end_time`` (ns since the
         Unix epoch).
     """
-    mc, = struct.unpack_from("<Q", buf, p)
+    (mc,) = struct.unpack_from("<Q", buf, p)
     t0, t1 = struct.unpack_from("<QQ", buf, p + 26)
     return {"message_count": mc, "message_start_time": t0, "message_end_time": t1}
 
@@ -266,7 +263,7 @@ def summary_records(buf):
     """
     size = len(buf)
     foot = size - 8 - 9 - 20
-    if foot < 8 or bytes(buf[size - 8:]) != MAGIC or buf[foot] != OP_FOOTER:
+    if foot < 8 or bytes(buf[size - 8 :]) != MAGIC or buf[foot] != OP_FOOTER:
         return None
     (ln, s0) = struct.unpack_from("<QQ", buf, foot + 1)
     if ln != 20 or s0 == 0 or not 8 <= s0 < foot:

@@ -29,8 +29,7 @@ SCAN_BAD_OPCODE = 4  # opcode 0; or > 0x0F inside a chunk (not forward-compatibl
 SCAN_UNKNOWN_CHANNEL = 5  # a top-level message on a channel id no earlier record defined
 SCAN_EARLY_FOOTER = 6  # (reader only) a footer record that does not end the file
 # records that belong in the summary section only (a sign of damage before the data end)
-SUMMARY_ONLY_OPS = (OP_CHUNK_INDEX, OP_ATTACHMENT_INDEX, OP_STATISTICS, OP_METADATA_INDEX,
-                    OP_SUMMARY_OFFSET)
+SUMMARY_ONLY_OPS = (OP_CHUNK_INDEX, OP_ATTACHMENT_INDEX, OP_STATISTICS, OP_METADATA_INDEX, OP_SUMMARY_OFFSET)
 
 
 @numba.njit(cache=True)
@@ -42,8 +41,9 @@ def _u64(buf, i):
 
 
 @numba.njit(cache=True)
-def _scan_kernel(buf, start, end, stop_at_footer, known_in, check_chan, fill, opcodes, rec_pos,
-                 rec_len, chan, logt, pubt, seq):
+def _scan_kernel(
+    buf, start, end, stop_at_footer, known_in, check_chan, fill, opcodes, rec_pos, rec_len, chan, logt, pubt, seq
+):
     """Walk MCAP records in ``buf[start:end]``.
 
     Parameters
@@ -112,8 +112,12 @@ def _scan_kernel(buf, start, end, stop_at_footer, known_in, check_chan, fill, op
             rec_len[n] = ln
             if op == 5:
                 chan[n] = np.int64(buf[c]) | (np.int64(buf[c + 1]) << 8)
-                seq[n] = (np.int64(buf[c + 2]) | (np.int64(buf[c + 3]) << 8)
-                          | (np.int64(buf[c + 4]) << 16) | (np.int64(buf[c + 5]) << 24))
+                seq[n] = (
+                    np.int64(buf[c + 2])
+                    | (np.int64(buf[c + 3]) << 8)
+                    | (np.int64(buf[c + 4]) << 16)
+                    | (np.int64(buf[c + 5]) << 24)
+                )
                 logt[n] = np.int64(_u64(buf, c + 6))
                 pubt[n] = np.int64(_u64(buf, c + 14))
         n += 1
@@ -196,8 +200,7 @@ def scan_records(buf, start, end, stop_at_footer=False, use_kernel=True, known=N
     if not use_kernel:
         return _scan_reference(buf, start, end, stop_at_footer, known, check)
     z = np.zeros(0, np.int64)
-    n, pos, status = _scan_kernel(buf, start, end, stop_at_footer, known, check, False,
-                                  z, z, z, z, z, z, z)
+    n, pos, status = _scan_kernel(buf, start, end, stop_at_footer, known, check, False, z, z, z, z, z, z, z)
     arrs = [np.zeros(n, np.int64) for _ in range(7)]
     _scan_kernel(buf, start, end, stop_at_footer, known, check, True, *arrs)
     return n, pos, status, arrs
@@ -278,8 +281,7 @@ def _resync_reference(buf, start, end, known, min_chain, opcode):
                 return False
             if length > end - p - 9:
                 return count >= 1 and length < 1 << 40
-            if op == OP_MESSAGE and (length < MESSAGE_HEADER_BYTES
-                                     or struct.unpack_from("<H", b, p + 9)[0] not in ids):
+            if op == OP_MESSAGE and (length < MESSAGE_HEADER_BYTES or struct.unpack_from("<H", b, p + 9)[0] not in ids):
                 return False
             if op == OP_FOOTER:
                 return length == 20 and p + 9 + 20 + 8 == end and b[p + 29] == 0x89
@@ -322,9 +324,11 @@ def find_resync(buf, start, end, known, min_chain=4, opcode=0, use_kernel=True):
 
 
 #: Why a scan stopped (``SCAN_*`` code -> reason in salvage reports).
-SCAN_REASONS = {SCAN_SHORT_HEADER: "file ends inside a record header",
-                 SCAN_BEYOND_END: "a record's declared length runs past the end of the file",
-                 SCAN_BAD_MESSAGE: "a message record shorter than its header",
-                 SCAN_BAD_OPCODE: "record with opcode 0",
-                 SCAN_UNKNOWN_CHANNEL: "a message on a channel no earlier record defined",
-                 SCAN_EARLY_FOOTER: "a footer record before the end of the file"}
+SCAN_REASONS = {
+    SCAN_SHORT_HEADER: "file ends inside a record header",
+    SCAN_BEYOND_END: "a record's declared length runs past the end of the file",
+    SCAN_BAD_MESSAGE: "a message record shorter than its header",
+    SCAN_BAD_OPCODE: "record with opcode 0",
+    SCAN_UNKNOWN_CHANNEL: "a message on a channel no earlier record defined",
+    SCAN_EARLY_FOOTER: "a footer record before the end of the file",
+}

@@ -34,20 +34,17 @@ def check_values(blk, role):
     # again after each drop: a corrupted run leaves corrupted neighbours, and a spike is only
     # recognised against neighbours that agree
     for _ in range(DAMAGE_CHECK_PASSES):
-        bad, why = damaged_values(role, blk.time_ns, blk.log_time_ns, blk.values,
-                                  ~blk.verified)
+        bad, why = damaged_values(role, blk.time_ns, blk.log_time_ns, blk.values, ~blk.verified)
         if not bad.any():
             break
         nbad += int(bad.sum())
         whys.append(why)
         keep = ~bad
-        blk.time_ns, blk.log_time_ns, blk.verified = (blk.time_ns[keep], blk.log_time_ns[keep],
-                                                      blk.verified[keep])
+        blk.time_ns, blk.log_time_ns, blk.verified = (blk.time_ns[keep], blk.log_time_ns[keep], blk.verified[keep])
         blk.values = {k: v[keep] for k, v in blk.values.items()}
     if not nbad:
         return blk
     blk.value_check_dropped = nbad
     blk.undecodable += nbad
-    blk.problems.insert(0, f"{nbad} samples without a chunk CRC failed the damage checks "
-                           f"({'; '.join(whys)})")
+    blk.problems.insert(0, f"{nbad} samples without a chunk CRC failed the damage checks ({'; '.join(whys)})")
     return blk

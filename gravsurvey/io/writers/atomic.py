@@ -283,8 +283,7 @@ class OutputLock:
 
     NAME = ".gravsurvey.lock"
 
-    def __init__(self, out_dir, *, wait: bool = False, timeout_s: float | None = None,
-                 wait_s: float | None = None):
+    def __init__(self, out_dir, *, wait: bool = False, timeout_s: float | None = None, wait_s: float | None = None):
         self.out_dir = Path(out_dir)
         if wait_s is not None:  # one-number form: 0 = refuse at once, > 0 = wait that long, inf = forever
             wait = wait_s > 0

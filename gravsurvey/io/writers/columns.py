@@ -40,12 +40,19 @@ TRUTH_COLUMNS = ("truth_mgal", "error_mgal")
 #: optional: the disturbance after base ties and crossover levelling (docs/outputs.md)
 LEVEL_COLUMNS = ("levelled_mgal",)
 #: optional: a strapdown triad's estimated attitude and its 1-sigma, deg (NaN for other flights)
-ATTITUDE_COLUMNS = ("roll_deg", "pitch_deg", "heading_deg", "roll_sigma_deg", "pitch_sigma_deg",
-                    "heading_sigma_deg")
+ATTITUDE_COLUMNS = ("roll_deg", "pitch_deg", "heading_deg", "roll_sigma_deg", "pitch_sigma_deg", "heading_sigma_deg")
 #: optional: horizontal disturbance components, the deflections of the vertical they give
 #: (xi = -dg_north / gamma, eta = -dg_east / gamma) and their 1-sigma; NaN where not observable
-HORIZONTAL_COLUMNS = ("dg_north_mgal", "dg_east_mgal", "xi_arcsec", "eta_arcsec", "dg_north_sigma_mgal",
-                      "dg_east_sigma_mgal", "xi_sigma_arcsec", "eta_sigma_arcsec")
+HORIZONTAL_COLUMNS = (
+    "dg_north_mgal",
+    "dg_east_mgal",
+    "xi_arcsec",
+    "eta_arcsec",
+    "dg_north_sigma_mgal",
+    "dg_east_sigma_mgal",
+    "xi_sigma_arcsec",
+    "eta_sigma_arcsec",
+)
 STRING_COLUMNS = ("flight", "line", "time_utc")
 # decimals written per float column (see docs/outputs.md for the resolution this gives)
 DECIMALS = {
@@ -122,8 +129,15 @@ def profile_columns(table: dict) -> tuple[str, ...]:
     estimate = tuple(c for c in ESTIMATE_COLUMNS if c in table)
     level = tuple(c for c in LEVEL_COLUMNS if c in table)
     attitude = tuple(c for c in ATTITUDE_COLUMNS if c in table)
-    cols = (PROFILE_COLUMNS[:10] + estimate + PROFILE_COLUMNS[10:] + level + attitude
-            + (HORIZONTAL_COLUMNS if all(horizontal) else ()) + (TRUTH_COLUMNS if all(has_truth) else ()))
+    cols = (
+        PROFILE_COLUMNS[:10]
+        + estimate
+        + PROFILE_COLUMNS[10:]
+        + level
+        + attitude
+        + (HORIZONTAL_COLUMNS if all(horizontal) else ())
+        + (TRUTH_COLUMNS if all(has_truth) else ())
+    )
     n = None
     for c in cols:
         if c == "time_utc" and c not in table:
@@ -201,8 +215,10 @@ def line_groups(flight, line) -> dict:
         if key[1] == "":
             continue
         runs.setdefault(key, []).append((a, b))
-    return {k: (np.arange(v[0][0], v[0][1]) if len(v) == 1 else np.concatenate([np.arange(a, b) for a, b in v]))
-            for k, v in runs.items()}
+    return {
+        k: (np.arange(v[0][0], v[0][1]) if len(v) == 1 else np.concatenate([np.arange(a, b) for a, b in v]))
+        for k, v in runs.items()
+    }
 
 
 def float_rows(arrays, fmts, sep: str, null: str) -> list[str]:

@@ -16,8 +16,16 @@ def write_crossovers_csv(path, crossovers, metadata: dict | None = None) -> None
     ----------
     crossovers : gravsurvey.crossovers.Crossovers
     """
-    dec = {"easting_m": 3, "northing_m": 3, "time_a_s": 3, "time_b_s": 3, "value_a_mgal": 4,
-           "value_b_mgal": 4, "diff_mgal": 4, "angle_deg": 2}
+    dec = {
+        "easting_m": 3,
+        "northing_m": 3,
+        "time_a_s": 3,
+        "time_b_s": 3,
+        "value_a_mgal": 4,
+        "value_b_mgal": 4,
+        "diff_mgal": 4,
+        "angle_deg": 2,
+    }
     parts = []
     for c in CROSSOVER_COLUMNS:
         a = getattr(crossovers, c)

@@ -30,8 +30,15 @@ def _split_antimeridian(lon, lat):
     return parts
 
 
-def write_geojson(path, lines_table: dict, line_stats=None, crs_epsg: int | None = None, *,
-                  max_vertices: int = 2000, metadata: dict | None = None) -> None:
+def write_geojson(
+    path,
+    lines_table: dict,
+    line_stats=None,
+    crs_epsg: int | None = None,
+    *,
+    max_vertices: int = 2000,
+    metadata: dict | None = None,
+) -> None:
     """Write the survey lines as a GeoJSON FeatureCollection (RFC 7946).
 
     One Feature per (flight, line): geometry a ``LineString`` of ``[lon, lat]`` positions in

@@ -106,8 +106,10 @@ def write_xyz(path, table: dict, *, title: str = "gravsurvey profiles", metadata
         data[c] = np.asarray(table[c], dtype=float)
     width = {c: max(len(c), 16) for c in numeric}
     out = [f"/ {title}"] + [f"/ {m}" for m in metadata_lines(metadata)]
-    out += ["/ units: time_unix_s s since 1970-01-01T00:00:00Z (UTC); lat_deg lon_deg WGS84 deg;",
-           "/ height_m ellipsoidal m; easting_m northing_m projected m; *_mgal mGal; '*' = no value"]
+    out += [
+        "/ units: time_unix_s s since 1970-01-01T00:00:00Z (UTC); lat_deg lon_deg WGS84 deg;",
+        "/ height_m ellipsoidal m; easting_m northing_m projected m; *_mgal mGal; '*' = no value",
+    ]
     if any(c.endswith("_arcsec") for c in numeric):
         out.append("/ *_arcsec: deflection of the vertical, arcsec (xi north, eta east)")
     for h in headers:
