@@ -10,9 +10,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: files kept in `ruff format` style (new and rewritten files; older files are converted when
-#: their owners rewrite them, to keep merges of parallel work small)
-FORMATTED = ["gravsurvey", "tests", "benchmarks"]  # the whole code base (pyproject: _unrolled.py excluded)
+#: kept in `ruff format` style: the whole code base (pyproject.toml excludes the generated _unrolled.py)
+FORMATTED = ["gravsurvey", "tests", "benchmarks"]
 
 
 def _run(*args, cwd=ROOT):

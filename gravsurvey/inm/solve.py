@@ -510,7 +510,10 @@ def _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state,
         sk[:, 1, 0], sk[:, 2, 0], sk[:, 2, 1] = q_t[:, 2], -q_t[:, 1], q_t[:, 0]
         jac[:, :, TH] = sk
         cov_pos = np.einsum("nij,njk,nlk->nil", jac, p_s, jac)
-        sig_pos = np.sqrt(np.einsum("nii->ni", cov_pos))
+        # dq and [q x] theta are almost opposite (theta enters dq multiplied by the Earth's
+        # radius), so their sum's variance is a difference of large numbers: a rounding-level
+        # negative value is a zero sigma, not a NaN
+        sig_pos = np.sqrt(np.maximum(np.einsum("nii->ni", cov_pos), 0.0))
     else:
         sig_pos = np.sqrt(np.stack([p_s[:, i, i] for i in DQ], axis=1))
     r_corr = nav.r_i[idx] - np.einsum("nij,nj->ni", c, err_q)
