@@ -10,8 +10,9 @@ Prints Markdown tables (docs/benchmarks.md, "Gradiometer-aided navigation").
 
 **Unseen flights** (default mode).  Flights with seeds ``S .. S+N-1`` (default 0..5) of the
 unseen-flight generator (:mod:`gravsurvey.simulate.unseen`: random fields, noise, rates,
-triads, headings, speeds, heights), capped at 40 min and 50 Hz IMU (``--quick``: seeds 0-1,
-15 min, 20 Hz).  Each flight's SIM config gains a gradient channel (``sensors.gradiometer``,
+triads, headings, speeds, heights) shortened by ``limit_spec`` to about 40 min and capped at
+50 Hz IMU (``--quick``: seeds 0-1, about 15 min -- the generator's shortest lines make them ~20 min
+-- and 20 Hz).  Each flight's SIM config gains a gradient channel (``sensors.gradiometer``,
 1 Hz, white noise 0, 1, 3, 10 E/sqrt(Hz); the simulator's exact tensors of the drawn sources
 plus the normal field).  Per flight:
 
@@ -427,7 +428,7 @@ def main_unseen(args):
                 per[noise].append(evaluate_unseen(spec, prof, truth, res_m, noise))
     dur, imu = QUICK_CAPS if args.quick else FULL_CAPS
     print(
-        f"Unseen flights seeds {seeds.start}-{seeds.stop - 1} (gravsurvey.simulate.unseen, capped at "
+        f"Unseen flights seeds {seeds.start}-{seeds.stop - 1} (gravsurvey.simulate.unseen, limit_spec to about "
         f"{dur / 60:.0f} min and {imu:.0f} Hz IMU); gradient channel {GRAD_HZ:g} Hz, white noise; "
         "values are means over the flights.\n"
     )
