@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -392,6 +393,8 @@ def _install_sigint_flag():
         return  # ignored (a background job) or someone else's handler: leave it
 
     def on_sigint(signum, frame):
+        if INTERRUPT.is_set():
+            return  # already on the way out: a second Ctrl-C must not start a second unwinding
         INTERRUPT.set()
         raise KeyboardInterrupt
 
@@ -422,6 +425,14 @@ def main(argv=None):
     except (KeyboardInterrupt, click.exceptions.Abort):
         # output transactions discard their staging on the way out: nothing is published
         click.echo(INTERRUPTED_LINE, err=True)
+        if argv is None:
+            # the console process ends here: the interpreter's own shutdown (joining a process
+            # pool's manager thread, atexit hooks) is skipped, so that nothing after the one line
+            # can be interrupted half-way and print a traceback
+            logging.shutdown()
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(EXIT_INTERRUPTED)
         sys.exit(EXIT_INTERRUPTED)
     except click.ClickException as exc:
         click.echo(f"gravsurvey: error: {exc.format_message()}", err=True)
