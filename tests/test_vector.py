@@ -10,9 +10,15 @@ import yaml
 
 from gravsurvey.geodesy import MGAL, geodetic_to_ecef, mat_en
 from gravsurvey.inm.errormodel import (
+    ACCEL_BIAS_SIGMA_MPS2,
+    BA1,
+    BA2,
+    DP1,
+    DP3,
     GE,
     GN,
     N_STATE_AIDED,
+    N_STATE_BIAS,
     N_STATE_VECTOR,
     continuous_model_n,
     discretise,
@@ -137,7 +143,7 @@ def test_vector_discretisation_matches_reference_and_extends_the_aided_model():
     # natural units of each state (m, m/s, m/s^2, rad, rad/s, m/s^2), as tests/test_inm_gnss.py:
     # the Taylor and Pade exponentials agree to round-off of the largest terms (|q| ~ 6.4e6 m)
     u = np.array(
-        [1.0, 1e-2, 1.0, 1e-2, 1.0, 1e-2, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-7, 1e-7, 1e-7, 1e-5, 1e-5, 1e-4, 1e-4]
+        [1.0, 1e-2, 1.0, 1e-2, 1.0, 1e-2, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-7, 1e-7, 1e-7, 1e-4, 1e-4, 1e-5, 1e-5]
     )
     sa = phi / u[:, None] * u[None, :]
     sb = phr / u[:, None] * u[None, :]
@@ -170,7 +176,7 @@ def test_vector_discretisation_matches_reference_and_extends_the_aided_model():
         c,
         18,
     )
-    north_i = a[3:6, 14]
+    north_i = a[3:6, GN]
     assert np.dot(north_i, -geom.up_i[k]) == pytest.approx(0.0, abs=1e-12)
     assert np.linalg.norm(north_i) == pytest.approx(1.0, abs=1e-12)
     # -a[:, GN] is North: at 47 N it has a positive part along the Earth's axis (inertial z)
@@ -179,6 +185,38 @@ def test_vector_discretisation_matches_reference_and_extends_the_aided_model():
     p0 = initial_covariance(p, np.array([0, 0, 6.4e6]), np.array([100.0, 0, 0]), horizontal=True, hprior=hp)
     assert p0[GN, GN] == pytest.approx(hp[0] ** 2) and p0[GE, GE] == pytest.approx(hp[0] ** 2)
     assert np.all(p0[GN, :GN] == 0.0)
+
+
+def test_accel_bias_model_is_the_vector_model_without_the_disturbance():
+    """The 16-state model (model.accel_bias_states): the 18-state one's leading block, its
+    reference path agrees, and a bias on accelerometer 1 drives the velocity along axis 1."""
+    s = _grid_flight()
+    tr = s.truth
+    init = InitialState(tr["lat"][0], tr["lon"][0], tr["height"][0], tr["vel_n"][0].copy(), tr["mat_nt"][0].copy())
+    nav = mechanize(s.imu_time, s.specific_force_t, s.angular_rate_t, init, s.alt_time, s.alt_height)
+    idx = np.arange(0, s.imu_time.size, 10)
+    geom = epoch_geometry(nav, idx)
+    p = InmParams()
+    phi, q = discretise(geom, p, 1.0, aided=True, accel_bias=True)
+    phr, qr = discretise(geom, p, 1.0, aided=True, accel_bias=True, reference=True)
+    ph18, _ = discretise(geom, p, 1.0, aided=True, horizontal=True, hprior=(3e-5, 1e-4))
+    assert phi.shape == (idx.size, N_STATE_BIAS, N_STATE_BIAS)
+    u = np.array([1.0, 1e-2, 1.0, 1e-2, 1.0, 1e-2, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-7, 1e-7, 1e-7, 1e-4, 1e-4])
+    sa = phi / u[:, None] * u[None, :]
+    assert np.max(np.abs(sa - phr / u[:, None] * u[None, :])) < 1e-8 * np.max(np.abs(phr / u[:, None] * u[None, :]))
+    assert np.max(np.abs(sa - ph18[:, :N_STATE_BIAS, :N_STATE_BIAS] / u[:, None] * u[None, :])) < 1e-12
+    sq = np.sqrt(np.abs(np.einsum("kii->ki", qr[1:]))).max(axis=0)
+    sq[sq == 0] = 1.0
+    assert np.max(np.abs(q[1:] - qr[1:]) / np.outer(sq, sq)) < 3e-8
+    # the triad-resolved velocity error dp1 grows at ba1 (plus the Schuler/rotation terms, small
+    # over one interval): d(dp)/dt = C^T (ba1 e1 + ba2 e2) = (ba1, ba2, 0)
+    k = idx.size // 2
+    assert phi[k, DP1, BA1] == pytest.approx(geom.dt[k], rel=2e-2)
+    assert abs(phi[k, DP3, BA1]) < 2e-2 * geom.dt[k]
+    assert phi[k, BA1, BA1] == 1.0 and phi[k, BA2, BA2] == 1.0
+    p0 = initial_covariance(p, np.array([0, 0, 6.4e6]), np.array([100.0, 0, 0]), accel_bias=True)
+    assert p0.shape == (N_STATE_BIAS, N_STATE_BIAS)
+    assert p0[BA1, BA1] == pytest.approx(ACCEL_BIAS_SIGMA_MPS2**2) and np.all(p0[BA1, :BA1] == 0.0)
 
 
 def test_deflections_sign():
