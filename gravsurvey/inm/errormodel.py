@@ -28,9 +28,12 @@ gravitation has the extra ``-g Up``, so the computed inertial velocity gains
 With GNSS position aiding the state is extended to 14 (attitude error ``theta`` and gyro
 bias ``b`` on the triad, :func:`continuous_model_n`), because GNSS sees the true position
 error ``C (dq + q x theta)`` while the seed's ``dq`` carries the attitude error as position.
-Vector gravimetry (``model.horizontal``) adds four more, 18: the horizontal disturbance
-``GN, GE`` (north, east, Markov in distance) and the biases ``BA1, BA2`` of accelerometers 1
-and 2 (``d(dp)/dt += -C^T (g_n N + g_e E) + (ba1, ba2, 0)``; docs/method.md section 8).
+``model.accel_bias_states`` adds the constant biases ``BA1, BA2`` of accelerometers 1 and 2
+(16 states, ``d(dp)/dt += (ba1, ba2, 0)``): on straight legs a horizontal bias looks like a
+tilt, and in turns that wrong tilt leaks the horizontal specific force into the vertical.
+Vector gravimetry (``model.horizontal``) adds two more, 18: the horizontal disturbance
+``GN, GE`` (north, east, Markov in distance; ``d(dp)/dt += -C^T (g_n N + g_e E)``;
+docs/method.md section 8).
 
 Exact discretisation: with ``y = (C dq, C dp, g, f3)`` (``C`` the computed
 triad->inertial matrix) the ``w x`` terms cancel, and the model becomes
@@ -71,16 +74,22 @@ BG = np.array([BG1, BG2, BG3])
 #: ``model.initial_attitude_sigma_deg`` is not set.
 GIVEN_ATTITUDE_SIGMA_DEG = 0.05
 _PERM_AIDED = np.array([0, 3, 1, 4, 2, 5, 6, 7, 8, 9, 10, 11, 12, 13])
+#: Constant biases of accelerometers 1 and 2 (m/s^2, triad axes), after the 14 aided states
+#: (``model.accel_bias_states``, and always with ``model.horizontal``).
+BA1, BA2 = range(14, 16)
+N_STATE_BIAS = 16
+BA = np.array([BA1, BA2])
+_PERM_BIAS = np.array([0, 3, 1, 4, 2, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15])
 #: Vector gravimetry (``model.horizontal``, seed 003): the horizontal gravity disturbance
-#: north and east (m/s^2, ``dg = g_true - gamma`` on local ENU) and the constant biases of
-#: accelerometers 1 and 2 (m/s^2, triad axes), after the 14 aided states.
-GN, GE, BA1, BA2 = range(14, 18)
+#: north and east (m/s^2, ``dg = g_true - gamma`` on local ENU), after the 16 states above.
+GN, GE = range(16, 18)
 N_STATE_VECTOR = 18
 GH = np.array([GN, GE])
-BA = np.array([BA1, BA2])
 _PERM_VECTOR = np.array([0, 3, 1, 4, 2, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17])
 #: Prior 1-sigma of each horizontal accelerometer bias, m/s^2 (~50 micro-g, the alignment's
-#: figure: a navigation-grade accelerometer's datasheet bias after calibration).
+#: figure): a navigation-grade accelerometer's datasheet bias is 25-100 micro-g and a tactical
+#: one's 0.1-1 mg; 50 micro-g is the navigation-grade middle, and the data (turns) move the
+#: estimate well beyond it when a tactical unit is used.
 ACCEL_BIAS_SIGMA_MPS2 = 5.0e-4
 
 
@@ -190,15 +199,16 @@ def _skew(v):
 
 @njit(cache=True)
 def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
-    """``A_y`` and noise density ``Qc_y`` (n, n) in block order, ``n`` = 8, 14 or 18.
+    """``A_y`` and noise density ``Qc_y`` (n, n) in block order, ``n`` = 8, 14, 16 or 18.
 
     Block order ``(dr, dv, g, f3)`` (n = 8, the seed), ``(dr, dv, g, f3, theta, b)``
-    (n = 14) or ``(dr, dv, g, f3, theta, b, g_n, g_e, ba1, ba2)`` (n = 18, vector
-    gravimetry): ``dr = C dq``, ``dv = C dp``, ``theta`` (C theta on inertial axes) the attitude
-    error, ``b`` the gyro bias on the triad, ``g_n, g_e`` the horizontal disturbance (north,
-    east; ``d(dv)/dt`` gains ``-(g_n N + g_e E)``: the mechanization leaves the anomalous
-    gravitation out, so the computed velocity lacks it) and ``ba1, ba2`` the constant biases
-    of accelerometers 1 and 2 (``d(dv)/dt`` gains ``ba1 e1 + ba2 e2``).
+    (n = 14), ``(dr, dv, g, f3, theta, b, ba1, ba2)`` (n = 16) or ``(dr, dv, g, f3, theta, b,
+    ba1, ba2, g_n, g_e)`` (n = 18, vector gravimetry): ``dr = C dq``, ``dv = C dp``, ``theta``
+    (C theta on inertial axes) the attitude error, ``b`` the gyro bias on the triad, ``ba1,
+    ba2`` the constant biases of accelerometers 1 and 2 (``d(dv)/dt`` gains ``ba1 e1 + ba2
+    e2``) and ``g_n, g_e`` the horizontal disturbance (north, east; ``d(dv)/dt`` gains ``-(g_n
+    N + g_e E)``: the mechanization leaves the anomalous gravitation out, so the computed
+    velocity lacks it).
     ``c`` = noise parameter vector from
     :func:`_noise_params`; ``e1, e2, e3`` are the columns of ``C`` at the interval midpoint.
 
@@ -279,6 +289,10 @@ def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
     if aided:
         for i in range(3):
             qc[11 + i, 11 + i] = c[9]
+    if n >= 16:
+        for i in range(3):
+            a[3 + i, 14] = e1[i]
+            a[3 + i, 15] = e2[i]
     if n == 18:
         # local East and North on inertial axes: the inertial z axis is the Earth's axis
         ex = -up[1]
@@ -290,14 +304,12 @@ def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
         north = np.array([-up[2] * ey, up[2] * ex, up[0] * ey - up[1] * ex])
         lam_h = c[10] * speed
         for i in range(3):
-            a[3 + i, 14] = -north[i]
-            a[3 + i, 15] = -east[i]
-            a[3 + i, 16] = e1[i]
-            a[3 + i, 17] = e2[i]
-        a[14, 14] = -lam_h
-        a[15, 15] = -lam_h
-        qc[14, 14] = 2.0 * lam_h * c[11] * c[11]
-        qc[15, 15] = 2.0 * lam_h * c[11] * c[11]
+            a[3 + i, 16] = -north[i]
+            a[3 + i, 17] = -east[i]
+        a[16, 16] = -lam_h
+        a[17, 17] = -lam_h
+        qc[16, 16] = 2.0 * lam_h * c[11] * c[11]
+        qc[17, 17] = 2.0 * lam_h * c[11] * c[11]
     return a, qc
 
 
@@ -324,8 +336,8 @@ def _to_seed(m_blk, perm):
 def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     """Transition and process noise of every epoch, seed order (see module docstring).
 
-    The state size is ``perm.shape[0]`` (8; 14 with attitude and gyro-bias states; 18 with
-    the horizontal disturbance and accelerometer biases as well).
+    The state size is ``perm.shape[0]`` (8; 14 with attitude and gyro-bias states; 16 with
+    the horizontal accelerometer biases; 18 with the horizontal disturbance as well).
 
     Returns
     -------
@@ -373,6 +385,7 @@ def discretise(
     aided: bool = False,
     horizontal: bool = False,
     hprior=None,
+    accel_bias: bool = False,
 ):
     """Phi, Q sequences ``(N, n, n)`` for the filter (seed state order).
 
@@ -388,14 +401,17 @@ def discretise(
         14 states: the seed's 8 plus attitude error and gyro bias (position aiding);
         otherwise n = 8.
     horizontal : bool
-        With ``aided``: 18 states, the horizontal disturbance (``GN, GE``) and accelerometer
-        biases (``BA1, BA2``) appended (vector gravimetry).
+        With ``aided``: 18 states, the accelerometer biases (``BA1, BA2``) and the horizontal
+        disturbance (``GN, GE``) appended (vector gravimetry).
     hprior : tuple of 2 floats, optional
         Horizontal disturbance prior (sigma m/s^2, lambda 1/m); None: from the vertical one
         (:func:`gravsurvey.inm.identify.horizontal_prior`).
+    accel_bias : bool
+        With ``aided`` (and not ``horizontal``): 16 states, the accelerometer biases
+        (``BA1, BA2``) appended.
     """
     c = _noise_params(params, alt_dt, hprior)
-    perm = (_PERM_VECTOR if horizontal else _PERM_AIDED) if aided else _PERM
+    perm = state_perm(aided, horizontal, accel_bias)
     n = perm.size
     args = (geom.dt, geom.r_i, geom.v_i, geom.up_i, geom.e1_i, geom.e2_i, geom.e3_i, geom.w02, geom.speed, geom.mat_it)
     if not reference:
@@ -428,9 +444,9 @@ def discretise(
         if aided:
             blocks_p += [geom.mat_it[k - 1], np.eye(3)]
             blocks_c += [geom.mat_it[k], np.eye(3)]
-        if n == N_STATE_VECTOR:
-            blocks_p.append(np.eye(4))
-            blocks_c.append(np.eye(4))
+        if n > N_STATE_AIDED:
+            blocks_p.append(np.eye(n - N_STATE_AIDED))
+            blocks_c.append(np.eye(n - N_STATE_AIDED))
         tp = scipy.linalg.block_diag(*blocks_p)
         tc = scipy.linalg.block_diag(*blocks_c)
         phi[k] = (tc.T @ phy @ tp)[np.ix_(perm, perm)]
@@ -439,8 +455,23 @@ def discretise(
     return phi, q
 
 
+def state_perm(aided: bool, horizontal: bool = False, accel_bias: bool = False) -> np.ndarray:
+    """Block order -> seed order permutation; its size is the state size (8, 14, 16 or 18)."""
+    if not aided:
+        return _PERM
+    if horizontal:
+        return _PERM_VECTOR
+    return _PERM_BIAS if accel_bias else _PERM_AIDED
+
+
 def initial_covariance(
-    params, q_t=None, p_t=None, attitude_cov_t=None, horizontal: bool = False, hprior=None
+    params,
+    q_t=None,
+    p_t=None,
+    attitude_cov_t=None,
+    horizontal: bool = False,
+    hprior=None,
+    accel_bias: bool = False,
 ) -> np.ndarray:
     """Prior covariance at the first epoch (zero prior mean).
 
@@ -458,11 +489,14 @@ def initial_covariance(
         :attr:`gravsurvey.inm.alignment.Alignment.cov_t`); replaces the isotropic
         ``initial_attitude_sigma_deg``.
     horizontal : bool
-        With ``q_t, p_t``: the 18-state prior, the horizontal disturbance at its stationary
-        sigma (:func:`gravsurvey.inm.identify.horizontal_prior`) and the accelerometer biases
-        at :data:`ACCEL_BIAS_SIGMA_MPS2`, independent of the rest.
+        With ``q_t, p_t``: the 18-state prior, the accelerometer biases at
+        :data:`ACCEL_BIAS_SIGMA_MPS2` and the horizontal disturbance at its stationary sigma
+        (:func:`gravsurvey.inm.identify.horizontal_prior`), independent of the rest.
     hprior : tuple of 2 floats, optional
         As in :func:`discretise`.
+    accel_bias : bool
+        With ``q_t, p_t`` (and not ``horizontal``): the 16-state prior, the accelerometer
+        biases at :data:`ACCEL_BIAS_SIGMA_MPS2`, independent of the rest.
     """
     if q_t is None or p_t is None:
         d = np.empty(8)
@@ -495,16 +529,18 @@ def initial_covariance(
     for i in range(11, 14):
         blk[i, i] = sb**2
     p = blk[np.ix_(_PERM_AIDED, _PERM_AIDED)]
-    if horizontal:
-        sig_h = (
-            hprior[0]
-            if hprior is not None
-            else horizontal_prior(params.anomaly_sigma_mps2, params.anomaly_lambda_per_m)[0]
-        )
-        big = np.zeros((N_STATE_VECTOR, N_STATE_VECTOR))
+    if horizontal or accel_bias:
+        n = N_STATE_VECTOR if horizontal else N_STATE_BIAS
+        big = np.zeros((n, n))
         big[:N_STATE_AIDED, :N_STATE_AIDED] = p
-        big[GN, GN] = big[GE, GE] = sig_h**2
         big[BA1, BA1] = big[BA2, BA2] = ACCEL_BIAS_SIGMA_MPS2**2
+        if horizontal:
+            sig_h = (
+                hprior[0]
+                if hprior is not None
+                else horizontal_prior(params.anomaly_sigma_mps2, params.anomaly_lambda_per_m)[0]
+            )
+            big[GN, GN] = big[GE, GE] = sig_h**2
         p = big
     return 0.5 * (p + p.T)
 

@@ -26,7 +26,7 @@ their n x n products and triangular solves from generated vector loops (``matmul
 of compilation).  The generated 8-state steps sit in their own compiled loops
 (:func:`_filter_loop8`, :func:`_rts_loop8`) so that other state sizes never compile them, and
 the full-R update uses no ``np.linalg`` (:func:`_update`): both for the cold start.  Every other
-size (18 with the horizontal disturbance) takes the generic loops (any n, any R): scalar measurement updates in O(n^2); small products in
+size (16 with the accelerometer biases, 18 with the horizontal disturbance) takes the generic loops (any n, any R): scalar measurement updates in O(n^2); small products in
 scalar-accumulator column blocks (:func:`_matmul`).  Both: outputs allocated by numpy, not
 inside the kernels (page faults); ``phi[k+1] P_f[k]`` from the prediction reused by the
 smoother (:func:`filter_and_smooth`); the backward sweep reads its inputs block-wise forwards

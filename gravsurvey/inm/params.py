@@ -33,7 +33,7 @@ from ..errors import ConfigError, DataError
 TRIADS = ("platform", "strapdown")
 RADIUS_SOURCES = ("altimeter", "computed")
 #: Boolean settings (everything else but ``radius_source`` is a number).
-_BOOL_KEYS = ("gnss_aiding", "identify", "horizontal")
+_BOOL_KEYS = ("gnss_aiding", "identify", "horizontal", "accel_bias_states")
 #: Attributes that are not config keys.
 _INTERNAL = ("given",)
 
@@ -103,6 +103,11 @@ class InmParams:
         Also estimate the horizontal components of the gravity disturbance (north, east) as
         states, with horizontal accelerometer biases (vector gravimetry, seed 003; needs GNSS
         aiding; docs/method.md "Vector gravimetry").  Off by default.
+    accel_bias_states : bool
+        Carry the constant biases of accelerometers 1 and 2 as states (16 instead of 14) in a
+        GNSS-aided strapdown filter (docs/method.md, "GNSS aiding"): an unmodelled horizontal
+        bias is taken for a tilt on straight legs and leaks into the vertical in turns.  A
+        platform triad keeps 14 states.
     given : frozenset of str
         The keys held fixed by identification: those written in the config
         (:func:`gravsurvey.settings.inm_params`) or, when constructed directly and not given, every key whose value
@@ -132,6 +137,7 @@ class InmParams:
     identify: bool = True
     target_resolution_m: float | None = None
     horizontal: bool = False
+    accel_bias_states: bool = False
     given: frozenset | None = None
 
     def __post_init__(self):

@@ -13,17 +13,15 @@ from .errormodel import (
     DP,
     DQ,
     F3,
-    G,
-    N_STATE,
-    N_STATE_AIDED,
-    N_STATE_VECTOR,
     TH,
     AltimeterMeasurement,
+    G,
     GnssMeasurement,
     discretise,
     epoch_geometry,
     initial_covariance,
     initial_mean,
+    state_perm,
 )
 from .identify import (
     horizontal_prior,
@@ -264,6 +262,9 @@ def estimate_anomaly(
     passes = int(params.attitude_passes)
     ident = {}
     given_params, reidentify = params, True
+    # a platform's horizontal accelerometers stay on East/North: their biases never rotate
+    # against the field, and the 14 states are kept there (docs/method.md, "GNSS aiding")
+    accel_bias = bool(params.accel_bias_states) and triad == "strapdown"
     for k in range(passes):
         cur = InitialState(
             initial.lat, initial.lon, initial.height, initial.vel_n, mat_nt0, initial.attitude_cov_t, initial.alignment
@@ -273,12 +274,12 @@ def estimate_anomaly(
             speed0 = _typical_speed(record, nav, ellipsoid)
         if given_params.identify and reidentify:
             params, ident = _identify(
-                record, given_params, cur, nav, ellipsoid, reference, theta_prior, gnss_lever_arm_t, speed0
+                record, given_params, cur, nav, ellipsoid, reference, theta_prior, gnss_lever_arm_t, speed0, accel_bias
             )
             ident["identified_in_pass"] = k + 1
             reidentify = False
         idx, c, gnss_used, n_state, out = _one_pass(
-            record, params, cur, nav, ellipsoid, reference, theta_prior, gnss_lever_arm_t
+            record, params, cur, nav, ellipsoid, reference, theta_prior, gnss_lever_arm_t, accel_bias=accel_bias
         )
         if not (gnss_used and triad == "strapdown") or k == passes - 1:
             break
@@ -394,7 +395,7 @@ def _mechanize(record, params, initial, ellipsoid, reference):
     )
 
 
-def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, speed0):
+def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, speed0, accel_bias=False):
     """Identify the model from the flight (gravsurvey.inm.identify; docs/method.md).
 
     1) noise levels from the vertical channel's spectrum; 2) a first pass with a wide anomaly
@@ -408,7 +409,9 @@ def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, l
         params, ident = keep_default_prior(params, ident, speed0, MIN_REFINE_S)
     elif ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
         wide = wide_prior_params(params, ident, speed0)
-        idx, _, _, _, first = _one_pass(record, wide, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t)
+        idx, _, _, _, first = _one_pass(
+            record, wide, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, accel_bias=accel_bias
+        )
         weight = straight_weight(nav, record.imu.specific_force_t, nav.time[idx])
         params, ident = refine_prior(
             params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))), wide, speed0, weight
@@ -430,12 +433,15 @@ def _horizontal_pass(record, params, initial, nav, ellipsoid, reference, theta_p
     return (*_one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, hprior), hprior)
 
 
-def _one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t=None, hprior=None):
+def _one_pass(
+    record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t=None, hprior=None, accel_bias=False
+):
     """Discretise, filter and smooth once about the mechanization ``nav``.
 
     Returns ``idx`` (IMU indices of the epochs), ``c`` (triad -> inertial at the epochs),
     ``gnss_used``, ``n_state`` and the :func:`filter_and_smooth` dict.  ``hprior``: the
-    horizontal disturbance prior (sigma, lambda) when ``params.horizontal``.
+    horizontal disturbance prior (sigma, lambda) when ``params.horizontal``.  ``accel_bias``:
+    the 16-state model (horizontal accelerometer biases) when GNSS-aided.
     """
     t = nav.time
     alt_t, alt_h = _altimeter(record)
@@ -449,12 +455,18 @@ def _one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, l
     gnss_used = bool(params.gnss_aiding) and record.gnss is not None and len(record.gnss.time) > 0
     # position aiding needs the attitude error explicitly (the seed's dq merges it into the
     # position): 14 states (errormodel.continuous_model_n)
-    n_state = N_STATE_AIDED if gnss_used else N_STATE
     horizontal = gnss_used and hprior is not None
-    if horizontal:
-        n_state = N_STATE_VECTOR
+    accel_bias = gnss_used and accel_bias and not horizontal
+    n_state = state_perm(gnss_used, horizontal, accel_bias).size
     phi, q = discretise(
-        geom, params, alt_dt, reference=reference, aided=gnss_used, horizontal=horizontal, hprior=hprior
+        geom,
+        params,
+        alt_dt,
+        reference=reference,
+        aided=gnss_used,
+        horizontal=horizontal,
+        hprior=hprior,
+        accel_bias=accel_bias,
     )
     meas = [AltimeterMeasurement(alt_t, alt_h, params.altimeter_sigma_m, ellipsoid)]
     if gnss_used:
@@ -477,7 +489,9 @@ def _one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, l
     if gnss_used:
         q_t0 = c[0].T @ nav.r_i[idx[0]]
         p_t0 = c[0].T @ nav.v_i[idx[0]]
-        p0 = initial_covariance(params, q_t0, p_t0, attitude_cov_t=att_cov, horizontal=horizontal, hprior=hprior)
+        p0 = initial_covariance(
+            params, q_t0, p_t0, attitude_cov_t=att_cov, horizontal=horizontal, hprior=hprior, accel_bias=accel_bias
+        )
         x0 = initial_mean(theta_prior, q_t0, p_t0, n_state)
     else:
         p0 = initial_covariance(params)
