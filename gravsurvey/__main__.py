@@ -1,5 +1,5 @@
 """``python -m gravsurvey`` = the ``gravsurvey`` console script."""
 
-from .cli import main
+from .console import main
 
 main()

@@ -16,32 +16,26 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import sys
 import warnings
 from pathlib import Path
 
-INTERRUPTED_LINE = "gravsurvey: interrupted; no output of this run was published"
+import click
 
-try:  # a Ctrl-C while the command loads (~0.1-0.4 s of imports) ends as any other Ctrl-C
-    import click
-
-    from . import __version__
-    from .errors import (
-        EXIT_CODES,
-        EXIT_CONFIG,
-        EXIT_INTERNAL,
-        EXIT_INTERRUPTED,
-        EXIT_OK,
-        ConfigError,
-        DataWarning,
-        GravsurveyError,
-        RegressionFailure,
-        os_fault,
-    )
-except KeyboardInterrupt:
-    sys.stderr.write(INTERRUPTED_LINE + "\n")
-    raise SystemExit(130) from None
+from . import __version__
+from .console import INTERRUPTED_LINE  # a Ctrl-C while this module loads: gravsurvey.console
+from .errors import (
+    EXIT_CODES,
+    EXIT_CONFIG,
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    ConfigError,
+    DataWarning,
+    GravsurveyError,
+    RegressionFailure,
+    os_fault,
+)
 
 log = logging.getLogger("gravsurvey")
 
@@ -425,14 +419,6 @@ def main(argv=None):
     except (KeyboardInterrupt, click.exceptions.Abort):
         # output transactions discard their staging on the way out: nothing is published
         click.echo(INTERRUPTED_LINE, err=True)
-        if argv is None:
-            # the console process ends here: the interpreter's own shutdown (joining a process
-            # pool's manager thread, atexit hooks) is skipped, so that nothing after the one line
-            # can be interrupted half-way and print a traceback
-            logging.shutdown()
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(EXIT_INTERRUPTED)
         sys.exit(EXIT_INTERRUPTED)
     except click.ClickException as exc:
         click.echo(f"gravsurvey: error: {exc.format_message()}", err=True)

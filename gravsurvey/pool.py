@@ -82,10 +82,14 @@ class WorkerPool:
 
     def __enter__(self) -> WorkerPool:
         self.children_before = set(mp.active_children())
-        with sigint_deferred():
-            self.executor = ProcessPoolExecutor(
-                max_workers=self.max_workers, mp_context=mp.get_context("spawn"), initializer=ignore_sigint
-            )
+        try:
+            with sigint_deferred():
+                self.executor = ProcessPoolExecutor(
+                    max_workers=self.max_workers, mp_context=mp.get_context("spawn"), initializer=ignore_sigint
+                )
+        except BaseException as exc:  # a Ctrl-C held back while creating it: __exit__ will not run
+            self.__exit__(type(exc), exc, exc.__traceback__)
+            raise
         return self
 
     def submit_all(self, fn, calls) -> list[Future]:
@@ -109,3 +113,6 @@ class WorkerPool:
         self.executor.shutdown(wait=True, cancel_futures=True)
         for p in workers:
             p.join(5.0)
+        # let its queues (and their semaphores) be freed now: an interrupted process may end
+        # without the interpreter's shutdown (cli.main), which would otherwise report them leaked
+        self.executor = None
