@@ -257,7 +257,7 @@ def from_inm_solution(sol, *, name: str = "", t0_unix_ns: int = 0) -> FlightEsti
     vel = np.asarray(sol.vel_n, float)
     heading = getattr(sol, "heading", None)
     if heading is None:
-        heading = np.mod(np.arctan2(vel[:, 0], vel[:, 1]), 2.0 * np.pi)
+        heading = track_heading(vel)
     res = float(getattr(sol, "resolution_m", np.nan))
     gnss_aided = bool(getattr(sol, "gnss_aided", False))
     return FlightEstimate(
@@ -290,6 +290,12 @@ def from_inm_solution(sol, *, name: str = "", t0_unix_ns: int = 0) -> FlightEsti
     )
 
 
+def track_heading(vel_n) -> np.ndarray:
+    """Track over ground from ENU velocities ``vel_n`` (N, 3), rad clockwise from north in [0, 2 pi)."""
+    vel_n = np.asarray(vel_n, float)
+    return np.mod(np.arctan2(vel_n[:, 0], vel_n[:, 1]), 2.0 * np.pi)
+
+
 def from_classic(res, *, name: str = "", t0_unix_ns: int = 0) -> FlightEstimate:
     """The :class:`FlightEstimate` of a :class:`gravsurvey.classic.ClassicResult`.
 
@@ -313,7 +319,7 @@ def from_classic(res, *, name: str = "", t0_unix_ns: int = 0) -> FlightEstimate:
         height=np.asarray(res.height, float),
         vel_n=vel,
         speed=np.linalg.norm(vel[:, :2], axis=1),
-        heading=np.mod(np.arctan2(vel[:, 0], vel[:, 1]), 2.0 * np.pi),
+        heading=track_heading(vel),
         disturbance=dist,
         sigma=np.full(n, np.nan),
         resolution_m=resolution,

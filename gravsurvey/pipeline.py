@@ -650,19 +650,9 @@ def horizontal_columns(results: list[FlightEstimate], ellipsoid=None) -> dict:
     from .geodesy import WGS84
 
     ell = ellipsoid if ellipsoid is not None else WGS84
-    cols: dict = {
-        c: []
-        for c in (
-            "dg_north_mgal",
-            "dg_east_mgal",
-            "xi_arcsec",
-            "eta_arcsec",
-            "dg_north_sigma_mgal",
-            "dg_east_sigma_mgal",
-            "xi_sigma_arcsec",
-            "eta_sigma_arcsec",
-        )
-    }
+    from .io.writers import HORIZONTAL_COLUMNS
+
+    cols: dict = {c: [] for c in HORIZONTAL_COLUMNS}
     for r in results:
         n = len(r.time)
         if not r.has_horizontal:

@@ -267,26 +267,10 @@ def _imu_truth(plan, t, anomaly: _Anomaly, ell, triad):
 
 def _truth_table(plan, t_rel, start_ns, t_ns, anomaly: _Anomaly):
     """truth.csv columns (docs/formats.md) at the times ``t_rel`` (s)."""
-    cols = {
-        k: np.empty(t_rel.shape[0])
-        for k in (
-            "lat_deg",
-            "lon_deg",
-            "height_m",
-            "ve_mps",
-            "vn_mps",
-            "vu_mps",
-            "roll_deg",
-            "pitch_deg",
-            "heading_deg",
-            "disturbance_mgal",
-            "anomaly_e_mgal",
-            "anomaly_n_mgal",
-            "anomaly_u_mgal",
-            "dg_north_mgal",
-            "dg_east_mgal",
-        )
-    }
+    from .logs import TRUTH_COLUMNS
+
+    # every truth.csv column but the two this function fills otherwise (time_ns, line)
+    cols = {k: np.empty(t_rel.shape[0]) for k in TRUTH_COLUMNS[2:]}
     line = np.empty(t_rel.shape[0], dtype=object)
     for sl in _chunks(t_rel.shape[0]):
         kin = kinematics(plan, t_rel[sl])
