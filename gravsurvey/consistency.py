@@ -29,12 +29,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from datetime import datetime, timezone
 
 import numpy as np
 
 from .errors import DataError, GravsurveyError
 from .geodesy import MGAL, WGS84, geodetic_to_ecef, normal_gravity_ecef
+from .utc import utc_iso
 
 #: Fastest plausible ground speed of a survey aircraft or ship, m/s (a jet at cruise is
 #: ~250 m/s; survey aircraft fly 50-120 m/s).
@@ -114,9 +114,7 @@ class CheckOptions:
 # ----------------------------------------------------------------------------- helpers
 def utc(t0_unix_ns: int, t_s: float) -> str:
     """``t_s`` seconds after ``t0_unix_ns`` as ISO UTC (to 0.1 s), for messages."""
-    ns = int(t0_unix_ns) + round(float(t_s) * 1e9)
-    d = datetime.fromtimestamp(ns // 10**9, tz=timezone.utc)
-    return d.strftime("%Y-%m-%dT%H:%M:%S") + f".{(ns % 10**9) // 10**8}Z"
+    return utc_iso(int(t0_unix_ns) + round(float(t_s) * 1e9), digits=1)
 
 
 def span_text(t0_unix_ns: int, a: float, b: float) -> str:

@@ -7,7 +7,6 @@ instead of an exception, so one bad file does not hide the others.
 
 from __future__ import annotations
 
-import datetime as _dt
 import os
 from pathlib import Path
 
@@ -18,23 +17,15 @@ from gravsurvey.io import checks as ck
 from gravsurvey.io.csv import read_csv_channel, sniff_csv_role
 from gravsurvey.io.ingest import IngestOptions, apply_units
 from gravsurvey.io.mcap import read_mcap
-
-
-def _iso(ns):
-    s, r = divmod(int(ns), 10**9)
-    try:
-        d = _dt.datetime.fromtimestamp(s, _dt.timezone.utc)
-    except (OverflowError, OSError, ValueError):
-        return f"{ns} ns"
-    return d.strftime("%Y-%m-%dT%H:%M:%S") + f".{r:09d}Z"
+from gravsurvey.utc import utc_iso
 
 
 def _span(t):
     if len(t) == 0:
         return {"start_utc": None, "end_utc": None, "duration_s": 0.0}
     return {
-        "start_utc": _iso(t.min()),
-        "end_utc": _iso(t.max()),
+        "start_utc": utc_iso(t.min(), digits=9),
+        "end_utc": utc_iso(t.max(), digits=9),
         "duration_s": float((int(t.max()) - int(t.min())) * 1e-9),
     }
 

@@ -61,21 +61,11 @@ from gravsurvey.io.mcap.scan import (
     scan_records,
 )
 from gravsurvey.io.mcap.value_checks import check_values
+from gravsurvey.utc import utc_iso
 
 DEFAULT_MAX_RECORD_BYTES = 256 * 2**20
 DAMAGED_START_MAX = 4096  # a file without closing magic is read only if records chain by here
 RESYNC_MIN_CHAIN = 4  # records that must chain up for a resynchronisation point to count
-
-
-def _utc(ns):
-    """ISO 8601 UTC of integer ns since the Unix epoch (ms resolution, for messages)."""
-    import datetime
-
-    try:
-        d = datetime.datetime.fromtimestamp(ns // 10**9, datetime.timezone.utc)
-    except (OverflowError, OSError, ValueError):
-        return f"{ns} ns"
-    return d.strftime("%Y-%m-%dT%H:%M:%S") + f".{ns % 10**9 // 10**6:03d}Z"
 
 
 @dataclass
@@ -125,19 +115,19 @@ class SkippedRegion:
         for k in ("log_time_before_ns", "log_time_after_ns", "lost_start_ns", "lost_end_ns"):
             v = getattr(self, k)
             d[k] = v
-            d[k.replace("_ns", "_utc")] = None if v is None else _utc(v)
+            d[k.replace("_ns", "_utc")] = None if v is None else utc_iso(v)
         return d
 
     def describe(self) -> str:
         """One clause for :meth:`SalvageInfo.describe`."""
         s = f"bytes {self.start}-{self.end} skipped ({self.reason})"
         if self.lost_start_ns is not None and self.lost_end_ns is not None:
-            s += f", log time {_utc(self.lost_start_ns)} to {_utc(self.lost_end_ns)} lost"
+            s += f", log time {utc_iso(self.lost_start_ns)} to {utc_iso(self.lost_end_ns)} lost"
         elif self.resumed and self.log_time_before_ns is not None and self.log_time_after_ns is not None:
             gap = (self.log_time_after_ns - self.log_time_before_ns) * 1e-9
             s += (
-                f", no data between log time {_utc(self.log_time_before_ns)} and "
-                f"{_utc(self.log_time_after_ns)} ({gap:.3f} s)"
+                f", no data between log time {utc_iso(self.log_time_before_ns)} and "
+                f"{utc_iso(self.log_time_after_ns)} ({gap:.3f} s)"
             )
         if self.resumed:
             s += (
@@ -222,7 +212,7 @@ class SalvageInfo:
             return s + "; reading resumed after the damage"
         lost_bytes = self.file_size - tail.start
         if self.last_log_time_ns is not None:
-            s += f" up to log time {_utc(self.last_log_time_ns)}"
+            s += f" up to log time {utc_iso(self.last_log_time_ns)}"
         if self.lost_until_ns is not None and self.last_log_time_ns is not None:
             span = max(0, self.lost_until_ns - self.last_log_time_ns) * 1e-9
             s += f"; lost at least {span:.3f} s of data"

@@ -15,8 +15,12 @@ import math
 import numpy as np
 
 from gravsurvey.crossovers import Crossovers
+from gravsurvey.utc import utc_iso_array
 
 from .jsonout import to_jsonable
+
+#: the writers' name for :func:`gravsurvey.utc.utc_iso_array` (milliseconds, rounded half up)
+format_utc = utc_iso_array
 
 #: required columns of profiles.csv, in order (docs/outputs.md)
 PROFILE_COLUMNS = (
@@ -88,24 +92,6 @@ DECIMALS = {
 XYZ_COLUMNS = ("time_unix_s",) + PROFILE_COLUMNS[4:]
 #: crossovers.csv columns: the fields of :class:`gravsurvey.crossovers.Crossovers`, in order
 CROSSOVER_COLUMNS = Crossovers.COLUMNS
-
-
-def format_utc(time_unix_ns) -> np.ndarray:
-    """ISO 8601 UTC strings with milliseconds, e.g. ``2024-05-01T10:00:00.125Z``.
-
-    Parameters
-    ----------
-    time_unix_ns : array_like of int, shape (n,)
-        Nanoseconds since the Unix epoch, UTC; rounded to the nearest millisecond (half up).
-
-    Returns
-    -------
-    ndarray of str, shape (n,)
-    """
-    ns = np.asarray(time_unix_ns, dtype=np.int64)
-    ms = (ns + 500_000) // 1_000_000
-    # timezone="UTC" appends the "Z" in C (6x faster than np.char.add on a million epochs)
-    return np.datetime_as_string(ms.astype("datetime64[ms]"), unit="ms", timezone="UTC")
 
 
 def profile_columns(table: dict) -> tuple[str, ...]:
