@@ -199,12 +199,31 @@ def _horizontal_specific_force(nav, f_t, times):
     averages out, a turn or a speed change (tens of seconds, one direction) does not.
     """
     f_i = np.einsum("nij,nj->ni", nav.mat_it, np.asarray(f_t, float))
+    n = nav.time.size
     dt = float(np.median(np.diff(nav.time)))
-    f_i = _running_mean(f_i, max(1, int(round(MANOEUVRE_WINDOW_S / dt))))
-    up = nav.r_i / np.linalg.norm(nav.r_i, axis=1)[:, None]
+    w = max(1, int(round(MANOEUVRE_WINDOW_S / dt)))
+    # the averaged force is needed only at the IMU samples that bracket ``times`` (1 Hz
+    # altimeter or filter epochs against a 100 Hz IMU): the running sums at every sample, the
+    # means, magnitudes and the interpolation at those only - the same numbers as evaluating
+    # all samples and interpolating (np.interp on a subset that holds every bracketing pair),
+    # at a third of the cost
+    x = np.asarray(times, float)
+    if 2 * x.size < n:
+        j = np.clip(np.searchsorted(nav.time, x, side="right") - 1, 0, n - 1)
+        sub = np.unique(np.concatenate([j, np.minimum(j + 1, n - 1)]))
+    else:
+        sub = np.arange(n)
+    c = np.empty((n + 1, 3))
+    c[0] = 0.0
+    np.cumsum(f_i, axis=0, out=c[1:])
+    lo = np.clip(sub - w // 2, 0, n)
+    hi = np.clip(sub + w // 2 + 1, 0, n)
+    f_i = (c[hi] - c[lo]) / (hi - lo)[:, None]
+    r_i = nav.r_i[sub]
+    up = r_i / np.linalg.norm(r_i, axis=1)[:, None]
     f_up = np.einsum("ni,ni->n", f_i, up)
     f_h = np.sqrt(np.maximum(np.einsum("ni,ni->n", f_i, f_i) - f_up**2, 0.0))
-    return np.interp(times, nav.time, f_h)
+    return np.interp(x, nav.time[sub], f_h)
 
 
 def straight_runs(
@@ -327,6 +346,112 @@ def _nll(v, f, i_f, dt, fixed_mask, fixed_v):
     return float(np.sum(np.log(s) + i_f / s))
 
 
+def _whittle_terms(f, dt):
+    """The parts of :func:`vertical_psd` that do not depend on the parameters, (3, k).
+
+    Rows: ``(2 pi f)^2`` (1/s^2), ``sinc^4(f dt)``, and the height noise's transfer
+    ``dt (2 - 2 cos 2 pi f dt)^2 / dt^4`` (1/s^3): computed once per fit instead of at each of
+    the optimizer's likelihood evaluations.
+    """
+    f = np.asarray(f, float)
+    x = math.pi * f * dt
+    return np.stack([(2.0 * math.pi * f) ** 2, (np.sin(x) / x) ** 4, (2.0 - 2.0 * np.cos(2.0 * x)) ** 2 / dt**3])
+
+
+def _psd_parts(v, terms):
+    """:func:`vertical_psd` at log-parameters ``v`` and its first derivatives by them.
+
+    Returns
+    -------
+    s : ndarray (k,)
+        The PSD, (m/s^2)^2/Hz.
+    d : ndarray (4, k)
+        ``dS / d log p`` for the parameters in :data:`_ORDER`.
+    s_g, r : ndarray (k,)
+        The anomaly's Markov PSD and ``(lambda^2 - omega^2) / (lambda^2 + omega^2)``
+        (``d log S_g / d log tau``), for the second derivatives.
+    """
+    sig2, tau, w2, eps2 = np.exp(2.0 * v[0]), np.exp(v[1]), np.exp(2.0 * v[2]), np.exp(2.0 * v[3])
+    om2, sinc4, hk = terms
+    lam = 1.0 / tau
+    den = lam * lam + om2
+    s_g = 2.0 * sig2 * lam / den
+    s_eps = eps2 * hk
+    s = (s_g + w2) * sinc4 + s_eps
+    r = (lam * lam - om2) / den
+    d = np.stack([2.0 * s_g * sinc4, s_g * r * sinc4, 2.0 * w2 * sinc4, 2.0 * s_eps])
+    return s, d, s_g, r
+
+
+def _nll_and_grad(v, terms, i_f, fixed_mask, fixed_v):
+    """Whittle's negative log-likelihood (:func:`_nll`) and its exact gradient by ``v``.
+
+    ``d/dp sum [log S + I / S] = sum (S - I) / S^2 dS/dp``: one pass over the bins instead of
+    the optimizer's finite differences (five passes per gradient, and a gradient only as
+    accurate as their step).  Held parameters get a zero gradient (they do not move).
+    """
+    vv = np.where(fixed_mask, fixed_v, v)
+    s, d, _, _ = _psd_parts(vv, terms)
+    q = i_f / s
+    g = d @ ((1.0 - q) / s)
+    g[fixed_mask] = 0.0
+    return float(np.sum(np.log(s) + q)), g
+
+
+def _nll_hessian(v, terms, i_f):
+    """Exact Hessian (4, 4) of Whittle's negative log-likelihood by the log-parameters ``v``.
+
+    ``sum [(2 I / S - 1) dS_i dS_j / S^2 + (1 - I / S) d2S_ij / S]``; ``d2S`` is nonzero on the
+    diagonal and between the anomaly's sigma and correlation time only.
+    """
+    s, d, s_g, r = _psd_parts(np.asarray(v, float), terms)
+    om2, sinc4, _ = terms
+    q = i_f / s
+    a = (2.0 * q - 1.0) / (s * s)
+    out = (d * a) @ d.T
+    b = (1.0 - q) / s
+    lam2 = np.exp(-2.0 * v[1])
+    # second derivatives of S by the log-parameters (the first ones are in _psd_parts)
+    d2 = np.array(
+        [
+            4.0 * s_g * sinc4,
+            s_g * (r * r - 4.0 * lam2 * om2 / (lam2 + om2) ** 2) * sinc4,
+            2.0 * d[2],
+            2.0 * d[3],
+        ]
+    )
+    out[np.diag_indices(4)] += d2 @ b
+    cross = float((2.0 * d[1]) @ b)
+    out[0, 1] += cross
+    out[1, 0] += cross
+    return out
+
+
+_BLAS_CONTROLLER: list = []
+
+
+def _single_thread_blas():
+    """Context in which BLAS runs on one thread (a no-op without threadpoolctl).
+
+    L-BFGS-B factorises 4 x 4 matrices at every iteration; multi-threaded OpenBLAS spends far
+    more on waking and synchronising its threads than on that work - measured 26 ms against
+    1.8 ms per 4-parameter optimisation (2-core machine with other load), which made the
+    optimizer's own bookkeeping 85 % of the identification.  The controller scans the loaded
+    libraries once (1 ms) and is then reused.
+    """
+    import contextlib
+
+    try:
+        from threadpoolctl import ThreadpoolController
+    except ImportError:  # pragma: no cover - scikit-learn (verde, harmonica) brings it
+        return contextlib.nullcontext()
+    if not _BLAS_CONTROLLER:
+        import scipy.optimize  # noqa: F401  (loads scipy's own BLAS, which the scan must see)
+
+        _BLAS_CONTROLLER.append(ThreadpoolController())
+    return _BLAS_CONTROLLER[0].limit(limits=1, user_api="blas")
+
+
 def fit_vertical_spectrum(
     time, residual_m, manoeuvring=None, *, fixed: dict | None = None, start: SpectralModel | None = None
 ) -> VerticalFit | None:
@@ -394,12 +519,21 @@ def fit_vertical_spectrum(
         starts.append(np.log([s0, tau, w0, eps0]))
     if start is not None:
         starts.append(start.as_vector())
+    terms = _whittle_terms(f, dt)
     best = None
-    for v0 in starts:
-        v0 = np.clip(np.where(fixed_mask, fixed_v, v0), lo, hi)
-        res = minimize(_nll, v0, args=(f, i_f, dt, fixed_mask, fixed_v), method="L-BFGS-B", bounds=list(zip(lo, hi)))
-        if best is None or res.fun < best.fun:
-            best = res
+    with _single_thread_blas():
+        for v0 in starts:
+            v0 = np.clip(np.where(fixed_mask, fixed_v, v0), lo, hi)
+            res = minimize(
+                _nll_and_grad,
+                v0,
+                args=(terms, i_f, fixed_mask, fixed_v),
+                jac=True,
+                method="L-BFGS-B",
+                bounds=list(zip(lo, hi)),
+            )
+            if best is None or res.fun < best.fun:
+                best = res
     v = np.where(fixed_mask, fixed_v, best.x)
     at_bound = tuple(
         k for k, x, a, b in zip(_ORDER, v, lo, hi) if not fixed_mask[_ORDER.index(k)] and (x - a < 1e-3 or b - x < 1e-3)
@@ -407,7 +541,7 @@ def fit_vertical_spectrum(
     free = [i for i, k in enumerate(_ORDER) if not fixed_mask[i] and k not in at_bound]
     factors = {k: None for k in _ORDER}
     if free:
-        hess = _hessian(lambda u: _nll(_embed(u, v, free), f, i_f, dt, fixed_mask, fixed_v), v[free])
+        hess = _nll_hessian(v, terms, i_f)[np.ix_(free, free)]
         try:
             cov = np.linalg.inv(hess)
             for j, i in enumerate(free):
@@ -780,6 +914,16 @@ def windowed_variance(psd, window_s: float, span_s: float) -> float:
     return float(2.0 * np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(f)))
 
 
+def _windowed_variances(psd, span_s: float, window_s: float = FIELD_VAR_WINDOW_S) -> np.ndarray:
+    """:func:`windowed_variance` of several processes at once, (m/s^2)^2 (p,).
+
+    ``psd`` maps the frequencies (Hz, (k,)) to the PSDs ((p, k)); the same quadrature, row by row.
+    """
+    f = np.geomspace(1e-3 / span_s, 20.0 / window_s, 4000)
+    y = psd(f) * _window_kernel(f, window_s, span_s)[None, :]
+    return 2.0 * np.sum(0.5 * (y[:, 1:] + y[:, :-1]) * np.diff(f)[None, :], axis=1)
+
+
 def field_variance_seen(g, weight, dt_s: float, window_s: float = FIELD_VAR_WINDOW_S) -> float:
     """Weighted variance of ``g`` averaged over ``window_s`` (weights: 0 in turns), (m/s^2)^2.
 
@@ -920,23 +1064,28 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     # variance through the same window must reach the variance seen
     best = None
     fallback = None
-    for tau in taus:
-        # the Markov PSD scales with sigma^2: one integral per correlation time
-        unit_var = windowed_variance(lambda x: _markov_psd(x, 1.0, tau), FIELD_VAR_WINDOW_S, span)
-        for sg in sigmas:
-            s_lo = float(_markov_psd(f_lo, sg, tau))
-            gain_lo = s_lo / (s_lo + s_n_lo)
-            score = gain_lo / PASS_BELOW_GAIN
-            if var_field > 0.0:
-                held = sg * sg * unit_var / var_field
-                score = min(score, held / FIELD_VAR_HELD)
-            if fallback is None or score > fallback[0]:
-                fallback = (score, float(sg), float(tau))
-            if score < 1.0:
-                continue
-            r = prior_risk(f, s_sig, s_n, sg, tau)
-            if best is None or r < best[0]:
-                best = (r, float(sg), float(tau))
+    sig_v = np.asarray(sigmas, float)
+    # the Markov PSD scales with sigma^2: one integral per correlation time, all of them at once
+    unit_vars = _windowed_variances(lambda x: _markov_psd(x[None, :], 1.0, np.asarray(taus, float)[:, None]), span)
+    for tau, unit_var in zip(taus, unit_vars):
+        # every sigma of this correlation time at once; the same arithmetic, element by element,
+        # as one candidate at a time (so the same choice, ties included: first of the least)
+        s_lo = _markov_psd(f_lo, sig_v, tau)
+        score = s_lo / (s_lo + s_n_lo) / PASS_BELOW_GAIN
+        if var_field > 0.0:
+            score = np.minimum(score, sig_v * sig_v * unit_var / var_field / FIELD_VAR_HELD)
+        i = int(np.argmax(score))
+        if fallback is None or score[i] > fallback[0]:
+            fallback = (float(score[i]), float(sig_v[i]), float(tau))
+        ok = np.flatnonzero(score >= 1.0)
+        if ok.size == 0:
+            continue
+        s_g = _markov_psd(f[None, :], sig_v[ok, None], tau)
+        h = s_g / (s_g + s_n)
+        risk = np.sum((1.0 - h) ** 2 * s_sig + h**2 * s_n, axis=1)
+        i = int(np.argmin(risk))
+        if best is None or risk[i] < best[0]:
+            best = (float(risk[i]), float(sig_v[ok[i]]), float(tau))
     _, sg, tau = best if best is not None else fallback
     model = dataclasses.replace(noise, anomaly_sigma_mps2=sg, anomaly_tau_s=tau)
     if params.target_resolution_m is not None:
