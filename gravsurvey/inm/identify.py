@@ -341,6 +341,8 @@ def _periodograms(y_runs, dt):
 
 
 def _nll(v, f, i_f, dt, fixed_mask, fixed_v):
+    """Whittle's negative log-likelihood written from :func:`vertical_psd`: the plain definition
+    that :func:`_nll_and_grad` (what the fit uses) evaluates faster, with its gradient."""
     vv = np.where(fixed_mask, fixed_v, v)
     s = vertical_psd(f, SpectralModel.from_vector(vv), dt)
     return float(np.sum(np.log(s) + i_f / s))
@@ -564,26 +566,6 @@ def fit_vertical_spectrum(
         factors["anomaly_tau_s"] = None
         at_bound = tuple(x for x in at_bound if x != "anomaly_tau_s")
     return VerticalFit(model, factors, at_bound, dt, used, len(runs), float(best.fun), unresolved, short)
-
-
-def _embed(u, v, free):
-    w = np.array(v, float)
-    w[free] = u
-    return w
-
-
-def _hessian(fun, x, h=1e-3):
-    n = x.size
-    out = np.zeros((n, n))
-    for i in range(n):
-        for j in range(i, n):
-            e_i = np.zeros(n)
-            e_j = np.zeros(n)
-            e_i[i] = h
-            e_j[j] = h
-            d = (fun(x + e_i + e_j) - fun(x + e_i - e_j) - fun(x - e_i + e_j) + fun(x - e_i - e_j)) / (4 * h * h)
-            out[i, j] = out[j, i] = d
-    return out
 
 
 def wiener_resolution_m(model: SpectralModel, speed_mps: float, dt_s: float = 1.0) -> float:
