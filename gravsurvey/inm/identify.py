@@ -437,9 +437,9 @@ def _single_thread_blas():
 
     L-BFGS-B factorises 4 x 4 matrices at every iteration; multi-threaded OpenBLAS spends far
     more on waking and synchronising its threads than on that work - measured 26 ms against
-    1.8 ms per 4-parameter optimisation (2-core machine with other load), which made the
-    optimizer's own bookkeeping 85 % of the identification.  The controller scans the loaded
-    libraries once (1 ms) and is then reused.
+    1.8 ms per 4-parameter optimisation (a toy problem; 2-core machine with other load), which
+    made the optimizer's own bookkeeping ~90 % of the fit's time.  The controller scans the
+    loaded libraries once (1 ms) and is then reused.
     """
     import contextlib
 
