@@ -320,7 +320,9 @@ def print_table(rows):
         for r in rows
         if r.get("default_rms") is not None and r.get("classic_rms") is not None and r["default_rms"] > r["classic_rms"]
     ]
-    print(f"default worse than classic on {len(worse)} of {len(rows)} flights: {', '.join(worse) or '-'}")
+    # only flights where both ran (``--runs default`` has no classic row: "of 0", not "0 of 20")
+    both = sum(1 for r in rows if r.get("default_rms") is not None and r.get("classic_rms") is not None)
+    print(f"default worse than classic on {len(worse)} of {both} flights: {', '.join(worse) or '-'}")
     # issue 12: never worse than the scalar chain at the same or coarser resolution
     coarser = [
         r["name"]

@@ -237,6 +237,18 @@ def attitude_report(sol) -> dict:
     return out
 
 
+def _honest_sigma(sol) -> np.ndarray:
+    """The smoother's sigma and, in quadrature, the drift it cannot tell from the field, m/s^2.
+
+    ``identification["drift_sigma_passed_mps2"]`` (:func:`gravsurvey.inm.identify.drift_sigma_passed`)
+    is the gravimeter drift of a datasheet that the smoother's model does not hold and passes
+    into the estimate (docs/method.md, "Honest sigma").
+    """
+    sig = np.asarray(sol.sigma_smooth, float)
+    extra = float((getattr(sol, "identification", None) or {}).get("drift_sigma_passed_mps2", 0.0))
+    return np.hypot(sig, extra) if extra > 0.0 else sig
+
+
 def from_inm_solution(sol, *, name: str = "", t0_unix_ns: int = 0) -> FlightEstimate:
     """The :class:`FlightEstimate` of a 3D-INM solution (``InmSolution`` or an object with its fields).
 
@@ -272,7 +284,7 @@ def from_inm_solution(sol, *, name: str = "", t0_unix_ns: int = 0) -> FlightEsti
         speed=np.asarray(sol.speed, float),
         heading=np.asarray(heading, float),
         disturbance=g.copy(),
-        sigma=np.asarray(sol.sigma_smooth, float),
+        sigma=_honest_sigma(sol),
         resolution_m=res,
         segment=np.zeros(n, dtype=np.int64),
         smoothed=g,

@@ -24,6 +24,7 @@ from .errormodel import (
     state_perm,
 )
 from .identify import (
+    drift_sigma_passed,
     horizontal_prior,
     identify_params,
     keep_default_prior,
@@ -416,6 +417,10 @@ def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, l
         params, ident = refine_prior(
             params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))), wide, speed0, weight
         )
+    if not {"gravimeter_sigma_mps2", "gravimeter_lambda_per_s"} & params.given:
+        # honest-sigma hook (docs/method.md "Honest sigma"): the datasheet drift that the filter's
+        # gravimeter state does not hold, as the smoother passes it; estimate.py adds it to sigma
+        ident["drift_sigma_passed_mps2"] = drift_sigma_passed(ident, float(nav.time[-1] - nav.time[0]))
     return params, ident
 
 
