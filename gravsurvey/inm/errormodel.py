@@ -257,8 +257,15 @@ def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
     # gyro drift: d(dr) += [r x] C nu, d(dv) += [v x] C nu, (d(C theta) -= C nu), C nu isotropic
     nb = 9 if aided else 6
     lg = np.zeros((nb, 3))
-    lg[0:3, :] = _skew(r)
-    lg[3:6, :] = _skew(v)
+    # [r x] and [v x] written in place (no call: model_scales runs this function's Python
+    # form, and a compiled callee would be loaded or compiled for it)
+    for o, x in ((0, r), (3, v)):
+        lg[o, 1] = -x[2]
+        lg[o, 2] = x[1]
+        lg[o + 1, 0] = x[2]
+        lg[o + 1, 2] = -x[0]
+        lg[o + 2, 0] = -x[1]
+        lg[o + 2, 1] = x[0]
     if aided:
         for i in range(3):
             lg[6 + i, i] = -1.0
@@ -340,7 +347,6 @@ BALANCE_EXP = 60
 BALANCE_SWEEPS = 4
 
 
-@njit(cache=True)
 def balance_scales(aa, qq):
     """Per-state scales (powers of two) that balance Van Loan's matrix ``[[-A, Qc], [0, A^T]]``.
 
@@ -397,14 +403,13 @@ def balance_scales(aa, qq):
 
 
 @njit(cache=True)
-def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
+def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm, scale):
     """Transition and process noise of every epoch, seed order (see module docstring).
 
     The state size is ``perm.shape[0]`` (8; 14 with attitude and gyro-bias states; 16 with
     the horizontal accelerometer biases; 18 with the horizontal disturbance as well).
-    The exponential is taken of the model in the states ``x / s`` and mapped back, ``s`` from
-    :func:`balance_scales` on the coefficients' magnitudes at three epochs (they change only
-    at the Earth and transport rates and with the triad's axes); exact: powers of two.
+    The exponential is taken of the model in the states ``x / scale`` and mapped back
+    (``scale`` (n,), block order, powers of two: exact; :func:`model_scales`).
 
     Returns
     -------
@@ -415,16 +420,6 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     n = perm.shape[0]
     phi = np.zeros((nep, n, n))
     q = np.zeros((nep, n, n))
-    aa = np.zeros((n, n))
-    qq = np.zeros((n, n))
-    if nep > 1:
-        for k in (1, nep // 2, nep - 1):
-            a, qc = continuous_model_n(r[k], v[k], up[k], e1[k], e2[k], e3[k], w02[k], speed[k], c, n)
-            for i in range(n):
-                for j in range(n):
-                    aa[i, j] = max(aa[i, j], abs(a[i, j]))
-                    qq[i, j] = max(qq[i, j], abs(qc[i, j]))
-    scale = balance_scales(aa, qq)
     # A' = S^-1 A S, Qc' = S^-1 Qc S^-1 and back: Phi = S Phi' S^-1, Qd = S Qd' S
     a_in = np.empty((n, n))
     q_in = np.empty((n, n))
@@ -473,6 +468,36 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     return phi, q
 
 
+def model_scales(geom: EpochGeometry, c: np.ndarray, n: int) -> np.ndarray:
+    """:func:`balance_scales` of the model's coefficients at three epochs (first, middle, last).
+
+    Their elementwise maximum magnitudes: the coefficients change only at the Earth and
+    transport rates and with the triad's axes.  Evaluated in Python (3 epochs: ~1 ms), so that
+    the compiled kernel does not grow (a second call site of :func:`continuous_model_n` in it
+    cost ~0.6 s of first-run compilation).
+    """
+    nep = geom.dt.size
+    aa = np.zeros((n, n))
+    qq = np.zeros((n, n))
+    if nep > 1:
+        for k in (1, nep // 2, nep - 1):
+            a, qc = continuous_model_n.py_func(
+                geom.r_i[k],
+                geom.v_i[k],
+                geom.up_i[k],
+                geom.e1_i[k],
+                geom.e2_i[k],
+                geom.e3_i[k],
+                float(geom.w02[k]),
+                float(geom.speed[k]),
+                c,
+                n,
+            )
+            aa = np.maximum(aa, np.abs(a))
+            qq = np.maximum(qq, np.abs(qc))
+    return balance_scales(aa, qq)
+
+
 def discretise(
     geom: EpochGeometry,
     params,
@@ -511,7 +536,7 @@ def discretise(
     n = perm.size
     args = (geom.dt, geom.r_i, geom.v_i, geom.up_i, geom.e1_i, geom.e2_i, geom.e3_i, geom.w02, geom.speed, geom.mat_it)
     if not reference:
-        return discretise_kernel(*[np.ascontiguousarray(x) for x in args], c, perm)
+        return discretise_kernel(*[np.ascontiguousarray(x) for x in args], c, perm, model_scales(geom, c, n))
     nep = geom.dt.size
     phi = np.zeros((nep, n, n))
     q = np.zeros((nep, n, n))
