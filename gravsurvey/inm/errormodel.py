@@ -158,7 +158,7 @@ def epoch_geometry(nav, idx, use_ext: bool = True, ellipsoid: Ellipsoid = WGS84)
     )
 
 
-def _noise_params(params, alt_dt, hprior=None):
+def noise_params(params, alt_dt, hprior=None):
     """Vector of the scalar coefficients passed to the kernels.
 
     ``hprior``: (sigma m/s^2, lambda 1/m) of the horizontal disturbance; None: from the
@@ -210,7 +210,7 @@ def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
     N + g_e E)``: the mechanization leaves the anomalous gravitation out, so the computed
     velocity lacks it).
     ``c`` = noise parameter vector from
-    :func:`_noise_params`; ``e1, e2, e3`` are the columns of ``C`` at the interval midpoint.
+    :func:`noise_params`; ``e1, e2, e3`` are the columns of ``C`` at the interval midpoint.
 
     With ``theta`` defined by ``C_true = C (I + [theta x])`` the seed's ``dq`` is
     ``C^T dr_i - q x theta`` (the rotation of the triad merges into it) and
@@ -257,8 +257,15 @@ def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
     # gyro drift: d(dr) += [r x] C nu, d(dv) += [v x] C nu, (d(C theta) -= C nu), C nu isotropic
     nb = 9 if aided else 6
     lg = np.zeros((nb, 3))
-    lg[0:3, :] = _skew(r)
-    lg[3:6, :] = _skew(v)
+    # [r x] and [v x] written in place (no call: model_scales runs this function's Python
+    # form, and a compiled callee would be loaded or compiled for it)
+    for o, x in ((0, r), (3, v)):
+        lg[o, 1] = -x[2]
+        lg[o, 2] = x[1]
+        lg[o + 1, 0] = x[2]
+        lg[o + 1, 2] = -x[0]
+        lg[o + 2, 0] = -x[1]
+        lg[o + 2, 1] = x[0]
     if aided:
         for i in range(3):
             lg[6 + i, i] = -1.0
@@ -317,7 +324,7 @@ def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
 def continuous_model(r, v, up, e1, e2, e3, w02, speed, c):
     """``A_y`` (8, 8) and noise density ``Qc_y`` (8, 8) in block order (dr, dv, g, f3).
 
-    ``c`` = noise parameter vector from :func:`_noise_params`.
+    ``c`` = noise parameter vector from :func:`noise_params`.
     """
     return continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, 8)
 
@@ -332,12 +339,77 @@ def _to_seed(m_blk, perm):
     return out
 
 
+#: Bounds of the balancing exponents (scales 2^-60 .. 2^60): a state whose column or row is
+#: empty (e.g. a constant bias) would otherwise be scaled without end.
+BALANCE_EXP = 60
+#: Coordinate sweeps of the balancing (the exponents no longer change after 2-3 on the
+#: flights measured).
+BALANCE_SWEEPS = 4
+
+
+def balance_scales(aa, qq):
+    """Per-state scales (powers of two) that balance Van Loan's matrix ``[[-A, Qc], [0, A^T]]``.
+
+    The model mixes units by ~13 orders of magnitude (the gyro bias drives the position with
+    the Earth's radius, 6.4e6 m): the 1-norm of Van Loan's matrix is ~1e7 for a 1 s epoch,
+    and scaling and squaring took ~26 squarings (4 products each) on top of the 13 Taylor
+    terms (3 each), losing ~1e-9 relative accuracy on the way (measured against a 40-digit
+    exponential).  In the states ``x / s`` (``A' = S^-1 A S``, ``Qc' = S^-1 Qc S^-1``) the
+    norm is ~0.03: no squaring, and the exponential is round-off accurate (1e-16).  Powers of
+    two make the change of units exact.
+
+    Osborne's balancing: coordinate sweeps of ``f(u) = sum_(i != j) |a_ij| 2^(u_j - u_i)
+    + sum |qc_ij| 2^(-u_i - u_j) / 2`` (the sum of the magnitudes of the matrix's entries,
+    convex in ``u``), each coordinate set to its minimiser (``Qc``'s diagonal term taken at
+    the current scale) rounded to an integer and bounded by :data:`BALANCE_EXP`.  Any scales
+    give the same exponential up to round-off: they only change how many squarings
+    :func:`gravsurvey.inm.kalman.van_loan` needs.
+
+    Parameters
+    ----------
+    aa, qq : ndarray (n, n)
+        Magnitudes ``|A|`` (1/s) and ``|Qc|`` (state units^2 / s), e.g. elementwise maxima
+        over a few epochs.
+
+    Returns
+    -------
+    ndarray (n,)
+        ``s``, block order.
+    """
+    n = aa.shape[0]
+    u = np.zeros(n)
+    e = np.ones(n)
+    for _ in range(BALANCE_SWEEPS):
+        for i in range(n):
+            # f's terms in 2^u_i (column i of A) and in 2^-u_i (row i of A and of Qc)
+            grow = 0.0
+            shrink = 0.0
+            for j in range(n):
+                if j != i:
+                    grow += aa[j, i] / e[j]
+                    shrink += aa[i, j] * e[j]
+                shrink += qq[i, j] / e[j]
+            if grow == 0.0 and shrink == 0.0:
+                continue
+            if grow == 0.0:
+                ui = float(BALANCE_EXP)
+            elif shrink == 0.0:
+                ui = -float(BALANCE_EXP)
+            else:
+                ui = min(float(BALANCE_EXP), max(-float(BALANCE_EXP), float(round(0.5 * math.log2(shrink / grow)))))
+            u[i] = ui
+            e[i] = 2.0**ui
+    return e
+
+
 @njit(cache=True)
-def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
+def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm, scale):
     """Transition and process noise of every epoch, seed order (see module docstring).
 
     The state size is ``perm.shape[0]`` (8; 14 with attitude and gyro-bias states; 16 with
     the horizontal accelerometer biases; 18 with the horizontal disturbance as well).
+    The exponential is taken of the model in the states ``x / scale`` and mapped back
+    (``scale`` (n,), block order, powers of two: exact; :func:`model_scales`).
 
     Returns
     -------
@@ -348,6 +420,17 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     n = perm.shape[0]
     phi = np.zeros((nep, n, n))
     q = np.zeros((nep, n, n))
+    # A' = S^-1 A S, Qc' = S^-1 Qc S^-1 and back: Phi = S Phi' S^-1, Qd = S Qd' S
+    a_in = np.empty((n, n))
+    q_in = np.empty((n, n))
+    a_out = np.empty((n, n))
+    q_out = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            a_in[i, j] = scale[j] / scale[i]
+            q_in[i, j] = 1.0 / (scale[i] * scale[j])
+            a_out[i, j] = scale[i] / scale[j]
+            q_out[i, j] = scale[i] * scale[j]
     phi[0] = np.eye(n)
     t_prev = np.eye(n)
     t_cur = np.eye(n)
@@ -358,7 +441,15 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     nblk = 3 if n >= 14 else 2
     for k in range(1, nep):
         a, qc = continuous_model_n(r[k], v[k], up[k], e1[k], e2[k], e3[k], w02[k], speed[k], c, n)
+        for i in range(n):
+            for j in range(n):
+                a[i, j] *= a_in[i, j]
+                qc[i, j] *= q_in[i, j]
         phy, qy = van_loan(a, qc, dt[k])
+        for i in range(n):
+            for j in range(n):
+                phy[i, j] *= a_out[i, j]
+                qy[i, j] *= q_out[i, j]
         for blk in range(nblk):
             o = 3 * blk if blk < 2 else 8
             for i in range(3):
@@ -375,6 +466,36 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
         qs = _to_seed(qx, perm)
         q[k] = 0.5 * (qs + qs.T)
     return phi, q
+
+
+def model_scales(geom: EpochGeometry, c: np.ndarray, n: int) -> np.ndarray:
+    """:func:`balance_scales` of the model's coefficients at three epochs (first, middle, last).
+
+    Their elementwise maximum magnitudes: the coefficients change only at the Earth and
+    transport rates and with the triad's axes.  Evaluated in Python (3 epochs: ~1 ms), so that
+    the compiled kernel does not grow (a second call site of :func:`continuous_model_n` in it
+    cost ~0.6 s of first-run compilation).
+    """
+    nep = geom.dt.size
+    aa = np.zeros((n, n))
+    qq = np.zeros((n, n))
+    if nep > 1:
+        for k in (1, nep // 2, nep - 1):
+            a, qc = continuous_model_n.py_func(
+                geom.r_i[k],
+                geom.v_i[k],
+                geom.up_i[k],
+                geom.e1_i[k],
+                geom.e2_i[k],
+                geom.e3_i[k],
+                float(geom.w02[k]),
+                float(geom.speed[k]),
+                c,
+                n,
+            )
+            aa = np.maximum(aa, np.abs(a))
+            qq = np.maximum(qq, np.abs(qc))
+    return balance_scales(aa, qq)
 
 
 def discretise(
@@ -410,12 +531,12 @@ def discretise(
         With ``aided`` (and not ``horizontal``): 16 states, the accelerometer biases
         (``BA1, BA2``) appended.
     """
-    c = _noise_params(params, alt_dt, hprior)
+    c = noise_params(params, alt_dt, hprior)
     perm = state_perm(aided, horizontal, accel_bias)
     n = perm.size
     args = (geom.dt, geom.r_i, geom.v_i, geom.up_i, geom.e1_i, geom.e2_i, geom.e3_i, geom.w02, geom.speed, geom.mat_it)
     if not reference:
-        return discretise_kernel(*[np.ascontiguousarray(x) for x in args], c, perm)
+        return discretise_kernel(*[np.ascontiguousarray(x) for x in args], c, perm, model_scales(geom, c, n))
     nep = geom.dt.size
     phi = np.zeros((nep, n, n))
     q = np.zeros((nep, n, n))

@@ -296,10 +296,9 @@ def _attitude_kernel(t, w, c0, c_out):
 
 
 @njit(cache=True)
-def _gravity_i(r, ts, radius, use_ext, a, f, gm, omega):
-    """Model gravitation on inertial axes at inertial point r, time ts."""
-    c = math.cos(omega * ts)
-    s = math.sin(omega * ts)
+def _gravity_i(r, c, s, radius, use_ext, a, f, gm, omega):
+    """Model gravitation on inertial axes at inertial point r; ``c, s`` = cos, sin of the
+    Earth's rotation angle ``omega * ts`` at its time (passed in: a step's stages share them)."""
     rn = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
     scale = radius / rn if use_ext else 1.0
     px = r[0] * scale
@@ -340,9 +339,13 @@ def _translation_kernel(t, a_i, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, ome
         nz = 0.0
         hc = 0.0
         cosa = 1.0
+        # Earth rotation at the step start (also stage 0's) and at the midpoint (stages 1, 2):
+        # the same arguments as one evaluation per stage, so the same values
+        cw = math.cos(omega * tk)
+        sw = math.sin(omega * tk)
+        cm = math.cos(omega * tm)
+        sm = math.sin(omega * tm)
         if use_ext:
-            cw = math.cos(omega * tk)
-            sw = math.sin(omega * tk)
             ex = cw * y[0] + sw * y[1]
             ey = -sw * y[0] + cw * y[1]
             lat, lon, hc = ecef_to_geodetic_scalar(ex, ey, y[2], a, f)
@@ -377,7 +380,13 @@ def _translation_kernel(t, a_i, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, ome
                 rs = math.sqrt(ys[0] * ys[0] + ys[1] * ys[1] + ys[2] * ys[2])
                 dh = nx * (ys[0] - y[0]) + ny * (ys[1] - y[1]) + nz * (ys[2] - y[2])
                 radius = rs + cosa * (hx - hc - dh)
-            gx, gy, gz = _gravity_i(ys, ts, radius, use_ext, a, f, gm, omega)
+            if st == 0:
+                cs, sn = cw, sw
+            elif st == 3:
+                cs, sn = math.cos(omega * ts), math.sin(omega * ts)
+            else:
+                cs, sn = cm, sm
+            gx, gy, gz = _gravity_i(ys, cs, sn, radius, use_ext, a, f, gm, omega)
             kk[st, 0] = ys[3]
             kk[st, 1] = ys[4]
             kk[st, 2] = ys[5]
