@@ -3,7 +3,11 @@
 
 Usage::
 
-    python benchmarks/bench_startup.py [--quick]
+    python benchmarks/bench_startup.py [--quick] [--base OTHER_CHECKOUT] [--cold-only]
+
+``--base``: the cold/warm pairs of another checkout (e.g. a worktree at the commit before a
+change, run with its own ``.venv`` when it has one) interleaved with this one's;
+``--cold-only``: without the flight-hour rows.
 
 Prints a Markdown table; ``run(quick) -> list[dict]`` returns its rows.  Timings are reported,
 never asserted.  Goals (issue 17.4, on a 2-core machine):
@@ -60,8 +64,8 @@ print(json.dumps([times, cpus]))
 """
 
 
-def _env(cache: Path) -> dict:
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(REPO))
+def _env(cache: Path, repo: Path = REPO) -> dict:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(repo))
     env.pop("PYTHONSTARTUP", None)
     return env
 
@@ -78,8 +82,15 @@ def _timed(cmd, env, cwd) -> tuple[float, float]:
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
-def _run_cmd(cfg: Path, out: Path) -> list[str]:
-    return [sys.executable, "-m", "gravsurvey.cli", "run", str(cfg), "-o", str(out), "--force"]
+def _python(repo: Path = REPO) -> str:
+    """The interpreter for ``repo``: its own ``.venv`` when it has one (an editable install
+    of another checkout in this venv would shadow ``PYTHONPATH``), else this one."""
+    own = repo / ".venv" / "bin" / "python"
+    return str(own) if repo != REPO and own.exists() else sys.executable
+
+
+def _run_cmd(cfg: Path, out: Path, repo: Path = REPO) -> list[str]:
+    return [_python(repo), "-m", "gravsurvey.cli", "run", str(cfg), "-o", str(out), "--force"]
 
 
 def _stats(v) -> dict:
@@ -87,25 +98,42 @@ def _stats(v) -> dict:
     return {"median": float(np.median(v)), "min": float(v.min()), "max": float(v.max()), "n": int(v.size)}
 
 
-def cold_and_warm_sample(work: Path, pairs: int) -> list[dict]:
-    """``pairs`` x (cold run in a fresh copy with an empty cache, then a warm run of it)."""
-    cold_w, cold_c, warm_w, warm_c = [], [], [], []
+def _cold_warm_pair(work: Path, tag: str, repo: Path) -> tuple[float, float, float, float]:
+    """One cold run in a fresh copy with an empty cache, then a warm run of it: wall, CPU."""
+    d = work / tag
+    shutil.copytree(REPO / "sample_data" / "grid_ros2", d / "data")
+    cache = d / "numba-cache"
+    cache.mkdir()
+    env = _env(cache, repo)
+    cw, cc = _timed(_run_cmd(d / "data" / "survey.yaml", d / "out_cold", repo), env, d)
+    ww, wc = _timed(_run_cmd(d / "data" / "survey.yaml", d / "out_warm", repo), env, d)
+    return cw, cc, ww, wc
+
+
+def cold_and_warm_sample(work: Path, pairs: int, base: Path | None = None) -> list[dict]:
+    """``pairs`` x (cold run in a fresh copy with an empty cache, then a warm run of it).
+
+    With ``base`` (another checkout, e.g. the commit before a change), each pair of this
+    checkout is interleaved with one of ``base`` (same load on a shared machine), and the
+    rows of both are returned, ``base`` first.
+    """
+    sides = [("this", REPO)] if base is None else [("base", base), ("this", REPO)]
+    got: dict = {name: ([], [], [], []) for name, _ in sides}
     for i in range(pairs):
-        d = work / f"sample{i}"
-        shutil.copytree(REPO / "sample_data" / "grid_ros2", d / "data")
-        cache = d / "numba-cache"
-        cache.mkdir()
-        env = _env(cache)
-        w, c = _timed(_run_cmd(d / "data" / "survey.yaml", d / "out_cold"), env, d)
-        cold_w.append(w)
-        cold_c.append(c)
-        w, c = _timed(_run_cmd(d / "data" / "survey.yaml", d / "out_warm"), env, d)
-        warm_w.append(w)
-        warm_c.append(c)
+        for name, repo in sides if i % 2 == 0 else sides[::-1]:
+            for lst, x in zip(got[name], _cold_warm_pair(work, f"{name}{i}", repo)):
+                lst.append(x)
+    rows = []
+    for name, _ in sides:
+        rows += _cold_warm_rows(*got[name], "" if base is None else f" [{name}]")
+    return rows
+
+
+def _cold_warm_rows(cold_w, cold_c, warm_w, warm_c, label="") -> list[dict]:
     cw, cc, ww, wc = _stats(cold_w), _stats(cold_c), _stats(warm_w), _stats(warm_c)
     return [
         {
-            "case": "sample survey, cold (empty numba cache), whole process",
+            "case": "sample survey, cold (empty numba cache), whole process" + label,
             "wall": cw,
             "cpu": cc,
             "goal_s": GOAL_COLD_S,
@@ -113,7 +141,7 @@ def cold_and_warm_sample(work: Path, pairs: int) -> list[dict]:
             "cpu_ratio_to_goal": cc["median"] / GOAL_COLD_S,
             "cold_over_warm": float(np.median(np.array(cold_w) / np.array(warm_w))),
         },
-        {"case": "sample survey, warm, whole process", "wall": ww, "cpu": wc, "goal_s": None},
+        {"case": "sample survey, warm, whole process" + label, "wall": ww, "cpu": wc, "goal_s": None},
     ]
 
 
@@ -172,11 +200,12 @@ def warm_flight_hour(work: Path, reps: int) -> list[dict]:
     ]
 
 
-def run(quick: bool = False) -> list[dict]:
+def run(quick: bool = False, base: Path | None = None, cold_only: bool = False) -> list[dict]:
     with tempfile.TemporaryDirectory(prefix="gravsurvey-startup-") as tmp:
         work = Path(tmp)
-        rows = cold_and_warm_sample(work, 1 if quick else 3)
-        rows += warm_flight_hour(work, 3 if quick else 7)
+        rows = cold_and_warm_sample(work, 1 if quick else 3, base)
+        if not cold_only:
+            rows += warm_flight_hour(work, 3 if quick else 7)
     return rows
 
 
@@ -187,8 +216,9 @@ def _fmt(s) -> str:
 
 
 def main(argv=None):
-    quick = "--quick" in (argv if argv is not None else sys.argv[1:])
-    rows = run(quick)
+    argv = list(argv if argv is not None else sys.argv[1:])
+    base = Path(argv[argv.index("--base") + 1]).resolve() if "--base" in argv else None
+    rows = run("--quick" in argv, base, "--cold-only" in argv)
     print(f"load average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     print("| case | wall s, median [range] | CPU s, median [range] | goal | median / goal |")
     print("|---|---|---|---|---|")

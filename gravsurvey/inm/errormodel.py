@@ -257,8 +257,12 @@ def continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, n):
     # gyro drift: d(dr) += [r x] C nu, d(dv) += [v x] C nu, (d(C theta) -= C nu), C nu isotropic
     nb = 9 if aided else 6
     lg = np.zeros((nb, 3))
-    lg[0:3, :] = _skew(r)
-    lg[3:6, :] = _skew(v)
+    sr = _skew(r)
+    sv = _skew(v)
+    for i in range(3):  # not `lg[0:3, :] = sr`: an array assignment compiles numba's error formatting (~2 s)
+        for j in range(3):
+            lg[i, j] = sr[i, j]
+            lg[3 + i, j] = sv[i, j]
     if aided:
         for i in range(3):
             lg[6 + i, i] = -1.0
@@ -323,16 +327,6 @@ def continuous_model(r, v, up, e1, e2, e3, w02, speed, c):
 
 
 @njit(cache=True)
-def _to_seed(m_blk, perm):
-    n = perm.shape[0]
-    out = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            out[i, j] = m_blk[perm[i], perm[j]]
-    return out
-
-
-@njit(cache=True)
 def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     """Transition and process noise of every epoch, seed order (see module docstring).
 
@@ -348,7 +342,8 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
     n = perm.shape[0]
     phi = np.zeros((nep, n, n))
     q = np.zeros((nep, n, n))
-    phi[0] = np.eye(n)
+    for i in range(n):
+        phi[0, i, i] = 1.0
     t_prev = np.eye(n)
     t_cur = np.eye(n)
     t_cur_t = np.empty((n, n))
@@ -371,9 +366,12 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm):
         matmul_into(w, t_prev, phx)
         matmul_into(t_cur_t, qy, w)
         matmul_into(w, t_cur, qx)
-        phi[k] = _to_seed(phx, perm)
-        qs = _to_seed(qx, perm)
-        q[k] = 0.5 * (qs + qs.T)
+        # element by element, not `phi[k] = ...`: array assignments and expressions compile
+        # numba's broadcast-error formatting (~2 s on a cold start)
+        for i in range(n):
+            for j in range(n):
+                phi[k, i, j] = phx[perm[i], perm[j]]
+                q[k, i, j] = 0.5 * (qx[perm[i], perm[j]] + qx[perm[j], perm[i]])
     return phi, q
 
 
