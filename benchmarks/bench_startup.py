@@ -98,16 +98,34 @@ def _stats(v) -> dict:
     return {"median": float(np.median(v)), "min": float(v.min()), "max": float(v.max()), "n": int(v.size)}
 
 
-def _cold_warm_pair(work: Path, tag: str, repo: Path) -> tuple[float, float, float, float]:
-    """One cold run in a fresh copy with an empty cache, then a warm run of it: wall, CPU."""
+#: ``gravsurvey run`` as ``python -m gravsurvey.cli run`` does it, writing the CPU seconds of
+#: the run's own process (without the processes it started) to the file ``argv[1]``
+OWN_CPU = """
+import json, resource, sys
+from gravsurvey.cli import main
+try:
+    main(sys.argv[2:])
+finally:
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    with open(sys.argv[1], "w") as fh:
+        fh.write(json.dumps(ru.ru_utime + ru.ru_stime))
+"""
+
+
+def _cold_warm_pair(work: Path, tag: str, repo: Path) -> tuple[float, float, float, float, float]:
+    """One cold run in a fresh copy with an empty cache, then a warm run of it: wall and CPU
+    of each, and the CPU of the cold run's own process (without a background compiler)."""
     d = work / tag
     shutil.copytree(REPO / "sample_data" / "grid_ros2", d / "data")
     cache = d / "numba-cache"
     cache.mkdir()
     env = _env(cache, repo)
-    cw, cc = _timed(_run_cmd(d / "data" / "survey.yaml", d / "out_cold", repo), env, d)
-    ww, wc = _timed(_run_cmd(d / "data" / "survey.yaml", d / "out_warm", repo), env, d)
-    return cw, cc, ww, wc
+    own = d / "own_cpu.json"
+    cfg = d / "data" / "survey.yaml"
+    cmd = [_python(repo), "-c", OWN_CPU, str(own), "run", str(cfg), "-o", str(d / "out_cold"), "--force"]
+    cw, cc = _timed(cmd, env, d)
+    ww, wc = _timed(_run_cmd(cfg, d / "out_warm", repo), env, d)
+    return cw, cc, ww, wc, float(json.loads(own.read_text()))
 
 
 def cold_and_warm_sample(work: Path, pairs: int, base: Path | None = None) -> list[dict]:
@@ -118,7 +136,7 @@ def cold_and_warm_sample(work: Path, pairs: int, base: Path | None = None) -> li
     rows of both are returned, ``base`` first.
     """
     sides = [("this", REPO)] if base is None else [("base", base), ("this", REPO)]
-    got: dict = {name: ([], [], [], []) for name, _ in sides}
+    got: dict = {name: ([], [], [], [], []) for name, _ in sides}
     for i in range(pairs):
         for name, repo in sides if i % 2 == 0 else sides[::-1]:
             for lst, x in zip(got[name], _cold_warm_pair(work, f"{name}{i}", repo)):
@@ -129,7 +147,7 @@ def cold_and_warm_sample(work: Path, pairs: int, base: Path | None = None) -> li
     return rows
 
 
-def _cold_warm_rows(cold_w, cold_c, warm_w, warm_c, label="") -> list[dict]:
+def _cold_warm_rows(cold_w, cold_c, warm_w, warm_c, own_c, label="") -> list[dict]:
     cw, cc, ww, wc = _stats(cold_w), _stats(cold_c), _stats(warm_w), _stats(warm_c)
     return [
         {
@@ -140,6 +158,12 @@ def _cold_warm_rows(cold_w, cold_c, warm_w, warm_c, label="") -> list[dict]:
             "ratio_to_goal": cw["median"] / GOAL_COLD_S,
             "cpu_ratio_to_goal": cc["median"] / GOAL_COLD_S,
             "cold_over_warm": float(np.median(np.array(cold_w) / np.array(warm_w))),
+        },
+        {
+            "case": "sample survey, cold, CPU of the run's own process (no background compiler)" + label,
+            "wall": None,
+            "cpu": _stats(own_c),
+            "goal_s": None,
         },
         {"case": "sample survey, warm, whole process" + label, "wall": ww, "cpu": wc, "goal_s": None},
     ]
