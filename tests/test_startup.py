@@ -13,6 +13,8 @@ import sys
 from pathlib import Path
 
 import pytest
+
+import gravsurvey  # noqa: F401  (chooses numba's cache folder before numba is imported)
 from numba import njit
 
 ROOT = Path(__file__).resolve().parents[1]
