@@ -183,16 +183,20 @@ def run(config, output_dir, jobs, force, wait_s, quiet, no_plots):
     from .pipeline import run_survey
 
     show = _interactive() and not quiet
+    from .precompile import Precompiler
+
     marker = announce_compilation()
-    result = run_survey(
-        config,
-        output_dir=output_dir,
-        jobs=jobs,
-        force=force,
-        wait_s=wait_s,
-        progress=show,
-        plots=False if no_plots else None,
-    )
+    # cold cache, one process: the second core compiles the kernels the run needs later
+    with Precompiler(marker is not None and jobs == 1):
+        result = run_survey(
+            config,
+            output_dir=output_dir,
+            jobs=jobs,
+            force=force,
+            wait_s=wait_s,
+            progress=show,
+            plots=False if no_plots else None,
+        )
     lost = set(result.data_loss)  # reported below as a data problem, not again as a warning
     for note in result.notes:  # already in the log (pipeline), so only printed and counted
         if note not in lost:

@@ -135,3 +135,25 @@ def test_large_survey_is_thinned_to_the_fit_limit(monkeypatch):
     ok = np.isfinite(g.value_mgal)
     rms = np.sqrt(np.mean((g.value_mgal[ok] - truth_field_mgal(GE, GN, g.altitude_m)[ok]) ** 2))
     assert rms < 0.6, rms  # coarser along the lines, still the field (std 2.2 mGal)
+
+
+def test_point_sources_match_harmonica():
+    """Our numpy Jacobian and prediction (numba cannot cache harmonica's kernels) against
+    harmonica's own EquivalentSources on the same fit: same coefficients, same field."""
+    import harmonica as hm
+
+    from gravsurvey.grid import point_source_jacobian, point_source_predict
+
+    rng = np.random.default_rng(3)
+    fit = tuple(rng.uniform(0, 5000, 300) for _ in range(2)) + (rng.uniform(500, 800, 300),)
+    v = rng.standard_normal(300)
+    pred = tuple(rng.uniform(0, 5000, 1000) for _ in range(2)) + (np.full(1000, 700.0),)
+    ref = hm.EquivalentSources(depth=2000.0, damping=1e-3).fit(fit, v)
+    ours = hm.EquivalentSources(depth=2000.0, damping=1e-3)
+    ours.jacobian = point_source_jacobian
+    ours.fit(fit, v)
+    np.testing.assert_allclose(point_source_jacobian(fit, ref.points_), ref.jacobian(fit, ref.points_), rtol=1e-14)
+    np.testing.assert_allclose(ours.coefs_, ref.coefs_, rtol=1e-9, atol=1e-12 * np.abs(ref.coefs_).max())
+    want = ref.predict(pred)
+    got = point_source_predict(pred, ours.points_, ours.coefs_, block=7 * 300)  # several blocks
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12 * np.abs(want).max())

@@ -14,6 +14,9 @@ from pathlib import Path
 
 import pytest
 
+import gravsurvey  # noqa: F401  (chooses numba's cache folder before numba is imported)
+from numba import njit
+
 ROOT = Path(__file__).resolve().parents[1]
 # a folder nobody (root included) can create entries in
 UNWRITABLE = "/proc/gravsurvey-no-such-home"
@@ -129,3 +132,137 @@ def test_compiling_message_on_a_terminal_only_while_the_cache_is_cold(tmp_path, 
     monkeypatch.setattr(cli, "_interactive", lambda: False)
     cli.announce_compilation()
     assert capsys.readouterr().err == ""
+
+
+# --- cold start: the second core compiles the kernels of KERNELS (gravsurvey.precompile) -----
+
+
+@njit  # not cached: this module may import numba before gravsurvey chose the cache folder
+def _probe_kernel(x):
+    return x.sum() + 1.0
+
+
+PROBE_KERNELS = ((__name__, "_probe_kernel", "Array(float64, 1, 'C')"),)
+
+
+def test_kernel_list_names_current_kernels():
+    """Every entry of KERNELS is a cached numba kernel of the package, with as many argument
+    types as the function has parameters (a stale entry would only cost background CPU)."""
+    import importlib
+    import inspect
+
+    from numba.core.dispatcher import Dispatcher
+
+    from gravsurvey import precompile
+
+    assert precompile.KERNELS and any(k[1] == precompile.WORKER_FIRST for k in precompile.KERNELS)
+    for module, name, sig in precompile.KERNELS:
+        disp = getattr(importlib.import_module(module), name)
+        assert isinstance(disp, Dispatcher), name
+        assert len(precompile.parse_signature(sig)) == len(inspect.signature(disp.py_func).parameters), name
+
+
+def test_worker_compiles_unclaimed_kernels_into_the_cache(tmp_path):
+    """The background process skips what the run claimed, compiles the rest into the cache
+    and marks each one done."""
+    from gravsurvey import precompile
+
+    cache = tmp_path / "cache"
+    claims = tmp_path / "claims"
+    claims.mkdir()
+    (claims / "0.claim").touch()  # the run took the first kernel
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
+    r = subprocess.run(
+        [sys.executable, "-m", "gravsurvey.precompile", str(claims), "2", "0"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stderr
+    assert (claims / "1.done").exists() and not (claims / "0.done").exists()
+    second = precompile.KERNELS[1][1]
+    assert list(cache.rglob(f"*{second}-*.nbi")) and not list(cache.rglob(f"*{precompile.KERNELS[0][1]}-*.nbi"))
+
+
+def _no_worker(tmp_path, monkeypatch, script):
+    """A Precompiler over PROBE_KERNELS whose background process runs ``script``."""
+    from gravsurvey import precompile
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(
+        precompile, "_start_worker", lambda folder, kernels: subprocess.Popen([sys.executable, "-c", script])
+    )
+    return precompile.Precompiler(True, kernels=PROBE_KERNELS)
+
+
+def test_run_does_not_wait_for_a_background_process_that_died(tmp_path, monkeypatch):
+    """The background process claimed the kernel and died: the run compiles it itself."""
+    import numpy as np
+    from numba.core.dispatcher import Dispatcher
+
+    original = Dispatcher.compile
+    with _no_worker(tmp_path, monkeypatch, "pass") as pre:
+        assert Dispatcher.compile is not original
+        (pre.claims.folder / "0.claim").touch()
+        assert _probe_kernel(np.ones(3)) == 4.0
+        assert pre.waited == [0]
+        folder = pre.claims.folder
+    assert Dispatcher.compile is original and not folder.exists()
+
+
+def test_interrupted_run_stops_the_background_process(tmp_path, monkeypatch):
+    """Ctrl-C (or any error) in the run: the background process is stopped, its claim folder
+    removed, numba's compile restored."""
+    from numba.core.dispatcher import Dispatcher
+
+    original = Dispatcher.compile
+    pre = _no_worker(tmp_path, monkeypatch, "import time; time.sleep(600)")
+    with pytest.raises(KeyboardInterrupt):
+        with pre:
+            proc, folder = pre.proc, pre.claims.folder
+            raise KeyboardInterrupt
+    assert proc.poll() is not None and not folder.exists() and Dispatcher.compile is original
+
+
+def test_precompiler_off_without_a_writable_cache(tmp_path, monkeypatch):
+    from gravsurvey import precompile
+
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    with precompile.Precompiler(True) as pre:
+        assert pre.proc is None
+    monkeypatch.setenv("NUMBA_CACHE_DIR", UNWRITABLE)
+    with precompile.Precompiler(True) as pre:
+        assert pre.proc is None
+    with precompile.Precompiler(False) as pre:  # warm cache, or --jobs > 1
+        assert pre.proc is None
+
+
+def test_cold_quickstart_run_shares_the_compilation(tmp_path):
+    """The README quickstart with an empty cache: exit 0, the background process compiled
+    into the shared cache, nothing left behind; the warm rerun gives the same profiles."""
+    src = tmp_path / "data"
+    shutil.copytree(ROOT / "sample_data" / "grid_ros2", src)
+    cache = tmp_path / "cache"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
+    outs = []
+    for tag in ("cold", "warm"):
+        out = tmp_path / tag
+        r = subprocess.run(
+            [sys.executable, "-m", "gravsurvey.cli", "run", str(src / "survey.yaml"), "-o", str(out), "--no-plots"],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=1200,
+        )
+        assert r.returncode == 0, r.stderr
+        assert not list(cache.glob(".gravsurvey-precompile-*"))
+        outs.append((out / "profiles.csv").read_bytes())
+    from gravsurvey.precompile import KERNELS
+
+    # one compiled signature per listed kernel: the run used the listed one (a second file would
+    # mean the run's call-site types moved away from KERNELS, and the background work is lost)
+    for module, name, _ in KERNELS:
+        files = list(cache.rglob(f"{module.rsplit('.', 1)[1]}.{name}-*.nbc"))
+        assert len(files) == 1, (name, files)
+    assert outs[0] == outs[1]

@@ -329,16 +329,6 @@ def continuous_model(r, v, up, e1, e2, e3, w02, speed, c):
     return continuous_model_n(r, v, up, e1, e2, e3, w02, speed, c, 8)
 
 
-@njit(cache=True)
-def _to_seed(m_blk, perm):
-    n = perm.shape[0]
-    out = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            out[i, j] = m_blk[perm[i], perm[j]]
-    return out
-
-
 #: Bounds of the balancing exponents (scales 2^-60 .. 2^60): a state whose column or row is
 #: empty (e.g. a constant bias) would otherwise be scaled without end.
 BALANCE_EXP = 60
@@ -431,7 +421,8 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm, sca
             q_in[i, j] = 1.0 / (scale[i] * scale[j])
             a_out[i, j] = scale[i] / scale[j]
             q_out[i, j] = scale[i] * scale[j]
-    phi[0] = np.eye(n)
+    for i in range(n):
+        phi[0, i, i] = 1.0
     t_prev = np.eye(n)
     t_cur = np.eye(n)
     t_cur_t = np.empty((n, n))
@@ -462,9 +453,12 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm, sca
         matmul_into(w, t_prev, phx)
         matmul_into(t_cur_t, qy, w)
         matmul_into(w, t_cur, qx)
-        phi[k] = _to_seed(phx, perm)
-        qs = _to_seed(qx, perm)
-        q[k] = 0.5 * (qs + qs.T)
+        # element by element, not `phi[k] = ...`: array assignments and expressions compile
+        # numba's broadcast-error formatting (~2 s on a cold start)
+        for i in range(n):
+            for j in range(n):
+                phi[k, i, j] = phx[perm[i], perm[j]]
+                q[k, i, j] = 0.5 * (qx[perm[i], perm[j]] + qx[perm[j], perm[i]])
     return phi, q
 
 

@@ -657,13 +657,23 @@ def _rts_into(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, unrolled):
 
 
 @njit(cache=True)
+def _copy_last(x_f, p_f, x_s, p_s):
+    """``x_s[-1] = x_f[-1]``, ``p_s[-1] = p_f[-1]`` element by element: an array assignment
+    compiles numba's broadcast-error formatting (string kernels, ~2 s on a cold start)."""
+    nep, n = x_f.shape
+    for i in range(n):
+        x_s[nep - 1, i] = x_f[nep - 1, i]
+        for j in range(n):
+            p_s[nep - 1, i, j] = p_f[nep - 1, i, j]
+
+
+@njit(cache=True)
 def _rts_loop(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s):
     """Every epoch by the generic loops (:func:`_rts_step`)."""
     nep, n = x_f.shape
     if nep == 0:
         return 0.0
-    x_s[nep - 1] = x_f[nep - 1]
-    p_s[nep - 1] = p_f[nep - 1]
+    _copy_last(x_f, p_f, x_s, p_s)
     d = np.empty(n)
     idg = np.empty(n)
     lch = np.empty((n, n))
@@ -687,8 +697,7 @@ def _rts_loop8(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s):
     nep, n = x_f.shape
     if nep == 0:
         return 0.0
-    x_s[nep - 1] = x_f[nep - 1]
-    p_s[nep - 1] = p_f[nep - 1]
+    _copy_last(x_f, p_f, x_s, p_s)
     phi_pf1 = np.empty((1, n, n))
     sink = 0.0
     for k1 in range(nep - 2, -1, -_BLOCK):

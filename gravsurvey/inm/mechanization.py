@@ -269,7 +269,11 @@ def _lagrange_mid(t, a, k, tm, out):
 
 @njit(cache=True)
 def _attitude_kernel(t, w, c0, c_out):
-    c_out[0] = c0
+    # element by element: an array assignment `c_out[0] = c0` pulls in numba's broadcast-error
+    # formatting (string kernels), ~2 s of compilation on a cold start
+    for i in range(3):
+        for j in range(3):
+            c_out[0, i, j] = c0[i, j]
     phi = np.empty(3)
     wm = np.empty(3)
     rot = np.empty((3, 3))
@@ -315,8 +319,9 @@ def _gravity_i(r, c, s, radius, use_ext, a, f, gm, omega):
 @njit(cache=True)
 def _translation_kernel(t, a_i, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, omega, r_out, v_out):
     n = t.shape[0]
-    r_out[0] = r0
-    v_out[0] = v0
+    for j in range(3):  # not `r_out[0] = r0`: see _attitude_kernel
+        r_out[0, j] = r0[j]
+        v_out[0, j] = v0[j]
     am = np.empty(3)
     y = np.empty(6)
     ys = np.empty(6)
