@@ -50,6 +50,7 @@ import numpy as np
 from numba import njit
 
 from ._unrolled import filter_step8, matmul8, matmul14, rts_step8, tri_solve8, tri_solve14
+from .kalman14 import N14, filter_step14, rts_gain14, rts_update14
 
 
 # --------------------------------------------------------------------------
@@ -555,6 +556,8 @@ def _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_
     """
     if unrolled and x0.shape[0] == 8:
         _filter_loop8(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf)
+    elif unrolled and x0.shape[0] == N14:
+        _filter_loop14(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf)
     else:
         _filter_loop(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf)
 
@@ -583,6 +586,23 @@ def _filter_loop8(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf):
         # reference-count updates, comparable to the arithmetic of a step)
         if k > 0 and _diagonal_at(r, k):
             filter_step8(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, k - 1 if keep else 0)
+        else:
+            _filter_epoch(k, x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, phit, kg, ph)
+
+
+@njit(cache=True)
+def _filter_loop14(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf):
+    """n = 14: the vector step (:mod:`gravsurvey.inm.kalman14`) wherever R is diagonal, the
+    generic loops elsewhere."""
+    n = x0.shape[0]
+    keep = phi_pf.shape[0] == phi.shape[0]
+    phit = np.empty((n, n))
+    kg = np.empty(n)
+    ph = np.empty(n)
+    wk = np.empty(32)
+    for k in range(phi.shape[0]):
+        if k > 0 and _diagonal_at(r, k):
+            filter_step14(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, k - 1 if keep else 0, phit, wk)
         else:
             _filter_epoch(k, x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, phit, kg, ph)
 
@@ -646,6 +666,8 @@ def _rts_into(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, unrolled):
     """
     if unrolled and x_f.shape[1] == 8:
         _rts_loop8(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s)
+    elif unrolled and x_f.shape[1] == N14:
+        _rts_loop14(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s)
     else:
         _rts_loop(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s)
 
@@ -701,6 +723,38 @@ def _rts_loop8(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s):
             else:
                 _matmul(phi[k + 1], p_f[k], phi_pf1[0], False)
                 rts_step8(k, x_f, p_f, x_p, p_p, phi_pf1, 0, x_s, p_s)
+    return sink
+
+
+@njit(cache=True)
+def _rts_loop14(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s):
+    """n = 14: the vector steps of :mod:`gravsurvey.inm.kalman14`, block by block: first the gains
+    of the block's epochs in a forward sweep (they do not depend on the smoothed epochs, so their
+    long latency chains overlap; the inputs are read forwards), then the backward recursion."""
+    nep, n = x_f.shape
+    if nep == 0:
+        return 0.0
+    x_s[nep - 1] = x_f[nep - 1]
+    p_s[nep - 1] = p_f[nep - 1]
+    phi_pf1 = np.empty((1, n, n))
+    gain = np.empty((_BLOCK, n, n))
+    lt = np.empty((n, n))
+    b = np.empty((n, n))
+    t = np.empty((n, n))
+    wk = np.empty(32)
+    sink = 0.0
+    for k1 in range(nep - 2, -1, -_BLOCK):
+        k0 = max(k1 - _BLOCK + 1, 0)
+        sink += _touch(p_f, k0, k1 + 1)
+        for k in range(k0, k1 + 1):
+            if have_phi_pf:
+                rts_gain14(k, p_p, phi_pf, k, gain, k - k0, lt, b, wk)
+            else:
+                _matmul(phi[k + 1], p_f[k], phi_pf1[0], False)
+                rts_gain14(k, p_p, phi_pf1, 0, gain, k - k0, lt, b, wk)
+        for kk in range(k1 - k0 + 1):
+            k = k1 - kk
+            rts_update14(k, x_f, p_f, x_p, p_p, gain, k - k0, x_s, p_s, b, t)
     return sink
 
 
