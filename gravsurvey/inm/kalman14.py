@@ -56,14 +56,25 @@ def filter_step14(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, kpf, ph
     zero6 = vsplat(0.0, 6)
     half8 = vsplat(0.5, 8)
     half6 = vsplat(0.5, 6)
-    for i in range(N14):
-        acc = 0.0
-        for j in range(N14):
-            c = phi[k, i, j]
-            if c != 0.0:
-                acc += c * x_f[k - 1, j]
-        x_p[k, i] = acc
-        x_f[k, i] = acc
+    # phi^T, and which of its rows have a nonzero 6-lane half (bit l of hi)
+    hi = 0
+    for l in range(N14):
+        for i in range(N14):
+            c = phi[k, i, l]
+            phit[l, i] = c
+            if i >= 8 and c != 0.0:
+                hi |= 1 << l
+    # x = phi x_f[k - 1]: lane i sums phi[i, j] x[j] over j ascending, as the generic loop
+    x0 = zero8
+    x1 = zero6
+    for j in range(N14):
+        c = x_f[k - 1, j]
+        x0 = vadd(x0, vmul(vload(phit, N14 * j, 8), vsplat(c, 8)))
+        x1 = vadd(x1, vmul(vload(phit, N14 * j + 8, 6), vsplat(c, 6)))
+    vstore(x_p, k * N14, x0)
+    vstore(x_p, k * N14 + 8, x1)
+    vstore(x_f, k * N14, x0)
+    vstore(x_f, k * N14 + 8, x1)
     # T = phi P: row i = sum over the nonzero phi[i, l] of phi[i, l] P[l, :]
     for i in range(N14):
         o0 = zero8
@@ -75,14 +86,6 @@ def filter_step14(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, kpf, ph
                 o1 = vadd(o1, vmul(vsplat(c, 6), vload(p_f, kb1 + N14 * l + 8, 6)))
         vstore(phi_pf, tb + N14 * i, o0)
         vstore(phi_pf, tb + N14 * i + 8, o1)
-    # phi^T, and which of its rows have a nonzero 6-lane half (bit l of hi)
-    hi = 0
-    for l in range(N14):
-        for i in range(N14):
-            c = phi[k, i, l]
-            phit[l, i] = c
-            if i >= 8 and c != 0.0:
-                hi |= 1 << l
     # P_p = T phi^T + sym(Q), upper triangle by rows; the lower lanes from the rows above
     for i in range(N14):
         qo = kb + N14 * i

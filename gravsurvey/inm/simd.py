@@ -227,7 +227,11 @@ def vjoin(typingctx, low, high, cut):
         lanes = ir.Constant(ir.VectorType(it, width), list(range(width)))
         c = context.cast(builder, args[2], sig.args[2], types.intp)
         cv = builder.insert_element(ir.Constant(ir.VectorType(it, width), ir.Undefined), c, ir.Constant(_I32, 0))
-        cv = builder.shuffle_vector(cv, ir.Constant(ir.VectorType(it, width), ir.Undefined), ir.Constant(ir.VectorType(_I32, width), [0] * width))
+        cv = builder.shuffle_vector(
+            cv,
+            ir.Constant(ir.VectorType(it, width), ir.Undefined),
+            ir.Constant(ir.VectorType(_I32, width), [0] * width),
+        )
         mask = builder.icmp_signed("<", lanes, cv)
         return builder.select(mask, args[0], args[1])
 
