@@ -21,8 +21,8 @@ epoch for filter + smoother against 1.4 us for the generic loops below (14,401 e
 same numbers to the last bit (tested).  For n = 14 (the GNSS-aided model a default run uses) the
 steps are hand-written vector loops (:mod:`gravsurvey.inm.kalman14`: rows as 8 + 6 lanes, zero
 coefficients of phi and h skipped, upper triangles only, the smoother's gains computed block-wise
-in a forward sweep), also bit-for-bit the generic loops' numbers, at about a second of
-compilation (generated 14-state steps took ~27 s, :mod:`gravsurvey.inm.codegen`); the generic
+in a forward sweep), also bit-for-bit the generic loops' numbers (~6 s of compilation, in place of the generic
+loops' for n = 14; generated 14-state steps took ~27 s, :mod:`gravsurvey.inm.codegen`); the generic
 loops still take their 14 x 14 products and triangular solves from generated vector loops
 (``matmul14``, ``tri_solve14``; the Van Loan discretisation uses ``matmul14`` too).  The
 fixed-size steps sit in their own compiled loops (:func:`_filter_loop8`, :func:`_rts_loop8`,

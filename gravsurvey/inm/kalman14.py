@@ -4,8 +4,11 @@ Each step does, operation for operation, what the generic loops of :mod:`gravsur
 do for one epoch (``_predict_into`` + ``_scalar_update``, ``_rts_step``), so the numbers are the
 same to the last bit (tested), but with every 14-element row of a covariance held in two
 :mod:`gravsurvey.inm.simd` vectors (8 and 6 lanes) and written as loops, not unrolled text: the
-generated 14-state steps this replaces (:mod:`gravsurvey.inm.codegen`) were as fast but took
-~27 s to compile; these take about a second.
+generated 14-state steps this replaces (:mod:`gravsurvey.inm.codegen`) took ~27 s to compile;
+these take ~5-6 s of CPU (measured on a loaded machine; most of it numba's typing and lowering
+of the intrinsic calls: a variant still took 3.4 s with ``NUMBA_OPT=0``), in place of the generic 14-state loops a
+default run then no longer compiles, so its cold first call is unchanged (docs/benchmarks.md,
+"Kalman filter").
 
 Structure used, without changing a single rounding:
 
