@@ -5,7 +5,7 @@ import pytest
 from numba import njit
 from numba.core.errors import TypingError
 
-from gravsurvey.inm.simd import vadd, vcol, vdiv, vget, vload, vmul, vset, vsplat, vstore, vsub
+from gravsurvey.inm.simd import vadd, vcol, vdiv, vget, vjoin, vload, vmul, vset, vsplat, vstore, vsub
 
 
 @njit
@@ -72,3 +72,20 @@ def test_non_contiguous_arrays_are_refused_at_compile_time():
     assert first_row(a) == 1.0
     with pytest.raises(TypingError):
         first_row(np.asfortranarray(a))
+
+
+@njit
+def _join(a, b, out, cut):
+    vstore(out, 0, vjoin(vload(a, 0, 8), vload(b, 0, 8), cut))
+    vstore(out, 8, vjoin(vload(a, 8, 6), vload(b, 8, 6), cut - 8))
+
+
+@pytest.mark.parametrize("cut", [-3, 0, 1, 5, 8, 9, 13, 14, 20])
+def test_join_takes_lanes_below_the_cut_from_the_first_vector(cut):
+    a = np.arange(1.0, 15.0)
+    b = -np.arange(1.0, 15.0)
+    b[3] = -0.0
+    out = np.full(14, np.nan)
+    _join(a, b, out, cut)
+    expected = np.where(np.arange(14) < cut, a, b)
+    assert np.array_equal(out.view(np.uint64), expected.view(np.uint64))

@@ -38,8 +38,8 @@ from .simd import vadd, vcol, vdiv, vget, vload, vmul, vset, vsplat, vstore, vsu
 '''
 
 #: State sizes with generated filter/smoother steps: the seed's 8-state model.  Not the
-#: 14-state GNSS-aided model: its steps took ~27 s to compile (once per machine) to save ~0.01 s
-#: per flight-hour (84 -> 38 ms for 4 h), a bad trade for a tool run once per flight.
+#: 14-state GNSS-aided model: its generated steps took ~27 s to compile (once per machine); it has
+#: hand-written vector loops instead (:mod:`gravsurvey.inm.kalman14`, same rounding, ~6 s).
 STEP_SIZES = (8,)
 #: Sizes with a generated n x n product (the Van Loan discretisation: 8 and 14 states; for 14,
 #: 0.21 us per product against 0.91 us for the generic loops, ~0.1 s per flight-hour, for ~0.5 s

@@ -14,30 +14,34 @@ Both a numba kernel (``kalman_filter``/``rts_smoother``) and a pure-numpy
 reference (``kalman_filter_ref``/``rts_smoother_ref``) are provided; tests
 check one against the other and both against filterpy.
 
-Speed notes (measured on the 8-state model, 14,401 epochs): no fastmath anywhere (results are
-bit-for-bit reproducible across machines); for n = 8 and a diagonal R each epoch is one call of
-a generated step (:mod:`gravsurvey.inm._unrolled`) that keeps every covariance row in an
-8-wide vector (:mod:`gravsurvey.inm.simd`): 0.6 us per epoch for filter + smoother against
-1.4 us for the generic loops below, and the same numbers to the last bit (tested).  Not for
-the 14-state GNSS-aided model: its generated steps took ~27 s to compile (once per machine) to
-save ~0.01 s per flight-hour (:mod:`gravsurvey.inm.codegen`); there the generic loops take
-their n x n products and triangular solves from generated vector loops (``matmul14``,
-``tri_solve14``: same rounding, ~1.6x less CPU for filter + smoother than scalar loops, ~1 s
-of compilation).  The generated 8-state steps sit in their own compiled loops
-(:func:`_filter_loop8`, :func:`_rts_loop8`) so that other state sizes never compile them, and
+Speed notes: no fastmath anywhere (results are bit-for-bit reproducible across machines).  For
+n = 8 and a diagonal R each epoch is one call of a generated step (:mod:`gravsurvey.inm._unrolled`)
+that keeps every covariance row in an 8-wide vector (:mod:`gravsurvey.inm.simd`): 0.6 us per
+epoch for filter + smoother against 1.4 us for the generic loops below (14,401 epochs), and the
+same numbers to the last bit (tested).  For n = 14 (the GNSS-aided model a default run uses) the
+steps are hand-written vector loops (:mod:`gravsurvey.inm.kalman14`: rows as 8 + 6 lanes, zero
+coefficients of phi and h skipped, upper triangles only, the smoother's gains computed block-wise
+in a forward sweep), also bit-for-bit the generic loops' numbers (~6 s of compilation, in place of the generic
+loops' for n = 14; generated 14-state steps took ~27 s, :mod:`gravsurvey.inm.codegen`); the generic
+loops still take their 14 x 14 products and triangular solves from generated vector loops
+(``matmul14``, ``tri_solve14``; the Van Loan discretisation uses ``matmul14`` too).  The
+fixed-size steps sit in their own compiled loops (:func:`_filter_loop8`, :func:`_rts_loop8`,
+:func:`_filter_loop14`, :func:`_rts_loop14`) so that other state sizes never compile them, and
 the full-R update uses no ``np.linalg`` (:func:`_update`): both for the cold start.  Every other
-size (16 with the accelerometer biases, 18 with the horizontal disturbance) takes the generic loops (any n, any R): scalar measurement updates in O(n^2); small products in
-scalar-accumulator column blocks (:func:`_matmul`).  Both: outputs allocated by numpy, not
-inside the kernels (page faults); ``phi[k+1] P_f[k]`` from the prediction reused by the
+size (16 with the accelerometer biases, 18 with the horizontal disturbance) takes the generic
+loops (any n, any R): scalar measurement updates in O(n^2); small products in scalar-accumulator
+column blocks (:func:`_matmul`).  Outputs: one 2-MiB-aligned allocation by numpy, not inside the
+kernels (:func:`_outputs`: page faults); ``phi[k+1] P_f[k]`` from the prediction reused by the
 smoother (:func:`filter_and_smooth`); the backward sweep reads its inputs block-wise forwards
-first (prefetching).
+first (prefetching).  Measured: docs/benchmarks.md, "Kalman filter".
 
 Agreement with filterpy on the 14-state model, and why it needs the true-error basis
 (:func:`change_basis`, :func:`gravsurvey.inm.errormodel.true_error_basis`): docs/benchmarks.md,
 "Kalman filter: speed and agreement".
 
 numba's on-disk cache tracks only the file that defines a function: after editing
-``simd.py`` or regenerating ``_unrolled.py``, delete this module's cached kernels
+``simd.py`` or ``kalman14.py`` (its steps are inlined into this module's loops) or regenerating
+``_unrolled.py``, delete this module's cached kernels
 (``inm_*/kalman.*.nb?`` in the kernel cache folder, :func:`gravsurvey.setup_numba_cache`), or
 they keep the old steps.
 """
@@ -50,6 +54,7 @@ import numpy as np
 from numba import njit
 
 from ._unrolled import filter_step8, matmul8, matmul14, rts_step8, tri_solve8, tri_solve14
+from .kalman14 import N14, filter_step14, rts_gain14, rts_update14
 
 
 # --------------------------------------------------------------------------
@@ -499,9 +504,9 @@ def _diagonal_at(r, k):
 def kalman_filter(x0, p0, phi, q, z, h, r, unrolled=True):
     """Forward Kalman filter over ``N`` epochs (numba kernel :func:`_kalman_filter_into`).
 
-    The outputs are allocated here with numpy (whose large allocations are backed by huge
-    pages) rather than inside the kernel: with numba's allocator every call page-faulted
-    ~2000 4-KiB pages per (N, 8, 8) array, a third of the run time.
+    The outputs are allocated here, as one huge-page-aligned block (:func:`_outputs`), rather
+    than inside the kernel: with numba's allocator every call page-faulted ~2000 4-KiB pages per
+    (N, 8, 8) array, a third of the run time.
 
     Parameters
     ----------
@@ -516,8 +521,9 @@ def kalman_filter(x0, p0, phi, q, z, h, r, unrolled=True):
     h : ndarray (N, m, n)
     r : ndarray (N, m, m)
     unrolled : bool
-        Use the generated unrolled vector step where it applies (n = 8; see
-        :mod:`gravsurvey.inm.codegen`); ``False`` forces the generic loops (same numbers).
+        Use the fixed-size vector steps where they apply (n = 8: generated,
+        :mod:`gravsurvey.inm.codegen`; n = 14: :mod:`gravsurvey.inm.kalman14`); ``False`` forces
+        the generic loops (same numbers).
 
     Returns
     -------
@@ -533,11 +539,7 @@ def kalman_filter(x0, p0, phi, q, z, h, r, unrolled=True):
     nep = phi.shape[0]
     n = x0.shape[0]
     m = z.shape[1]
-    x_f = np.empty((nep, n))
-    p_f = np.empty((nep, n, n))
-    x_p = np.empty((nep, n))
-    p_p = np.empty((nep, n, n))
-    innov = np.empty((nep, m))
+    x_f, p_f, x_p, p_p, innov = _outputs(((nep, n), (nep, n, n), (nep, n), (nep, n, n), (nep, m)))
     _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, np.empty((1, n, n)), unrolled)
     return x_f, p_f, x_p, p_p, innov
 
@@ -547,14 +549,17 @@ def _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_
 
     If ``phi_pf`` has ``N`` rows, ``phi_pf[k - 1] = phi[k] @ p_f[k - 1]`` (a by-product of the
     prediction, stored one row down so that the smoother's ``p_s`` can hold it) is kept for the
-    smoother; give it one row to discard it.  ``unrolled``: use the generated fixed-size step
-    (:mod:`gravsurvey.inm._unrolled`) where it applies (n = 8, diagonal R), same numbers.
+    smoother; give it one row to discard it.  ``unrolled``: use the fixed-size vector steps
+    where they apply (n = 8: :mod:`gravsurvey.inm._unrolled`; n = 14:
+    :mod:`gravsurvey.inm.kalman14`; diagonal R), same numbers.
 
-    Two compiled loops, chosen here: with the generated step in the same kernel, numba would
-    compile it for every state size (~4 s of CPU on a cold cache, for a step only n = 8 uses).
+    Separate compiled loops, chosen here: with the fixed-size steps in the same kernel, numba
+    would compile them for every state size (~4 s of CPU on a cold cache for the 8-state step).
     """
     if unrolled and x0.shape[0] == 8:
         _filter_loop8(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf)
+    elif unrolled and x0.shape[0] == N14:
+        _filter_loop14(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf)
     else:
         _filter_loop(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf)
 
@@ -583,6 +588,23 @@ def _filter_loop8(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf):
         # reference-count updates, comparable to the arithmetic of a step)
         if k > 0 and _diagonal_at(r, k):
             filter_step8(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, k - 1 if keep else 0)
+        else:
+            _filter_epoch(k, x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, phit, kg, ph)
+
+
+@njit(cache=True)
+def _filter_loop14(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf):
+    """n = 14: the vector step (:mod:`gravsurvey.inm.kalman14`) wherever R is diagonal, the
+    generic loops elsewhere."""
+    n = x0.shape[0]
+    keep = phi_pf.shape[0] == phi.shape[0]
+    phit = np.empty((n, n))
+    kg = np.empty(n)
+    ph = np.empty(n)
+    wk = np.empty(32)
+    for k in range(phi.shape[0]):
+        if k > 0 and _diagonal_at(r, k):
+            filter_step14(k, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, k - 1 if keep else 0, phit, wk)
         else:
             _filter_epoch(k, x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, phi_pf, phit, kg, ph)
 
@@ -641,11 +663,13 @@ def _rts_into(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s, unrolled):
     With ``have_phi_pf``, ``phi_pf[k]`` must hold ``phi[k + 1] @ p_f[k]`` exactly as the
     filter computed it (see :func:`_kalman_filter_into`) and is used instead of recomputing it.
     ``phi_pf`` may be ``p_s`` itself: row ``k`` is read before ``p_s[k]`` is written.
-    ``unrolled``: the generated step (same numbers) when n = 8, in its own compiled loop (as
-    the filter's).
+    ``unrolled``: the fixed-size vector steps (same numbers) when n = 8 or 14, each size in its
+    own compiled loop (as the filter's).
     """
     if unrolled and x_f.shape[1] == 8:
         _rts_loop8(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s)
+    elif unrolled and x_f.shape[1] == N14:
+        _rts_loop14(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s)
     else:
         _rts_loop(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s)
 
@@ -714,6 +738,38 @@ def _rts_loop8(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s):
 
 
 @njit(cache=True)
+def _rts_loop14(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s):
+    """n = 14: the vector steps of :mod:`gravsurvey.inm.kalman14`, block by block: first the gains
+    of the block's epochs in a forward sweep (they do not depend on the smoothed epochs, so their
+    long latency chains overlap; the inputs are read forwards), then the backward recursion."""
+    nep, n = x_f.shape
+    if nep == 0:
+        return 0.0
+    x_s[nep - 1] = x_f[nep - 1]
+    p_s[nep - 1] = p_f[nep - 1]
+    phi_pf1 = np.empty((1, n, n))
+    gain = np.empty((_BLOCK, n, n))
+    lt = np.empty((n, n))
+    b = np.empty((n, n))
+    t = np.empty((n, n))
+    wk = np.empty(32)
+    sink = 0.0
+    for k1 in range(nep - 2, -1, -_BLOCK):
+        k0 = max(k1 - _BLOCK + 1, 0)
+        sink += _touch(p_f, k0, k1 + 1)
+        for k in range(k0, k1 + 1):
+            if have_phi_pf:
+                rts_gain14(k, p_p, phi_pf, k, gain, k - k0, lt, b, wk)
+            else:
+                _matmul(phi[k + 1], p_f[k], phi_pf1[0], False)
+                rts_gain14(k, p_p, phi_pf1, 0, gain, k - k0, lt, b, wk)
+        for kk in range(k1 - k0 + 1):
+            k = k1 - kk
+            rts_update14(k, x_f, p_f, x_p, p_p, gain, k - k0, x_s, p_s, b, t)
+    return sink
+
+
+@njit(cache=True)
 def _prefetch_block(p_p, p_f, p_s, phi, phi_pf, have_phi_pf, k0, k1):
     """Read the smoother's inputs of epochs ``k0..k1`` forwards (see above)."""
     sink = _touch(p_p, k0 + 1, k1 + 2) + _touch(p_f, k0, k1 + 1) + _touch(p_s, k0, k1 + 1)
@@ -724,8 +780,8 @@ def _prefetch_block(p_p, p_f, p_s, phi, phi_pf, have_phi_pf, k0, k1):
     return sink
 
 
-#: Epochs per block of the smoother's cache-friendly sweep (4 (n, n) arrays x 64 x 512 B for
-#: n = 8 stay well inside L2).
+#: Epochs per block of the smoother's cache-friendly sweep (4 (n, n) arrays x 64 epochs: 128 KB
+#: for n = 8, 400 KB for n = 14 with its gain buffer, inside L2; 32 and 128 measured no faster).
 _BLOCK = 64
 
 
@@ -857,7 +913,7 @@ def filter_and_smooth(x0, p0, phi, q, z, h, r, reference: bool = False, unrolled
 
     Keys: ``x_f, p_f, x_p, p_p, innov, x_s, p_s`` (see :func:`kalman_filter`).
     ``reference=True`` uses the pure-numpy path; ``unrolled=False`` the compiled generic loops
-    instead of the generated 8-state steps (for tests: the numbers are the same).
+    instead of the 8- and 14-state vector steps (for tests: the numbers are the same).
     """
     args = [np.ascontiguousarray(a, dtype=float) for a in (x0, p0, phi, q, z, h, r)]
     if reference:
@@ -866,14 +922,34 @@ def filter_and_smooth(x0, p0, phi, q, z, h, r, reference: bool = False, unrolled
     else:
         x0, p0, phi, q, z, h, r = args
         nep, n, m = phi.shape[0], x0.shape[0], z.shape[1]
-        x_f, x_p, x_s = np.empty((nep, n)), np.empty((nep, n)), np.empty((nep, n))
-        p_f, p_p, p_s = np.empty((nep, n, n)), np.empty((nep, n, n)), np.empty((nep, n, n))
-        innov = np.empty((nep, m))
+        x_f, x_p, x_s, p_f, p_p, p_s, innov = _outputs(((nep, n),) * 3 + ((nep, n, n),) * 3 + ((nep, m),))
         # phi[k + 1] @ p_f[k] is computed by the prediction and reused by the smoother; it is
         # parked in p_s[k] (written by the smoother only after it has been read)
         _kalman_filter_into(x0, p0, phi, q, z, h, r, x_f, p_f, x_p, p_p, innov, p_s, unrolled)
         _rts_into(x_f, p_f, x_p, p_p, phi, p_s, True, x_s, p_s, unrolled)
     return dict(x_f=x_f, p_f=p_f, x_p=x_p, p_p=p_p, innov=innov, x_s=x_s, p_s=p_s)
+
+
+#: Huge-page size of x86-64 and arm64 Linux (transparent huge pages), bytes.
+_HUGE_PAGE = 2 << 20
+
+
+def _outputs(shapes):
+    """Uninitialised float64 arrays of the given shapes, carved from one allocation that starts
+    on a 2-MiB boundary.
+
+    Fresh memory is paid for on first touch, one page fault per page the kernel zeroes.  numpy
+    asks for transparent huge pages on large allocations (``madvise``), but an array gets them
+    only for the 2-MiB-aligned stretches inside it: separate (N, 14, 14) arrays for a 1-hour
+    flight (5.6 MB each) were mostly 4-KiB pages, ~1 us of page fault each on this VM, 0.6-1.2 us
+    per epoch in all (docs/benchmarks.md, "Kalman filter").  One aligned block is all huge pages.
+    The arrays are views of it (they keep it alive together).
+    """
+    sizes = [int(np.prod(s)) * 8 for s in shapes]
+    offsets = np.cumsum([0] + [(b + 63) // 64 * 64 for b in sizes])  # cache-line aligned
+    raw = np.empty(int(offsets[-1]) + _HUGE_PAGE, dtype=np.uint8)
+    base = (-raw.ctypes.data) % _HUGE_PAGE
+    return [raw[base + o : base + o + b].view(np.float64).reshape(s) for s, o, b in zip(shapes, offsets[:-1], sizes)]
 
 
 def change_basis(t, t_inv, x0, p0, phi, q, h):

@@ -207,3 +207,32 @@ def vset(typingctx, v, i, x):
         return builder.insert_element(args[0], args[2], i)
 
     return sig, codegen
+
+
+@intrinsic
+def vjoin(typingctx, low, high, cut):
+    """Lanes ``i < cut`` from ``low``, lanes ``i >= cut`` from ``high`` (``cut`` any integer: <= 0
+    takes every lane from ``high``, >= the width every lane from ``low``).
+
+    For rows of a symmetric matrix whose lanes below and above the diagonal come from two
+    different computations (a lane-wise select; no arithmetic).
+    """
+    if not (isinstance(low, F64xNType) and low == high and isinstance(cut, types.Integer)):
+        return None
+    sig = low(low, high, types.intp)
+
+    def codegen(context, builder, sig, args):
+        width = sig.args[0].width
+        it = ir.IntType(64)
+        lanes = ir.Constant(ir.VectorType(it, width), list(range(width)))
+        c = context.cast(builder, args[2], sig.args[2], types.intp)
+        cv = builder.insert_element(ir.Constant(ir.VectorType(it, width), ir.Undefined), c, ir.Constant(_I32, 0))
+        cv = builder.shuffle_vector(
+            cv,
+            ir.Constant(ir.VectorType(it, width), ir.Undefined),
+            ir.Constant(ir.VectorType(_I32, width), [0] * width),
+        )
+        mask = builder.icmp_signed("<", lanes, cv)
+        return builder.select(mask, args[0], args[1])
+
+    return sig, codegen
