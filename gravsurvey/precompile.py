@@ -82,11 +82,12 @@ KERNELS: tuple[tuple[str, str, str], ...] = (
         "discretise_kernel",
         "Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
         "Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), "
-        "Array(float64, 1, 'C'), Array(float64, 3, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C')",
+        "Array(float64, 1, 'C'), Array(float64, 3, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), "
+        "Array(float64, 1, 'C')",
     ),
     (
         "gravsurvey.inm.kalman",
-        "_filter_loop",
+        "_filter_loop14",
         "Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), "
         "Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), "
         "Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), "
@@ -94,7 +95,7 @@ KERNELS: tuple[tuple[str, str, str], ...] = (
     ),
     (
         "gravsurvey.inm.kalman",
-        "_rts_loop",
+        "_rts_loop14",
         "Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
         "Array(float64, 3, 'C'), Array(float64, 3, 'C'), bool, Array(float64, 2, 'C'), Array(float64, 3, 'C')",
     ),

@@ -745,8 +745,7 @@ def _rts_loop14(x_f, p_f, x_p, p_p, phi, phi_pf, have_phi_pf, x_s, p_s):
     nep, n = x_f.shape
     if nep == 0:
         return 0.0
-    x_s[nep - 1] = x_f[nep - 1]
-    p_s[nep - 1] = p_f[nep - 1]
+    _copy_last(x_f, p_f, x_s, p_s)
     phi_pf1 = np.empty((1, n, n))
     gain = np.empty((_BLOCK, n, n))
     lt = np.empty((n, n))
