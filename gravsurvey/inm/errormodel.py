@@ -462,6 +462,23 @@ def discretise_kernel(dt, r, v, up, e1, e2, e3, w02, speed, mat_it, c, perm, sca
     return phi, q
 
 
+def _model_at(geom: EpochGeometry, k: int, c: np.ndarray, n: int):
+    """``A`` and ``Qc`` (n, n), block order, of epoch ``k`` by the Python form of
+    :func:`continuous_model_n` (the reference path and the balancing's few epochs)."""
+    return continuous_model_n.py_func(
+        geom.r_i[k],
+        geom.v_i[k],
+        geom.up_i[k],
+        geom.e1_i[k],
+        geom.e2_i[k],
+        geom.e3_i[k],
+        float(geom.w02[k]),
+        float(geom.speed[k]),
+        c,
+        n,
+    )
+
+
 def model_scales(geom: EpochGeometry, c: np.ndarray, n: int) -> np.ndarray:
     """:func:`balance_scales` of the model's coefficients at three epochs (first, middle, last).
 
@@ -475,18 +492,7 @@ def model_scales(geom: EpochGeometry, c: np.ndarray, n: int) -> np.ndarray:
     qq = np.zeros((n, n))
     if nep > 1:
         for k in (1, nep // 2, nep - 1):
-            a, qc = continuous_model_n.py_func(
-                geom.r_i[k],
-                geom.v_i[k],
-                geom.up_i[k],
-                geom.e1_i[k],
-                geom.e2_i[k],
-                geom.e3_i[k],
-                float(geom.w02[k]),
-                float(geom.speed[k]),
-                c,
-                n,
-            )
+            a, qc = _model_at(geom, k, c, n)
             aa = np.maximum(aa, np.abs(a))
             qq = np.maximum(qq, np.abs(qc))
     return balance_scales(aa, qq)
@@ -536,18 +542,7 @@ def discretise(
     q = np.zeros((nep, n, n))
     phi[0] = np.eye(n)
     for k in range(1, nep):
-        a, qc = continuous_model_n.py_func(
-            geom.r_i[k],
-            geom.v_i[k],
-            geom.up_i[k],
-            geom.e1_i[k],
-            geom.e2_i[k],
-            geom.e3_i[k],
-            geom.w02[k],
-            geom.speed[k],
-            c,
-            n,
-        )
+        a, qc = _model_at(geom, k, c, n)
         m = np.zeros((2 * n, 2 * n))
         dt = geom.dt[k]
         m[:n, :n], m[:n, n:], m[n:, n:] = -a * dt, qc * dt, a.T * dt
