@@ -65,12 +65,13 @@ from ..geodesy import (
     WGS84,
     Ellipsoid,
     ecef_to_geodetic,
-    ecef_to_geodetic_scalar,
     geodetic_to_ecef,
+    geodetic_trig_scalar,
     mat_en,
     mat_ie,
     normal_gravitation_ecef,
-    normal_gravitation_ecef_scalar,
+    normal_gravitation_inertial_scalar,
+    normal_gravitation_q0,
 )
 
 
@@ -300,20 +301,18 @@ def _attitude_kernel(t, w, c0, c_out):
 
 
 @njit(cache=True)
-def _gravity_i(r, c, s, radius, use_ext, a, f, gm, omega):
-    """Model gravitation on inertial axes at inertial point r; ``c, s`` = cos, sin of the
-    Earth's rotation angle ``omega * ts`` at its time (passed in: a step's stages share them)."""
+def _gravity_i(r, radius, use_ext, a, f, gm, omega, q0):
+    """Model gravitation on inertial axes at inertial point r, m/s^2.
+
+    The normal field is symmetric about the Earth's axis, so it is evaluated on the inertial
+    axes directly: rotating to ECEF and back (by the Earth's angle at the stage time) changes
+    nothing but round-off.
+    """
     rn = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
     scale = radius / rn if use_ext else 1.0
-    px = r[0] * scale
-    py = r[1] * scale
-    pz = r[2] * scale
-    # inertial -> ECEF: rotate by -omega t about z
-    ex = c * px + s * py
-    ey = -s * px + c * py
-    gx, gy, gz = normal_gravitation_ecef_scalar(ex, ey, pz, a, f, gm, omega)
+    gx, gy, gz = normal_gravitation_inertial_scalar(r[0] * scale, r[1] * scale, r[2] * scale, a, f, gm, omega, q0)
     back = 1.0 / scale
-    return (c * gx - s * gy) * back, (s * gx + c * gy) * back, gz * back
+    return gx * back, gy * back, gz * back
 
 
 @njit(cache=True)
@@ -322,6 +321,7 @@ def _translation_kernel(t, a_i, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, ome
     for j in range(3):  # not `r_out[0] = r0`: see _attitude_kernel
         r_out[0, j] = r0[j]
         v_out[0, j] = v0[j]
+    q0 = normal_gravitation_q0(a, f)
     am = np.empty(3)
     y = np.empty(6)
     ys = np.empty(6)
@@ -338,44 +338,33 @@ def _translation_kernel(t, a_i, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, ome
             acc[2, j] = a_i[k + 1, j]
             y[j] = r_out[k, j]
             y[3 + j] = v_out[k, j]
-        # geometry of the external radius at the step start
+        # geometry of the external radius at the step start: ellipsoid normal (inertial axes)
+        # and computed height; latitude and height do not depend on the longitude, so the
+        # inertial coordinates serve as they are
         nx = 0.0
         ny = 0.0
         nz = 0.0
         hc = 0.0
         cosa = 1.0
-        # Earth rotation at the step start (also stage 0's) and at the midpoint (stages 1, 2):
-        # the same arguments as one evaluation per stage, so the same values
-        cw = math.cos(omega * tk)
-        sw = math.sin(omega * tk)
-        cm = math.cos(omega * tm)
-        sm = math.sin(omega * tm)
         if use_ext:
-            ex = cw * y[0] + sw * y[1]
-            ey = -sw * y[0] + cw * y[1]
-            lat, lon, hc = ecef_to_geodetic_scalar(ex, ey, y[2], a, f)
-            cl = math.cos(lat)
-            ne_x = cl * math.cos(lon)
-            ne_y = cl * math.sin(lon)
-            nz = math.sin(lat)
-            nx = cw * ne_x - sw * ne_y
-            ny = sw * ne_x + cw * ne_y
-            rn = math.sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2])
+            nz, cl, hc = geodetic_trig_scalar(y[0], y[1], y[2], a, f)
+            p = math.sqrt(y[0] * y[0] + y[1] * y[1])
+            if p > 0.0:
+                nx = cl * y[0] / p
+                ny = cl * y[1] / p
+            rn = math.sqrt(p * p + y[2] * y[2])
             cosa = (nx * y[0] + ny * y[1] + nz * y[2]) / rn
         for st in range(4):
             if st == 0:
                 hs = 0.0
-                ts = tk
                 ia = 0
                 hx = h_ext[k]
             elif st == 3:
                 hs = dt
-                ts = tk + dt
                 ia = 2
                 hx = h_ext[k + 1]
             else:
                 hs = 0.5 * dt
-                ts = tm
                 ia = 1
                 hx = h_ext_mid[k]
             for j in range(6):
@@ -385,13 +374,7 @@ def _translation_kernel(t, a_i, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, ome
                 rs = math.sqrt(ys[0] * ys[0] + ys[1] * ys[1] + ys[2] * ys[2])
                 dh = nx * (ys[0] - y[0]) + ny * (ys[1] - y[1]) + nz * (ys[2] - y[2])
                 radius = rs + cosa * (hx - hc - dh)
-            if st == 0:
-                cs, sn = cw, sw
-            elif st == 3:
-                cs, sn = math.cos(omega * ts), math.sin(omega * ts)
-            else:
-                cs, sn = cm, sm
-            gx, gy, gz = _gravity_i(ys, cs, sn, radius, use_ext, a, f, gm, omega)
+            gx, gy, gz = _gravity_i(ys, radius, use_ext, a, f, gm, omega, q0)
             kk[st, 0] = ys[3]
             kk[st, 1] = ys[4]
             kk[st, 2] = ys[5]
@@ -466,7 +449,6 @@ def mechanize_reference(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, elli
     """Pure-numpy/scipy implementation of :func:`mechanize_kernel` (same algorithm)."""
     t = np.asarray(t, float)
     n = t.size
-    om = ellipsoid.omega
     c = np.empty((n, 3, 3))
     c[0] = c0
     for k in range(n - 1):
@@ -477,10 +459,10 @@ def mechanize_reference(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, elli
         c[k + 1] = c[k] @ _rotvec_to_mat_ref(d1 + d2 + 2.0 / 3.0 * np.cross(d1, d2))
     a_i = np.einsum("nij,nj->ni", c, f_t)
 
-    def grav(r, ts, radius):
+    def grav(r, radius):
+        # the normal field is symmetric about the Earth's axis: inertial axes serve as ECEF ones
         scale = radius / np.linalg.norm(r) if use_ext else 1.0
-        p_e = mat_ie(ts, om).T @ (r * scale)
-        return mat_ie(ts, om) @ normal_gravitation_ecef(p_e, ellipsoid) / scale
+        return normal_gravitation_ecef(r * scale, ellipsoid) / scale
 
     r = np.empty((n, 3))
     v = np.empty((n, 3))
@@ -490,25 +472,25 @@ def mechanize_reference(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, elli
         tm = t[k] + 0.5 * dt
         amid = _lagrange_ref(t, a_i, k, tm)
         if use_ext:
-            r_e = mat_ie(t[k], om).T @ r[k]
-            lat, lon, hc = ecef_to_geodetic(r_e, ellipsoid)
-            n_i = mat_ie(t[k], om) @ mat_en(lat, lon)[:, 2]
+            # on inertial axes the longitude is the inertial one: the normal comes out inertial
+            lat, lon_i, hc = ecef_to_geodetic(r[k], ellipsoid)
+            n_i = mat_en(lat, lon_i)[:, 2]
             cosa = n_i @ r[k] / np.linalg.norm(r[k])
         y = np.concatenate([r[k], v[k]])
         stages = [
-            (0.0, t[k], a_i[k], h_ext[k]),
-            (0.5 * dt, tm, amid, h_ext_mid[k]),
-            (0.5 * dt, tm, amid, h_ext_mid[k]),
-            (dt, t[k + 1], a_i[k + 1], h_ext[k + 1]),
+            (0.0, a_i[k], h_ext[k]),
+            (0.5 * dt, amid, h_ext_mid[k]),
+            (0.5 * dt, amid, h_ext_mid[k]),
+            (dt, a_i[k + 1], h_ext[k + 1]),
         ]
         kprev = np.zeros(6)
         ks = []
-        for hs, ts, acc, hx in stages:
+        for hs, acc, hx in stages:
             ys = y + hs * kprev
             radius = 0.0
             if use_ext:
                 radius = np.linalg.norm(ys[:3]) + cosa * (hx - hc - n_i @ (ys[:3] - y[:3]))
-            kprev = np.concatenate([ys[3:], grav(ys[:3], ts, radius) + acc])
+            kprev = np.concatenate([ys[3:], grav(ys[:3], radius) + acc])
             ks.append(kprev)
         y = y + dt / 6.0 * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
         r[k + 1], v[k + 1] = y[:3], y[3:]
