@@ -293,6 +293,60 @@ def normal_gravitation_inertial_scalar(x, y, z, a, f, gm, omega, q0):
 
 
 @njit(cache=True)
+def normal_gravitation_j2_j4(a, f, gm, omega):
+    """Zonal coefficients ``J2, J4`` of the level ellipsoid's gravitation (Heiskanen-Moritz 2-92).
+
+    ``J2 = e^2/3 (1 - 2/15 m e' / q0)`` with ``m = omega^2 a^2 b / GM`` and ``e'`` the second
+    eccentricity; ``J4 = -3 e^4 / 35 (1 - 2 + 10 J2 / e^2)``.  GRS80: 0.00108263 (its
+    defining value) and -2.37091e-6 (Moritz 2000); tests/test_geodesy.py.
+
+    Returns
+    -------
+    j2, j4 : float
+    """
+    b = a * (1.0 - f)
+    big_e = math.sqrt(a * a - b * b)
+    m = omega * omega * a * a * b / gm
+    e2 = big_e * big_e / (a * a)
+    j2 = e2 / 3.0 * (1.0 - 2.0 / 15.0 * m * (big_e / b) / _q(b, big_e))
+    return j2, -3.0 * e2 * e2 / 35.0 * (-1.0 + 10.0 * j2 / e2)
+
+
+@njit(cache=True)
+def zonal4_gravitation_scalar(x, y, z, a, gm, j2, j4):
+    """Degree-0, 2 and 4 zonal part of a gravitation field at a point, m/s^2.
+
+    The gradient of ``GM/r (1 - J2 (a/r)^2 P2(z/r) - J4 (a/r)^4 P4(z/r))``: a polynomial in
+    ``x, y, z, 1/r``, no transcendental calls.  For the normal field the rest (``J6 = 6.1e-9``
+    and beyond) changes by at most 2.5e-13 m/s^2 per metre at flight heights (measured,
+    tests/test_geodesy.py), which is what lets the mechanization carry a normal-gravitation
+    value over the few metres of an integration step with this function.
+
+    Parameters
+    ----------
+    x, y, z : float
+        Position, m, z along the Earth's axis (ECEF or inertial axes).
+    a, gm, j2, j4 : float
+        Semi-major axis (m), GM (m^3/s^2), :func:`normal_gravitation_j2_j4`.
+
+    Returns
+    -------
+    gx, gy, gz : float
+        m/s^2, on the axes of ``x, y, z``.
+    """
+    r2 = x * x + y * y + z * z
+    ir2 = 1.0 / r2
+    k0 = gm * ir2 * math.sqrt(ir2)
+    s2 = z * z * ir2
+    a2r2 = a * a * ir2
+    k2 = 1.5 * j2 * a2r2
+    k4 = 0.125 * j4 * a2r2 * a2r2
+    kh = -k0 * (1.0 + k2 * (1.0 - 5.0 * s2) - k4 * 15.0 * ((21.0 * s2 - 14.0) * s2 + 1.0))
+    kz = -k0 * (1.0 + k2 * (3.0 - 5.0 * s2) - k4 * 5.0 * ((63.0 * s2 - 70.0) * s2 + 15.0))
+    return kh * x, kh * y, kz * z
+
+
+@njit(cache=True)
 def geodetic_trig_scalar(x, y, z, a, f):
     """Sine and cosine of the geodetic latitude and the ellipsoidal height of a point, no trig calls.
 
