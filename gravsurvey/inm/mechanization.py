@@ -338,7 +338,7 @@ def _translation_kernel(t, a_i, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, ome
         hc = 0.0
         cosa = 1.0
         if use_ext:
-            nz, cl, hc = geodetic_trig_scalar(y[0], y[1], y[2], a, f)
+            nz, cl, hc = geodetic_trig_scalar(y[0], y[1], y[2], a, f, 0)
             p = math.sqrt(y[0] * y[0] + y[1] * y[1])
             if p > 0.0:
                 nx = cl * y[0] / p
@@ -496,9 +496,18 @@ def mechanize_reference(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, elli
         tm = t[k] + 0.5 * dt
         amid = _lagrange_ref(t, a_i, k, tm)
         if use_ext:
-            # on inertial axes the longitude is the inertial one: the normal comes out inertial
-            lat, lon_i, hc = ecef_to_geodetic(r[k], ellipsoid)
-            n_i = mat_en(lat, lon_i)[:, 2]
+            # Bowring's closed form, as the kernel; on inertial axes the longitude is the
+            # inertial one, so the normal comes out inertial
+            x, yy, z = r[k]
+            p = np.hypot(x, yy)
+            theta = np.arctan2(z * ellipsoid.a, p * ellipsoid.b)
+            ep2 = ellipsoid.e2 / (1.0 - ellipsoid.e2)
+            lat = np.arctan2(
+                z + ep2 * ellipsoid.b * np.sin(theta) ** 3, p - ellipsoid.e2 * ellipsoid.a * np.cos(theta) ** 3
+            )
+            big_n = ellipsoid.a / np.sqrt(1.0 - ellipsoid.e2 * np.sin(lat) ** 2)
+            hc = p * np.cos(lat) + z * np.sin(lat) - ellipsoid.a**2 / big_n
+            n_i = mat_en(lat, np.arctan2(yy, x))[:, 2]
             cosa = n_i @ r[k] / np.linalg.norm(r[k])
         y = np.concatenate([r[k], v[k]])
         stages = [
