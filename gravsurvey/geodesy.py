@@ -218,6 +218,200 @@ def normal_gravitation_ecef_scalar(x, y, z, a, f, gm, omega):
 
 
 @njit(cache=True)
+def normal_gravitation_q0(a, f):
+    """Heiskanen-Moritz ``q0 = q(b)`` of the ellipsoid: the constant of
+    :func:`normal_gravitation_inertial_scalar`, computed once per run instead of once per point."""
+    b = a * (1.0 - f)
+    return _q(b, math.sqrt(a * a - b * b))
+
+
+@njit(cache=True)
+def normal_gravitation_inertial_scalar(x, y, z, a, f, gm, omega, q0):
+    """Normal gravitation at a point given on any axes with z along the Earth's axis, m/s^2.
+
+    The same field as :func:`normal_gravitation_ecef_scalar` (equal to 1e-15 relative,
+    tests/test_geodesy.py), for the mechanization's inner loop:
+
+    * the field of a level ellipsoid is symmetric about the rotation axis, so the point
+      may be given on inertial axes (the Earth's rotation angle drops out exactly);
+    * ``sin``, ``cos`` of the reduced latitude ``beta`` come from its tangent by one square
+      root instead of ``atan2`` + ``sin`` + ``cos``; ``atan(E/u)`` is shared by ``q(u)`` and
+      ``q'(u)``; ``q0 = q(b)`` (:func:`normal_gravitation_q0`) is passed in: one
+      transcendental call per point instead of six.
+
+    Parameters
+    ----------
+    x, y, z : float
+        Position, m, on or outside the ellipsoid.
+    a, f, gm, omega : float
+        Ellipsoid (m, -, m^3/s^2, rad/s).
+    q0 : float
+        :func:`normal_gravitation_q0` of ``a, f``.
+
+    Returns
+    -------
+    gx, gy, gz : float
+        Gravitation (attraction only) on the axes of ``x, y, z``, m/s^2.
+    """
+    b = a * (1.0 - f)
+    big_e2 = a * a - b * b
+    big_e = math.sqrt(big_e2)
+    p2 = x * x + y * y
+    d = p2 + z * z - big_e2
+    u = math.sqrt(0.5 * d + 0.5 * math.sqrt(d * d + 4.0 * big_e2 * z * z))
+    # u * u and big_e * big_e, not u2 and big_e2: the rounding of _ellipsoidal_harmonic and _q,
+    # which q(u)'s cancellation (a factor ~5e5) would otherwise turn into 3e-13 relative
+    u2 = u * u
+    e2 = big_e * big_e
+    p = math.sqrt(p2)
+    sq = math.sqrt(u2 + e2)
+    # tan(beta) = z sq / (u p), as in _ellipsoidal_harmonic
+    zs = z * sq
+    up = u * p
+    hyp = math.sqrt(zs * zs + up * up)
+    sb = zs / hyp
+    cb = up / hyp
+    t = math.atan(big_e / u)
+    k3 = 1.0 + 3.0 * u * u / e2
+    q_u = 0.5 * (k3 * t - 3.0 * u / big_e)
+    dq_du = 0.5 * (6.0 * u / e2 * t - k3 * big_e / (u2 + e2) - 3.0 / big_e)
+    w2a2 = omega * omega * a * a
+    dv_du = -gm / (u2 + e2) + 0.5 * w2a2 * dq_du / q0 * (sb * sb - 1.0 / 3.0)
+    dv_db = w2a2 * q_u / q0 * sb * cb
+    if p > 0.0:
+        cl = x / p
+        sl = y / p
+    else:
+        cl = 1.0
+        sl = 0.0
+    nu2 = u2 + e2 * sb * sb
+    cu = dv_du * (u2 + e2) / nu2
+    cbeta = dv_db / nu2
+    # cu dr/du + cbeta dr/dbeta
+    radial = cu * u / sq * cb - cbeta * sq * sb
+    return radial * cl, radial * sl, cu * sb + cbeta * u * cb
+
+
+@njit(cache=True)
+def normal_gravitation_j2_j4(a, f, gm, omega):
+    """Zonal coefficients ``J2, J4`` of the level ellipsoid's gravitation (Heiskanen-Moritz 2-92).
+
+    ``J2 = e^2/3 (1 - 2/15 m e' / q0)`` with ``m = omega^2 a^2 b / GM`` and ``e'`` the second
+    eccentricity; ``J4 = -3 e^4 / 35 (1 - 2 + 10 J2 / e^2)``.  GRS80: 0.00108263 (its
+    defining value) and -2.37091e-6 (Moritz 2000); tests/test_geodesy.py.
+
+    Returns
+    -------
+    j2, j4 : float
+    """
+    b = a * (1.0 - f)
+    big_e = math.sqrt(a * a - b * b)
+    m = omega * omega * a * a * b / gm
+    e2 = big_e * big_e / (a * a)
+    j2 = e2 / 3.0 * (1.0 - 2.0 / 15.0 * m * (big_e / b) / _q(b, big_e))
+    return j2, -3.0 * e2 * e2 / 35.0 * (-1.0 + 10.0 * j2 / e2)
+
+
+@njit(cache=True)
+def zonal4_gravitation_scalar(x, y, z, a, gm, j2, j4):
+    """Degree-0, 2 and 4 zonal part of a gravitation field at a point, m/s^2.
+
+    The gradient of ``GM/r (1 - J2 (a/r)^2 P2(z/r) - J4 (a/r)^4 P4(z/r))``: a polynomial in
+    ``x, y, z, 1/r``, no transcendental calls.  For the normal field the rest (``J6 = 6.1e-9``
+    and beyond) changes by at most 2.5e-13 m/s^2 per metre at flight heights (measured,
+    tests/test_geodesy.py), which is what lets the mechanization carry a normal-gravitation
+    value over the few metres of an integration step with this function.
+
+    Parameters
+    ----------
+    x, y, z : float
+        Position, m, z along the Earth's axis (ECEF or inertial axes).
+    a, gm, j2, j4 : float
+        Semi-major axis (m), GM (m^3/s^2), :func:`normal_gravitation_j2_j4`.
+
+    Returns
+    -------
+    gx, gy, gz : float
+        m/s^2, on the axes of ``x, y, z``.
+    """
+    r2 = x * x + y * y + z * z
+    ir2 = 1.0 / r2
+    k0 = gm * ir2 * math.sqrt(ir2)
+    s2 = z * z * ir2
+    a2r2 = a * a * ir2
+    k2 = 1.5 * j2 * a2r2
+    k4 = 0.125 * j4 * a2r2 * a2r2
+    kh = -k0 * (1.0 + k2 * (1.0 - 5.0 * s2) - k4 * 15.0 * ((21.0 * s2 - 14.0) * s2 + 1.0))
+    kz = -k0 * (1.0 + k2 * (3.0 - 5.0 * s2) - k4 * 5.0 * ((63.0 * s2 - 70.0) * s2 + 15.0))
+    return kh * x, kh * y, kz * z
+
+
+@njit(cache=True)
+def geodetic_trig_scalar(x, y, z, a, f, n_iter=3):
+    """Sine and cosine of the geodetic latitude and the ellipsoidal height of a point, no trig calls.
+
+    The algorithm of :func:`ecef_to_geodetic_scalar` (Bowring's initial value, then
+    ``n_iter`` fixed-point iterations on the latitude, then the height by projection) carried
+    out on ``(sin lat, cos lat)`` normalised from the tangent by a square root, so it needs no
+    ``atan2``/``sin``/``cos``; the longitude is not formed.  The axes may be ECEF or inertial
+    (latitude and height do not depend on the longitude).  Measured against
+    :func:`ecef_to_geodetic_scalar` at all latitudes (tests/test_geodesy.py):
+
+    ========  =================  =================  ==================
+    n_iter    -1e4..2e4 m        2e4..1e5 m         1e5..1e6 m
+    ========  =================  =================  ==================
+    0         4.1e-13            9.8e-12            6.6e-10
+    1         1.3e-15            3.1e-14            1.9e-12
+    3         2.2e-16            2.2e-16            3.3e-16
+    ========  =================  =================  ==================
+
+    (largest error of ``sin lat`` and ``cos lat``).  The height is stationary in the
+    latitude (its error is second order, ~N dlat^2 < 1e-12 m) and agrees to 5e-9 m, the
+    round-off of coordinates ~6.4e6 m, with any ``n_iter``.
+
+    Parameters
+    ----------
+    x, y, z : float
+        Position, m (z along the Earth's axis).
+    a, f : float
+        Semi-major axis (m), flattening.
+    n_iter : int
+        Iterations after Bowring's value.
+
+    Returns
+    -------
+    sin_lat, cos_lat, h : float
+        Geodetic latitude as its sine and (non-negative) cosine; height, m.
+    """
+    e2 = f * (2.0 - f)
+    b = a * (1.0 - f)
+    ep2 = (a * a - b * b) / (b * b)
+    p = math.sqrt(x * x + y * y)
+    if p < 1e-9:
+        return math.copysign(1.0, z), 0.0, abs(z) - b
+    za = z * a
+    pb = p * b
+    d = math.sqrt(za * za + pb * pb)
+    st = za / d
+    ct = pb / d
+    num = z + ep2 * b * st * st * st
+    den = p - e2 * a * ct * ct * ct
+    d = math.sqrt(num * num + den * den)
+    sl = num / d
+    cl = den / d
+    for _ in range(n_iter):
+        n = a / math.sqrt(1.0 - e2 * sl * sl)
+        # |lat| < 0.78 rad as in ecef_to_geodetic_scalar
+        h = p / cl - n if cl > 0.7109135380122773 else z / sl - n * (1.0 - e2)
+        den = p * (1.0 - e2 * n / (n + h))
+        d = math.sqrt(z * z + den * den)
+        sl = z / d
+        cl = den / d
+    n = a / math.sqrt(1.0 - e2 * sl * sl)
+    return sl, cl, p * cl + z * sl - a * a / n
+
+
+@njit(cache=True)
 def mat_en_scalar(lat, lon):
     """3x3 matrix mapping local ENU (n) vectors to ECEF (e)."""
     sl = math.sin(lat)
