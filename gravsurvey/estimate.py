@@ -12,6 +12,7 @@ SI units throughout (m, s, rad, m/s^2); mGal and degrees appear only in the writ
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field
 
@@ -245,7 +246,10 @@ def _honest_sigma(sol) -> np.ndarray:
     into the estimate (docs/method.md, "Honest sigma").
     """
     sig = np.asarray(sol.sigma_smooth, float)
-    extra = float((getattr(sol, "identification", None) or {}).get("drift_sigma_passed_mps2", 0.0))
+    ident = getattr(sol, "identification", None) or {}
+    extra = math.hypot(
+        float(ident.get("drift_sigma_passed_mps2", 0.0)), float(ident.get("field_sigma_missed_mps2", 0.0))
+    )
     return np.hypot(sig, extra) if extra > 0.0 else sig
 
 

@@ -309,3 +309,27 @@ def test_short_record_keeps_the_default_prior(noisy_flight):
 def test_identify_false_uses_the_values_as_given():
     p = dataclasses.replace(InmParams(identify=False), altimeter_sigma_m=0.2)
     assert p.identify is False and p.altimeter_sigma_m == 0.2
+
+
+def test_field_under_the_margin_is_in_the_stated_sigma():
+    """A 1.06 mGal (rms) field at ~370 s period that stays within two standard errors of the
+    modelled noise: the prior does not count it and the smoother flattens it; the report holds
+    it (``field_sigma_missed_mps2``, added to the product's sigma) instead of claiming the
+    field is known to the prior's floor.  A field that stands out is counted by the prior
+    (and then mostly not in the missed part)."""
+    dt, n = 1.0, 2400
+    t = np.arange(n) * dt
+    noise = I.SpectralModel(1e-3, 3600.0, 1e-4, 0.05)
+    report = {"spectral_model": dataclasses.asdict(noise), "height_dt_s": 0.2}
+    params = InmParams()
+    wide = I.wide_prior_params(params, report, 70.0)
+    weak = 1.5 * MGAL * np.sin(2 * np.pi * 6.5 / (n * dt) * t)
+    new, rep = I.refine_prior(params, report, weak, dt, wide, 70.0, np.ones(n))
+    rms = 1.5 / math.sqrt(2.0)
+    assert rep["signal_seen_to_m"] is None
+    assert new.anomaly_sigma_mps2 < 0.1 * MGAL  # the prior flattens it
+    assert 0.5 * rms < rep["field_sigma_missed_mps2"] / MGAL < 1.2 * rms
+    strong, rep_s = I.refine_prior(params, report, 2.0 * weak, dt, wide, 70.0, np.ones(n))
+    assert rep_s["signal_seen_to_m"] is not None
+    assert strong.anomaly_sigma_mps2 > 1.0 * MGAL
+    assert rep_s["field_sigma_missed_mps2"] < rep["field_sigma_missed_mps2"]

@@ -875,6 +875,9 @@ FIELD_VAR_HELD = 0.25
 #: not hold (the gravimeter's drift, turbulence through attitude errors), which on weak fields
 #: exceed the field (measured: 1.24 mGal "seen" on a 0.32 mGal field).
 FIELD_VAR_NOISE_MARGIN = 3.0
+#: A band of the first pass's spectrum counts as field only this many standard errors above
+#: the noise (:func:`refine_prior`): a chance excess of noise must not widen the smoother.
+SIGNAL_MARGIN_SE = 2.0
 
 
 def _window_kernel(f, window_s: float, span_s: float):
@@ -1015,18 +1018,21 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     )
     # bands of >= 8 bins, log-spaced: the periodogram's scatter (100 % per bin) averages down
     s_sig = np.zeros_like(f)
+    s_pt = np.zeros_like(f)  # the same without the margin: the unbiased estimate, for the sigma
     edges = np.unique(np.concatenate([[0], np.geomspace(8, max(valid.sum(), 9), 24).astype(int)]))
     idx_valid = np.flatnonzero(valid)
     for a, b in zip(edges[:-1], edges[1:]):
         ii = idx_valid[a:b]
         if ii.size == 0:
             continue
-        est = np.mean(p[ii] / h1[ii] ** 2) - np.mean(s_n[ii]) * (1.0 + 2.0 / math.sqrt(ii.size))
-        s_sig[ii] = max(est, 0.0)
+        excess = np.mean(p[ii] / h1[ii] ** 2) - np.mean(s_n[ii])
+        s_pt[ii] = max(excess, 0.0)
+        s_sig[ii] = max(excess - np.mean(s_n[ii]) * SIGNAL_MARGIN_SE / math.sqrt(ii.size), 0.0)
     # a field seen from the air has a spectrum that falls with frequency (upward continuation):
     # a band above one without signal cannot hold any; this keeps a chance excess of noise
     # near the top of the band (P / H1^2 amplifies it there) from widening the smoother
     s_sig = np.minimum.accumulate(s_sig)
+    s_pt = np.minimum.accumulate(s_pt)
     # candidates
     tau_fixed = 1.0 / (params.anomaly_lambda_per_m * v) if "anomaly_lambda_per_m" in given else None
     sig_fixed = params.anomaly_sigma_mps2 if "anomaly_sigma_mps2" in given else None
@@ -1079,6 +1085,12 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     # expected error variance of the chosen smoother: the risk as a variance (two-sided
     # periodogram bins of width 1/(n dt), both signs of frequency)
     expected = prior_risk(f, s_sig, s_n, model.anomaly_sigma_mps2, model.anomaly_tau_s) * 2.0 / (n * dt_s)
+    # the field the margin did not count (bands within two standard errors of the noise), as
+    # the chosen smoother removes it: not in the filter's model, so not in its sigma either
+    s_g = _markov_psd(f, model.anomaly_sigma_mps2, model.anomaly_tau_s)
+    h = s_g / (s_g + s_n)
+    missed = float(np.sum((1.0 - h) ** 2 * np.maximum(s_pt - s_sig, 0.0))) * 2.0 / (n * dt_s)
+    report["field_sigma_missed_mps2"] = math.sqrt(max(missed, 0.0))
     how_sigma = (
         "target_resolution_m"
         if params.target_resolution_m is not None
