@@ -165,13 +165,6 @@ def _q(u, big_e):
 
 
 @njit(cache=True)
-def _dq_du(u, big_e):
-    t = math.atan(big_e / u)
-    e2 = big_e * big_e
-    return 0.5 * (6.0 * u / e2 * t - (1.0 + 3.0 * u * u / e2) * big_e / (u * u + e2) - 3.0 / big_e)
-
-
-@njit(cache=True)
 def normal_gravitational_potential_scalar(x, y, z, a, f, gm, omega):
     """Gravitational potential V (attraction only) of the level ellipsoid, m^2/s^2."""
     u, beta, p, big_e = _ellipsoidal_harmonic(x, y, z, a, f)
@@ -188,33 +181,7 @@ def normal_gravitation_ecef_scalar(x, y, z, a, f, gm, omega):
     Attraction only: add ``omega^2 (x, y, 0)`` for normal gravity.
     Valid outside the ellipsoid and down to its surface (any flight height).
     """
-    u, beta, p, big_e = _ellipsoidal_harmonic(x, y, z, a, f)
-    b = a * (1.0 - f)
-    e2 = big_e * big_e
-    q0 = _q(b, big_e)
-    sb = math.sin(beta)
-    cb = math.cos(beta)
-    w2a2 = omega * omega * a * a
-    dv_du = -gm / (u * u + e2) + 0.5 * w2a2 * _dq_du(u, big_e) / q0 * (sb * sb - 1.0 / 3.0)
-    dv_db = w2a2 * _q(u, big_e) / q0 * sb * cb
-    sq = math.sqrt(u * u + e2)
-    # tangent vectors dr/du and dr/dbeta; grad = dV/du * dr/du / |dr/du|^2 + ...
-    if p > 0.0:
-        cl = x / p
-        sl = y / p
-    else:
-        cl = 1.0
-        sl = 0.0
-    ru_x = u / sq * cb * cl
-    ru_y = u / sq * cb * sl
-    ru_z = sb
-    rb_x = -sq * sb * cl
-    rb_y = -sq * sb * sl
-    rb_z = u * cb
-    nu2 = u * u + e2 * sb * sb  # |dr/dbeta|^2 ; |dr/du|^2 = nu2 / (u^2 + E^2)
-    cu = dv_du * (u * u + e2) / nu2
-    cbeta = dv_db / nu2
-    return (cu * ru_x + cbeta * rb_x, cu * ru_y + cbeta * rb_y, cu * ru_z + cbeta * rb_z)
+    return normal_gravitation_inertial_scalar(x, y, z, a, f, gm, omega, normal_gravitation_q0(a, f))
 
 
 @njit(cache=True)
@@ -229,8 +196,8 @@ def normal_gravitation_q0(a, f):
 def normal_gravitation_inertial_scalar(x, y, z, a, f, gm, omega, q0):
     """Normal gravitation at a point given on any axes with z along the Earth's axis, m/s^2.
 
-    The same field as :func:`normal_gravitation_ecef_scalar` (equal to 1e-15 relative,
-    tests/test_geodesy.py), for the mechanization's inner loop:
+    :func:`normal_gravitation_ecef_scalar` is this function; the mechanization's inner loop
+    calls it directly on inertial axes with ``q0`` computed once:
 
     * the field of a level ellipsoid is symmetric about the rotation axis, so the point
       may be given on inertial axes (the Earth's rotation angle drops out exactly);
