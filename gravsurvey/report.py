@@ -339,14 +339,16 @@ def figure_survey_map(
     lim = lim if lim > 0 else 1.0
     # the track itself in thin grey under the colour (visible where the value is near zero), and a
     # diverging map whose centre is pale yellow, not white
+    # one artist for all lines: a NaN vertex between two lines breaks the path there, as separate
+    # lines would (a survey has hundreds of lines; each Line2D costs its own draw set-up)
     cut = np.flatnonzero(ids[1:] != ids[:-1]) + 1
-    for a, b in zip(np.concatenate(([0], cut)), np.concatenate((cut, [e.size]))):
-        ax.plot(e[a:b], n[a:b], color="0.4", linewidth=0.5, zorder=1)
+    ax.plot(np.insert(e, cut, np.nan), np.insert(n, cut, np.nan), color="0.4", linewidth=0.5, zorder=1)
     sc = ax.scatter(e, n, c=v, s=4, cmap="RdYlBu_r", vmin=-lim, vmax=lim, linewidths=0, gid="tracks", zorder=2)
     cb = fig.colorbar(sc, ax=ax, shrink=0.8)
     cb.set_label("gravity disturbance, mGal")
-    for lid in dict.fromkeys(ids.tolist()):
-        i = int(np.flatnonzero(ids == lid)[0])
+    # each line labelled at its first sample, in order of appearance (one pass, not one per line)
+    lids, first = np.unique(ids, return_index=True)
+    for lid, i in sorted(zip(lids.tolist(), first.tolist()), key=lambda p: p[1]):
         if np.isfinite(e[i]) and np.isfinite(n[i]):
             ax.annotate(lid, (e[i], n[i]), fontsize=7, xytext=(3, 3), textcoords="offset points")
     xe, xn, xd = _crossover_arrays(crossovers)
