@@ -50,8 +50,8 @@ def _new_figure(figsize) -> Figure:
     return fig
 
 
-# tight_layout's default padding: 1.08 font sizes around the figure and between rows, pt
-_PAD_PT = 1.08 * 10.0
+# tight_layout's default padding around the figure and between rows, in font sizes
+_PAD_FONTSIZES = 1.08
 # matplotlib's fixed distance of an axis' offset text ("1e6") from the tick labels, pt
 _OFFSET_TEXT_PAD_PT = 3.0
 
@@ -147,9 +147,11 @@ def _fit_layout(fig: Figure) -> None:
     For figures whose axes sit in one column of a top-level grid (rows may hold nested grids,
     e.g. an axes and its colour bar).
     """
+    from matplotlib import rcParams
+
     renderer = fig.canvas.get_renderer()
     W, H = fig.bbox.width, fig.bbox.height
-    pad = _PAD_PT * fig.dpi / 72.0
+    pad = _PAD_FONTSIZES * float(rcParams["font.size"]) * fig.dpi / 72.0  # px
     nrows = None
     left = right = 0.0
     top, bottom = {}, {}
