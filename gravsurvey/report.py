@@ -35,16 +35,158 @@ _METADATA = {"Software": "gravsurvey"}
 
 
 def _new_figure(figsize) -> Figure:
-    """A matplotlib Figure (imported here, on first use: runs without plots never load it)."""
+    """A matplotlib Figure on an Agg canvas (imported here, on first use: runs without plots
+    never load it).
+
+    The canvas is attached now, not at saving, so that :func:`_fit_layout` measures text with
+    the renderer that later draws the PNG (same size and dpi): text metrics are cached per
+    renderer, and each label is measured once.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    return Figure(figsize=figsize)
+    fig = Figure(figsize=figsize, dpi=_DPI)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+# tight_layout's default padding around the figure and between rows, in font sizes
+_PAD_FONTSIZES = 1.08
+# matplotlib's fixed distance of an axis' offset text ("1e6") from the tick labels, pt
+_OFFSET_TEXT_PAD_PT = 3.0
+
+
+def _visible_tick_labels(axis):
+    """The tick labels of ``axis`` that are drawn: non-empty, visible, tick inside the view."""
+    lo, hi = sorted(axis.get_view_interval())
+    tol = 1e-10 * max(abs(hi - lo), 1e-300)
+    locs = axis.get_majorticklocs()
+    labels = axis.get_majorticklabels()  # updates the ticks' positions and texts
+    ticks = axis.get_major_ticks(len(locs))
+    drawn = {id(t.label1) for t, x in zip(ticks, locs) if lo - tol <= x <= hi + tol}
+    drawn |= {id(t.label2) for t, x in zip(ticks, locs) if lo - tol <= x <= hi + tol}
+    return [lb for lb in labels if id(lb) in drawn and lb.get_visible() and lb.get_text()]
+
+
+def _decorations_bbox(ax, renderer):
+    """Display-space box (px) of ``ax`` with everything drawn around it: tick labels, axis
+    labels, offset texts, title, texts and annotations.
+
+    Computed from text metrics and matplotlib's fixed placement rules (axis label ``labelpad``
+    beyond the tick labels, offset text 3 pt beyond them, title at ``titlepad`` above the axes)
+    instead of ``Axes.get_tightbbox``, which recomputes every axis' ticks several times (the
+    draw that follows does it once more).
+    """
+    from matplotlib.transforms import Bbox
+
+    px = ax.figure.dpi / 72.0
+    ax.apply_aspect()
+    box = ax.get_window_extent(renderer)
+    boxes = [box]
+    y_off = None
+    for axis, side in ((ax.xaxis, "x"), (ax.yaxis, "y")):
+        if not (ax.axison and axis.get_visible()):
+            continue
+        tl = [lb.get_window_extent(renderer) for lb in _visible_tick_labels(axis)]
+        boxes += tl
+        tb = Bbox.union(tl + [box])
+        label, offset = axis.label, axis.get_offset_text()
+        # the draw sets the offset text ("1e6") from the formatter the tick labels just used
+        offset.set_text(axis.get_major_formatter().get_offset())
+        lab = label.get_window_extent(renderer) if label.get_visible() and label.get_text() else None
+        off = offset.get_window_extent(renderer) if offset.get_visible() and offset.get_text() else None
+        if side == "x":
+            below = axis.get_label_position() == "bottom"
+            edge = tb.y0 if below else tb.y1
+            if lab is not None:
+                # width taken as 1 px at the label's centre, as tight_layout does: a long label
+                # may overhang the axes but must not squeeze them
+                gap, h, cx = axis.labelpad * px, lab.height, 0.5 * (box.x0 + box.x1)
+                y0, y1 = (edge - gap - h, edge - gap) if below else (edge + gap, edge + gap + h)
+                boxes.append(Bbox.from_extents(cx - 0.5, y0, cx + 0.5, y1))
+            if off is not None:
+                g = _OFFSET_TEXT_PAD_PT * px
+                y0, y1 = (tb.y0 - g - off.height, tb.y0) if below else (tb.y1, tb.y1 + g + off.height)
+                boxes.append(Bbox.from_extents(box.x1 - off.width, y0, box.x1, y1))
+        else:
+            left = axis.get_label_position() == "left"
+            edge = tb.x0 if left else tb.x1
+            if lab is not None:
+                gap, w, cy = axis.labelpad * px, lab.width, 0.5 * (box.y0 + box.y1)
+                x0, x1 = (edge - gap - w, edge - gap) if left else (edge + gap, edge + gap + w)
+                boxes.append(Bbox.from_extents(x0, cy - 0.5, x1, cy + 0.5))
+            if off is not None:
+                g = _OFFSET_TEXT_PAD_PT * px
+                x0 = box.x0 if left else box.x1 - off.width
+                # placed on its baseline 3 pt above the axes; a line's descent is at least that of
+                # "lp" (matplotlib's text layout rule)
+                fp = offset.get_fontproperties()
+                d = max(renderer.get_text_width_height_descent(t, fp, False)[2] for t in (offset.get_text(), "lp"))
+                y_off = Bbox.from_extents(x0, box.y1 + g - d, x0 + off.width, box.y1 + g - d + off.height)
+                boxes.append(y_off)
+    if ax.title.get_visible() and ax.title.get_text():
+        tb = ax.title.get_window_extent(renderer)
+        if y_off is not None and tb.overlaps(y_off) and tb.y0 < y_off.y1:
+            # matplotlib raises a title that would overlap the y axis' offset text ("1e6"): its
+            # anchor, then at titlepad below its baseline, moves from the axes top to the text's
+            tb = Bbox.from_extents(tb.x0, tb.y0 + y_off.y1 - box.y1, tb.x1, tb.y1 + y_off.y1 - box.y1)
+        # zero width as in tight_layout: a long title may overhang the axes, not squeeze them
+        cx = 0.5 * (tb.x0 + tb.x1)
+        boxes.append(Bbox.from_extents(cx - 0.5, tb.y0, cx + 0.5, tb.y1))
+    for t in ax.texts:
+        if t.get_visible() and t.get_in_layout() and t.get_text():
+            boxes.append(t.get_window_extent(renderer))
+    return Bbox.union(boxes)
+
+
+def _fit_layout(fig: Figure) -> None:
+    """Set the subplot margins and row spacing so that every axes' decorations fit, as
+    ``fig.tight_layout()`` would (same padding, same rule: the overhang of each axes'
+    decorations beyond its top-level grid cell), without its repeated tick computations.
+
+    For figures whose axes sit in one column of a top-level grid (rows may hold nested grids,
+    e.g. an axes and its colour bar).
+    """
+    from matplotlib import rcParams
+
+    renderer = fig.canvas.get_renderer()
+    W, H = fig.bbox.width, fig.bbox.height
+    pad = _PAD_FONTSIZES * float(rcParams["font.size"]) * fig.dpi / 72.0  # px
+    nrows = None
+    left = right = 0.0
+    top, bottom = {}, {}
+    for ax in fig.axes:
+        ss = ax.get_subplotspec()
+        if ss is None:
+            continue
+        top_ss = ss.get_topmost_subplotspec()
+        nrows = top_ss.get_gridspec().nrows
+        cell = top_ss.get_position(fig).transformed(fig.transFigure)
+        deco = _decorations_bbox(ax, renderer)
+        left = max(left, cell.x0 - deco.x0)
+        right = max(right, deco.x1 - cell.x1)
+        r0, r1 = top_ss.rowspan.start, top_ss.rowspan.stop - 1
+        top[r0] = max(top.get(r0, 0.0), deco.y1 - cell.y1)
+        bottom[r1] = max(bottom.get(r1, 0.0), cell.y0 - deco.y0)
+    if nrows is None:
+        return
+    lo = (pad + left) / W
+    ro = 1.0 - (pad + right) / W
+    to = 1.0 - (pad + top.get(0, 0.0)) / H
+    bo = (pad + bottom.get(nrows - 1, 0.0)) / H
+    kw = {"left": lo, "right": ro, "top": to, "bottom": bo}
+    if nrows > 1:
+        gap = max(bottom.get(i, 0.0) + top.get(i + 1, 0.0) + pad for i in range(nrows - 1))
+        cell_h = ((to - bo) * H - (nrows - 1) * gap) / nrows
+        kw["hspace"] = gap / cell_h
+    fig.subplots_adjust(**kw)
 
 
 def _save(fig: Figure, path) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    FigureCanvasAgg(fig)
+    if not isinstance(fig.canvas, FigureCanvasAgg):
+        FigureCanvasAgg(fig)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=_DPI, metadata=_METADATA)
     atomic_write_bytes(path, buf.getvalue())
@@ -131,7 +273,7 @@ def figure_line_profile(
         ax2.set_ylabel("horizontal disturbance, mGal")
         ax2.set_title("horizontal components ± 1σ (blank where not observable)", fontsize=9)
         ax2.grid(True, alpha=0.3)
-    fig.tight_layout()
+    _fit_layout(fig)
     return fig
 
 
@@ -199,14 +341,16 @@ def figure_survey_map(
     lim = lim if lim > 0 else 1.0
     # the track itself in thin grey under the colour (visible where the value is near zero), and a
     # diverging map whose centre is pale yellow, not white
+    # one artist for all lines: a NaN vertex between two lines breaks the path there, as separate
+    # lines would (a survey has hundreds of lines; each Line2D costs its own draw set-up)
     cut = np.flatnonzero(ids[1:] != ids[:-1]) + 1
-    for a, b in zip(np.concatenate(([0], cut)), np.concatenate((cut, [e.size]))):
-        ax.plot(e[a:b], n[a:b], color="0.4", linewidth=0.5, zorder=1)
+    ax.plot(np.insert(e, cut, np.nan), np.insert(n, cut, np.nan), color="0.4", linewidth=0.5, zorder=1)
     sc = ax.scatter(e, n, c=v, s=4, cmap="RdYlBu_r", vmin=-lim, vmax=lim, linewidths=0, gid="tracks", zorder=2)
     cb = fig.colorbar(sc, ax=ax, shrink=0.8)
     cb.set_label("gravity disturbance, mGal")
-    for lid in dict.fromkeys(ids.tolist()):
-        i = int(np.flatnonzero(ids == lid)[0])
+    # each line labelled at its first sample, in order of appearance (one pass, not one per line)
+    lids, first = np.unique(ids, return_index=True)
+    for lid, i in sorted(zip(lids.tolist(), first.tolist()), key=lambda p: p[1]):
         if np.isfinite(e[i]) and np.isfinite(n[i]):
             ax.annotate(lid, (e[i], n[i]), fontsize=7, xytext=(3, 3), textcoords="offset points")
     xe, xn, xd = _crossover_arrays(crossovers)
@@ -249,7 +393,7 @@ def figure_survey_map(
     ax.grid(True, alpha=0.3)
     if title:
         ax.set_title(title, fontsize=10)
-    fig.tight_layout()
+    _fit_layout(fig)
     return fig
 
 
@@ -286,7 +430,7 @@ def figure_crossover_histogram(crossovers, *, title: str = "") -> Figure:
         ax.set_ylabel("count")
         stats = f"n = {d.size}, mean {d.mean():.2f}, RMS {rms:.2f}, RMS/√2 {rms / math.sqrt(2):.2f} mGal"
     ax.set_title(f"{title}\n{stats}" if title else stats, fontsize=10)
-    fig.tight_layout()
+    _fit_layout(fig)
     return fig
 
 

@@ -171,3 +171,36 @@ def test_epoch_helpers_interpolate_and_respect_gaps():
     # across the antimeridian: midpoint is 180 deg, not 0
     assert abs(abs(np.degrees(lon[0])) - 180.0) < 1e-9 and np.isnan(lon[1])
     np.testing.assert_allclose([np.degrees(lat[0]), hh[0]], [10.1, 6.0])
+
+
+@pytest.mark.parametrize("order", ["C", "F"])
+def test_fast_row_norm_and_mean_std_are_bit_identical_to_numpy(order):
+    """check_imu's helpers replace np.linalg.norm and mean()/std() for speed: the findings'
+    values and messages must not change by a single bit."""
+    rng = np.random.default_rng(3)
+    x = np.asarray(rng.normal(0, 1, (1001, 3)) * [1e-5, 3.0, 7e4], order=order)
+    assert np.array_equal(ck.row_norm(x), np.linalg.norm(x, axis=1))
+    b = np.ascontiguousarray(x[:1000]).reshape(50, 20, 3)
+    for arr, axis in ((x, 0), (b, 1), (b, 0)):
+        m, s = ck.mean_std(arr, axis)
+        assert np.array_equal(m, arr.mean(axis=axis)) and np.array_equal(s, arr.std(axis=axis))
+
+
+@pytest.mark.parametrize("turn", [False, True])
+def test_rest_rate_matches_plain_numpy_on_contiguous_and_split_rest(turn):
+    """The rest mean rate is the plain numpy mean of the steady windows' samples, whether they
+    are one contiguous run (read through a view) or split by a turn (gathered by mask)."""
+    d = static_flight(seconds=60.0, lat_deg=50.0)
+    w = d["w"].copy()
+    win = int(round(ck.REST_WINDOW_S * 100.0))
+    if turn:  # windows 10-12 turn: not steady, the others are
+        w[10 * win : 13 * win] += 0.02
+    fs = ck.check_imu(d["imu_t"], d["f"], w, 1e7)
+    r = next(x for x in fs if x.check == "gyro at rest")
+    keep = np.ones(len(w) // win, bool)
+    if turn:
+        keep[10:13] = False
+    rest = w[: keep.size * win].reshape(keep.size, win, 3)[keep].reshape(-1, 3)
+    expected = float(np.linalg.norm(rest.mean(axis=0))) / ck.OMEGA_E
+    assert r.level == "ok" and r.value == expected
+    assert f"at rest ({len(rest)} samples)" in r.message

