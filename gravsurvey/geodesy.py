@@ -114,32 +114,12 @@ def geodetic_to_ecef_scalar(lat, lon, h, a, f):
 def ecef_to_geodetic_scalar(x, y, z, a, f):
     """ECEF (m) -> geodetic (rad, rad, m).
 
-    Bowring's initial value refined by Newton-like iteration on the latitude;
-    four iterations give < 1e-12 rad and < 1e-6 m for |h| < 1e6 m.
+    Bowring's initial value refined by four fixed-point iterations on the latitude
+    (:func:`geodetic_trig_scalar`, which does it on the latitude's sine and cosine):
+    < 1e-12 rad and < 1e-6 m for |h| < 1e6 m.
     """
-    e2 = f * (2.0 - f)
-    b = a * (1.0 - f)
-    ep2 = (a * a - b * b) / (b * b)
-    p = math.hypot(x, y)
-    lon = math.atan2(y, x)
-    if p < 1e-9:
-        lat = math.copysign(0.5 * math.pi, z)
-        return lat, lon, abs(z) - b
-    theta = math.atan2(z * a, p * b)
-    st = math.sin(theta)
-    ct = math.cos(theta)
-    lat = math.atan2(z + ep2 * b * st * st * st, p - e2 * a * ct * ct * ct)
-    for _ in range(4):
-        slat = math.sin(lat)
-        n = a / math.sqrt(1.0 - e2 * slat * slat)
-        h = p / math.cos(lat) - n if abs(lat) < 0.78 else z / slat - n * (1.0 - e2)
-        lat = math.atan2(z, p * (1.0 - e2 * n / (n + h)))
-    slat = math.sin(lat)
-    clat = math.cos(lat)
-    n = a / math.sqrt(1.0 - e2 * slat * slat)
-    # height from the projection that is well conditioned at any latitude
-    h = p * clat + z * slat - a * a / n
-    return lat, lon, h
+    sl, cl, h = geodetic_trig_scalar(x, y, z, a, f, 4)
+    return math.atan2(sl, cl), math.atan2(y, x), h
 
 
 @njit(cache=True)
@@ -317,12 +297,12 @@ def zonal4_gravitation_scalar(x, y, z, a, gm, j2, j4):
 def geodetic_trig_scalar(x, y, z, a, f, n_iter=3):
     """Sine and cosine of the geodetic latitude and the ellipsoidal height of a point, no trig calls.
 
-    The algorithm of :func:`ecef_to_geodetic_scalar` (Bowring's initial value, then
-    ``n_iter`` fixed-point iterations on the latitude, then the height by projection) carried
-    out on ``(sin lat, cos lat)`` normalised from the tangent by a square root, so it needs no
-    ``atan2``/``sin``/``cos``; the longitude is not formed.  The axes may be ECEF or inertial
-    (latitude and height do not depend on the longitude).  Measured against
-    :func:`ecef_to_geodetic_scalar` at all latitudes (tests/test_geodesy.py):
+    Bowring's initial value, then ``n_iter`` fixed-point iterations on the latitude, then the
+    height by projection, carried out on ``(sin lat, cos lat)`` normalised from the tangent by
+    a square root, so it needs no ``atan2``/``sin``/``cos``; the longitude is not formed
+    (:func:`ecef_to_geodetic_scalar` is this with four iterations).  The axes may be ECEF or
+    inertial (latitude and height do not depend on the longitude).  Measured against four
+    iterations at all latitudes (tests/test_geodesy.py):
 
     ========  =================  =================  ==================
     n_iter    -1e4..2e4 m        2e4..1e5 m         1e5..1e6 m
@@ -368,7 +348,7 @@ def geodetic_trig_scalar(x, y, z, a, f, n_iter=3):
     cl = den / d
     for _ in range(n_iter):
         n = a / math.sqrt(1.0 - e2 * sl * sl)
-        # |lat| < 0.78 rad as in ecef_to_geodetic_scalar
+        # |lat| < 0.78 rad: the height from p, else from z (better conditioned there)
         h = p / cl - n if cl > 0.7109135380122773 else z / sl - n * (1.0 - e2)
         den = p * (1.0 - e2 * n / (n + h))
         d = math.sqrt(z * z + den * den)
@@ -376,31 +356,6 @@ def geodetic_trig_scalar(x, y, z, a, f, n_iter=3):
         cl = den / d
     n = a / math.sqrt(1.0 - e2 * sl * sl)
     return sl, cl, p * cl + z * sl - a * a / n
-
-
-@njit(cache=True)
-def mat_en_scalar(lat, lon):
-    """3x3 matrix mapping local ENU (n) vectors to ECEF (e)."""
-    sl = math.sin(lat)
-    cl = math.cos(lat)
-    so = math.sin(lon)
-    co = math.cos(lon)
-    m = np.empty((3, 3))
-    m[0, 0] = -so
-    m[0, 1] = -sl * co
-    m[0, 2] = cl * co
-    m[1, 0] = co
-    m[1, 1] = -sl * so
-    m[1, 2] = cl * so
-    m[2, 0] = 0.0
-    m[2, 1] = cl
-    m[2, 2] = sl
-    return m
-
-
-# --------------------------------------------------------------------------
-# Array wrappers
-# --------------------------------------------------------------------------
 
 
 @njit(cache=True)
