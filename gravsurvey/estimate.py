@@ -231,10 +231,16 @@ def attitude_report(sol) -> dict:
     if att_sig is not None and np.isfinite(att_sig).any():
         med = np.degrees(np.nanmedian(att_sig, axis=0))
         out["attitude_sigma_median_deg"] = {"roll": float(med[0]), "pitch": float(med[1]), "heading": float(med[2])}
-        out["attitude_passes"] = int(sol.passes)
-        out["attitude_corrections_deg"] = [float(np.degrees(c)) for c in sol.attitude_corrections]
         out["attitude_converge_s"] = float(sol.attitude_converge_s)
         out["gnss_residual_rms_m"] = float(sol.gnss_residual_rms_m)
+    bias = getattr(sol, "gyro_bias_t", None)
+    if bias is not None:
+        # the passes re-linearise every GNSS-aided flight (attitude and gyro bias), platform too
+        out["attitude_passes"] = int(sol.passes)
+        out["attitude_corrections_deg"] = [float(np.degrees(c)) for c in sol.attitude_corrections]
+        degph = math.degrees(1.0) * 3600.0
+        out["gyro_bias_degph"] = [float(b * degph) for b in bias]
+        out["gyro_bias_sigma_degph"] = [float(b * degph) for b in sol.gyro_bias_sigma_t]
     return out
 
 

@@ -655,19 +655,23 @@ def initial_covariance(
     return 0.5 * (p + p.T)
 
 
-def initial_mean(theta_t, q_t, p_t, n_state: int = N_STATE_AIDED) -> np.ndarray:
+def initial_mean(theta_t, q_t, p_t, n_state: int = N_STATE_AIDED, gyro_bias_t=None) -> np.ndarray:
     """Prior mean (n_state,) of the aided state for an attitude error ``theta_t`` (rad, triad axes).
 
     With the position and velocity errors ``dr``, ``dv`` of zero mean the seed's states carry
     the attitude: ``dq = -q x theta`` and ``dp = -p x theta`` (:func:`continuous_model_n`).
     Used when the filter is re-run about a corrected attitude while the prior stays the
     alignment's (the prior mean is then the old attitude seen from the new one).
+    ``gyro_bias_t`` (3,), rad/s: the gyro-bias state's prior mean (a re-run whose rates had an
+    estimated bias taken off: minus that bias); None: zero.
     """
     th = np.asarray(theta_t, float)
     x = np.zeros(n_state)
     x[DQ] = -np.cross(np.asarray(q_t, float), th)
     x[DP] = -np.cross(np.asarray(p_t, float), th)
     x[TH] = th
+    if gyro_bias_t is not None:
+        x[BG] = np.asarray(gyro_bias_t, float)
     return x
 
 

@@ -83,10 +83,11 @@ class InmParams:
         the alignment (docs/method.md, "Alignment"), 0.05 deg when it is given (a platform's
         levelled triad, or ``initial.attitude_deg``).
     attitude_passes : int
-        Most filter/smoother passes for a strapdown triad with GNSS aiding (1-5, default 3):
-        after a pass the initial attitude is corrected by the smoothed attitude error and the
-        flight is mechanized and filtered again about it (the prior stays the alignment's);
-        it stops when the correction is below 0.001 deg.
+        Most filter/smoother passes with GNSS aiding (1-5, default 3): after a pass the
+        initial attitude is corrected by the smoothed attitude error, the smoothed gyro bias
+        is taken off the rates, and the flight is mechanized and filtered again about that
+        (the prior stays the alignment's); it stops when the corrections are below 0.001 deg
+        and 0.001 deg/h.
     gyro_bias_sigma_degph : float
         1-sigma of each gyro's constant bias, deg/h (GNSS-aided filter only: with position
         aiding the bias is observable and is estimated as three extra states).

@@ -10,6 +10,7 @@ import numpy as np
 from ..errors import ConfigError, DataError
 from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, mat_en, mat_ie
 from .errormodel import (
+    BG,
     DP,
     DQ,
     F3,
@@ -99,6 +100,9 @@ class InmSolution:
         Filter/smoother passes run (``model.attitude_passes``).
     attitude_corrections : list of float
         Size of the initial-attitude correction after each pass, rad.
+    gyro_bias_t, gyro_bias_sigma_t : ndarray (3,) or None
+        The gyro biases on the triad axes and their smoothed 1-sigma, rad/s (GNSS-aided only):
+        what the passes took off the rates plus the last pass's smoothed bias state.
     alignment : Alignment or None
         The coarse alignment the initial attitude came from (None: given).
     attitude_converge_s : float
@@ -147,6 +151,8 @@ class InmSolution:
     attitude_sigma: np.ndarray | None = None
     passes: int = 1
     attitude_corrections: list = field(default_factory=list)
+    gyro_bias_t: np.ndarray | None = None
+    gyro_bias_sigma_t: np.ndarray | None = None
     alignment: object | None = None
     attitude_converge_s: float = float("nan")
     gnss_residual_rms_m: float = float("nan")
@@ -200,6 +206,12 @@ MIN_REFINE_S = 900.0
 #: The passes stop once the initial-attitude correction is below this, rad (0.001 deg).
 ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
 
+#: ... and once the gyro-bias correction is below this, rad/s (0.001 deg/h).  An uncorrected
+#: horizontal gyro bias tilts the mechanization by ``b t`` (0.05 deg/h: 0.5 mrad after 40 min)
+#: and the filter, linearised about that navigation, left a slow vertical error of ~35 mGal
+#: per deg/h of bias (docs/method.md, "Passes"); 0.001 deg/h leaves ~0.04 mGal.
+GYRO_BIAS_CONVERGED_RADPS = math.radians(1e-3) / 3600.0
+
 #: An initial-attitude correction above this (rad, 0.5 deg) re-runs the identification about
 #: the corrected attitude in the next pass (after an alignment: 0.004-0.13 deg measured, not re-run).
 REIDENTIFY_RAD = math.radians(0.5)
@@ -217,11 +229,13 @@ def estimate_anomaly(
 ) -> InmSolution:
     """Estimate the gravity disturbance along a flight (3D-INM + Kalman + RTS).
 
-    A GNSS-aided strapdown flight runs up to ``params.attitude_passes`` passes: after each,
-    the initial attitude is corrected by the smoothed attitude error at the first epoch
-    (``C_true = C Exp(theta)``) and the flight is mechanized and filtered again about it.
-    The prior is kept (the alignment's): its mean becomes the old attitude seen from the new
-    one (:func:`gravsurvey.inm.errormodel.initial_mean`), an iterated (Gauss-Newton) smoother.
+    A GNSS-aided flight runs up to ``params.attitude_passes`` passes: after each, the initial
+    attitude is corrected by the smoothed attitude error at the first epoch
+    (``C_true = C Exp(theta)``), the smoothed gyro bias is taken off the angular rates, and the
+    flight is mechanized and filtered again about that.  The prior is kept (the alignment's,
+    zero-mean bias about the raw rates): its mean becomes the old attitude and bias seen from
+    the new point (:func:`gravsurvey.inm.errormodel.initial_mean`), an iterated
+    (Gauss-Newton) smoother.
     With ``params.horizontal`` (and GNSS) one more pass follows about the last linearisation
     point with the 18-state model (horizontal disturbance and accelerometer biases; its prior
     from the vertical estimate, :func:`gravsurvey.inm.identify.horizontal_prior`), and the
@@ -259,6 +273,7 @@ def estimate_anomaly(
         initial = initial_state_from_gnss(record, triad, attitude_deg, params=params, ellipsoid=ellipsoid)
     mat_nt0 = np.array(initial.mat_nt, float)
     theta_prior = np.zeros(3)  # the prior attitude seen from the current linearisation point
+    gyro_bias_t = np.zeros(3)  # the gyro bias taken off the rates before mechanizing, rad/s
     corrections = []
     passes = int(params.attitude_passes)
     ident = {}
@@ -270,23 +285,43 @@ def estimate_anomaly(
         cur = InitialState(
             initial.lat, initial.lon, initial.height, initial.vel_n, mat_nt0, initial.attitude_cov_t, initial.alignment
         )
-        nav = _mechanize(record, params, cur, ellipsoid, reference)
+        nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
         if k == 0:
             speed0 = _typical_speed(record, nav, ellipsoid)
         if given_params.identify and reidentify:
             params, ident = _identify(
-                record, given_params, cur, nav, ellipsoid, reference, theta_prior, gnss_lever_arm_t, speed0, accel_bias
+                record,
+                given_params,
+                cur,
+                nav,
+                ellipsoid,
+                reference,
+                theta_prior,
+                gnss_lever_arm_t,
+                speed0,
+                accel_bias,
+                gyro_bias_prior=-gyro_bias_t,
             )
             ident["identified_in_pass"] = k + 1
             reidentify = False
         idx, c, gnss_used, n_state, out = _one_pass(
-            record, params, cur, nav, ellipsoid, reference, theta_prior, gnss_lever_arm_t, accel_bias=accel_bias
+            record,
+            params,
+            cur,
+            nav,
+            ellipsoid,
+            reference,
+            theta_prior,
+            gnss_lever_arm_t,
+            accel_bias=accel_bias,
+            gyro_bias_prior=-gyro_bias_t,
         )
-        if not (gnss_used and triad == "strapdown") or k == passes - 1:
+        if not gnss_used or k == passes - 1:
             break
         th0 = out["x_s"][0, TH]
+        db = out["x_s"][0, BG]
         corrections.append(float(np.linalg.norm(th0)))
-        if corrections[-1] < ATTITUDE_CONVERGED_RAD:
+        if corrections[-1] < ATTITUDE_CONVERGED_RAD and float(np.max(np.abs(db))) < GYRO_BIAS_CONVERGED_RADPS:
             break
         # the model was identified on a navigation this far off (a given attitude degrees off: tilt
         # leaks the horizontal specific force into the vertical channel): identify it again about
@@ -297,11 +332,23 @@ def estimate_anomaly(
         mat_nt0 = mat_nt0 @ rot
         # prior attitude (old point) seen from the new point: C_old = C_new Exp(-th0)
         theta_prior = theta_prior - th0
+        # the smoothed gyro bias comes off the rates; the bias state is then what remains, its
+        # prior (zero mean about the raw rates) seen from the new point has mean -bias taken off
+        gyro_bias_t = gyro_bias_t + db
     hsol = None
     if params.horizontal:
         if gnss_used:
             hsol = _horizontal_pass(
-                record, params, cur, nav, ellipsoid, reference, theta_prior, gnss_lever_arm_t, out["x_s"][:, G]
+                record,
+                params,
+                cur,
+                nav,
+                ellipsoid,
+                reference,
+                theta_prior,
+                gnss_lever_arm_t,
+                out["x_s"][:, G],
+                gyro_bias_prior=-gyro_bias_t,
             )
             idx, c, gnss_used, n_state, out, hprior = hsol
         else:
@@ -319,6 +366,9 @@ def estimate_anomaly(
             "lambda_per_m": hprior[1],
             "observable_fraction": float(np.mean(sol.horizontal_observable)),
         }
+    if gnss_used:
+        sol.gyro_bias_t = gyro_bias_t + out["x_s"][0, BG]
+        sol.gyro_bias_sigma_t = np.sqrt(np.diagonal(out["p_s"][0])[BG])
     sol.alignment = initial.alignment
     sol.params = params
     sol.identification = ident
@@ -379,14 +429,21 @@ def _altimeter(record):
     return alt_t[good], alt_h[good]
 
 
-def _mechanize(record, params, initial, ellipsoid, reference):
-    """Mechanize the record about ``initial`` (gravity with the altimeter radius by default)."""
+def _mechanize(record, params, initial, ellipsoid, reference, gyro_bias_t=None):
+    """Mechanize the record about ``initial`` (gravity with the altimeter radius by default).
+
+    ``gyro_bias_t`` (3,), rad/s: a gyro bias already estimated, taken off the angular rates
+    before integrating (the passes' re-linearisation, :func:`estimate_anomaly`).
+    """
     imu = record.imu
     alt_t, alt_h = _altimeter(record)
+    rate_t = imu.angular_rate_t
+    if gyro_bias_t is not None and np.any(gyro_bias_t != 0.0):
+        rate_t = np.asarray(rate_t, float) - np.asarray(gyro_bias_t, float)[None, :]
     return mechanize(
         np.asarray(imu.time, float),
         imu.specific_force_t,
-        imu.angular_rate_t,
+        rate_t,
         initial,
         alt_t,
         alt_h,
@@ -396,7 +453,19 @@ def _mechanize(record, params, initial, ellipsoid, reference):
     )
 
 
-def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, speed0, accel_bias=False):
+def _identify(
+    record,
+    params,
+    initial,
+    nav,
+    ellipsoid,
+    reference,
+    theta_prior,
+    lever_arm_t,
+    speed0,
+    accel_bias=False,
+    gyro_bias_prior=None,
+):
     """Identify the model from the flight (gravsurvey.inm.identify; docs/method.md).
 
     1) noise levels from the vertical channel's spectrum; 2) a first pass with a wide anomaly
@@ -411,7 +480,16 @@ def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, l
     elif ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
         wide = wide_prior_params(params, ident, speed0)
         idx, _, _, _, first = _one_pass(
-            record, wide, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, accel_bias=accel_bias
+            record,
+            wide,
+            initial,
+            nav,
+            ellipsoid,
+            reference,
+            theta_prior,
+            lever_arm_t,
+            accel_bias=accel_bias,
+            gyro_bias_prior=gyro_bias_prior,
         )
         weight = straight_weight(nav, record.imu.specific_force_t, nav.time[idx])
         params, ident = refine_prior(
@@ -424,7 +502,9 @@ def _identify(record, params, initial, nav, ellipsoid, reference, theta_prior, l
     return params, ident
 
 
-def _horizontal_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, g_vertical):
+def _horizontal_pass(
+    record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, g_vertical, gyro_bias_prior=None
+):
     """The 18-state pass (vector gravimetry) about the last vertical pass's linearisation point.
 
     Its horizontal prior is the Markov process matched to the vertical estimate ``g_vertical``
@@ -435,18 +515,41 @@ def _horizontal_pass(record, params, initial, nav, ellipsoid, reference, theta_p
     step = max(1, int(round((t.size - 1) / (t[-1] - t[0]) / params.filter_rate_hz)))
     spacing = _typical_speed(record, nav, ellipsoid) * float(t[min(step, t.size - 1)] - t[0])
     hprior = horizontal_prior(params.anomaly_sigma_mps2, params.anomaly_lambda_per_m, g_vertical, spacing)
-    return (*_one_pass(record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, hprior), hprior)
+    out = _one_pass(
+        record,
+        params,
+        initial,
+        nav,
+        ellipsoid,
+        reference,
+        theta_prior,
+        lever_arm_t,
+        hprior,
+        gyro_bias_prior=gyro_bias_prior,
+    )
+    return (*out, hprior)
 
 
 def _one_pass(
-    record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t=None, hprior=None, accel_bias=False
+    record,
+    params,
+    initial,
+    nav,
+    ellipsoid,
+    reference,
+    theta_prior,
+    lever_arm_t=None,
+    hprior=None,
+    accel_bias=False,
+    gyro_bias_prior=None,
 ):
     """Discretise, filter and smooth once about the mechanization ``nav``.
 
     Returns ``idx`` (IMU indices of the epochs), ``c`` (triad -> inertial at the epochs),
     ``gnss_used``, ``n_state`` and the :func:`filter_and_smooth` dict.  ``hprior``: the
     horizontal disturbance prior (sigma, lambda) when ``params.horizontal``.  ``accel_bias``:
-    the 16-state model (horizontal accelerometer biases) when GNSS-aided.
+    the 16-state model (horizontal accelerometer biases) when GNSS-aided.  ``gyro_bias_prior``
+    (3,), rad/s: the prior mean of the gyro-bias state (minus the bias taken off the rates).
     """
     t = nav.time
     alt_t, alt_h = _altimeter(record)
@@ -497,7 +600,7 @@ def _one_pass(
         p0 = initial_covariance(
             params, q_t0, p_t0, attitude_cov_t=att_cov, horizontal=horizontal, hprior=hprior, accel_bias=accel_bias
         )
-        x0 = initial_mean(theta_prior, q_t0, p_t0, n_state)
+        x0 = initial_mean(theta_prior, q_t0, p_t0, n_state, gyro_bias_prior)
     else:
         p0 = initial_covariance(params)
         x0 = np.zeros(n_state)

@@ -180,9 +180,9 @@ class ModelSection(Section):
     )
     attitude_passes: int = _m(
         "attitude_passes",
-        "most filter/smoother passes of a GNSS-aided strapdown flight: "
-        "each re-mechanizes about the smoothed initial-attitude correction; stops below "
-        "0.001 deg",
+        "most filter/smoother passes of a GNSS-aided flight: each re-mechanizes about the "
+        "smoothed initial-attitude correction with the smoothed gyro bias taken off the rates; "
+        "stops below 0.001 deg and 0.001 deg/h",
         ge=1,
         le=5,
     )
