@@ -87,7 +87,7 @@ class InmParams:
         initial attitude is corrected by the smoothed attitude error, the smoothed gyro bias
         is taken off the rates, and the flight is mechanized and filtered again about that
         (the prior stays the alignment's); it stops when the corrections are below 0.001 deg
-        and 0.001 deg/h.
+        and 0.001 deg/h (or within the bias's smoothed sigma).
     gyro_bias_sigma_degph : float
         1-sigma of each gyro's constant bias, deg/h (GNSS-aided filter only: with position
         aiding the bias is observable and is estimated as three extra states).

@@ -206,7 +206,8 @@ MIN_REFINE_S = 900.0
 #: The passes stop once the initial-attitude correction is below this, rad (0.001 deg).
 ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
 
-#: ... and once the gyro-bias correction is below this, rad/s (0.001 deg/h).  An uncorrected
+#: ... and once every gyro-bias correction is below this, rad/s (0.001 deg/h), or below its own
+#: smoothed sigma.  An uncorrected
 #: horizontal gyro bias tilts the mechanization by ``b t`` (0.05 deg/h: 0.5 mrad after 40 min)
 #: and the filter, linearised about that navigation, left a slow vertical error of ~35 mGal
 #: per deg/h of bias (docs/method.md, "Passes"); 0.001 deg/h leaves ~0.04 mGal.
@@ -321,7 +322,11 @@ def estimate_anomaly(
         th0 = out["x_s"][0, TH]
         db = out["x_s"][0, BG]
         corrections.append(float(np.linalg.norm(th0)))
-        if corrections[-1] < ATTITUDE_CONVERGED_RAD and float(np.max(np.abs(db))) < GYRO_BIAS_CONVERGED_RADPS:
+        # a bias correction within its own smoothed sigma (the heading gyro's on straight lines,
+        # where it is unobservable) is not one another pass could confirm
+        db_sig = np.sqrt(np.diagonal(out["p_s"][0])[BG])
+        bias_done = np.all((np.abs(db) < GYRO_BIAS_CONVERGED_RADPS) | (np.abs(db) < db_sig))
+        if corrections[-1] < ATTITUDE_CONVERGED_RAD and bias_done:
             break
         # the model was identified on a navigation this far off (a given attitude degrees off: tilt
         # leaks the horizontal specific force into the vertical channel): identify it again about

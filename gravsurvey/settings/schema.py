@@ -182,7 +182,7 @@ class ModelSection(Section):
         "attitude_passes",
         "most filter/smoother passes of a GNSS-aided flight: each re-mechanizes about the "
         "smoothed initial-attitude correction with the smoothed gyro bias taken off the rates; "
-        "stops below 0.001 deg and 0.001 deg/h",
+        "stops below 0.001 deg and 0.001 deg/h (or the bias's own sigma)",
         ge=1,
         le=5,
     )
