@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -289,34 +290,24 @@ def estimate_anomaly(
         nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
         if k == 0:
             speed0 = _typical_speed(record, nav, ellipsoid)
-        if given_params.identify and reidentify:
-            params, ident = _identify(
-                record,
-                given_params,
-                cur,
-                nav,
-                ellipsoid,
-                reference,
-                theta_prior,
-                gnss_lever_arm_t,
-                speed0,
-                accel_bias,
-                gyro_bias_prior=-gyro_bias_t,
-            )
-            ident["identified_in_pass"] = k + 1
-            reidentify = False
-        idx, c, gnss_used, n_state, out = _one_pass(
+        # every pass about this linearisation point: the navigation, the prior attitude and
+        # gyro bias seen from it
+        one_pass = functools.partial(
+            _one_pass,
             record,
-            params,
-            cur,
-            nav,
-            ellipsoid,
-            reference,
-            theta_prior,
-            gnss_lever_arm_t,
-            accel_bias=accel_bias,
+            initial=cur,
+            nav=nav,
+            ellipsoid=ellipsoid,
+            reference=reference,
+            theta_prior=theta_prior,
+            lever_arm_t=gnss_lever_arm_t,
             gyro_bias_prior=-gyro_bias_t,
         )
+        if given_params.identify and reidentify:
+            params, ident = _identify(record, given_params, nav, ellipsoid, speed0, one_pass, accel_bias)
+            ident["identified_in_pass"] = k + 1
+            reidentify = False
+        idx, c, gnss_used, n_state, out = one_pass(params, accel_bias=accel_bias)
         if not gnss_used or k == passes - 1:
             break
         th0 = out["x_s"][0, TH]
@@ -343,18 +334,7 @@ def estimate_anomaly(
     hsol = None
     if params.horizontal:
         if gnss_used:
-            hsol = _horizontal_pass(
-                record,
-                params,
-                cur,
-                nav,
-                ellipsoid,
-                reference,
-                theta_prior,
-                gnss_lever_arm_t,
-                out["x_s"][:, G],
-                gyro_bias_prior=-gyro_bias_t,
-            )
+            hsol = _horizontal_pass(record, params, nav, ellipsoid, out["x_s"][:, G], one_pass)
             idx, c, gnss_used, n_state, out, hprior = hsol
         else:
             ident.setdefault("warnings", []).append(
@@ -458,23 +438,12 @@ def _mechanize(record, params, initial, ellipsoid, reference, gyro_bias_t=None):
     )
 
 
-def _identify(
-    record,
-    params,
-    initial,
-    nav,
-    ellipsoid,
-    reference,
-    theta_prior,
-    lever_arm_t,
-    speed0,
-    accel_bias=False,
-    gyro_bias_prior=None,
-):
+def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False):
     """Identify the model from the flight (gravsurvey.inm.identify; docs/method.md).
 
     1) noise levels from the vertical channel's spectrum; 2) a first pass with a wide anomaly
     prior; 3) the prior that minimises the expected error given that estimate's spectrum.
+    ``one_pass(params, **kw)``: :func:`_one_pass` bound to the current linearisation point.
     """
     alt_t, alt_h = _altimeter(record)
     params, ident = identify_params(params, nav, record.imu.specific_force_t, alt_t, alt_h, speed0, ellipsoid)
@@ -484,18 +453,7 @@ def _identify(
         params, ident = keep_default_prior(params, ident, speed0, MIN_REFINE_S)
     elif ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
         wide = wide_prior_params(params, ident, speed0)
-        idx, _, _, _, first = _one_pass(
-            record,
-            wide,
-            initial,
-            nav,
-            ellipsoid,
-            reference,
-            theta_prior,
-            lever_arm_t,
-            accel_bias=accel_bias,
-            gyro_bias_prior=gyro_bias_prior,
-        )
+        idx, _, _, _, first = one_pass(wide, accel_bias=accel_bias)
         weight = straight_weight(nav, record.imu.specific_force_t, nav.time[idx])
         params, ident = refine_prior(
             params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))), wide, speed0, weight
@@ -507,31 +465,19 @@ def _identify(
     return params, ident
 
 
-def _horizontal_pass(
-    record, params, initial, nav, ellipsoid, reference, theta_prior, lever_arm_t, g_vertical, gyro_bias_prior=None
-):
+def _horizontal_pass(record, params, nav, ellipsoid, g_vertical, one_pass):
     """The 18-state pass (vector gravimetry) about the last vertical pass's linearisation point.
 
     Its horizontal prior is the Markov process matched to the vertical estimate ``g_vertical``
     (m/s^2, per epoch) through the harmonic relation (:func:`horizontal_prior`).  Returns
-    :func:`_one_pass`'s tuple and the prior (sigma m/s^2, lambda 1/m) used.
+    :func:`_one_pass`'s tuple and the prior (sigma m/s^2, lambda 1/m) used; ``one_pass`` is
+    :func:`_one_pass` bound to that point.
     """
     t = nav.time
     step = max(1, int(round((t.size - 1) / (t[-1] - t[0]) / params.filter_rate_hz)))
     spacing = _typical_speed(record, nav, ellipsoid) * float(t[min(step, t.size - 1)] - t[0])
     hprior = horizontal_prior(params.anomaly_sigma_mps2, params.anomaly_lambda_per_m, g_vertical, spacing)
-    out = _one_pass(
-        record,
-        params,
-        initial,
-        nav,
-        ellipsoid,
-        reference,
-        theta_prior,
-        lever_arm_t,
-        hprior,
-        gyro_bias_prior=gyro_bias_prior,
-    )
+    out = one_pass(params, hprior=hprior)
     return (*out, hprior)
 
 
