@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from gravsurvey.errors import DataError
 from gravsurvey.geodesy import MGAL
 from gravsurvey.inm.params import InitialState, InmParams
 from gravsurvey.inm.solve import estimate_anomaly
@@ -30,9 +31,9 @@ SENSORS = {
 }
 
 
-@pytest.fixture(scope="module")
-def flight():
+def _simulate(bias_degph):
     """Strapdown, two 150-km lines at 100 m/s (~53 min), 10 Hz IMU, no field, no gravimeter drift."""
+    sensors = dict(SENSORS, gyro={"bias_degph": list(bias_degph), "white_drift_degph": 0.002})
     plan = {
         "kind": "grid",
         "origin_lat_deg": 30.0,
@@ -41,7 +42,7 @@ def flight():
         "speed_mps": 100.0,
         "lines": {"count": 2, "spacing_m": 2000.0, "length_m": 150000.0, "heading_deg": 40.0},
     }
-    s = simulate_flight(quick_sim(plan=plan, triad="strapdown", noise=SENSORS, gnss_hz=2.0, seed=5))
+    s = simulate_flight(quick_sim(plan=plan, triad="strapdown", noise=sensors, gnss_hz=2.0, seed=5))
     rec = FlightRecord(
         s.start_unix_ns,
         ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
@@ -54,7 +55,12 @@ def flight():
     return rec, init
 
 
-def _run(flight, passes):
+@pytest.fixture(scope="module")
+def flight():
+    return _simulate(BIAS_DEGPH)
+
+
+def _run(flight, passes, **kw):
     rec, init = flight
     # a wide fixed prior (2 mGal, 130 km), as identification picks on a weak smooth field: it
     # passes slow errors, so an error the linearisation leaves shows in full
@@ -69,6 +75,7 @@ def _run(flight, passes):
         altimeter_sigma_m=0.05,
         gnss_horizontal_sigma_m=0.2,
         gnss_vertical_sigma_m=0.5,
+        **kw,
     )
     sol = estimate_anomaly(rec, params, init, "strapdown")
     t = sol.time - sol.time[0]
@@ -78,7 +85,8 @@ def _run(flight, passes):
 
 
 def test_the_gyro_bias_is_fed_back_and_the_slow_vertical_error_goes(flight):
-    one, rms_one = _run(flight, 1)
+    with pytest.warns(UserWarning, match="the last of 1 attitude passes still corrects"):
+        one, rms_one = _run(flight, 1)
     sol, rms = _run(flight, 3)
     # one pass: the error the issue found (a wave of several mGal over no field at all)
     assert rms_one > 1.0, rms_one
@@ -92,3 +100,26 @@ def test_the_gyro_bias_is_fed_back_and_the_slow_vertical_error_goes(flight):
     assert abs(err[1]) < 3.0 * sol.gyro_bias_sigma_t[1] + 1e-4 * DEGPH, (err / DEGPH, sol.gyro_bias_sigma_t / DEGPH)
     # one pass estimates the same bias (it was never the bias state that was wrong)
     assert abs(one.gyro_bias_t[0] - sol.gyro_bias_t[0]) < 0.05 * BIAS_DEGPH[0] * DEGPH
+
+
+def test_a_bias_twenty_times_the_prior_is_found_by_the_passes():
+    # 1.6 deg/h on axis 1 (0.8 on 2) against the default 0.05 deg/h prior: one pass misses most of
+    # it (the prior holds the bias near zero); the passes take off what each pass found
+    bias = (1.6, -0.8, 0.0)
+    f = _simulate(bias)
+    # one pass: not settled (1.35 deg and 3 deg/h still to correct) - a failed flight, where
+    # before the passes' bias feedback and this check it was an estimate tens of mGal off
+    with pytest.raises(DataError, match="did not settle: the last of 1 attitude passes"):
+        _run(f, 1)
+    sol, rms = _run(f, 5)
+    assert rms < 0.3, rms
+    np.testing.assert_allclose(sol.gyro_bias_t[:2] / DEGPH, bias[:2], atol=0.01)
+    # the list ends with the correction the last pass would still apply: settled
+    assert sol.attitude_corrections[-1] < math.radians(0.05)
+
+
+def test_passes_that_do_not_settle_fail_the_flight_instead_of_giving_an_estimate():
+    # 20 deg/h: far outside the 0.05 deg/h prior; three passes do not catch up
+    f = _simulate((20.0, -10.0, 0.0))
+    with pytest.raises(DataError, match=r"^sim: the navigation did not settle: the last of 3 attitude passes"):
+        _run(f, 3)
