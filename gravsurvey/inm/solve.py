@@ -101,7 +101,8 @@ class InmSolution:
     passes : int
         Filter/smoother passes run (``model.attitude_passes``).
     attitude_corrections : list of float
-        Size of the initial-attitude correction after each pass, rad.
+        Size of the initial-attitude correction after each pass, rad (when the passes end at
+        ``attitude_passes``, the last entry is the one the last pass would still apply).
     gyro_bias_t, gyro_bias_sigma_t : ndarray (3,) or None
         The gyro biases on the triad axes and their smoothed 1-sigma, rad/s (GNSS-aided only):
         what the passes took off the rates plus the last pass's smoothed bias state.
@@ -209,10 +210,10 @@ MIN_REFINE_S = 900.0
 ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
 
 #: ... and once every gyro-bias correction is below this, rad/s (0.001 deg/h), or below its own
-#: smoothed sigma.  An uncorrected
-#: horizontal gyro bias tilts the mechanization by ``b t`` (0.05 deg/h: 0.5 mrad after 40 min)
-#: and the filter, linearised about that navigation, left a slow vertical error of ~35 mGal
-#: per deg/h of bias (docs/method.md, "Passes"); 0.001 deg/h leaves ~0.04 mGal.
+#: smoothed sigma.  An uncorrected horizontal gyro bias tilts the mechanization by ``b t``
+#: (0.05 deg/h: 0.5 mrad after 40 min) and the filter, linearised about that navigation, left a
+#: slow vertical error of ~35 mGal per deg/h of bias (docs/method.md, "Passes"); 0.001 deg/h
+#: leaves ~0.04 mGal.
 GYRO_BIAS_CONVERGED_RADPS = math.radians(1e-3) / 3600.0
 
 #: An initial-attitude correction above this (rad, 0.5 deg) re-runs the identification about
@@ -289,7 +290,6 @@ def estimate_anomaly(
     theta_prior = np.zeros(3)  # the prior attitude seen from the current linearisation point
     gyro_bias_t = np.zeros(3)  # the gyro bias taken off the rates before mechanizing, rad/s
     corrections = []
-    bias_corrections = []  # per pass: the largest gyro-bias correction beyond its sigma, rad/s
     passes = int(params.attitude_passes)
     ident = {}
     given_params, reidentify = params, True
@@ -324,7 +324,7 @@ def estimate_anomaly(
         if not gnss_used:
             break
         if k == passes - 1:
-            _check_passes_settled(record, out, float(nav.time[-1] - nav.time[0]), passes, corrections, bias_corrections)
+            corrections.append(_check_passes_settled(record, out, float(nav.time[-1] - nav.time[0]), passes))
             break
         th0 = out["x_s"][0, TH]
         db = out["x_s"][0, BG]
@@ -333,7 +333,6 @@ def estimate_anomaly(
         # where it is unobservable) is not one another pass could confirm
         db_sig = np.sqrt(np.diagonal(out["p_s"][0])[BG])
         bias_done = np.all((np.abs(db) < GYRO_BIAS_CONVERGED_RADPS) | (np.abs(db) < db_sig))
-        bias_corrections.append(float(np.max(np.maximum(np.abs(db) - db_sig, 0.0))))
         if corrections[-1] < ATTITUDE_CONVERGED_RAD and bias_done:
             break
         # the model was identified on a navigation this far off (a given attitude degrees off: tilt
@@ -431,19 +430,16 @@ def _altimeter(record):
     return alt_t[good], alt_h[good]
 
 
-def _check_passes_settled(record, out, span_s, passes, corrections, bias_corrections):
+def _check_passes_settled(record, out, span_s, passes) -> float:
     """After the last allowed pass: the correction it would still apply, and a verdict.
 
-    Appends that pass's own initial-attitude correction (rad) and gyro-bias correction beyond
-    its sigma (rad/s) to the lists; raises DataError when the larger of the attitude correction
-    and the tilt the bias correction builds over ``span_s`` (s) exceeds ``PASSES_FAILED_RAD``,
-    and emits a warning above ``PASSES_WARN_RAD``.
+    Returns that pass's own initial-attitude correction (rad).  Raises DataError when the
+    larger of it and the tilt that its gyro-bias correction beyond the bias's sigma builds over
+    ``span_s`` (s) exceeds ``PASSES_FAILED_RAD``; emits a warning above ``PASSES_WARN_RAD``.
     """
     th = float(np.linalg.norm(out["x_s"][0, TH]))
     db = np.abs(out["x_s"][0, BG]) - np.sqrt(np.diagonal(out["p_s"][0])[BG])
     bias = float(np.max(np.maximum(db, 0.0)))
-    corrections.append(th)
-    bias_corrections.append(bias)
     moved = max(th, bias * span_s)
     what = (
         f"the last of {passes} attitude passes still corrects the initial attitude by {math.degrees(th):.3g} deg "
@@ -458,6 +454,7 @@ def _check_passes_settled(record, out, span_s, passes, corrections, bias_correct
         )
     if moved > PASSES_WARN_RAD:
         warnings.warn(f"{what}: the estimate may carry some of that error (raise model.attitude_passes)")
+    return th
 
 
 def _mechanize(record, params, initial, ellipsoid, reference, gyro_bias_t=None):
