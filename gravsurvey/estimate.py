@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .geodesy import WGS84, Ellipsoid, normal_gravity
+from .inm.params import RADPS_PER_DEGPH
 
 #: arcseconds per radian (deflections of the vertical are written in arcsec)
 ARCSEC_PER_RAD = 180.0 * 3600.0 / np.pi
@@ -238,9 +239,8 @@ def attitude_report(sol) -> dict:
         # the passes re-linearise every GNSS-aided flight (attitude and gyro bias), platform too
         out["attitude_passes"] = int(sol.passes)
         out["attitude_corrections_deg"] = [float(np.degrees(c)) for c in sol.attitude_corrections]
-        degph = math.degrees(1.0) * 3600.0
-        out["gyro_bias_degph"] = [float(b * degph) for b in bias]
-        out["gyro_bias_sigma_degph"] = [float(b * degph) for b in sol.gyro_bias_sigma_t]
+        out["gyro_bias_degph"] = [float(b / RADPS_PER_DEGPH) for b in bias]
+        out["gyro_bias_sigma_degph"] = [float(b / RADPS_PER_DEGPH) for b in sol.gyro_bias_sigma_t]
     return out
 
 

@@ -31,6 +31,9 @@ from ..errors import ConfigError, DataError
 
 #: instrument triads: ENU-stabilised platform, or body-fixed (docs/conventions.md)
 TRIADS = ("platform", "strapdown")
+
+#: One deg/h (the gyro keys' unit) in rad/s.
+RADPS_PER_DEGPH = math.radians(1.0) / 3600.0
 RADIUS_SOURCES = ("altimeter", "computed")
 #: Boolean settings (everything else but ``radius_source`` is a number).
 _BOOL_KEYS = ("gnss_aiding", "identify", "horizontal", "accel_bias_states")

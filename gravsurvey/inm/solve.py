@@ -38,7 +38,7 @@ from .identify import (
 )
 from .kalman import filter_and_smooth
 from .mechanization import mechanize, navigation_to_geodetic, rodrigues
-from .params import TRIADS, InitialState, InmParams, initial_state_from_gnss, solvability_warnings
+from .params import RADPS_PER_DEGPH, TRIADS, InitialState, InmParams, initial_state_from_gnss, solvability_warnings
 from .vector import horizontal_outputs
 
 __all__ = ["InmSolution", "estimate_anomaly", "solvability_warnings", "initial_state_from_gnss"]
@@ -214,7 +214,7 @@ ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
 #: (0.05 deg/h: 0.5 mrad after 40 min) and the filter, linearised about that navigation, left a
 #: slow vertical error of ~35 mGal per deg/h of bias (docs/method.md, "Passes"); 0.001 deg/h
 #: leaves ~0.04 mGal.
-GYRO_BIAS_CONVERGED_RADPS = math.radians(1e-3) / 3600.0
+GYRO_BIAS_CONVERGED_RADPS = 1e-3 * RADPS_PER_DEGPH
 
 #: An initial-attitude correction above this (rad, 0.5 deg) re-runs the identification about
 #: the corrected attitude in the next pass (after an alignment: 0.004-0.13 deg measured, not re-run).
@@ -326,13 +326,11 @@ def estimate_anomaly(
         if k == passes - 1:
             corrections.append(_check_passes_settled(record, out, float(nav.time[-1] - nav.time[0]), passes))
             break
-        th0 = out["x_s"][0, TH]
-        db = out["x_s"][0, BG]
+        th0, db, db_sig = _pass_correction(out)
         corrections.append(float(np.linalg.norm(th0)))
         # a bias correction within its own smoothed sigma (the heading gyro's on straight lines,
         # where it is unobservable) is not one another pass could confirm
-        db_sig = np.sqrt(np.diagonal(out["p_s"][0])[BG])
-        bias_done = np.all((np.abs(db) < GYRO_BIAS_CONVERGED_RADPS) | (np.abs(db) < db_sig))
+        bias_done = np.all(np.abs(db) < np.maximum(GYRO_BIAS_CONVERGED_RADPS, db_sig))
         if corrections[-1] < ATTITUDE_CONVERGED_RAD and bias_done:
             break
         # the model was identified on a navigation this far off (a given attitude degrees off: tilt
@@ -368,8 +366,8 @@ def estimate_anomaly(
             "observable_fraction": float(np.mean(sol.horizontal_observable)),
         }
     if gnss_used:
-        sol.gyro_bias_t = gyro_bias_t + out["x_s"][0, BG]
-        sol.gyro_bias_sigma_t = np.sqrt(np.diagonal(out["p_s"][0])[BG])
+        _, db, sol.gyro_bias_sigma_t = _pass_correction(out)
+        sol.gyro_bias_t = gyro_bias_t + db
     sol.alignment = initial.alignment
     sol.params = params
     sol.identification = ident
@@ -430,6 +428,13 @@ def _altimeter(record):
     return alt_t[good], alt_h[good]
 
 
+def _pass_correction(out):
+    """The smoothed corrections a pass found at its first epoch: the attitude error (3,) rad,
+    the gyro bias (3,) rad/s and the bias's 1-sigma (3,) rad/s (triad axes)."""
+    x0 = out["x_s"][0]
+    return x0[TH], x0[BG], np.sqrt(np.diagonal(out["p_s"][0])[BG])
+
+
 def _check_passes_settled(record, out, span_s, passes) -> float:
     """After the last allowed pass: the correction it would still apply, and a verdict.
 
@@ -437,13 +442,13 @@ def _check_passes_settled(record, out, span_s, passes) -> float:
     larger of it and the tilt that its gyro-bias correction beyond the bias's sigma builds over
     ``span_s`` (s) exceeds ``PASSES_FAILED_RAD``; emits a warning above ``PASSES_WARN_RAD``.
     """
-    th = float(np.linalg.norm(out["x_s"][0, TH]))
-    db = np.abs(out["x_s"][0, BG]) - np.sqrt(np.diagonal(out["p_s"][0])[BG])
-    bias = float(np.max(np.maximum(db, 0.0)))
+    th0, db, db_sig = _pass_correction(out)
+    th = float(np.linalg.norm(th0))
+    bias = float(np.max(np.maximum(np.abs(db) - db_sig, 0.0)))
     moved = max(th, bias * span_s)
     what = (
         f"the last of {passes} attitude passes still corrects the initial attitude by {math.degrees(th):.3g} deg "
-        f"and a gyro bias by {math.degrees(bias) * 3600.0:.3g} deg/h beyond its sigma "
+        f"and a gyro bias by {bias / RADPS_PER_DEGPH:.3g} deg/h beyond its sigma "
         f"({math.degrees(bias * span_s):.3g} deg of tilt over the record)"
     )
     if moved > PASSES_FAILED_RAD:
