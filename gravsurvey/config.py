@@ -70,11 +70,14 @@ class SurveyConfig:
     checks: Any = None  # gravsurvey.consistency.CheckOptions (section ``checks``)
     levelling: Any = None  # gravsurvey.levelling.LevellingOptions
     grid: Any = None  # gravsurvey.grid.GridOptions
+    drift: Any = None  # gravsurvey.drift.DriftOptions (section ``drift``)
 
     def section_hash(self, flight: FlightConfig) -> str:
         """Hash of everything that determines one flight's result (for rerun skipping)."""
         h = hashlib.sha256()
-        sections = {k: self.raw.get(k) for k in ("ellipsoid", "model", "lines", "postprocess", "processing", "checks")}
+        sections = {
+            k: self.raw.get(k) for k in ("ellipsoid", "model", "lines", "postprocess", "processing", "checks", "drift")
+        }
         h.update(json.dumps(sections, sort_keys=True, default=str).encode())
         h.update(json.dumps(flight.raw, sort_keys=True, default=str).encode())
         return h.hexdigest()
@@ -290,6 +293,7 @@ def load_config(path, *, output_dir: str | Path | None = None) -> SurveyConfig:
         checks=S.check_options(doc.checks),
         levelling=S.levelling_options(doc.levelling),
         grid=S.grid_options(doc.grid),
+        drift=S.drift_options(doc.drift),
     )
     preflight_checks(cfg)
     return cfg

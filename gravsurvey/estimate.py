@@ -74,6 +74,9 @@ class FlightEstimate:
         separators between pieces, or epochs the chain left empty).
     smoothed : ndarray, shape (N,) or None
         RTS-smoothed estimate, m/s^2 (``inm``; None for a chain without a smoother).
+    drift : ndarray, shape (N,) or None
+        Gravimeter drift told from the field by the lines (:func:`gravsurvey.drift.separate_drift`),
+        m/s^2, taken off ``smoothed`` before post-processing; None when not estimated or not used.
     forward, forward_sigma : ndarray, shape (N,) or None
         Forward Kalman filter estimate and its 1-sigma, m/s^2 (``inm`` only).
     unfiltered : ndarray, shape (N,) or None
@@ -126,6 +129,7 @@ class FlightEstimate:
     resolution_m: float = float("nan")
     segment: np.ndarray | None = None
     smoothed: np.ndarray | None = None
+    drift: np.ndarray | None = None
     forward: np.ndarray | None = None
     forward_sigma: np.ndarray | None = None
     unfiltered: np.ndarray | None = None

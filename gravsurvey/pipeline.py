@@ -154,6 +154,8 @@ def line_products(est: FlightEstimate, segs, postprocess_options, model=None) ->
 
     n = len(est.time)
     product = est.disturbance
+    # the smoothed estimate less the drift the lines identified (estimate_drift), if any
+    base = est.smoothed if est.smoothed is None or est.drift is None else est.smoothed - est.drift
     final = np.full(n, np.nan)
     line = np.full(n, "", dtype=object)
     seg_out, line_info, notes = [], {}, []
@@ -172,19 +174,19 @@ def line_products(est: FlightEstimate, segs, postprocess_options, model=None) ->
         if s.kind not in ("line", "tie") or b - a < 8:
             continue
         speed = float(np.nanmean(est.speed[a:b]))
-        if est.smoothed is None:
+        if base is None:
             # the chain's own product (the classic low-pass), as the chain stated it
             z, info = product[a:b], {"method": est.method, **est.product_info}
         else:
             if model is not None:
                 notes += [f"{est.name} {s.name}: {w}" for w in solvability_warnings(model, speed)]
             z, info = postprocess(
-                est.smoothed[a:b],
+                base[a:b],
                 dt,
                 speed,
                 options=postprocess_options,
                 sigma=est.sigma[a:b],
-                context=(est.smoothed, a, b),
+                context=(base, a, b),
             )
             if info.get("method") == "none":
                 # the product is the smoother's own estimate: state the smoother's resolution
@@ -195,6 +197,45 @@ def line_products(est: FlightEstimate, segs, postprocess_options, model=None) ->
     est.disturbance = final
     est.line = line
     return seg_out, line_info, notes
+
+
+def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
+    """Tell the gravimeter drift from the field by the flight's lines, in place.
+
+    :func:`gravsurvey.drift.separate_drift` over the smoothed estimate on the line and tie
+    segments.  When the data need the drift, ``est.drift`` holds it (taken off before the
+    post-processing, :func:`line_products`) and ``est.sigma`` trades the datasheet drift it held
+    (``identification.drift_sigma_passed_mps2``) for the drift's posterior sigma.  The fit's
+    facts go to ``est.estimator["drift"]`` (summary.json).
+
+    Returns
+    -------
+    list of str
+        Notes for the flight (a drift larger than the datasheet prior).
+    """
+    from .drift import DriftOptions, separate_drift
+
+    options = options if options is not None else DriftOptions()
+    if est.smoothed is None:
+        return []
+    labels = np.full(len(est.time), "", dtype=object)
+    for s in segs:
+        if s.kind in ("line", "tie"):
+            labels[int(s.start_index) : int(s.stop_index)] = s.name
+    drift, sigma, report = separate_drift(est.time, est.lat, est.lon, est.smoothed, labels, options)
+    est.estimator = {**est.estimator, "drift": report}
+    if drift is None:
+        return []
+    est.drift = drift
+    passed = float(est.estimator.get("identification", {}).get("drift_sigma_passed_mps2", 0.0))
+    est.sigma = np.sqrt(np.clip(est.sigma**2 - passed**2, 0.0, None) + sigma**2)
+    notes = []
+    if report["drift_rms_mgal"] > 3.0 * options.sigma_mps2 / MGAL:
+        notes.append(
+            f"{est.name}: the lines show a gravimeter drift of {report['drift_rms_mgal']:.1f} mGal RMS "
+            f"(over 3x the prior drift.sigma_mps2); it was taken off (drift_mgal in profiles.csv)"
+        )
+    return notes
 
 
 def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
@@ -230,6 +271,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
 
     t = time.perf_counter()
     segs = line_segments(cfg, fl, est)
+    notes += estimate_drift(est, segs, cfg.drift)
     est.line_segments, est.line_info, line_notes = line_products(est, segs, cfg.postprocess, cfg.model)
     notes += line_notes
     timings["postprocess_s"] = time.perf_counter() - t
@@ -636,6 +678,10 @@ def _profile_table(cfg: SurveyConfig, results: list[FlightEstimate]):
                 )
                 / MGAL
             )
+    if any(r.drift is not None for r in results):
+        table["drift_mgal"] = (
+            np.concatenate([r.drift if r.drift is not None else np.zeros(len(r.time)) for r in results]) / MGAL
+        )
     table["sigma_mgal"] = np.concatenate([r.sigma for r in results]) / MGAL
     if any(r.has_attitude for r in results):
         # strapdown attitude and its 1-sigma per epoch (NaN for flights without it)

@@ -8,7 +8,7 @@ loaded YAML mapping; :func:`config_error` turns any validation failure into one
 
 Stage modules never see raw mappings: the builders here (:func:`inm_params`,
 :func:`segmentation_options`, :func:`postprocess_options`, :func:`check_options`,
-:func:`levelling_options`, :func:`grid_options`, :func:`tie_config`, :func:`ingest_options`,
+:func:`levelling_options`, :func:`drift_options`, :func:`grid_options`, :func:`tie_config`, :func:`ingest_options`,
 :func:`initial_overrides`, :func:`initial_state`) return the typed settings each stage takes.
 Those settings classes keep their defaults (a notebook user writes ``InmParams()``); the
 schema's defaults are read from them, so a default is written once.
@@ -71,6 +71,7 @@ from .messages import (
 from .build import (
     check_inm_params,
     check_options,
+    drift_options,
     gravimeter_options,
     grid_options,
     ingest_options,
@@ -139,6 +140,7 @@ __all__ = [
     "value_text",
     "check_inm_params",
     "check_options",
+    "drift_options",
     "gravimeter_options",
     "grid_options",
     "ingest_options",

@@ -10,6 +10,7 @@ import numpy as np
 from pydantic_core import PydanticCustomError
 
 from ..consistency import CheckOptions
+from ..drift import DriftOptions
 from ..errors import ConfigError, unknown_key_text
 from ..grid import GridOptions
 from ..inm.params import InitialState, InmParams, mat_nb_from_attitude
@@ -23,6 +24,7 @@ from ..wavelet import PostprocessOptions
 from .messages import key_path_text, validate_section, value_text
 from .schema import (
     ChecksSection,
+    DriftSection,
     FlightSection,
     GravimeterSection,
     GridSection,
@@ -94,6 +96,12 @@ def check_options(section: ChecksSection | dict | None = None, key_path: str = "
     """:class:`~gravsurvey.consistency.CheckOptions` from the ``checks`` section."""
     s = section if isinstance(section, ChecksSection) else validate_section(ChecksSection, section, key_path)
     return CheckOptions(**section_dict(s))
+
+
+def drift_options(section: DriftSection | dict | None = None, key_path: str = "drift") -> DriftOptions:
+    """:class:`~gravsurvey.drift.DriftOptions` from the ``drift`` section."""
+    s = section if isinstance(section, DriftSection) else validate_section(DriftSection, section, key_path)
+    return DriftOptions(**section_dict(s))
 
 
 def levelling_options(section: LevellingSection | dict | None = None, key_path: str = "levelling") -> LevellingOptions:

@@ -21,6 +21,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from ..consistency import CheckOptions
+from ..drift import DriftOptions
 from ..errors import ConfigError
 from ..grid import GRID_METHODS, GridOptions
 from ..inm.params import RADIUS_SOURCES, TRIADS, InmParams
@@ -313,6 +314,25 @@ class PostprocessSection(Section):
         if self.max_level is not None and self.max_level < self.min_level:
             raise fail(f"must be >= min_level ({self.min_level})", ("max_level",))
         return self
+
+
+# ============================================================================ drift
+_dr = _defaults_of(DriftOptions)
+
+
+class DriftSection(Section):
+    """``drift``: the gravimeter drift told from the field by the survey's lines (docs/method.md)."""
+
+    estimate: bool = _dr(
+        "estimate",
+        "separate the drift with the lines (a field shared by neighbouring lines, a drift in time); "
+        "used only when the likelihood needs it",
+    )
+    block_s: float = _dr("block_s", "block length of the field-plus-drift fit, s", ge=10, le=3600)
+    sigma_mps2: float = _dr(
+        "sigma_mps2", "centre of the prior on the drift's Gauss-Markov sigma (a datasheet figure), m/s^2", gt=0, le=1e-3
+    )
+    tau_s: float = _dr("tau_s", "centre of the prior on the drift's correlation time, s", gt=0, le=1e6)
 
 
 # ============================================================================ checks (survey level)
@@ -994,6 +1014,9 @@ class SurveyFile(Section):
         default_factory=ChecksSection,
         description="gaps, clocks, input consistency "
         "and result plausibility; not the flight-level `checks` of ingestion",
+    )
+    drift: DriftSection = Field(
+        default_factory=DriftSection, description="gravimeter drift from the lines (docs/method.md)"
     )
     levelling: LevellingSection = Field(default_factory=LevellingSection, description="crossover levelling")
     grid: GridSection = Field(default_factory=GridSection, description="gridding of the levelled lines")

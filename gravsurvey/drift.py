@@ -1,0 +1,355 @@
+"""Separate the gravimeter drift from the field with the survey's lines.
+
+Within one line a slow gravimeter drift and a long-wavelength field look the same (seed 004's
+solvability condition; docs/method.md "Drift"): the 1D identification cannot tell them apart and
+the smoothed estimate carries the drift.  A survey flies several lines a few km apart, and there
+the two differ: the field is a function of *position*, shared by neighbouring lines, the drift a
+function of *time*, different on every line.  This stage fits that statement as a Gaussian
+process on block averages of the smoothed estimate ``g`` over the flight's lines:
+
+    g(t_i) = F(x_i, y_i) + D(t_i) + c + e_i
+
+* ``F``: the field, isotropic in the horizontal plane, Matern-3/2 covariance
+  ``s_F^2 (1 + sqrt(3) r / L) exp(-sqrt(3) r / L)`` (a potential field at flight height is
+  smooth; the exponential kernel's roughness lets a strong short-wavelength field pose as drift);
+* ``D``: the drift, first-order Gauss-Markov in time, ``s_D^2 exp(-|dt| / tau)`` - the
+  gravimeter datasheet's model;
+* ``c``: an unknown constant (the gravimeter bias; ties and levelling own it);
+* ``e``: white, what the block average leaves of the smoother's error.
+
+The five hyperparameters are found by maximising the likelihood of the block averages, with a
+log-normal datasheet prior on the drift (``s_D`` about 1 mGal within a factor 3, ``tau`` about
+600 s within a factor 10: :data:`gravsurvey.inm.identify.DRIFT_DEFAULT_SIGMA_MPS2`); the drift's
+posterior mean at every epoch is taken off the estimate and its posterior sigma (less the part
+common to the whole flight, which the constant absorbs) joins the product's sigma.  The blocks
+are :data:`BLOCK_S` long: the likelihood then weighs the long wavelengths, where drift and field
+must be told apart, rather than the field's fine structure.  The drift is used only when the fit
+needs it: a likelihood-ratio test against the model without drift (:data:`MIN_LOG_LR`).
+
+One line, or lines too far apart for their field to be shared, leave the drift unidentifiable;
+the test then keeps the estimate as it is, and says so in the report.
+
+All inputs and outputs are SI (s, m, m/s^2).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .inm.identify import DRIFT_DEFAULT_SIGMA_MPS2, DRIFT_DEFAULT_TAU_S
+
+__all__ = [
+    "BLOCK_S",
+    "DriftOptions",
+    "DriftFit",
+    "line_blocks",
+    "fit_drift",
+    "separate_drift",
+]
+
+MGAL = 1e-5
+#: Block length of the averages the model is fitted to, s (9 km at 100 m/s: measured on the
+#: unseen suite against 30 and 45 s, docs/benchmarks.md "Drift from the lines").
+BLOCK_S = 90.0
+#: A block is used when at least this fraction of it lies on one line.
+BLOCK_FILL = 0.5
+#: Fewest blocks for a fit.
+MIN_BLOCKS = 12
+#: Most blocks (longer blocks beyond it; the fit is O(n^3)).
+MAX_BLOCKS = 600
+#: Log-likelihood ratio (with drift over without) below which the drift is not used; 3.0 is
+#: the 95 % point of chi-square with 2 degrees of freedom (6.0) halved.
+MIN_LOG_LR = 3.0
+#: Prior width of the drift's sigma and correlation time (1-sigma factors of the log-normal).
+PRIOR_SIGMA_FACTOR = 3.0
+PRIOR_TAU_FACTOR = 10.0
+#: Bounds of the fit (m/s^2, m, s): field 0.01-1000 mGal over 0.2-1000 km, drift 0.01-20 mGal
+#: over 30 s - 1 day, white 0.01-50 mGal.
+BOUNDS = {
+    "field_sigma_mps2": (0.01 * MGAL, 1000.0 * MGAL),
+    "field_length_m": (200.0, 1.0e6),
+    "drift_sigma_mps2": (0.01 * MGAL, 20.0 * MGAL),
+    "drift_tau_s": (30.0, 86400.0),
+    "white_mps2": (0.01 * MGAL, 50.0 * MGAL),
+}
+_ORDER = tuple(BOUNDS)
+#: Prior variance of the unknown constant, (m/s^2)^2 (100 mGal: any gravimeter bias).
+CONSTANT_VAR = (100.0 * MGAL) ** 2
+#: Sigma of the drift in the null model (effectively none), m/s^2.
+NO_DRIFT_MPS2 = 1e-3 * MGAL
+
+
+@dataclass(frozen=True)
+class DriftOptions:
+    """Settings of the drift separation (config section ``drift``).
+
+    Attributes
+    ----------
+    estimate : bool
+        Separate the drift with the lines (default True).
+    block_s : float
+        Block length of the fit, s.
+    sigma_mps2, tau_s : float
+        Centre of the datasheet prior on the drift's Gauss-Markov sigma (m/s^2) and correlation
+        time (s).
+    """
+
+    estimate: bool = True
+    block_s: float = BLOCK_S
+    sigma_mps2: float = DRIFT_DEFAULT_SIGMA_MPS2
+    tau_s: float = DRIFT_DEFAULT_TAU_S
+
+
+@dataclass(frozen=True)
+class DriftFit:
+    """Hyperparameters of the field-plus-drift model and the fit's facts (SI)."""
+
+    field_sigma_mps2: float
+    field_length_m: float
+    drift_sigma_mps2: float
+    drift_tau_s: float
+    white_mps2: float
+    log_lr: float
+    blocks: int
+    lines: int
+
+    def report(self) -> dict:
+        """summary.json facts: values in mGal, km and s."""
+        return {
+            "field_sigma_mgal": self.field_sigma_mps2 / MGAL,
+            "field_length_km": self.field_length_m / 1000.0,
+            "drift_sigma_mgal": self.drift_sigma_mps2 / MGAL,
+            "drift_tau_s": self.drift_tau_s,
+            "white_mgal": self.white_mps2 / MGAL,
+            "log_likelihood_ratio": self.log_lr,
+            "blocks": self.blocks,
+            "lines": self.lines,
+        }
+
+
+def local_plane(lat, lon, radius_m: float = 6371000.0):
+    """East and north (m) about the mean position, equirectangular; shape (N,) each."""
+    lat = np.asarray(lat, float)
+    lon = np.asarray(lon, float)
+    lat0 = float(np.nanmean(lat))
+    lon0 = float(np.nanmean(lon))
+    dlon = (lon - lon0 + np.pi) % (2.0 * np.pi) - np.pi
+    return radius_m * math.cos(lat0) * dlon, radius_m * (lat - lat0)
+
+
+def line_blocks(time, east, north, g, line_id, block_s: float = BLOCK_S):
+    """Block averages of ``g`` over each line.
+
+    Parameters
+    ----------
+    time, east, north, g : ndarray, shape (N,)
+        s, m, m, m/s^2.
+    line_id : ndarray, shape (N,)
+        Line label of every epoch; ``""`` (or None) off the lines.
+
+    Returns
+    -------
+    blocks : ndarray, shape (M, 4)
+        Columns: mean time (s), east (m), north (m), g (m/s^2).
+    lines : int
+        Number of lines that gave a block.
+    """
+    time = np.asarray(time, float)
+    lab = np.asarray([str(s) if s is not None else "" for s in line_id], dtype=object)
+    ok = (lab != "") & np.isfinite(g) & np.isfinite(east) & np.isfinite(north)
+    dt = float(np.median(np.diff(time))) if time.size > 1 else 1.0
+    need = max(2, int(BLOCK_FILL * block_s / max(dt, 1e-9)))
+    idx = np.floor((time - time[0]) / block_s).astype(np.int64)
+    rows, used = [], set()
+    # one block per (block index, line): sort by line then index and cut at changes
+    keys = np.flatnonzero(ok)
+    if keys.size == 0:
+        return np.zeros((0, 4)), 0
+    order = keys[np.lexsort((idx[keys], lab[keys].astype(str)))]
+    k_lab, k_idx = lab[order].astype(str), idx[order]
+    cut = np.flatnonzero((k_lab[1:] != k_lab[:-1]) | (k_idx[1:] != k_idx[:-1])) + 1
+    for part in np.split(order, cut):
+        if part.size < need:
+            continue
+        rows.append((time[part].mean(), east[part].mean(), north[part].mean(), float(np.mean(g[part]))))
+        used.add(lab[part[0]])
+    if not rows:
+        return np.zeros((0, 4)), 0
+    b = np.asarray(rows, float)
+    return b[np.argsort(b[:, 0])], len(used)
+
+
+def _matern32(r, length):
+    s = math.sqrt(3.0) * r / length
+    return (1.0 + s) * np.exp(-s)
+
+
+def _covariance(v, dist, lag, drift=True):
+    s_f, length, s_d, tau, w = v
+    k = s_f**2 * _matern32(dist, length) + CONSTANT_VAR
+    if drift:
+        k = k + s_d**2 * np.exp(-lag / tau)
+    k[np.diag_indices_from(k)] += w**2
+    return k
+
+
+def _neg_log_likelihood(v, dist, lag, y):
+    """Gaussian negative log-likelihood (constant dropped), +inf where not positive definite."""
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve
+
+    try:
+        c = cho_factor(_covariance(v, dist, lag), lower=True, check_finite=False)
+    except LinAlgError:
+        return math.inf
+    a = cho_solve(c, y, check_finite=False)
+    return 0.5 * float(y @ a) + float(np.sum(np.log(np.diag(c[0]))))
+
+
+def _prior_penalty(v, options: DriftOptions) -> float:
+    return (
+        0.5 * (math.log(v[2] / options.sigma_mps2) / math.log(PRIOR_SIGMA_FACTOR)) ** 2
+        + 0.5 * (math.log(v[3] / options.tau_s) / math.log(PRIOR_TAU_FACTOR)) ** 2
+    )
+
+
+def _fit(y, dist, lag, options: DriftOptions, with_drift: bool):
+    """Best (negative log-likelihood without prior, parameters) over several starts."""
+    from scipy.optimize import minimize
+
+    lo = np.log([BOUNDS[k][0] for k in _ORDER])
+    hi = np.log([BOUNDS[k][1] for k in _ORDER])
+    scale = max(float(np.std(y)), BOUNDS["field_sigma_mps2"][0])
+    starts = [
+        (scale, 5000.0, options.sigma_mps2, options.tau_s, 0.3 * MGAL),
+        (scale, 20000.0, 0.3 * options.sigma_mps2, 3.0 * options.tau_s, 0.3 * MGAL),
+        (scale, 2000.0, 2.0 * options.sigma_mps2, options.tau_s / 3.0, 0.3 * MGAL),
+    ]
+    if not with_drift:
+        lo[2] = hi[2] = math.log(NO_DRIFT_MPS2)
+
+    def objective(u):
+        v = np.exp(u)
+        f = _neg_log_likelihood(v, dist, lag, y)
+        return f + (_prior_penalty(v, options) if with_drift else 0.0)
+
+    best = None
+    for s in starts:
+        u0 = np.clip(np.log(s), lo, hi)
+        r = minimize(objective, u0, method="L-BFGS-B", bounds=list(zip(lo, hi)))
+        if np.isfinite(r.fun) and (best is None or r.fun < best.fun):
+            best = r
+    if best is None:
+        return math.inf, None
+    v = np.exp(best.x)
+    return _neg_log_likelihood(v, dist, lag, y), v
+
+
+def fit_drift(blocks, lines: int, options: DriftOptions = DriftOptions()):
+    """Fit the field-plus-drift model to block averages (:func:`line_blocks`).
+
+    Returns
+    -------
+    DriftFit or None
+        None when there are fewer than :data:`MIN_BLOCKS` blocks or lines < 2.
+    """
+    b = np.asarray(blocks, float)
+    if b.shape[0] < MIN_BLOCKS or lines < 2:
+        return None
+    y = b[:, 3] - b[:, 3].mean()
+    dist = np.hypot(b[:, 1, None] - b[None, :, 1], b[:, 2, None] - b[None, :, 2])
+    lag = np.abs(b[:, 0, None] - b[None, :, 0])
+    nll1, v1 = _fit(y, dist, lag, options, True)
+    nll0, _ = _fit(y, dist, lag, options, False)
+    if v1 is None:
+        return None
+    return DriftFit(*(float(x) for x in v1), log_lr=float(nll0 - nll1), blocks=int(b.shape[0]), lines=int(lines))
+
+
+def drift_posterior(fit: DriftFit, blocks, time):
+    """Posterior mean and sigma of the drift at ``time`` (s), m/s^2, shape (N,) each.
+
+    The sigma leaves out the part common to the whole flight (the constant absorbs it, as the
+    gravimeter bias; the product's sigma is of the error about its mean).
+    """
+    b = np.asarray(blocks, float)
+    v = np.array([fit.field_sigma_mps2, fit.field_length_m, fit.drift_sigma_mps2, fit.drift_tau_s, fit.white_mps2])
+    y = b[:, 3] - b[:, 3].mean()
+    dist = np.hypot(b[:, 1, None] - b[None, :, 1], b[:, 2, None] - b[None, :, 2])
+    lag = np.abs(b[:, 0, None] - b[None, :, 0])
+    k = _covariance(v, dist, lag)
+    chol = np.linalg.cholesky(k)
+    alpha = np.linalg.solve(chol.T, np.linalg.solve(chol, y))
+    t = np.asarray(time, float)
+    k_tb = fit.drift_sigma_mps2**2 * np.exp(-np.abs(t[:, None] - b[None, :, 0]) / fit.drift_tau_s)
+    mean = k_tb @ alpha
+    # posterior covariance of the drift at the blocks, then of its deviation from its mean
+    k_bb = fit.drift_sigma_mps2**2 * np.exp(-lag / fit.drift_tau_s)
+    w = np.linalg.solve(chol, k_bb)
+    post = k_bb - w.T @ w
+    m = post.shape[0]
+    centre = np.eye(m) - 1.0 / m
+    var_b = np.clip(np.diag(centre @ post @ centre), 0.0, None)
+    sigma = np.sqrt(np.interp(t, b[:, 0], var_b))
+    return mean, sigma
+
+
+def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOptions()):
+    """The gravimeter drift of one flight, estimated from its lines.
+
+    Parameters
+    ----------
+    time : ndarray, shape (N,)
+        s.
+    lat, lon : ndarray, shape (N,)
+        rad.
+    g : ndarray, shape (N,)
+        Smoothed disturbance estimate, m/s^2.
+    line_id : ndarray, shape (N,)
+        Line label per epoch, ``""`` off the lines.
+    options : DriftOptions
+
+    Returns
+    -------
+    drift : ndarray, shape (N,) or None
+        Drift to take off ``g``, m/s^2 (None when not used).
+    sigma : ndarray, shape (N,) or None
+        Its posterior 1-sigma about the flight mean, m/s^2.
+    report : dict
+        ``used`` (bool), ``reason`` (why not, when not used) and the fit's facts
+        (:meth:`DriftFit.report`).
+    """
+    if not options.estimate:
+        return None, None, {"used": False, "reason": "drift.estimate is false"}
+    time = np.asarray(time, float)
+    east, north = local_plane(lat, lon)
+    span = float(time[-1] - time[0]) if time.size else 0.0
+    block = max(float(options.block_s), span / MAX_BLOCKS)
+    blocks, lines = line_blocks(time, east, north, np.asarray(g, float), line_id, block)
+    if lines < 2:
+        return None, None, {"used": False, "reason": f"{lines} line(s): the drift needs two or more"}
+    if blocks.shape[0] < MIN_BLOCKS:
+        return (
+            None,
+            None,
+            {"used": False, "reason": f"{blocks.shape[0]} blocks of {block:g} s, fewer than {MIN_BLOCKS}"},
+        )
+    fit = fit_drift(blocks, lines, options)
+    if fit is None:
+        return None, None, {"used": False, "reason": "the fit failed"}
+    rep = {**fit.report(), "block_s": block}
+    if fit.log_lr < MIN_LOG_LR:
+        return (
+            None,
+            None,
+            {
+                "used": False,
+                "reason": f"not needed by the data (log-likelihood ratio {fit.log_lr:.1f} < {MIN_LOG_LR:g})",
+                **rep,
+            },
+        )
+    mean, sigma = drift_posterior(fit, blocks, time)
+    rep["drift_rms_mgal"] = float(np.std(mean) / MGAL)
+    return mean, sigma, {"used": True, **rep}
