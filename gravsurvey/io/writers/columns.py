@@ -38,8 +38,9 @@ PROFILE_COLUMNS = (
 )
 #: optional, written between disturbance_mgal and sigma_mgal: the estimate the product was made
 #: from, named for what it is: the Kalman/RTS smoothed estimate (3D-INM) or the classic
-#: reduction before its low-pass (no Kalman filter involved)
-ESTIMATE_COLUMNS = ("kalman_mgal", "unfiltered_mgal")
+#: reduction before its low-pass (no Kalman filter involved); and the gravimeter drift the
+#: lines identified and took off the smoothed estimate (gravsurvey.drift)
+ESTIMATE_COLUMNS = ("kalman_mgal", "unfiltered_mgal", "drift_mgal")
 TRUTH_COLUMNS = ("truth_mgal", "error_mgal")
 #: optional: the disturbance after base ties and crossover levelling (docs/outputs.md)
 LEVEL_COLUMNS = ("levelled_mgal",)
@@ -69,6 +70,7 @@ DECIMALS = {
     "levelled_mgal": 4,
     "kalman_mgal": 4,
     "unfiltered_mgal": 4,
+    "drift_mgal": 4,
     "sigma_mgal": 4,
     "truth_mgal": 4,
     "error_mgal": 4,
