@@ -78,6 +78,8 @@ BOUNDS = {
 _ORDER = tuple(BOUNDS)
 #: Prior variance of the unknown constant, (m/s^2)^2 (100 mGal: any gravimeter bias).
 CONSTANT_VAR = (100.0 * MGAL) ** 2
+#: Epochs per piece of the posterior evaluation.
+POSTERIOR_CHUNK = 4096
 #: Sigma of the drift in the null model (effectively none), m/s^2.
 NO_DRIFT_MPS2 = 1e-3 * MGAL
 
@@ -283,8 +285,11 @@ def drift_posterior(fit: DriftFit, blocks, time):
     chol = np.linalg.cholesky(k)
     alpha = np.linalg.solve(chol.T, np.linalg.solve(chol, y))
     t = np.asarray(time, float)
-    k_tb = fit.drift_sigma_mps2**2 * np.exp(-np.abs(t[:, None] - b[None, :, 0]) / fit.drift_tau_s)
-    mean = k_tb @ alpha
+    mean = np.empty(t.size)
+    # in chunks: an (epochs x blocks) matrix of a 10-h flight would take 100s of MB
+    for a in range(0, t.size, POSTERIOR_CHUNK):
+        dt = np.abs(t[a : a + POSTERIOR_CHUNK, None] - b[None, :, 0])
+        mean[a : a + POSTERIOR_CHUNK] = (fit.drift_sigma_mps2**2 * np.exp(-dt / fit.drift_tau_s)) @ alpha
     # posterior covariance of the drift at the blocks, then of its deviation from its mean
     k_bb = fit.drift_sigma_mps2**2 * np.exp(-lag / fit.drift_tau_s)
     w = np.linalg.solve(chol, k_bb)

@@ -271,7 +271,9 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
 
     t = time.perf_counter()
     segs = line_segments(cfg, fl, est)
+    t_drift = time.perf_counter()
     notes += estimate_drift(est, segs, cfg.drift)
+    timings["drift_s"] = time.perf_counter() - t_drift
     est.line_segments, est.line_info, line_notes = line_products(est, segs, cfg.postprocess, cfg.model)
     notes += line_notes
     timings["postprocess_s"] = time.perf_counter() - t
