@@ -27,7 +27,10 @@ must be told apart, rather than the field's fine structure.  The drift is used o
 needs it: a likelihood-ratio test against the model without drift (:data:`MIN_LOG_LR`).
 
 One line, or lines too far apart for their field to be shared, leave the drift unidentifiable;
-the test then keeps the estimate as it is, and says so in the report.
+the test then keeps the estimate as it is, and says so in the report.  So does a field whose
+fitted correlation length is below :data:`MIN_LENGTH_PER_RESOLUTION` times the estimate's
+along-track resolution: the smoother has low-passed it along the lines only, and the isotropic
+field model would read the difference between neighbouring lines as drift.
 
 All inputs and outputs are SI (s, m, m/s^2).
 """
@@ -63,6 +66,10 @@ MAX_BLOCKS = 600
 #: Log-likelihood ratio (with drift over without) below which the drift is not used; 3.0 is
 #: the 95 % point of chi-square with 2 degrees of freedom (6.0) halved.
 MIN_LOG_LR = 3.0
+#: Fitted field correlation length below this multiple of the estimate's along-track resolution:
+#: the drift is not used (configs/realistic_survey.yaml: 0.8x and 1.3x, where it made the error
+#: 2.0-2.5 -> 3.0-3.6 mGal; the unseen flights it helped: 1.8x (U001) and more).
+MIN_LENGTH_PER_RESOLUTION = 1.5
 #: Prior width of the drift's sigma and correlation time (1-sigma factors of the log-normal).
 PRIOR_SIGMA_FACTOR = 3.0
 PRIOR_TAU_FACTOR = 10.0
@@ -301,7 +308,7 @@ def drift_posterior(fit: DriftFit, blocks, time):
     return mean, sigma
 
 
-def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOptions()):
+def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOptions(), resolution_m: float = 0.0):
     """The gravimeter drift of one flight, estimated from its lines.
 
     Parameters
@@ -315,6 +322,11 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
     line_id : ndarray, shape (N,)
         Line label per epoch, ``""`` off the lines.
     options : DriftOptions
+    resolution_m : float
+        Half-wavelength resolution of ``g`` along the track, m (0: unknown). The drift is not
+        used when the fitted field correlation length is below :data:`MIN_LENGTH_PER_RESOLUTION`
+        times it: the estimate then smooths the field along the lines only, an anisotropy the
+        isotropic field model reads as drift.
 
     Returns
     -------
@@ -345,6 +357,13 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
     if fit is None:
         return None, None, {"used": False, "reason": "the fit failed"}
     rep = {**fit.report(), "block_s": block}
+    if resolution_m > 0 and fit.field_length_m < MIN_LENGTH_PER_RESOLUTION * resolution_m:
+        reason = (
+            f"the field's correlation length ({fit.field_length_m / 1000:.1f} km) is under "
+            f"{MIN_LENGTH_PER_RESOLUTION:g}x the estimate's resolution ({resolution_m / 1000:.1f} km): "
+            "the lines cannot tell the drift from the field the estimate smooths along them"
+        )
+        return None, None, {"used": False, "reason": reason, **rep}
     if fit.log_lr < MIN_LOG_LR:
         return (
             None,

@@ -53,6 +53,9 @@ MAX_DISTANCE_PER_LINE_SPACING = 0.6
 #: most thinned points fitted: the equivalent-source Jacobian is points x points float64
 #: (4,000 points: 128 MB); larger surveys are thinned more coarsely along the lines
 MAX_FIT_POINTS = 4000
+#: Two lines whose median separation is below this are one track flown twice (a reflight, or
+#: another flight over the same line), m: they do not give the line spacing.
+REPEAT_LINE_M = 100.0
 #: the grid is at least this fine relative to the line spacing
 SPACING_PER_LINE_SPACING = 0.25
 
@@ -213,12 +216,18 @@ def line_spacing(easting_m, northing_m, line) -> float:
     names = np.unique(lab)
     if names.size < 2:
         raise DataError("grid: need at least 2 lines to estimate the line spacing")
+    trees = {nm: cKDTree(np.column_stack([e[lab == nm], n[lab == nm]])) for nm in names}
     d = []
     for nm in names:
-        m = lab == nm
-        tree = cKDTree(np.column_stack([e[~m], n[~m]]))
-        dd, _ = tree.query(np.column_stack([e[m], n[m]]))
-        d.append(np.median(dd))
+        pts = np.column_stack([e[lab == nm], n[lab == nm]])
+        # the nearest other line that is not this track flown again (another flight's or a
+        # reflight's pass within REPEAT_LINE_M): a repeat would give a spacing of metres
+        seps = [float(np.median(trees[other].query(pts)[0])) for other in names if other != nm]
+        seps = [x for x in seps if x > REPEAT_LINE_M]
+        if seps:
+            d.append(min(seps))
+    if not d:
+        raise DataError(f"grid: every line lies within {REPEAT_LINE_M:g} m of another: no line spacing")
     return float(np.median(d))
 
 
@@ -328,10 +337,13 @@ def _grid_lines(
     spacing = o.spacing_m or SPACING_PER_LINE_SPACING * ls
     step = THIN_PER_SPACING * spacing
     e, n, h, v, lab = thin_lines(easting_m, northing_m, height_m, value_mgal, line, step)
-    if e.size > MAX_FIT_POINTS:
+    for _ in range(8):
+        if e.size <= MAX_FIT_POINTS:
+            break
         # the fit is a dense (points x sources) least-squares problem: a large survey is thinned
-        # more coarsely along the lines (never across them) so memory and time stay bounded
-        step *= e.size / MAX_FIT_POINTS
+        # more coarsely along the lines (never across them) so memory and time stay bounded; a
+        # step below the sample spacing thins nothing, so it grows until the points fit
+        step = max(step * e.size / MAX_FIT_POINTS, 1.5 * step)
         e, n, h, v, lab = thin_lines(easting_m, northing_m, height_m, value_mgal, line, step)
     if e.size < 10:
         raise DataError(f"grid: only {e.size} data points after thinning to {step:.0f} m; need >= 10")

@@ -220,9 +220,12 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
         return []
     labels = np.full(len(est.time), "", dtype=object)
     for s in segs:
-        if s.kind in ("line", "tie"):
+        # survey lines only: tie lines cross them, and the smoother's along-track low-pass of a
+        # short-wavelength field differs between crossing directions (seen as drift)
+        if s.kind == "line":
             labels[int(s.start_index) : int(s.stop_index)] = s.name
-    drift, sigma, report = separate_drift(est.time, est.lat, est.lon, est.smoothed, labels, options)
+    res = float(est.resolution_m) if np.isfinite(est.resolution_m) else 0.0
+    drift, sigma, report = separate_drift(est.time, est.lat, est.lon, est.smoothed, labels, options, res)
     est.estimator = {**est.estimator, "drift": report}
     if drift is None:
         return []

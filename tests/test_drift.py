@@ -217,3 +217,28 @@ def test_pipeline_without_drift_keeps_the_estimate():
     assert not est.estimator["drift"]["used"]
     assert est.drift is None
     np.testing.assert_array_equal(est.sigma, sigma0)
+
+
+def test_resolution_guard_withholds_the_drift():
+    # the same drifting survey, but an estimate said to be smoothed over 200 km along the lines:
+    # a field correlation length below 1.5x that cannot be told from drift line to line
+    rng = np.random.default_rng(1)
+    t, lat, lon, e, n, lab = survey()
+    g = field_at(e, n) + markov(t.size, 1.0, 1500.0, 2.0 * MGAL, rng)
+    est, sigma, rep = separate_drift(t, lat, lon, g, lab, resolution_m=200e3)
+    assert est is None and not rep["used"]
+    assert "resolution (200.0 km)" in rep["reason"]
+    # with the resolution of a smoother that resolves the field, it is used
+    est, sigma, rep = separate_drift(t, lat, lon, g, lab, resolution_m=5e3)
+    assert rep["used"]
+
+
+def test_tie_lines_are_left_out():
+    from gravsurvey.pipeline import estimate_drift
+    from gravsurvey.segmentation import Segment
+
+    est, segs, field, lab = _flight_estimate()
+    ties = [Segment(s.name.replace("L", "T"), "tie", s.start_index, s.stop_index) for s in segs]
+    estimate_drift(est, ties)
+    assert est.drift is None
+    assert est.estimator["drift"] == {"used": False, "reason": "0 line(s): the drift needs two or more"}

@@ -157,3 +157,41 @@ def test_point_sources_match_harmonica():
     want = ref.predict(pred)
     got = point_source_predict(pred, ours.points_, ours.coefs_, block=7 * 300)  # several blocks
     np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
+
+
+def test_line_spacing_ignores_a_track_flown_again():
+    # two flights over the same three lines 3 km apart (a reflight, GNSS scatter of 20 m): the
+    # spacing is 3 km, not the 20 m between the passes (which thinned nothing and asked the
+    # equivalent-source fit for 11,000 points: 12 GB on configs/realistic_survey.yaml)
+    rng = np.random.default_rng(0)
+    e, n, lab = [], [], []
+    for flight in ("F1", "F2"):
+        for i in range(3):
+            along = np.linspace(0.0, 20000.0, 201)
+            e.append(np.full(along.size, 3000.0 * i) + rng.normal(0.0, 20.0, along.size))
+            n.append(along)
+            lab.append(np.full(along.size, f"{flight}/L{i + 1:02d}"))
+    e, n, lab = np.concatenate(e), np.concatenate(n), np.concatenate(lab)
+    assert line_spacing(e, n, lab) == pytest.approx(3000.0, rel=0.02)
+    # one track flown twice and nothing else: no spacing, said so
+    one = np.char.endswith(lab.astype(str), "L01")
+    with pytest.raises(DataError, match="within 100 m of another"):
+        line_spacing(e[one], n[one], lab[one])
+
+
+def test_thinning_reaches_the_fit_limit_below_the_sample_spacing(monkeypatch):
+    import gravsurvey.grid as grid_module
+
+    # a step below the sample spacing thins nothing: the thinning must still reach the limit
+    monkeypatch.setattr(grid_module, "MAX_FIT_POINTS", 300)
+    seen = []
+    real = grid_module.point_source_jacobian
+
+    def counting(coordinates, points):
+        seen.append(points[0].size)  # one source per fitted point
+        return real(coordinates, points)
+
+    monkeypatch.setattr(grid_module, "point_source_jacobian", counting)
+    e, n, h, v, lab = _survey_arrays()
+    grid_lines(e, n, h, v, lab, GridOptions(spacing_m=20.0, damping=1.0))
+    assert seen and max(seen) <= 300

@@ -73,7 +73,7 @@ def test_profiles_csv_columns_as_documented_and_values(tmp_path):
     assert [c for c in documented if c in w.ATTITUDE_COLUMNS] == list(w.ATTITUDE_COLUMNS)
     assert [c for c in documented if c in w.HORIZONTAL_COLUMNS] == list(w.HORIZONTAL_COLUMNS)
     assert [c for c in documented if c in w.ESTIMATE_COLUMNS] == list(w.ESTIMATE_COLUMNS)
-    optional = w.ATTITUDE_COLUMNS + w.HORIZONTAL_COLUMNS + ("unfiltered_mgal",)
+    optional = w.ATTITUDE_COLUMNS + w.HORIZONTAL_COLUMNS + ("unfiltered_mgal", "drift_mgal")
     assert rows[0] == [c for c in documented if c not in optional]
     assert rows[0] == list(
         w.PROFILE_COLUMNS[:10] + ("kalman_mgal",) + w.PROFILE_COLUMNS[10:] + w.LEVEL_COLUMNS + w.TRUTH_COLUMNS
