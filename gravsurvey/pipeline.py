@@ -230,7 +230,10 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
     if drift is None:
         return []
     est.drift = drift
-    passed = float(est.estimator.get("identification", {}).get("drift_sigma_passed_mps2", 0.0))
+    ident = est.estimator.get("identification", {})
+    # a flight estimated in pieces (split at gaps) has one identification per piece
+    pieces = ident.get("segments", [ident]) if isinstance(ident, dict) else []
+    passed = max([float(p.get("drift_sigma_passed_mps2", 0.0)) for p in pieces] or [0.0])
     est.sigma = np.sqrt(np.clip(est.sigma**2 - passed**2, 0.0, None) + sigma**2)
     notes = []
     if report["drift_rms_mgal"] > 3.0 * options.sigma_mps2 / MGAL:

@@ -242,3 +242,16 @@ def test_tie_lines_are_left_out():
     estimate_drift(est, ties)
     assert est.drift is None
     assert est.estimator["drift"] == {"used": False, "reason": "0 line(s): the drift needs two or more"}
+
+
+def test_pieces_of_a_flight_trade_their_datasheet_drift():
+    from gravsurvey.pipeline import estimate_drift
+
+    # a flight split at a gap carries one identification per piece (estimate.concatenate_estimates)
+    est, segs, field, lab = _flight_estimate()
+    est.estimator = {"identification": {"segments": [{"drift_sigma_passed_mps2": 0.8 * MGAL}, {}]}}
+    estimate_drift(est, segs)
+    assert est.drift is not None
+    # the smoother's 1 mGal loses the pieces' 0.8 mGal datasheet drift and gains the posterior
+    # (0.3-0.7 mGal): below 1 mGal everywhere; adding the posterior on top would be above it
+    assert np.all(est.sigma < 0.95 * MGAL)
