@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geodesy import MGAL
 from .inm.identify import DRIFT_DEFAULT_SIGMA_MPS2, DRIFT_DEFAULT_TAU_S
 
 __all__ = [
@@ -53,7 +54,6 @@ __all__ = [
     "separate_drift",
 ]
 
-MGAL = 1e-5
 #: Block length of the averages the model is fitted to, s (9 km at 100 m/s: measured on the
 #: unseen suite against 30 and 45 s, docs/benchmarks.md "Drift from the lines").
 BLOCK_S = 90.0
@@ -125,6 +125,11 @@ class DriftFit:
     blocks: int
     lines: int
 
+    @property
+    def vector(self) -> np.ndarray:
+        """The hyperparameters in the fit's order (:data:`BOUNDS`)."""
+        return np.array([getattr(self, k) for k in _ORDER])
+
     def report(self) -> dict:
         """summary.json facts: values in mGal, km and s."""
         return {
@@ -140,7 +145,11 @@ class DriftFit:
 
 
 def local_plane(lat, lon, radius_m: float = 6371000.0):
-    """East and north (m) about the mean position, equirectangular; shape (N,) each."""
+    """East and north (m) about the mean position, equirectangular; shape (N,) each.
+
+    Not :func:`gravsurvey.georef.project` (UTM): the fit is sensitive to a change of scale of
+    a few 1e-4 (U016 0.68 -> 0.72 mGal measured), and its results are stated with this plane.
+    """
     lat = np.asarray(lat, float)
     lon = np.asarray(lon, float)
     lat0 = float(np.nanmean(lat))
@@ -189,6 +198,15 @@ def line_blocks(time, east, north, g, line_id, block_s: float = BLOCK_S):
         return np.zeros((0, 4)), 0
     b = np.asarray(rows, float)
     return b[np.argsort(b[:, 0])], len(used)
+
+
+def _block_geometry(blocks):
+    """(values about their mean, distances m, time lags s) of the blocks, shapes (M,), (M, M), (M, M)."""
+    b = np.asarray(blocks, float)
+    y = b[:, 3] - b[:, 3].mean()
+    dist = np.hypot(b[:, 1, None] - b[None, :, 1], b[:, 2, None] - b[None, :, 2])
+    lag = np.abs(b[:, 0, None] - b[None, :, 0])
+    return y, dist, lag
 
 
 def _matern32(r, length):
@@ -267,9 +285,7 @@ def fit_drift(blocks, lines: int, options: DriftOptions = DriftOptions()):
     b = np.asarray(blocks, float)
     if b.shape[0] < MIN_BLOCKS or lines < 2:
         return None
-    y = b[:, 3] - b[:, 3].mean()
-    dist = np.hypot(b[:, 1, None] - b[None, :, 1], b[:, 2, None] - b[None, :, 2])
-    lag = np.abs(b[:, 0, None] - b[None, :, 0])
+    y, dist, lag = _block_geometry(b)
     nll1, v1 = _fit(y, dist, lag, options, True)
     nll0, _ = _fit(y, dist, lag, options, False)
     if v1 is None:
@@ -284,11 +300,8 @@ def drift_posterior(fit: DriftFit, blocks, time):
     gravimeter bias; the product's sigma is of the error about its mean).
     """
     b = np.asarray(blocks, float)
-    v = np.array([fit.field_sigma_mps2, fit.field_length_m, fit.drift_sigma_mps2, fit.drift_tau_s, fit.white_mps2])
-    y = b[:, 3] - b[:, 3].mean()
-    dist = np.hypot(b[:, 1, None] - b[None, :, 1], b[:, 2, None] - b[None, :, 2])
-    lag = np.abs(b[:, 0, None] - b[None, :, 0])
-    k = _covariance(v, dist, lag)
+    y, dist, lag = _block_geometry(b)
+    k = _covariance(fit.vector, dist, lag)
     chol = np.linalg.cholesky(k)
     alpha = np.linalg.solve(chol.T, np.linalg.solve(chol, y))
     t = np.asarray(time, float)
@@ -338,42 +351,36 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
         ``used`` (bool), ``reason`` (why not, when not used) and the fit's facts
         (:meth:`DriftFit.report`).
     """
+
+    def not_used(reason, **facts):
+        return None, None, {"used": False, "reason": reason, **facts}
+
     if not options.estimate:
-        return None, None, {"used": False, "reason": "drift.estimate is false"}
+        return not_used("drift.estimate is false")
     time = np.asarray(time, float)
+    if not (np.isfinite(lat) & np.isfinite(lon)).any():
+        return not_used("no finite position")
     east, north = local_plane(lat, lon)
     span = float(time[-1] - time[0]) if time.size else 0.0
     block = max(float(options.block_s), span / MAX_BLOCKS)
     blocks, lines = line_blocks(time, east, north, np.asarray(g, float), line_id, block)
     if lines < 2:
-        return None, None, {"used": False, "reason": f"{lines} line(s): the drift needs two or more"}
+        return not_used(f"{lines} line(s): the drift needs two or more")
     if blocks.shape[0] < MIN_BLOCKS:
-        return (
-            None,
-            None,
-            {"used": False, "reason": f"{blocks.shape[0]} blocks of {block:g} s, fewer than {MIN_BLOCKS}"},
-        )
+        return not_used(f"{blocks.shape[0]} blocks of {block:g} s, fewer than {MIN_BLOCKS}")
     fit = fit_drift(blocks, lines, options)
     if fit is None:
-        return None, None, {"used": False, "reason": "the fit failed"}
+        return not_used("the fit failed")
     rep = {**fit.report(), "block_s": block}
     if resolution_m > 0 and fit.field_length_m < MIN_LENGTH_PER_RESOLUTION * resolution_m:
-        reason = (
+        return not_used(
             f"the field's correlation length ({fit.field_length_m / 1000:.1f} km) is under "
             f"{MIN_LENGTH_PER_RESOLUTION:g}x the estimate's resolution ({resolution_m / 1000:.1f} km): "
-            "the lines cannot tell the drift from the field the estimate smooths along them"
+            "the lines cannot tell the drift from the field the estimate smooths along them",
+            **rep,
         )
-        return None, None, {"used": False, "reason": reason, **rep}
     if fit.log_lr < MIN_LOG_LR:
-        return (
-            None,
-            None,
-            {
-                "used": False,
-                "reason": f"not needed by the data (log-likelihood ratio {fit.log_lr:.1f} < {MIN_LOG_LR:g})",
-                **rep,
-            },
-        )
+        return not_used(f"not needed by the data (log-likelihood ratio {fit.log_lr:.1f} < {MIN_LOG_LR:g})", **rep)
     mean, sigma = drift_posterior(fit, blocks, time)
     rep["drift_rms_mgal"] = float(np.std(mean) / MGAL)
     return mean, sigma, {"used": True, **rep}

@@ -216,10 +216,10 @@ def line_spacing(easting_m, northing_m, line) -> float:
     names = np.unique(lab)
     if names.size < 2:
         raise DataError("grid: need at least 2 lines to estimate the line spacing")
-    trees = {nm: cKDTree(np.column_stack([e[lab == nm], n[lab == nm]])) for nm in names}
+    pts_of = {nm: np.column_stack([e[lab == nm], n[lab == nm]]) for nm in names}
+    trees = {nm: cKDTree(p) for nm, p in pts_of.items()}
     d = []
-    for nm in names:
-        pts = np.column_stack([e[lab == nm], n[lab == nm]])
+    for nm, pts in pts_of.items():
         # the nearest other line that is not this track flown again (another flight's or a
         # reflight's pass within REPEAT_LINE_M): a repeat would give a spacing of metres
         seps = [float(np.median(trees[other].query(pts)[0])) for other in names if other != nm]

@@ -202,8 +202,8 @@ def line_products(est: FlightEstimate, segs, postprocess_options, model=None) ->
 def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
     """Tell the gravimeter drift from the field by the flight's lines, in place.
 
-    :func:`gravsurvey.drift.separate_drift` over the smoothed estimate on the line and tie
-    segments.  When the data need the drift, ``est.drift`` holds it (taken off before the
+    :func:`gravsurvey.drift.separate_drift` over the smoothed estimate on the survey-line
+    segments (tie lines are left out).  When the data need the drift, ``est.drift`` holds it (taken off before the
     post-processing, :func:`line_products`) and ``est.sigma`` trades the datasheet drift it held
     (``identification.drift_sigma_passed_mps2``) for the drift's posterior sigma.  The fit's
     facts go to ``est.estimator["drift"]`` (summary.json).
@@ -282,7 +282,8 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
     timings["drift_s"] = time.perf_counter() - t_drift
     est.line_segments, est.line_info, line_notes = line_products(est, segs, cfg.postprocess, cfg.model)
     notes += line_notes
-    timings["postprocess_s"] = time.perf_counter() - t
+    # segmentation and post-processing; the drift fit between them has its own entry
+    timings["postprocess_s"] = time.perf_counter() - t - timings["drift_s"]
     notes += check_result(
         fl.name, est.disturbance, est.line != "", est, record, checks, len(est.line_info), cfg.ellipsoid
     )
