@@ -63,6 +63,8 @@ __all__ = [
     "model_resolution_m",
     "horizontal_prior",
     "drift_sigma_passed",
+    "tilt_leak_factor",
+    "white_less_tilt_leak",
 ]
 
 #: ``model:`` keys this module identifies (a key given in the config is held fixed instead).
@@ -225,6 +227,55 @@ def _horizontal_specific_force(nav, f_t, times):
     f_up = np.einsum("ni,ni->n", f_i, up)
     f_h = np.sqrt(np.maximum(np.einsum("ni,ni->n", f_i, f_i) - f_up**2, 0.0))
     return np.interp(x, nav.time[sub], f_h)
+
+
+def tilt_leak_factor(nav, f_t, max_samples: int = 20000) -> float:
+    """Mean of ``1 - u_z^2`` over the straight epochs: the tilt's share of the horizontal axes.
+
+    ``u`` is the local up direction on the triad axes.  A strapdown triad's z axis leaves the
+    vertical by the aircraft's roll and pitch, so the vertical channel carries the horizontal
+    accelerometers' noise with variance ``accel_noise^2 (1 - u_z^2)``; a platform's stays
+    level (factor 0).  Epochs that manoeuvre (:data:`MANOEUVRE_MPS2`) are left out, as in the
+    spectral fit.
+
+    Parameters
+    ----------
+    nav : Navigation
+        Uncorrected mechanization.
+    f_t : ndarray (n, 3)
+        Specific force on the triad at ``nav.time``, m/s^2.
+    max_samples : int
+        At most this many IMU samples are used (evenly spaced).
+
+    Returns
+    -------
+    float
+        Dimensionless, in [0, 1]; 0 when no epoch is straight.
+    """
+    k = max(1, nav.time.size // max_samples)
+    r_i = nav.r_i[::k]
+    up_i = r_i / np.linalg.norm(r_i, axis=1)[:, None]
+    up_t = np.einsum("nji,nj->ni", nav.mat_it[::k], up_i)
+    straight = _horizontal_specific_force(nav, f_t, nav.time[::k]) <= MANOEUVRE_MPS2
+    if not straight.any():
+        return 0.0
+    return float(np.clip(np.mean(1.0 - up_t[straight, 2] ** 2), 0.0, 1.0))
+
+
+def white_less_tilt_leak(white_mps2: float, leak_mps2: float, sigma_factor: float | None) -> float | None:
+    """The gravimeter's own white level: the vertical channel's less the tilt leak, m/s^2.
+
+    ``sqrt(white^2 - leak^2)``, not below ``min(white, WHITE_DEFAULT_MPS2)`` (the accelerometer
+    figure is a datasheet or default value, the subtraction must not make the gravimeter
+    cleaner than a typical one on its strength alone).  None when the correction is within
+    the fit's own 1-sigma factor ``sigma_factor`` of the white level (not resolved by the
+    data: a platform's leak, a quiet flight's).
+    """
+    own = math.sqrt(max(white_mps2**2 - leak_mps2**2, 0.0))
+    own = max(own, min(white_mps2, WHITE_DEFAULT_MPS2))
+    if sigma_factor is None or own <= 0.0 or white_mps2 / own <= sigma_factor:
+        return None
+    return own
 
 
 def straight_runs(
@@ -721,6 +772,23 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
         # refine_prior's noise calibration raises it if the straight flight shows more
         m = dataclasses.replace(m, white_mps2=WHITE_DEFAULT_MPS2)
         white_how = "default (whole-flight fit: turns dominate the white level)"
+    if white_how == "identified" and "white_mps2" not in fixed:
+        # the fitted white level is the whole vertical channel's, the horizontal accelerometers'
+        # noise through the tilt included; the filter holds that leak already (accel_noise_mps2
+        # through its attitude), so counting it again as gravimeter noise smoothed the field
+        # away (measured: 4x the gravimeter's white, a resolution of 19 km for 5 km)
+        lf = tilt_leak_factor(nav, f_t)
+        leak = params.accel_noise_mps2 * math.sqrt(lf)
+        own = white_less_tilt_leak(m.white_mps2, leak, factor_w)
+        report["tilt_leak"] = {
+            "tilt_rms_deg": math.degrees(math.asin(math.sqrt(lf))),
+            "leak_mps2": leak,
+            "vertical_white_mps2": m.white_mps2,
+            "applied": own is not None,
+        }
+        if own is not None:
+            m = dataclasses.replace(m, white_mps2=own)
+            white_how = "identified (vertical white less the horizontal accelerometers' leak through the tilt)"
     if params.target_resolution_m is not None:
         m = prior_for_resolution(m, v, params.target_resolution_m, fit.dt_s)
     found = {
