@@ -14,10 +14,10 @@ import pytest
 
 from gravsurvey.errors import DataError
 from gravsurvey.geodesy import MGAL
-from gravsurvey.inm.params import InitialState, InmParams
+from gravsurvey.inm.params import InmParams
 from gravsurvey.inm.solve import estimate_anomaly
-from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
 from gravsurvey.simulate.run import quick_sim, simulate_flight
+from sim_record import record_and_initial
 
 DEGPH = math.radians(1.0) / 3600.0
 BIAS_DEGPH = (0.08, 0.0, 0.0)
@@ -43,16 +43,7 @@ def _simulate(bias_degph):
         "lines": {"count": 2, "spacing_m": 2000.0, "length_m": 150000.0, "heading_deg": 40.0},
     }
     s = simulate_flight(quick_sim(plan=plan, triad="strapdown", noise=sensors, gnss_hz=2.0, seed=5))
-    rec = FlightRecord(
-        s.start_unix_ns,
-        ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
-        AltimeterChannel(s.alt_time, s.alt_height),
-        GnssChannel(s.gnss_time, np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg), s.gnss_height),
-        source="sim",
-    )
-    tr = s.truth
-    init = InitialState(tr["lat"][0], tr["lon"][0], tr["height"][0], tr["vel_n"][0].copy(), tr["mat_nt"][0])
-    return rec, init
+    return record_and_initial(s)
 
 
 @pytest.fixture(scope="module")

@@ -9,10 +9,10 @@ import pytest
 
 from gravsurvey.inm import identify as I
 from gravsurvey.inm.mechanization import Navigation
-from gravsurvey.inm.params import InitialState, InmParams
+from gravsurvey.inm.params import InmParams
 from gravsurvey.inm.solve import estimate_anomaly
-from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
 from gravsurvey.simulate.run import quick_sim, simulate_flight
+from sim_record import record_and_initial
 
 
 def _rot_x(a):
@@ -103,16 +103,7 @@ def rolling_strapdown():
             seed=3,
         )
     )
-    rec = FlightRecord(
-        s.start_unix_ns,
-        ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
-        AltimeterChannel(s.alt_time, s.alt_height),
-        GnssChannel(s.gnss_time, np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg), s.gnss_height),
-        source="sim",
-    )
-    tr = s.truth
-    init = InitialState(tr["lat"][0], tr["lon"][0], tr["height"][0], tr["vel_n"][0].copy(), tr["mat_nt"][0].copy())
-    return rec, init
+    return record_and_initial(s)
 
 
 def test_identified_gravimeter_white_is_the_gravimeters_not_the_tilts(rolling_strapdown):
