@@ -133,7 +133,10 @@ class ModelSection(Section):
     )
     filter_rate_hz: float = _m("filter_rate_hz", "Kalman epoch rate, Hz (the IMU rate is decimated)", gt=0)
     accel_noise_mps2: float = _m(
-        "accel_noise_mps2", "sigma_f1 = sigma_f2, horizontal accelerometer white noise, m/s^2 (one-second sigma)", ge=0
+        "accel_noise_mps2",
+        "sigma_f1 = sigma_f2, horizontal accelerometer white noise, m/s^2 (one-second sigma); on a strapdown "
+        "triad also the tilt leak identification takes off the vertical white level: give the datasheet figure",
+        ge=0,
     )
     gyro_drift_degph: float = _m("gyro_drift_degph", "sigma_nu, white gyro drift, deg/h (one-second sigma)", ge=0)
     gravimeter_lambda_per_s: float = _m(
