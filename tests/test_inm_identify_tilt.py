@@ -119,3 +119,24 @@ def test_identified_gravimeter_white_is_the_gravimeters_not_the_tilts(rolling_st
     assert white["how"].startswith("identified (vertical white less")
     assert 0.5e-5 <= white["value"] <= 2e-5
     assert sol.params.gravimeter_white_mps2 == white["value"]
+
+
+def test_a_leak_the_data_contradict_is_not_taken_off_and_is_reported(rolling_strapdown):
+    # accel_noise_mps2 5x the simulated accelerometers': the leak it implies is over twice the
+    # vertical white level the data show, beyond the fit's 2-sigma
+    rec, init = rolling_strapdown
+    sol = estimate_anomaly(rec, InmParams(accel_noise_mps2=5e-3), init, "strapdown")
+    rep = sol.identification
+    assert rep["tilt_leak"]["applied"] is False
+    assert rep["tilt_leak"]["leak_mps2"] > rep["tilt_leak"]["vertical_white_mps2"]
+    assert rep["gravimeter_white_mps2"]["how"] == "identified"
+    assert rep["gravimeter_white_mps2"]["value"] == rep["tilt_leak"]["vertical_white_mps2"]
+    warned = [w for w in sol.warnings if "quieter than that" in w]
+    assert len(warned) == 1 and "accel_noise_mps2 = 0.005" in warned[0]
+
+
+def test_leak_beyond_two_sigma_of_the_white_level_contradicts_it():
+    assert I.tilt_leak_exceeds_white(1e-5, 1.5e-5, 1.2)  # 1.5 > 1.44
+    assert not I.tilt_leak_exceeds_white(1e-5, 1.4e-5, 1.2)
+    assert not I.tilt_leak_exceeds_white(1e-5, 1e-3, None)  # white level not from the fit
+    assert I.white_less_tilt_leak(1e-5, 1.5e-5, 1.2) is None

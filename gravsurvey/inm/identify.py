@@ -64,6 +64,7 @@ __all__ = [
     "horizontal_prior",
     "drift_sigma_passed",
     "tilt_leak_factor",
+    "tilt_leak_exceeds_white",
     "white_less_tilt_leak",
 ]
 
@@ -262,6 +263,17 @@ def tilt_leak_factor(nav, f_t, max_samples: int = 20000) -> float:
     return float(np.clip(np.mean(1.0 - up_t[straight, 2] ** 2), 0.0, 1.0))
 
 
+def tilt_leak_exceeds_white(white_mps2: float, leak_mps2: float, sigma_factor: float | None) -> bool:
+    """Whether the modelled leak is beyond two standard errors above the fitted white level.
+
+    The vertical channel cannot carry less noise than the horizontal accelerometers leak into
+    it; when the leak computed from ``accel_noise_mps2`` exceeds the white level the data show
+    by more than ``sigma_factor^2`` (a multiplicative 2-sigma), the accelerometers are quieter
+    than that figure says (the default 1e-3 m/s^2 on a navigation-grade IMU).
+    """
+    return sigma_factor is not None and leak_mps2 > white_mps2 * sigma_factor**2
+
+
 def white_less_tilt_leak(white_mps2: float, leak_mps2: float, sigma_factor: float | None) -> float | None:
     """The gravimeter's own white level: the vertical channel's less the tilt leak, m/s^2.
 
@@ -269,8 +281,11 @@ def white_less_tilt_leak(white_mps2: float, leak_mps2: float, sigma_factor: floa
     figure is a datasheet or default value, the subtraction must not make the gravimeter
     cleaner than a typical one on its strength alone).  None when the correction is within
     the fit's own 1-sigma factor ``sigma_factor`` of the white level (not resolved by the
-    data: a platform's leak, a quiet flight's).
+    data: a platform's leak, a quiet flight's), and when the leak contradicts the data
+    (:func:`tilt_leak_exceeds_white`: the accelerometer figure is then not to be trusted).
     """
+    if tilt_leak_exceeds_white(white_mps2, leak_mps2, sigma_factor):
+        return None
     own = math.sqrt(max(white_mps2**2 - leak_mps2**2, 0.0))
     own = max(own, min(white_mps2, WHITE_DEFAULT_MPS2))
     if sigma_factor is None or own <= 0.0 or white_mps2 / own <= sigma_factor:
@@ -789,6 +804,13 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
         if own is not None:
             m = dataclasses.replace(m, white_mps2=own)
             white_how = "identified (vertical white less the horizontal accelerometers' leak through the tilt)"
+        elif tilt_leak_exceeds_white(m.white_mps2, leak, factor_w):
+            report["warnings"].append(
+                f"model identification: the vertical channel's white level ({m.white_mps2:.2g} m/s^2) is below "
+                f"the noise accel_noise_mps2 = {params.accel_noise_mps2:.2g} would leak into it through the "
+                f"{report['tilt_leak']['tilt_rms_deg']:.1f} deg RMS tilt ({leak:.2g}): the horizontal "
+                "accelerometers are quieter than that; give accel_noise_mps2 from the datasheet"
+            )
     if params.target_resolution_m is not None:
         m = prior_for_resolution(m, v, params.target_resolution_m, fit.dt_s)
     found = {
