@@ -77,6 +77,10 @@ class FlightEstimate:
     drift : ndarray, shape (N,) or None
         Gravimeter drift told from the field by the lines (:func:`gravsurvey.drift.separate_drift`),
         m/s^2, taken off ``smoothed`` before post-processing; None when not estimated or not used.
+    drift_sigma_passed : float
+        The datasheet drift ``sigma`` holds in quadrature because the smoother passes it
+        (``identification.drift_sigma_passed_mps2``; the largest of a flight's pieces), m/s^2;
+        the drift stage trades it for its posterior (:func:`gravsurvey.pipeline.estimate_drift`).
     forward, forward_sigma : ndarray, shape (N,) or None
         Forward Kalman filter estimate and its 1-sigma, m/s^2 (``inm`` only).
     unfiltered : ndarray, shape (N,) or None
@@ -130,6 +134,7 @@ class FlightEstimate:
     segment: np.ndarray | None = None
     smoothed: np.ndarray | None = None
     drift: np.ndarray | None = None
+    drift_sigma_passed: float = 0.0
     forward: np.ndarray | None = None
     forward_sigma: np.ndarray | None = None
     unfiltered: np.ndarray | None = None
@@ -302,6 +307,7 @@ def from_inm_solution(sol, *, name: str = "", t0_unix_ns: int = 0) -> FlightEsti
         resolution_m=res,
         segment=np.zeros(n, dtype=np.int64),
         smoothed=g,
+        drift_sigma_passed=float((getattr(sol, "identification", None) or {}).get("drift_sigma_passed_mps2", 0.0)),
         forward=np.asarray(sol.g_forward, float),
         forward_sigma=_opt(getattr(sol, "sigma_forward", None), n, "sigma_forward"),
         attitude=getattr(sol, "attitude", None),
@@ -441,6 +447,7 @@ def concatenate_estimates(parts: list[FlightEstimate]) -> FlightEstimate:
         method=first.method,
         t0_unix_ns=first.t0_unix_ns,
         resolution_m=resolution,
+        drift_sigma_passed=max(p.drift_sigma_passed for p in parts),
         notes=[n for p in parts for n in p.notes],
         data_loss=[d for p in parts for d in p.data_loss],
         estimator=estimator,

@@ -205,7 +205,7 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
     :func:`gravsurvey.drift.separate_drift` over the smoothed estimate on the survey-line
     segments (tie lines are left out).  When the data need the drift, ``est.drift`` holds it (taken off before the
     post-processing, :func:`line_products`) and ``est.sigma`` trades the datasheet drift it held
-    (``identification.drift_sigma_passed_mps2``) for the drift's posterior sigma.  The fit's
+    (``est.drift_sigma_passed``) for the drift's posterior sigma.  The fit's
     facts go to ``est.estimator["drift"]`` (summary.json).
 
     Returns
@@ -230,11 +230,7 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
     if drift is None:
         return []
     est.drift = drift
-    ident = est.estimator.get("identification", {})
-    # a flight estimated in pieces (split at gaps) has one identification per piece
-    pieces = ident.get("segments", [ident]) if isinstance(ident, dict) else []
-    passed = max([float(p.get("drift_sigma_passed_mps2", 0.0)) for p in pieces] or [0.0])
-    est.sigma = np.sqrt(np.clip(est.sigma**2 - passed**2, 0.0, None) + sigma**2)
+    est.sigma = np.sqrt(np.clip(est.sigma**2 - est.drift_sigma_passed**2, 0.0, None) + sigma**2)
     notes = []
     if report["drift_rms_mgal"] > 3.0 * options.sigma_mps2 / MGAL:
         notes.append(

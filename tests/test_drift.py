@@ -174,7 +174,7 @@ def _flight_estimate(seed=1, with_drift=True):
         disturbance=g.copy(),
         sigma=sigma,
         smoothed=g,
-        estimator={"identification": {"drift_sigma_passed_mps2": 0.8 * MGAL}},
+        drift_sigma_passed=0.8 * MGAL,
     )
     segs = []
     for name in dict.fromkeys(lab):
@@ -247,9 +247,14 @@ def test_tie_lines_are_left_out():
 def test_pieces_of_a_flight_trade_their_datasheet_drift():
     from gravsurvey.pipeline import estimate_drift
 
-    # a flight split at a gap carries one identification per piece (estimate.concatenate_estimates)
+    import dataclasses
+
+    from gravsurvey.estimate import concatenate_estimates
+
+    # a flight split at a gap: its pieces' datasheet drift, the largest, is what sigma holds
     est, segs, field, lab = _flight_estimate()
-    est.estimator = {"identification": {"segments": [{"drift_sigma_passed_mps2": 0.8 * MGAL}, {}]}}
+    pieces = [dataclasses.replace(est, drift_sigma_passed=d) for d in (0.8 * MGAL, 0.0)]
+    est.drift_sigma_passed = concatenate_estimates(pieces).drift_sigma_passed
     estimate_drift(est, segs)
     assert est.drift is not None
     # the smoother's 1 mGal loses the pieces' 0.8 mGal datasheet drift and gains the posterior

@@ -25,7 +25,9 @@ def _rot_x(a):
 
 
 def _nav(roll_rad, horizontal_force=None):
-    """A level-flight navigation at (R, 0, 0) whose triad is rolled by ``roll_rad`` (n,) about x.
+    """A level-flight navigation at (R, 0, 0) whose triad is rolled by ``roll_rad`` (n,) about x,
+    with altimeter-like epochs between its samples and their manoeuvre mask (horizontal
+    specific force ``horizontal_force`` above identify.MANOEUVRE_MPS2).
 
     The untilted triad maps x -> inertial y, y -> inertial z, z -> up (inertial x).
     """
@@ -37,9 +39,9 @@ def _nav(roll_rad, horizontal_force=None):
     f_i = np.tile([9.8, 0.0, 0.0], (n, 1))
     if horizontal_force is not None:
         f_i[:, 1] = horizontal_force
-    f_t = np.einsum("nji,nj->ni", mat_it, f_i)
     nav = Navigation(time=time, r_i=r_i, v_i=np.zeros((n, 3)), mat_it=mat_it, h_ext=np.zeros(n))
-    return nav, f_t
+    times = time + 0.05
+    return nav, times, np.abs(f_i[:, 1]) > I.MANOEUVRE_MPS2
 
 
 def test_tilt_leak_factor_is_the_mean_squared_sine_of_the_tilt():
@@ -57,7 +59,7 @@ def test_tilt_leak_factor_leaves_the_manoeuvres_out():
     roll[n // 2 :] = np.radians(20.0)
     force = np.where(np.arange(n) >= n // 2, 3.6, 0.0)
     lf = I.tilt_leak_factor(*_nav(roll, force))
-    # only the straight half counts (the 20-s averaging window smears the edge by a few samples)
+    # only the straight half counts
     assert lf < 0.01 * np.sin(np.radians(20.0)) ** 2
     # all in a turn: nothing straight, no leak claimed
     assert I.tilt_leak_factor(*_nav(np.full(n, 0.3), np.full(n, 3.6))) == 0.0

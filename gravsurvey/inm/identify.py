@@ -230,37 +230,40 @@ def _horizontal_specific_force(nav, f_t, times):
     return np.interp(x, nav.time[sub], f_h)
 
 
-def tilt_leak_factor(nav, f_t, max_samples: int = 20000) -> float:
+def tilt_leak_factor(nav, times, manoeuvring, max_samples: int = 20000) -> float:
     """Mean of ``1 - u_z^2`` over the straight epochs: the tilt's share of the horizontal axes.
 
     ``u`` is the local up direction on the triad axes.  A strapdown triad's z axis leaves the
     vertical by the aircraft's roll and pitch, so the vertical channel carries the horizontal
     accelerometers' noise with variance ``accel_noise^2 (1 - u_z^2)``; a platform's stays
-    level (factor 0).  Epochs that manoeuvre (:data:`MANOEUVRE_MPS2`) are left out, as in the
-    spectral fit.
+    level (factor 0).
 
     Parameters
     ----------
     nav : Navigation
         Uncorrected mechanization.
-    f_t : ndarray (n, 3)
-        Specific force on the triad at ``nav.time``, m/s^2.
+    times : ndarray (k,)
+        Epochs to average over, s (the spectral fit's altimeter times); each takes the attitude
+        of the IMU sample at or before it.
+    manoeuvring : ndarray (k,) bool
+        Epochs left out (the spectral fit's manoeuvre mask, :data:`MANOEUVRE_MPS2`).
     max_samples : int
-        At most this many IMU samples are used (evenly spaced).
+        At most this many epochs are used (evenly spaced).
 
     Returns
     -------
     float
         Dimensionless, in [0, 1]; 0 when no epoch is straight.
     """
-    k = max(1, nav.time.size // max_samples)
-    r_i = nav.r_i[::k]
-    up_i = r_i / np.linalg.norm(r_i, axis=1)[:, None]
-    up_t = np.einsum("nji,nj->ni", nav.mat_it[::k], up_i)
-    straight = _horizontal_specific_force(nav, f_t, nav.time[::k]) <= MANOEUVRE_MPS2
-    if not straight.any():
+    k = max(1, np.size(times) // max_samples)
+    x = np.asarray(times, float)[::k][~np.asarray(manoeuvring, bool)[::k]]
+    if x.size == 0:
         return 0.0
-    return float(np.clip(np.mean(1.0 - up_t[straight, 2] ** 2), 0.0, 1.0))
+    j = np.clip(np.searchsorted(nav.time, x, side="right") - 1, 0, nav.time.size - 1)
+    r_i = nav.r_i[j]
+    up_i = r_i / np.linalg.norm(r_i, axis=1)[:, None]
+    up_t = np.einsum("nji,nj->ni", nav.mat_it[j], up_i)
+    return float(np.clip(np.mean(1.0 - up_t[:, 2] ** 2), 0.0, 1.0))
 
 
 def tilt_leak_exceeds_white(white_mps2: float, leak_mps2: float, sigma_factor: float | None) -> bool:
@@ -792,7 +795,7 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
         # noise through the tilt included; the filter holds that leak already (accel_noise_mps2
         # through its attitude), so counting it again as gravimeter noise smoothed the field
         # away (measured: 4x the gravimeter's white, a resolution of 19 km for 5 km)
-        lf = tilt_leak_factor(nav, f_t)
+        lf = tilt_leak_factor(nav, t, man)
         leak = params.accel_noise_mps2 * math.sqrt(lf)
         own = white_less_tilt_leak(m.white_mps2, leak, factor_w)
         report["tilt_leak"] = {
