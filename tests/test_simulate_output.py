@@ -12,9 +12,11 @@ import pytest
 import yaml
 
 from gravsurvey import geodesy as gd
+from gravsurvey.errors import ConfigError
 from gravsurvey.simulate import sensors as sn
 from gravsurvey.simulate.run import (
     SEED_SENSORS,
+    gravimeter_slow_error,
     quick_sim,
     simulate_flight,
     simulate_to_dir,
@@ -138,6 +140,29 @@ def test_one_error_source_does_not_change_another():
     )
     assert np.array_equal(a.angular_rate_t, b.angular_rate_t)
     assert not np.array_equal(a.alt_height, b.alt_height)
+
+
+def test_gravimeter_slow_error_is_the_simulations_own_draw():
+    # the benchmark's drift column must score the drift the flight really carries
+    sensors = {
+        "gravimeter": {
+            "bias_mps2": 2.0e-5,
+            "markov_sigma_mps2": 1.0e-5,
+            "markov_lambda_per_s": 1.0 / 600.0,
+            "white_sigma_mps2": 1.0e-5,
+        },
+        "accelerometer": {"white_sigma_mps2": 1e-3},
+    }
+    sim = quick_sim(duration_s=900.0, noise=sensors, seed=4, turbulence={"vertical_sigma_m": 1.0})
+    s = simulate_flight(sim)
+    t_ns, err = gravimeter_slow_error(sim)
+    assert np.array_equal(t_ns, s.imu_time_ns)
+    assert np.array_equal(err, s.truth["gravimeter_markov"] + 2.0e-5)
+    # the slow part: the white noise is left out, the Markov part is there
+    assert 0.3e-5 < np.std(err) < 3e-5
+    assert np.std(s.truth["gravimeter_error"] - err) > 10 * np.std(np.diff(err))
+    with pytest.raises(ConfigError, match="no flight with index 1"):
+        gravimeter_slow_error(sim, 1)
 
 
 def _tree_bytes(d):

@@ -42,6 +42,7 @@ from .trajectory import FlightPlan, Kinematics, build_plan, earth_rate_n, kinema
 __all__ = [
     "FlightSimulation",
     "simulate_flight",
+    "gravimeter_slow_error",
     "simulate_to_dir",
     "quick_sim",
     "load_sim_config",
@@ -394,6 +395,39 @@ def simulate_flight(sim, flight_index: int = 0) -> FlightSimulation:
         imu_errors=errs,
         **grad,
     )
+
+
+def gravimeter_slow_error(sim, flight_index: int = 0):
+    """The slow part of one simulated flight's gravimeter error, as :func:`simulate_flight` draws it.
+
+    The bias plus the Gauss-Markov error (the white part left out), from the same random streams
+    as the simulation but without its kinematics, field and logs: for scoring how much of an
+    estimate's error is the drift a flight cannot tell from the field (benchmarks/bench_unseen.py).
+
+    Parameters
+    ----------
+    sim : dict, path or SimConfig
+    flight_index : int
+
+    Returns
+    -------
+    time_unix_ns : ndarray (n,), int64
+        IMU sample times, Unix ns.
+    error_mps2 : ndarray (n,)
+        ``bias + Markov`` of the gravimeter (third accelerometer), m/s^2; equal to
+        ``truth["gravimeter_markov"] + bias`` of :func:`simulate_flight`.
+    """
+    cfg = load_sim_config(sim)
+    if not 0 <= flight_index < len(cfg.flights):
+        raise ConfigError(f"flights: no flight with index {flight_index} (the config has {len(cfg.flights)})")
+    f = cfg.flights[flight_index]
+    # the plan's duration sets the sample count; its turbulence stream is drawn as in the
+    # simulation but only the duration is used
+    plan = build_plan(f["plan"], f["turbulence"], _rng(cfg, flight_index, _STREAM_TURBULENCE), cfg.ellipsoid)
+    imu_ns = sample_times_ns(plan.duration, f["rates"]["imu_hz"])
+    errs = imu_errors(imu_ns.shape[0], f["rates"]["imu_hz"], f["sensors"], _rng(cfg, flight_index, _STREAM_IMU))
+    bias = float(f["sensors"]["gravimeter"]["bias_mps2"])
+    return imu_ns + int(f["start_unix_ns"]), bias + errs.gravimeter_markov
 
 
 # --------------------------------------------------------------------------
