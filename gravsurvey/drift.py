@@ -30,7 +30,8 @@ One line, or lines too far apart for their field to be shared, leave the drift u
 the test then keeps the estimate as it is, and says so in the report.  So does a field whose
 fitted correlation length is below :data:`MIN_LENGTH_PER_RESOLUTION` times the estimate's
 along-track resolution: the smoother has low-passed it along the lines only, and the isotropic
-field model would read the difference between neighbouring lines as drift.
+field model would read the difference between neighbouring lines as drift - unless the fitted
+field is too weak to pose as the fitted drift (:data:`GUARD_FIELD_PER_DRIFT`).
 
 All inputs and outputs are SI (s, m, m/s^2).
 """
@@ -70,6 +71,13 @@ MIN_LOG_LR = 3.0
 #: the drift is not used (configs/realistic_survey.yaml: 0.8x and 1.3x, where it made the error
 #: 2.0-2.5 -> 3.0-3.6 mGal; the unseen flights it helped: 1.8x (U001) and more).
 MIN_LENGTH_PER_RESOLUTION = 1.5
+#: ... unless the fitted field is weaker than this fraction of the fitted drift: smoothing along
+#: the lines only turns at most the field's own variation between neighbouring lines into
+#: apparent drift, and a field that weak cannot pose as that much drift (U018 of the unseen
+#: suite: field 0.2 mGal, drift 1.1 mGal, its fitted field length 24.9 or 61 km within 0.44 of
+#: log-likelihood, either side of the guard; the realistic survey the guard is for: 4.8-7.1
+#: mGal of field, 3.0-3.7 of drift).
+GUARD_FIELD_PER_DRIFT = 0.5
 #: Prior width of the drift's sigma and correlation time (1-sigma factors of the log-normal).
 PRIOR_SIGMA_FACTOR = 3.0
 PRIOR_TAU_FACTOR = 10.0
@@ -372,7 +380,8 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
     if fit is None:
         return not_used("the fit failed")
     rep = {**fit.report(), "block_s": block}
-    if resolution_m > 0 and fit.field_length_m < MIN_LENGTH_PER_RESOLUTION * resolution_m:
+    field_can_pose = fit.field_sigma_mps2 >= GUARD_FIELD_PER_DRIFT * fit.drift_sigma_mps2
+    if resolution_m > 0 and fit.field_length_m < MIN_LENGTH_PER_RESOLUTION * resolution_m and field_can_pose:
         return not_used(
             f"the field's correlation length ({fit.field_length_m / 1000:.1f} km) is under "
             f"{MIN_LENGTH_PER_RESOLUTION:g}x the estimate's resolution ({resolution_m / 1000:.1f} km): "

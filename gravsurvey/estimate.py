@@ -248,6 +248,9 @@ def attitude_report(sol) -> dict:
         # the passes re-linearise every GNSS-aided flight (attitude and gyro bias), platform too
         out["attitude_passes"] = int(sol.passes)
         out["attitude_corrections_deg"] = [float(np.degrees(c)) for c in sol.attitude_corrections]
+        pv = getattr(sol, "initial_corrections", None) or []
+        out["initial_position_corrections_m"] = [float(a) for a, _ in pv]
+        out["initial_velocity_corrections_mps"] = [float(b) for _, b in pv]
         out["gyro_bias_degph"] = [float(b / RADPS_PER_DEGPH) for b in bias]
         out["gyro_bias_sigma_degph"] = [float(b / RADPS_PER_DEGPH) for b in sol.gyro_bias_sigma_t]
     return out

@@ -655,20 +655,27 @@ def initial_covariance(
     return 0.5 * (p + p.T)
 
 
-def initial_mean(theta_t, q_t, p_t, n_state: int = N_STATE_AIDED, gyro_bias_t=None) -> np.ndarray:
+def initial_mean(theta_t, q_t, p_t, n_state: int = N_STATE_AIDED, gyro_bias_t=None, dr_t=None, dv_t=None) -> np.ndarray:
     """Prior mean (n_state,) of the aided state for an attitude error ``theta_t`` (rad, triad axes).
 
-    With the position and velocity errors ``dr``, ``dv`` of zero mean the seed's states carry
-    the attitude: ``dq = -q x theta`` and ``dp = -p x theta`` (:func:`continuous_model_n`).
-    Used when the filter is re-run about a corrected attitude while the prior stays the
-    alignment's (the prior mean is then the old attitude seen from the new one).
+    The seed's states carry the attitude: ``dq = dr - q x theta`` and ``dp = dv - p x theta``
+    (:func:`continuous_model_n`), ``dr``, ``dv`` the position and velocity errors on the triad
+    axes (``C^T dr_i``, ``C^T dv_i``; zero mean unless given).  Used when the filter is re-run
+    about a corrected initial state while the prior stays the alignment's and the GNSS fit's
+    (the prior mean is then the old state seen from the new one).
     ``gyro_bias_t`` (3,), rad/s: the gyro-bias state's prior mean (a re-run whose rates had an
     estimated bias taken off: minus that bias); None: zero.
+    ``dr_t``, ``dv_t`` (3,), m and m/s: prior means of ``dr`` and ``dv`` (a re-run from a
+    corrected initial position and velocity: minus the corrections); None: zero.
     """
     th = np.asarray(theta_t, float)
     x = np.zeros(n_state)
     x[DQ] = -np.cross(np.asarray(q_t, float), th)
     x[DP] = -np.cross(np.asarray(p_t, float), th)
+    if dr_t is not None:
+        x[DQ] += np.asarray(dr_t, float)
+    if dv_t is not None:
+        x[DP] += np.asarray(dv_t, float)
     x[TH] = th
     if gyro_bias_t is not None:
         x[BG] = np.asarray(gyro_bias_t, float)

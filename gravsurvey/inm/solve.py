@@ -103,6 +103,9 @@ class InmSolution:
     attitude_corrections : list of float
         Size of the initial-attitude correction after each pass, rad (when the passes end at
         ``attitude_passes``, the last entry is the one the last pass would still apply).
+    initial_corrections : list of (float, float)
+        Size of the initial position (m) and velocity (m/s) correction after each pass but the
+        last (GNSS-aided only).
     gyro_bias_t, gyro_bias_sigma_t : ndarray (3,) or None
         The gyro biases on the triad axes and their smoothed 1-sigma, rad/s (GNSS-aided only):
         what the passes took off the rates plus the last pass's smoothed bias state.
@@ -154,6 +157,7 @@ class InmSolution:
     attitude_sigma: np.ndarray | None = None
     passes: int = 1
     attitude_corrections: list = field(default_factory=list)
+    initial_corrections: list = field(default_factory=list)
     gyro_bias_t: np.ndarray | None = None
     gyro_bias_sigma_t: np.ndarray | None = None
     alignment: object | None = None
@@ -215,6 +219,15 @@ ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
 #: slow vertical error of ~35 mGal per deg/h of bias (docs/method.md, "Passes"); 0.001 deg/h
 #: leaves ~0.04 mGal.
 GYRO_BIAS_CONVERGED_RADPS = 1e-3 * RADPS_PER_DEGPH
+
+#: ... and once the initial velocity correction is below this, m/s, and the position's below
+#: :data:`POSITION_CONVERGED_M`.  The initial position and velocity come from a fit to the first
+#: seconds of GNSS; in turbulence the velocity is off by the gusts (1-2 m/s), and the
+#: mechanization about it carries a Schuler oscillation of ``dv / w_s`` (800 m per m/s) that the
+#: filter, linearised about it, left in the disturbance (measured: U005 of the unseen suite, 5.5 m
+#: horizontal turbulence, a 1.8 mGal oscillation of 84 min).  0.1 m/s leaves 80 m (under 0.1 mGal).
+VELOCITY_CONVERGED_MPS = 0.1
+POSITION_CONVERGED_M = 30.0
 
 #: An initial-attitude correction above this (rad, 0.5 deg) re-runs the identification about
 #: the corrected attitude in the next pass (after an alignment: 0.004-0.13 deg measured, not re-run).
@@ -287,7 +300,12 @@ def estimate_anomaly(
     if initial is None:
         initial = initial_state_from_gnss(record, triad, attitude_deg, params=params, ellipsoid=ellipsoid)
     mat_nt0 = np.array(initial.mat_nt, float)
+    # the initial position and velocity the passes mechanize from (corrected after each pass)
+    pv0 = (initial.lat, initial.lon, initial.height, np.asarray(initial.vel_n, float))
     theta_prior = np.zeros(3)  # the prior attitude seen from the current linearisation point
+    # the prior position and velocity errors seen from the current point, inertial axes (m, m/s)
+    dr_prior_i, dv_prior_i = np.zeros(3), np.zeros(3)
+    pv_corrections = []
     gyro_bias_t = np.zeros(3)  # the gyro bias taken off the rates before mechanizing, rad/s
     corrections = []
     passes = int(params.attitude_passes)
@@ -297,9 +315,7 @@ def estimate_anomaly(
     # against the field, and the 14 states are kept there (docs/method.md, "GNSS aiding")
     accel_bias = bool(params.accel_bias_states) and triad == "strapdown"
     for k in range(passes):
-        cur = InitialState(
-            initial.lat, initial.lon, initial.height, initial.vel_n, mat_nt0, initial.attitude_cov_t, initial.alignment
-        )
+        cur = InitialState(pv0[0], pv0[1], pv0[2], pv0[3], mat_nt0, initial.attitude_cov_t, initial.alignment)
         nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
         if k == 0:
             speed0 = _typical_speed(record, nav, ellipsoid)
@@ -315,6 +331,7 @@ def estimate_anomaly(
             theta_prior=theta_prior,
             lever_arm_t=gnss_lever_arm_t,
             gyro_bias_prior=-gyro_bias_t,
+            pv_prior_i=(dr_prior_i, dv_prior_i),
         )
         if given_params.identify and reidentify:
             params, ident = _identify(record, given_params, nav, ellipsoid, speed0, one_pass, accel_bias)
@@ -328,18 +345,23 @@ def estimate_anomaly(
             break
         th0, db, db_sig = _pass_correction(out)
         corrections.append(float(np.linalg.norm(th0)))
+        dr_i, dv_i = _initial_pv_correction(out, nav, idx, c)
+        pv_corrections.append((float(np.linalg.norm(dr_i)), float(np.linalg.norm(dv_i))))
         # a bias correction within its own smoothed sigma (the heading gyro's on straight lines,
         # where it is unobservable) is not one another pass could confirm
         bias_done = np.all(np.abs(db) < np.maximum(GYRO_BIAS_CONVERGED_RADPS, db_sig))
-        if corrections[-1] < ATTITUDE_CONVERGED_RAD and bias_done:
+        pv_done = pv_corrections[-1][0] < POSITION_CONVERGED_M and pv_corrections[-1][1] < VELOCITY_CONVERGED_MPS
+        if corrections[-1] < ATTITUDE_CONVERGED_RAD and bias_done and pv_done:
             break
         # the model was identified on a navigation this far off (a given attitude degrees off: tilt
         # leaks the horizontal specific force into the vertical channel): identify it again about
         # the corrected attitude
         reidentify = corrections[-1] > REIDENTIFY_RAD
-        # C_true = C Exp(theta): the triad -> ENU matrix gets the same right factor
+        # C_true = C Exp(theta) on inertial axes, at the corrected position (whose ENU axes
+        # differ from the old point's by the position change over the Earth's radius)
         rot = rodrigues(np.ascontiguousarray(th0))
-        mat_nt0 = mat_nt0 @ rot
+        pv0, mat_nt0 = _corrected_initial_state(nav, dr_i, dv_i, nav.mat_it[0] @ rot, ellipsoid)
+        dr_prior_i, dv_prior_i = dr_prior_i - dr_i, dv_prior_i - dv_i
         # prior attitude (old point) seen from the new point: C_old = C_new Exp(-th0)
         theta_prior = theta_prior - th0
         # the smoothed gyro bias comes off the rates; the bias state is then what remains, its
@@ -356,6 +378,7 @@ def estimate_anomaly(
                 "a GNSS channel); not estimated"
             )
     sol = _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, k + 1, corrections)
+    sol.initial_corrections = pv_corrections
     if hsol is not None:
         sol.dg_horizontal, sol.dg_horizontal_sigma, sol.horizontal_observable = horizontal_outputs(
             out["x_s"], out["p_s"], hprior[0]
@@ -433,6 +456,41 @@ def _pass_correction(out):
     the gyro bias (3,) rad/s and the bias's 1-sigma (3,) rad/s (triad axes)."""
     x0 = out["x_s"][0]
     return x0[TH], x0[BG], np.sqrt(np.diagonal(out["p_s"][0])[BG])
+
+
+def _initial_pv_correction(out, nav, idx, c):
+    """The smoothed position and velocity errors a pass found at its first epoch, inertial axes.
+
+    ``C^T dr_i = dq + q x theta`` and ``C^T dv_i = dp + p x theta`` (errors = computed minus
+    true; :func:`gravsurvey.inm.errormodel.continuous_model_n`).
+
+    Returns
+    -------
+    dr_i, dv_i : ndarray (3,)
+        m, m/s.
+    """
+    x0 = out["x_s"][0]
+    c0 = c[0]
+    q0 = c0.T @ nav.r_i[idx[0]]
+    p0 = c0.T @ nav.v_i[idx[0]]
+    dr_i = c0 @ (x0[DQ] + np.cross(q0, x0[TH]))
+    dv_i = c0 @ (x0[DP] + np.cross(p0, x0[TH]))
+    return dr_i, dv_i
+
+
+def _corrected_initial_state(nav, dr_i, dv_i, mat_it, ellipsoid):
+    """The first IMU sample's state less the errors ``dr_i``, ``dv_i`` (inertial, m and m/s).
+
+    Returns ``(lat, lon, height, vel_n)`` (rad, rad, m, ENU m/s relative to the Earth) and the
+    triad -> ENU matrix at that position for the triad -> inertial matrix ``mat_it``.
+    """
+    t0 = float(nav.time[0])
+    r = (nav.r_i[0] - dr_i)[None, :]
+    v = (nav.v_i[0] - dv_i)[None, :]
+    lat, lon, h, vel_n = navigation_to_geodetic(np.array([t0]), r, v, ellipsoid)
+    m_ie = mat_ie(t0, ellipsoid.omega)
+    mat_nt = (m_ie @ mat_en(float(lat[0]), float(lon[0]))).T @ mat_it
+    return (float(lat[0]), float(lon[0]), float(h[0]), vel_n[0]), mat_nt
 
 
 def _check_passes_settled(record, out, span_s, passes) -> float:
@@ -541,6 +599,7 @@ def _one_pass(
     hprior=None,
     accel_bias=False,
     gyro_bias_prior=None,
+    pv_prior_i=None,
 ):
     """Discretise, filter and smooth once about the mechanization ``nav``.
 
@@ -599,7 +658,10 @@ def _one_pass(
         p0 = initial_covariance(
             params, q_t0, p_t0, attitude_cov_t=att_cov, horizontal=horizontal, hprior=hprior, accel_bias=accel_bias
         )
-        x0 = initial_mean(theta_prior, q_t0, p_t0, n_state, gyro_bias_prior)
+        dr_t = dv_t = None
+        if pv_prior_i is not None:
+            dr_t, dv_t = c[0].T @ pv_prior_i[0], c[0].T @ pv_prior_i[1]
+        x0 = initial_mean(theta_prior, q_t0, p_t0, n_state, gyro_bias_prior, dr_t, dv_t)
     else:
         p0 = initial_covariance(params)
         x0 = np.zeros(n_state)
