@@ -2,7 +2,8 @@
 
 import numpy as np
 
-from gravsurvey.inm.params import InitialState
+from gravsurvey.geodesy import MGAL
+from gravsurvey.inm.params import InitialState, InmParams
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
 
 
@@ -20,3 +21,31 @@ def record_and_initial(s, gnss: bool = True):
     tr = s.truth
     init = InitialState(tr["lat"][0], tr["lon"][0], tr["height"][0], tr["vel_n"][0].copy(), tr["mat_nt"][0].copy())
     return rec, init
+
+
+def wide_fixed_params(passes: int, **kw) -> InmParams:
+    """Settings of the passes tests: the simulated sensors' figures, identification off and a
+    wide fixed prior (2 mGal, 130 km), as identification picks on a weak smooth field: it passes
+    slow errors, so an error the linearisation leaves shows in full."""
+    return InmParams(
+        identify=False,
+        attitude_passes=passes,
+        anomaly_sigma_mps2=2.0e-5,
+        anomaly_lambda_per_m=1.0 / 130e3,
+        accel_noise_mps2=2.0e-4,
+        gyro_drift_degph=0.002,
+        gravimeter_white_mps2=1.0e-5,
+        altimeter_sigma_m=0.05,
+        gnss_horizontal_sigma_m=0.2,
+        gnss_vertical_sigma_m=0.5,
+        **kw,
+    )
+
+
+def smoothed_rms_mgal(sol, edge_s: float = 300.0) -> float:
+    """RMS about its mean of the smoothed disturbance more than ``edge_s`` from either end, mGal
+    (over no field: the estimate's error)."""
+    t = sol.time - sol.time[0]
+    keep = (t > edge_s) & (t < t[-1] - edge_s)
+    g = sol.g_smooth[keep]
+    return float(np.sqrt(np.mean((g - g.mean()) ** 2))) / MGAL

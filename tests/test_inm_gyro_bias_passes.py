@@ -13,11 +13,9 @@ import numpy as np
 import pytest
 
 from gravsurvey.errors import DataError
-from gravsurvey.geodesy import MGAL
-from gravsurvey.inm.params import InmParams
 from gravsurvey.inm.solve import estimate_anomaly
 from gravsurvey.simulate.run import quick_sim, simulate_flight
-from sim_record import record_and_initial
+from sim_record import record_and_initial, smoothed_rms_mgal, wide_fixed_params
 
 DEGPH = math.radians(1.0) / 3600.0
 BIAS_DEGPH = (0.08, 0.0, 0.0)
@@ -53,26 +51,8 @@ def flight():
 
 def _run(flight, passes, **kw):
     rec, init = flight
-    # a wide fixed prior (2 mGal, 130 km), as identification picks on a weak smooth field: it
-    # passes slow errors, so an error the linearisation leaves shows in full
-    params = InmParams(
-        identify=False,
-        attitude_passes=passes,
-        anomaly_sigma_mps2=2.0e-5,
-        anomaly_lambda_per_m=1.0 / 130e3,
-        accel_noise_mps2=2.0e-4,
-        gyro_drift_degph=0.002,
-        gravimeter_white_mps2=1.0e-5,
-        altimeter_sigma_m=0.05,
-        gnss_horizontal_sigma_m=0.2,
-        gnss_vertical_sigma_m=0.5,
-        **kw,
-    )
-    sol = estimate_anomaly(rec, params, init, "strapdown")
-    t = sol.time - sol.time[0]
-    keep = (t > 300.0) & (t < t[-1] - 300.0)
-    g = sol.g_smooth[keep]
-    return sol, float(np.sqrt(np.mean((g - g.mean()) ** 2))) / MGAL
+    sol = estimate_anomaly(rec, wide_fixed_params(passes, **kw), init, "strapdown")
+    return sol, smoothed_rms_mgal(sol)
 
 
 def test_the_gyro_bias_is_fed_back_and_the_slow_vertical_error_goes(flight):

@@ -11,11 +11,10 @@ the unseen suite: 1.8 mGal) although its position and velocity states were estim
 import numpy as np
 import pytest
 
-from gravsurvey.geodesy import MGAL
-from gravsurvey.inm.params import InmParams, initial_state_from_gnss
+from gravsurvey.inm.params import initial_state_from_gnss
 from gravsurvey.inm.solve import VELOCITY_CONVERGED_MPS, estimate_anomaly
 from gravsurvey.simulate.run import quick_sim, simulate_flight
-from sim_record import record_and_initial
+from sim_record import record_and_initial, smoothed_rms_mgal, wide_fixed_params
 
 SENSORS = {
     "accelerometer": {"white_sigma_mps2": 2.0e-4},
@@ -48,25 +47,9 @@ def flight():
 
 def _run(flight, passes):
     rec, _ = flight
-    # a wide fixed prior (2 mGal, 130 km): it passes slow errors, so one the linearisation
-    # leaves shows in full
-    params = InmParams(
-        identify=False,
-        attitude_passes=passes,
-        anomaly_sigma_mps2=2.0e-5,
-        anomaly_lambda_per_m=1.0 / 130e3,
-        accel_noise_mps2=2.0e-4,
-        gyro_drift_degph=0.002,
-        gravimeter_white_mps2=1.0e-5,
-        altimeter_sigma_m=0.05,
-        gnss_horizontal_sigma_m=0.2,
-        gnss_vertical_sigma_m=0.5,
-    )
+    params = wide_fixed_params(passes)
     sol = estimate_anomaly(rec, params, None, "platform")
-    t = sol.time - sol.time[0]
-    keep = (t > 300.0) & (t < t[-1] - 300.0)
-    g = sol.g_smooth[keep]
-    return sol, params, float(np.sqrt(np.mean((g - g.mean()) ** 2))) / MGAL
+    return sol, params, smoothed_rms_mgal(sol)
 
 
 def test_the_initial_velocity_is_corrected_and_the_schuler_error_goes(flight):
