@@ -75,8 +75,8 @@ MIN_LENGTH_PER_RESOLUTION = 1.5
 #: the lines only turns at most the field's own variation between neighbouring lines into
 #: apparent drift, and a field that weak cannot pose as that much drift (U018 of the unseen
 #: suite: field 0.2 mGal, drift 1.1 mGal, its fitted field length 24.9 or 61 km within 0.44 of
-#: log-likelihood, either side of the guard; the realistic survey the guard is for: 4.8-7.1
-#: mGal of field, 3.0-3.7 of drift).
+#: log-likelihood, either side of the guard; the realistic survey the guard is for: 4.0-4.5
+#: mGal of field, 2.7-3.6 of drift).
 GUARD_FIELD_PER_DRIFT = 0.5
 #: Prior width of the drift's sigma and correlation time (1-sigma factors of the log-normal).
 PRIOR_SIGMA_FACTOR = 3.0

@@ -222,10 +222,11 @@ GYRO_BIAS_CONVERGED_RADPS = 1e-3 * RADPS_PER_DEGPH
 
 #: ... and once the initial velocity correction is below this, m/s, and the position's below
 #: :data:`POSITION_CONVERGED_M`.  The initial position and velocity come from a fit to the first
-#: seconds of GNSS; in turbulence the velocity is off by the gusts (1-2 m/s), and the
-#: mechanization about it carries a Schuler oscillation of ``dv / w_s`` (800 m per m/s) that the
-#: filter, linearised about it, left in the disturbance (measured: U005 of the unseen suite, 5.5 m
-#: horizontal turbulence, a 1.8 mGal oscillation of 84 min).  0.1 m/s leaves 80 m (under 0.1 mGal).
+#: seconds of GNSS; in turbulence the velocity is off by the gusts (1-4.6 m/s on the unseen
+#: suite), and the mechanization about it carries a Schuler oscillation of ``dv / w_s`` (800 m per
+#: m/s) that the filter, linearised about it, left in the disturbance (measured: U005 of the
+#: unseen suite, 5.5 m horizontal turbulence, a 1.8 mGal oscillation of 84 min).  0.1 m/s leaves
+#: 80 m (under 0.1 mGal).
 VELOCITY_CONVERGED_MPS = 0.1
 POSITION_CONVERGED_M = 30.0
 
