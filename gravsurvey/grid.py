@@ -32,6 +32,7 @@ survey (its EPSG code is written into the netCDF file).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -217,15 +218,32 @@ def line_spacing(easting_m, northing_m, line) -> float:
     if names.size < 2:
         raise DataError("grid: need at least 2 lines to estimate the line spacing")
     pts_of = {nm: np.column_stack([e[lab == nm], n[lab == nm]]) for nm in names}
-    trees = {nm: cKDTree(p) for nm, p in pts_of.items()}
+    box_lo = {nm: p.min(axis=0) for nm, p in pts_of.items()}
+    box_hi = {nm: p.max(axis=0) for nm, p in pts_of.items()}
+    trees = {}
     d = []
     for nm, pts in pts_of.items():
         # the nearest other line that is not this track flown again (another flight's or a
-        # reflight's pass within REPEAT_LINE_M): a repeat would give a spacing of metres
-        seps = [float(np.median(trees[other].query(pts)[0])) for other in names if other != nm]
-        seps = [x for x in seps if x > REPEAT_LINE_M]
-        if seps:
-            d.append(min(seps))
+        # reflight's pass within REPEAT_LINE_M): a repeat would give a spacing of metres.  The
+        # gap between two lines' bounding boxes is below every point's distance, so below the
+        # median: lines are tried nearest box first and the rest skipped once a gap reaches the
+        # best separation (a survey of L lines queries ~2 neighbours per line, not L - 1)
+        gaps = sorted(
+            (float(np.hypot(*np.maximum(0.0, np.maximum(box_lo[o] - box_hi[nm], box_lo[nm] - box_hi[o])))), o)
+            for o in names
+            if o != nm
+        )
+        best = math.inf
+        for gap, other in gaps:
+            if gap >= best:
+                break
+            if other not in trees:
+                trees[other] = cKDTree(pts_of[other])
+            sep = float(np.median(trees[other].query(pts)[0]))
+            if sep > REPEAT_LINE_M:
+                best = min(best, sep)
+        if math.isfinite(best):
+            d.append(best)
     if not d:
         raise DataError(f"grid: every line lies within {REPEAT_LINE_M:g} m of another: no line spacing")
     return float(np.median(d))

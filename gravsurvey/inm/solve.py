@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 import math
 import warnings
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -300,9 +301,8 @@ def estimate_anomaly(
     _check_record(record)
     if initial is None:
         initial = initial_state_from_gnss(record, triad, attitude_deg, params=params, ellipsoid=ellipsoid)
-    mat_nt0 = np.array(initial.mat_nt, float)
-    # the initial position and velocity the passes mechanize from (corrected after each pass)
-    pv0 = (initial.lat, initial.lon, initial.height, np.asarray(initial.vel_n, float))
+    # the state the passes mechanize from (position, velocity and attitude corrected after each)
+    cur = dataclasses.replace(initial, vel_n=np.asarray(initial.vel_n, float), mat_nt=np.array(initial.mat_nt, float))
     theta_prior = np.zeros(3)  # the prior attitude seen from the current linearisation point
     # the prior position and velocity errors seen from the current point, inertial axes (m, m/s)
     dr_prior_i, dv_prior_i = np.zeros(3), np.zeros(3)
@@ -316,7 +316,6 @@ def estimate_anomaly(
     # against the field, and the 14 states are kept there (docs/method.md, "GNSS aiding")
     accel_bias = bool(params.accel_bias_states) and triad == "strapdown"
     for k in range(passes):
-        cur = InitialState(pv0[0], pv0[1], pv0[2], pv0[3], mat_nt0, initial.attitude_cov_t, initial.alignment)
         nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
         if k == 0:
             speed0 = _typical_speed(record, nav, ellipsoid)
@@ -361,7 +360,7 @@ def estimate_anomaly(
         # C_true = C Exp(theta) on inertial axes, at the corrected position (whose ENU axes
         # differ from the old point's by the position change over the Earth's radius)
         rot = rodrigues(np.ascontiguousarray(th0))
-        pv0, mat_nt0 = _corrected_initial_state(nav, dr_i, dv_i, nav.mat_it[0] @ rot, ellipsoid)
+        cur = _corrected_initial_state(cur, nav, dr_i, dv_i, nav.mat_it[0] @ rot, ellipsoid)
         dr_prior_i, dv_prior_i = dr_prior_i - dr_i, dv_prior_i - dv_i
         # prior attitude (old point) seen from the new point: C_old = C_new Exp(-th0)
         theta_prior = theta_prior - th0
@@ -459,39 +458,56 @@ def _pass_correction(out):
     return x0[TH], x0[BG], np.sqrt(np.diagonal(out["p_s"][0])[BG])
 
 
-def _initial_pv_correction(out, nav, idx, c):
-    """The smoothed position and velocity errors a pass found at its first epoch, inertial axes.
+def _triad_errors(x_s, c, r_i, v_i):
+    """Position and velocity errors on the triad axes of aided states, and ``q``.
 
     ``C^T dr_i = dq + q x theta`` and ``C^T dv_i = dp + p x theta`` (errors = computed minus
     true; :func:`gravsurvey.inm.errormodel.continuous_model_n`).
+
+    Parameters
+    ----------
+    x_s : ndarray (N, n_state)
+    c : ndarray (N, 3, 3)
+        Triad -> inertial at the epochs.
+    r_i, v_i : ndarray (N, 3)
+        Mechanized inertial position (m) and velocity (m/s) at the epochs.
+
+    Returns
+    -------
+    err_q, err_p, q_t : ndarray (N, 3)
+        m, m/s, and the triad-resolved position ``q = C^T r_i`` (m).
+    """
+    th = x_s[:, TH]
+    c_t = np.swapaxes(c, 1, 2)
+    q_t = np.matmul(c_t, r_i[:, :, None])[:, :, 0]
+    p_t = np.matmul(c_t, v_i[:, :, None])[:, :, 0]
+    return x_s[:, DQ] + np.cross(q_t, th), x_s[:, DP] + np.cross(p_t, th), q_t
+
+
+def _initial_pv_correction(out, nav, idx, c):
+    """The smoothed position and velocity errors a pass found at its first epoch, inertial axes.
 
     Returns
     -------
     dr_i, dv_i : ndarray (3,)
         m, m/s.
     """
-    x0 = out["x_s"][0]
-    c0 = c[0]
-    q0 = c0.T @ nav.r_i[idx[0]]
-    p0 = c0.T @ nav.v_i[idx[0]]
-    dr_i = c0 @ (x0[DQ] + np.cross(q0, x0[TH]))
-    dv_i = c0 @ (x0[DP] + np.cross(p0, x0[TH]))
-    return dr_i, dv_i
+    err_q, err_p, _ = _triad_errors(out["x_s"][:1], c[:1], nav.r_i[idx[:1]], nav.v_i[idx[:1]])
+    return c[0] @ err_q[0], c[0] @ err_p[0]
 
 
-def _corrected_initial_state(nav, dr_i, dv_i, mat_it, ellipsoid):
-    """The first IMU sample's state less the errors ``dr_i``, ``dv_i`` (inertial, m and m/s).
-
-    Returns ``(lat, lon, height, vel_n)`` (rad, rad, m, ENU m/s relative to the Earth) and the
-    triad -> ENU matrix at that position for the triad -> inertial matrix ``mat_it``.
-    """
+def _corrected_initial_state(state: InitialState, nav, dr_i, dv_i, mat_it, ellipsoid) -> InitialState:
+    """``state`` at the first IMU sample less the errors ``dr_i``, ``dv_i`` (inertial, m and m/s),
+    with the triad -> ENU matrix at the corrected position for the triad -> inertial ``mat_it``."""
     t0 = float(nav.time[0])
     r = (nav.r_i[0] - dr_i)[None, :]
     v = (nav.v_i[0] - dv_i)[None, :]
     lat, lon, h, vel_n = navigation_to_geodetic(np.array([t0]), r, v, ellipsoid)
     m_ie = mat_ie(t0, ellipsoid.omega)
     mat_nt = (m_ie @ mat_en(float(lat[0]), float(lon[0]))).T @ mat_it
-    return (float(lat[0]), float(lon[0]), float(h[0]), vel_n[0]), mat_nt
+    return dataclasses.replace(
+        state, lat=float(lat[0]), lon=float(lon[0]), height=float(h[0]), vel_n=vel_n[0], mat_nt=mat_nt
+    )
 
 
 def _check_passes_settled(record, out, span_s, passes) -> float:
@@ -677,15 +693,8 @@ def _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state,
 
     # corrections: true = computed - error; the position and velocity errors on the triad are
     # dq (+ q x theta when aided) and dp (+ p x theta), to inertial through C
-    dq = x_s[:, DQ]
-    dp = x_s[:, DP]
-    err_q, err_p = dq.copy(), dp.copy()
     if gnss_used:
-        th = x_s[:, TH]
-        q_t = np.einsum("nji,nj->ni", c, nav.r_i[idx])
-        p_t = np.einsum("nji,nj->ni", c, nav.v_i[idx])
-        err_q += np.cross(q_t, th)
-        err_p += np.cross(p_t, th)
+        err_q, err_p, q_t = _triad_errors(x_s, c, nav.r_i[idx], nav.v_i[idx])
         # covariance of dq + [q x] theta
         jac = np.zeros((idx.size, 3, n_state))
         jac[:, :, DQ] = np.eye(3)
@@ -699,6 +708,7 @@ def _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state,
         # negative value is a zero sigma, not a NaN
         sig_pos = np.sqrt(np.maximum(np.einsum("nii->ni", cov_pos), 0.0))
     else:
+        err_q, err_p = x_s[:, DQ].copy(), x_s[:, DP].copy()
         sig_pos = np.sqrt(np.stack([p_s[:, i, i] for i in DQ], axis=1))
     r_corr = nav.r_i[idx] - np.einsum("nij,nj->ni", c, err_q)
     v_corr = nav.v_i[idx] - np.einsum("nij,nj->ni", c, err_p)
@@ -728,8 +738,8 @@ def _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state,
         speed=speed,
         heading=heading,
         innovations_normalised=innov,
-        dq_smooth=dq.copy(),
-        dp_smooth=dp.copy(),
+        dq_smooth=x_s[:, DQ].copy(),
+        dp_smooth=x_s[:, DP].copy(),
         sigma_position_m=sig_pos,
         x_smooth=x_s,
         p_smooth=p_s,
