@@ -400,9 +400,14 @@ def _install_sigint_flag():
     previous = sys.unraisablehook
 
     def quiet_interrupt(unraisable):
-        # the swallowed Ctrl-C would print a traceback; the run reports it once, as exit 130
-        if not isinstance(unraisable.exc_value, KeyboardInterrupt):
-            previous(unraisable)
+        # the swallowed Ctrl-C would print a traceback; the run reports it once, as exit 130.
+        # After a Ctrl-C, an object the interrupt left half-built (llvmlite's PassBuilder when
+        # it lands inside numba's compiler) fails in its __del__ as well: a consequence of the
+        # interrupt, so it goes to the log, not to the user's screen
+        if isinstance(unraisable.exc_value, KeyboardInterrupt) or INTERRUPT.is_set():
+            log.debug("after the interrupt, ignored in %r: %r", unraisable.object, unraisable.exc_value)
+            return
+        previous(unraisable)
 
     sys.unraisablehook = quiet_interrupt
 

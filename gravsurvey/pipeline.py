@@ -26,7 +26,7 @@ import numpy as np
 
 from . import __version__
 from .config import FlightConfig, SurveyConfig, load_config
-from .errors import DataError, GravsurveyError, os_fault
+from .errors import INTERRUPT, DataError, GravsurveyError, os_fault
 from .estimate import FlightEstimate, concatenate_estimates, from_classic, from_inm_solution
 from .geodesy import MGAL
 from .io.writers import to_jsonable
@@ -621,13 +621,18 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
             for fl in todo:
                 try:
                     status, payload = "ok", process_flight(cfg, fl)
-                except GravsurveyError as exc:
-                    status, payload = "error", f"{fl.name}: {exc}"
                 except Exception as exc:
-                    status, payload = (
-                        "bug",
-                        f"{fl.name}: internal error {type(exc).__name__}: {exc}\n{traceback.format_exc()}",
-                    )
+                    if INTERRUPT.is_set():
+                        # a Ctrl-C swallowed inside numba's compiler leaves it half-done
+                        # ("no compiled object yet"): the run was interrupted, not the flight bad
+                        raise KeyboardInterrupt from exc
+                    if isinstance(exc, GravsurveyError):
+                        status, payload = "error", f"{fl.name}: {exc}"
+                    else:
+                        status, payload = (
+                            "bug",
+                            f"{fl.name}: internal error {type(exc).__name__}: {exc}\n{traceback.format_exc()}",
+                        )
                 _collect(fl, status, payload)
                 if bar:
                     bar.update(1)

@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+import types
 import warnings
 from pathlib import Path
 
@@ -340,3 +341,55 @@ def test_check_exit_codes(seed_run, tmp_path):
     r = gs("check", out, ref)
     assert r.returncode == 1 and "summary.json: missing" in r.stderr
     assert len(_nonblank(r.stderr)) == 1
+
+
+def test_teardown_errors_after_sigint_stay_off_the_screen(monkeypatch, capsys):
+    """A Ctrl-C inside numba's compiler leaves an llvmlite object half-built whose ``__del__``
+    then fails (AttributeError): after the interrupt that is logged, not printed. Before one,
+    such an error still reaches the previous hook."""
+    from gravsurvey.errors import INTERRUPT
+
+    seen = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: seen.append(u.exc_value))
+    previous = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        cli._install_sigint_flag()
+        hook = sys.unraisablehook
+        unraisable = types.SimpleNamespace(
+            exc_value=AttributeError("'PassBuilder' object has no attribute '_as_parameter_'"), object=None
+        )
+        hook(unraisable)
+        assert seen == [unraisable.exc_value]
+        INTERRUPT.set()
+        hook(unraisable)
+        hook(types.SimpleNamespace(exc_value=KeyboardInterrupt(), object=None))
+        assert seen == [unraisable.exc_value]
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        INTERRUPT.clear()
+    assert capsys.readouterr().err == ""
+
+
+def test_flight_error_after_a_swallowed_sigint_is_an_interrupt(seed_run, monkeypatch, capsys, tmp_path):
+    """A Ctrl-C swallowed inside numba's compiler makes the next call fail ("no compiled object
+    yet"): with the interrupt flag set that is exit 130 and nothing published, not a failed
+    flight with exit 1."""
+    from gravsurvey import pipeline
+    from gravsurvey.errors import INTERRUPT
+
+    src, _ = seed_run
+
+    def half_compiled(*a, **k):
+        INTERRUPT.set()
+        raise RuntimeError("no compiled object yet for <Library 'mechanize_kernel'>")
+
+    monkeypatch.setattr(pipeline, "process_flight", half_compiled)
+    out = tmp_path / "out"
+    try:
+        code, _, stderr = run_in_process(["run", src / "survey.yaml", "-o", out, "--force", "-q"], monkeypatch, capsys)
+    finally:
+        INTERRUPT.clear()
+    assert code == 130, stderr
+    assert _nonblank(stderr) == ["gravsurvey: interrupted; no output of this run was published"]
+    assert not [p.name for p in out.iterdir() if not p.name.startswith(".") and p.name != "gravsurvey.log"]
