@@ -30,6 +30,7 @@ from .errors import (
     EXIT_INTERNAL,
     EXIT_INTERRUPTED,
     EXIT_OK,
+    INTERRUPT,
     ConfigError,
     DataWarning,
     GravsurveyError,
@@ -384,8 +385,6 @@ def _install_sigint_flag():
     """Ctrl-C raises KeyboardInterrupt as usual and also sets :data:`errors.INTERRUPT`."""
     import signal
 
-    from .errors import INTERRUPT
-
     INTERRUPT.clear()
     if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         return  # ignored (a background job) or someone else's handler: leave it
@@ -422,37 +421,40 @@ def main(argv=None):
     warnings.simplefilter("default", DataWarning)
     try:
         cli.main(args=argv, prog_name="gravsurvey", standalone_mode=False)
-    except GravsurveyError as exc:
-        click.echo(f"gravsurvey: error: {exc}", err=True)
-        sys.exit(exc.exit_code)
     except (KeyboardInterrupt, click.exceptions.Abort):
         # output transactions discard their staging on the way out: nothing is published
         click.echo(INTERRUPTED_LINE, err=True)
         sys.exit(EXIT_INTERRUPTED)
-    except click.ClickException as exc:
+    except Exception as exc:
+        if INTERRUPT.is_set():
+            # Ctrl-C landed inside library code that turned it into another error (a process
+            # pool interrupted while starting raises RuntimeError, a reader a read error): it
+            # is still an interrupt
+            click.echo(INTERRUPTED_LINE, err=True)
+            sys.exit(EXIT_INTERRUPTED)
+        _exit_on_error(exc)
+    sys.exit(EXIT_OK)
+
+
+def _exit_on_error(exc: Exception):
+    """One line on stderr for ``exc`` and the documented exit code (see :data:`EXIT_CODES`)."""
+    if isinstance(exc, GravsurveyError):
+        click.echo(f"gravsurvey: error: {exc}", err=True)
+        sys.exit(exc.exit_code)
+    if isinstance(exc, click.ClickException):
         click.echo(f"gravsurvey: error: {exc.format_message()}", err=True)
         sys.exit(EXIT_CONFIG)
-    except OSError as exc:  # permissions, disk full, read-only or vanished output
+    if isinstance(exc, OSError):  # permissions, disk full, read-only or vanished output
         fault = os_fault(exc)
         click.echo(f"gravsurvey: error: {fault}", err=True)
         sys.exit(fault.exit_code)
-    except MemoryError:
+    if isinstance(exc, MemoryError):
         click.echo("gravsurvey: error: out of memory (try fewer --jobs or a shorter flight)", err=True)
         sys.exit(os_fault(OSError(12, "Cannot allocate memory")).exit_code)
-    except SystemExit:
-        raise
-    except Exception as exc:  # a bug: still one line, never a traceback on the user's screen
-        from .errors import INTERRUPT
-
-        if INTERRUPT.is_set():
-            # Ctrl-C landed inside library code that turned it into another error (a process
-            # pool interrupted while starting raises RuntimeError): it is still an interrupt
-            click.echo(INTERRUPTED_LINE, err=True)
-            sys.exit(EXIT_INTERRUPTED)
-        log.exception("internal error")  # to the run's log file when one is open
-        click.echo(f"gravsurvey: internal error: {type(exc).__name__}: {exc}", err=True)
-        sys.exit(EXIT_INTERNAL)
-    sys.exit(EXIT_OK)
+    # a bug: still one line, never a traceback on the user's screen
+    log.error("internal error", exc_info=exc)  # to the run's log file when one is open
+    click.echo(f"gravsurvey: internal error: {type(exc).__name__}: {exc}", err=True)
+    sys.exit(EXIT_INTERNAL)
 
 
 if __name__ == "__main__":  # pragma: no cover

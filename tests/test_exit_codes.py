@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from gravsurvey import cli
-from gravsurvey.errors import EXIT_CODES
+from gravsurvey.errors import EXIT_CODES, DataError
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = ROOT / "sample_data"
@@ -393,3 +393,26 @@ def test_flight_error_after_a_swallowed_sigint_is_an_interrupt(seed_run, monkeyp
     assert code == 130, stderr
     assert _nonblank(stderr) == ["gravsurvey: interrupted; no output of this run was published"]
     assert not [p.name for p in out.iterdir() if not p.name.startswith(".") and p.name != "gravsurvey.log"]
+
+
+@pytest.mark.parametrize(
+    "error",
+    [RuntimeError("pool interrupted while starting"), OSError(5, "Input/output error"), DataError("x.csv: truncated")],
+)
+def test_any_error_after_a_swallowed_sigint_is_an_interrupt(monkeypatch, capsys, tmp_path, error):
+    """Whatever error a swallowed Ctrl-C turns into further up (a bug's, an I/O or a data
+    error), the run reports the interrupt: exit 130, one line."""
+    from gravsurvey import pipeline
+    from gravsurvey.errors import INTERRUPT
+
+    def interrupted(*a, **k):
+        INTERRUPT.set()
+        raise error
+
+    monkeypatch.setattr(pipeline, "run_survey", interrupted)
+    try:
+        code, _, stderr = run_in_process(["run", tmp_path / "x.yaml"], monkeypatch, capsys)
+    finally:
+        INTERRUPT.clear()
+    assert code == 130, stderr
+    assert _nonblank(stderr) == ["gravsurvey: interrupted; no output of this run was published"]
