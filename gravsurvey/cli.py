@@ -23,12 +23,11 @@ from pathlib import Path
 import click
 
 from . import __version__
-from .console import INTERRUPTED_LINE  # a Ctrl-C while this module loads: gravsurvey.console
+from .console import exit_interrupted  # a Ctrl-C while this module loads: gravsurvey.console
 from .errors import (
     EXIT_CODES,
     EXIT_CONFIG,
     EXIT_INTERNAL,
-    EXIT_INTERRUPTED,
     EXIT_OK,
     INTERRUPT,
     ConfigError,
@@ -423,15 +422,13 @@ def main(argv=None):
         cli.main(args=argv, prog_name="gravsurvey", standalone_mode=False)
     except (KeyboardInterrupt, click.exceptions.Abort):
         # output transactions discard their staging on the way out: nothing is published
-        click.echo(INTERRUPTED_LINE, err=True)
-        sys.exit(EXIT_INTERRUPTED)
+        exit_interrupted()
     except Exception as exc:
         if INTERRUPT.is_set():
             # Ctrl-C landed inside library code that turned it into another error (a process
             # pool interrupted while starting raises RuntimeError, a reader a read error): it
             # is still an interrupt
-            click.echo(INTERRUPTED_LINE, err=True)
-            sys.exit(EXIT_INTERRUPTED)
+            exit_interrupted()
         _exit_on_error(exc)
     sys.exit(EXIT_OK)
 

@@ -12,8 +12,22 @@ import sys
 
 from .errors import EXIT_INTERRUPTED
 
-#: the line an interrupted run ends with (the same text as gravsurvey.cli.INTERRUPTED_LINE)
+#: the line an interrupted run ends with
 INTERRUPTED_LINE = "gravsurvey: interrupted; no output of this run was published"
+
+
+def exit_interrupted():
+    """Write :data:`INTERRUPTED_LINE` to stderr and exit with :data:`EXIT_INTERRUPTED` (130).
+
+    A ``KeyboardInterrupt`` that passed through an ``exec`` of a string (dataclasses, numba and
+    pydantic build code that way, so a Ctrl-C often lands there) leaves CPython (3.10-3.13)
+    marked as interrupted: under ``python -m gravsurvey`` the process would then end killed by
+    SIGINT instead of with exit 130. Any ``exec`` of a string that completes clears that mark.
+    """
+    sys.stderr.write(INTERRUPTED_LINE + "\n")
+    sys.stderr.flush()
+    exec("pass")
+    sys.exit(EXIT_INTERRUPTED)
 
 
 def main(argv=None):
@@ -21,6 +35,5 @@ def main(argv=None):
     try:
         from .cli import main as cli_main
     except KeyboardInterrupt:
-        sys.stderr.write(INTERRUPTED_LINE + "\n")
-        sys.exit(EXIT_INTERRUPTED)
+        exit_interrupted()
     cli_main(argv)

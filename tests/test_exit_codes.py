@@ -416,3 +416,22 @@ def test_any_error_after_a_swallowed_sigint_is_an_interrupt(monkeypatch, capsys,
         INTERRUPT.clear()
     assert code == 130, stderr
     assert _nonblank(stderr) == ["gravsurvey: interrupted; no output of this run was published"]
+
+
+def test_interrupt_through_exec_still_exits_130(tmp_path):
+    """A Ctrl-C that passes through an ``exec`` of a string (dataclasses, numba and pydantic
+    build code so) marks CPython as interrupted; under ``python -m`` the process would then die
+    of SIGINT (returncode -2) although the run handled it. exit_interrupted clears the mark."""
+    (tmp_path / "interrupted_in_exec.py").write_text(
+        "from gravsurvey.console import exit_interrupted\n"
+        "try:\n"
+        "    exec('raise KeyboardInterrupt')\n"
+        "except KeyboardInterrupt:\n"
+        "    exit_interrupted()\n"
+    )
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    r = subprocess.run(
+        [sys.executable, "-m", "interrupted_in_exec"], cwd=tmp_path, capture_output=True, text=True, env=env
+    )
+    assert r.returncode == 130, (r.returncode, r.stderr)
+    assert _nonblank(r.stderr) == ["gravsurvey: interrupted; no output of this run was published"]
