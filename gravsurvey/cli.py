@@ -30,6 +30,7 @@ from .errors import (
     EXIT_INTERNAL,
     EXIT_OK,
     INTERRUPT,
+    PUBLISHED,
     ConfigError,
     DataWarning,
     GravsurveyError,
@@ -385,12 +386,15 @@ def _install_sigint_flag():
     import signal
 
     INTERRUPT.clear()
+    PUBLISHED.clear()
     if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         return  # ignored (a background job) or someone else's handler: leave it
 
     def on_sigint(signum, frame):
         if INTERRUPT.is_set():
             return  # already on the way out: a second Ctrl-C must not start a second unwinding
+        if PUBLISHED.is_set():
+            return  # the outputs are published: the run ends in a moment with its own exit code
         INTERRUPT.set()
         raise KeyboardInterrupt
 

@@ -122,3 +122,9 @@ def check_keys(d, valid, path: str, required=()) -> None:
 #: object-cache hook, say) is swallowed there; output transactions check this flag before they
 #: publish, so such a run still ends as interrupted with nothing published.
 INTERRUPT = threading.Event()
+
+#: Set by :class:`~gravsurvey.io.writers.atomic.OutputTransaction` when it starts publishing
+#: (cleared when the next one opens).  The CLI then ignores Ctrl-C: the run's outputs are
+#: complete and it ends in the next moment with its normal exit code; exit 130 would say that
+#: nothing was published.
+PUBLISHED = threading.Event()

@@ -27,7 +27,7 @@ def ignore_sigint() -> None:
 
 @contextmanager
 def sigint_deferred():
-    """Hold a Ctrl-C back for the ``with`` block, then raise it (as the previous handler does).
+    """Hold a Ctrl-C back for the ``with`` block, then hand it to the previous handler.
 
     SIGINT is blocked in this thread, so processes started inside inherit the block, and in
     the main thread Python's handler is replaced by one that only records the signal: another
@@ -56,8 +56,11 @@ def sigint_deferred():
             signal.signal(signal.SIGINT, previous)
     if caught:
         if callable(previous):
+            # Python's own handler raises KeyboardInterrupt, and so does the CLI's unless the
+            # run is already unwinding or has published its outputs (then the Ctrl-C is moot)
             previous(signal.SIGINT, None)
-        raise KeyboardInterrupt
+        else:
+            raise KeyboardInterrupt
 
 
 class WorkerPool:

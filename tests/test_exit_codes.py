@@ -4,6 +4,7 @@ stderr and the log with a closing count; Ctrl-C and OS faults publish no partial
 from __future__ import annotations
 
 import errno
+import hashlib
 import json
 import os
 import re
@@ -435,3 +436,40 @@ def test_interrupt_through_exec_still_exits_130(tmp_path):
     )
     assert r.returncode == 130, (r.returncode, r.stderr)
     assert _nonblank(r.stderr) == ["gravsurvey: interrupted; no output of this run was published"]
+
+
+def test_ctrl_c_once_the_outputs_are_published_is_ignored(seed_run, monkeypatch, capsys, tmp_path):
+    """A Ctrl-C during the publication of the outputs: the commit finishes and the run ends with
+    its own exit code, 0, every output complete (before: exit 130 and "no output of this run was
+    published" although it had been, or new and previous files mixed)."""
+    from gravsurvey.io.writers import atomic
+
+    src, ref = seed_run
+    real_replace = os.replace
+    sent = []
+
+    def replace_then_interrupt(src_path, dst):
+        if ".staging-" in str(src_path) and ".staging-" not in str(dst) and not sent:  # the commit
+            sent.append(dst)
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)
+        real_replace(src_path, dst)
+
+    monkeypatch.setattr(atomic.os, "replace", replace_then_interrupt)
+    out = tmp_path / "out"
+    previous = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        code, _, stderr = run_in_process(["run", src / "survey.yaml", "-o", out, "--force", "-q"], monkeypatch, capsys)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert sent, "the publication never started"
+    assert code == 0, stderr
+    assert "interrupted" not in stderr
+    published = sorted(p.name for p in out.iterdir() if not p.name.startswith(".") and p.name != "gravsurvey.log")
+    assert published == sorted(
+        p.name for p in ref.iterdir() if not p.name.startswith(".") and p.name != "gravsurvey.log"
+    )
+    summary = json.loads((out / "summary.json").read_text())
+    for name, sha in summary["output_sha256"].items():
+        assert hashlib.sha256((out / name).read_bytes()).hexdigest() == sha, name

@@ -313,6 +313,43 @@ def test_transaction_publishes_on_success_and_nothing_on_error(tmp_path):
             tx.path("../escape.txt")
 
 
+def test_ctrl_c_during_publish_waits_for_the_commit(tmp_path, monkeypatch):
+    """A SIGINT that arrives half-way through the renames (Python's own handler, as in a
+    notebook): every file of the run is published, then the KeyboardInterrupt comes."""
+    from gravsurvey.io.writers import atomic
+
+    out = tmp_path / "out"
+    with w.OutputTransaction(out) as tx:
+        for name in ("a.csv", "b.csv", "summary.json"):
+            tx.path(name).write_text("old")
+    real_replace = os.replace
+    calls = []
+
+    def replace_then_interrupt(src, dst):
+        calls.append(dst)
+        if len(calls) == 1:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)  # the handler would run here, between two renames
+        real_replace(src, dst)
+
+    monkeypatch.setattr(atomic.os, "replace", replace_then_interrupt)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with w.OutputTransaction(out) as tx:
+                for name in ("a.csv", "b.csv", "summary.json"):
+                    tx.path(name).write_text("new")
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert len(calls) >= 3
+    assert {p.name: p.read_text() for p in out.iterdir() if p.suffix in (".csv", ".json") and p.name[0] != "."} == {
+        "a.csv": "new",
+        "b.csv": "new",
+        "summary.json": "new",
+    }
+    assert not [p for p in out.iterdir() if p.name.startswith(".staging")]
+
+
 CHILD = textwrap.dedent(
     """
     import os, sys, json, signal

@@ -139,7 +139,9 @@ class OutputTransaction:
     a mix of new and previous files; ``summary.json`` is renamed last, so it still describes the
     previous run and the mix is detectable (:meth:`file_hashes` lists the SHA-256 of every
     staged file, for the summary to record). The next successful run replaces everything.
-    Stale staging directories are removed by the next run.
+    Stale staging directories are removed by the next run. A Ctrl-C (SIGINT) during publishing
+    waits for its end (:func:`gravsurvey.pool.sigint_deferred`), then is raised as usual; the CLI
+    ignores it then (:data:`gravsurvey.errors.PUBLISHED`).
     """
 
     def __init__(self, out_dir, *, min_stale_age_s: float = 60.0):
@@ -151,6 +153,9 @@ class OutputTransaction:
         self.removed_stale: list[str] = []
 
     def __enter__(self) -> "OutputTransaction":
+        from gravsurvey.errors import PUBLISHED
+
+        PUBLISHED.clear()
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.removed_stale = remove_stale_staging(self.out_dir, min_age_s=self._min_stale_age_s)
         token = os.urandom(4).hex()
@@ -243,13 +248,18 @@ class OutputTransaction:
             self.staging = None
 
     def __exit__(self, exc_type, exc, tb) -> bool:
-        from gravsurvey.errors import INTERRUPT
+        from gravsurvey.errors import INTERRUPT, PUBLISHED
+        from gravsurvey.pool import sigint_deferred
 
         try:
             if exc_type is None:
                 if INTERRUPT.is_set():  # a Ctrl-C swallowed on the way: publish nothing
                     raise KeyboardInterrupt
-                self.commit()
+                # a Ctrl-C half-way through the renames would leave new and previous files
+                # mixed: it waits for the end of the commit (then the CLI ignores it)
+                with sigint_deferred():
+                    PUBLISHED.set()
+                    self.commit()
         finally:
             self._cleanup()
         return False
