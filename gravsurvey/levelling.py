@@ -48,6 +48,7 @@ __all__ = [
     "level_survey",
     "choose_levelling",
     "significance_test",
+    "understated_sigma_note",
 ]
 
 LEVELLING_MODELS = ("constant", "line_trend", "flight_trend", "flight_constant")
@@ -62,6 +63,12 @@ HUBER_K_DEFAULT = 1.345
 MAD_TO_SIGMA = 1.4826
 #: IRLS stops when no unknown moves by more than this between iterations, mGal (mGal/h)
 IRLS_TOL_MGAL = 1e-4
+#: A robust unit-weight sigma of the crossovers about the fitted model above this factor says
+#: the lines' stated sigmas understate their errors (a factor, not a test: crossover errors
+#: correlate along the lines, so the redundancy overstates the degrees of freedom)
+SIGMA0_UNDERSTATED = 2.0
+#: ... judged only with at least this redundancy (crossovers less unknowns)
+SIGMA_CHECK_MIN_REDUNDANCY = 10
 
 
 @dataclass
@@ -191,6 +198,11 @@ class Levelling:
     ls_misfit : (float, float)
         ``sum w x^2`` and ``sum w r^2`` of the plain weighted least-squares fit (``w`` the sigma
         weights, no robust reweighting): the sums of squares of :func:`significance_test`.
+    sigma0_robust : float
+        Robust unit-weight sigma of the crossovers about the final fit:
+        ``1.4826 median(|r_k| sqrt(w_k)) sqrt(n / (n - u))`` with ``w_k = 1 / (sigma_a^2 +
+        sigma_b^2)`` (sigmas under ``sigma_floor_mgal`` raised to it); about 1 when the stated
+        sigmas are right (NaN without sigmas or without redundancy). The median keeps a few bad crossovers (a turn, a spike) from deciding it.
     decision : dict or None
         Set by :func:`choose_levelling`: whether the corrections are applied, by which rule, and
         the statistics of every model tried.
@@ -217,6 +229,7 @@ class Levelling:
     fit_weight: np.ndarray | None = None
     ls_misfit: tuple = (0.0, 0.0)
     decision: dict | None = None
+    sigma0_robust: float = float("nan")
 
     def correction(self, flight: str, line: str, time_s) -> np.ndarray:
         """The level error of one line at the given times, mGal: subtract it from the values.
@@ -365,7 +378,8 @@ def level_crossovers(
     sb = np.full(x.size, np.nan) if sigma_b_mgal is None else np.asarray(sigma_b_mgal, float)
     var = np.maximum(np.where(np.isfinite(sa), sa, 0.0), sigma_floor_mgal) ** 2
     var = var + np.maximum(np.where(np.isfinite(sb), sb, 0.0), sigma_floor_mgal) ** 2
-    if not (np.isfinite(sa).any() or np.isfinite(sb).any()):
+    sigmas_given = bool(np.isfinite(sa).any() or np.isfinite(sb).any())
+    if not sigmas_given:
         var = np.ones_like(var)
     ok = np.isfinite(x) & np.isfinite(ta) & np.isfinite(tb)
     k_ok = np.flatnonzero(ok)
@@ -492,6 +506,11 @@ def level_crossovers(
         notes.append(
             f"the crossovers split the lines into {ngroups} unconnected groups, each levelled to its own datum"
         )
+    n_unknowns = int(free.sum()) - int(ngroups)
+    sigma0_robust = float("nan")
+    if sigmas_given and m > n_unknowns:
+        r_w = np.abs(y - A @ u) * np.sqrt(w0)
+        sigma0_robust = MAD_TO_SIGMA * float(np.median(r_w)) * math.sqrt(m / (m - n_unknowns))
     return Levelling(
         model=model,
         line_keys=keys,
@@ -510,9 +529,10 @@ def level_crossovers(
         notes=notes,
         diff_mgal=x.copy(),
         n_observations=int(m),
-        n_unknowns=int(free.sum()) - int(ngroups),
+        n_unknowns=n_unknowns,
         fit_weight=fit_w,
         ls_misfit=ls_misfit,
+        sigma0_robust=sigma0_robust,
     )
 
 
@@ -610,7 +630,8 @@ def significance_test(lev: Levelling) -> dict:
     dict
         ``redundancy`` (n - u), ``f_statistic``, ``p_value`` (NaN when n <= u or nothing
         was estimated) and ``sigma0_before``, ``sigma0_after`` (the square roots of S0 / n and
-        S1 / (n - u): unit-weight standard deviations, 1 for sigmas that are right).
+        S1 / (n - u): unit-weight standard deviations, 1 for sigmas that are right), and
+        ``sigma0_robust`` (:attr:`Levelling.sigma0_robust`).
     """
     n, u = int(lev.n_observations), int(lev.n_unknowns)
     out = {
@@ -619,6 +640,7 @@ def significance_test(lev: Levelling) -> dict:
         "p_value": float("nan"),
         "sigma0_before": float("nan"),
         "sigma0_after": float("nan"),
+        "sigma0_robust": float(lev.sigma0_robust),
     }
     if n == 0:
         return out
@@ -716,6 +738,33 @@ def choose_levelling(crossovers, lines, options: LevellingOptions | None = None,
         )
     lev.decision = {"applied": bool(applied), "model": lev.model, "rule": rule, "reason": reason, "tried": tried}
     return lev
+
+
+def understated_sigma_note(lev: Levelling) -> str | None:
+    """A warning when the crossovers disagree by more than the lines' stated sigmas allow.
+
+    Parameters
+    ----------
+    lev : Levelling
+        A fitted levelling (applied or not); its :attr:`~Levelling.sigma0_robust` is compared
+        with :data:`SIGMA0_UNDERSTATED` when the redundancy reaches
+        :data:`SIGMA_CHECK_MIN_REDUNDANCY`.
+
+    Returns
+    -------
+    str or None
+        The note, or None when the sigmas are consistent with the crossovers or there are too
+        few crossovers to say.
+    """
+    s0 = float(lev.sigma0_robust)
+    redundancy = int(lev.n_observations) - int(lev.n_unknowns)
+    if not (np.isfinite(s0) and redundancy >= SIGMA_CHECK_MIN_REDUNDANCY and s0 > SIGMA0_UNDERSTATED):
+        return None
+    return (
+        f"crossovers: after levelling ({lev.model}) the lines still differ by {s0:.1f} times what their "
+        f"stated sigma_mgal allows (robust unit-weight sigma over {lev.n_observations} crossovers, "
+        f"1 when the sigmas are right): sigma_mgal understates the error of this survey"
+    )
 
 
 #: GMT x2sys definition of the track text files written by :func:`write_gmt_tracks`

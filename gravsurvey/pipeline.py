@@ -896,7 +896,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     from . import report
     from .io import writers
     from .crossovers import Crossovers, find_crossovers
-    from .levelling import choose_levelling
+    from .levelling import choose_levelling, understated_sigma_note
 
     table, epsg = _profile_table(cfg, results)
     in_line = table["line"] != ""
@@ -952,6 +952,9 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         xo_tied.value_b_mgal = xo.value_b_mgal - cb
         xo_tied.diff_mgal = xo_tied.value_a_mgal - xo_tied.value_b_mgal
         lev = choose_levelling(xo_tied, lines, lopt, tied_flights=list(ties))
+        understated = understated_sigma_note(lev)
+        if understated:
+            notes.append(understated)
         if not lev.decision["applied"]:
             notes.append(f"levelling: not applied: {lev.decision['reason']} (levelling.enabled: true forces it)")
             lev_skipped = lev

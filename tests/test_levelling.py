@@ -366,3 +366,74 @@ def test_decision_on_the_simulated_survey_applies_constant():
     t = lev.decision["tried"][0]
     assert lev.decision["applied"] and lev.decision["model"] == "constant"
     assert (t["n_observations"], t["n_unknowns"]) == (32, 11) and t["p_value"] < 1e-10
+
+
+def test_understated_sigma_is_reported_from_the_crossovers():
+    """The robust unit-weight sigma of the crossovers is about 1 when the lines' stated sigma
+    (0.2 mGal each, so 0.28 per crossover) is right, whatever their level errors, and unmoved by
+    one wild crossover; crossovers 3.5 times noisier than stated give the warning."""
+    from gravsurvey.levelling import SIGMA0_UNDERSTATED, understated_sigma_note
+
+    rng = np.random.default_rng(11)
+    stated = 0.2 * np.sqrt(2.0)
+    s0 = []
+    for k in range(200):
+        d, a, b, t, keys, _ = _grid_crossovers(6, 6, rng.normal(0, 1.0, 6), rng.normal(0, 1.0, 6), stated, rng)
+        lev = _decide(d, a, b, t, keys, enabled=True)
+        s0.append(lev.sigma0_robust)
+        assert understated_sigma_note(lev) is None
+    assert 0.9 < np.mean(s0) < 1.1 and max(s0) < SIGMA0_UNDERSTATED, (np.mean(s0), max(s0))
+    d[0] += 20.0  # one wild crossover (a turn, a spike)
+    lev = _decide(d, a, b, t, keys, enabled=True)
+    assert lev.sigma0_robust < 1.5 and understated_sigma_note(lev) is None
+    assert lev.statistics()["test"]["sigma0_robust"] == lev.sigma0_robust
+    d, a, b, t, keys, _ = _grid_crossovers(6, 6, rng.normal(0, 1.0, 6), rng.normal(0, 1.0, 6), 3.5 * stated, rng)
+    lev = _decide(d, a, b, t, keys, enabled=True)
+    note = understated_sigma_note(lev)
+    assert 2.5 < lev.sigma0_robust < 5.0 and note and "understates" in note and "36 crossovers" in note, note
+    # too few crossovers to say (redundancy 16 - 7 = 9 < 10): no judgement
+    d, a, b, t, keys, _ = _grid_crossovers(4, 4, np.zeros(4), np.zeros(4), 3.5 * stated, rng)
+    assert understated_sigma_note(_decide(d, a, b, t, keys, enabled=True)) is None
+
+
+@pytest.mark.parametrize("sigma_mgal, warned", [(0.5, False), (0.05, True)])
+def test_survey_warns_when_crossovers_exceed_the_stated_sigma(tmp_path, sigma_mgal, warned):
+    """The survey stage end to end: a flight whose samples carry 0.5 mGal of white noise, stated
+    as 0.5 mGal (consistent: no note) or as 0.05 mGal (the crossovers show it: a warning in the
+    summary's notes and sigma0_robust in levelling.test; the levelling's 0.1 mGal sigma floor
+    makes that 0.1, about 5x under the truth)."""
+    import sys
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from benchmarks.bench_outputs import synthetic_flight
+    from gravsurvey.config import SurveyConfig
+    from gravsurvey.geodesy import WGS84
+    from gravsurvey.pipeline import write_survey_outputs
+
+    r = synthetic_flight(0, n_main=8, n_tie=3)
+    r.sigma = np.full(r.time.size, sigma_mgal * MGAL)
+    cfg_path = tmp_path / "survey.yaml"
+    cfg_path.write_text("survey: {name: t}\n")
+    cfg = SurveyConfig(
+        path=cfg_path,
+        base_dir=tmp_path,
+        raw={"survey": {"name": "t"}},
+        name="t",
+        ellipsoid=WGS84,
+        flights=[SimpleNamespace(name=r.name, tie=None, index=0)],
+        model=None,
+        lines=None,
+        postprocess=None,
+        plots=False,
+        levelling=LevellingOptions(),
+        grid=None,
+    )
+    summary = write_survey_outputs(cfg, tmp_path / "out", [r])
+    s0 = summary["levelling"]["test"]["sigma0_robust"]
+    notes = [n for n in summary["notes"] if "understates" in n]
+    if warned:
+        assert 3.0 < s0 < 7.0 and len(notes) == 1, (s0, summary["notes"])
+    else:
+        assert 0.5 < s0 < 1.5 and not notes, (s0, summary["notes"])
