@@ -202,7 +202,8 @@ class Levelling:
         Robust unit-weight sigma of the crossovers about the final fit:
         ``1.4826 median(|r_k| sqrt(w_k)) sqrt(n / (n - u))`` with ``w_k = 1 / (sigma_a^2 +
         sigma_b^2)`` (sigmas under ``sigma_floor_mgal`` raised to it); about 1 when the stated
-        sigmas are right (NaN without sigmas or without redundancy). The median keeps a few bad crossovers (a turn, a spike) from deciding it.
+        sigmas are right (NaN without sigmas or without redundancy). The median keeps a few bad
+        crossovers (a turn, a spike) from deciding it.
     decision : dict or None
         Set by :func:`choose_levelling`: whether the corrections are applied, by which rule, and
         the statistics of every model tried.
