@@ -172,41 +172,49 @@ def test_against_gmt_x2sys():
     assert r["max_correction_mgal"] < 2e-4
 
 
-def test_survey_outputs_tie_level_grid_and_metadata(tmp_path):
-    """The output stage end to end on a synthetic processed flight: tie, levelling, grid, metadata."""
-    import json
-    import sys
-    from pathlib import Path
+def _one_flight_survey(tmp_path, flight, *, tie=None, plots=False, grid=None):
+    """The SurveyConfig of a survey of one processed flight (the output stage alone)."""
     from types import SimpleNamespace
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from benchmarks.bench_outputs import synthetic_flight
     from gravsurvey.config import SurveyConfig
     from gravsurvey.geodesy import WGS84
-    from gravsurvey.grid import GridOptions
-    from gravsurvey.io.writers import read_profiles_csv, read_xyz
-    from gravsurvey.pipeline import write_survey_outputs
 
-    r = synthetic_flight(0, n_main=8, n_tie=3)  # 24 crossovers for 10 unknowns: levelled
     cfg_path = tmp_path / "survey.yaml"
     cfg_path.write_text("survey: {name: t}\n")
-    tie = tie_config(
-        {"base_gravity_mgal": 980_800.0, "before": {"reading_mgal": 980_802.0}, "after": {"reading_mgal": 980_802.0}}
-    )
-    cfg = SurveyConfig(
+    return SurveyConfig(
         path=cfg_path,
         base_dir=tmp_path,
         raw={"survey": {"name": "t"}},
         name="t",
         ellipsoid=WGS84,
-        flights=[SimpleNamespace(name=r.name, tie=tie, index=0)],
+        flights=[SimpleNamespace(name=flight.name, tie=tie, index=0)],
         model=None,
         lines=None,
         postprocess=None,
-        plots=True,
+        plots=plots,
         levelling=LevellingOptions(),
-        grid=GridOptions(damping=1.0, cv_folds=2),
-    )  # one damping, 2 folds: fast
+        grid=grid,
+    )
+
+
+def test_survey_outputs_tie_level_grid_and_metadata(tmp_path):
+    """The output stage end to end on a synthetic processed flight: tie, levelling, grid, metadata."""
+    import json
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from benchmarks.bench_outputs import synthetic_flight
+    from gravsurvey.grid import GridOptions
+    from gravsurvey.io.writers import read_profiles_csv, read_xyz
+    from gravsurvey.pipeline import write_survey_outputs
+
+    r = synthetic_flight(0, n_main=8, n_tie=3)  # 24 crossovers for 10 unknowns: levelled
+    tie = tie_config(
+        {"base_gravity_mgal": 980_800.0, "before": {"reading_mgal": 980_802.0}, "after": {"reading_mgal": 980_802.0}}
+    )
+    # one damping, 2 folds: fast
+    cfg = _one_flight_survey(tmp_path, r, tie=tie, plots=True, grid=GridOptions(damping=1.0, cv_folds=2))
     out = tmp_path / "out"
     summary = write_survey_outputs(cfg, out, [r])
     assert summary["level"]["state"] == "absolute"
@@ -404,33 +412,14 @@ def test_survey_warns_when_crossovers_exceed_the_stated_sigma(tmp_path, sigma_mg
     makes that 0.1, about 5x under the truth)."""
     import sys
     from pathlib import Path
-    from types import SimpleNamespace
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from benchmarks.bench_outputs import synthetic_flight
-    from gravsurvey.config import SurveyConfig
-    from gravsurvey.geodesy import WGS84
     from gravsurvey.pipeline import write_survey_outputs
 
     r = synthetic_flight(0, n_main=8, n_tie=3)
     r.sigma = np.full(r.time.size, sigma_mgal * MGAL)
-    cfg_path = tmp_path / "survey.yaml"
-    cfg_path.write_text("survey: {name: t}\n")
-    cfg = SurveyConfig(
-        path=cfg_path,
-        base_dir=tmp_path,
-        raw={"survey": {"name": "t"}},
-        name="t",
-        ellipsoid=WGS84,
-        flights=[SimpleNamespace(name=r.name, tie=None, index=0)],
-        model=None,
-        lines=None,
-        postprocess=None,
-        plots=False,
-        levelling=LevellingOptions(),
-        grid=None,
-    )
-    summary = write_survey_outputs(cfg, tmp_path / "out", [r])
+    summary = write_survey_outputs(_one_flight_survey(tmp_path, r), tmp_path / "out", [r])
     s0 = summary["levelling"]["test"]["sigma0_robust"]
     notes = [n for n in summary["notes"] if "understates" in n]
     if warned:
