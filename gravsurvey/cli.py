@@ -267,6 +267,8 @@ def simulate(sim_config, output_dir, oracle):
 def inspect(files, as_json, config):
     """Describe sensor logs (MCAP or CSV): channels, counts, spans, rates, gaps, unit checks.
 
+    Gravimeter and navigation files (MGD77T, DGS, AT1A, ZLS, BGM-3, NMEA, trajectory text)
+    are recognised by their content and described too, with how to process them.
     Exit 1 when a file is damaged (what and where is said) or cannot be read.
 
     \b
@@ -274,6 +276,7 @@ def inspect(files, as_json, config):
       gravsurvey inspect flight.mcap
       gravsurvey inspect --config survey.yaml logs/imu.csv
       gravsurvey inspect --json flight.mcap > flight.json
+      gravsurvey inspect DGS_2019.dat nav.gps
     """
     from .io.inspect import format_inspect, inspect_files
 

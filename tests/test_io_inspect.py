@@ -133,3 +133,45 @@ def test_run_with_a_damaged_middle_chunk_reads_on_and_says_so(tmp_path):
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["flights"]["F01"]["data_loss"]
     assert (tmp_path / "out" / "profiles.csv").exists()
+
+
+def test_inspect_recognises_gravimeter_and_navigation_files(tmp_path):
+    """A real gravimeter or navigation file (one small valid file per reader; the AT1A, ZLS,
+    trajectory and MGD77T ones are real excerpts) is recognised and described: format, records,
+    span, rate, columns with units, and how to process it; before, every one was "header
+    matches no channel" with exit 1."""
+    from test_formats_readers import _fixtures
+
+    expected = {
+        "read_nmea": "nmea",
+        "read_dgs_laptop": "dgs_laptop",
+        "read_dgs_raw": "dgs_raw",
+        "read_bgm_serial": "bgm_serial",
+        "read_at1a": "at1a",
+        "read_trajectory": "trajectory",
+        "read_zls": "zls",
+        "read_mgd77t": "mgd77t",
+    }
+    for reader, data in _fixtures(tmp_path):
+        p = tmp_path / f"{reader.__name__}.dat"  # a neutral name: the content decides
+        p.write_bytes(data)
+        (rep,) = inspect_files([p])
+        fmt = expected[reader.__name__]
+        assert "error" not in rep and rep["format"] == fmt, (fmt, rep)
+        (ch,) = rep["channels"]
+        assert ch["messages"] == len(reader(p)) > 0 and ch["measurement_time"]["start_utc"], ch
+        assert ch["role"] == ("navigation" if fmt in ("nmea", "trajectory") else "gravimeter")
+        assert ch["columns"] and all(isinstance(u, str) for u in ch["columns"].values())
+        assert any(f"format {fmt}" in n for n in rep["notes"]), rep["notes"]
+        if fmt not in ("nmea", "trajectory", "dgs_raw"):
+            assert any(f"inputs.gravimeter: {{format: {fmt}" in n for n in rep["notes"])
+        assert rep["damage"] == []
+    r = gs("inspect", tmp_path / "read_dgs_laptop.dat")
+    assert r.returncode == 0, r.stderr
+    assert "[dgs_laptop" in r.stdout and "format dgs_laptop" in r.stdout
+    # a text file that is none of them: exit 1, one line naming the formats tried
+    other = tmp_path / "notes.txt"
+    other.write_text("survey notes\nline 2 flown twice\n")
+    r = gs("inspect", other)
+    assert r.returncode == 1
+    assert "none of the gravimeter or navigation formats (mgd77t, dgs_laptop" in r.stderr

@@ -1,5 +1,8 @@
 """``gravsurvey inspect FILE...``: what is in a log file, per channel, and does it look sane.
 
+MCAP and channel CSV files are described channel by channel; any other file is tried with the
+real gravimeter and navigation readers (:data:`VENDOR_FORMATS`) and described as one channel.
+
 :func:`inspect_files` returns JSON-serialisable dicts (``--json``); :func:`format_inspect`
 renders them as text.  A file that cannot be read gives a report with an ``error`` entry
 instead of an exception, so one bad file does not hide the others.
@@ -223,9 +226,17 @@ def _inspect_csv(path, o):
             "notes": ["simulator truth file (docs/formats.md, truth.csv), not a sensor log"],
         }
     if role is None:
+        vendor = _inspect_vendor(path)
+        if vendor is not None:
+            return vendor
         return {
             "format": "csv",
-            "error": f"{path}: header matches no channel (imu, altimeter, gnss columns of docs/input-formats.md)",
+            "error": (
+                f"{path}: header matches no channel (imu, altimeter, gnss columns of docs/input-formats.md) "
+                "and the file is none of the gravimeter or navigation formats (mgd77t, dgs_laptop, dgs_raw, "
+                "at1a, zls, bgm_rgs, bgm_serial, nmea, trajectory); a channel CSV with other column names "
+                "needs them: --config survey.yaml"
+            ),
         }
     notes, damage = [], []
     t, vals = read_csv_channel(
@@ -248,6 +259,72 @@ def _inspect_csv(path, o):
     }
     entry.update(_channel_report(role, t, vals, o.csv_units))
     return {"format": "csv", "channels": [entry], "csv_damage": damage, "notes": [n for n in notes if n not in damage]}
+
+
+#: Vendor formats tried, in this order, on a file that is no channel CSV: (format, kind, reader
+#: name in :mod:`gravsurvey.io.formats`). The distinctive layouts first; the trajectory text,
+#: which takes any table of times and positions, last.
+VENDOR_FORMATS = (
+    ("mgd77t", "gravimeter", "read_mgd77t"),
+    ("nmea", "navigation", "read_nmea"),
+    ("bgm_rgs", "gravimeter", "read_bgm_rgs"),
+    ("dgs_laptop", "gravimeter", "read_dgs_laptop"),
+    ("at1a", "gravimeter", "read_at1a"),
+    ("dgs_raw", "gravimeter", "read_dgs_raw"),
+    ("zls", "gravimeter", "read_zls"),
+    ("bgm_serial", "gravimeter", "read_bgm_serial"),
+    ("trajectory", "navigation", "read_trajectory"),
+)
+
+
+def _inspect_vendor(path):
+    """Report of a real gravimeter or navigation file (:data:`VENDOR_FORMATS`), or None when
+    no reader takes it (each refuses a file of which fewer than half the lines are its records)."""
+    import warnings
+
+    from gravsurvey.io import formats
+
+    for fmt, kind, reader in VENDOR_FORMATS:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                table = getattr(formats, reader)(path)
+            except (GravsurveyError, ValueError, UnicodeDecodeError):
+                continue
+        if len(table) == 0:
+            continue
+        t, _, rep = ck.repair_time(table.time_ns, [])
+        rate = 1e9 / rep.nominal_step_ns if np.isfinite(rep.nominal_step_ns) else None
+        t0 = int(t[0]) if len(t) else 0
+        if kind == "navigation":
+            use = "the navigation of inputs.gravimeter.nav or inputs.nav"
+        elif fmt == "dgs_raw":
+            use = "raw counts, not processed (they need the meter's calibration)"
+        else:
+            use = f"process it with inputs.gravimeter: {{format: {fmt}, file: ...}}"
+        channel = {
+            "topic": None,
+            "schema": fmt,
+            "encoding": "text",
+            "messages": len(table),
+            "role": kind,
+            "time_source": str(table.meta.get("time_source", "file")),
+            "samples": rep.n_out,
+            "measurement_time": _span(t),
+            "nominal_rate_hz": rate,
+            "duplicates_dropped": rep.duplicates + rep.conflicting_duplicates,
+            "backward_steps": rep.n_backward,
+            "gaps": rep.n_gaps,
+            "gap_list_s": [[(a - t0) * 1e-9, (b - t0) * 1e-9] for a, b in rep.gaps],
+            "irregular_step_fraction": rep.irregular_fraction,
+            "columns": {k: table.units.get(k, "") for k in table.columns},
+            "checks": [],
+        }
+        notes = [f"{kind} file, format {fmt} (docs/input-formats.md): {use}"]
+        notes += [f"{table.n_skipped} of {table.n_lines} content lines skipped"] if table.n_skipped else []
+        notes += list(table.notes) + [str(w.message) for w in caught]
+        return {"format": fmt, "channels": [channel], "notes": notes}
+    return None
 
 
 def format_inspect(reports) -> str:
