@@ -36,4 +36,15 @@ def main(argv=None):
         from .cli import main as cli_main
     except KeyboardInterrupt:
         exit_interrupted()
-    cli_main(argv)
+    try:
+        cli_main(argv)
+    finally:
+        from .errors import PUBLISHED
+
+        if PUBLISHED.is_set():
+            # the outputs are published and the exit code decided; the interpreter's shutdown
+            # (0.3-0.4 s with numba loaded) restores the default SIGINT action, so a Ctrl-C
+            # then killed a finished run (returncode -2, shell 130): from here on it is ignored
+            import signal
+
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
