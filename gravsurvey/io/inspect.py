@@ -48,10 +48,18 @@ def _channel_report(role, time_ns, values, units):
         f += ck.check_height(role, values["height"], units["height"])
     elif role != "gradient":  # the gradient's unit/symmetry checks run at ingestion
         f += ck.check_height(role, values["height"], units["height"])
+    return {
+        "role": role,
+        **_time_base(t, rep),
+        "checks": [{"check": x.check, "level": x.level, "message": x.message} for x in f],
+    }
+
+
+def _time_base(t, rep):
+    """The report entries of a repaired time base (``t`` and ``rep`` of :func:`checks.repair_time`)."""
     rate = 1e9 / rep.nominal_step_ns if np.isfinite(rep.nominal_step_ns) else None
     t0 = int(t[0]) if len(t) else 0
     return {
-        "role": role,
         "samples": rep.n_out,
         "measurement_time": _span(t),
         "nominal_rate_hz": rate,
@@ -60,7 +68,6 @@ def _channel_report(role, time_ns, values, units):
         "gaps": rep.n_gaps,
         "gap_list_s": [[(a - t0) * 1e-9, (b - t0) * 1e-9] for a, b in rep.gaps],
         "irregular_step_fraction": rep.irregular_fraction,
-        "checks": [{"check": x.check, "level": x.level, "message": x.message} for x in f],
     }
 
 
@@ -294,8 +301,6 @@ def _inspect_vendor(path):
         if len(table) == 0:
             continue
         t, _, rep = ck.repair_time(table.time_ns, [])
-        rate = 1e9 / rep.nominal_step_ns if np.isfinite(rep.nominal_step_ns) else None
-        t0 = int(t[0]) if len(t) else 0
         if kind == "navigation":
             use = "the navigation of inputs.gravimeter.nav or inputs.nav"
         elif fmt == "dgs_raw":
@@ -309,14 +314,7 @@ def _inspect_vendor(path):
             "messages": len(table),
             "role": kind,
             "time_source": str(table.meta.get("time_source", "file")),
-            "samples": rep.n_out,
-            "measurement_time": _span(t),
-            "nominal_rate_hz": rate,
-            "duplicates_dropped": rep.duplicates + rep.conflicting_duplicates,
-            "backward_steps": rep.n_backward,
-            "gaps": rep.n_gaps,
-            "gap_list_s": [[(a - t0) * 1e-9, (b - t0) * 1e-9] for a, b in rep.gaps],
-            "irregular_step_fraction": rep.irregular_fraction,
+            **_time_base(t, rep),
             "columns": {k: table.units.get(k, "") for k in table.columns},
             "checks": [],
         }
