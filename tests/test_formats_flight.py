@@ -5,6 +5,7 @@ formats' layouts; (2) the real cruise NBP9908, whose NCEI FREEAIR the processed 
 reproduce up to the known GRS80-IGF1967 offset.
 """
 
+import re
 import calendar
 import datetime
 import os
@@ -408,3 +409,41 @@ def test_at1a_and_trajectory_airborne(tmp_path):
     err = (res.disturbance - ref) / MGAL
     # measured: max 0.012 mGal, RMS 0.008 mGal (file rounding: 0.1 mm heights, 1e-10 deg, 1e-6 mGal)
     assert np.abs(err).max() < 0.05, np.abs(err).max()
+
+
+def test_a_file_in_another_format_is_named_with_the_format_it_reads_as(tmp_path):
+    """inputs.gravimeter.format or nav.format that does not match the file: the refusal says
+    which format the file does read as (gravsurvey.io.formats.flight.detect_format)."""
+    import pytest
+    from test_formats_readers import _fixtures
+
+    from gravsurvey.errors import DataError
+    from gravsurvey.io.formats.flight import GravimeterOptions, read_gravimeter, read_navigation
+
+    files = {}
+    for reader, data in _fixtures(tmp_path):
+        files[reader.__name__] = tmp_path / f"{reader.__name__}.txt"
+        files[reader.__name__].write_bytes(data)
+    key = "flights[0].inputs.gravimeter"
+    o = GravimeterOptions(format="dgs_laptop", files=[files["read_bgm_serial"]], offset_mgal=969000.0, key_path=key)
+    with pytest.raises(DataError, match=r"not a DGS laptop file.*; it reads as a bgm_serial gravimeter file: "):
+        read_gravimeter(o)
+    with pytest.raises(DataError, match=rf"{re.escape(key)}\.format: bgm_serial\?$"):
+        read_gravimeter(o)
+    o = GravimeterOptions(format="zls", files=[files["read_nmea"]], offset_mgal=969000.0, key_path=key)
+    with pytest.raises(DataError, match=rf"it reads as a nmea navigation file: give it as {re.escape(key)}\.nav$"):
+        read_gravimeter(o)
+    nav = {"format": "nmea", "file": str(files["read_trajectory"])}
+    with pytest.raises(
+        DataError, match=r"it reads as a trajectory navigation file: flights\[0\]\.nav\.format: trajectory\?$"
+    ):
+        read_navigation(nav, key_path="flights[0].nav")
+    nav = {"format": "nmea", "file": str(files["read_dgs_laptop"])}
+    with pytest.raises(DataError, match=r"it reads as a dgs_laptop gravimeter file, not navigation$"):
+        read_navigation(nav)
+    # a file no reader takes: the reader's own refusal, unchanged
+    other = tmp_path / "notes.txt"
+    other.write_text("survey notes\nline 2 flown twice\n")
+    with pytest.raises(DataError) as exc:
+        read_gravimeter(GravimeterOptions(format="dgs_laptop", files=[other], offset_mgal=969000.0))
+    assert "reads as" not in str(exc.value) and "not a DGS laptop file" in str(exc.value)

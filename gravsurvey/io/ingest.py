@@ -407,7 +407,7 @@ def read_gnss_file(options: IngestOptions, base_dir, notes: list, replaces=None)
 
     fmt = options.nav["format"]
     path = options._resolve(options.nav["file"], base_dir)
-    tab = read_navigation({**options.nav, "file": os.fspath(path)})
+    tab = read_navigation({**options.nav, "file": os.fspath(path)}, key_path=f"{options.key_path}.inputs.nav")
     # the reader's remarks on damage and missing values are findings; its time-source line is not
     info = (": time from the ", ": time scale ", "no RMC/VTG speed")
     notes.extend(f"gnss: {n}" for n in tab.notes if not any(k in n for k in info))

@@ -1,7 +1,8 @@
 """``gravsurvey inspect FILE...``: what is in a log file, per channel, and does it look sane.
 
 MCAP and channel CSV files are described channel by channel; any other file is tried with the
-real gravimeter and navigation readers (:data:`VENDOR_FORMATS`) and described as one channel.
+real gravimeter and navigation readers
+(:func:`gravsurvey.io.formats.flight.detect_format`) and described as one channel.
 
 :func:`inspect_files` returns JSON-serialisable dicts (``--json``); :func:`format_inspect`
 renders them as text.  A file that cannot be read gives a report with an ``error`` entry
@@ -268,61 +269,37 @@ def _inspect_csv(path, o):
     return {"format": "csv", "channels": [entry], "csv_damage": damage, "notes": [n for n in notes if n not in damage]}
 
 
-#: Vendor formats tried, in this order, on a file that is no channel CSV: (format, kind, reader
-#: name in :mod:`gravsurvey.io.formats`). The distinctive layouts first; the trajectory text,
-#: which takes any table of times and positions, last.
-VENDOR_FORMATS = (
-    ("mgd77t", "gravimeter", "read_mgd77t"),
-    ("nmea", "navigation", "read_nmea"),
-    ("bgm_rgs", "gravimeter", "read_bgm_rgs"),
-    ("dgs_laptop", "gravimeter", "read_dgs_laptop"),
-    ("at1a", "gravimeter", "read_at1a"),
-    ("dgs_raw", "gravimeter", "read_dgs_raw"),
-    ("zls", "gravimeter", "read_zls"),
-    ("bgm_serial", "gravimeter", "read_bgm_serial"),
-    ("trajectory", "navigation", "read_trajectory"),
-)
-
-
 def _inspect_vendor(path):
-    """Report of a real gravimeter or navigation file (:data:`VENDOR_FORMATS`), or None when
-    no reader takes it (each refuses a file of which fewer than half the lines are its records)."""
-    import warnings
+    """Report of a real gravimeter or navigation file, or None when no reader takes it
+    (:func:`gravsurvey.io.formats.flight.detect_format`)."""
+    from gravsurvey.io.formats.flight import detect_format
 
-    from gravsurvey.io import formats
-
-    for fmt, kind, reader in VENDOR_FORMATS:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            try:
-                table = getattr(formats, reader)(path)
-            except (GravsurveyError, ValueError, UnicodeDecodeError):
-                continue
-        if len(table) == 0:
-            continue
-        t, _, rep = ck.repair_time(table.time_ns, [])
-        if kind == "navigation":
-            use = "the navigation of inputs.gravimeter.nav or inputs.nav"
-        elif fmt == "dgs_raw":
-            use = "raw counts, not processed (they need the meter's calibration)"
-        else:
-            use = f"process it with inputs.gravimeter: {{format: {fmt}, file: ...}}"
-        channel = {
-            "topic": None,
-            "schema": fmt,
-            "encoding": "text",
-            "messages": len(table),
-            "role": kind,
-            "time_source": str(table.meta.get("time_source", "file")),
-            **_time_base(t, rep),
-            "columns": {k: table.units.get(k, "") for k in table.columns},
-            "checks": [],
-        }
-        notes = [f"{kind} file, format {fmt} (docs/input-formats.md): {use}"]
-        notes += [f"{table.n_skipped} of {table.n_lines} content lines skipped"] if table.n_skipped else []
-        notes += list(table.notes) + [str(w.message) for w in caught]
-        return {"format": fmt, "channels": [channel], "notes": notes}
-    return None
+    found = detect_format(path)
+    if found is None:
+        return None
+    fmt, kind, table, caught = found
+    t, _, rep = ck.repair_time(table.time_ns, [])
+    if kind == "navigation":
+        use = "the navigation of inputs.gravimeter.nav or inputs.nav"
+    elif fmt == "dgs_raw":
+        use = "raw counts, not processed (they need the meter's calibration)"
+    else:
+        use = f"process it with inputs.gravimeter: {{format: {fmt}, file: ...}}"
+    channel = {
+        "topic": None,
+        "schema": fmt,
+        "encoding": "text",
+        "messages": len(table),
+        "role": kind,
+        "time_source": str(table.meta.get("time_source", "file")),
+        **_time_base(t, rep),
+        "columns": {k: table.units.get(k, "") for k in table.columns},
+        "checks": [],
+    }
+    notes = [f"{kind} file, format {fmt} (docs/input-formats.md): {use}"]
+    notes += [f"{table.n_skipped} of {table.n_lines} content lines skipped"] if table.n_skipped else []
+    notes += list(table.notes) + list(caught)
+    return {"format": fmt, "channels": [channel], "notes": notes}
 
 
 def format_inspect(reports) -> str:

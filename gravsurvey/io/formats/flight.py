@@ -125,38 +125,132 @@ class GravimeterOptions:
         return out
 
 
+#: Readers :func:`detect_format` tries, in this order: (format, kind, reader name in
+#: :mod:`gravsurvey.io.formats`). The distinctive layouts first; the trajectory text, which
+#: takes any table of times and positions, last.
+DETECT_ORDER = (
+    ("mgd77t", "gravimeter", "read_mgd77t"),
+    ("nmea", "navigation", "read_nmea"),
+    ("bgm_rgs", "gravimeter", "read_bgm_rgs"),
+    ("dgs_laptop", "gravimeter", "read_dgs_laptop"),
+    ("at1a", "gravimeter", "read_at1a"),
+    ("dgs_raw", "gravimeter", "read_dgs_raw"),
+    ("zls", "gravimeter", "read_zls"),
+    ("bgm_serial", "gravimeter", "read_bgm_serial"),
+    ("trajectory", "navigation", "read_trajectory"),
+)
+
+
+def detect_format(path, exclude=()):
+    """The first gravimeter or navigation reader that takes a file (:data:`DETECT_ORDER`).
+
+    Each reader refuses a file of which fewer than half the content lines are its records.
+
+    Parameters
+    ----------
+    path : path-like
+    exclude : iterable of str
+        Formats not to try (one already refused).
+
+    Returns
+    -------
+    (format, kind, table, warnings) or None
+        ``kind`` is ``"gravimeter"`` or ``"navigation"``; ``table`` the
+        :class:`~gravsurvey.io.formats.common.FormatTable` read (at least one record);
+        ``warnings`` the texts of the reader's warnings. None when no reader takes it.
+    """
+    from gravsurvey import errors
+    from gravsurvey.io import formats
+
+    for fmt, kind, reader in DETECT_ORDER:
+        if fmt in exclude:
+            continue
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                table = getattr(formats, reader)(path)
+            except (errors.GravsurveyError, ValueError, OSError):
+                continue
+        if len(table):
+            return fmt, kind, table, [str(w.message) for w in caught]
+    return None
+
+
+#: Phrases of the readers' refusals that mean "not a file of this format" (not damage within one).
+NOT_THIS_FORMAT = ("not a ", "not an ", "no usable GGA or RMC position fix")
+
+
+def _reads_as(exc: DataError, path, fmt: str):
+    """(format, kind) the file reads as when its reader refused it as another format (``exc``
+    holds one of :data:`NOT_THIS_FORMAT`), by :func:`detect_format` with ``fmt`` left out;
+    None otherwise."""
+    if not any(m in str(exc) for m in NOT_THIS_FORMAT) or not Path(path).is_file():
+        return None
+    found = detect_format(path, exclude=(fmt,))
+    return None if found is None else found[:2]
+
+
 def read_gravimeter(o: GravimeterOptions, base_dir=None) -> FormatTable:
-    """Read the gravimeter file(s) of ``o`` with the matching reader."""
+    """Read the gravimeter file(s) of ``o`` with the matching reader.
+
+    A file the reader refuses is named with the format it does read as, when another reader
+    takes it (:func:`detect_format`).
+    """
     from . import bgm, dgs, mgd77t, zls
 
     paths = o.paths(base_dir)[: len(o.files)]
     for p in paths:
         if not p.exists():
             raise DataError(f"{p}: gravimeter file not found ({o.key_path})")
-    if o.format == "mgd77t":
-        return mgd77t.read_mgd77t(paths[0])
-    if o.format == "dgs_laptop":
-        return dgs.read_dgs_laptop(paths[0], time_source=o.time_source)
-    if o.format == "at1a":
-        return dgs.read_at1a(paths[0])
-    if o.format == "zls":
-        return zls.read_zls(paths[0] if len(paths) == 1 else paths)
-    if o.format == "bgm_serial":
-        return bgm.read_bgm_serial(paths[0], scale_mgal_per_count=o.counts_scale_mgal)
-    return bgm.read_bgm_rgs(paths[0])
+    try:
+        if o.format == "mgd77t":
+            return mgd77t.read_mgd77t(paths[0])
+        if o.format == "dgs_laptop":
+            return dgs.read_dgs_laptop(paths[0], time_source=o.time_source)
+        if o.format == "at1a":
+            return dgs.read_at1a(paths[0])
+        if o.format == "zls":
+            return zls.read_zls(paths[0] if len(paths) == 1 else paths)
+        if o.format == "bgm_serial":
+            return bgm.read_bgm_serial(paths[0], scale_mgal_per_count=o.counts_scale_mgal)
+        return bgm.read_bgm_rgs(paths[0])
+    except DataError as exc:
+        found = _reads_as(exc, paths[0], o.format)
+        if found is None:
+            raise
+        other, kind = found
+        if kind == "navigation":
+            hint = f"it reads as a {other} navigation file: give it as {o.key_path}.nav"
+        else:
+            hint = f"it reads as a {other} gravimeter file: {o.key_path}.format: {other}?"
+        raise DataError(f"{exc}; {hint}") from None
 
 
-def read_navigation(nav: dict, base_dir=None) -> FormatTable:
-    """Read an ``inputs.gravimeter.nav`` file (NMEA or trajectory)."""
+def read_navigation(nav: dict, base_dir=None, key_path: str = "inputs.gravimeter.nav") -> FormatTable:
+    """Read an ``inputs.gravimeter.nav`` file (NMEA or trajectory).
+
+    A file the reader refuses is named with the format it does read as (:func:`detect_format`).
+    """
     from .nmea import read_nmea
     from .trajectory import read_trajectory
 
     p = Path(base_dir) / nav["file"] if base_dir is not None else Path(nav["file"])
     if not p.exists():
         raise DataError(f"{p}: navigation file not found")
-    if nav["format"] == "nmea":
-        return read_nmea(p, time_source=nav.get("time_source", "auto"))
-    return read_trajectory(p, time_system=nav.get("time_system", "auto"))
+    try:
+        if nav["format"] == "nmea":
+            return read_nmea(p, time_source=nav.get("time_source", "auto"))
+        return read_trajectory(p, time_system=nav.get("time_system", "auto"))
+    except DataError as exc:
+        found = _reads_as(exc, p, nav["format"])
+        if found is None:
+            raise
+        other, kind = found
+        if kind == "navigation":
+            hint = f"it reads as a {other} navigation file: {key_path}.format: {other}?"
+        else:
+            hint = f"it reads as a {other} gravimeter file, not navigation"
+        raise DataError(f"{exc}; {hint}") from None
 
 
 def absolute_gravity(table: FormatTable, o: GravimeterOptions, notes: list) -> np.ndarray:
@@ -206,7 +300,7 @@ def gravimeter_record(
     notes += gt.notes
     f_up = absolute_gravity(gt, o, notes)
     if o.nav is not None:
-        nt = read_navigation(o.nav, base_dir)
+        nt = read_navigation(o.nav, base_dir, key_path=f"{o.key_path}.nav")
         notes += nt.notes
         nav_t, lat, lon = nt.time_ns, nt.columns["lat"], nt.columns["lon"]
         height = nt.columns.get("height", np.full(len(nt), np.nan))
