@@ -180,14 +180,21 @@ def detect_format(path, exclude=()):
 NOT_THIS_FORMAT = ("not a ", "not an ", "no usable GGA or RMC position fix")
 
 
-def _reads_as(exc: DataError, path, fmt: str):
-    """(format, kind) the file reads as when its reader refused it as another format (``exc``
-    holds one of :data:`NOT_THIS_FORMAT`), by :func:`detect_format` with ``fmt`` left out;
-    None otherwise."""
+def _with_format_hint(exc: DataError, path, fmt: str, hints: dict) -> DataError:
+    """``exc`` with the format the file does read as, when its reader refused it as another
+    format (``exc`` holds one of :data:`NOT_THIS_FORMAT`) and another reader takes it
+    (:func:`detect_format`, ``fmt`` left out); else ``exc`` itself.
+
+    ``hints`` maps the kind found (``"gravimeter"``, ``"navigation"``) to the hint's text, with
+    ``{other}`` for the format found.
+    """
     if not any(m in str(exc) for m in NOT_THIS_FORMAT) or not Path(path).is_file():
-        return None
+        return exc
     found = detect_format(path, exclude=(fmt,))
-    return None if found is None else found[:2]
+    if found is None:
+        return exc
+    other, kind = found[:2]
+    return DataError(f"{exc}; it reads as a {other} {kind} file{hints[kind].format(other=other)}")
 
 
 def read_gravimeter(o: GravimeterOptions, base_dir=None) -> FormatTable:
@@ -215,15 +222,11 @@ def read_gravimeter(o: GravimeterOptions, base_dir=None) -> FormatTable:
             return bgm.read_bgm_serial(paths[0], scale_mgal_per_count=o.counts_scale_mgal)
         return bgm.read_bgm_rgs(paths[0])
     except DataError as exc:
-        found = _reads_as(exc, paths[0], o.format)
-        if found is None:
+        hints = {"navigation": f": give it as {o.key_path}.nav", "gravimeter": f": {o.key_path}.format: {{other}}?"}
+        err = _with_format_hint(exc, paths[0], o.format, hints)
+        if err is exc:
             raise
-        other, kind = found
-        if kind == "navigation":
-            hint = f"it reads as a {other} navigation file: give it as {o.key_path}.nav"
-        else:
-            hint = f"it reads as a {other} gravimeter file: {o.key_path}.format: {other}?"
-        raise DataError(f"{exc}; {hint}") from None
+        raise err from None
 
 
 def read_navigation(nav: dict, base_dir=None, key_path: str = "inputs.gravimeter.nav") -> FormatTable:
@@ -242,15 +245,11 @@ def read_navigation(nav: dict, base_dir=None, key_path: str = "inputs.gravimeter
             return read_nmea(p, time_source=nav.get("time_source", "auto"))
         return read_trajectory(p, time_system=nav.get("time_system", "auto"))
     except DataError as exc:
-        found = _reads_as(exc, p, nav["format"])
-        if found is None:
+        hints = {"navigation": f": {key_path}.format: {{other}}?", "gravimeter": ", not navigation"}
+        err = _with_format_hint(exc, p, nav["format"], hints)
+        if err is exc:
             raise
-        other, kind = found
-        if kind == "navigation":
-            hint = f"it reads as a {other} navigation file: {key_path}.format: {other}?"
-        else:
-            hint = f"it reads as a {other} gravimeter file, not navigation"
-        raise DataError(f"{exc}; {hint}") from None
+        raise err from None
 
 
 def absolute_gravity(table: FormatTable, o: GravimeterOptions, notes: list) -> np.ndarray:
