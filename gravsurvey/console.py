@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 
-from .errors import EXIT_INTERRUPTED
+from .errors import EXIT_INTERRUPTED, PUBLISHED
 
 #: the line an interrupted run ends with
 INTERRUPTED_LINE = "gravsurvey: interrupted; no output of this run was published"
@@ -39,8 +39,6 @@ def main(argv=None):
     try:
         cli_main(argv)
     finally:
-        from .errors import PUBLISHED
-
         if PUBLISHED.is_set():
             # the outputs are published and the exit code decided; the interpreter's shutdown
             # (0.3-0.4 s with numba loaded) restores the default SIGINT action, so a Ctrl-C

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import warnings
-import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np

@@ -309,19 +309,13 @@ def simulate_flight(sim, flight_index: int = 0) -> FlightSimulation:
     -------
     FlightSimulation
     """
-    cfg = load_sim_config(sim)
-    if not 0 <= flight_index < len(cfg.flights):
-        raise ConfigError(f"flights: no flight with index {flight_index} (the config has {len(cfg.flights)})")
-    f = cfg.flights[flight_index]
+    cfg, f, plan, imu_ns, errs = _plan_and_imu_errors(sim, flight_index)
     ell = cfg.ellipsoid
-    plan = build_plan(f["plan"], f["turbulence"], _rng(cfg, flight_index, _STREAM_TURBULENCE), ell)
     rates = f["rates"]
     dur = plan.duration
-    imu_ns = sample_times_ns(dur, rates["imu_hz"])
     t_imu = imu_ns / 1e9
     anomaly = _Anomaly(cfg, flight_index)
     tru, f_t, w_t, mat_nt = _imu_truth(plan, t_imu, anomaly, ell, f["triad"])
-    errs = imu_errors(t_imu.shape[0], rates["imu_hz"], f["sensors"], _rng(cfg, flight_index, _STREAM_IMU))
 
     alt_ns = sample_times_ns(dur, rates["altimeter_hz"])
     kin_alt = kinematics(plan, alt_ns / 1e9)
@@ -417,17 +411,24 @@ def gravimeter_slow_error(sim, flight_index: int = 0):
         ``bias + Markov`` of the gravimeter (third accelerometer), m/s^2; equal to
         ``truth["gravimeter_markov"] + bias`` of :func:`simulate_flight`.
     """
+    # the plan's duration sets the sample count; only the errors of the simulation are needed
+    _, f, _, imu_ns, errs = _plan_and_imu_errors(sim, flight_index)
+    bias = float(f["sensors"]["gravimeter"]["bias_mps2"])
+    return imu_ns + int(f["start_unix_ns"]), bias + errs.gravimeter_markov
+
+
+def _plan_and_imu_errors(sim, flight_index: int):
+    """One flight's config, plan, IMU sample times (ns from its start) and IMU errors, drawn from
+    the simulation's own random streams (each stream its own generator, so the order of the
+    draws does not matter): ``(cfg, flight, plan, imu_ns, errors)``."""
     cfg = load_sim_config(sim)
     if not 0 <= flight_index < len(cfg.flights):
         raise ConfigError(f"flights: no flight with index {flight_index} (the config has {len(cfg.flights)})")
     f = cfg.flights[flight_index]
-    # the plan's duration sets the sample count; its turbulence stream is drawn as in the
-    # simulation but only the duration is used
     plan = build_plan(f["plan"], f["turbulence"], _rng(cfg, flight_index, _STREAM_TURBULENCE), cfg.ellipsoid)
     imu_ns = sample_times_ns(plan.duration, f["rates"]["imu_hz"])
     errs = imu_errors(imu_ns.shape[0], f["rates"]["imu_hz"], f["sensors"], _rng(cfg, flight_index, _STREAM_IMU))
-    bias = float(f["sensors"]["gravimeter"]["bias_mps2"])
-    return imu_ns + int(f["start_unix_ns"]), bias + errs.gravimeter_markov
+    return cfg, f, plan, imu_ns, errs
 
 
 # --------------------------------------------------------------------------
