@@ -120,11 +120,37 @@ def test_no_drift_leaves_the_field():
     g = field + 0.3 * MGAL * rng.standard_normal(t.size)
     on = lab != ""
     est, sigma, rep = separate_drift(t, lat, lon, g, lab)
-    # the likelihood-ratio test finds nothing to take off: the field is left as it is
-    assert not rep["used"] and "not needed" in rep["reason"], rep
+    # the likelihood-ratio test finds nothing to take off, and the blocks speak against even a
+    # datasheet-size drift (a quiet gravimeter): the field is left as it is
+    assert not rep["used"] and "do not show a drift" in rep["reason"], rep
+    assert "nor a drift of the datasheet's size" in rep["reason"], rep
     assert est is None and sigma is None
     assert rep["drift_sigma_mgal"] < 0.5 and rep["log_likelihood_ratio"] < 3.0
     assert on.sum() > 3000
+
+
+@pytest.mark.parametrize("seed", [1, 2, 4])
+def test_datasheet_drift_is_taken_off_as_far_as_two_lines_show_it(seed):
+    # a drift of the datasheet's size (1 mGal, 600 s) on two lines: too little for the fitted
+    # drift's likelihood-ratio test, but the blocks do not speak against it, so its posterior
+    # mean under the datasheet's model comes off
+    rng = np.random.default_rng(seed)
+    t, lat, lon, e, n, lab = survey(lines=2)
+    field = field_at(e, n)
+    drift = markov(t.size, 1.0, 600.0, 1.0 * MGAL, rng)
+    g = field + drift + 0.3 * MGAL * rng.standard_normal(t.size)
+    on = lab != ""
+    est, sigma, rep = separate_drift(t, lat, lon, g, lab)
+    assert rep["used"] and rep["model"] == "datasheet", rep
+    assert rep["log_likelihood_ratio"] < 3.0 and "do not show a drift beyond" in rep["reason"]
+    assert rep["drift_sigma_mgal"] == pytest.approx(1.0) and rep["drift_tau_s"] == pytest.approx(600.0)
+    before = rms_about_mean((g - field)[on])
+    after = rms_about_mean((g - est - field)[on])
+    assert after < 0.8 * before, (before / MGAL, after / MGAL)
+    # its posterior sigma is below the prior's and of the size of the drift error left over
+    assert np.all(sigma[on] < 1.0 * MGAL)
+    z = rms_about_mean((drift - est)[on]) / float(np.sqrt(np.mean(sigma[on] ** 2)))
+    assert 0.4 < z < 2.5, z
 
 
 def test_one_line_cannot_tell_drift_from_field():

@@ -328,14 +328,21 @@ class DriftSection(Section):
 
     estimate: bool = _dr(
         "estimate",
-        "separate the drift with the lines (a field shared by neighbouring lines, a drift in time); "
-        "used only when the likelihood needs it",
+        "separate the drift with the lines (a field shared by neighbouring lines, a drift in time): "
+        "the fitted drift when the likelihood needs it, else the datasheet drift (`sigma_mps2`, `tau_s`) "
+        "as far as the lines show it, unless they speak against it",
     )
     block_s: float = _dr("block_s", "block length of the field-plus-drift fit, s", ge=10, le=3600)
     sigma_mps2: float = _dr(
-        "sigma_mps2", "centre of the prior on the drift's Gauss-Markov sigma (a datasheet figure), m/s^2", gt=0, le=1e-3
+        "sigma_mps2",
+        "centre of the prior on the drift's Gauss-Markov sigma, and the datasheet drift taken off when the lines "
+        "cannot fit one (a datasheet figure), m/s^2",
+        gt=0,
+        le=1e-3,
     )
-    tau_s: float = _dr("tau_s", "centre of the prior on the drift's correlation time, s", gt=0, le=1e6)
+    tau_s: float = _dr(
+        "tau_s", "centre of the prior on the drift's correlation time, and the datasheet drift's, s", gt=0, le=1e6
+    )
 
 
 # ============================================================================ checks (survey level)
