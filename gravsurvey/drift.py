@@ -82,13 +82,14 @@ DATASHEET_MIN_LOG_LR = -1.0
 #: the drift is not used (configs/realistic_survey.yaml: 0.8x and 1.3x, where it made the error
 #: 2.0-2.5 -> 3.0-3.6 mGal; the unseen flights it helped: 1.8x (U001) and more).
 MIN_LENGTH_PER_RESOLUTION = 1.5
-#: ... unless the fitted field is weaker than this fraction of the fitted drift: smoothing along
-#: the lines only turns at most the field's own variation between neighbouring lines into
-#: apparent drift, and a field that weak cannot pose as that much drift (U018 of the unseen
+#: ... unless the fitted field is weaker than the fitted drift (this multiple of it): smoothing
+#: along the lines only turns at most the field's own variation between neighbouring lines into
+#: apparent drift, and a field weaker than the drift cannot pose as it (U018 of the unseen
 #: suite: field 0.2 mGal, drift 1.1 mGal, its fitted field length 24.9 or 61 km within 0.44 of
-#: log-likelihood, either side of the guard; the realistic survey the guard is for: 4.0-4.5
-#: mGal of field, 2.7-3.6 of drift).
-GUARD_FIELD_PER_DRIFT = 0.5
+#: log-likelihood, either side of the guard; quick U202: field 0.84, drift 1.08, 1.25 -> 0.57
+#: mGal once the guard let it through (it was 0.5 until then); the realistic survey the guard is
+#: for: 4.0-4.5 mGal of field, 2.7-3.6 of drift, ratios 1.2-1.5).
+GUARD_FIELD_PER_DRIFT = 1.0
 #: Prior width of the drift's sigma and correlation time (1-sigma factors of the log-normal).
 PRIOR_SIGMA_FACTOR = 3.0
 PRIOR_TAU_FACTOR = 10.0
