@@ -30,11 +30,11 @@ taken off as far as the lines show it - its posterior mean, shrunk by what the l
 tell - unless the blocks speak against a drift of that size (:data:`DATASHEET_MIN_LOG_LR`).
 
 One line leaves the drift unidentifiable; the stage then keeps the estimate as it is, and says
-so in the report.  So does a field whose
-fitted correlation length is below :data:`MIN_LENGTH_PER_RESOLUTION` times the estimate's
-along-track resolution: the smoother has low-passed it along the lines only, and the isotropic
-field model would read the difference between neighbouring lines as drift - unless the fitted
-field is too weak to pose as the fitted drift (:data:`GUARD_FIELD_PER_DRIFT`).
+so in the report.  So does a field whose fitted correlation length is below
+:data:`MIN_LENGTH_PER_RESOLUTION` times the estimate's along-track resolution: the smoother has
+low-passed it along the lines only, and the isotropic field model would read the difference
+between neighbouring lines as drift - unless the fitted field is too weak to pose as the fitted
+drift (:data:`GUARD_FIELD_PER_DRIFT`).
 
 All inputs and outputs are SI (s, m, m/s^2).
 """
@@ -123,7 +123,8 @@ class DriftOptions:
         Block length of the fit, s.
     sigma_mps2, tau_s : float
         Centre of the datasheet prior on the drift's Gauss-Markov sigma (m/s^2) and correlation
-        time (s).
+        time (s); also the datasheet drift taken off when the fitted one is not needed
+        (:func:`datasheet_drift_fit`).
     """
 
     estimate: bool = True
