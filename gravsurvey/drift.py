@@ -313,21 +313,7 @@ def fit_drift(blocks, lines: int, options: DriftOptions = DriftOptions()):
     DriftFit or None
         None when there are fewer than :data:`MIN_BLOCKS` blocks or lines < 2.
     """
-    b = np.asarray(blocks, float)
-    if b.shape[0] < MIN_BLOCKS or lines < 2:
-        return None
-    y, dist, lag = _block_geometry(b)
-    nll1, v1 = _fit(y, dist, lag, options, True)
-    nll0, _ = _fit(y, dist, lag, options, False)
-    if v1 is None:
-        return None
-    return DriftFit(
-        *(float(x) for x in v1),
-        log_lr=float(nll0 - nll1),
-        blocks=int(b.shape[0]),
-        lines=int(lines),
-        nll_without_drift=float(nll0),
-    )
+    return _fit_against_no_drift(blocks, lines, options, datasheet=False)
 
 
 def datasheet_drift_fit(blocks, lines: int, options: DriftOptions = DriftOptions(), nll_without_drift=None):
@@ -350,11 +336,17 @@ def datasheet_drift_fit(blocks, lines: int, options: DriftOptions = DriftOptions
         ``log_lr`` is that of the datasheet drift over no drift (both models fit the same
         three parameters: a Bayes factor); None when the blocks are too few or the fit fails.
     """
+    return _fit_against_no_drift(blocks, lines, options, datasheet=True, nll_without_drift=nll_without_drift)
+
+
+def _fit_against_no_drift(blocks, lines, options, datasheet, nll_without_drift=None):
+    """:class:`DriftFit` of the model with drift (fitted, or held at the datasheet's) and its
+    log-likelihood ratio over the same model without drift (fitted here unless given)."""
     b = np.asarray(blocks, float)
     if b.shape[0] < MIN_BLOCKS or lines < 2:
         return None
     y, dist, lag = _block_geometry(b)
-    nll1, v1 = _fit(y, dist, lag, options, True, datasheet=True)
+    nll1, v1 = _fit(y, dist, lag, options, True, datasheet=datasheet)
     if v1 is None:
         return None
     nll0 = nll_without_drift
@@ -462,10 +454,13 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
             "the lines cannot tell the drift from the field the estimate smooths along them",
             **rep,
         )
+
+    def used(model_fit, model, facts):
+        mean, sigma = drift_posterior(model_fit, blocks, time)
+        return mean, sigma, {"used": True, "model": model, **facts, "drift_rms_mgal": float(np.std(mean) / MGAL)}
+
     if fit.log_lr >= MIN_LOG_LR:
-        mean, sigma = drift_posterior(fit, blocks, time)
-        rep["drift_rms_mgal"] = float(np.std(mean) / MGAL)
-        return mean, sigma, {"used": True, "model": "fitted", **rep}
+        return used(fit, "fitted", rep)
     # the lines cannot prove a drift of their own; a gravimeter has its datasheet's, and its
     # posterior mean under that model is what the lines show of it
     reason = (
@@ -481,12 +476,14 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
             **rep,
             datasheet_log_likelihood_ratio=ds.log_lr,
         )
-    mean, sigma = drift_posterior(ds, blocks, time)
-    rep = {
-        **ds.report(),
-        "log_likelihood_ratio": fit.log_lr,
-        "datasheet_log_likelihood_ratio": ds.log_lr,
-        "block_s": block,
-    }
-    rep["drift_rms_mgal"] = float(np.std(mean) / MGAL)
-    return mean, sigma, {"used": True, "model": "datasheet", "reason": reason, **rep}
+    return used(
+        ds,
+        "datasheet",
+        {
+            "reason": reason,
+            **ds.report(),
+            "log_likelihood_ratio": fit.log_lr,
+            "datasheet_log_likelihood_ratio": ds.log_lr,
+            "block_s": block,
+        },
+    )
