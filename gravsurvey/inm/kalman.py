@@ -28,8 +28,9 @@ loops still take their 14 x 14 products and triangular solves from generated vec
 fixed-size steps sit in their own compiled loops (:func:`_filter_loop8`, :func:`_rts_loop8`,
 :func:`_filter_loop14`, :func:`_rts_loop14`) so that other state sizes never compile them, and
 the full-R update uses no ``np.linalg`` (:func:`_update`): both for the cold start.  Every other
-size (16 with the accelerometer biases, 18 with the horizontal disturbance) takes the generic
-loops (any n, any R): scalar measurement updates in O(n^2); small products in scalar-accumulator
+size (16 with the accelerometer biases, the platform default; 18 with the horizontal
+disturbance) takes the generic loops (any n, any R; for 16 with the generated ``matmul16``,
+``tri_solve16``): scalar measurement updates in O(n^2); small products in scalar-accumulator
 column blocks (:func:`_matmul`).  Outputs: one 2-MiB-aligned allocation by numpy, not inside the
 kernels (:func:`_outputs`: page faults); ``phi[k+1] P_f[k]`` from the prediction reused by the
 smoother (:func:`filter_and_smooth`); the backward sweep reads its inputs block-wise forwards
@@ -53,7 +54,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._unrolled import filter_step8, matmul8, matmul14, rts_step8, tri_solve8, tri_solve14
+from ._unrolled import filter_step8, matmul8, matmul14, matmul16, rts_step8, tri_solve8, tri_solve14, tri_solve16
 from .kalman14 import N14, filter_step14, rts_gain14, rts_update14
 
 
@@ -111,7 +112,7 @@ def matmul_into(a, b, out):
     out : ndarray (n, n)
         Written in place; must not alias ``a`` or ``b``.
 
-    Generated vector code for n = 8 and 14, :func:`_matmul` otherwise; the same rounding
+    Generated vector code for n = 8, 14 and 16, :func:`_matmul` otherwise; the same rounding
     either way.
     """
     n = a.shape[0]
@@ -119,6 +120,8 @@ def matmul_into(a, b, out):
         matmul8(a, b, out)
     elif n == 14:
         matmul14(a, b, out)
+    elif n == 16:
+        matmul16(a, b, out)
     else:
         _matmul(a, b, out, False)
 
@@ -349,12 +352,14 @@ def _matmul(a, b, out, upper):
 
 @njit(cache=True)
 def _tri_solve(lch, idg, b, forward):
-    """:func:`_tri_solve_rows` by generated vector loops for n = 8 and 14 (same rounding)."""
+    """:func:`_tri_solve_rows` by generated vector loops for n = 8, 14 and 16 (same rounding)."""
     n = b.shape[0]
     if n == 8:
         tri_solve8(lch, idg, b, forward)
     elif n == 14:
         tri_solve14(lch, idg, b, forward)
+    elif n == 16:
+        tri_solve16(lch, idg, b, forward)
     else:
         _tri_solve_rows(lch, idg, b, forward)
 

@@ -107,11 +107,12 @@ class InmParams:
         Also estimate the horizontal components of the gravity disturbance (north, east) as
         states, with horizontal accelerometer biases (vector gravimetry, seed 003; needs GNSS
         aiding; docs/method.md "Vector gravimetry").  Off by default.
-    accel_bias_states : bool
+    accel_bias_states : bool or None
         Carry the constant biases of accelerometers 1 and 2 as states (16 instead of 14) in a
-        GNSS-aided strapdown filter (docs/method.md, "GNSS aiding"): an unmodelled horizontal
-        bias is taken for a tilt on straight legs and leaks into the vertical in turns.  A
-        platform triad keeps 14 states.
+        GNSS-aided filter (docs/method.md, "GNSS aiding"): an unmodelled horizontal bias is
+        taken for a tilt on straight legs and leaks into the vertical in turns.  ``None`` (the
+        default): on for a platform triad, off for a strapdown one (measured,
+        docs/benchmarks.md, "Horizontal accelerometer-bias states").
     given : frozenset of str
         The keys held fixed by identification: those written in the config
         (:func:`gravsurvey.settings.inm_params`) or, when constructed directly and not given, every key whose value
@@ -141,7 +142,7 @@ class InmParams:
     identify: bool = True
     target_resolution_m: float | None = None
     horizontal: bool = False
-    accel_bias_states: bool = False
+    accel_bias_states: bool | None = None
     given: frozenset | None = None
 
     def __post_init__(self):
@@ -168,6 +169,22 @@ class InmParams:
     def gyro_drift_radps(self) -> float:
         """sigma_nu in rad/s."""
         return math.radians(self.gyro_drift_degph) / 3600.0
+
+
+def accel_bias_states_for(params: InmParams, triad: str) -> bool:
+    """Whether the GNSS-aided filter carries the horizontal accelerometer biases (16 states).
+
+    ``params.accel_bias_states`` when the config gives it; else on for a platform triad and off
+    for a strapdown one.  On a straight leg a horizontal bias ``b`` is indistinguishable from a
+    tilt ``b / g``; in a turn that tilt would put ``b |f_h| / g`` into the vertical channel,
+    which a bias does not.  On the unseen-flight suite the platform flights gain (quick U230
+    0.40 -> 0.22 mGal, U215 0.48 -> 0.21); the strapdown flights do not on balance (quick U016
+    0.85 -> 0.75, U003 0.20 -> 0.23), so strapdown keeps the cheaper 14 states
+    (docs/benchmarks.md, "Horizontal accelerometer-bias states").
+    """
+    if params.accel_bias_states is not None:
+        return bool(params.accel_bias_states)
+    return triad == "platform"
 
 
 def solvability_warnings(params: InmParams, speed_mps) -> list[str]:

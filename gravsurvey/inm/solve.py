@@ -39,7 +39,15 @@ from .identify import (
 )
 from .kalman import filter_and_smooth
 from .mechanization import mechanize, navigation_to_geodetic, rodrigues
-from .params import RADPS_PER_DEGPH, TRIADS, InitialState, InmParams, initial_state_from_gnss, solvability_warnings
+from .params import (
+    RADPS_PER_DEGPH,
+    TRIADS,
+    InitialState,
+    InmParams,
+    accel_bias_states_for,
+    initial_state_from_gnss,
+    solvability_warnings,
+)
 from .vector import horizontal_outputs
 
 __all__ = ["InmSolution", "estimate_anomaly", "solvability_warnings", "initial_state_from_gnss"]
@@ -312,9 +320,7 @@ def estimate_anomaly(
     passes = int(params.attitude_passes)
     ident = {}
     given_params, reidentify = params, True
-    # a platform's horizontal accelerometers stay on East/North: their biases never rotate
-    # against the field, and the 14 states are kept there (docs/method.md, "GNSS aiding")
-    accel_bias = bool(params.accel_bias_states) and triad == "strapdown"
+    accel_bias = accel_bias_states_for(params, triad)
     for k in range(passes):
         nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
         if k == 0:

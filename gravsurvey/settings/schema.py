@@ -125,11 +125,11 @@ class ModelSection(Section):
         "also estimate the horizontal disturbance (north, east; deflections xi, eta) as states, with "
         "horizontal accelerometer biases (vector gravimetry; needs GNSS aiding; docs/method.md)",
     )
-    accel_bias_states: bool = _m(
+    accel_bias_states: Optional[bool] = _m(
         "accel_bias_states",
         "carry the horizontal accelerometer biases as filter states (16 instead of 14) on GNSS-aided "
-        "strapdown flights: an unmodelled bias is taken for tilt and leaks into the vertical in turns "
-        "(docs/method.md, GNSS aiding); a platform triad keeps 14",
+        "flights: an unmodelled bias is taken for tilt and leaks into the vertical in turns "
+        "(docs/method.md, GNSS aiding); null: on for a platform triad, off for a strapdown one",
     )
     filter_rate_hz: float = _m("filter_rate_hz", "Kalman epoch rate, Hz (the IMU rate is decimated)", gt=0)
     accel_noise_mps2: float = _m(
