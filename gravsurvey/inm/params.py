@@ -112,7 +112,7 @@ class InmParams:
         GNSS-aided filter (docs/method.md, "GNSS aiding"): an unmodelled horizontal bias is
         taken for a tilt on straight legs and leaks into the vertical in turns.  ``None`` (the
         default): on for a platform triad, off for a strapdown one (measured,
-        docs/benchmarks.md, "Horizontal accelerometer-bias states").
+        docs/benchmarks.md, "Horizontal accelerometer-bias states on platform flights").
     given : frozenset of str
         The keys held fixed by identification: those written in the config
         (:func:`gravsurvey.settings.inm_params`) or, when constructed directly and not given, every key whose value
@@ -180,7 +180,7 @@ def accel_bias_states_for(params: InmParams, triad: str) -> bool:
     which a bias does not.  On the unseen-flight suite the platform flights gain (quick U230
     0.40 -> 0.22 mGal, U215 0.48 -> 0.21); the strapdown flights do not on balance (quick U016
     0.85 -> 0.75, U003 0.20 -> 0.23), so strapdown keeps the cheaper 14 states
-    (docs/benchmarks.md, "Horizontal accelerometer-bias states").
+    (docs/benchmarks.md, "Horizontal accelerometer-bias states on platform flights").
     """
     if params.accel_bias_states is not None:
         return bool(params.accel_bias_states)
