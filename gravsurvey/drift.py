@@ -58,6 +58,7 @@ __all__ = [
     "datasheet_drift_fit",
     "drift_posterior",
     "separate_drift",
+    "passed_drift_factor",
 ]
 
 #: Block length of the averages the model is fitted to, s (9 km at 100 m/s: measured on the
@@ -387,6 +388,35 @@ def drift_posterior(fit: DriftFit, blocks, time):
     var_b = np.clip(np.diag(centre @ post @ centre), 0.0, None)
     sigma = np.sqrt(np.interp(t, b[:, 0], var_b))
     return mean, sigma
+
+
+def passed_drift_factor(report: dict, options: DriftOptions = DriftOptions()) -> float:
+    """Factor on the datasheet drift that the stated sigma holds where no drift is taken off.
+
+    A flight whose drift is not used keeps, in its sigma, the datasheet drift the smoother
+    passes (:func:`gravsurvey.inm.identify.drift_sigma_passed`, proportional to the drift's
+    sigma).  Where the lines set a drift of the datasheet's size aside (:func:`separate_drift`:
+    its log-likelihood ratio over no drift under :data:`DATASHEET_MIN_LOG_LR`), they speak for
+    a smaller one: the factor is then the fitted drift sigma over the datasheet's (at most 1);
+    1 otherwise.
+
+    Parameters
+    ----------
+    report : dict
+        :func:`separate_drift`'s report.
+    options : DriftOptions
+        ``sigma_mps2``: the datasheet drift sigma.
+
+    Returns
+    -------
+    float
+        In (0, 1].
+    """
+    ds = report.get("datasheet_log_likelihood_ratio")
+    fitted = report.get("drift_sigma_mgal")
+    if report.get("used") or ds is None or fitted is None or not ds < DATASHEET_MIN_LOG_LR:
+        return 1.0
+    return float(min(1.0, max(float(fitted) * MGAL / options.sigma_mps2, 1e-3)))
 
 
 def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOptions(), resolution_m: float = 0.0):

@@ -205,15 +205,17 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
     :func:`gravsurvey.drift.separate_drift` over the smoothed estimate on the survey-line
     segments (tie lines are left out).  When the data need the drift, ``est.drift`` holds it (taken off before the
     post-processing, :func:`line_products`) and ``est.sigma`` trades the datasheet drift it held
-    (``est.drift_sigma_passed``) for the drift's posterior sigma.  The fit's
-    facts go to ``est.estimator["drift"]`` (summary.json).
+    (``est.drift_sigma_passed``) for the drift's posterior sigma.  When no drift is taken off
+    but the lines set the datasheet's aside, the datasheet drift in ``est.sigma`` shrinks to
+    the fitted one (:func:`gravsurvey.drift.passed_drift_factor`; ``sigma_drift_passed_mgal`` in
+    the report).  The fit's facts go to ``est.estimator["drift"]`` (summary.json).
 
     Returns
     -------
     list of str
         Notes for the flight (a drift larger than the datasheet prior).
     """
-    from .drift import DriftOptions, separate_drift
+    from .drift import DriftOptions, passed_drift_factor, separate_drift
 
     options = options if options is not None else DriftOptions()
     if est.smoothed is None:
@@ -226,9 +228,18 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
             labels[int(s.start_index) : int(s.stop_index)] = s.name
     res = float(est.resolution_m) if np.isfinite(est.resolution_m) else 0.0
     drift, sigma, report = separate_drift(est.time, est.lat, est.lon, est.smoothed, labels, options, res)
-    est.estimator = {**est.estimator, "drift": report}
     if drift is None:
+        # the lines may have set the datasheet drift aside: the sigma then passes the drift
+        # they support (drift.passed_drift_factor), not the datasheet's
+        factor = passed_drift_factor(report, options)
+        if factor < 1.0 and est.drift_sigma_passed > 0.0:
+            passed = factor * est.drift_sigma_passed
+            est.sigma = np.sqrt(np.clip(est.sigma**2 - est.drift_sigma_passed**2, 0.0, None) + passed**2)
+            est.drift_sigma_passed = passed
+            report = {**report, "sigma_drift_passed_mgal": passed / MGAL}
+        est.estimator = {**est.estimator, "drift": report}
         return []
+    est.estimator = {**est.estimator, "drift": report}
     est.drift = drift
     est.sigma = np.sqrt(np.clip(est.sigma**2 - est.drift_sigma_passed**2, 0.0, None) + sigma**2)
     notes = []

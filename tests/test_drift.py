@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from gravsurvey.drift import DriftOptions, line_blocks, local_plane, separate_drift
+from gravsurvey.drift import DriftOptions, line_blocks, local_plane, passed_drift_factor, separate_drift
 from gravsurvey.errors import ConfigError
 from gravsurvey.settings import drift_options
 
@@ -235,14 +235,39 @@ def test_pipeline_takes_the_drift_off_before_the_product():
 
 
 def test_pipeline_without_drift_keeps_the_estimate():
+    """No drift: nothing is taken off.  The lines set even a datasheet-size drift aside, so the
+    sigma's datasheet drift (0.8 of its 1 mGal) shrinks to the fitted drift's size; it still
+    covers the estimate's error (0.3 mGal white noise)."""
     from gravsurvey.pipeline import estimate_drift
 
     est, segs, field, lab = _flight_estimate(seed=7, with_drift=False)
     sigma0 = est.sigma.copy()
+    g0 = est.smoothed.copy()
     estimate_drift(est, segs)
-    assert not est.estimator["drift"]["used"]
+    rep = est.estimator["drift"]
+    assert not rep["used"] and "nor a drift of the datasheet's size" in rep["reason"], rep
     assert est.drift is None
-    np.testing.assert_array_equal(est.sigma, sigma0)
+    np.testing.assert_array_equal(est.smoothed, g0)
+    f = passed_drift_factor(rep)
+    assert f == pytest.approx(rep["drift_sigma_mgal"]) and f < 0.5
+    passed = f * 0.8 * MGAL
+    np.testing.assert_allclose(est.sigma, np.sqrt(sigma0**2 - (0.8 * MGAL) ** 2 + passed**2))
+    assert est.drift_sigma_passed == pytest.approx(passed)
+    assert rep["sigma_drift_passed_mgal"] == pytest.approx(passed / MGAL)
+    on = lab != ""
+    assert rms_about_mean((est.smoothed - field)[on]) < float(np.mean(est.sigma))
+
+
+def test_passed_drift_factor():
+    """1 unless the lines set the datasheet drift aside; then the fitted sigma over the
+    datasheet's, at most 1."""
+    base = {"used": False, "drift_sigma_mgal": 0.4, "datasheet_log_likelihood_ratio": -3.0}
+    assert passed_drift_factor(base) == pytest.approx(0.4)
+    assert passed_drift_factor({**base, "drift_sigma_mgal": 2.5}) == 1.0
+    assert passed_drift_factor({**base, "datasheet_log_likelihood_ratio": -0.5}) == 1.0
+    assert passed_drift_factor({**base, "used": True}) == 1.0
+    assert passed_drift_factor({"used": False, "reason": "1 line(s)"}) == 1.0
+    assert passed_drift_factor(base, DriftOptions(sigma_mps2=2.0 * MGAL)) == pytest.approx(0.2)
 
 
 def test_resolution_guard_withholds_the_drift():
