@@ -174,4 +174,5 @@ def test_inspect_recognises_gravimeter_and_navigation_files(tmp_path):
     other.write_text("survey notes\nline 2 flown twice\n")
     r = gs("inspect", other)
     assert r.returncode == 1
-    assert "none of the gravimeter or navigation formats (mgd77t, dgs_laptop" in r.stderr
+    assert "none of the gravimeter or navigation formats (mgd77t, nmea, bgm_rgs, dgs_laptop" in r.stderr
+    assert "trajectory); a channel CSV" in r.stderr

@@ -237,13 +237,16 @@ def _inspect_csv(path, o):
         vendor = _inspect_vendor(path)
         if vendor is not None:
             return vendor
+        # the formats _inspect_vendor has just tried, in its order
+        from gravsurvey.io.formats.flight import DETECT_ORDER
+
+        tried = ", ".join(name for name, _, _ in DETECT_ORDER)
         return {
             "format": "csv",
             "error": (
                 f"{path}: header matches no channel (imu, altimeter, gnss columns of docs/input-formats.md) "
-                "and the file is none of the gravimeter or navigation formats (mgd77t, dgs_laptop, dgs_raw, "
-                "at1a, zls, bgm_rgs, bgm_serial, nmea, trajectory); a channel CSV with other column names "
-                "needs them: --config survey.yaml"
+                f"and the file is none of the gravimeter or navigation formats ({tried}); a channel "
+                "CSV with other column names needs them: --config survey.yaml"
             ),
         }
     notes, damage = [], []
