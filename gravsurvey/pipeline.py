@@ -234,14 +234,14 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
         factor = passed_drift_factor(report, options)
         if factor < 1.0 and est.drift_sigma_passed > 0.0:
             passed = factor * est.drift_sigma_passed
-            est.sigma = np.sqrt(np.clip(est.sigma**2 - est.drift_sigma_passed**2, 0.0, None) + passed**2)
+            _trade_drift_sigma(est, passed)
             est.drift_sigma_passed = passed
             report = {**report, "sigma_drift_passed_mgal": passed / MGAL}
-        est.estimator = {**est.estimator, "drift": report}
-        return []
     est.estimator = {**est.estimator, "drift": report}
+    if drift is None:
+        return []
     est.drift = drift
-    est.sigma = np.sqrt(np.clip(est.sigma**2 - est.drift_sigma_passed**2, 0.0, None) + sigma**2)
+    _trade_drift_sigma(est, sigma)
     notes = []
     if report["drift_rms_mgal"] > 3.0 * options.sigma_mps2 / MGAL:
         notes.append(
@@ -249,6 +249,12 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
             f"(over 3x the prior drift.sigma_mps2); it was taken off (drift_mgal in profiles.csv)"
         )
     return notes
+
+
+def _trade_drift_sigma(est: FlightEstimate, sigma) -> None:
+    """``est.sigma`` with the datasheet drift it held (``est.drift_sigma_passed``) replaced in
+    quadrature by ``sigma`` (m/s^2, scalar or shape (N,)), in place."""
+    est.sigma = np.sqrt(np.clip(est.sigma**2 - est.drift_sigma_passed**2, 0.0, None) + np.square(sigma))
 
 
 def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
