@@ -333,3 +333,31 @@ def test_field_under_the_margin_is_in_the_stated_sigma():
     assert rep_s["signal_seen_to_m"] is not None
     assert strong.anomaly_sigma_mps2 > 1.0 * MGAL
     assert rep_s["field_sigma_missed_mps2"] < rep["field_sigma_missed_mps2"]
+
+
+def test_field_the_data_cannot_exclude_is_in_the_stated_sigma():
+    """A first pass that shows nothing above the noise (U217-like: a weak field under a noisy
+    vertical channel) gets a flattening prior; the stated sigma then holds the field its lowest
+    band cannot exclude (two standard errors of the noise there, through the flattening
+    smoother), not the prior's floor.  Where a band is counted (the prior holds the field's
+    level) there is no such floor."""
+    dt, n = 1.0, 2400
+    t = np.arange(n) * dt
+    noise = I.SpectralModel(1e-3, 3600.0, 1e-4, 0.05)
+    report = {"spectral_model": dataclasses.asdict(noise), "height_dt_s": 0.2}
+    params = InmParams()
+    wide = I.wide_prior_params(params, report, 70.0)
+    quiet = 1e-4 * MGAL * np.sin(2 * np.pi * 3.0 / (n * dt) * t)
+    new, rep = I.refine_prior(params, report, quiet, dt, wide, 70.0, np.ones(n))
+    assert new.anomaly_sigma_mps2 < 0.1 * MGAL  # flattens
+    # closed form: the 8 lowest periodogram bins (3..10 of n) at 2 standard errors of 8 bins,
+    # each bin 1/(n dt) wide, both signs of frequency, the smoother's gain ~0 there
+    f = np.arange(3, 11) / (n * dt)
+    s_n = float(np.mean(I._noise_psd_g(f, noise, 0.2)))
+    expected = math.sqrt(8 * s_n * 2.0 / math.sqrt(8) * 2.0 / (n * dt))
+    assert rep["field_sigma_unexcluded_mps2"] == pytest.approx(expected, rel=0.1)
+    assert rep["field_sigma_missed_mps2"] == rep["field_sigma_unexcluded_mps2"]
+    strong = 3.0 * MGAL * np.sin(2 * np.pi * 6.5 / (n * dt) * t)
+    _, rep_s = I.refine_prior(params, report, strong, dt, wide, 70.0, np.ones(n))
+    assert rep_s["signal_seen_to_m"] is not None
+    assert rep_s["field_sigma_unexcluded_mps2"] == 0.0

@@ -1183,7 +1183,18 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     s_g = _markov_psd(f, model.anomaly_sigma_mps2, model.anomaly_tau_s)
     h = s_g / (s_g + s_n)
     missed = float(np.sum((1.0 - h) ** 2 * np.maximum(s_pt - s_sig, 0.0))) * 2.0 / (n * dt_s)
-    report["field_sigma_missed_mps2"] = math.sqrt(max(missed, 0.0))
+    # where no band stands out, the prior flattens the estimate and the unbiased excess can be
+    # nil while a field up to the margin still fits the data: the field at the longest
+    # wavelengths shown (the lowest band, where a field seen from the air is strongest) that the
+    # data cannot exclude, as the chosen smoother flattens it, is then a floor on that part
+    # (where a band is counted, the prior holds the field's level and this is not needed)
+    lowest = idx_valid[edges[0] : edges[1]]
+    unexcluded = 0.0
+    if lowest.size and not np.any(s_sig > 0):
+        margin = float(np.mean(s_n[lowest])) * SIGNAL_MARGIN_SE / math.sqrt(lowest.size)
+        unexcluded = float(np.sum((1.0 - h[lowest]) ** 2 * margin)) * 2.0 / (n * dt_s)
+    report["field_sigma_unexcluded_mps2"] = math.sqrt(unexcluded)
+    report["field_sigma_missed_mps2"] = math.sqrt(max(missed, unexcluded, 0.0))
     how_sigma = (
         "target_resolution_m"
         if params.target_resolution_m is not None
