@@ -311,25 +311,34 @@ def test_identify_false_uses_the_values_as_given():
     assert p.identify is False and p.altimeter_sigma_m == 0.2
 
 
+#: The first pass of the refine_prior tests: 40 min at 1 s, 70 m/s, a noisy vertical channel.
+REFINE_DT, REFINE_N = 1.0, 2400
+REFINE_NOISE = I.SpectralModel(1e-3, 3600.0, 1e-4, 0.05)
+
+
+def _refine(g):
+    """:func:`refine_prior` on the first-pass estimate ``g`` (m/s^2, (REFINE_N,)) under REFINE_NOISE."""
+    report = {"spectral_model": dataclasses.asdict(REFINE_NOISE), "height_dt_s": 0.2}
+    params = InmParams()
+    wide = I.wide_prior_params(params, report, 70.0)
+    return I.refine_prior(params, report, g, REFINE_DT, wide, 70.0, np.ones(g.size))
+
+
 def test_field_under_the_margin_is_in_the_stated_sigma():
     """A 1.06 mGal (rms) field at ~370 s period that stays within two standard errors of the
     modelled noise: the prior does not count it and the smoother flattens it; the report holds
     it (``field_sigma_missed_mps2``, added to the product's sigma) instead of claiming the
     field is known to the prior's floor.  A field that stands out is counted by the prior
     (and then mostly not in the missed part)."""
-    dt, n = 1.0, 2400
+    dt, n = REFINE_DT, REFINE_N
     t = np.arange(n) * dt
-    noise = I.SpectralModel(1e-3, 3600.0, 1e-4, 0.05)
-    report = {"spectral_model": dataclasses.asdict(noise), "height_dt_s": 0.2}
-    params = InmParams()
-    wide = I.wide_prior_params(params, report, 70.0)
     weak = 1.5 * MGAL * np.sin(2 * np.pi * 6.5 / (n * dt) * t)
-    new, rep = I.refine_prior(params, report, weak, dt, wide, 70.0, np.ones(n))
+    new, rep = _refine(weak)
     rms = 1.5 / math.sqrt(2.0)
     assert rep["signal_seen_to_m"] is None
     assert new.anomaly_sigma_mps2 < 0.1 * MGAL  # the prior flattens it
     assert 0.5 * rms < rep["field_sigma_missed_mps2"] / MGAL < 1.2 * rms
-    strong, rep_s = I.refine_prior(params, report, 2.0 * weak, dt, wide, 70.0, np.ones(n))
+    strong, rep_s = _refine(2.0 * weak)
     assert rep_s["signal_seen_to_m"] is not None
     assert strong.anomaly_sigma_mps2 > 1.0 * MGAL
     assert rep_s["field_sigma_missed_mps2"] < rep["field_sigma_missed_mps2"]
@@ -341,23 +350,22 @@ def test_field_the_data_cannot_exclude_is_in_the_stated_sigma():
     band cannot exclude (two standard errors of the noise there, through the flattening
     smoother), not the prior's floor.  Where a band is counted (the prior holds the field's
     level) there is no such floor."""
-    dt, n = 1.0, 2400
+    dt, n = REFINE_DT, REFINE_N
     t = np.arange(n) * dt
-    noise = I.SpectralModel(1e-3, 3600.0, 1e-4, 0.05)
-    report = {"spectral_model": dataclasses.asdict(noise), "height_dt_s": 0.2}
-    params = InmParams()
-    wide = I.wide_prior_params(params, report, 70.0)
     quiet = 1e-4 * MGAL * np.sin(2 * np.pi * 3.0 / (n * dt) * t)
-    new, rep = I.refine_prior(params, report, quiet, dt, wide, 70.0, np.ones(n))
+    new, rep = _refine(quiet)
     assert new.anomaly_sigma_mps2 < 0.1 * MGAL  # flattens
     # closed form: the 8 lowest periodogram bins (3..10 of n) at 2 standard errors of 8 bins,
     # each bin 1/(n dt) wide, both signs of frequency, the smoother's gain ~0 there
     f = np.arange(3, 11) / (n * dt)
-    s_n = float(np.mean(I._noise_psd_g(f, noise, 0.2)))
+    # the vertical channel's noise referred to the disturbance (two-sided): the white level, and
+    # the height's white noise (sigma^2 dt_h at dt_h = 0.2 s) differentiated twice
+    m = REFINE_NOISE
+    s_n = float(np.mean(m.white_mps2**2 + m.height_sigma_m**2 * 0.2 * (2 * np.pi * f) ** 4))
     expected = math.sqrt(8 * s_n * 2.0 / math.sqrt(8) * 2.0 / (n * dt))
     assert rep["field_sigma_unexcluded_mps2"] == pytest.approx(expected, rel=0.1)
     assert rep["field_sigma_missed_mps2"] == rep["field_sigma_unexcluded_mps2"]
     strong = 3.0 * MGAL * np.sin(2 * np.pi * 6.5 / (n * dt) * t)
-    _, rep_s = I.refine_prior(params, report, strong, dt, wide, 70.0, np.ones(n))
+    _, rep_s = _refine(strong)
     assert rep_s["signal_seen_to_m"] is not None
     assert rep_s["field_sigma_unexcluded_mps2"] == 0.0
