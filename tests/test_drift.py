@@ -9,7 +9,19 @@ import math
 import numpy as np
 import pytest
 
-from gravsurvey.drift import DriftOptions, line_blocks, local_plane, passed_drift_factor, separate_drift
+from gravsurvey.drift import (
+    BLOCK_S,
+    MIN_LOG_LR,
+    DriftOptions,
+    datasheet_drift_fit,
+    drift_posterior,
+    fit_drift,
+    fitted_weight,
+    line_blocks,
+    local_plane,
+    passed_drift_factor,
+    separate_drift,
+)
 from gravsurvey.errors import ConfigError
 from gravsurvey.settings import drift_options
 
@@ -327,3 +339,40 @@ def test_pieces_of_a_flight_trade_their_datasheet_drift():
     # the smoother's 1 mGal loses the pieces' 0.8 mGal datasheet drift and gains the posterior
     # (0.3-0.7 mGal): below 1 mGal everywhere; adding the posterior on top would be above it
     assert np.all(est.sigma < 0.95 * MGAL)
+
+
+def test_fitted_weight():
+    assert fitted_weight(MIN_LOG_LR) == pytest.approx(0.5)
+    w = [fitted_weight(x) for x in (-5.0, 0.0, 2.0, 3.0, 4.0, 8.0, 20.0)]
+    assert all(a < b for a, b in zip(w, w[1:]))
+    assert w[0] < 1e-3 and w[-1] > 1.0 - 1e-7
+
+
+@pytest.mark.parametrize("seed", [3, 7, 12])
+def test_near_the_threshold_both_drifts_are_weighed(seed):
+    """A 1.2-mGal drift on three lines whose test ratio lands near MIN_LOG_LR (2.6-3.8): the drift
+    taken off is the weighted mean of the fitted and the datasheet posteriors (neither taken
+    whole), and its sigma is the mixture's: at least each model's posterior variance, weighed."""
+    rng = np.random.default_rng(seed)
+    t, lat, lon, e, n, lab = survey(lines=3)
+    field = field_at(e, n)
+    drift = markov(t.size, 1.0, 900.0, 1.2 * MGAL, rng)
+    g = field + drift + 0.3 * MGAL * rng.standard_normal(t.size)
+    est, sigma, rep = separate_drift(t, lat, lon, g, lab)
+    assert rep["used"], rep
+    w = rep["fitted_weight"]
+    assert 0.3 < w < 0.7, rep
+    assert rep["model"] == ("fitted" if w >= 0.5 else "datasheet")
+    east, north = local_plane(lat, lon)
+    blocks, lines = line_blocks(t, east, north, g, lab, BLOCK_S)
+    fit = fit_drift(blocks, lines)
+    ds = datasheet_drift_fit(blocks, lines, DriftOptions(), fit.nll_without_drift)
+    assert ds.log_lr >= -1.0
+    mean_f, sigma_f = drift_posterior(fit, blocks, t)
+    mean_d, sigma_d = drift_posterior(ds, blocks, t)
+    assert w == pytest.approx(fitted_weight(fit.log_lr))
+    np.testing.assert_allclose(est, w * mean_f + (1.0 - w) * mean_d, rtol=0, atol=1e-4 * MGAL)
+    assert np.all(sigma**2 >= w * sigma_f**2 + (1.0 - w) * sigma_d**2 - 1e-18)
+    # and the weighed drift helps: the error left is below the drift's
+    on = lab != ""
+    assert rms_about_mean((g - est - field)[on]) < rms_about_mean((g - field)[on])
