@@ -1114,13 +1114,17 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     s_pt = np.zeros_like(f)  # the same without the margin: the unbiased estimate, for the sigma
     edges = np.unique(np.concatenate([[0], np.geomspace(8, max(valid.sum(), 9), 24).astype(int)]))
     idx_valid = np.flatnonzero(valid)
+    lowest = None  # the lowest band's bins and margin (the field it cannot exclude, below)
     for a, b in zip(edges[:-1], edges[1:]):
         ii = idx_valid[a:b]
         if ii.size == 0:
             continue
         excess = np.mean(p[ii] / h1[ii] ** 2) - np.mean(s_n[ii])
+        margin = np.mean(s_n[ii]) * SIGNAL_MARGIN_SE / math.sqrt(ii.size)
         s_pt[ii] = max(excess, 0.0)
-        s_sig[ii] = max(excess - np.mean(s_n[ii]) * SIGNAL_MARGIN_SE / math.sqrt(ii.size), 0.0)
+        s_sig[ii] = max(excess - margin, 0.0)
+        if lowest is None:
+            lowest = (ii, float(margin))
     # a field seen from the air has a spectrum that falls with frequency (upward continuation):
     # a band above one without signal cannot hold any; this keeps a chance excess of noise
     # near the top of the band (P / H1^2 amplifies it there) from widening the smoother
@@ -1188,11 +1192,10 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     # wavelengths shown (the lowest band, where a field seen from the air is strongest) that the
     # data cannot exclude, as the chosen smoother flattens it, is then a floor on that part
     # (where a band is counted, the prior holds the field's level and this is not needed)
-    lowest = idx_valid[edges[0] : edges[1]]
     unexcluded = 0.0
-    if lowest.size and not np.any(s_sig > 0):
-        margin = float(np.mean(s_n[lowest])) * SIGNAL_MARGIN_SE / math.sqrt(lowest.size)
-        unexcluded = float(np.sum((1.0 - h[lowest]) ** 2 * margin)) * 2.0 / (n * dt_s)
+    if lowest is not None and not np.any(s_sig > 0):
+        ii, margin = lowest
+        unexcluded = float(np.sum((1.0 - h[ii]) ** 2 * margin)) * 2.0 / (n * dt_s)
     report["field_sigma_unexcluded_mps2"] = math.sqrt(unexcluded)
     report["field_sigma_missed_mps2"] = math.sqrt(max(missed, unexcluded, 0.0))
     how_sigma = (
