@@ -276,7 +276,8 @@ def from_inm_solution(sol, *, name: str = "", t0_unix_ns: int = 0) -> FlightEsti
 
     The product (``disturbance``) is the RTS-smoothed estimate; the horizontal components are
     taken when the solution has them (``dg_horizontal``, ``dg_horizontal_sigma``,
-    ``horizontal_observable``).
+    ``horizontal_observable``). The identification's warnings (``identification["warnings"]``)
+    become the estimate's ``notes``, prefixed with ``name``.
 
     Parameters
     ----------
@@ -294,6 +295,11 @@ def from_inm_solution(sol, *, name: str = "", t0_unix_ns: int = 0) -> FlightEsti
         heading = track_heading(vel)
     res = float(getattr(sol, "resolution_m", np.nan))
     gnss_aided = bool(getattr(sol, "gnss_aided", False))
+    ident = getattr(sol, "identification", None) or {}
+    # what may have degraded the estimate (model identification, a horizontal estimate not
+    # made) reaches the user as the flight's notes; the solver's flight-wide solvability check
+    # is left to the per-line one (gravsurvey.pipeline.line_products)
+    notes = [f"{name}: {w}" if name else str(w) for w in dict.fromkeys(ident.get("warnings", []))]
     return FlightEstimate(
         name=name,
         method=METHOD_INM,
@@ -310,7 +316,7 @@ def from_inm_solution(sol, *, name: str = "", t0_unix_ns: int = 0) -> FlightEsti
         resolution_m=res,
         segment=np.zeros(n, dtype=np.int64),
         smoothed=g,
-        drift_sigma_passed=float((getattr(sol, "identification", None) or {}).get("drift_sigma_passed_mps2", 0.0)),
+        drift_sigma_passed=float(ident.get("drift_sigma_passed_mps2", 0.0)),
         forward=np.asarray(sol.g_forward, float),
         forward_sigma=_opt(getattr(sol, "sigma_forward", None), n, "sigma_forward"),
         attitude=getattr(sol, "attitude", None),
@@ -319,9 +325,10 @@ def from_inm_solution(sol, *, name: str = "", t0_unix_ns: int = 0) -> FlightEsti
         estimator={
             **attitude_report(sol),
             "gnss_aided": gnss_aided,
-            "identification": getattr(sol, "identification", {}) or {},
+            "identification": ident,
             "kalman_resolution_m": res,
         },
+        notes=notes,
     )
 
 
@@ -451,7 +458,7 @@ def concatenate_estimates(parts: list[FlightEstimate]) -> FlightEstimate:
         t0_unix_ns=first.t0_unix_ns,
         resolution_m=resolution,
         drift_sigma_passed=max(p.drift_sigma_passed for p in parts),
-        notes=[n for p in parts for n in p.notes],
+        notes=list(dict.fromkeys(n for p in parts for n in p.notes)),
         data_loss=[d for p in parts for d in p.data_loss],
         estimator=estimator,
         **arr,

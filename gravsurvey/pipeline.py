@@ -10,6 +10,7 @@ and writes the deliverables atomically into the output directory under a lock.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import json
 import logging
@@ -147,7 +148,8 @@ def line_products(est: FlightEstimate, segs, postprocess_options, model=None) ->
     line_info : dict
         Line -> post-processor facts, ``kind``, ``speed_mps``, ``samples``.
     notes : list of str
-        Per-line warnings (e.g. the model's solvability at the line's speed).
+        Per-line warnings (e.g. the solvability at the line's speed of the model the smoother
+        used there, :func:`model_used`).
     """
     from .inm.params import solvability_warnings
     from .wavelet import postprocess
@@ -179,7 +181,8 @@ def line_products(est: FlightEstimate, segs, postprocess_options, model=None) ->
             z, info = product[a:b], {"method": est.method, **est.product_info}
         else:
             if model is not None:
-                notes += [f"{est.name} {s.name}: {w}" for w in solvability_warnings(model, speed)]
+                used = model_used(est, model, a)
+                notes += [f"{est.name} {s.name}: {w}" for w in solvability_warnings(used, speed)]
             z, info = postprocess(
                 base[a:b],
                 dt,
@@ -197,6 +200,80 @@ def line_products(est: FlightEstimate, segs, postprocess_options, model=None) ->
     est.disturbance = final
     est.line = line
     return seg_out, line_info, notes
+
+
+def model_used(est: FlightEstimate, model, index: int):
+    """The configured ``model`` (InmParams) with the anomaly prior the smoother used at epoch
+    ``index``: identified from the flight (per piece of a flight split at gaps) unless given.
+
+    The anomaly correlation decides the seed-004 solvability at a line's speed, so a check
+    against the configured (default) prior would warn about a model that was not used.
+    """
+    ident = est.estimator.get("identification") or {}
+    pieces = ident.get("segments")
+    if pieces is not None:
+        k = int(est.segment[index]) if est.segment is not None and 0 <= index < len(est.segment) else -1
+        ident = pieces[k] if 0 <= k < len(pieces) else {}
+    found = {}
+    for key in ("anomaly_sigma_mps2", "anomaly_lambda_per_m"):
+        item = ident.get(key)
+        if isinstance(item, dict) and item.get("value") is not None:
+            found[key] = float(item["value"])
+    return dataclasses.replace(model, **found) if found else model
+
+
+def identification_log_lines(est: FlightEstimate) -> list[str]:
+    """The flight's identified model and drift separation as log lines (issue 12: the values,
+    their uncertainty and how each was found, as in summary.json ``estimator``).
+
+    One line per estimated piece of the flight (``model:``), then one for the drift; empty for
+    an estimate without identification (classic).
+    """
+    ident = est.estimator.get("identification") or {}
+    pieces = ident.get("segments", [ident])
+    out = []
+    for i, piece in enumerate(pieces):
+        items = []
+        for key, label, scale, unit in _IDENTIFIED_LOG:
+            item = piece.get(key)
+            if not isinstance(item, dict) or item.get("value") is None:
+                continue
+            v = float(item["value"])
+            v = 1.0 / v if key == "anomaly_lambda_per_m" and v > 0 else v
+            text = f"{label} {v / scale:.3g} {unit}"
+            if item.get("sigma_factor"):
+                text += f" (x/ {float(item['sigma_factor']):.3g})"
+            items.append(f"{text}, {item.get('how', '?')}")
+        if not items:
+            continue
+        tail = []
+        if piece.get("resolution_m"):
+            tail.append(f"resolution {float(piece['resolution_m']) / 1000:.3g} km")
+        if piece.get("expected_error_mgal") is not None:
+            tail.append(f"expected error {float(piece['expected_error_mgal']):.3g} mGal")
+        where = f" (piece {i + 1} of {len(pieces)})" if len(pieces) > 1 else ""
+        out.append(f"{est.name}: model{where}: " + "; ".join(items) + ("; " + ", ".join(tail) if tail else ""))
+    drift = est.estimator.get("drift")
+    if isinstance(drift, dict):
+        if drift.get("used"):
+            out.append(
+                f"{est.name}: drift: {drift.get('drift_rms_mgal', float('nan')):.3g} mGal RMS taken off, "
+                f"{drift.get('model')} model leading (fitted weight {float(drift.get('fitted_weight', 1.0)):.2f}, "
+                f"log-likelihood ratio {float(drift.get('log_likelihood_ratio', float('nan'))):.2f}, "
+                f"{drift.get('lines')} lines, {drift.get('blocks')} blocks)"
+            )
+        else:
+            out.append(f"{est.name}: drift: not taken off: {drift.get('reason', '?')}")
+    return out
+
+
+#: The identified values in the log: summary.json key, label, scale from SI, unit shown.
+_IDENTIFIED_LOG = (
+    ("anomaly_sigma_mps2", "anomaly sigma", MGAL, "mGal"),
+    ("anomaly_lambda_per_m", "anomaly correlation length", 1000.0, "km"),
+    ("gravimeter_white_mps2", "gravimeter white", MGAL, "mGal in 1 s"),
+    ("altimeter_sigma_m", "height noise", 1.0, "m"),
+)
 
 
 def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
@@ -370,7 +447,6 @@ def inm_estimate(cfg: SurveyConfig, fl: FlightConfig, record, checks, names) -> 
     loss : list of str
         Pieces not estimated (too short, or not re-initialisable): reported as data loss.
     """
-    import dataclasses
 
     from .consistency import REINIT_VELOCITY_SIGMA_MPS, plan_segments, span_text
     from .inm.params import resolve_initial_state
@@ -597,6 +673,8 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
             results[fl.name] = cached
             skipped.append(fl.name)
             log.info("%s: inputs and config unchanged, reusing the previous result", fl.name)
+            for line in identification_log_lines(cached):
+                log.info("%s", line)
             continue
         todo.append(fl)
 
@@ -607,6 +685,8 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
             processed.append(fl.name)
             save_result(cache_dir, fl.name, keys[fl.name][0], payload)
             log.info("%s: processed in %.1f s", fl.name, sum(payload.timings.values()))
+            for line in identification_log_lines(payload):
+                log.info("%s", line)
         else:
             failed.append(payload)
             log.error("%s", payload)

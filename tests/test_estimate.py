@@ -15,12 +15,14 @@ import pytest
 
 from gravsurvey.classic import ClassicResult
 from gravsurvey.config import SurveyConfig
-from gravsurvey.estimate import FlightEstimate, from_classic, from_inm_solution
+from gravsurvey.estimate import FlightEstimate, concatenate_estimates, from_classic, from_inm_solution
 from gravsurvey.geodesy import MGAL, WGS84
 from gravsurvey.grid import GridOptions
 from gravsurvey.io.writers import read_xyz
 from gravsurvey.levelling import LevellingOptions
-from gravsurvey.pipeline import write_survey_outputs
+from gravsurvey.inm.params import InmParams
+from gravsurvey.pipeline import identification_log_lines, line_products, model_used, write_survey_outputs
+from gravsurvey.wavelet import PostprocessOptions
 
 R_EARTH = 6_371_000.0
 N = 400
@@ -246,3 +248,64 @@ def test_regression_check_compares_the_renamed_columns(tmp_path):
     assert len(d) == 1 and d[0].startswith("profiles.csv unfiltered_mgal: ")
     d = compare_runs(tmp_path / "c", tmp_path / "a")
     assert "profiles.csv: column unfiltered_mgal of the reference missing from the result" in d
+
+
+def test_identification_warnings_become_the_flights_notes():
+    """What may have degraded the estimate reaches the user (stderr, log) as the flight's notes;
+    the identification's informational notes stay in summary.json."""
+    s = inm_like(horizontal=False)
+    warn = "model identification: no straight stretch of 240 s with evenly sampled heights; defaults used"
+    s.identification = {"warnings": [warn, warn], "notes": ["model identification: 3 stretches pooled"]}
+    e = from_inm_solution(s, name="F07")
+    assert e.notes == [f"F07: {warn}"]
+    # a flight estimated in pieces: each piece's warning once
+    both = concatenate_estimates([e, from_inm_solution(s, name="F07")])
+    assert both.notes == [f"F07: {warn}"]
+    assert from_inm_solution(inm_like(horizontal=False), name="F07").notes == []
+
+
+def test_line_solvability_uses_the_prior_the_smoother_used():
+    """The seed-004 check at a line's speed is against the identified anomaly correlation, not
+    the configured default (which the identification replaced)."""
+    model = InmParams()  # gravimeter 0.025 1/s; default anomaly 1e-5 1/m: 80 m/s -> 8e-4 1/s
+    s = inm_like(horizontal=False)
+    s.identification = {"anomaly_lambda_per_m": {"value": 0.025 / 80.0, "sigma_factor": None, "how": "identified"}}
+    e = from_inm_solution(s, name="F01")
+    assert model_used(e, model, 0).anomaly_lambda_per_m == pytest.approx(0.025 / 80.0)
+    segs = [
+        SimpleNamespace(name=n, kind="line", start_index=a, stop_index=a + 200) for n, a in (("L01", 0), ("L02", 200))
+    ]
+    _, _, notes = line_products(e, segs, PostprocessOptions(), model)
+    assert len(notes) == 2 and all("solvability" in n and "F01 L0" in n for n in notes)
+    # with the default prior as used (nothing identified) the same lines are fine
+    quiet = from_inm_solution(inm_like(horizontal=False), name="F01")
+    assert line_products(quiet, segs, PostprocessOptions(), model)[2] == []
+    # pieces of a flight split at a gap: each line is checked against its own piece's prior
+    two = concatenate_estimates([quiet, e])
+    assert model_used(two, model, 10).anomaly_lambda_per_m == model.anomaly_lambda_per_m
+    assert model_used(two, model, N + 10).anomaly_lambda_per_m == pytest.approx(0.025 / 80.0)
+
+
+def test_the_log_states_the_identified_model_and_the_drift():
+    s = inm_like(horizontal=False)
+    s.identification = {
+        "anomaly_sigma_mps2": {"value": 3.2 * MGAL, "sigma_factor": None, "how": "least expected error"},
+        "anomaly_lambda_per_m": {"value": 1.0 / 25_000.0, "sigma_factor": None, "how": "least expected error"},
+        "altimeter_sigma_m": {"value": 0.05, "sigma_factor": 1.04, "how": "identified"},
+        "resolution_m": 4200.0,
+        "expected_error_mgal": 0.41,
+    }
+    e = from_inm_solution(s, name="F01")
+    e.estimator["drift"] = {"used": False, "reason": "1 line(s): the drift needs two or more"}
+    lines = identification_log_lines(e)
+    assert lines[0].startswith("F01: model: anomaly sigma 3.2 mGal, least expected error")
+    assert "anomaly correlation length 25 km" in lines[0] and "height noise 0.05 m (x/ 1.04), identified" in lines[0]
+    assert "resolution 4.2 km" in lines[0] and "expected error 0.41 mGal" in lines[0]
+    assert lines[1] == "F01: drift: not taken off: 1 line(s): the drift needs two or more"
+    assert identification_log_lines(from_classic_like()) == []
+
+
+def from_classic_like():
+    est = from_inm_solution(inm_like(horizontal=False), name="C")
+    est.estimator = {"method": "classic", "resolution_m": 3000.0}
+    return est

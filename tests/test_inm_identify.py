@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from gravsurvey.estimate import from_inm_solution
 from gravsurvey.geodesy import MGAL
 from gravsurvey.inm import identify as I
 from gravsurvey.inm.params import InitialState, InmParams
@@ -304,6 +305,15 @@ def test_short_record_keeps_the_default_prior(noisy_flight):
     assert rep["anomaly_sigma_mps2"]["how"].startswith("default (record shorter than")
     assert sol.params.anomaly_sigma_mps2 == InmParams().anomaly_sigma_mps2
     assert rep["altimeter_sigma_m"]["how"] == "identified"
+    # the user is told (the flight's notes: stderr and the log) that the product rests on it
+    warned = [w for w in rep["warnings"] if "too short to see the field's spectrum" in w]
+    assert len(warned) == 1 and "600 s" in warned[0] and "100 mGal over 100 km" in warned[0]
+    assert any("too short to see" in n for n in from_inm_solution(sol, name="F01").notes)
+    # a prior given in the config: nothing to warn about
+    given = estimate_anomaly(
+        short, inm_params({"anomaly_sigma_mps2": 2e-4, "anomaly_lambda_per_m": 1e-4}), init, "platform"
+    )
+    assert not [w for w in given.identification.get("warnings", []) if "too short" in w]
 
 
 def test_identify_false_uses_the_values_as_given():

@@ -742,7 +742,9 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
     if "altimeter_sigma_m" in given:
         fixed["height_sigma_m"] = params.altimeter_sigma_m
     fixed = {k: min(max(val, BOUNDS[k][0]), BOUNDS[k][1]) for k, val in fixed.items()}
-    report: dict = {"method": "whittle-vertical-spectrum", "warnings": []}
+    # "warnings" may have degraded the estimate and reach the user (stderr, log); "notes" are
+    # facts of how the fit went that do not (summary.json only)
+    report: dict = {"method": "whittle-vertical-spectrum", "warnings": [], "notes": []}
     fit = fit_vertical_spectrum(t, e, man, fixed=fixed)
     whole_flight = False
     if fit is None:
@@ -757,7 +759,7 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
                 "levels identified over the whole flight, turns included"
             )
     elif fit.short_runs:
-        report["warnings"].append(
+        report["notes"].append(
             f"model identification: no straight stretch of {MIN_RUN_S:.0f} s; {fit.n_runs} stretches of "
             f"{SHORT_RUN_S:.0f} s or more pooled ({fit.seconds_used:.0f} s)"
         )
@@ -840,7 +842,10 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
             how = white_how
         report[k] = {"value": getattr(new, k), "sigma_factor": fit.sigma_factor.get(src[k]), "how": how}
     for k in fit.at_bound:
-        report["warnings"].append(
+        # only the height noise is used as fitted: a white level at its bound is replaced by the
+        # datasheet figure above, and the anomaly prior is chosen again by refine_prior
+        used_as_fitted = k == "height_sigma_m" and report["altimeter_sigma_m"]["how"] == "identified"
+        report["warnings" if used_as_fitted else "notes"].append(
             f"model identification: {k} ended on its bound {BOUNDS[k]} (SI); the data say little about it"
         )
     if fit.unresolved:
@@ -904,10 +909,11 @@ def prior_risk(f, s_signal, s_noise, sigma, tau) -> float:
     return float(np.sum((1.0 - h) ** 2 * s_signal + h**2 * s_noise))
 
 
-def keep_default_prior(params, report, speed_mps: float, min_s: float):
+def keep_default_prior(params, report, speed_mps: float, min_s: float, span_s: float = 0.0):
     """The anomaly prior as configured or defaulted (a record too short to identify it).
 
-    The identified noise levels stay; ``report`` says why the prior was not identified.
+    The identified noise levels stay; ``report`` says why the prior was not identified, with a
+    warning when a default part of it is used (``span_s``: the record's length, s).
     """
     defaults = type(params)()
     given = set(getattr(params, "given", ()))
@@ -922,6 +928,15 @@ def keep_default_prior(params, report, speed_mps: float, min_s: float):
             "sigma_factor": None,
             "how": "config" if k in given else f"default (record shorter than {min_s:.0f} s)",
         }
+    if not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= given:
+        # the broad default prior smooths a field unlike it to tens of km (issue 12's first
+        # finding): the user must know the product rests on it
+        report["warnings"] = list(report.get("warnings", [])) + [
+            f"model identification: the record ({span_s:.0f} s) is shorter than {min_s:.0f} s, too short "
+            "to see the field's spectrum; the anomaly prior is the default "
+            f"({defaults.anomaly_sigma_mps2 / 1e-5:.0f} mGal over {1e-3 / defaults.anomaly_lambda_per_m:.0f} km) "
+            "where model.anomaly_sigma_mps2 / anomaly_lambda_per_m do not give it"
+        ]
     if "spectral_model" in report:
         v = max(float(speed_mps), 1.0)
         m = dataclasses.replace(

@@ -579,7 +579,7 @@ def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False
     if nav.time[-1] - nav.time[0] < MIN_REFINE_S:
         # too short to see the field's spectrum: the noise levels stay identified, the anomaly
         # prior is the configured or default (broad) one
-        params, ident = keep_default_prior(params, ident, speed0, MIN_REFINE_S)
+        params, ident = keep_default_prior(params, ident, speed0, MIN_REFINE_S, float(nav.time[-1] - nav.time[0]))
     elif ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
         wide = wide_prior_params(params, ident, speed0)
         idx, _, _, _, first = one_pass(wide, accel_bias=accel_bias)
