@@ -27,6 +27,7 @@ from .errormodel import (
     initial_mean,
     state_perm,
 )
+from .heightqc import find_height_faults, repair_heights
 from .identify import (
     drift_sigma_passed,
     horizontal_prior,
@@ -36,6 +37,7 @@ from .identify import (
     refine_prior,
     straight_weight,
     wide_prior_params,
+    vertical_residual,
 )
 from .kalman import filter_and_smooth
 from .mechanization import mechanize, navigation_to_geodetic, rodrigues
@@ -321,9 +323,16 @@ def estimate_anomaly(
     ident = {}
     given_params, reidentify = params, True
     accel_bias = accel_bias_states_for(params, triad)
+    height_warnings = []
     for k in range(passes):
         nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
         if k == 0:
+            # the height channel's spikes and steps, found against this first mechanization,
+            # repaired before anything reads the heights (and the flight mechanized again:
+            # the gravity model's radius may come from them)
+            record, height_warnings, height_facts = _repaired_heights(record, nav, ellipsoid)
+            if height_warnings:
+                nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
             speed0 = _typical_speed(record, nav, ellipsoid)
         # every pass about this linearisation point: the navigation, the prior attitude and
         # gyro bias seen from it
@@ -400,6 +409,9 @@ def estimate_anomaly(
     sol.alignment = initial.alignment
     sol.params = params
     sol.identification = ident
+    if height_warnings or height_facts:
+        ident["height_faults"] = height_facts
+        ident["warnings"] = height_warnings + list(ident.get("warnings", []))
     sol.warnings = sol.warnings + list(ident.get("warnings", []))
     alt_t = np.asarray(record.altimeter.time, float)
     sol.resolution_m = (
@@ -445,6 +457,44 @@ def _check_track(record, params, sol, ellipsoid):
             f"model.gnss_horizontal_sigma_m = {params.gnss_horizontal_sigma_m:g} m); check triad, imu_axes "
             "and the initial attitude"
         )
+
+
+def _repaired_heights(record, nav, ellipsoid):
+    """The record with its height channel's spikes dropped and steps taken off
+    (:mod:`gravsurvey.inm.heightqc`), the warnings that say so, and the facts for the report
+    (``spikes``, ``steps``: time s and size m each; empty when nothing was found)."""
+    alt_t = np.asarray(record.altimeter.time, float)
+    alt_h = np.asarray(record.altimeter.height, float)
+    inside = np.flatnonzero(np.isfinite(alt_h) & (alt_t >= nav.time[0]) & (alt_t <= nav.time[-1]))
+    if inside.size < 16:
+        return record, [], {}
+    t, e = vertical_residual(nav, alt_t[inside], alt_h[inside], ellipsoid)
+    faults = find_height_faults(t, e)
+    if not faults:
+        return record, [], {}
+    fixed = np.array(alt_h, float)
+    fixed[inside] = repair_heights(alt_h[inside], faults)
+    for start, size in faults.steps:
+        # the samples after the checked span follow the last level too
+        fixed[inside[-1] + 1 :] -= size
+    record = dataclasses.replace(record, altimeter=dataclasses.replace(record.altimeter, height=fixed))
+    steps = [(float(t[i]), float(size)) for i, size in faults.steps]
+    facts = {"spikes": int(faults.spikes.size), "steps": [{"time_s": a, "size_m": b} for a, b in steps]}
+    what = []
+    if faults.spikes.size:
+        what.append(f"{faults.spikes.size} spike(s) dropped")
+    if steps:
+        listed = ", ".join(f"{b:+.2f} m at {a:.0f} s" for a, b in steps)
+        what.append(f"{len(steps)} step(s) taken off the heights after them ({listed} after the record's start)")
+    source = record.source or "record"
+    return (
+        record,
+        [
+            f"{source}: altimeter.height: {' and '.join(what)}; found against the inertial height "
+            '(docs/method.md, "Height spikes and steps")'
+        ],
+        facts,
+    )
 
 
 def _altimeter(record):

@@ -1,0 +1,94 @@
+"""Spikes and steps of the height channel (gravsurvey/inm/heightqc.py): found on the residual
+against the inertial height whatever its drift and rate, none where there are none, and
+repaired before the estimator reads the heights."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from gravsurvey.estimate import from_inm_solution
+from gravsurvey.inm import heightqc as Q
+from gravsurvey.inm.params import InmParams
+from gravsurvey.inm.solve import estimate_anomaly
+from gravsurvey.io.record import AltimeterChannel
+
+from test_inm_identify import _rms_mid, noisy_flight  # noqa: F401  (the fixture)
+
+
+def _residual(rate_hz, seed, span_s=2400.0, sigma_m=0.05, drift_m=300.0):
+    """An unaided inertial height error (smooth, up to ``drift_m``) plus white height noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, span_s, 1.0 / rate_hz)
+    x = t / span_s
+    smooth = drift_m * (np.cosh(3.0 * x) - 1.0) / (np.cosh(3.0) - 1.0) + 2.0 * np.sin(2 * np.pi * t / 700.0)
+    return t, smooth + sigma_m * rng.standard_normal(t.size)
+
+
+@pytest.mark.parametrize("rate_hz", [1.0, 5.0, 20.0])
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_nothing_found_where_there_is_nothing(rate_hz, seed):
+    t, e = _residual(rate_hz, seed)
+    faults = Q.find_height_faults(t, e)
+    assert not faults and faults.spikes.size == 0 and faults.steps == []
+
+
+@pytest.mark.parametrize("rate_hz", [1.0, 5.0, 20.0])
+def test_spikes_and_steps_are_found_where_they_are(rate_hz):
+    t, e = _residual(rate_hz, 7)
+    rng = np.random.default_rng(11)
+    # the measured height: spikes of 1 m, a step of +0.8 m at 600 s and of -0.6 m at 1500 s
+    # (at 1 Hz and 5 cm of noise a jump's standard error is 4.7 cm: 13-17 of them)
+    h = np.zeros(t.size)
+    spikes = np.sort(rng.choice(np.arange(50, t.size - 50), 10, replace=False))
+    h[spikes] += rng.choice([-1.0, 1.0], 10)
+    k1, k2 = np.searchsorted(t, 600.0), np.searchsorted(t, 1500.0)
+    h[k1:] += 0.8
+    h[k2:] -= 0.6
+    faults = Q.find_height_faults(t, e - h)  # e = h_ins - h_alt
+    assert set(faults.spikes.tolist()) == set(spikes.tolist())
+    assert [k for k, _ in faults.steps] == [k1, k2]
+    # each size within three standard errors of two 20-s quadratic end-point fits
+    se = 0.05 * np.sqrt(2 * 9.0 / (20.0 * rate_hz))
+    np.testing.assert_allclose([s for _, s in faults.steps], [0.8, -0.6], atol=3 * se + 1e-3)
+    # repaired: the spikes dropped, the steps taken off what follows them
+    fixed = Q.repair_heights(h, faults)
+    assert np.isnan(fixed[spikes]).all()
+    ok = np.isfinite(fixed)
+    assert np.max(np.abs(fixed[ok])) < 4 * se + 1e-3
+
+
+def test_a_step_in_the_heights_is_repaired_before_the_estimate(noisy_flight):  # noqa: F811
+    """A 0.3-m jump of the heights in mid-flight (a GNSS height re-fixing its ambiguities):
+    taken off before the filter, the estimate is as good as without it, and the user is told."""
+    s, rec, init = noisy_flight
+    clean = estimate_anomaly(rec, InmParams(), init, "platform")
+    h = np.array(rec.altimeter.height, float)
+    mid = h.size // 2
+    h[mid:] += 0.3
+    h[[1000, 5000, 13000]] += 3.0
+    broken = dataclasses.replace(rec, altimeter=AltimeterChannel(rec.altimeter.time, h))
+    sol = estimate_anomaly(broken, InmParams(), init, "platform")
+    facts = sol.identification["height_faults"]
+    assert facts["spikes"] == 3 and len(facts["steps"]) == 1
+    assert facts["steps"][0]["time_s"] == pytest.approx(rec.altimeter.time[mid], abs=0.01)
+    assert facts["steps"][0]["size_m"] == pytest.approx(0.3, abs=0.03)
+    notes = from_inm_solution(sol, name="F01").notes
+    assert any("1 step(s) taken off" in n and "3 spike(s) dropped" in n for n in notes), notes
+    assert _rms_mid(sol, s) < 1.05 * _rms_mid(clean, s)
+    # what the repair saves: the same record with the check switched off
+    off = dataclasses.replace(Q.HeightFaults())
+    assert not off
+    from gravsurvey.inm import solve
+
+    original = solve.find_height_faults
+    try:
+        solve.find_height_faults = lambda t, e: Q.HeightFaults()
+        unrepaired = estimate_anomaly(broken, InmParams(), init, "platform")
+    finally:
+        solve.find_height_faults = original
+    assert _rms_mid(unrepaired, s) > 2.0 * _rms_mid(sol, s)
+    # a clean record is left as it is: no facts, no warning
+    assert "height_faults" not in clean.identification
