@@ -22,12 +22,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..io.checks import single_sample_outliers
+
 __all__ = ["HeightFaults", "find_height_faults", "repair_heights"]
 
-#: Running-median half window for spikes, samples.
-SPIKE_HALF_WINDOW = 3
-#: A spike: both differences at a sample off their running median by more than this many robust
-#: sigmas, with opposite signs.
+#: A spike: a sample off the mean of its neighbours by more than this many robust sigmas, its
+#: neighbours off theirs the other way (:func:`gravsurvey.io.checks.single_sample_outliers`).
 SPIKE_K = 6.0
 #: Means of the residual over this span before the step search, s (at most the sample spacing
 #: coarser: a 1 Hz channel is searched sample by sample).
@@ -63,37 +63,12 @@ class HeightFaults:
         return bool(self.spikes.size or self.steps)
 
 
-def _running_median(x, half):
-    n = x.size
-    pad = np.pad(x, half, mode="edge")
-    win = np.lib.stride_tricks.sliding_window_view(pad, 2 * half + 1)
-    return np.median(win, axis=1)[:n]
-
-
 def _robust_sigma(x) -> float:
     x = np.asarray(x, float)
     x = x[np.isfinite(x)]
     if x.size == 0:
         return 0.0
     return MAD_SIGMA * float(np.median(np.abs(x - np.median(x))))
-
-
-def _find_spikes(e) -> np.ndarray:
-    """A spike at ``k`` moves the differences ``e[k] - e[k-1]`` and ``e[k+1] - e[k]`` by the same
-    amount with opposite signs (a step moves one only). On the differences, not ``e`` itself:
-    the unaided inertial height drifts by metres per second, which a running median of ``e``
-    follows without its noise (every residual nil, any noise a spike)."""
-    if e.size < 2 * SPIKE_HALF_WINDOW + 4:
-        return np.zeros(0, np.int64)
-    d = np.diff(e)
-    r = d - _running_median(d, SPIKE_HALF_WINDOW)
-    s = _robust_sigma(r)
-    if not s > 0.0:
-        return np.zeros(0, np.int64)
-    big = np.abs(r) > SPIKE_K * s
-    # sample k (1 .. n-2): the difference into it and the one out of it, both large, opposite
-    k = np.flatnonzero(big[:-1] & big[1:] & (np.sign(r[:-1]) != np.sign(r[1:]))) + 1
-    return k.astype(np.int64)
 
 
 def _bins(t, e, dt):
@@ -213,7 +188,7 @@ def find_height_faults(time, residual_m) -> HeightFaults:
     e = np.asarray(residual_m, float)
     if t.size < 16:
         return HeightFaults()
-    spikes = _find_spikes(e)
+    spikes = single_sample_outliers(e, SPIKE_K)
     keep = np.ones(t.size, bool)
     keep[spikes] = False
     idx = np.flatnonzero(keep)

@@ -478,6 +478,12 @@ def repair_and_check(raw: dict, options: IngestOptions):
         findings += ck.check_epoch(role, t)
     if "imu" in raw:
         ch = raw["imu"]
+        findings += ck.repair_imu_glitches(
+            ch.values["specific_force"],
+            ch.values["angular_rate"],
+            options.csv_units["accel"] if options.kind == "csv" else options.mcap_units["accel"],
+            options.csv_units["gyro"] if options.kind == "csv" else options.mcap_units["gyro"],
+        )
         findings += ck.check_imu(
             ch.time_ns,
             ch.values["specific_force"],
