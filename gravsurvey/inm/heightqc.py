@@ -28,7 +28,7 @@ __all__ = ["HeightFaults", "find_height_faults", "repair_heights"]
 
 #: A spike: a sample off the mean of its neighbours by more than this many robust sigmas, its
 #: neighbours off theirs the other way (:func:`gravsurvey.io.checks.single_sample_outliers`).
-SPIKE_K = 6.0
+SPIKE_K = 8.0
 #: Means of the residual over this span before the step search, s (at most the sample spacing
 #: coarser: a 1 Hz channel is searched sample by sample).
 STEP_BIN_S = 0.5

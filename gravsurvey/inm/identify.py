@@ -316,7 +316,8 @@ def white_less_tilt_leak(white_mps2: float, leak_mps2: float, sigma_factor: floa
 def straight_runs(
     time, manoeuvring, *, min_run_s: float = MIN_RUN_S, margin_s: float = MANOEUVRE_MARGIN_S
 ) -> list[tuple[int, int]]:
-    """Index ranges ``[a, b)`` of evenly sampled, non-manoeuvring stretches.
+    """Index ranges ``[a, b)`` of non-manoeuvring stretches without a gap (a step over 1.5x the
+    median).
 
     Parameters
     ----------
@@ -340,7 +341,10 @@ def straight_runs(
         lo = np.clip(idx - m, 0, t.size)
         hi = np.clip(idx + m + 1, 0, t.size)
         bad = (c[hi] - c[lo]) > 0
-    broken = np.abs(np.diff(t) - dt) > 0.5 * dt
+    # a stretch ends at a gap (what fill_short_gaps left); stamps that jitter about the grid
+    # (a logger's receive times) do not end it: the periodogram takes the samples as evenly
+    # spaced, and a jitter of sigma_t only adds v_z sigma_t of noise to the residual
+    broken = np.diff(t) > 1.5 * dt
     edge = np.diff(np.concatenate([[0], (~bad).astype(np.int8), [0]]))
     runs = []
     for a, b in zip(np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)):
