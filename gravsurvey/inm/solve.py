@@ -27,7 +27,7 @@ from .errormodel import (
     initial_mean,
     state_perm,
 )
-from .heightqc import find_height_faults, repair_heights
+from .heightqc import LATENCY_K, LATENCY_MAX_S, LATENCY_MIN_S, estimate_latency, find_height_faults, repair_heights
 from .identify import (
     drift_sigma_passed,
     horizontal_prior,
@@ -460,9 +460,10 @@ def _check_track(record, params, sol, ellipsoid):
 
 
 def _repaired_heights(record, nav, ellipsoid):
-    """The record with its height channel's spikes dropped and steps taken off
-    (:mod:`gravsurvey.inm.heightqc`), the warnings that say so, and the facts for the report
-    (``spikes``, ``steps``: time s and size m each; empty when nothing was found)."""
+    """The record with its height channel's spikes dropped, steps taken off and stamps moved
+    back by a clear latency (:mod:`gravsurvey.inm.heightqc`), the warnings that say so, and
+    the facts for the report (``spikes``, ``steps``: time s and size m each, ``latency_s`` and
+    ``latency_sigma_s``; empty when nothing was found)."""
     alt_t = np.asarray(record.altimeter.time, float)
     alt_h = np.asarray(record.altimeter.height, float)
     inside = np.flatnonzero(np.isfinite(alt_h) & (alt_t >= nav.time[0]) & (alt_t <= nav.time[-1]))
@@ -470,17 +471,25 @@ def _repaired_heights(record, nav, ellipsoid):
         return record, [], {}
     t, e = vertical_residual(nav, alt_t[inside], alt_h[inside], ellipsoid)
     faults = find_height_faults(t, e)
-    if not faults:
+    latency = _height_latency(nav, t, e, faults)
+    if not faults and latency is None:
         return record, [], {}
     fixed = np.array(alt_h, float)
     fixed[inside] = repair_heights(alt_h[inside], faults)
     for start, size in faults.steps:
         # the samples after the checked span follow the last level too
         fixed[inside[-1] + 1 :] -= size
-    record = dataclasses.replace(record, altimeter=dataclasses.replace(record.altimeter, height=fixed))
+    shifted = alt_t if latency is None else alt_t - latency[0]
+    record = dataclasses.replace(record, altimeter=dataclasses.replace(record.altimeter, time=shifted, height=fixed))
     steps = [(float(t[i]), float(size)) for i, size in faults.steps]
     facts = {"spikes": int(faults.spikes.size), "steps": [{"time_s": a, "size_m": b} for a, b in steps]}
     what = []
+    if latency is not None:
+        facts["latency_s"], facts["latency_sigma_s"] = latency
+        what.append(
+            f"stamps {latency[0]:+.3f} s (+-{latency[1]:.3f}) late against the IMU, taken off (the residual "
+            "against the inertial height follows the vertical velocity)"
+        )
     if faults.spikes.size:
         what.append(f"{faults.spikes.size} spike(s) dropped")
     if steps:
@@ -491,10 +500,27 @@ def _repaired_heights(record, nav, ellipsoid):
         record,
         [
             f"{source}: altimeter.height: {' and '.join(what)}; found against the inertial height "
-            '(docs/method.md, "Height spikes and steps")'
+            '(docs/method.md, "Height spikes, steps and latency")'
         ],
         facts,
     )
+
+
+def _height_latency(nav, t, e, faults):
+    """The height stamps' latency (s) and its standard error when it is clear and plausible
+    (:data:`heightqc.LATENCY_K` standard errors, at least :data:`heightqc.LATENCY_MIN_S`, at most
+    :data:`heightqc.LATENCY_MAX_S`), else None; spikes left out, steps taken off first."""
+    h_e = np.array(e, float)
+    for start, size in faults.steps:
+        h_e[start:] += size  # e = h_ins - h_alt: a step up of the heights took e down
+    keep = np.ones(t.size, bool)
+    keep[faults.spikes] = False
+    radial = np.einsum("ij,ij->i", nav.r_i, nav.v_i) / np.linalg.norm(nav.r_i, axis=1)
+    v = np.interp(t, nav.time, radial)
+    lat, sig = estimate_latency(t[keep], h_e[keep], v[keep])
+    if not (math.isfinite(lat) and abs(lat) >= max(LATENCY_K * sig, LATENCY_MIN_S) and abs(lat) <= LATENCY_MAX_S):
+        return None
+    return float(lat), float(sig)
 
 
 def _altimeter(record):
