@@ -26,7 +26,7 @@ import numpy as np
 
 from ..io.checks import single_sample_outliers
 
-__all__ = ["HeightFaults", "find_height_faults", "repair_heights", "estimate_latency"]
+__all__ = ["HeightFaults", "find_height_faults", "frozen_samples", "repair_heights", "estimate_latency"]
 
 #: A spike: a sample off the mean of its neighbours by more than this many robust sigmas, its
 #: neighbours off theirs the other way (:func:`gravsurvey.io.checks.single_sample_outliers`).
@@ -52,18 +52,34 @@ LATENCY_K = 8.0
 LATENCY_MIN_S = 0.04
 #: Longest latency believed, s (beyond it the clocks are out of step, not a processing delay).
 LATENCY_MAX_S = 2.0
+#: A step is looked for only where the samples either side are at most this far apart, s (or
+#: 3 samples): across a longer gap the fits would extrapolate, and a 30-s gap read as a 1.6-m
+#: step put 43 mGal into quick U214; there the heights are left to the filter, as before.
+STEP_MAX_GAP_S = 2.0
+#: A frozen height: at least this many consecutive samples with the very same value ...
+FREEZE_MIN_SAMPLES = 5
+#: ... lasting at least this long, s ...
+FREEZE_MIN_S = 1.0
+#: ... in a record whose other samples repeat their predecessor this rarely (a quantised height
+#: repeats by nature: there nothing is taken for frozen) ...
+FREEZE_MAX_REPEAT_FRACTION = 0.01
+#: ... and at most this share of the record frozen (a noiseless simulated height at a constant
+#: altitude repeats throughout: that is the signal).
+FREEZE_MAX_FRACTION = 0.05
 #: Robust sigma of a normal sample from its median absolute deviation.
 MAD_SIGMA = 1.4826
 
 
 @dataclass
 class HeightFaults:
-    """Spikes and steps of a height record.
+    """Spikes, frozen stretches and steps of a height record.
 
     Attributes
     ----------
     spikes : ndarray of int
-        Indices of the samples to drop.
+        Indices of the samples to drop (spikes and frozen samples).
+    frozen : int
+        How many of them repeat a frozen value.
     steps : list of (int, float)
         Index of the first sample after each step and its size (measured height after minus
         before, m), in time order.
@@ -71,6 +87,7 @@ class HeightFaults:
 
     spikes: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     steps: list = field(default_factory=list)
+    frozen: int = 0
 
     def __bool__(self) -> bool:
         return bool(self.spikes.size or self.steps)
@@ -82,6 +99,33 @@ def _robust_sigma(x) -> float:
     if x.size == 0:
         return 0.0
     return MAD_SIGMA * float(np.median(np.abs(x - np.median(x))))
+
+
+def frozen_samples(time, height) -> np.ndarray:
+    """Samples of a height that holds its value: the repeats after the first of a run of at least
+    :data:`FREEZE_MIN_SAMPLES` equal values over :data:`FREEZE_MIN_S` (a stalled sensor or
+    logger); none in a record that repeats values by nature (quantised, or noiseless: more than
+    :data:`FREEZE_MAX_FRACTION` of it in such runs).
+
+    Returns
+    -------
+    ndarray of int
+    """
+    t = np.asarray(time, float)
+    h = np.asarray(height, float)
+    if h.size < FREEZE_MIN_SAMPLES + 1:
+        return np.zeros(0, np.int64)
+    same = h[1:] == h[:-1]
+    edge = np.diff(np.concatenate([[0], same.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+    # runs of repeats: same[a:b] True means samples a+1..b repeat sample a
+    runs = [(a, b) for a, b in zip(starts, stops) if b - a + 1 >= FREEZE_MIN_SAMPLES and t[b] - t[a] >= FREEZE_MIN_S]
+    in_runs = sum(b - a for a, b in runs)
+    if (int(same.sum()) - in_runs) > FREEZE_MAX_REPEAT_FRACTION * h.size or in_runs > FREEZE_MAX_FRACTION * h.size:
+        return np.zeros(0, np.int64)
+    if not runs:
+        return np.zeros(0, np.int64)
+    return np.concatenate([np.arange(a + 1, b + 1) for a, b in runs]).astype(np.int64)
 
 
 def _bins(t, e, dt):
@@ -139,6 +183,10 @@ def _find_steps(t, e, dt) -> list:
     lo_before = np.searchsorted(tb, at - STEP_WINDOW_S, side="left")
     hi_after = np.searchsorted(tb, at + STEP_WINDOW_S, side="right")
     jump = _side_fit(tb, eb, j, hi_after, at) - _side_fit(tb, eb, lo_before, j, at)
+    # not across a gap: the last sample of bin j-1 and the first of bin j too far apart
+    last_before = t[first[j] - 1]
+    first_after = t[first[j]]
+    jump[(first_after - last_before) > max(STEP_MAX_GAP_S, 3.0 * dt)] = np.nan
     s = _robust_sigma(jump)
     if not s > 0.0:
         return []
@@ -181,8 +229,9 @@ def _find_steps(t, e, dt) -> list:
     return out
 
 
-def find_height_faults(time, residual_m) -> HeightFaults:
-    """Spikes and steps of the height channel from its residual against the inertial height.
+def find_height_faults(time, residual_m, height_m=None) -> HeightFaults:
+    """Spikes, frozen stretches and steps of the height channel from its residual against the
+    inertial height.
 
     Parameters
     ----------
@@ -191,6 +240,8 @@ def find_height_faults(time, residual_m) -> HeightFaults:
     residual_m : ndarray (k,)
         Mechanized minus measured height at those times, m
         (:func:`gravsurvey.inm.identify.vertical_residual`).
+    height_m : ndarray (k,), optional
+        The measured heights themselves (for :func:`frozen_samples`).
 
     Returns
     -------
@@ -201,13 +252,17 @@ def find_height_faults(time, residual_m) -> HeightFaults:
     e = np.asarray(residual_m, float)
     if t.size < 16:
         return HeightFaults()
-    spikes = single_sample_outliers(e, SPIKE_K)
+    frozen = frozen_samples(t, height_m) if height_m is not None else np.zeros(0, np.int64)
     keep = np.ones(t.size, bool)
+    keep[frozen] = False
+    live = np.flatnonzero(keep)
+    spikes = live[single_sample_outliers(e[live], SPIKE_K)]
     keep[spikes] = False
     idx = np.flatnonzero(keep)
     dt = float(np.median(np.diff(t)))
     steps = [(int(idx[k]), size) for k, size in _find_steps(t[idx], e[idx], dt)]
-    return HeightFaults(spikes=spikes, steps=steps)
+    dropped = np.union1d(frozen, spikes).astype(np.int64)
+    return HeightFaults(spikes=dropped, steps=steps, frozen=int(frozen.size))
 
 
 def repair_heights(height, faults: HeightFaults) -> np.ndarray:
@@ -266,6 +321,14 @@ def estimate_latency(time, residual_m, vertical_velocity_mps):
     w = max(3, int(round(LATENCY_HIGHPASS_S / max(dt, 1e-9))))
     y = e - _running_mean(e, w)
     x = v - _running_mean(v, w)
+    # a running mean across a gap mixes both sides: the samples within half a window of one
+    # are left out (a 30-s gap read as a 53-ms latency otherwise)
+    gap = np.flatnonzero(np.diff(t) > max(STEP_MAX_GAP_S, 3.0 * dt))
+    if gap.size:
+        near = np.zeros(t.size, bool)
+        for g in gap:
+            near |= (t > t[g] - 0.5 * LATENCY_HIGHPASS_S) & (t < t[g + 1] + 0.5 * LATENCY_HIGHPASS_S)
+        x, y = x[~near], y[~near]
     sxx = float(x @ x)
     if not sxx > 0.0:
         return math.nan, math.nan

@@ -470,7 +470,7 @@ def _repaired_heights(record, nav, ellipsoid):
     if inside.size < 16:
         return record, [], {}
     t, e = vertical_residual(nav, alt_t[inside], alt_h[inside], ellipsoid)
-    faults = find_height_faults(t, e)
+    faults = find_height_faults(t, e, alt_h[inside])
     latency = _height_latency(nav, t, e, faults)
     if not faults and latency is None:
         return record, [], {}
@@ -482,7 +482,11 @@ def _repaired_heights(record, nav, ellipsoid):
     shifted = alt_t if latency is None else alt_t - latency[0]
     record = dataclasses.replace(record, altimeter=dataclasses.replace(record.altimeter, time=shifted, height=fixed))
     steps = [(float(t[i]), float(size)) for i, size in faults.steps]
-    facts = {"spikes": int(faults.spikes.size), "steps": [{"time_s": a, "size_m": b} for a, b in steps]}
+    facts = {
+        "spikes": int(faults.spikes.size - faults.frozen),
+        "frozen": faults.frozen,
+        "steps": [{"time_s": a, "size_m": b} for a, b in steps],
+    }
     what = []
     if latency is not None:
         facts["latency_s"], facts["latency_sigma_s"] = latency
@@ -490,8 +494,10 @@ def _repaired_heights(record, nav, ellipsoid):
             f"stamps {latency[0]:+.3f} s (+-{latency[1]:.3f}) late against the IMU, taken off (the residual "
             "against the inertial height follows the vertical velocity)"
         )
-    if faults.spikes.size:
-        what.append(f"{faults.spikes.size} spike(s) dropped")
+    if faults.spikes.size - faults.frozen:
+        what.append(f"{faults.spikes.size - faults.frozen} spike(s) dropped")
+    if faults.frozen:
+        what.append(f"{faults.frozen} sample(s) of a frozen (repeated) value dropped")
     if steps:
         listed = ", ".join(f"{b:+.2f} m at {a:.0f} s" for a, b in steps)
         what.append(f"{len(steps)} step(s) taken off the heights after them ({listed} after the record's start)")
