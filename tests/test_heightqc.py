@@ -15,7 +15,12 @@ from gravsurvey.inm.params import InmParams
 from gravsurvey.inm.solve import estimate_anomaly
 from gravsurvey.io.record import AltimeterChannel
 
-from test_inm_identify import _rms_mid, noisy_flight  # noqa: F401  (the fixture)
+from test_inm_identify import (  # noqa: F401  (noisy_flight: the fixture)
+    NAVIGATION_GRADE,
+    rms_mid,
+    noisy_flight,
+    record_and_truth_start,
+)
 
 
 def _residual(rate_hz, seed, span_s=2400.0, sigma_m=0.05, drift_m=300.0):
@@ -77,7 +82,7 @@ def test_a_step_in_the_heights_is_repaired_before_the_estimate(noisy_flight):  #
     assert facts["steps"][0]["size_m"] == pytest.approx(0.3, abs=0.03)
     notes = from_inm_solution(sol, name="F01").notes
     assert any("1 step(s) taken off" in n and "3 spike(s) dropped" in n for n in notes), notes
-    assert _rms_mid(sol, s) < 1.05 * _rms_mid(clean, s)
+    assert rms_mid(sol, s) < 1.05 * rms_mid(clean, s)
     # what the repair saves: the same record with the check switched off
     off = dataclasses.replace(Q.HeightFaults())
     assert not off
@@ -89,7 +94,7 @@ def test_a_step_in_the_heights_is_repaired_before_the_estimate(noisy_flight):  #
         unrepaired = estimate_anomaly(broken, InmParams(), init, "platform")
     finally:
         solve.find_height_faults = original
-    assert _rms_mid(unrepaired, s) > 2.0 * _rms_mid(sol, s)
+    assert rms_mid(unrepaired, s) > 2.0 * rms_mid(sol, s)
     # a clean record is left as it is: no facts, no warning
     assert "height_faults" not in clean.identification
 
@@ -113,17 +118,9 @@ def test_latency_is_the_slope_of_the_residual_on_the_vertical_velocity():
 def turbulent_flight():
     """30 min of level flight in turbulence (0.8 m of vertical motion at 2-60 s periods),
     navigation-grade noise, 5 Hz heights with 5 cm of noise: the estimator is not told."""
-    from gravsurvey.inm.params import InitialState
-    from gravsurvey.io.record import FlightRecord, ImuChannel
     from gravsurvey.simulate.run import quick_sim, simulate_flight
 
-    sensors = {
-        "accelerometer": {"white_sigma_mps2": 5e-4},
-        "gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 3e-6, "markov_lambda_per_s": 0.002},
-        "gyro": {"white_drift_degph": 0.01},
-        "altimeter": {"sigma_m": 0.05},
-        "gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0},
-    }
+    sensors = NAVIGATION_GRADE
     turbulence = {
         "vertical_sigma_m": 0.8,
         "horizontal_sigma_m": 1.0,
@@ -143,16 +140,7 @@ def turbulent_flight():
         seed=3,
     )
     s = simulate_flight(sim)
-    rec = FlightRecord(
-        s.start_unix_ns,
-        ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
-        AltimeterChannel(s.alt_time, s.alt_height),
-        None,
-        source="sim",
-    )
-    tr = s.truth
-    init = InitialState(tr["lat"][0], tr["lon"][0], tr["height"][0], tr["vel_n"][0].copy(), tr["mat_nt"][0].copy())
-    return s, rec, init
+    return (s, *record_and_truth_start(s))
 
 
 def test_late_height_stamps_are_taken_back_before_the_estimate(turbulent_flight):
@@ -165,7 +153,7 @@ def test_late_height_stamps_are_taken_back_before_the_estimate(turbulent_flight)
     facts = sol.identification["height_faults"]
     assert facts["latency_s"] == pytest.approx(0.15, abs=max(4 * facts["latency_sigma_s"], 0.005))
     assert any("late against the IMU" in n for n in from_inm_solution(sol, name="F01").notes)
-    assert _rms_mid(sol, s) < 1.05 * _rms_mid(clean, s)
+    assert rms_mid(sol, s) < 1.05 * rms_mid(clean, s)
     assert "height_faults" not in clean.identification
 
 
@@ -184,7 +172,7 @@ def test_frozen_heights_and_gaps_are_not_read_as_steps(noisy_flight):  # noqa: F
     sol = estimate_anomaly(broken, InmParams(), init, "platform")
     facts = sol.identification["height_faults"]
     assert facts["frozen"] == frozen.size - 1 and facts["spikes"] == 0 and facts["steps"] == []
-    assert _rms_mid(sol, s) < 1.05 * _rms_mid(clean, s)
+    assert rms_mid(sol, s) < 1.05 * rms_mid(clean, s)
     # a quantised height repeats by nature: nothing is taken for frozen there
     q = np.round(h / 0.2) * 0.2
     assert Q.frozen_samples(t, q).size == 0

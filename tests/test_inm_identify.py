@@ -202,18 +202,22 @@ def test_prior_holds_a_smooth_field_below_the_analysed_band():
     assert held_w < 0.5 * held
 
 
+#: Sensor errors of the simulated flights of these tests (and tests/test_heightqc.py).
+NAVIGATION_GRADE = {
+    "accelerometer": {"white_sigma_mps2": 5e-4},
+    "gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 3e-6, "markov_lambda_per_s": 0.002},
+    "gyro": {"white_drift_degph": 0.01},
+    "altimeter": {"sigma_m": 0.05},
+    "gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0},
+}
+
+
 @pytest.fixture(scope="module")
 def noisy_flight():
     """1 h straight platform flight over point masses and a dipole (3-10 km deep, 3-30 km
     wavelengths), 5 cm height noise at 5 Hz, gravimeter white 1 mGal/sqrt(Hz) plus a Markov
     error: the sensor values are NOT given to the estimator."""
-    sensors = {
-        "accelerometer": {"white_sigma_mps2": 5e-4},
-        "gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 3e-6, "markov_lambda_per_s": 0.002},
-        "gyro": {"white_drift_degph": 0.01},
-        "altimeter": {"sigma_m": 0.05},
-        "gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0},
-    }
+    sensors = NAVIGATION_GRADE
     field = {
         "type": "model",
         "point_masses": [
@@ -239,6 +243,11 @@ def noisy_flight():
     s = simulate_flight(
         quick_sim(duration_s=3600, speed_mps=70.0, altimeter_hz=5.0, field=field, noise=sensors, seed=7)
     )
+    return (s, *record_and_truth_start(s))
+
+
+def record_and_truth_start(s):
+    """The FlightRecord of a simulation (IMU and heights, no GNSS) and its true initial state."""
     rec = FlightRecord(
         s.start_unix_ns,
         ImuChannel(s.imu_time, s.specific_force_t, s.angular_rate_t),
@@ -248,10 +257,10 @@ def noisy_flight():
     )
     tr = s.truth
     init = InitialState(tr["lat"][0], tr["lon"][0], tr["height"][0], tr["vel_n"][0].copy(), tr["mat_nt"][0].copy())
-    return s, rec, init
+    return rec, init
 
 
-def _rms_mid(sol, s):
+def rms_mid(sol, s):
     g = np.interp(sol.time, s.truth["time"], s.truth["disturbance"])
     keep = (sol.time > sol.time[0] + 600) & (sol.time < sol.time[-1] - 600)
     e = (sol.g_smooth - g)[keep]
@@ -269,7 +278,7 @@ def test_identified_flight_beats_the_seed_defaults_and_reports_itself(noisy_flig
     assert ident.params.altimeter_sigma_m == rep["altimeter_sigma_m"]["value"]
     assert math.isfinite(ident.resolution_m) and 500.0 < ident.resolution_m < 1e5
     # the seed's prior with its 1 m height noise is what a user got before; identification wins
-    assert _rms_mid(ident, s) < _rms_mid(seed, s)
+    assert rms_mid(ident, s) < rms_mid(seed, s)
 
 
 def test_dropped_height_samples_do_not_stop_the_identification(noisy_flight):
@@ -288,7 +297,7 @@ def test_dropped_height_samples_do_not_stop_the_identification(noisy_flight):
     assert any("missing height samples" in n for n in rep["notes"])
     assert rep["altimeter_sigma_m"]["value"] == pytest.approx(0.05, rel=0.05)
     assert rep["anomaly_sigma_mps2"]["how"].startswith("least expected error")
-    assert _rms_mid(sol, s) < 1.1 * _rms_mid(full, s)
+    assert rms_mid(sol, s) < 1.1 * rms_mid(full, s)
     # an outage of 3 s every 30 s (longer than a fill): no stretch of 60 s, the 27-s ones pooled
     t = rec.altimeter.time
     up = np.mod(t - t[0], 30.0) >= 3.0
@@ -301,7 +310,7 @@ def test_dropped_height_samples_do_not_stop_the_identification(noisy_flight):
     # a tenth of the heights lost costs the estimate some accuracy (0.64 -> 0.73 mGal), but
     # the model identified from the broken record does as well as the whole record's would
     known = dataclasses.replace(full.params, given=frozenset(I.IDENTIFIED_KEYS))
-    assert _rms_mid(sol, s) < 1.05 * _rms_mid(estimate_anomaly(cut, known, init, "platform"), s)
+    assert rms_mid(sol, s) < 1.05 * rms_mid(estimate_anomaly(cut, known, init, "platform"), s)
 
 
 def test_jittered_height_stamps_do_not_stop_the_identification(noisy_flight):
@@ -318,7 +327,7 @@ def test_jittered_height_stamps_do_not_stop_the_identification(noisy_flight):
     assert rep["method"] == "whittle-vertical-spectrum" and not rep["warnings"], rep["warnings"]
     assert rep["anomaly_sigma_mps2"]["how"].startswith("least expected error")
     known = dataclasses.replace(full.params, given=frozenset(I.IDENTIFIED_KEYS))
-    assert _rms_mid(sol, s) < 1.1 * _rms_mid(estimate_anomaly(jittered, known, init, "platform"), s)
+    assert rms_mid(sol, s) < 1.1 * rms_mid(estimate_anomaly(jittered, known, init, "platform"), s)
 
 
 def test_fill_short_gaps():
