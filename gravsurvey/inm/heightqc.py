@@ -1,4 +1,5 @@
-"""Faults of the height channel, found against the inertial height: spikes, steps, latency.
+"""Faults of the height channel, found against the inertial height: spikes, frozen values,
+steps, latency.
 
 A GNSS height jumps when the receiver loses and re-fixes its ambiguities, a barometric or
 radar-derived height has single-sample outliers. The Kalman filter takes either as a real
@@ -8,13 +9,14 @@ estimate (quick U214 of the unseen suite, 0.44 mGal without), with nothing to sh
 The aircraft's true height cancels in the residual ``e = h_ins - h_alt`` between the
 mechanized and the measured height (:func:`gravsurvey.inm.identify.vertical_residual`): what
 is left is the inertial height error, smooth over seconds, plus the measurement's noise. A
-spike stands out of a running median of ``e``; a step is a jump between quadratic fits of
-``e`` over the 20 s before and after a point (on 0.5-s means). Both are judged against the
-flight's own robust scale of the same statistic, so the threshold follows the channel's noise
-whatever its rate. A spike is dropped, a step taken off the heights after it (the height's
-absolute level changes normal gravity by 0.3 mGal/m, a constant the levelling owns). Stamps
-late against the IMU show as a residual that follows the vertical velocity
-(:func:`estimate_latency`).
+spike stands alone off both neighbours (:func:`gravsurvey.io.checks.single_sample_outliers`);
+a step is a jump between quadratic fits of ``e`` over the 20 s before and after a point (on
+0.5-s means), never across a gap. Both are judged against the flight's own robust scale of the
+same statistic, so the threshold follows the channel's noise whatever its rate. A run of
+identical values (a stalled sensor) is dropped, except in a record that repeats by nature. A
+spike is dropped, a step taken off the heights after it (the height's absolute level changes
+normal gravity by 0.3 mGal/m, a constant the levelling owns). Stamps late against the IMU show
+as a residual that follows the vertical velocity (:func:`estimate_latency`).
 """
 
 from __future__ import annotations

@@ -323,13 +323,13 @@ def estimate_anomaly(
     ident = {}
     given_params, reidentify = params, True
     accel_bias = accel_bias_states_for(params, triad)
-    height_warnings = []
+    height_warnings, height_facts = [], {}
     for k in range(passes):
         nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
         if k == 0:
-            # the height channel's spikes and steps, found against this first mechanization,
-            # repaired before anything reads the heights (and the flight mechanized again:
-            # the gravity model's radius may come from them)
+            # the height channel's spikes, frozen stretches, steps and latency, found against
+            # this first mechanization, repaired before anything reads the heights (and the
+            # flight mechanized again: the gravity model's radius may come from them)
             record, height_warnings, height_facts = _repaired_heights(record, nav, ellipsoid)
             if height_warnings:
                 nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
@@ -460,10 +460,10 @@ def _check_track(record, params, sol, ellipsoid):
 
 
 def _repaired_heights(record, nav, ellipsoid):
-    """The record with its height channel's spikes dropped, steps taken off and stamps moved
-    back by a clear latency (:mod:`gravsurvey.inm.heightqc`), the warnings that say so, and
-    the facts for the report (``spikes``, ``steps``: time s and size m each, ``latency_s`` and
-    ``latency_sigma_s``; empty when nothing was found)."""
+    """The record with its height channel's spikes and frozen samples dropped, steps taken off
+    and stamps moved back by a clear latency (:mod:`gravsurvey.inm.heightqc`), the warnings that
+    say so, and the facts for the report (``spikes``, ``frozen``, ``steps``: time s and size m
+    each, ``latency_s`` and ``latency_sigma_s``; empty when nothing was found)."""
     alt_t = np.asarray(record.altimeter.time, float)
     alt_h = np.asarray(record.altimeter.height, float)
     inside = np.flatnonzero(np.isfinite(alt_h) & (alt_t >= nav.time[0]) & (alt_t <= nav.time[-1]))
