@@ -478,6 +478,10 @@ def repair_and_check(raw: dict, options: IngestOptions):
         findings += ck.check_epoch(role, t)
     if "imu" in raw:
         ch = raw["imu"]
+        for key in ("specific_force", "angular_rate"):
+            # repaired in place: a reader's zero-copy view of its buffer is copied first
+            if not ch.values[key].flags.writeable:
+                ch.values[key] = ch.values[key].copy()
         findings += ck.repair_imu_glitches(
             ch.values["specific_force"],
             ch.values["angular_rate"],
