@@ -26,7 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..io.checks import single_sample_outliers
+from ..io.checks import robust_sigma, single_sample_outliers
+from .identify import running_mean
 
 __all__ = ["HeightFaults", "find_height_faults", "frozen_samples", "repair_heights", "estimate_latency"]
 
@@ -68,8 +69,6 @@ FREEZE_MAX_REPEAT_FRACTION = 0.01
 #: ... and at most this share of the record frozen (a noiseless simulated height at a constant
 #: altitude repeats throughout: that is the signal).
 FREEZE_MAX_FRACTION = 0.05
-#: Robust sigma of a normal sample from its median absolute deviation.
-MAD_SIGMA = 1.4826
 
 
 @dataclass
@@ -93,14 +92,6 @@ class HeightFaults:
 
     def __bool__(self) -> bool:
         return bool(self.spikes.size or self.steps)
-
-
-def _robust_sigma(x) -> float:
-    x = np.asarray(x, float)
-    x = x[np.isfinite(x)]
-    if x.size == 0:
-        return 0.0
-    return MAD_SIGMA * float(np.median(np.abs(x - np.median(x))))
 
 
 def frozen_samples(time, height) -> np.ndarray:
@@ -189,7 +180,7 @@ def _find_steps(t, e, dt) -> list:
     last_before = t[first[j] - 1]
     first_after = t[first[j]]
     jump[(first_after - last_before) > max(STEP_MAX_GAP_S, 3.0 * dt)] = np.nan
-    s = _robust_sigma(jump)
+    s = robust_sigma(jump)
     if not s > 0.0:
         return []
     z = np.abs(np.nan_to_num(jump)) / s
@@ -283,14 +274,6 @@ def repair_heights(height, faults: HeightFaults) -> np.ndarray:
     return h
 
 
-def _running_mean(x, w):
-    c = np.concatenate([[0.0], np.cumsum(x)])
-    i = np.arange(x.size)
-    lo = np.clip(i - w // 2, 0, x.size)
-    hi = np.clip(i + w // 2 + 1, 0, x.size)
-    return (c[hi] - c[lo]) / (hi - lo)
-
-
 def estimate_latency(time, residual_m, vertical_velocity_mps):
     """How late the height stamps are against the inertial time base, s, and its standard error.
 
@@ -321,8 +304,8 @@ def estimate_latency(time, residual_m, vertical_velocity_mps):
         return math.nan, math.nan
     dt = float(np.median(np.diff(t)))
     w = max(3, int(round(LATENCY_HIGHPASS_S / max(dt, 1e-9))))
-    y = e - _running_mean(e, w)
-    x = v - _running_mean(v, w)
+    y = e - running_mean(e, w)
+    x = v - running_mean(v, w)
     # a running mean across a gap mixes both sides: the samples within half a window of one
     # are left out (a 30-s gap read as a 53-ms latency otherwise)
     gap = np.flatnonzero(np.diff(t) > max(STEP_MAX_GAP_S, 3.0 * dt))
@@ -338,5 +321,5 @@ def estimate_latency(time, residual_m, vertical_velocity_mps):
     res = y - slope * x
     # the high-pass correlates neighbouring residuals little at these windows; the robust
     # scale keeps a spike or two from inflating the error
-    sigma = _robust_sigma(res) / math.sqrt(sxx)
+    sigma = robust_sigma(res) / math.sqrt(sxx)
     return slope, sigma

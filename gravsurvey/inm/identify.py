@@ -51,6 +51,7 @@ __all__ = [
     "vertical_psd",
     "vertical_residual",
     "straight_runs",
+    "running_mean",
     "fill_short_gaps",
     "fit_vertical_spectrum",
     "identify_params",
@@ -204,7 +205,7 @@ def vertical_residual(nav, alt_time, alt_height, ellipsoid: Ellipsoid = WGS84):
     return t, np.linalg.norm(r_i, axis=1) - r_ext
 
 
-def _running_mean(x, w):
+def running_mean(x, w):
     """Centred running mean over ``w`` samples along axis 0 (shrinking at the ends)."""
     c = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)])
     i = np.arange(x.shape[0])

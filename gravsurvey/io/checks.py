@@ -457,6 +457,16 @@ IMU_SPIKE_TAIL = 4.0
 IMU_SPIKE_MAX_FRACTION = 0.001
 
 
+def robust_sigma(x) -> float:
+    """1.4826 x the median absolute deviation of the finite values of ``x``: the sigma of a
+    normal sample, unmoved by a few outliers (0 for none)."""
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return 0.0
+    return 1.4826 * float(np.median(np.abs(x - np.median(x))))
+
+
 def single_sample_outliers(x, k_sigma: float, tail_factor: float | None = None):
     """Samples that stand alone off both neighbours.
 
@@ -486,7 +496,7 @@ def single_sample_outliers(x, k_sigma: float, tail_factor: float | None = None):
     if x.size < 5 or not np.isfinite(x).all():
         return np.zeros(0, np.int64)
     r = x[1:-1] - 0.5 * (x[:-2] + x[2:])
-    s = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    s = robust_sigma(r)
     if not s > 0.0:
         return np.zeros(0, np.int64)
     level = k_sigma * s
