@@ -274,23 +274,27 @@ def repair_heights(height, faults: HeightFaults) -> np.ndarray:
     return h
 
 
-def estimate_latency(time, residual_m, vertical_velocity_mps):
+def estimate_latency(time, residual_m, vertical_velocity_mps, highpass_s=LATENCY_HIGHPASS_S):
     """How late the height stamps are against the inertial time base, s, and its standard error.
 
     A height stamped ``L`` after it was measured gives ``e(t) = h_ins(t) - h(t - L) ~ dh_ins +
     L v_z(t)``: the residual follows the vertical velocity. ``L`` is the least-squares slope of
-    the residual on ``v_z``, both less their running mean over :data:`LATENCY_HIGHPASS_S` (the
-    inertial height error is slow; the turbulence's vertical motion is not), its standard error
-    from the scatter about the fit.
+    the residual on ``v_z``, both less their running mean over ``highpass_s`` (the inertial
+    height error is slow; the turbulence's vertical motion is not), its standard error from the
+    scatter about the fit. Several axes (columns) are pooled into one slope: the GNSS
+    positions' latency (:func:`gravsurvey.inm.gnssqc.estimate_gnss_latency`) is the same
+    regression on the horizontal residual and velocity.
 
     Parameters
     ----------
     time : ndarray (k,)
         Height sample times, s.
-    residual_m : ndarray (k,)
-        Mechanized minus measured height, m.
-    vertical_velocity_mps : ndarray (k,)
-        The mechanization's vertical velocity at those times, m/s.
+    residual_m : ndarray (k,) or (k, m)
+        Mechanized minus measured height (or position on ``m`` axes), m.
+    vertical_velocity_mps : ndarray, shaped as ``residual_m``
+        The mechanization's vertical velocity (velocity on the same axes) at those times, m/s.
+    highpass_s : float
+        Window of the running mean taken off both, s.
 
     Returns
     -------
@@ -303,7 +307,7 @@ def estimate_latency(time, residual_m, vertical_velocity_mps):
     if t.size < 32:
         return math.nan, math.nan
     dt = float(np.median(np.diff(t)))
-    w = max(3, int(round(LATENCY_HIGHPASS_S / max(dt, 1e-9))))
+    w = max(3, int(round(highpass_s / max(dt, 1e-9))))
     y = e - running_mean(e, w)
     x = v - running_mean(v, w)
     # a running mean across a gap mixes both sides: the samples within half a window of one
@@ -312,8 +316,9 @@ def estimate_latency(time, residual_m, vertical_velocity_mps):
     if gap.size:
         near = np.zeros(t.size, bool)
         for g in gap:
-            near |= (t > t[g] - 0.5 * LATENCY_HIGHPASS_S) & (t < t[g + 1] + 0.5 * LATENCY_HIGHPASS_S)
+            near |= (t > t[g] - 0.5 * highpass_s) & (t < t[g + 1] + 0.5 * highpass_s)
         x, y = x[~near], y[~near]
+    x, y = x.ravel(), y.ravel()
     sxx = float(x @ x)
     if not sxx > 0.0:
         return math.nan, math.nan

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError, DataError
-from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, mat_en, mat_ie
+from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, mat_en, mat_ie, radii_of_curvature
 from .errormodel import (
     BG,
     DP,
@@ -27,6 +27,7 @@ from .errormodel import (
     initial_mean,
     state_perm,
 )
+from .gnssqc import estimate_gnss_latency, latency_is_clear, shift_gnss
 from .heightqc import LATENCY_K, LATENCY_MAX_S, LATENCY_MIN_S, estimate_latency, find_height_faults, repair_heights
 from .identify import (
     drift_sigma_passed,
@@ -324,9 +325,12 @@ def estimate_anomaly(
     given_params, reidentify = params, True
     accel_bias = accel_bias_states_for(params, triad)
     height_warnings, height_facts = [], {}
-    for k in range(passes):
+    gnss_latency = None  # (s, sigma s) once the first pass has measured it
+    k = -1
+    while k + 1 < passes:
+        k += 1
         nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
-        if k == 0:
+        if k == 0 and gnss_latency is None:
             # the height channel's spikes, frozen stretches, steps and latency, found against
             # this first mechanization, repaired before anything reads the heights (and the
             # flight mechanized again: the gravity model's radius may come from them)
@@ -355,6 +359,15 @@ def estimate_anomaly(
         idx, c, gnss_used, n_state, out = one_pass(params, accel_bias=accel_bias)
         if not gnss_used:
             break
+        if gnss_latency is None:
+            # late GNSS stamps, measured on this first aided track: taken off, and the pass run
+            # again (the model identified again) on the corrected stamps
+            gnss_latency = _gnss_latency(record, nav, idx, c, out, ellipsoid, gnss_lever_arm_t)
+            if latency_is_clear(*gnss_latency):
+                record = dataclasses.replace(record, gnss=shift_gnss(record.gnss, gnss_latency[0]))
+                reidentify = True
+                k -= 1
+                continue
         if k == passes - 1:
             corrections.append(_check_passes_settled(record, out, float(nav.time[-1] - nav.time[0]), passes))
             break
@@ -412,6 +425,19 @@ def estimate_anomaly(
     if height_warnings or height_facts:
         ident["height_faults"] = height_facts
         ident["warnings"] = height_warnings + list(ident.get("warnings", []))
+    if gnss_latency is not None and math.isfinite(gnss_latency[0]):
+        applied = latency_is_clear(*gnss_latency)
+        ident["gnss_latency"] = {
+            "latency_s": gnss_latency[0],
+            "sigma_s": gnss_latency[1],
+            "taken_off": applied,
+        }
+        if applied:
+            ident["warnings"] = [
+                f"{record.source or 'record'}: gnss: stamps {gnss_latency[0]:+.3f} s (+-{gnss_latency[1]:.3f}) late "
+                "against the IMU, taken off (the aided track's residual follows the horizontal velocity; "
+                'docs/method.md, "GNSS latency")'
+            ] + list(ident.get("warnings", []))
     sol.warnings = sol.warnings + list(ident.get("warnings", []))
     alt_t = np.asarray(record.altimeter.time, float)
     sol.resolution_m = (
@@ -431,7 +457,6 @@ TRACK_RESIDUAL_SIGMAS = 20.0
 
 def _check_track(record, params, sol, ellipsoid):
     """DataError when the corrected navigation leaves the GNSS track (median distance >> GNSS sigma)."""
-    from ..geodesy import radii_of_curvature
 
     gn = record.gnss
     tg = np.asarray(gn.time, float)
@@ -510,6 +535,34 @@ def _repaired_heights(record, nav, ellipsoid):
         ],
         facts,
     )
+
+
+def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None):
+    """How late the GNSS stamps are (s) and its standard error, from a pass's smoothed track.
+
+    The corrected navigation (at the antenna, with a lever arm) minus the GNSS positions, east
+    and north, regressed on the navigation's velocity (:func:`gnssqc.estimate_gnss_latency`).
+    """
+    err_q, err_p, _ = _triad_errors(out["x_s"], c, nav.r_i[idx], nav.v_i[idx])
+    r_corr = nav.r_i[idx] - np.einsum("nij,nj->ni", c, err_q)
+    if lever_arm_t is not None:
+        r_corr = r_corr + np.einsum("nij,j->ni", c, np.asarray(lever_arm_t, float))
+    v_corr = nav.v_i[idx] - np.einsum("nij,nj->ni", c, err_p)
+    t_e = nav.time[idx]
+    lat, lon, height, vel_n = navigation_to_geodetic(t_e, r_corr, v_corr, ellipsoid)
+    gn = record.gnss
+    tg = np.asarray(gn.time, float)
+    ok = (tg >= t_e[0]) & (tg <= t_e[-1]) & np.isfinite(gn.lat) & np.isfinite(gn.lon)
+    if ok.sum() < 32:
+        return math.nan, math.nan
+    t = tg[ok]
+    la = np.interp(t, t_e, lat)
+    lo = np.interp(t, t_e, np.unwrap(lon))
+    m, n = radii_of_curvature(la, ellipsoid)
+    d_lon = (lo - np.asarray(gn.lon, float)[ok] + math.pi) % (2.0 * math.pi) - math.pi
+    res = np.stack([d_lon * n * np.cos(la), (la - np.asarray(gn.lat, float)[ok]) * m], axis=1)
+    vel = np.stack([np.interp(t, t_e, vel_n[:, j]) for j in range(2)], axis=1)
+    return estimate_gnss_latency(t, res, vel)
 
 
 def _height_latency(nav, t, e, faults):

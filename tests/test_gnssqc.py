@@ -1,0 +1,108 @@
+"""Late GNSS stamps (gravsurvey/inm/gnssqc.py): the latency is the slope of the aided track's
+high-passed residual on the velocity, found on a simulated strapdown flight to a few ms, taken
+off before the estimate, and none is found where there is none."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import gravsurvey.inm.solve as solve
+from gravsurvey.estimate import from_inm_solution
+from gravsurvey.inm import gnssqc
+from gravsurvey.inm.params import InmParams
+from gravsurvey.inm.solve import estimate_anomaly
+from gravsurvey.io.record import GnssChannel
+from gravsurvey.simulate.run import quick_sim, simulate_flight
+
+from sim_record import record_and_initial
+from test_inm_identify import rms_mid
+
+
+def _turning_velocity(t, rng):
+    """East/north velocity of a 70 m/s flight: turns of 180 deg every 300 s and surges, (k, 2)."""
+    heading = np.pi * np.clip((t % 300.0 - 240.0) / 60.0, 0.0, 1.0) + np.pi * (t // 300.0)
+    speed = 70.0 + sum(0.5 * np.sin(2 * np.pi * t / p + rng.uniform(0, 6)) for p in (4.0, 9.0, 17.0, 40.0))
+    return np.stack([speed * np.sin(heading), speed * np.cos(heading)], axis=1)
+
+
+@pytest.mark.parametrize("latency", [0.0, 0.1, -0.25])
+def test_latency_is_the_slope_of_the_horizontal_residual_on_the_velocity(latency):
+    rng = np.random.default_rng(7)
+    t = np.arange(0.0, 1800.0, 0.2)
+    v = _turning_velocity(t, rng)
+    # the smoothed track's slow error (metres over minutes) and 0.3 m of GNSS noise
+    slow = np.stack([3.0 * np.sin(2 * np.pi * t / 900.0), 2.0 * (t / 1800.0) ** 2], axis=1)
+    res = slow + latency * v + 0.3 * rng.standard_normal(v.shape)
+    got, sigma = gnssqc.estimate_gnss_latency(t, res, v)
+    assert sigma < 0.005 and abs(got - latency) < 4 * sigma + 2e-3
+    assert gnssqc.latency_is_clear(got, sigma) == (latency != 0.0)
+    # straight and steady: nothing to regress on, no verdict
+    got, sigma = gnssqc.estimate_gnss_latency(t, slow, np.full((t.size, 2), 50.0))
+    assert np.isnan(got) and not gnssqc.latency_is_clear(got, sigma)
+
+
+def test_latency_verdict_bounds():
+    assert not gnssqc.latency_is_clear(0.015, 0.001)  # under LATENCY_MIN_S
+    assert not gnssqc.latency_is_clear(0.1, 0.03)  # within LATENCY_K standard errors
+    assert gnssqc.latency_is_clear(-0.1, 0.01)
+    assert not gnssqc.latency_is_clear(1.5, 0.01)  # the clock check's, not a latency
+    g = GnssChannel(np.arange(5.0), np.zeros(5), np.zeros(5), np.zeros(5))
+    shifted = gnssqc.shift_gnss(g, 0.2)
+    np.testing.assert_allclose(shifted.time, np.arange(5.0) - 0.2)
+    np.testing.assert_array_equal(g.time, np.arange(5.0))  # the record's channel is not touched
+    assert shifted.lat is g.lat
+
+
+@pytest.fixture(scope="module")
+def turning_strapdown():
+    """25 min strapdown grid (three 25-km lines, two turns) in turbulence, 5 Hz GNSS with 0.3 m
+    of noise: the estimator is told none of it."""
+    sim = quick_sim(
+        plan={
+            "kind": "grid",
+            "origin_lat_deg": 47.0,
+            "origin_lon_deg": 11.0,
+            "altitude_m": 800.0,
+            "speed_mps": 70.0,
+            "lines": {"count": 3, "spacing_m": 3000.0, "length_m": 25000.0, "heading_deg": 30.0},
+            "static_start_s": 120.0,
+        },
+        triad="strapdown",
+        noise={
+            "accelerometer": {"white_sigma_mps2": 5e-4},
+            "gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 3e-6, "markov_lambda_per_s": 0.002},
+            "gyro": {"white_drift_degph": 0.005},
+            "altimeter": {"sigma_m": 0.05},
+            "gnss": {"horizontal_sigma_m": 0.3, "vertical_sigma_m": 0.6},
+        },
+        field="seed_smooth",
+        gnss_hz=5.0,
+        altimeter_hz=5.0,
+        turbulence={"vertical_sigma_m": 1.0, "horizontal_sigma_m": 1.0, "attitude_sigma_deg": 0.5},
+        seed=11,
+    )
+    s = simulate_flight(sim)
+    return (s, *record_and_initial(s))
+
+
+def test_late_gnss_stamps_are_taken_off_before_the_estimate(turning_strapdown, monkeypatch):
+    """GNSS stamped 0.2 s late (a logger's receive time): found to a few ms, taken off, the
+    estimate as with the right stamps; left in, the same flight is clearly worse. The clean
+    flight has none."""
+    s, rec, init = turning_strapdown
+    clean = estimate_anomaly(rec, InmParams(), init, "strapdown")
+    assert not clean.identification["gnss_latency"]["taken_off"]
+    assert abs(clean.identification["gnss_latency"]["latency_s"]) < gnssqc.LATENCY_MIN_S
+    late = dataclasses.replace(rec, gnss=dataclasses.replace(rec.gnss, time=rec.gnss.time + 0.2))
+    sol = estimate_anomaly(late, InmParams(), init, "strapdown")
+    facts = sol.identification["gnss_latency"]
+    assert facts["taken_off"]
+    assert facts["latency_s"] == pytest.approx(0.2, abs=max(4 * facts["sigma_s"], 0.01))
+    assert any("gnss: stamps +0.2" in n and "late against the IMU" in n for n in from_inm_solution(sol, name="F01").notes)
+    assert rms_mid(sol, s) < 1.1 * rms_mid(clean, s)
+    monkeypatch.setattr(solve, "latency_is_clear", lambda *a: False)
+    left = estimate_anomaly(late, InmParams(), init, "strapdown")
+    assert rms_mid(left, s) > 1.5 * rms_mid(sol, s)
