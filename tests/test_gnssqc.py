@@ -101,7 +101,9 @@ def test_late_gnss_stamps_are_taken_off_before_the_estimate(turning_strapdown, m
     facts = sol.identification["gnss_latency"]
     assert facts["taken_off"]
     assert facts["latency_s"] == pytest.approx(0.2, abs=max(4 * facts["sigma_s"], 0.01))
-    assert any("gnss: stamps +0.2" in n and "late against the IMU" in n for n in from_inm_solution(sol, name="F01").notes)
+    assert any(
+        "gnss: stamps +0.2" in n and "late against the IMU" in n for n in from_inm_solution(sol, name="F01").notes
+    )
     assert rms_mid(sol, s) < 1.1 * rms_mid(clean, s)
     monkeypatch.setattr(solve, "latency_is_clear", lambda *a: False)
     left = estimate_anomaly(late, InmParams(), init, "strapdown")
