@@ -847,7 +847,9 @@ def check_gnss_consistency(
         )
         if abs(off) > opts.max_time_offset_s and c >= OFFSET_VERDICT_CORRELATION:
             raise DataError(
-                f"{txt}; expected within {opts.max_time_offset_s:g} s (checks.max_time_offset_s): clocks out of step"
+                f"{txt}; expected within {opts.max_time_offset_s:g} s (checks.max_time_offset_s): clocks out of step "
+                f"(if they are known to differ, as GPS time runs 18 s ahead of UTC, give the flight "
+                f"time_offsets_s: {{gnss: {off:+.2f}}})"
             )
         if abs(off) > opts.max_time_offset_s:
             # a weak correlation (turbulence on a strapdown triad) can place the peak a few

@@ -180,6 +180,49 @@ def test_imu_gnss_time_offset_is_measured_and_refused(tmp_path):
         process_flight(cfg, fl)
 
 
+def test_a_known_clock_offset_is_named_and_taken_in_the_config(tmp_path, intact):
+    """A GNSS in GPS time against an IMU in UTC (18 s): refused, the error names the key and the
+    value that puts the clocks in step; given, the flight is estimated as intact."""
+    import re
+
+    cfg, fl = _flight(tmp_path / "a", lambda p: d.shift_after(p, -1, 18.0, names=("gnss",)))
+    with pytest.raises(DataError, match=r"runs -18\.\d\d s relative to gnss") as err:
+        process_flight(cfg, fl)
+    hint = re.search(r"time_offsets_s: \{gnss: ([-+0-9.]+)\}", str(err.value))
+    assert hint and float(hint.group(1)) == pytest.approx(-18.0, abs=0.1)
+    cfg, fl = _flight(tmp_path / "b", lambda p: d.shift_after(p, -1, 18.0, names=("gnss",)))
+    assert fl.ingest.time_offsets_ns == {}
+    cfg_path = tmp_path / "b" / "s" / "survey.yaml"
+    cfg_path.write_text(cfg_path.read_text().replace("\n  triad:", "\n  time_offsets_s: {gnss: -18}\n  triad:", 1))
+    cfg = load_config(cfg_path, output_dir=tmp_path / "b" / "out")
+    assert cfg.flights[0].ingest.time_offsets_ns == {"gnss": -18 * 10**9}
+    r = process_flight(cfg, cfg.flights[0])
+    assert _rms_on_lines(r) == pytest.approx(_rms_on_lines(intact), rel=1e-6, abs=1e-6)
+
+
+def test_time_offsets_are_for_channels_read_from_mcap_or_csv():
+    from gravsurvey.settings import FlightSection, validate_section
+
+    with pytest.raises(ConfigError, match=r"flights\[0\]\.time_offsets_s: a gravimeter flight"):
+        validate_section(
+            FlightSection,
+            {
+                "inputs": {
+                    "gravimeter": {
+                        "format": "zls",
+                        "file": "x.dat",
+                        "offset_mgal": 0.0,
+                        "nav": {"format": "nmea", "file": "x.nmea"},
+                    }
+                },
+                "time_offsets_s": {"gnss": 1.0},
+            },
+            "flights[0]",
+        )
+    with pytest.raises(ConfigError, match=r"flights\[0\]\.time_offsets_s\.gnss: "):
+        validate_section(FlightSection, {"inputs": {"mcap": "x.mcap"}, "time_offsets_s": {"gnss": 1e9}}, "flights[0]")
+
+
 def test_time_offset_within_the_limit_is_reported(tmp_path):
     cfg, fl = _flight(tmp_path, lambda p: d.shift_after(p, -1, 0.3, names=("imu",)))
     r = process_flight(cfg, fl)

@@ -71,6 +71,8 @@ class IngestOptions:
     mat_axes: np.ndarray = field(default_factory=lambda: np.eye(3))
     #: GNSS antenna position from the IMU on the forward-left-up triad axes, m, (3,) (``gnss_lever_arm_m``)
     gnss_lever_arm_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    #: nanoseconds added to a channel's stamps as read, role -> int (``time_offsets_s``)
+    time_offsets_ns: dict = field(default_factory=dict)
     gap_factor: float = 5.0
     plausibility: str = "error"  # "error" | "warn"
     key_path: str = "flight"
@@ -550,6 +552,10 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
     raw, content = read_raw_channels(options, base_dir, notes, csv_loss)
     for ch in raw.values():
         _drop_nonfinite(ch, notes)
+    for role, off in options.time_offsets_ns.items():
+        # clocks known to differ (time_offsets_s), before anything compares the channels
+        if role in raw:
+            raw[role].time_ns = raw[role].time_ns + np.int64(off)
     if "imu" in raw and not np.array_equal(options.mat_axes, np.eye(3)):
         # the sensor axes onto forward-left-up (imu_axes) before the checks, which expect +g on z at rest
         for q in ("specific_force", "angular_rate"):

@@ -19,6 +19,7 @@ from .schema import (
     CsvSection,
     DriftSection,
     FlightChecksSection,
+    TimeOffsetsSection,
     FlightSection,
     GravimeterSection,
     GridSection,
@@ -72,6 +73,7 @@ DOC_SECTIONS: list[tuple[str, str, Any]] = [
         for role in DEFAULT_COLUMNS
     ],
     ("`flights[i].checks`", "checks.", FlightChecksSection),
+    ("`flights[i].time_offsets_s`", "time_offsets_s.", TimeOffsetsSection),
     ("`flights[i].initial`", "initial.", InitialSection),
     ("`flights[i].lines`, `lines.windows[j]`", "", WindowSection),
     ("`flights[i].tie`", "tie.", TieSection),

@@ -678,6 +678,29 @@ def _names_at(v, lengths, what, key):
         raise fail(exc.context["message"], key) from None  # type: ignore[index]
 
 
+#: Largest clock offset a channel may be given, s (a week: GPS time against a logger's local
+#: time zone is hours; a bigger value is a wrong unit).
+MAX_TIME_OFFSET_S = 7 * 86400.0
+
+
+class TimeOffsetsSection(Section):
+    """``flights[i].time_offsets_s``: seconds added to a channel's stamps as read (docs/input-formats.md)."""
+
+    imu: float = Field(0.0, description="added to the IMU stamps, s", ge=-MAX_TIME_OFFSET_S, le=MAX_TIME_OFFSET_S)
+    altimeter: float = Field(
+        0.0, description="added to the altimeter stamps, s", ge=-MAX_TIME_OFFSET_S, le=MAX_TIME_OFFSET_S
+    )
+    gnss: float = Field(
+        0.0,
+        description="added to the GNSS stamps, s (a GNSS in GPS time against an IMU in UTC: -18)",
+        ge=-MAX_TIME_OFFSET_S,
+        le=MAX_TIME_OFFSET_S,
+    )
+    gradient: float = Field(
+        0.0, description="added to the gradiometer stamps, s", ge=-MAX_TIME_OFFSET_S, le=MAX_TIME_OFFSET_S
+    )
+
+
 class FlightChecksSection(Section):
     """``flights[i].checks``: gap detection and plausibility of the inputs (docs/input-formats.md)."""
 
@@ -822,7 +845,7 @@ class TopicsSection(Section):
 
 
 #: Flight-level keys handed to ingestion (io/ingest.py)
-INGEST_KEYS = ("inputs", "topics", "mcap", "csv", "checks", "imu_axes", "gnss_lever_arm_m")
+INGEST_KEYS = ("inputs", "topics", "mcap", "csv", "checks", "imu_axes", "gnss_lever_arm_m", "time_offsets_s")
 
 
 class TruthColumns(Section):
@@ -866,6 +889,11 @@ class FlightSection(Section):
     checks: FlightChecksSection = Field(
         default_factory=FlightChecksSection,
         description="gap detection and plausibility checks of the inputs (docs/input-formats.md)",
+    )
+    time_offsets_s: TimeOffsetsSection = Field(
+        default_factory=TimeOffsetsSection,
+        description="seconds added to each channel's stamps as read, `{imu, altimeter, gnss, gradient}` "
+        "(clocks known to differ; docs/input-formats.md)",
     )
     triad: Literal[TRIADS] = Field(  # type: ignore[valid-type]
         "platform",
@@ -928,6 +956,16 @@ class FlightSection(Section):
         except ConfigError as exc:
             raise fail(str(exc).split(": ", 1)[1]) from None
         return v
+
+    @model_validator(mode="after")
+    def _offsets_need_channels(self):
+        if self.inputs.gravimeter is not None and any(v != 0.0 for _, v in self.time_offsets_s):
+            raise fail(
+                "a gravimeter flight's channels come from its own file and navigation; offsets are for mcap or "
+                "csv inputs",
+                ("time_offsets_s",),
+            )
+        return self
 
     @field_validator("gnss_lever_arm_m")
     @classmethod
