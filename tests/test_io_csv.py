@@ -167,7 +167,7 @@ def test_config_errors_name_the_key_and_suggest(tmp_path):
 
     err(
         {"inputs": CSV_IN, "csv": {"units": {"accel": "G"}}},
-        r"flights\[0\].csv.units.accel: expected one of m/s\^2, g, mGal, got 'G' \(did you mean 'g'\?\)",
+        r"flights\[0\].csv.units.accel: expected one of m/s\^2, g, mGal, m/s, got 'G' \(did you mean 'g'\?\)",
     )
     err({"inputs": CSV_IN, "csv": {"unit": {}}}, r"flights\[0\].csv.unit: unknown key \(did you mean 'units'\?\)")
     err({"inputs": {"mcap": "a", "csv": {}}}, r"flights\[0\].inputs: expected exactly one")

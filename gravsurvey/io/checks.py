@@ -306,15 +306,29 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
             )
         )
     else:
-        hint = _ratio_name(
-            med,
-            [
-                ("values are in g but declared as m/s^2", 1.0),
-                ("values are in mGal but declared as m/s^2", 9.80665e5),
-                ("values are in m/s^2 but declared as g", G_STD**2),
-                ("values are in m/s^2 but declared as mGal", 9.80665e-5),
-            ],
-        )
+        dt = nominal_step_ns * 1e-9
+        candidates = [
+            ("values are in g but declared as m/s^2", 1.0),
+            ("values are in mGal but declared as m/s^2", 9.80665e5),
+            ("values are in m/s^2 but declared as g", G_STD**2),
+            ("values are in m/s^2 but declared as mGal", 9.80665e-5),
+        ]
+        if accel_unit in ("m/s^2", "m/s") and dt > 0.0:
+            # navigation-grade IMUs write increments per sample: g x step read as a rate, or
+            # g / step when rates are declared as increments
+            candidates += [
+                (
+                    f"values are velocity increments per {dt * 1e3:.4g}-ms sample declared as a rate "
+                    "(units accel: m/s with gyro: rad or deg)",
+                    G_STD * dt,
+                ),
+                (
+                    f"values are rates declared as increments per {dt * 1e3:.4g}-ms sample "
+                    "(units accel: m/s^2 with gyro: rad/s)",
+                    G_STD / dt,
+                ),
+            ]
+        hint = _ratio_name(med, candidates)
         out.append(
             Finding(
                 "imu",

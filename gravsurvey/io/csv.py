@@ -24,12 +24,18 @@ WEEK_NS = 604800 * 10**9
 TIME_FORMATS = ("ns", "s", "gps_week_sow", "iso")
 
 UNITS = {
-    "accel": {"m/s^2": 1.0, "g": 9.80665, "mGal": 1e-5},
-    "gyro": {"rad/s": 1.0, "deg/s": np.pi / 180.0, "deg/h": np.pi / 180.0 / 3600.0},
+    # "m/s", "rad", "deg": increments per sample (velocity, angle), as navigation-grade IMUs
+    # write them; divided by the nominal sample step after the time repair
+    # (gravsurvey.io.ingest.repair_and_check)
+    "accel": {"m/s^2": 1.0, "g": 9.80665, "mGal": 1e-5, "m/s": 1.0},
+    "gyro": {"rad/s": 1.0, "deg/s": np.pi / 180.0, "deg/h": np.pi / 180.0 / 3600.0, "rad": 1.0, "deg": np.pi / 180.0},
     "height": {"m": 1.0, "ft": 0.3048},
     # gravity gradients: Eotvos (1 E = 1e-9 1/s^2) unless declared SI
     "gradient": {"E": 1e-9, "1/s^2": 1.0},
 }
+
+#: Units that are increments per sample, not rates: unit kind -> units.
+INCREMENT_UNITS = {"accel": ("m/s",), "gyro": ("rad", "deg")}
 
 # quantities per channel: name -> (unit kind or None, width)
 QUANTITIES = {

@@ -19,7 +19,7 @@ import numpy as np
 
 from gravsurvey.errors import ConfigError, DataError, DataWarning
 from gravsurvey.io import checks as ck
-from gravsurvey.io.csv import UNITS, read_csv_channel
+from gravsurvey.io.csv import INCREMENT_UNITS, UNITS, read_csv_channel
 from gravsurvey.io.mcap import DEFAULT_JSON_FIELDS, DEFAULT_MAX_RECORD_BYTES, ROLE_SCHEMAS, McapContent, read_mcap
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, GradientChannel, ImuChannel
 
@@ -458,6 +458,49 @@ def _drop_nonfinite(ch: RawChannel, notes):
         ch.values = {k: v[ok] for k, v in ch.values.items()}
 
 
+def imu_units(options: IngestOptions) -> tuple:
+    """The declared (accelerometer, gyro) units of a flight's IMU channel."""
+    units = options.csv_units if options.kind == "csv" else options.mcap_units
+    return units.get("accel", "m/s^2"), units.get("gyro", "rad/s")
+
+
+def _increments_to_rates(ch: RawChannel, nominal_step_ns: int, options: IngestOptions) -> list:
+    """IMU increments per sample (``m/s``, ``rad``, ``deg``: already scaled to SI) divided by the
+    nominal step into rates, in place, the stamps moved to the middle of each sample's interval.
+
+    An increment covers the interval that ends at its stamp; after a gap it still covers one
+    nominal step (the samples in between were lost, not merged), so every sample is divided by
+    the nominal step, not by the time since the previous one.
+    """
+    accel_unit, gyro_unit = imu_units(options)
+    inc = [q for q, u in (("accel", accel_unit), ("gyro", gyro_unit)) if u in INCREMENT_UNITS[q]]
+    if not inc:
+        return []
+    if len(inc) == 1:
+        # refused by the config schema too (FlightSection); here for IngestOptions built in code
+        raise ConfigError(
+            f"{options.key_path}.{options.kind}.units: accel {accel_unit!r} and gyro {gyro_unit!r}: one is an "
+            "increment per sample and the other a rate; declare both as increments (m/s with rad or deg) or both "
+            "as rates"
+        )
+    dt = nominal_step_ns * 1e-9
+    if not dt > 0.0:
+        return []
+    ch.values["specific_force"] = np.asarray(ch.values["specific_force"], float) / dt
+    ch.values["angular_rate"] = np.asarray(ch.values["angular_rate"], float) / dt
+    ch.time_ns = ch.time_ns - np.int64(nominal_step_ns // 2)
+    return [
+        ck.Finding(
+            "imu",
+            "increments",
+            "ok",
+            f"imu: increments per sample ({accel_unit}, {gyro_unit}) divided by the nominal step "
+            f"{dt * 1e3:.4g} ms into rates; stamps moved {dt * 5e2:.4g} ms earlier, to the middle of each interval",
+            dt,
+        )
+    ]
+
+
 def repair_and_check(raw: dict, options: IngestOptions):
     """Time repair and plausibility findings for every channel.
 
@@ -480,23 +523,18 @@ def repair_and_check(raw: dict, options: IngestOptions):
         findings += ck.check_epoch(role, t)
     if "imu" in raw:
         ch = raw["imu"]
+        findings += _increments_to_rates(ch, reports["imu"].nominal_step_ns, options)
         for key in ("specific_force", "angular_rate"):
             # repaired in place: a reader's zero-copy view of its buffer is copied first
             if not ch.values[key].flags.writeable:
                 ch.values[key] = ch.values[key].copy()
-        findings += ck.repair_imu_glitches(
-            ch.values["specific_force"],
-            ch.values["angular_rate"],
-            options.csv_units["accel"] if options.kind == "csv" else options.mcap_units["accel"],
-            options.csv_units["gyro"] if options.kind == "csv" else options.mcap_units["gyro"],
-        )
+        findings += ck.repair_imu_glitches(ch.values["specific_force"], ch.values["angular_rate"], *imu_units(options))
         findings += ck.check_imu(
             ch.time_ns,
             ch.values["specific_force"],
             ch.values["angular_rate"],
             reports["imu"].nominal_step_ns,
-            options.csv_units["accel"] if options.kind == "csv" else options.mcap_units["accel"],
-            options.csv_units["gyro"] if options.kind == "csv" else options.mcap_units["gyro"],
+            *imu_units(options),
         )
     hunit = options.csv_units["height"] if options.kind == "csv" else options.mcap_units["height"]
     g = raw.get("gnss")

@@ -26,7 +26,7 @@ from ..errors import ConfigError
 from ..grid import GRID_METHODS, GridOptions
 from ..inm.params import RADIUS_SOURCES, TRIADS, InmParams
 from ..io.checks import HEIGHT_OK
-from ..io.csv import DEFAULT_COLUMNS, TIME_FORMATS, UNITS
+from ..io.csv import DEFAULT_COLUMNS, INCREMENT_UNITS, TIME_FORMATS, UNITS
 from ..io.formats.flight import GRAVIMETER_FORMATS, NAV_FORMATS
 from ..truth import TRUTH_TIME_FORMATS
 from ..io.ingest import IngestOptions, imu_axes_matrix
@@ -575,7 +575,19 @@ UnitsSection = create_model(  # type: ignore[call-overload]
     __base__=Section,
     __doc__="units of the channels as written",
     **{
-        k: (Literal[tuple(v)], Field(next(iter(v)), description=f"unit of {k}: {', '.join(v)}"))  # type: ignore[misc]
+        k: (
+            Literal[tuple(v)],  # type: ignore[misc]
+            Field(
+                next(iter(v)),
+                description=f"unit of {k}: {', '.join(v)}"
+                + (
+                    f" ({' and '.join(INCREMENT_UNITS[k])}: increments per sample, accel and gyro alike; "
+                    "docs/input-formats.md)"
+                    if k in INCREMENT_UNITS
+                    else ""
+                ),
+            ),
+        )
         for k, v in UNITS.items()
     },
 )
@@ -956,6 +968,19 @@ class FlightSection(Section):
         except ConfigError as exc:
             raise fail(str(exc).split(": ", 1)[1]) from None
         return v
+
+    @model_validator(mode="after")
+    def _increments_or_rates(self):
+        for sec in ("mcap", "csv"):
+            units = getattr(self, sec).units
+            inc = [u in INCREMENT_UNITS[q] for q, u in (("accel", units.accel), ("gyro", units.gyro))]
+            if inc[0] != inc[1]:
+                raise fail(
+                    f"accel {units.accel!r} and gyro {units.gyro!r}: one is an increment per sample and the other a "
+                    "rate; declare both as increments (m/s with rad or deg) or both as rates",
+                    (sec, "units"),
+                )
+        return self
 
     @model_validator(mode="after")
     def _offsets_need_channels(self):
