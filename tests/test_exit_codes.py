@@ -197,12 +197,16 @@ def _children(pid: int) -> list[str]:
         return []
 
 
-# runs gravsurvey as `python -m gravsurvey` does, after saying (one byte on stdout) that the
-# interpreter's start-up and the package's (`import gravsurvey`: numba cache folder) are over;
-# a Ctrl-C before that prints the interpreter's traceback (docs/reliability.md, Known and open)
+# runs gravsurvey as the `gravsurvey` console script does (import the entry point's module,
+# call its main), after saying (one byte on stdout) that the interpreter's start-up and the
+# package's (`import gravsurvey`: numba cache folder) are over; a Ctrl-C before that prints the
+# interpreter's traceback (docs/reliability.md, Known and open). Not through
+# `runpy.run_module('gravsurvey')`: its own look-up of `gravsurvey.__main__` is more of that
+# start-up, outside any guard of ours (a Ctrl-C 0.1 s after the byte landed there now and then
+# under load, an importlib traceback)
 _MAIN_AFTER_READY = (
-    "import runpy, sys, gravsurvey; sys.stdout.write('R'); sys.stdout.flush(); "
-    "sys.argv[0] = 'gravsurvey'; runpy.run_module('gravsurvey', run_name='__main__')"
+    "import sys, gravsurvey.console as console; sys.stdout.write('R'); sys.stdout.flush(); "
+    "sys.argv[0] = 'gravsurvey'; console.main()"
 )
 
 
