@@ -59,6 +59,27 @@ def test_gnss_outliers_do_not_make_a_latency():
     assert abs(got) < 4 * sigma + 2e-3 and not gnssqc.latency_is_clear(got, sigma)
 
 
+def test_a_drifting_latency_is_its_middle_and_its_rate():
+    """A clock running 150 ppm slow: the latency at the middle and its change per second."""
+    rng = np.random.default_rng(9)
+    t = np.arange(0.0, 3600.0, 0.2)
+    v = _turning_velocity(t, rng)
+    lat = 0.05 + 150e-6 * (t - 1800.0)
+    res = 2.0 * np.sin(2 * np.pi * t[:, None] / 1200.0) + lat[:, None] * v + 0.3 * rng.standard_normal(v.shape)
+    fit = gnssqc.gnss_latency_fit(t, res, v)
+    assert abs(fit.mid_latency_s - 0.05) < 4 * fit.mid_sigma_s + 2e-3
+    assert abs(fit.rate - 150e-6) < 4 * fit.rate_sigma + 2e-6
+    assert fit.drifts and fit.taken_off
+    shifted = fit.shift(GnssChannel(t, np.zeros(t.size), np.zeros(t.size), np.zeros(t.size)))
+    np.testing.assert_allclose(shifted.time, t - lat, atol=0.01)
+    assert fit.report()["drift_taken_off"] and fit.report()["drift_ppm"] == pytest.approx(150.0, abs=10.0)
+    assert "ppm" in fit.text() and "a clock running slow" in fit.text()
+    # a constant latency is not read as a drift
+    res = 2.0 * np.sin(2 * np.pi * t[:, None] / 1200.0) + 0.05 * v + 0.3 * rng.standard_normal(v.shape)
+    fit = gnssqc.gnss_latency_fit(t, res, v)
+    assert fit.taken_off and not fit.drifts
+
+
 def test_latency_verdict_bounds():
     assert not gnssqc.latency_is_clear(0.015, 0.001)  # under LATENCY_MIN_S
     assert not gnssqc.latency_is_clear(0.1, 0.03)  # within LATENCY_K standard errors
@@ -120,6 +141,32 @@ def test_late_gnss_stamps_are_taken_off_before_the_estimate(turning_strapdown, m
         "gnss: stamps +0.2" in n and "late against the IMU" in n for n in from_inm_solution(sol, name="F01").notes
     )
     assert rms_mid(sol, s) < 1.1 * rms_mid(clean, s)
-    monkeypatch.setattr(solve, "latency_is_clear", lambda *a: False)
+    monkeypatch.setattr(gnssqc.GnssLatency, "taken_off", property(lambda self: False))
     left = estimate_anomaly(late, InmParams(), init, "strapdown")
     assert rms_mid(left, s) > 1.5 * rms_mid(sol, s)
+
+
+def test_a_clock_running_slow_is_taken_off_gnss_and_heights(turning_strapdown, monkeypatch):
+    """GNSS and heights on a clock 300 ppm slow against the IMU (0.23 s apart at the ends of 25
+    min): both drifts found and taken off, the estimate as with the right stamps (measured 0.49
+    against 0.46 mGal); with constant latencies only, 2.66."""
+    s, rec, init = turning_strapdown
+    clean = estimate_anomaly(rec, InmParams(), init, "strapdown")
+    t0 = rec.imu.time[0]
+
+    def slow(ch):
+        return dataclasses.replace(ch, time=ch.time + 300e-6 * (ch.time - t0))
+
+    late = dataclasses.replace(rec, gnss=slow(rec.gnss), altimeter=slow(rec.altimeter))
+    sol = estimate_anomaly(late, InmParams(), init, "strapdown")
+    g = sol.identification["gnss_latency"]
+    h = sol.identification["height_faults"]
+    assert g["drift_taken_off"] and g["drift_ppm"] == pytest.approx(300.0, abs=max(4 * g["drift_sigma_ppm"], 20.0))
+    assert h["drift_ppm"] == pytest.approx(300.0, abs=max(4 * h["drift_sigma_ppm"], 20.0))
+    notes = from_inm_solution(sol, name="F01").notes
+    assert sum("ppm" in n and "running slow" in n for n in notes) == 2
+    assert rms_mid(sol, s) < 1.1 * rms_mid(clean, s)
+    monkeypatch.setattr(solve, "LATENCY_DRIFT_MIN_S", float("inf"))
+    monkeypatch.setattr(gnssqc.GnssLatency, "drifts", property(lambda self: False))
+    constant = estimate_anomaly(late, InmParams(), init, "strapdown")
+    assert rms_mid(constant, s) > 2.0 * rms_mid(sol, s)

@@ -14,7 +14,9 @@ hold it) and the GNSS positions over minutes. Positions stamped ``L`` late give
 velocity turns and surges, so ``L`` is the slope of the high-passed horizontal residual on the
 high-passed horizontal velocity (:func:`gravsurvey.inm.heightqc.estimate_latency`, the height
 channel's regression, both axes pooled). The vertical axis is left out: the GNSS height's
-noise and the altimeter's own share of the vertical channel make it the weakest.
+noise and the altimeter's own share of the vertical channel make it the weakest. A clock
+running slow or fast makes the latency change over the flight: a second regressor, the velocity
+times the time from the record's middle, gives its rate (:class:`GnssLatency`).
 """
 
 from __future__ import annotations
@@ -24,9 +26,16 @@ import math
 
 import numpy as np
 
-from .heightqc import estimate_latency
+from .heightqc import estimate_latency, estimate_latency_drift
 
-__all__ = ["estimate_gnss_latency", "latency_is_clear", "shift_gnss"]
+__all__ = [
+    "GnssLatency",
+    "estimate_gnss_latency",
+    "gnss_latency_fit",
+    "latency_is_clear",
+    "drift_is_clear",
+    "shift_gnss",
+]
 
 #: Window of the running mean taken off the horizontal residual and velocity, s: the smoothed
 #: navigation follows the GNSS positions over longer spans (at 30 s a 0.1-s latency reads as
@@ -83,6 +92,94 @@ def latency_is_clear(latency_s: float, sigma_s: float) -> bool:
     )
 
 
-def shift_gnss(gnss, latency_s: float):
-    """The GNSS channel with its stamps moved ``latency_s`` earlier (a copy; the stamps only)."""
-    return dataclasses.replace(gnss, time=np.asarray(gnss.time, float) - float(latency_s))
+def drift_is_clear(rate: float, rate_sigma: float, span_s: float) -> bool:
+    """True when a latency drift (s per s of record) is worth taking off: :data:`LATENCY_K`
+    standard errors from zero and changing the latency by at least :data:`LATENCY_MIN_S` between
+    the record's middle and either end."""
+    return (
+        math.isfinite(rate)
+        and math.isfinite(rate_sigma)
+        and abs(rate) >= LATENCY_K * rate_sigma
+        and abs(rate) * 0.5 * span_s >= LATENCY_MIN_S
+        and abs(rate) * 0.5 * span_s <= LATENCY_MAX_S
+    )
+
+
+def shift_gnss(gnss, latency_s: float, rate: float = 0.0, t_mid_s: float = 0.0):
+    """The GNSS channel with its stamps moved ``latency_s + rate (t - t_mid_s)`` earlier (a copy;
+    the stamps only)."""
+    t = np.asarray(gnss.time, float)
+    return dataclasses.replace(gnss, time=t - (float(latency_s) + float(rate) * (t - float(t_mid_s))))
+
+
+@dataclasses.dataclass
+class GnssLatency:
+    """How late the GNSS stamps are against the IMU, as measured on one aided track.
+
+    Attributes
+    ----------
+    latency_s, sigma_s : float
+        A constant latency and its standard error, s (:func:`estimate_gnss_latency`).
+    mid_latency_s, mid_sigma_s : float
+        With a drift: the latency at the record's middle, s.
+    rate, rate_sigma : float
+        The latency's change per second of record (a clock running slow or fast), s/s.
+    t_mid_s, span_s : float
+        The middle and the length of the GNSS epochs used, s.
+    """
+
+    latency_s: float = math.nan
+    sigma_s: float = math.nan
+    mid_latency_s: float = math.nan
+    mid_sigma_s: float = math.nan
+    rate: float = math.nan
+    rate_sigma: float = math.nan
+    t_mid_s: float = 0.0
+    span_s: float = 0.0
+
+    @property
+    def drifts(self) -> bool:
+        """The latency changes over the record (:func:`drift_is_clear`)."""
+        return drift_is_clear(self.rate, self.rate_sigma, self.span_s)
+
+    @property
+    def taken_off(self) -> bool:
+        """A constant latency or a drift is clear enough to correct."""
+        return self.drifts or latency_is_clear(self.latency_s, self.sigma_s)
+
+    def shift(self, gnss):
+        """``gnss`` with the measured latency (and drift) taken off its stamps."""
+        if self.drifts:
+            return shift_gnss(gnss, self.mid_latency_s, self.rate, self.t_mid_s)
+        return shift_gnss(gnss, self.latency_s)
+
+    def report(self) -> dict:
+        """summary.json's ``identification.gnss_latency``."""
+        out = {"latency_s": self.latency_s, "sigma_s": self.sigma_s, "taken_off": self.taken_off}
+        if math.isfinite(self.rate):
+            out["drift_ppm"] = self.rate * 1e6
+            out["drift_sigma_ppm"] = self.rate_sigma * 1e6
+            out["drift_taken_off"] = self.drifts
+        return out
+
+    def text(self) -> str:
+        """What was taken off, for the flight's warning."""
+        if self.drifts:
+            return (
+                f"stamps {self.mid_latency_s:+.3f} s (+-{self.mid_sigma_s:.3f}) late against the IMU at mid-record, "
+                f"drifting {self.rate * 1e6:+.0f} ppm (+-{self.rate_sigma * 1e6:.0f}: a clock running "
+                f"{'slow' if self.rate > 0 else 'fast'}, {self.rate * 0.5 * self.span_s:+.3f} s at the end)"
+            )
+        return f"stamps {self.latency_s:+.3f} s (+-{self.sigma_s:.3f}) late against the IMU"
+
+
+def gnss_latency_fit(time, residual_en_m, velocity_en_mps) -> GnssLatency:
+    """:class:`GnssLatency` of a track: the constant latency and the drifting one
+    (:func:`gravsurvey.inm.heightqc.estimate_latency_drift`), both with the outlier refit."""
+    t = np.asarray(time, float)
+    lat, sig = estimate_gnss_latency(t, residual_en_m, velocity_en_mps)
+    mid, mid_sig, rate, rate_sig = estimate_latency_drift(
+        t, residual_en_m, velocity_en_mps, highpass_s=LATENCY_HIGHPASS_S, outlier_k=LATENCY_OUTLIER_K
+    )
+    span = float(t[-1] - t[0]) if t.size else 0.0
+    return GnssLatency(lat, sig, mid, mid_sig, rate, rate_sig, 0.5 * float(t[0] + t[-1]) if t.size else 0.0, span)

@@ -27,8 +27,17 @@ from .errormodel import (
     initial_mean,
     state_perm,
 )
-from .gnssqc import estimate_gnss_latency, latency_is_clear, shift_gnss
-from .heightqc import LATENCY_K, LATENCY_MAX_S, LATENCY_MIN_S, estimate_latency, find_height_faults, repair_heights
+from .gnssqc import GnssLatency, gnss_latency_fit
+from .heightqc import (
+    LATENCY_DRIFT_MIN_S,
+    LATENCY_K,
+    LATENCY_MAX_S,
+    LATENCY_MIN_S,
+    estimate_latency,
+    estimate_latency_drift,
+    find_height_faults,
+    repair_heights,
+)
 from .identify import (
     drift_sigma_passed,
     horizontal_prior,
@@ -325,7 +334,7 @@ def estimate_anomaly(
     given_params, reidentify = params, True
     accel_bias = accel_bias_states_for(params, triad)
     height_warnings, height_facts = [], {}
-    gnss_latency = None  # (s, sigma s) once the first pass has measured it
+    gnss_latency = None  # a GnssLatency once the first aided pass has measured it
     k = -1
     while k + 1 < passes:
         k += 1
@@ -363,8 +372,8 @@ def estimate_anomaly(
             # late GNSS stamps, measured on this first aided track: taken off, and the pass run
             # again (the model identified again) on the corrected stamps
             gnss_latency = _gnss_latency(record, nav, idx, c, out, ellipsoid, gnss_lever_arm_t)
-            if latency_is_clear(*gnss_latency):
-                record = dataclasses.replace(record, gnss=shift_gnss(record.gnss, gnss_latency[0]))
+            if gnss_latency.taken_off:
+                record = dataclasses.replace(record, gnss=gnss_latency.shift(record.gnss))
                 reidentify = True
                 k -= 1
                 continue
@@ -425,18 +434,12 @@ def estimate_anomaly(
     if height_warnings or height_facts:
         ident["height_faults"] = height_facts
         ident["warnings"] = height_warnings + list(ident.get("warnings", []))
-    if gnss_latency is not None and math.isfinite(gnss_latency[0]):
-        applied = latency_is_clear(*gnss_latency)
-        ident["gnss_latency"] = {
-            "latency_s": gnss_latency[0],
-            "sigma_s": gnss_latency[1],
-            "taken_off": applied,
-        }
-        if applied:
+    if gnss_latency is not None and math.isfinite(gnss_latency.latency_s):
+        ident["gnss_latency"] = gnss_latency.report()
+        if gnss_latency.taken_off:
             ident["warnings"] = [
-                f"{record.source or 'record'}: gnss: stamps {gnss_latency[0]:+.3f} s (+-{gnss_latency[1]:.3f}) late "
-                "against the IMU, taken off (the aided track's residual follows the horizontal velocity; "
-                'docs/method.md, "GNSS latency")'
+                f"{record.source or 'record'}: gnss: {gnss_latency.text()}, taken off (the aided track's residual "
+                'follows the horizontal velocity; docs/method.md, "GNSS latency")'
             ] + list(ident.get("warnings", []))
     sol.warnings = sol.warnings + list(ident.get("warnings", []))
     alt_t = np.asarray(record.altimeter.time, float)
@@ -504,7 +507,7 @@ def _repaired_heights(record, nav, ellipsoid):
     for start, size in faults.steps:
         # the samples after the checked span follow the last level too
         fixed[inside[-1] + 1 :] -= size
-    shifted = alt_t if latency is None else alt_t - latency[0]
+    shifted = alt_t if latency is None else alt_t - (latency[0] + latency[2] * (alt_t - latency[4]))
     record = dataclasses.replace(record, altimeter=dataclasses.replace(record.altimeter, time=shifted, height=fixed))
     steps = [(float(t[i]), float(size)) for i, size in faults.steps]
     facts = {
@@ -514,9 +517,16 @@ def _repaired_heights(record, nav, ellipsoid):
     }
     what = []
     if latency is not None:
-        facts["latency_s"], facts["latency_sigma_s"] = latency
+        facts["latency_s"], facts["latency_sigma_s"] = latency[:2]
+        drift = ""
+        if latency[2] != 0.0:
+            facts["drift_ppm"], facts["drift_sigma_ppm"] = latency[2] * 1e6, latency[3] * 1e6
+            drift = (
+                f" at mid-record, drifting {latency[2] * 1e6:+.0f} ppm (+-{latency[3] * 1e6:.0f}: a clock running "
+                f"{'slow' if latency[2] > 0 else 'fast'})"
+            )
         what.append(
-            f"stamps {latency[0]:+.3f} s (+-{latency[1]:.3f}) late against the IMU, taken off (the residual "
+            f"stamps {latency[0]:+.3f} s (+-{latency[1]:.3f}) late against the IMU{drift}, taken off (the residual "
             "against the inertial height follows the vertical velocity)"
         )
     if faults.spikes.size - faults.frozen:
@@ -537,11 +547,11 @@ def _repaired_heights(record, nav, ellipsoid):
     )
 
 
-def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None):
-    """How late the GNSS stamps are (s) and its standard error, from a pass's smoothed track.
+def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None) -> GnssLatency:
+    """How late the GNSS stamps are, constant or drifting, from a pass's smoothed track.
 
     The corrected navigation (at the antenna, with a lever arm) minus the GNSS positions, east
-    and north, regressed on the navigation's velocity (:func:`gnssqc.estimate_gnss_latency`).
+    and north, regressed on the navigation's velocity (:func:`gnssqc.gnss_latency_fit`).
     """
     err_q, err_p, _ = _triad_errors(out["x_s"], c, nav.r_i[idx], nav.v_i[idx])
     r_corr = nav.r_i[idx] - np.einsum("nij,nj->ni", c, err_q)
@@ -554,7 +564,7 @@ def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None):
     tg = np.asarray(gn.time, float)
     ok = (tg >= t_e[0]) & (tg <= t_e[-1]) & np.isfinite(gn.lat) & np.isfinite(gn.lon)
     if ok.sum() < 32:
-        return math.nan, math.nan
+        return GnssLatency()
     t = tg[ok]
     la = np.interp(t, t_e, lat)
     lo = np.interp(t, t_e, np.unwrap(lon))
@@ -562,13 +572,19 @@ def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None):
     d_lon = (lo - np.asarray(gn.lon, float)[ok] + math.pi) % (2.0 * math.pi) - math.pi
     res = np.stack([d_lon * n * np.cos(la), (la - np.asarray(gn.lat, float)[ok]) * m], axis=1)
     vel = np.stack([np.interp(t, t_e, vel_n[:, j]) for j in range(2)], axis=1)
-    return estimate_gnss_latency(t, res, vel)
+    return gnss_latency_fit(t, res, vel)
 
 
 def _height_latency(nav, t, e, faults):
-    """The height stamps' latency (s) and its standard error when it is clear and plausible
-    (:data:`heightqc.LATENCY_K` standard errors, at least :data:`heightqc.LATENCY_MIN_S`, at most
-    :data:`heightqc.LATENCY_MAX_S`), else None; spikes left out, steps taken off first."""
+    """The height stamps' latency when it is clear and plausible, else None: ``(latency_s,
+    sigma_s, rate, rate_sigma, t_mid_s)``, the stamps late by ``latency_s + rate (t - t_mid_s)``.
+
+    Constant (:data:`heightqc.LATENCY_K` standard errors, at least :data:`heightqc.LATENCY_MIN_S`,
+    at most :data:`heightqc.LATENCY_MAX_S`; ``rate`` 0) or drifting (a clock running slow or fast:
+    the rate as many standard errors from zero, and the latency changing by at least
+    :data:`heightqc.LATENCY_DRIFT_MIN_S` between the middle and the ends:
+    :func:`heightqc.estimate_latency_drift`); spikes
+    left out, steps taken off first."""
     h_e = np.array(e, float)
     for start, size in faults.steps:
         h_e[start:] += size  # e = h_ins - h_alt: a step up of the heights took e down
@@ -576,10 +592,20 @@ def _height_latency(nav, t, e, faults):
     keep[faults.spikes] = False
     radial = np.einsum("ij,ij->i", nav.r_i, nav.v_i) / np.linalg.norm(nav.r_i, axis=1)
     v = np.interp(t, nav.time, radial)
-    lat, sig = estimate_latency(t[keep], h_e[keep], v[keep])
+    tk, ek, vk = t[keep], h_e[keep], v[keep]
+    mid, mid_sig, rate, rate_sig = estimate_latency_drift(tk, ek, vk)
+    half = 0.5 * float(tk[-1] - tk[0]) if tk.size else 0.0
+    if (
+        math.isfinite(rate)
+        and abs(rate) >= max(LATENCY_K * rate_sig, 0.0)
+        and LATENCY_DRIFT_MIN_S <= abs(rate) * half <= LATENCY_MAX_S
+        and abs(mid) + abs(rate) * half <= LATENCY_MAX_S
+    ):
+        return float(mid), float(mid_sig), float(rate), float(rate_sig), 0.5 * float(tk[0] + tk[-1])
+    lat, sig = estimate_latency(tk, ek, vk)
     if not (math.isfinite(lat) and abs(lat) >= max(LATENCY_K * sig, LATENCY_MIN_S) and abs(lat) <= LATENCY_MAX_S):
         return None
-    return float(lat), float(sig)
+    return float(lat), float(sig), 0.0, 0.0, 0.0
 
 
 def _altimeter(record):
