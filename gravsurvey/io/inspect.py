@@ -221,6 +221,23 @@ def _inspect_mcap(path, o):
     return rep
 
 
+def _suggest_from_header(path, delimiter=","):
+    """:func:`gravsurvey.io.columns.suggest_csv_settings` for the first non-comment line of a CSV
+    (empty when it cannot be read)."""
+    import csv as _csv
+
+    from gravsurvey.io.columns import suggest_csv_settings
+
+    try:
+        with open(path, newline="", encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                if line.strip() and not line.startswith("#"):
+                    return suggest_csv_settings(next(_csv.reader([line], delimiter=delimiter)))
+    except OSError:
+        pass
+    return {}
+
+
 def _inspect_csv(path, o):
     role = None
     for r, q in o.csv_paths.items():
@@ -241,14 +258,19 @@ def _inspect_csv(path, o):
         from gravsurvey.io.formats.flight import DETECT_ORDER
 
         tried = ", ".join(name for name, _, _ in DETECT_ORDER)
-        return {
+        suggestion = _suggest_from_header(path, o.csv_delimiter)
+        rep = {
             "format": "csv",
             "error": (
                 f"{path}: header matches no channel (imu, altimeter, gnss columns of docs/input-formats.md) "
                 f"and the file is none of the gravimeter or navigation formats ({tried}); a channel "
                 "CSV with other column names needs them: --config survey.yaml"
+                + ("; suggested from its header (check before use):" if suggestion.get("columns") else "")
             ),
         }
+        if suggestion.get("columns"):
+            rep["suggested_csv"] = suggestion
+        return rep
     notes, damage = [], []
     t, vals = read_csv_channel(
         path,
@@ -323,6 +345,11 @@ def format_inspect(reports) -> str:
             lines.append(f"  using {rep['settings']}")
         if "error" in rep:
             lines.append(f"  ERROR: {rep['error']}")
+            if rep.get("suggested_csv"):
+                from gravsurvey.io.columns import suggestion_yaml
+
+                lines += ["    " + x for x in suggestion_yaml(rep["suggested_csv"])]
+                lines += [f"    # {n}" for n in rep["suggested_csv"].get("notes", [])]
             continue
         for d in rep.get("damage", []):
             lines.append(f"  DAMAGED: {d}")
