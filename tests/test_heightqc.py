@@ -157,6 +157,24 @@ def test_late_height_stamps_are_taken_back_before_the_estimate(turbulent_flight)
     assert "height_faults" not in clean.identification
 
 
+def test_a_height_clock_seconds_out_of_step_is_found(turbulent_flight):
+    """Heights 1.5 s late: found by the coarse search (the regression alone is linear and reads
+    such offsets short), taken off, the estimate as without; 18 s (GPS time against UTC): a
+    DataError naming the key and the value that puts the clocks in step; in step: nothing."""
+    from gravsurvey.errors import DataError
+
+    s, rec, init = turbulent_flight
+    clean = estimate_anomaly(rec, InmParams(), init, "platform")
+    assert "height_faults" not in clean.identification
+    late = dataclasses.replace(rec, altimeter=AltimeterChannel(rec.altimeter.time + 1.5, rec.altimeter.height))
+    sol = estimate_anomaly(late, InmParams(), init, "platform")
+    assert sol.identification["height_faults"]["latency_s"] == pytest.approx(1.5, abs=0.03)
+    assert rms_mid(sol, s) < 1.05 * rms_mid(clean, s)
+    gps = dataclasses.replace(rec, altimeter=AltimeterChannel(rec.altimeter.time + 18.0, rec.altimeter.height))
+    with pytest.raises(DataError, match=r"altimeter: .*\+18\.00 s .*time_offsets_s: \{altimeter: -18\.00\}"):
+        estimate_anomaly(gps, InmParams(), init, "platform")
+
+
 def test_frozen_heights_and_gaps_are_not_read_as_steps(noisy_flight):  # noqa: F811
     """A height that holds its value for 10 s (a stalled sensor) and a 30-s outage: the frozen
     samples are dropped, no step is read across either, and the estimate is as good as the

@@ -23,11 +23,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 
 from ..io.checks import robust_sigma, single_sample_outliers
-from .identify import running_mean
+from .identify import running_mean, vertical_residual
 
 __all__ = [
     "HeightFaults",
@@ -36,6 +37,7 @@ __all__ = [
     "repair_heights",
     "estimate_latency",
     "estimate_latency_drift",
+    "coarse_height_offset",
 ]
 
 #: A spike: a sample off the mean of its neighbours by more than this many robust sigmas, its
@@ -67,6 +69,18 @@ LATENCY_MIN_S = 0.04
 #: residual's slow part is not white), so the standard error cannot decide alone. 200 ppm over a
 #: 40-min flight is 0.24 s.
 LATENCY_DRIFT_MIN_S = 0.15
+#: The coarse search for a height clock offset (:func:`coarse_height_offset`): shifts up to this
+#: far either way, s (the IMU-GNSS clock check's reach) ...
+COARSE_MAX_S = 30.0
+#: ... in steps of this, s, then refined to :data:`COARSE_FINE_STEP_S` ...
+COARSE_STEP_S = 0.5
+COARSE_FINE_STEP_S = 0.05
+#: ... on at most this many height samples (evenly thinned: a variance needs no more) ...
+COARSE_MAX_SAMPLES = 2000
+#: ... an offset is believed when it is at least this long (shorter ones are the regression's,
+#: :func:`estimate_latency`) and divides the high-passed residual's variance by at least this.
+COARSE_MIN_S = 0.5
+COARSE_MIN_RATIO = 2.0
 #: Longest latency believed, s (beyond it the clocks are out of step, not a processing delay).
 LATENCY_MAX_S = 2.0
 #: A step is looked for only where the samples either side are at most this far apart, s (or
@@ -412,3 +426,68 @@ def _slope(x, y, use):
         return math.nan, None, 0.0
     slope = float(xs @ ys) / sxx
     return slope, y - slope * x, sxx
+
+
+def coarse_height_offset(nav, alt_time, alt_height, ellipsoid):
+    """A height clock seconds out of step with the IMU: the shift of the height stamps that best
+    explains the heights by the mechanized height, s, and how much it explains.
+
+    The latency regression (:func:`estimate_latency`) is linear in the latency and reads a 3-s
+    offset as 1.25 s; an 18-s one (heights in GPS time, the IMU in UTC) it does not see at all,
+    and the flight's error went from 0.44 to 50 mGal with exit 0 (quick U214). Here the
+    residual ``h_ins(t - L) - h(t)`` is formed for shifts ``L`` every :data:`COARSE_STEP_S` s
+    within :data:`COARSE_MAX_S` s, then every :data:`COARSE_FINE_STEP_S` s about the best, and
+    the variance of its :data:`LATENCY_HIGHPASS_S` high-pass compared (the aircraft's vertical
+    motion, metres over seconds, cancels only at the right shift).
+
+    Parameters
+    ----------
+    nav : gravsurvey.inm.mechanization.Navigation
+        The first, unaided mechanization.
+    alt_time, alt_height : ndarray (k,)
+        Finite height samples inside the mechanization's span (s, m).
+    ellipsoid : Ellipsoid
+
+    Returns
+    -------
+    offset_s : float or None
+        The stamps are late by this much; None unless at least :data:`COARSE_MIN_S` and
+        dividing the variance by :data:`COARSE_MIN_RATIO` or more.
+    ratio : float
+        Variance at no shift over the variance at the best shift (1 when no shift helps; NaN
+        when there is nothing to compare).
+    """
+    t = np.asarray(alt_time, float)
+    h = np.asarray(alt_height, float)
+    if t.size < 32:
+        return None, math.nan
+    step = max(1, t.size // COARSE_MAX_SAMPLES)
+    t, h = t[::step], h[::step]
+    dt = float(np.median(np.diff(t)))
+    w = max(3, int(round(LATENCY_HIGHPASS_S / max(dt, 1e-9))))
+    # samples whose shifted time leaves the mechanization are left out at every shift alike
+    keep = (t - COARSE_MAX_S >= nav.time[0] + 1.0) & (t + COARSE_MAX_S <= nav.time[-1] - 1.0)
+    if keep.sum() < 32:
+        return None, math.nan
+
+    # the inertial position at 10 Hz is plenty for a variance (linear interpolation's radial error
+    # a_up dt^2 / 8: about 1 mm in turbulence) and 5-30x fewer points to search at every shift
+    k = max(1, int(round(0.1 / max(float(np.median(np.diff(nav.time[:1000]))), 1e-9))))
+    coarse_nav = SimpleNamespace(time=nav.time[::k], r_i=nav.r_i[::k])
+
+    def variance(shift):
+        _, e = vertical_residual(coarse_nav, t[keep] - shift, h[keep], ellipsoid)
+        return float(np.var(e - running_mean(e, w)))
+
+    coarse = np.arange(-COARSE_MAX_S, COARSE_MAX_S + 1e-9, COARSE_STEP_S)
+    v = np.array([variance(x) for x in coarse])
+    best = float(coarse[int(np.argmin(v))])
+    fine = np.arange(best - COARSE_STEP_S, best + COARSE_STEP_S + 1e-9, COARSE_FINE_STEP_S)
+    vf = np.array([variance(x) for x in fine])
+    best = float(fine[int(np.argmin(vf))])
+    v0 = variance(0.0)
+    ratio = v0 / float(vf.min()) if vf.min() > 0 else math.inf
+    if abs(best) < COARSE_MIN_S or not ratio >= COARSE_MIN_RATIO:
+        return None, ratio
+    return best, ratio
+

@@ -29,10 +29,12 @@ from .errormodel import (
 )
 from .gnssqc import GnssLatency, gnss_latency_fit
 from .heightqc import (
+    COARSE_FINE_STEP_S,
     LATENCY_DRIFT_MIN_S,
     LATENCY_K,
     LATENCY_MAX_S,
     LATENCY_MIN_S,
+    coarse_height_offset,
     estimate_latency,
     estimate_latency_drift,
     find_height_faults,
@@ -497,9 +499,33 @@ def _repaired_heights(record, nav, ellipsoid):
     inside = np.flatnonzero(np.isfinite(alt_h) & (alt_t >= nav.time[0]) & (alt_t <= nav.time[-1]))
     if inside.size < 16:
         return record, [], {}
+    coarse, ratio = coarse_height_offset(nav, alt_t[inside], alt_h[inside], ellipsoid)
+    if coarse is not None:
+        source = record.source or "record"
+        what = (
+            f"{source}: altimeter: the heights match the inertial height {coarse:+.2f} s earlier than their stamps "
+            f"(the high-passed residual's variance {ratio:.3g}x smaller)"
+        )
+        if abs(coarse) > LATENCY_MAX_S:
+            raise DataError(
+                f"{what}: the height clock is out of step with the IMU's (expected within {LATENCY_MAX_S:g} s); if "
+                f"they are known to differ, as GPS time runs 18 s ahead of UTC, give the flight time_offsets_s: "
+                f"{{altimeter: {-coarse:+.2f}}}"
+            )
+        # within LATENCY_MAX_S: taken off first, the regression below refines the rest
+        alt_t = alt_t - coarse
+        inside = np.flatnonzero(np.isfinite(alt_h) & (alt_t >= nav.time[0]) & (alt_t <= nav.time[-1]))
     t, e = vertical_residual(nav, alt_t[inside], alt_h[inside], ellipsoid)
     faults = find_height_faults(t, e, alt_h[inside])
     latency = _height_latency(nav, t, e, faults)
+    if coarse is not None:
+        latency = (
+            (coarse + latency[0], *latency[1:]) if latency is not None else (coarse, COARSE_FINE_STEP_S, 0.0, 0.0, 0.0)
+        )
+        # the drift term is about the already shifted stamps
+        if latency[2] != 0.0:
+            latency = (latency[0], latency[1], latency[2], latency[3], latency[4] + coarse)
+        alt_t = alt_t + coarse  # the shift below is taken from the stamps as recorded
     if not faults and latency is None:
         return record, [], {}
     fixed = np.array(alt_h, float)
