@@ -71,6 +71,12 @@ def test_simulated_flight_passes_and_unit_mistakes_fail(triad):
     assert _levels(ck.check_height("altimeter", s.alt_height, ref=gh), "height vs GNSS") == ["ok"]
     ft = ck.check_height("altimeter", s.alt_height / 0.3048, ref=gh)
     assert any("feet declared as metres" in x.message for x in ft if x.level == "error")
+    # heights above the geoid against ellipsoidal GNSS heights (a constant 30 m): a warning that
+    # names the level it moves; 3 m (an antenna offset, noise) is not
+    sea = ck.check_height("altimeter", s.alt_height - 30.0, ref=gh)
+    assert [x.level for x in sea if x.check == "height vs GNSS"] == ["warning"]
+    assert any("-30 m from the GNSS heights" in x.message and "9.3 mGal of level" in x.message for x in sea)
+    assert _levels(ck.check_height("altimeter", s.alt_height + 3.0, ref=gh), "height vs GNSS") == ["ok"]
 
 
 def test_unit_mistakes_stop_load_flight_with_channel_named(tmp_path):

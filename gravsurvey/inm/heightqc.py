@@ -490,4 +490,3 @@ def coarse_height_offset(nav, alt_time, alt_height, ellipsoid):
     if abs(best) < COARSE_MIN_S or not ratio >= COARSE_MIN_RATIO:
         return None, ratio
     return best, ratio
-

@@ -584,6 +584,11 @@ def repair_imu_glitches(f, w, accel_unit="m/s^2", gyro_unit="rad/s"):
     return out
 
 
+#: A median offset of a height channel from the GNSS heights beyond this is a warning, m (1.5 mGal
+#: of normal gravity; the simulated flights, the same height measured twice, differ by < 0.1 m).
+HEIGHT_OFFSET_WARN_M = 5.0
+
+
 def check_height(channel, h, unit="m", ref=None):
     """Altimeter/GNSS height inside ``HEIGHT_OK``; with ``ref`` (GNSS heights on the same
     times) a ratio of ~3.28 means feet declared as metres."""
@@ -622,10 +627,30 @@ def check_height(channel, h, unit="m", ref=None):
                 )
             else:
                 d = float(np.median(np.abs(h - ref)))
-                lvl = "ok" if d < 100.0 else "warning"
-                out.append(
-                    Finding(channel, "height vs GNSS", lvl, f"{channel}: median |height - GNSS height| {d:.3g} m", d)
-                )
+                off = float(np.median(h - ref))
+                if abs(off) >= HEIGHT_OFFSET_WARN_M:
+                    # a constant offset: normal gravity is taken at this channel's height, so the
+                    # product's level moves by 0.3086 mGal per metre, and a filter holding both
+                    # heights sees a conflict it cannot resolve
+                    out.append(
+                        Finding(
+                            channel,
+                            "height vs GNSS",
+                            "warning",
+                            f"{channel}: heights are {off:+.3g} m from the GNSS heights (median): heights above sea "
+                            "level (the geoid) against ellipsoidal ones, a barometric altitude, or an antenna offset? "
+                            f"Expected ellipsoidal heights of the IMU; {abs(off):.3g} m is "
+                            f"{abs(off) * 0.3086:.2g} mGal of level",
+                            off,
+                        )
+                    )
+                else:
+                    lvl = "ok" if d < 100.0 else "warning"
+                    out.append(
+                        Finding(
+                            channel, "height vs GNSS", lvl, f"{channel}: median |height - GNSS height| {d:.3g} m", d
+                        )
+                    )
     return out
 
 
