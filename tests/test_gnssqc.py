@@ -18,7 +18,8 @@ from gravsurvey.io.record import GnssChannel
 from gravsurvey.simulate.run import quick_sim, simulate_flight
 
 from sim_record import record_and_initial
-from test_inm_identify import rms_mid
+from test_inm_gnss import GRID
+from test_inm_identify import NAVIGATION_GRADE, rms_mid
 
 
 def _turning_velocity(t, rng):
@@ -97,21 +98,11 @@ def turning_strapdown():
     """25 min strapdown grid (three 25-km lines, two turns) in turbulence, 5 Hz GNSS with 0.3 m
     of noise: the estimator is told none of it."""
     sim = quick_sim(
-        plan={
-            "kind": "grid",
-            "origin_lat_deg": 47.0,
-            "origin_lon_deg": 11.0,
-            "altitude_m": 800.0,
-            "speed_mps": 70.0,
-            "lines": {"count": 3, "spacing_m": 3000.0, "length_m": 25000.0, "heading_deg": 30.0},
-            "static_start_s": 120.0,
-        },
+        plan={**GRID, "lines": {**GRID["lines"], "heading_deg": 30.0}},
         triad="strapdown",
         noise={
-            "accelerometer": {"white_sigma_mps2": 5e-4},
-            "gravimeter": {"white_sigma_mps2": 1e-5, "markov_sigma_mps2": 3e-6, "markov_lambda_per_s": 0.002},
+            **NAVIGATION_GRADE,
             "gyro": {"white_drift_degph": 0.005},
-            "altimeter": {"sigma_m": 0.05},
             "gnss": {"horizontal_sigma_m": 0.3, "vertical_sigma_m": 0.6},
         },
         field="seed_smooth",
