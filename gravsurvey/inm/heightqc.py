@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -470,13 +469,19 @@ def coarse_height_offset(nav, alt_time, alt_height, ellipsoid):
     if keep.sum() < 32:
         return None, math.nan
 
-    # the inertial position at 10 Hz is plenty for a variance (linear interpolation's radial error
-    # a_up dt^2 / 8: about 1 mm in turbulence) and 5-30x fewer points to search at every shift
+    # the residual at no shift, once; a shift then only moves the inertial radius along the
+    # track, ``e_L(t) = e(t) + |r_ins|(t - L) - |r_ins|(t)`` (the ellipsoid's radius under the
+    # aircraft changes over L seconds by a ramp the high-pass takes off), with |r_ins| at 10 Hz
+    # (linear interpolation's radial error a_up dt^2 / 8: about 1 mm in turbulence)
+    tk, hk = t[keep], h[keep]
+    _, e0 = vertical_residual(nav, tk, hk, ellipsoid)
     k = max(1, int(round(0.1 / max(float(np.median(np.diff(nav.time[:1000]))), 1e-9))))
-    coarse_nav = SimpleNamespace(time=nav.time[::k], r_i=nav.r_i[::k])
+    t_nav = nav.time[::k]
+    r_nav = np.linalg.norm(nav.r_i[::k], axis=1)
+    r_now = np.interp(tk, t_nav, r_nav)
 
     def variance(shift):
-        _, e = vertical_residual(coarse_nav, t[keep] - shift, h[keep], ellipsoid)
+        e = e0 + np.interp(tk - shift, t_nav, r_nav) - r_now
         return float(np.var(e - running_mean(e, w)))
 
     coarse = np.arange(-COARSE_MAX_S, COARSE_MAX_S + 1e-9, COARSE_STEP_S)
