@@ -824,6 +824,10 @@ class GnssMeasurement:
         ``r + C_true l``: the measurement becomes ``z = M_in^T (r_computed + C l - r_gnss)``
         (``C`` the computed attitude at the IMU sample nearest the GNSS time) and
         ``C_true = C (I + [theta x])`` adds ``M_in^T C [l x]`` on ``theta``.
+    vertical : bool
+        Use the up component.  False where the height channel is these same GNSS heights
+        (:func:`gravsurvey.inm.heightqc.gnss_height_fraction`): the up component is then NaN
+        (missing) and the heights enter once, as the height measurement.
     """
 
     def __init__(
@@ -836,8 +840,10 @@ class GnssMeasurement:
         vertical_sigma_m,
         ellipsoid: Ellipsoid = WGS84,
         lever_arm_t=None,
+        vertical: bool = True,
     ):
         self.lever_arm_t = None if lever_arm_t is None else np.asarray(lever_arm_t, float)
+        self.vertical = bool(vertical)
         self.time = np.asarray(time, float)
         self.lat = np.asarray(lat, float)
         self.lon = np.asarray(lon, float)
@@ -904,6 +910,8 @@ class GnssMeasurement:
         z[have] = zsum[have] / cnt[have, None]
         h[have] = hsum[have] / cnt[have, None, None]
         r[have] /= cnt[have, None, None]
+        if not self.vertical:
+            z[:, 2] = np.nan
         return z, h, r
 
 

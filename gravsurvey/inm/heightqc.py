@@ -37,7 +37,17 @@ __all__ = [
     "estimate_latency",
     "estimate_latency_drift",
     "coarse_height_offset",
+    "gnss_height_fraction",
 ]
+
+#: A height sample is one of the GNSS's own when a GNSS sample lies within this time of it ...
+SAME_SAMPLE_S = 1e-3
+#: ... with a height within this, m (a GNSS height exported to a CSV with 2-3 decimals; two
+#: independent sensors, metres apart on the aircraft and centimetres noisy each, do not agree
+#: to this on most samples).
+SAME_HEIGHT_M = 5e-3
+#: The height channel is the GNSS's heights when at least this fraction of its samples are.
+SAME_FRACTION = 0.9
 
 #: A spike: a sample off the mean of its neighbours by more than this many robust sigmas, its
 #: neighbours off theirs the other way (:func:`gravsurvey.io.checks.single_sample_outliers`).
@@ -495,3 +505,36 @@ def coarse_height_offset(nav, alt_time, alt_height, ellipsoid):
     if abs(best) < COARSE_MIN_S or not ratio >= COARSE_MIN_RATIO:
         return None, ratio
     return best, ratio
+
+
+def gnss_height_fraction(alt_time, alt_height, gnss_time, gnss_height) -> float:
+    """Fraction of the height channel's samples that are the GNSS's own heights.
+
+    A log without an altimeter gives the GNSS heights as the height channel (``topics:
+    {altimeter: /fix}``, or the GNSS file's height column): the same numbers then enter the
+    filter twice, as the height measurement and as the GNSS position's up component, each with
+    its own noise taken as independent of the other's - the vertical channel weighted as two
+    receivers.  A sample counts when a GNSS sample lies within :data:`SAME_SAMPLE_S` of it with
+    a height within :data:`SAME_HEIGHT_M`.
+
+    Parameters
+    ----------
+    alt_time, alt_height : ndarray (n,)
+        Height channel, s and m.
+    gnss_time, gnss_height : ndarray (k,)
+        GNSS times (sorted) and ellipsoidal heights, s and m.
+
+    Returns
+    -------
+    float
+        In [0, 1]; 0 when either channel is empty.
+    """
+    ta, ha = np.asarray(alt_time, float), np.asarray(alt_height, float)
+    tg, hg = np.asarray(gnss_time, float), np.asarray(gnss_height, float)
+    if ta.size == 0 or tg.size == 0:
+        return 0.0
+    j = np.clip(np.searchsorted(tg, ta), 1, max(tg.size - 1, 1)) if tg.size > 1 else np.zeros(ta.size, int)
+    if tg.size > 1:
+        j = np.where(np.abs(tg[j - 1] - ta) <= np.abs(tg[j] - ta), j - 1, j)
+    same = (np.abs(tg[j] - ta) <= SAME_SAMPLE_S) & (np.abs(hg[j] - ha) <= SAME_HEIGHT_M)
+    return float(np.count_nonzero(same)) / ta.size

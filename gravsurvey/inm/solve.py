@@ -34,10 +34,12 @@ from .heightqc import (
     LATENCY_K,
     LATENCY_MAX_S,
     LATENCY_MIN_S,
+    SAME_FRACTION,
     coarse_height_offset,
     estimate_latency,
     estimate_latency_drift,
     find_height_faults,
+    gnss_height_fraction,
     repair_heights,
 )
 from .identify import (
@@ -337,6 +339,8 @@ def estimate_anomaly(
     accel_bias = accel_bias_states_for(params, triad)
     height_warnings, height_facts = [], {}
     gnss_latency = None  # a GnssLatency once the first aided pass has measured it
+    # a height channel that is the GNSS's own heights enters once, not again as GNSS's up
+    gnss_heights = _heights_are_gnss(record)
     k = -1
     while k + 1 < passes:
         k += 1
@@ -362,6 +366,7 @@ def estimate_anomaly(
             lever_arm_t=gnss_lever_arm_t,
             gyro_bias_prior=-gyro_bias_t,
             pv_prior_i=(dr_prior_i, dv_prior_i),
+            gnss_vertical=not gnss_heights,
         )
         if given_params.identify and reidentify:
             params, ident = _identify(record, given_params, nav, ellipsoid, speed0, one_pass, accel_bias)
@@ -443,6 +448,13 @@ def estimate_anomaly(
                 f"{record.source or 'record'}: gnss: {gnss_latency.text()}, taken off (the aided track's residual "
                 'follows the horizontal velocity; docs/method.md, "GNSS latency")'
             ] + list(ident.get("warnings", []))
+    if gnss_used:
+        ident["gnss_vertical_used"] = not gnss_heights
+        if gnss_heights:
+            ident["notes"] = list(ident.get("notes", [])) + [
+                "gnss: the height channel is the GNSS's own heights; they enter once, as the height "
+                "measurement (the GNSS position's up component left out)"
+            ]
     sol.warnings = sol.warnings + list(ident.get("warnings", []))
     alt_t = np.asarray(record.altimeter.time, float)
     sol.resolution_m = (
@@ -634,6 +646,16 @@ def _height_latency(nav, t, e, faults):
     return float(lat), float(sig), 0.0, 0.0, 0.0
 
 
+def _heights_are_gnss(record) -> bool:
+    """Whether the record's height channel is its GNSS heights (:func:`gnss_height_fraction`)."""
+    gn = record.gnss
+    if gn is None or len(gn.time) == 0:
+        return False
+    alt_t, alt_h = _altimeter(record)
+    frac = gnss_height_fraction(alt_t, alt_h, np.asarray(gn.time, float), np.asarray(gn.height, float))
+    return frac >= SAME_FRACTION
+
+
 def _altimeter(record):
     """Finite altimeter samples: times (s) and heights (m)."""
     alt_t = np.asarray(record.altimeter.time, float)
@@ -810,13 +832,15 @@ def _one_pass(
     accel_bias=False,
     gyro_bias_prior=None,
     pv_prior_i=None,
+    gnss_vertical=True,
 ):
     """Discretise, filter and smooth once about the mechanization ``nav``.
 
     Returns ``idx`` (IMU indices of the epochs), ``c`` (triad -> inertial at the epochs),
     ``gnss_used``, ``n_state`` and the :func:`filter_and_smooth` dict.  ``hprior``: the
     horizontal disturbance prior (sigma, lambda) when ``params.horizontal``.  ``accel_bias``:
-    the 16-state model (horizontal accelerometer biases) when GNSS-aided.  ``gyro_bias_prior``
+    the 16-state model (horizontal accelerometer biases) when GNSS-aided.  ``gnss_vertical``:
+    use the GNSS's up component (False where the heights are the GNSS's).  ``gyro_bias_prior``
     (3,), rad/s: the prior mean of the gyro-bias state (minus the bias taken off the rates).
     """
     t = nav.time
@@ -857,6 +881,7 @@ def _one_pass(
                 params.gnss_vertical_sigma_m,
                 ellipsoid,
                 lever_arm_t,
+                vertical=gnss_vertical,
             )
         )
     z, h, r = stack_measurements([m.build(nav, idx, half, n_state) for m in meas])
