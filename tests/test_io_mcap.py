@@ -13,6 +13,7 @@ from mcap.writer import CompressionType
 from mcap_ros2.decoder import DecoderFactory
 from test_io_support import EXTERNAL, static_flight, write_json, write_ros2
 
+from gravsurvey.inm.heightqc import gnss_height_fraction
 from gravsurvey.errors import DataError, DataWarning
 from gravsurvey.io.ingest import load_flight, read_raw_channels
 from gravsurvey.io.inspect import format_inspect, inspect_files
@@ -140,6 +141,9 @@ def test_ros2_real_recording_load_flight_and_inspect():
     assert len(rec.imu.time) == 11865 and len(rec.gnss.time) == 989
     assert np.all(np.diff(rec.imu.time) > 0)
     assert abs(np.degrees(np.median(rec.gnss.lat)) - 42.3758) < 0.01  # Boston area
+    # the heights are the fix's altitudes: the filter takes them once (docs/method.md, "Heights
+    # that are the GNSS's own")
+    assert gnss_height_fraction(rec.altimeter.time, rec.altimeter.height, rec.gnss.time, rec.gnss.height) == 1.0
     reps = inspect_files([ROS2 / "robot_localization_test1.mcap", ROS2 / "robot_localization_test2.mcap"])
     text = format_inspect(reps)
     json.dumps(reps)
