@@ -231,22 +231,39 @@ def sigma_ratio_rms(err, sigma) -> float | None:
     return float(np.sqrt(np.mean(((e[ok] - e[ok].mean()) / s[ok]) ** 2)))
 
 
-def evaluate_flight(spec, folder: Path, runs=("default", "oracle", "classic")) -> dict:
-    """Run default / oracle / classic on one prepared flight and score them against truth."""
+def gnss_heights_config(folder: Path, name: str = "survey.yaml") -> str:
+    """Write ``gnss_heights_<name>`` beside ``name``: the same flight with the GNSS fixes'
+    heights as the height channel (a log without an altimeter); returns its file name."""
+    text = (folder / name).read_text()
+    if "altimeter: /altimeter" not in text:
+        raise SystemExit(f"{folder / name}: no 'altimeter: /altimeter' topic to replace")
+    out = f"gnss_heights_{name}"
+    (folder / out).write_text(text.replace("altimeter: /altimeter", "altimeter: /gnss"))
+    return out
+
+
+def evaluate_flight(spec, folder: Path, runs=("default", "oracle", "classic"), heights: str = "altimeter") -> dict:
+    """Run default / oracle / classic on one prepared flight and score them against truth.
+
+    ``heights="gnss"``: the default run takes the GNSS heights as its height channel
+    (:func:`gnss_heights_config`; the bound still assumes the altimeter).
+    """
     truth = read_truth_csv(folder / "F01" / "truth.csv")
     truth["line"] = np.array(truth_lines(folder / "F01" / "truth.csv"), dtype=object)
     row = {"name": spec["name"], "seed": spec["seed"], "summary": spec_summary(spec)}
     prof = {}
-    for tag, cfg in (("default", "survey.yaml"), ("oracle", "oracle.yaml"), ("classic", "classic.yaml")):
+    default_cfg = gnss_heights_config(folder) if heights == "gnss" else "survey.yaml"
+    suffix = "_gnss_heights" if heights == "gnss" else ""
+    for tag, cfg in (("default", default_cfg), ("oracle", "oracle.yaml"), ("classic", "classic.yaml")):
         if tag not in runs:
             continue
         t0 = time.perf_counter()
-        res = run_survey(folder / cfg, output_dir=folder / f"out_{tag}", force=True)
+        res = run_survey(folder / cfg, output_dir=folder / f"out_{tag}{suffix}", force=True)
         row[f"{tag}_s"] = time.perf_counter() - t0
         if res.failed:
             row[f"{tag}_error"] = res.failed[0].splitlines()[0]
             continue
-        prof[tag] = read_profiles(folder / f"out_{tag}" / "profiles.csv")
+        prof[tag] = read_profiles(folder / f"out_{tag}{suffix}" / "profiles.csv")
         row[f"{tag}_resolution_km"] = median_resolution_km(res.summary)
     if "default" not in prof:
         return row
@@ -367,6 +384,13 @@ def main(argv=None):
         default="default,oracle,classic",
         help="comma-separated subset of default,oracle,classic to run (faster checks)",
     )
+    ap.add_argument(
+        "--heights",
+        choices=("altimeter", "gnss"),
+        default="altimeter",
+        help="height channel of the default run: the simulated altimeter, or the GNSS fixes' heights "
+        "(a log without an altimeter; docs/benchmarks.md 'GNSS heights as the height channel')",
+    )
     a = ap.parse_args(argv)
     if a.flights < 1:
         ap.error("--flights must be >= 1")
@@ -379,7 +403,7 @@ def main(argv=None):
         try:
             folder = prepare_flight(spec, a.cache)
             t_sim = time.perf_counter() - t0
-            row = evaluate_flight(spec, folder, tuple(a.runs.split(",")))
+            row = evaluate_flight(spec, folder, tuple(a.runs.split(",")), a.heights)
         except GravsurveyError as exc:  # one bad flight must not hide the others' rows
             t_sim = time.perf_counter() - t0
             row = {

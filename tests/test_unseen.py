@@ -246,3 +246,18 @@ def test_one_short_unseen_flight_runs_end_to_end_with_defaults(tmp_path):
     assert rms is not None and math.isfinite(rms)
     text = (tmp_path / "out" / "profiles.csv").read_text()
     assert "disturbance_mgal" in text and "truth_mgal" in text
+
+
+def test_gnss_heights_config_takes_the_fixes_as_the_height_channel(tmp_path):
+    """``bench_unseen.py --heights gnss``: the default run's config with the GNSS topic as the
+    height channel, the rest as written; a config without the altimeter topic is refused."""
+    bench = _bench()
+    text = "flights:\n- name: F01\n  topics: {imu: /imu, altimeter: /altimeter, gnss: /gnss}\n  triad: platform\n"
+    (tmp_path / "survey.yaml").write_text(text)
+    name = bench.gnss_heights_config(tmp_path)
+    cfg = yaml.safe_load((tmp_path / name).read_text())
+    assert cfg["flights"][0]["topics"] == {"imu": "/imu", "altimeter": "/gnss", "gnss": "/gnss"}
+    assert cfg["flights"][0]["triad"] == "platform"
+    (tmp_path / "csv.yaml").write_text("flights:\n- name: F01\n  inputs: {csv: {imu: i.csv}}\n")
+    with pytest.raises(SystemExit, match="no 'altimeter: /altimeter' topic"):
+        bench.gnss_heights_config(tmp_path, "csv.yaml")
