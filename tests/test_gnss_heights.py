@@ -1,7 +1,7 @@
 """A height channel that is the GNSS's own heights (a log without an altimeter: ``topics:
 {altimeter: /fix}``, or the GNSS file's height column): found, and the heights enter the filter
 once, not again as the GNSS position's up component (gravsurvey/inm/heightqc.py,
-``gnss_height_fraction``; docs/method.md, "GNSS aiding")."""
+``gnss_height_fraction``; docs/method.md, "Heights that are the GNSS's own")."""
 
 from __future__ import annotations
 

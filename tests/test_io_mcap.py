@@ -13,8 +13,8 @@ from mcap.writer import CompressionType
 from mcap_ros2.decoder import DecoderFactory
 from test_io_support import EXTERNAL, static_flight, write_json, write_ros2
 
-from gravsurvey.inm.heightqc import gnss_height_fraction
 from gravsurvey.errors import DataError, DataWarning
+from gravsurvey.inm.heightqc import gnss_height_fraction
 from gravsurvey.io.ingest import load_flight, read_raw_channels
 from gravsurvey.io.inspect import format_inspect, inspect_files
 from gravsurvey.io.mcap import read_mcap, scan_records

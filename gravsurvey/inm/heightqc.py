@@ -533,8 +533,9 @@ def gnss_height_fraction(alt_time, alt_height, gnss_time, gnss_height) -> float:
     tg, hg = np.asarray(gnss_time, float), np.asarray(gnss_height, float)
     if ta.size == 0 or tg.size == 0:
         return 0.0
-    j = np.clip(np.searchsorted(tg, ta), 1, max(tg.size - 1, 1)) if tg.size > 1 else np.zeros(ta.size, int)
-    if tg.size > 1:
-        j = np.where(np.abs(tg[j - 1] - ta) <= np.abs(tg[j] - ta), j - 1, j)
+    # the nearest GNSS sample of each height sample
+    hi = np.minimum(np.searchsorted(tg, ta), tg.size - 1)
+    lo = np.maximum(hi - 1, 0)
+    j = np.where(np.abs(tg[lo] - ta) <= np.abs(tg[hi] - ta), lo, hi)
     same = (np.abs(tg[j] - ta) <= SAME_SAMPLE_S) & (np.abs(hg[j] - ha) <= SAME_HEIGHT_M)
     return float(np.count_nonzero(same)) / ta.size
