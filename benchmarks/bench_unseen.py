@@ -242,11 +242,36 @@ def gnss_heights_config(folder: Path, name: str = "survey.yaml") -> str:
     return out
 
 
-def evaluate_flight(spec, folder: Path, runs=("default", "oracle", "classic"), heights: str = "altimeter") -> dict:
+def model_config(folder: Path, model: dict, name: str = "survey.yaml") -> str:
+    """Write ``model_<name>`` beside ``name``: the same survey with ``model`` as its ``model``
+    section (datasheet figures a user would know, e.g. ``accel_bias_mps2``); its file name."""
+    cfg = yaml.safe_load((folder / name).read_text())
+    cfg["model"] = dict(model)
+    out = f"model_{name}"
+    (folder / out).write_text(
+        "# survey.yaml with a model section (bench_unseen --model)\n"
+        + yaml.safe_dump(cfg, sort_keys=False, default_flow_style=None)
+    )
+    return out
+
+
+def with_accel_bias(spec: dict, bias_mps2) -> dict:
+    """The drawn flight with its horizontal accelerometer biases replaced by ``bias_mps2`` (2,),
+    m/s^2 (a tactical IMU's instead of the suite's draw; the name is unchanged, the cache
+    folder's hash differs)."""
+    out = json.loads(json.dumps(spec))
+    out["sim"]["flights"][0]["sensors"]["accelerometer"]["bias_mps2"] = [float(b) for b in bias_mps2]
+    return out
+
+
+def evaluate_flight(
+    spec, folder: Path, runs=("default", "oracle", "classic"), heights: str = "altimeter", model=None
+) -> dict:
     """Run default / oracle / classic on one prepared flight and score them against truth.
 
     ``heights="gnss"``: the default run takes the GNSS heights as its height channel
-    (:func:`gnss_heights_config`; the bound still assumes the altimeter).
+    (:func:`gnss_heights_config`; the bound still assumes the altimeter).  ``model`` (dict): a
+    ``model`` section for the default run (:func:`model_config`).
     """
     truth = read_truth_csv(folder / "F01" / "truth.csv")
     truth["line"] = np.array(truth_lines(folder / "F01" / "truth.csv"), dtype=object)
@@ -254,6 +279,9 @@ def evaluate_flight(spec, folder: Path, runs=("default", "oracle", "classic"), h
     prof = {}
     default_cfg = gnss_heights_config(folder) if heights == "gnss" else "survey.yaml"
     suffix = "_gnss_heights" if heights == "gnss" else ""
+    if model:
+        default_cfg = model_config(folder, model, default_cfg)
+        suffix += "_model"
     for tag, cfg in (("default", default_cfg), ("oracle", "oracle.yaml"), ("classic", "classic.yaml")):
         if tag not in runs:
             continue
@@ -391,19 +419,50 @@ def main(argv=None):
         help="height channel of the default run: the simulated altimeter, or the GNSS fixes' heights "
         "(a log without an altimeter; docs/benchmarks.md 'GNSS heights as the height channel')",
     )
+    ap.add_argument(
+        "--model",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a model key for the default run (repeatable; a datasheet figure a user knows, e.g. "
+        "accel_bias_mps2=1e-3; the value is read as YAML)",
+    )
+    ap.add_argument(
+        "--accel-bias",
+        default=None,
+        metavar="B1,B2",
+        help="replace the drawn horizontal accelerometer biases by these, m/s^2 (a tactical IMU's; "
+        "docs/benchmarks.md 'Accelerometer bias taken off between passes')",
+    )
     a = ap.parse_args(argv)
     if a.flights < 1:
         ap.error("--flights must be >= 1")
+    model = {}
+    for item in a.model:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            ap.error(f"--model: expected KEY=VALUE, got {item!r}")
+        model[key.strip()] = yaml.safe_load(value)
+    accel_bias = None
+    if a.accel_bias is not None:
+        try:
+            accel_bias = [float(b) for b in a.accel_bias.split(",")]
+        except ValueError:
+            accel_bias = []
+        if len(accel_bias) != 2:
+            ap.error(f"--accel-bias: expected two numbers B1,B2 (m/s^2), got {a.accel_bias!r}")
     rows = []
     for seed in range(a.first_seed, a.first_seed + a.flights):
         spec = draw_flight_spec(seed)
         if a.quick:
             spec = limit_spec(spec, QUICK_MAX_DURATION_S, QUICK_MAX_IMU_HZ)
+        if accel_bias is not None:
+            spec = with_accel_bias(spec, accel_bias)
         t0 = time.perf_counter()
         try:
             folder = prepare_flight(spec, a.cache)
             t_sim = time.perf_counter() - t0
-            row = evaluate_flight(spec, folder, tuple(a.runs.split(",")), a.heights)
+            row = evaluate_flight(spec, folder, tuple(a.runs.split(",")), a.heights, model)
         except GravsurveyError as exc:  # one bad flight must not hide the others' rows
             t_sim = time.perf_counter() - t0
             row = {

@@ -253,6 +253,13 @@ def attitude_report(sol) -> dict:
         out["initial_velocity_corrections_mps"] = [float(b) for _, b in pv]
         out["gyro_bias_degph"] = [float(b / RADPS_PER_DEGPH) for b in bias]
         out["gyro_bias_sigma_degph"] = [float(b / RADPS_PER_DEGPH) for b in sol.gyro_bias_sigma_t]
+    abias = getattr(sol, "accel_bias_t", None)
+    if abias is not None:
+        # accelerometers 1 and 2 (triad axes), estimated as states; taken off the specific force
+        # between passes when the config gives a datasheet bias (model.accel_bias_mps2)
+        out["accel_bias_mps2"] = [float(b) for b in abias]
+        out["accel_bias_sigma_mps2"] = [float(b) for b in sol.accel_bias_sigma_t]
+        out["accel_bias_taken_off"] = bool(getattr(sol, "accel_bias_taken_off", False))
     return out
 
 

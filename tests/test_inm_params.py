@@ -43,6 +43,13 @@ def test_defaults_are_seed_004():
         ({"attitude_passes": 2.0}, "model.attitude_passes: expected an integer in [1, 5], got 2.0"),
         ({"attitude_passes": 6}, "model.attitude_passes: expected an integer in [1, 5], got 6"),
         ({"target_resolution_m": 0}, "model.target_resolution_m: expected a number > 0, got 0"),
+        ({"accel_bias_mps2": 0.0}, "model.accel_bias_mps2: expected a number in (0, 0.5], got 0.0"),
+        ({"accel_bias_mps2": 9.8}, "model.accel_bias_mps2: expected a number in (0, 0.5], got 9.8"),
+        (
+            {"accel_bias_mps2": 1e-3, "accel_bias_states": False},
+            "model.accel_bias_states: expected null or true with accel_bias_mps2 given (0.001 m/s^2: the biases "
+            "are estimated as states), got false",
+        ),
     ],
 )
 def test_from_dict_rejects_nonsense_naming_the_key(d, msg):

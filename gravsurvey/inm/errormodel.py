@@ -600,13 +600,14 @@ def initial_covariance(
         ``initial_attitude_sigma_deg``.
     horizontal : bool
         With ``q_t, p_t``: the 18-state prior, the accelerometer biases at
-        :data:`ACCEL_BIAS_SIGMA_MPS2` and the horizontal disturbance at its stationary sigma
+        ``params.accel_bias_mps2`` (the datasheet's; :data:`ACCEL_BIAS_SIGMA_MPS2` when None)
+        and the horizontal disturbance at its stationary sigma
         (:func:`gravsurvey.inm.identify.horizontal_prior`), independent of the rest.
     hprior : tuple of 2 floats, optional
         As in :func:`discretise`.
     accel_bias : bool
         With ``q_t, p_t`` (and not ``horizontal``): the 16-state prior, the accelerometer
-        biases at :data:`ACCEL_BIAS_SIGMA_MPS2`, independent of the rest.
+        biases as with ``horizontal``, independent of the rest.
     """
     if q_t is None or p_t is None:
         d = np.empty(8)
@@ -643,7 +644,8 @@ def initial_covariance(
         n = N_STATE_VECTOR if horizontal else N_STATE_BIAS
         big = np.zeros((n, n))
         big[:N_STATE_AIDED, :N_STATE_AIDED] = p
-        big[BA1, BA1] = big[BA2, BA2] = ACCEL_BIAS_SIGMA_MPS2**2
+        sig_ba = ACCEL_BIAS_SIGMA_MPS2 if params.accel_bias_mps2 is None else params.accel_bias_mps2
+        big[BA1, BA1] = big[BA2, BA2] = sig_ba**2
         if horizontal:
             sig_h = (
                 hprior[0]
@@ -655,7 +657,9 @@ def initial_covariance(
     return 0.5 * (p + p.T)
 
 
-def initial_mean(theta_t, q_t, p_t, n_state: int = N_STATE_AIDED, gyro_bias_t=None, dr_t=None, dv_t=None) -> np.ndarray:
+def initial_mean(
+    theta_t, q_t, p_t, n_state: int = N_STATE_AIDED, gyro_bias_t=None, dr_t=None, dv_t=None, accel_bias_t=None
+) -> np.ndarray:
     """Prior mean (n_state,) of the aided state for an attitude error ``theta_t`` (rad, triad axes).
 
     The seed's states carry the attitude: ``dq = dr - q x theta`` and ``dp = dv - p x theta``
@@ -667,6 +671,8 @@ def initial_mean(theta_t, q_t, p_t, n_state: int = N_STATE_AIDED, gyro_bias_t=No
     estimated bias taken off: minus that bias); None: zero.
     ``dr_t``, ``dv_t`` (3,), m and m/s: prior means of ``dr`` and ``dv`` (a re-run from a
     corrected initial position and velocity: minus the corrections); None: zero.
+    ``accel_bias_t`` (2,), m/s^2: the prior mean of the bias states ``BA1, BA2`` (a re-run whose
+    specific force had an estimated bias taken off: minus that bias; ``n_state`` >= 16); None: zero.
     """
     th = np.asarray(theta_t, float)
     x = np.zeros(n_state)
@@ -679,6 +685,8 @@ def initial_mean(theta_t, q_t, p_t, n_state: int = N_STATE_AIDED, gyro_bias_t=No
     x[TH] = th
     if gyro_bias_t is not None:
         x[BG] = np.asarray(gyro_bias_t, float)
+    if accel_bias_t is not None:
+        x[BA] = np.asarray(accel_bias_t, float)
     return x
 
 

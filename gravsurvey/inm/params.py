@@ -113,6 +113,16 @@ class InmParams:
         taken for a tilt on straight legs and leaks into the vertical in turns.  ``None`` (the
         default): on for a platform triad, off for a strapdown one (measured,
         docs/benchmarks.md, "Horizontal accelerometer-bias states on platform flights").
+    accel_bias_mps2 : float or None
+        The horizontal accelerometers' bias from their datasheet (1-sigma of each constant bias,
+        m/s^2; e.g. 1e-3 for 100 micro-g).  Given, a GNSS-aided filter on either triad carries the
+        bias states (16) with this prior; on a strapdown triad, after each pass, the smoothed
+        bias is also taken off the specific force and the flight mechanized (and the model
+        identified) again about it, as the gyro bias is (docs/method.md, "Accelerometer bias").
+        ``None`` (the default): the states follow ``accel_bias_states`` with a 5e-4 m/s^2 prior,
+        and nothing is taken off.  Opt-in, measured: it removes a tactical strapdown bias's leak
+        into the vertical (1e-3 m/s^2: 1.29 -> 0.69 mGal) but costs on some flights whose bias
+        is small (docs/benchmarks.md, "Accelerometer bias taken off between passes").
     given : frozenset of str
         The keys held fixed by identification: those written in the config
         (:func:`gravsurvey.settings.inm_params`) or, when constructed directly and not given, every key whose value
@@ -143,6 +153,7 @@ class InmParams:
     target_resolution_m: float | None = None
     horizontal: bool = False
     accel_bias_states: bool | None = None
+    accel_bias_mps2: float | None = None
     given: frozenset | None = None
 
     def __post_init__(self):
@@ -174,17 +185,18 @@ class InmParams:
 def accel_bias_states_for(params: InmParams, triad: str) -> bool:
     """Whether the GNSS-aided filter carries the horizontal accelerometer biases (16 states).
 
-    ``params.accel_bias_states`` when the config gives it; else on for a platform triad and off
-    for a strapdown one.  On a straight leg a horizontal bias ``b`` is indistinguishable from a
-    tilt ``b / g``; in a turn that tilt would put ``b |f_h| / g`` into the vertical channel,
-    which a bias does not.  On the unseen-flight suite the platform flights gain (quick U230
-    0.40 -> 0.22 mGal, U215 0.48 -> 0.21); the strapdown flights do not on balance (quick U016
-    0.85 -> 0.75, U003 0.20 -> 0.23), so strapdown keeps the cheaper 14 states
+    ``params.accel_bias_states`` when the config gives it; else on for a platform triad or when
+    the datasheet bias ``params.accel_bias_mps2`` is given, off for a strapdown one.  On a
+    straight leg a horizontal bias ``b`` is indistinguishable from a tilt ``b / g``; in a turn
+    that tilt would put ``b |f_h| / g`` into the vertical channel, which a bias does not.  On
+    the unseen-flight suite the platform flights gain (quick U230 0.40 -> 0.22 mGal, U215 0.48
+    -> 0.21); the strapdown flights do not on balance (quick U016 0.85 -> 0.75, U003 0.20 ->
+    0.23), so strapdown keeps the cheaper 14 states unless a datasheet bias is given
     (docs/benchmarks.md, "Horizontal accelerometer-bias states on platform flights").
     """
     if params.accel_bias_states is not None:
         return bool(params.accel_bias_states)
-    return triad == "platform"
+    return triad == "platform" or params.accel_bias_mps2 is not None
 
 
 def solvability_warnings(params: InmParams, speed_mps) -> list[str]:

@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import ConfigError, DataError
 from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, mat_en, mat_ie, radii_of_curvature
 from .errormodel import (
+    BA,
     BG,
     DP,
     DQ,
@@ -20,6 +21,7 @@ from .errormodel import (
     TH,
     AltimeterMeasurement,
     G,
+    N_STATE_BIAS,
     GnssMeasurement,
     discretise,
     epoch_geometry,
@@ -134,6 +136,13 @@ class InmSolution:
     gyro_bias_t, gyro_bias_sigma_t : ndarray (3,) or None
         The gyro biases on the triad axes and their smoothed 1-sigma, rad/s (GNSS-aided only):
         what the passes took off the rates plus the last pass's smoothed bias state.
+    accel_bias_t, accel_bias_sigma_t : ndarray (2,) or None
+        The biases of accelerometers 1 and 2 and their smoothed 1-sigma, m/s^2, when the filter
+        carried them as states (16 or 18): what the passes took off the specific force plus the
+        last pass's smoothed bias state.
+    accel_bias_taken_off : bool
+        Whether the passes took the estimated accelerometer bias off the specific force
+        (``model.accel_bias_mps2`` given, strapdown triad).
     alignment : Alignment or None
         The coarse alignment the initial attitude came from (None: given).
     attitude_converge_s : float
@@ -185,6 +194,9 @@ class InmSolution:
     initial_corrections: list = field(default_factory=list)
     gyro_bias_t: np.ndarray | None = None
     gyro_bias_sigma_t: np.ndarray | None = None
+    accel_bias_t: np.ndarray | None = None
+    accel_bias_sigma_t: np.ndarray | None = None
+    accel_bias_taken_off: bool = False
     alignment: object | None = None
     attitude_converge_s: float = float("nan")
     gnss_residual_rms_m: float = float("nan")
@@ -255,6 +267,17 @@ GYRO_BIAS_CONVERGED_RADPS = 1e-3 * RADPS_PER_DEGPH
 VELOCITY_CONVERGED_MPS = 0.1
 POSITION_CONVERGED_M = 30.0
 
+#: With ``model.accel_bias_mps2`` the passes also stop only once every accelerometer-bias
+#: correction is below this, m/s^2 (2 micro-g), or below its own smoothed sigma.  A horizontal
+#: bias ``b`` left in the specific force is a tilt ``b / g`` to the mechanization, which puts
+#: ``b |f_h| / g`` into the vertical in turns (docs/method.md, "Accelerometer bias").
+ACCEL_BIAS_CONVERGED_MPS2 = 2.0e-5
+
+#: An accelerometer-bias correction above this (m/s^2) re-runs the identification about the
+#: corrected specific force in the next pass: the vertical channel's tilt leak, which the noise
+#: levels were identified with, has changed.
+REIDENTIFY_ACCEL_BIAS_MPS2 = 5.0e-5
+
 #: An initial-attitude correction above this (rad, 0.5 deg) re-runs the identification about
 #: the corrected attitude in the next pass (after an alignment: 0.004-0.13 deg measured, not re-run).
 REIDENTIFY_RAD = math.radians(0.5)
@@ -290,6 +313,10 @@ def estimate_anomaly(
     zero-mean bias about the raw rates): its mean becomes the old attitude and bias seen from
     the new point (:func:`gravsurvey.inm.errormodel.initial_mean`), an iterated
     (Gauss-Newton) smoother.
+    With a datasheet accelerometer bias (``params.accel_bias_mps2``) the filter carries the
+    horizontal accelerometer biases as states on either triad, and on a strapdown one after
+    each pass their smoothed value comes off the specific force the same way (prior mean shifted to match; the
+    model identified again when it moved by more than :data:`REIDENTIFY_ACCEL_BIAS_MPS2`).
     With ``params.horizontal`` (and GNSS) one more pass follows about the last linearisation
     point with the 18-state model (horizontal disturbance and accelerometer biases; its prior
     from the vertical estimate, :func:`gravsurvey.inm.identify.horizontal_prior`), and the
@@ -337,6 +364,13 @@ def estimate_anomaly(
     ident = {}
     given_params, reidentify = params, True
     accel_bias = accel_bias_states_for(params, triad)
+    # a datasheet accelerometer bias given on a strapdown triad: the estimated bias comes off the
+    # specific force between passes (as the gyro bias comes off the rates); m/s^2 on triad axes 1
+    # and 2.  Not on a platform: it is levelled mechanically, so no alignment tilt carries the bias
+    # into the unaided channel the identification reads, and there the states' first-pass estimate
+    # taken off misled the next pass (docs/benchmarks.md, "Accelerometer bias taken off between passes")
+    take_off_accel_bias = params.accel_bias_mps2 is not None and triad == "strapdown"
+    accel_bias_t = np.zeros(2)
     height_warnings, height_facts = [], {}
     gnss_latency = None  # a GnssLatency once the first aided pass has measured it
     # a height channel that is the GNSS's own heights enters once, not again as GNSS's up
@@ -365,6 +399,7 @@ def estimate_anomaly(
             theta_prior=theta_prior,
             lever_arm_t=gnss_lever_arm_t,
             gyro_bias_prior=-gyro_bias_t,
+            accel_bias_prior=-accel_bias_t,
             pv_prior_i=(dr_prior_i, dv_prior_i),
             gnss_vertical=not gnss_heights,
         )
@@ -394,13 +429,19 @@ def estimate_anomaly(
         # a bias correction within its own smoothed sigma (the heading gyro's on straight lines,
         # where it is unobservable) is not one another pass could confirm
         bias_done = np.all(np.abs(db) < np.maximum(GYRO_BIAS_CONVERGED_RADPS, db_sig))
+        da = None
+        if take_off_accel_bias and n_state >= N_STATE_BIAS:
+            da, da_sig = _accel_bias_correction(out)
+            bias_done = bias_done and np.all(np.abs(da) < np.maximum(ACCEL_BIAS_CONVERGED_MPS2, da_sig))
         pv_done = pv_corrections[-1][0] < POSITION_CONVERGED_M and pv_corrections[-1][1] < VELOCITY_CONVERGED_MPS
         if corrections[-1] < ATTITUDE_CONVERGED_RAD and bias_done and pv_done:
             break
         # the model was identified on a navigation this far off (a given attitude degrees off: tilt
         # leaks the horizontal specific force into the vertical channel): identify it again about
         # the corrected attitude
-        reidentify = corrections[-1] > REIDENTIFY_RAD
+        reidentify = corrections[-1] > REIDENTIFY_RAD or (
+            da is not None and float(np.max(np.abs(da))) > REIDENTIFY_ACCEL_BIAS_MPS2
+        )
         # C_true = C Exp(theta) on inertial axes, at the corrected position (whose ENU axes
         # differ from the old point's by the position change over the Earth's radius)
         rot = rodrigues(np.ascontiguousarray(th0))
@@ -411,6 +452,11 @@ def estimate_anomaly(
         # the smoothed gyro bias comes off the rates; the bias state is then what remains, its
         # prior (zero mean about the raw rates) seen from the new point has mean -bias taken off
         gyro_bias_t = gyro_bias_t + db
+        if da is not None:
+            # the same for the accelerometer bias: off the specific force, the state's prior mean
+            # (zero about the raw specific force) then minus what was taken off
+            accel_bias_t = accel_bias_t + da
+            record = _accel_bias_off(record, da)
     hsol = None
     if params.horizontal:
         if gnss_used:
@@ -435,6 +481,15 @@ def estimate_anomaly(
     if gnss_used:
         _, db, sol.gyro_bias_sigma_t = _pass_correction(out)
         sol.gyro_bias_t = gyro_bias_t + db
+        if n_state >= N_STATE_BIAS:
+            da, sol.accel_bias_sigma_t = _accel_bias_correction(out)
+            sol.accel_bias_t = accel_bias_t + da
+            sol.accel_bias_taken_off = take_off_accel_bias
+    elif take_off_accel_bias:
+        ident.setdefault("warnings", []).append(
+            "model.accel_bias_mps2: the accelerometer biases need GNSS position aiding (model.gnss_aiding and a "
+            "GNSS channel); not estimated"
+        )
     sol.alignment = initial.alignment
     sol.params = params
     sol.identification = ident
@@ -673,6 +728,20 @@ def _pass_correction(out):
     return x0[TH], x0[BG], np.sqrt(np.diagonal(out["p_s"][0])[BG])
 
 
+def _accel_bias_correction(out):
+    """The smoothed biases of accelerometers 1 and 2 a 16- or 18-state pass found at its first
+    epoch (2,) m/s^2, and their 1-sigma (2,) m/s^2."""
+    return out["x_s"][0][BA], np.sqrt(np.diagonal(out["p_s"][0])[BA])
+
+
+def _accel_bias_off(record, bias_t):
+    """``record`` with the bias ``bias_t`` (2,) m/s^2 taken off the specific force of triad axes
+    1 and 2 (a copy; the caller's record is left as it is)."""
+    f_t = np.array(record.imu.specific_force_t, dtype=float)
+    f_t[:, :2] -= np.asarray(bias_t, float)[None, :]
+    return dataclasses.replace(record, imu=dataclasses.replace(record.imu, specific_force_t=f_t))
+
+
 def _triad_errors(x_s, c, r_i, v_i):
     """Position and velocity errors on the triad axes of aided states, and ``q``.
 
@@ -833,6 +902,7 @@ def _one_pass(
     gyro_bias_prior=None,
     pv_prior_i=None,
     gnss_vertical=True,
+    accel_bias_prior=None,
 ):
     """Discretise, filter and smooth once about the mechanization ``nav``.
 
@@ -841,7 +911,8 @@ def _one_pass(
     horizontal disturbance prior (sigma, lambda) when ``params.horizontal``.  ``accel_bias``:
     the 16-state model (horizontal accelerometer biases) when GNSS-aided.  ``gnss_vertical``:
     use the GNSS's up component (False where the heights are the GNSS's).  ``gyro_bias_prior``
-    (3,), rad/s: the prior mean of the gyro-bias state (minus the bias taken off the rates).
+    (3,), rad/s: the prior mean of the gyro-bias state (minus the bias taken off the rates);
+    ``accel_bias_prior`` (2,), m/s^2: the same for the accelerometer-bias states (16 or 18).
     """
     t = nav.time
     alt_t, alt_h = _altimeter(record)
@@ -896,7 +967,8 @@ def _one_pass(
         dr_t = dv_t = None
         if pv_prior_i is not None:
             dr_t, dv_t = c[0].T @ pv_prior_i[0], c[0].T @ pv_prior_i[1]
-        x0 = initial_mean(theta_prior, q_t0, p_t0, n_state, gyro_bias_prior, dr_t, dv_t)
+        ba_prior = accel_bias_prior if n_state >= N_STATE_BIAS else None
+        x0 = initial_mean(theta_prior, q_t0, p_t0, n_state, gyro_bias_prior, dr_t, dv_t, ba_prior)
     else:
         p0 = initial_covariance(params)
         x0 = np.zeros(n_state)

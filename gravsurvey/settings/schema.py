@@ -129,7 +129,16 @@ class ModelSection(Section):
         "accel_bias_states",
         "carry the horizontal accelerometer biases as filter states (16 instead of 14) on GNSS-aided "
         "flights: an unmodelled bias is taken for tilt and leaks into the vertical in turns "
-        "(docs/method.md, GNSS aiding); null: on for a platform triad, off for a strapdown one",
+        "(docs/method.md, GNSS aiding); null: on for a platform triad or when `accel_bias_mps2` is given, "
+        "off for a strapdown one",
+    )
+    accel_bias_mps2: Optional[float] = _m(
+        "accel_bias_mps2",
+        "datasheet bias of the horizontal accelerometers, m/s^2 (1-sigma of each, e.g. 1e-3 for 100 micro-g): "
+        "the GNSS-aided filter estimates the biases (on either triad) with this prior and, on a strapdown triad, "
+        "takes them off the specific force between passes (docs/method.md, Accelerometer bias); null: not taken off",
+        gt=0,
+        le=0.5,
     )
     filter_rate_hz: float = _m("filter_rate_hz", "Kalman epoch rate, Hz (the IMU rate is decimated)", gt=0)
     accel_noise_mps2: float = _m(
@@ -193,6 +202,16 @@ class ModelSection(Section):
     gyro_bias_sigma_degph: float = _m(
         "gyro_bias_sigma_degph", "sigma of each gyro's constant bias, deg/h (GNSS-aided filter only)", ge=0
     )
+
+    @model_validator(mode="after")
+    def _accel_bias_states_kept(self):
+        if self.accel_bias_mps2 is not None and self.accel_bias_states is False:
+            raise fail(
+                f"expected null or true with accel_bias_mps2 given ({self.accel_bias_mps2:g} m/s^2: the biases are "
+                "estimated as states), got false",
+                ("accel_bias_states",),
+            )
+        return self
 
 
 # ============================================================================ lines
