@@ -4,6 +4,7 @@
 Usage::
 
     python benchmarks/bench_unseen.py [--flights N] [--quick] [--first-seed S] [--json out.json]
+        [--runs default,oracle,classic] [--heights altimeter|gnss] [--model KEY=VALUE ...] [--accel-bias B1,B2]
 
 Draws ``N`` (default 20) flights with seeds ``S .. S+N-1`` from the unseen-flight generator
 (``gravsurvey.simulate.unseen``: random fields, noise x0.3-x3, rates, triads, headings,
@@ -33,7 +34,9 @@ scored samples, and ``kalman less drift``, the RMS of the smoothed Kalman estima
 the drift stage takes off what the lines show) with that drift taken off: where the second is
 near the bound and the default is not, the flight's loss is the drift its lines could not tell
 from the field.  ``--quick`` caps every drawn flight at 40 min and 50 Hz IMU (the
-same draws otherwise) for a fast check.  Uses public API only.
+same draws otherwise) for a fast check.  ``--model KEY=VALUE`` gives the default run a
+``model`` section (a datasheet figure a user would know); ``--accel-bias B1,B2`` replaces the
+drawn horizontal accelerometer biases (a tactical IMU's).  Uses public API only.
 """
 
 from __future__ import annotations
