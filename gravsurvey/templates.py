@@ -41,6 +41,7 @@ model:                             # 3D-INM Kalman/RTS filter (docs/method.md)
   identify: true                   # noise levels and anomaly prior from each flight's data
   filter_rate_hz: 1.0              # Kalman epochs per second (the IMU decimated)
   # target_resolution_m: ...       # ask for a resolution instead of the least-error one
+  # accel_bias_mps2: 1.0e-3        # datasheet accelerometer bias, m/s^2 (tactical strapdown IMUs)
 
 lines:                             # line segmentation (docs/outputs.md)
   mode: auto                       # auto (straight, level legs) | windows | whole
