@@ -172,9 +172,15 @@ def test_platform_takes_the_datasheet_bias_as_prior_only():
     force (a levelled platform has no alignment tilt for the bias to hide in; docs/method.md)."""
     spec = limit_spec(draw_flight_spec(1), 1200.0, 20.0)
     spec["sim"]["flights"][0]["triad"] = "platform"
-    rec = record_and_initial(simulate_flight(spec["sim"]))[0]
+    sim = simulate_flight(spec["sim"])
+    rec = record_and_initial(sim)[0]
     f_before = rec.imu.specific_force_t.copy()
     sol = estimate_anomaly(rec, inm_params({"accel_bias_mps2": 1e-3}), None, "platform")
     assert sol.x_smooth.shape[1] == N_STATE_BIAS and not sol.accel_bias_taken_off
     assert sol.accel_bias_t is not None and sol.identification["identified_in_pass"] == 1
     np.testing.assert_array_equal(rec.imu.specific_force_t, f_before)
+    # without GNSS there are no bias states: said, not silently ignored
+    rec, init = record_and_initial(sim, gnss=False)
+    sol = estimate_anomaly(rec, inm_params({"accel_bias_mps2": 1e-3}), init, "platform")
+    assert sol.accel_bias_t is None
+    assert any(w.startswith("model.accel_bias_mps2: the accelerometer biases need GNSS") for w in sol.warnings)

@@ -315,8 +315,9 @@ def estimate_anomaly(
     (Gauss-Newton) smoother.
     With a datasheet accelerometer bias (``params.accel_bias_mps2``) the filter carries the
     horizontal accelerometer biases as states on either triad, and on a strapdown one after
-    each pass their smoothed value comes off the specific force the same way (prior mean shifted to match; the
-    model identified again when it moved by more than :data:`REIDENTIFY_ACCEL_BIAS_MPS2`).
+    each pass their smoothed value comes off the specific force the same way (prior mean
+    shifted to match; the model identified again when it moved by more than
+    :data:`REIDENTIFY_ACCEL_BIAS_MPS2`).
     With ``params.horizontal`` (and GNSS) one more pass follows about the last linearisation
     point with the 18-state model (horizontal disturbance and accelerometer biases; its prior
     from the vertical estimate, :func:`gravsurvey.inm.identify.horizontal_prior`), and the
@@ -366,9 +367,9 @@ def estimate_anomaly(
     accel_bias = accel_bias_states_for(params, triad)
     # a datasheet accelerometer bias given on a strapdown triad: the estimated bias comes off the
     # specific force between passes (as the gyro bias comes off the rates); m/s^2 on triad axes 1
-    # and 2.  Not on a platform: it is levelled mechanically, so no alignment tilt carries the bias
-    # into the unaided channel the identification reads, and there the states' first-pass estimate
-    # taken off misled the next pass (docs/benchmarks.md, "Accelerometer bias taken off between passes")
+    # and 2.  Not on a platform: measured there, it helps most flights with a tactical bias but
+    # wrecks some whose first-pass bias estimate is wrong (quick U018 0.32 -> 1.21 mGal as drawn;
+    # docs/benchmarks.md, "Accelerometer bias taken off between passes")
     take_off_accel_bias = params.accel_bias_mps2 is not None and triad == "strapdown"
     accel_bias_t = np.zeros(2)
     height_warnings, height_facts = [], {}
@@ -485,7 +486,7 @@ def estimate_anomaly(
             da, sol.accel_bias_sigma_t = _accel_bias_correction(out)
             sol.accel_bias_t = accel_bias_t + da
             sol.accel_bias_taken_off = take_off_accel_bias
-    elif take_off_accel_bias:
+    elif params.accel_bias_mps2 is not None:
         ident.setdefault("warnings", []).append(
             "model.accel_bias_mps2: the accelerometer biases need GNSS position aiding (model.gnss_aiding and a "
             "GNSS channel); not estimated"
