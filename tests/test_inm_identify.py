@@ -166,23 +166,36 @@ def test_windowed_variance_matches_realisations():
         assert np.mean(seen) == pytest.approx(want, rel=0.15), (np.mean(seen), want)
 
 
+def _seed_smooth(n, dt):
+    """The seed's smooth field (30/20/10 mGal sinusoids of 3600/1500/900 s) at n samples, m/s^2."""
+    t = np.arange(n) * dt
+    mgal = (
+        30 * np.sin(2 * np.pi * t / 3600) + 20 * np.sin(2 * np.pi * t / 1500 + 1) + 10 * np.sin(2 * np.pi * t / 900 + 2)
+    )
+    return mgal * MGAL
+
+
+def _refine_under(noise, height_dt_s, speed, g1, dt):
+    """refine_prior on the first-pass estimate ``g1`` under the noise model ``noise``: the
+    default params, the report, the wide params, and refine_prior's (params, report)."""
+    report = {"spectral_model": dataclasses.asdict(noise), "height_dt_s": height_dt_s}
+    params = InmParams()
+    wide = I.wide_prior_params(params, report, speed)
+    new, rep = I.refine_prior(params, report, g1, dt, wide, speed, np.ones(g1.size))
+    return params, report, wide, new, rep
+
+
 def test_prior_holds_a_smooth_field_below_the_analysed_band():
     """The seed's smooth field (30/20/10 mGal sinusoids of 3600/1500/900 s) on a 22 min record
     lies below the periodogram band (which starts at a third of the record): the prior must
     still hold its variance.  Before the constraint the least-risk prior here was 0.05 mGal,
     which in the attitude-aided filter gave 6-94 mGal errors (docs/method.md)."""
     dt, n = 1.0, 1320
-    t = np.arange(n) * dt
-    rng = np.random.default_rng(2)
-    field = (
-        30 * np.sin(2 * np.pi * t / 3600) + 20 * np.sin(2 * np.pi * t / 1500 + 1) + 10 * np.sin(2 * np.pi * t / 900 + 2)
-    ) * MGAL
+    field = _seed_smooth(n, dt)
     noise = I.SpectralModel(1e-3, 3600.0, 1e-4, 0.05)
-    report = {"spectral_model": dataclasses.asdict(noise), "height_dt_s": 0.2}
-    params = InmParams()
-    wide = I.wide_prior_params(params, report, 70.0)
-    g1 = field + rng.standard_normal(n) * 1e-4 / math.sqrt(dt)  # the wide pass passes the white noise
-    new, rep = I.refine_prior(params, report, g1, dt, wide, 70.0, np.ones(n))
+    # the wide pass passes the white noise
+    g1 = field + np.random.default_rng(2).standard_normal(n) * 1e-4 / math.sqrt(dt)
+    params, report, wide, new, rep = _refine_under(noise, 0.2, 70.0, g1, dt)
     seen = I.field_variance_seen(field, np.ones(n), dt)
     assert rep["field_std_seen_mgal"] == pytest.approx(math.sqrt(seen) / MGAL, rel=0.25)
     tau = 1.0 / (new.anomaly_lambda_per_m * 70.0)
@@ -207,19 +220,12 @@ def test_prior_keeps_every_line_of_a_few_wavelength_field_on_a_long_record():
     its fine frequency resolution the periodogram bands between the lines are empty.  A plain
     running minimum over the bands dropped everything above the first empty band and chose a
     prior that flattened the 1500 and 900 s lines (15.8 mGal RMS on the simulated flight,
-    benchmarks/run.py's speed case); the prior must pass all three."""
+    benchmarks/run.py's scaling case); the prior must pass all three."""
     dt, n = 1.0, 57600
-    t = np.arange(n) * dt
-    rng = np.random.default_rng(4)
-    field = (
-        30 * np.sin(2 * np.pi * t / 3600) + 20 * np.sin(2 * np.pi * t / 1500 + 1) + 10 * np.sin(2 * np.pi * t / 900 + 2)
-    ) * MGAL
     noise = I.SpectralModel(1e-3, 3600.0, 1e-5, 1.0)
-    report = {"spectral_model": dataclasses.asdict(noise), "height_dt_s": 1.0}
-    params = InmParams()
-    wide = I.wide_prior_params(params, report, 50.0)
-    g1 = field + rng.standard_normal(n) * 2e-4  # the wide pass's noise (1 m heights), roughly
-    new, rep = I.refine_prior(params, report, g1, dt, wide, 50.0, np.ones(n))
+    # the wide pass's noise (1 m heights), roughly
+    g1 = _seed_smooth(n, dt) + np.random.default_rng(4).standard_normal(n) * 2e-4
+    _, _, _, new, rep = _refine_under(noise, 1.0, 50.0, g1, dt)
     tau = 1.0 / (new.anomaly_lambda_per_m * 50.0)
     m = dataclasses.replace(noise, anomaly_sigma_mps2=new.anomaly_sigma_mps2, anomaly_tau_s=tau)
     for period in (3600.0, 1500.0, 900.0):
