@@ -113,11 +113,11 @@ def check_mgd77t(d: Path):
 
 def check_mgd77t_run(d: Path):
     """The whole cruise through ``gravsurvey run`` (inputs.gravimeter, classic chain)."""
-    import csv
     import tempfile
     import warnings
 
     from gravsurvey.filters import gaussian_fir
+    from gravsurvey.io.writers.profiles_csv import read_profiles_csv
     from gravsurvey.pipeline import run_survey
 
     f = d / "mgd77t" / "nbp9908.m77t"
@@ -141,9 +141,9 @@ def check_mgd77t_run(d: Path):
                 warnings.simplefilter("ignore")
                 res = run_survey(cfg)
             el = time.perf_counter() - t
-            rows = list(csv.DictReader(open(Path(tmp) / "out" / "profiles.csv")))
-        tt = np.array([int(r["time_unix_ns"]) for r in rows])
-        dd = np.array([float(r["disturbance_mgal"]) for r in rows]) - np.interp(tt, ref_t, ref)
+            prof = read_profiles_csv(Path(tmp) / "out" / "profiles.csv")
+        tt = prof["time_unix_ns"]
+        dd = prof["disturbance_mgal"] - np.interp(tt, ref_t, ref)
         n_all = dd.size
         dd = dd[np.isfinite(dd)]  # epochs near gaps are NaN (not bridged)
         p5, p50, p95 = np.percentile(dd, [5, 50, 95])
