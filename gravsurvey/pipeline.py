@@ -30,7 +30,7 @@ from .config import FlightConfig, SurveyConfig, load_config
 from .errors import INTERRUPT, DataError, GravsurveyError, os_fault
 from .estimate import FlightEstimate, concatenate_estimates, from_classic, from_inm_solution
 from .geodesy import MGAL
-from .io.writers import to_jsonable
+from .io.writers import resolution_statement, to_jsonable
 from .truth import read_truth_csv, truth_at  # noqa: F401  (public here for notebooks and benchmarks)
 
 log = logging.getLogger("gravsurvey")
@@ -196,7 +196,14 @@ def line_products(est: FlightEstimate, segs, postprocess_options, model=None) ->
                 info["resolution_m"] = float(est.resolution_m)
         final[a:b] = z
         line[a:b] = s.name
-        line_info[s.name] = {**to_jsonable(info), "kind": s.kind, "speed_mps": speed, "samples": b - a}
+        line_info[s.name] = {
+            **to_jsonable(info),
+            # before to_jsonable turns an unbounded resolution (nothing resolved) into null
+            "resolution_note": resolution_statement(info.get("resolution_m")),
+            "kind": s.kind,
+            "speed_mps": speed,
+            "samples": b - a,
+        }
     est.disturbance = final
     est.line = line
     return seg_out, line_info, notes
@@ -248,7 +255,7 @@ def identification_log_lines(est: FlightEstimate) -> list[str]:
             continue
         tail = []
         if piece.get("resolution_m"):
-            tail.append(f"resolution {float(piece['resolution_m']) / 1000:.3g} km")
+            tail.append(resolution_statement(piece["resolution_m"]))
         if piece.get("expected_error_mgal") is not None:
             tail.append(f"expected error {float(piece['expected_error_mgal']):.3g} mGal")
         where = f" (piece {i + 1} of {len(pieces)})" if len(pieces) > 1 else ""
@@ -849,6 +856,19 @@ def horizontal_columns(results: list[FlightEstimate], ellipsoid=None) -> dict:
 HORIZONTAL_MEANINGFUL_FRACTION = 0.5
 
 
+def _resolution_note(line_stat: dict) -> str:
+    """The resolution statement of one line's summary entry (a cached result of an earlier
+    version has only ``resolution_m``)."""
+    return line_stat.get("resolution_note") or resolution_statement(line_stat.get("resolution_m"))
+
+
+def _product_name(line_stat: dict) -> str:
+    """What a line's final product is, for a plot legend: its post-processor, or ``smoothed``
+    for the smoothed estimate itself (post-processor ``none``, the default)."""
+    method = str(line_stat.get("method") or "")
+    return "smoothed" if method in ("", "none") else method
+
+
 def horizontal_line_stats(table: dict, idx) -> dict:
     """summary.json facts of one line's horizontal components (rows ``idx`` of the table).
 
@@ -1195,7 +1215,11 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         writers.write_profiles_csv(tx.path("profiles.csv"), table, metadata=metadata)
         if cfg.xyz:
             writers.write_xyz(
-                tx.path("profiles.xyz"), table, title=f"gravsurvey profiles: {cfg.name}", metadata=metadata
+                tx.path("profiles.xyz"),
+                table,
+                title=f"gravsurvey profiles: {cfg.name}",
+                metadata=metadata,
+                line_notes={(st["flight"], st["line"]): _resolution_note(st) for st in line_stats},
             )
         if cfg.geojson:
             writers.write_geojson(tx.path("lines.geojson"), table, line_stats, epsg, metadata=metadata)
@@ -1218,6 +1242,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         if cfg.plots:
             for ln in lines:
                 idx = ln["index"]
+                stat = lines_of.get(ln["flight"], {}).get(ln["line"], {})
                 e, n = table["easting_m"][idx], table["northing_m"][idx]
                 step = np.hypot(np.diff(e), np.diff(n))
                 dist_km = np.concatenate(([0.0], np.cumsum(np.where(np.isfinite(step), step, 0.0)))) / 1e3
@@ -1230,7 +1255,8 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                     table["disturbance_mgal"][idx],
                     table["sigma_mgal"][idx],
                     truth_mgal=table["truth_mgal"][idx] if "truth_mgal" in table else None,
-                    title=f"{cfg.name} {ln['flight']} {ln['line']}",
+                    title=f"{cfg.name} {ln['flight']} {ln['line']}\n" + _resolution_note(stat),
+                    final_label=f"final ({_product_name(stat)})",
                     x_label="distance along line, km",
                     horizontal=(
                         {

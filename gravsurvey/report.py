@@ -202,6 +202,7 @@ def figure_line_profile(
     title: str = "",
     x_label: str = "time, s",
     horizontal=None,
+    final_label: str = "final",
 ) -> Figure:
     """Figure of one line's profile.
 
@@ -224,6 +225,9 @@ def figure_line_profile(
     horizontal : dict, optional
         ``dg_north_mgal, dg_east_mgal, dg_north_sigma_mgal, dg_east_sigma_mgal`` arrays of shape
         (n,) (NaN where not observable): drawn in a second panel below, with 1-sigma bands.
+    final_label : str
+        Legend entry of ``final_mgal`` (the pipeline names the line's post-processor:
+        ``final (smoothed)`` for the default product, ``final (ti_cosphi)``, ...).
 
     Returns
     -------
@@ -254,7 +258,7 @@ def figure_line_profile(
                 f"{title}  (final - truth: RMS {rms:.2f} mGal)" if title else f"final - truth: RMS {rms:.2f} mGal"
             )
     handles, labels = ax.get_legend_handles_labels()
-    names = {"kalman": "Kalman/RTS", "final": "final (wavelet)", "truth": "truth", "sigma": "Kalman ± 1σ"}
+    names = {"kalman": "Kalman/RTS", "final": final_label, "truth": "truth", "sigma": "Kalman ± 1σ"}
     ax.legend(handles, [names[lb] for lb in labels], loc="best", fontsize=8)
     ax.set_xlabel(x_label)
     ax.set_ylabel("gravity disturbance, mGal")
@@ -288,11 +292,20 @@ def plot_line_profile(
     title: str = "",
     x_label: str = "time, s",
     horizontal=None,
+    final_label: str = "final",
 ) -> None:
     """Write a line's profile plot as PNG (see :func:`figure_line_profile`)."""
     _save(
         figure_line_profile(
-            x, kalman_mgal, final_mgal, sigma_mgal, truth_mgal, title=title, x_label=x_label, horizontal=horizontal
+            x,
+            kalman_mgal,
+            final_mgal,
+            sigma_mgal,
+            truth_mgal,
+            title=title,
+            x_label=x_label,
+            horizontal=horizontal,
+            final_label=final_label,
         ),
         path,
     )

@@ -309,3 +309,38 @@ def from_classic_like():
     est = from_inm_solution(inm_like(horizontal=False), name="C")
     est.estimator = {"method": "classic", "resolution_m": 3000.0}
     return est
+
+
+def test_every_product_states_its_resolution(tmp_path, monkeypatch):
+    """Issue 12 item 4: each line's half-wavelength resolution (the smoother's, for the default
+    product) in summary.json, the XYZ line map and the profile plot's title; a smoother that
+    resolves nothing (unbounded resolution: a flat estimate) says so instead of a number."""
+    import dataclasses
+    import math
+
+    from gravsurvey import report
+
+    segs = [
+        SimpleNamespace(name=n, kind="line", start_index=a, stop_index=a + 200) for n, a in (("L01", 0), ("L02", 200))
+    ]
+    titles, legends = {}, {}
+
+    def capture(path, *args, title="", final_label="final", **kw):
+        titles[Path(path).name], legends[Path(path).name] = title, final_label
+
+    monkeypatch.setattr(report, "plot_line_profile", capture)
+    for resolution_m, stated in ((2500.0, "half-wavelength resolution 2.5 km"), (math.inf, "no wavelength resolved")):
+        s = inm_like(horizontal=False)
+        s.resolution_m = resolution_m
+        est = from_inm_solution(s, name="F01", t0_unix_ns=1_700_000_000 * 10**9)
+        _, est.line_info, _ = line_products(est, segs, PostprocessOptions())
+        out = tmp_path / f"out_{resolution_m}"
+        summary = write_survey_outputs(dataclasses.replace(survey_cfg(tmp_path), plots=True), out, [est])
+        lines = summary["flights"]["F01"]["lines"]
+        assert lines["L01"]["resolution_m"] == (resolution_m if math.isfinite(resolution_m) else None)
+        assert all(stated in lines[n]["resolution_note"] for n in ("L01", "L02"))
+        comments = read_xyz(out / "profiles.xyz").comments
+        assert f"Line 1001 = flight F01 line L01; {lines['L01']['resolution_note']}" in comments
+        assert sum(stated in c for c in comments) == 2
+        assert titles["profile_F01_L02.png"] == f"t F01 L02\n{lines['L02']['resolution_note']}"
+        assert legends["profile_F01_L02.png"] == "final (smoothed)"

@@ -46,6 +46,10 @@ def test_profile_plot_png_and_content(tmp_path):
     assert "RMS 0.30 mGal" in ax.get_title()
     fig2 = report.figure_line_profile(x, k, f, s)
     assert {ln.get_label() for ln in fig2.axes[0].get_lines()} == {"kalman", "final"}
+    # the legend names the product as the caller says (the pipeline: the line's post-processor)
+    assert [t.get_text() for t in ax.get_legend().get_texts()].count("final") == 1
+    fig3 = report.figure_line_profile(x, k, f, s, final_label="final (ti_cosphi)")
+    assert "final (ti_cosphi)" in [t.get_text() for t in fig3.axes[0].get_legend().get_texts()]
 
 
 def test_plots_are_deterministic(tmp_path):

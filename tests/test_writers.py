@@ -167,6 +167,24 @@ def test_xyz_round_trip_and_format(tmp_path):
     np.testing.assert_allclose(l1["time_unix_s"][0] % 1.0, 0.123, atol=1e-6)
 
 
+def test_xyz_line_notes_follow_the_line_map(tmp_path):
+    t = make_table()
+    p = tmp_path / "p.xyz"
+    w.write_xyz(p, t, line_notes={("F01", "L01"): "half-wavelength resolution 4.2 km", ("F02", "T01"): "two\nlines"})
+    lines = p.read_text().splitlines()
+    assert "/ Line 1001 = flight F01 line L01; half-wavelength resolution 4.2 km" in lines
+    assert "/ Tie 2001 = flight F02 line T01; two lines" in lines  # one comment line per map entry
+    assert list(w.read_xyz(p).lines) == ["Line 1001", "Tie 2001"]  # the notes do not disturb the data
+
+
+def test_resolution_statement():
+    assert w.resolution_statement(4200.0) == "half-wavelength resolution 4.2 km"
+    assert w.resolution_statement(12345.0) == "half-wavelength resolution 12.3 km"
+    assert w.resolution_statement(math.inf) == "no wavelength resolved above the noise (flat estimate)"
+    for missing in (None, math.nan, 0.0):
+        assert w.resolution_statement(missing) == "half-wavelength resolution not stated"
+
+
 def test_rows_outside_lines_only_in_csv(tmp_path):
     # turn epochs (line "") between two lines of one flight, and a stale time_utc that is ignored
     t = make_table(truth=False, n1=6, n2=0)

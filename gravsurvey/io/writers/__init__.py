@@ -43,6 +43,7 @@ from .columns import (
     format_utc,
     line_groups,
     metadata_lines,
+    resolution_statement,
     profile_columns,
 )
 from .crossovers_csv import write_crossovers_csv
@@ -63,6 +64,7 @@ __all__ = [
     "SUMMARY_NAME",
     "line_groups",
     "metadata_lines",
+    "resolution_statement",
     "XYZ_COLUMNS",
     "CROSSOVER_COLUMNS",
     "LockedError",

@@ -177,6 +177,33 @@ def metadata_lines(metadata: dict | None) -> list[str]:
     return out
 
 
+def resolution_statement(resolution_m) -> str:
+    """How a line's product states its resolution in the XYZ header and the plots.
+
+    Parameters
+    ----------
+    resolution_m : float or None
+        Half-wavelength resolution of the line's product, m (summary.json ``resolution_m``);
+        ``math.inf`` when the estimator resolves no wavelength of the field above the noise (the
+        product is then the line's level, flat within its sigma); None or NaN when the
+        product's method states none.
+
+    Returns
+    -------
+    str
+        ``"half-wavelength resolution 4.2 km"``, ``"no wavelength resolved above the noise
+        (flat estimate)"`` or ``"half-wavelength resolution not stated"``.
+    """
+    if resolution_m is None:
+        return "half-wavelength resolution not stated"
+    r = float(resolution_m)
+    if math.isnan(r) or r <= 0.0:
+        return "half-wavelength resolution not stated"
+    if math.isinf(r):
+        return "no wavelength resolved above the noise (flat estimate)"
+    return f"half-wavelength resolution {r / 1000.0:.3g} km"
+
+
 def line_groups(flight, line) -> dict:
     """Row indices of every (flight, line), in order of first appearance; empty line names skipped.
 

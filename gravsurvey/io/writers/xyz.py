@@ -59,10 +59,18 @@ def xyz_line_labels(flight, line) -> tuple[list[str], dict[str, tuple[str, str]]
     return headers, mapping
 
 
-def write_xyz(path, table: dict, *, title: str = "gravsurvey profiles", metadata: dict | None = None) -> None:
+def write_xyz(
+    path,
+    table: dict,
+    *,
+    title: str = "gravsurvey profiles",
+    metadata: dict | None = None,
+    line_notes: dict | None = None,
+) -> None:
     """Write the profile table as Geosoft XYZ line data (Oasis montaj "Import XYZ").
 
-    Layout: ``/`` comment lines (title, units, the line-number map ``/ Line 1001 = F01 L01``),
+    Layout: ``/`` comment lines (title, units, the line-number map ``/ Line 1001 = F01 L01``, each
+    with its ``line_notes`` entry),
     then a ``/`` comment naming the columns, then per line a ``Line <n>`` (or ``Tie <n>``)
     header followed by whitespace-separated rows of :data:`XYZ_COLUMNS` with the optional
     columns of the table in profiles.csv order (estimate, level, horizontal, truth; not the
@@ -78,6 +86,9 @@ def write_xyz(path, table: dict, *, title: str = "gravsurvey profiles", metadata
         First comment line.
     metadata : dict, optional
         ``/ key: value`` comment lines after the title (:func:`metadata_lines`).
+    line_notes : dict, optional
+        ``(flight, line) -> text`` appended to that line's map comment after ``"; "`` (the
+        pipeline states each line's resolution there: :func:`resolution_statement`).
     """
     cols = profile_columns(table)
     numeric = ("time_unix_s",) + tuple(c for c in cols[4:] if c not in ATTITUDE_COLUMNS)
@@ -114,7 +125,8 @@ def write_xyz(path, table: dict, *, title: str = "gravsurvey profiles", metadata
         out.append("/ *_arcsec: deflection of the vertical, arcsec (xi north, eta east)")
     for h in headers:
         f, ln = mapping[h]
-        out.append(f"/ {h} = flight {f} line {ln}")
+        note = (line_notes or {}).get((f, ln))
+        out.append(f"/ {h} = flight {f} line {ln}" + (f"; {' '.join(str(note).splitlines())}" if note else ""))
     # column names right-aligned over their fields (the "/" takes the first field's first blank)
     out.append("/" + " ".join(f"{c:>{width[c]}}" for c in numeric)[1:])
     # right-aligned fixed-width fields; 'nan' -> '  *' keeps the width
