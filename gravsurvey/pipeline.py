@@ -310,6 +310,10 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
         # short-wavelength field differs between crossing directions (seen as drift)
         if s.kind == "line":
             labels[int(s.start_index) : int(s.stop_index)] = s.name
+    # an unbounded resolution (a flat estimate: no field along the lines for the stage's field
+    # model to misread) leaves the resolution guard off: on the four quick unseen flights with
+    # one, the drift taken off moved U233 0.67 -> 0.12 mGal, U217 0.65 -> 0.62, U018 0.33 ->
+    # 0.32, U016 0.68 -> 0.80 (2026-12-01)
     res = float(est.resolution_m) if np.isfinite(est.resolution_m) else 0.0
     drift, sigma, report = separate_drift(est.time, est.lat, est.lon, est.smoothed, labels, options, res)
     if drift is None:
