@@ -449,7 +449,8 @@ def concatenate_estimates(parts: list[FlightEstimate]) -> FlightEstimate:
     if arr["dg_north"] is None:
         arr["horizontal_observable"] = None
     res = np.array([p.resolution_m for p in parts], float)
-    resolution = float(np.nanmax(res)) if np.isfinite(res).any() else float("nan")
+    # an unbounded piece (nothing resolved) is the coarsest: inf, not "unknown" (NaN)
+    resolution = float(np.nanmax(res)) if (~np.isnan(res)).any() else float("nan")
     estimator = {
         "gnss_aided": any(bool(p.estimator.get("gnss_aided", False)) for p in parts),
         "identification": {"segments": [p.estimator.get("identification", {}) for p in parts]},

@@ -344,3 +344,13 @@ def test_every_product_states_its_resolution(tmp_path, monkeypatch):
         assert sum(stated in c for c in comments) == 2
         assert titles["profile_F01_L02.png"] == f"t F01 L02\n{lines['L02']['resolution_note']}"
         assert legends["profile_F01_L02.png"] == "final (smoothed)"
+    # a flight estimated in pieces states its coarsest piece's resolution; unbounded wins
+    pieces = []
+    for r in (2500.0, math.inf, math.nan):
+        s = inm_like(horizontal=False)
+        s.resolution_m = r
+        pieces.append(from_inm_solution(s, name="F01"))
+    assert concatenate_estimates(pieces[:1] + pieces[2:]).resolution_m == 2500.0
+    assert concatenate_estimates(pieces).resolution_m == math.inf
+    assert concatenate_estimates(pieces[1:]).resolution_m == math.inf
+    assert math.isnan(concatenate_estimates(pieces[2:] * 2).resolution_m)
