@@ -866,11 +866,13 @@ def _resolution_note(line_stat: dict) -> str:
     return line_stat.get("resolution_note") or resolution_statement(line_stat.get("resolution_m"))
 
 
-def _product_name(line_stat: dict) -> str:
+def _product_name(line_stat: dict, drift_off: bool = False) -> str:
     """What a line's final product is, for a plot legend: its post-processor, or ``smoothed``
-    for the smoothed estimate itself (post-processor ``none``, the default)."""
+    for the smoothed estimate itself (post-processor ``none``, the default); ``drift_off``: the
+    drift the lines showed was taken off the smoothed estimate first (:func:`estimate_drift`)."""
     method = str(line_stat.get("method") or "")
-    return "smoothed" if method in ("", "none") else method
+    name = "smoothed" if method in ("", "none") else method
+    return f"{name} less drift" if drift_off else name
 
 
 def horizontal_line_stats(table: dict, idx) -> dict:
@@ -1244,6 +1246,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                 },
             )
         if cfg.plots:
+            drift_off = {r.name: r.drift is not None for r in results}
             for ln in lines:
                 idx = ln["index"]
                 stat = lines_of.get(ln["flight"], {}).get(ln["line"], {})
@@ -1260,7 +1263,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                     table["sigma_mgal"][idx],
                     truth_mgal=table["truth_mgal"][idx] if "truth_mgal" in table else None,
                     title=f"{cfg.name} {ln['flight']} {ln['line']}\n" + _resolution_note(stat),
-                    final_label=f"final ({_product_name(stat)})",
+                    final_label=f"final ({_product_name(stat, drift_off.get(ln['flight'], False))})",
                     x_label="distance along line, km",
                     horizontal=(
                         {

@@ -344,6 +344,9 @@ def test_every_product_states_its_resolution(tmp_path, monkeypatch):
         assert sum(stated in c for c in comments) == 2
         assert titles["profile_F01_L02.png"] == f"t F01 L02\n{lines['L02']['resolution_note']}"
         assert legends["profile_F01_L02.png"] == "final (smoothed)"
+    est.drift = np.full(N, 0.1 * MGAL)  # the drift stage took some off: the legend says so
+    write_survey_outputs(dataclasses.replace(survey_cfg(tmp_path), plots=True), tmp_path / "out_drift", [est])
+    assert legends["profile_F01_L01.png"] == "final (smoothed less drift)"
     # a flight estimated in pieces states its coarsest piece's resolution; unbounded wins
     pieces = []
     for r in (2500.0, math.inf, math.nan):
