@@ -1179,6 +1179,8 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         }
 
     metadata = _output_metadata(cfg, epsg, level_state)
+    # every line's stated resolution travels with the table into each file (issue 12 item 4)
+    metadata["resolution"] = {f"{st['flight']}/{st['line']}": _resolution_note(st) for st in line_stats}
     summary = {
         "survey": cfg.name,
         "software": {"name": "gravsurvey", "version": __version__, "python": platform.python_version()},

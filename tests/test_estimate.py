@@ -341,7 +341,10 @@ def test_every_product_states_its_resolution(tmp_path, monkeypatch):
         assert all(stated in lines[n]["resolution_note"] for n in ("L01", "L02"))
         comments = read_xyz(out / "profiles.xyz").comments
         assert f"Line 1001 = flight F01 line L01; {lines['L01']['resolution_note']}" in comments
-        assert sum(stated in c for c in comments) == 2
+        assert sum(stated in c for c in comments) == 3  # the two map lines and the metadata
+        csv_head = [ln for ln in (out / "profiles.csv").read_text().splitlines() if ln.startswith("#")]
+        resolution = json.loads(next(ln for ln in csv_head if ln.startswith("# resolution: "))[14:])
+        assert resolution == {f"F01/{n}": lines[n]["resolution_note"] for n in ("L01", "L02")}
         assert titles["profile_F01_L02.png"] == f"t F01 L02\n{lines['L02']['resolution_note']}"
         assert legends["profile_F01_L02.png"] == "final (smoothed)"
     est.drift = np.full(N, 0.1 * MGAL)  # the drift stage took some off: the legend says so
