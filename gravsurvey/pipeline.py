@@ -35,7 +35,7 @@ from .truth import read_truth_csv, truth_at  # noqa: F401  (public here for note
 
 log = logging.getLogger("gravsurvey")
 
-CACHE_VERSION = 4
+CACHE_VERSION = 5
 
 
 # --------------------------------------------------------------------------
@@ -860,12 +860,6 @@ def horizontal_columns(results: list[FlightEstimate], ellipsoid=None) -> dict:
 HORIZONTAL_MEANINGFUL_FRACTION = 0.5
 
 
-def _resolution_note(line_stat: dict) -> str:
-    """The resolution statement of one line's summary entry (a cached result of an earlier
-    version has only ``resolution_m``)."""
-    return line_stat.get("resolution_note") or resolution_statement(line_stat.get("resolution_m"))
-
-
 def _product_name(line_stat: dict, drift_off: bool = False) -> str:
     """What a line's final product is, for a plot legend: its post-processor, or ``smoothed``
     for the smoothed estimate itself (post-processor ``none``, the default); ``drift_off``: the
@@ -1143,6 +1137,8 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
             if idx is None:
                 continue
             st = {"flight": r.name, "line": name, **info}
+            # line_info made by line_products has it; one built by a caller may give only resolution_m
+            st.setdefault("resolution_note", resolution_statement(st.get("resolution_m")))
             d = table["disturbance_mgal"][idx]
             st["mean_mgal"] = float(np.nanmean(d)) if np.isfinite(d).any() else None
             st["std_mgal"] = float(np.nanstd(d)) if np.isfinite(d).any() else None
@@ -1180,7 +1176,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
 
     metadata = _output_metadata(cfg, epsg, level_state)
     # every line's stated resolution travels with the table into each file (issue 12 item 4)
-    metadata["resolution"] = {f"{st['flight']}/{st['line']}": _resolution_note(st) for st in line_stats}
+    metadata["resolution"] = {f"{st['flight']}/{st['line']}": st["resolution_note"] for st in line_stats}
     summary = {
         "survey": cfg.name,
         "software": {"name": "gravsurvey", "version": __version__, "python": platform.python_version()},
@@ -1227,7 +1223,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                 table,
                 title=f"gravsurvey profiles: {cfg.name}",
                 metadata=metadata,
-                line_notes={(st["flight"], st["line"]): _resolution_note(st) for st in line_stats},
+                line_notes={(st["flight"], st["line"]): st["resolution_note"] for st in line_stats},
             )
         if cfg.geojson:
             writers.write_geojson(tx.path("lines.geojson"), table, line_stats, epsg, metadata=metadata)
@@ -1251,6 +1247,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
             drift_off = {r.name: r.drift is not None for r in results}
             for ln in lines:
                 idx = ln["index"]
+                # a line of the table without line_info (a caller's own estimate) states nothing
                 stat = lines_of.get(ln["flight"], {}).get(ln["line"], {})
                 e, n = table["easting_m"][idx], table["northing_m"][idx]
                 step = np.hypot(np.diff(e), np.diff(n))
@@ -1264,7 +1261,8 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                     table["disturbance_mgal"][idx],
                     table["sigma_mgal"][idx],
                     truth_mgal=table["truth_mgal"][idx] if "truth_mgal" in table else None,
-                    title=f"{cfg.name} {ln['flight']} {ln['line']}\n" + _resolution_note(stat),
+                    title=f"{cfg.name} {ln['flight']} {ln['line']}\n"
+                    + stat.get("resolution_note", resolution_statement(None)),
                     final_label=f"final ({_product_name(stat, drift_off.get(ln['flight'], False))})",
                     x_label="distance along line, km",
                     horizontal=(

@@ -194,10 +194,8 @@ def resolution_statement(resolution_m) -> str:
         ``"half-wavelength resolution 4.2 km"``, ``"no wavelength resolved above the noise
         (flat estimate)"`` or ``"half-wavelength resolution not stated"``.
     """
-    if resolution_m is None:
-        return "half-wavelength resolution not stated"
-    r = float(resolution_m)
-    if math.isnan(r) or r <= 0.0:
+    r = math.nan if resolution_m is None else float(resolution_m)
+    if not r > 0.0:  # NaN or not positive
         return "half-wavelength resolution not stated"
     if math.isinf(r):
         return "no wavelength resolved above the noise (flat estimate)"
