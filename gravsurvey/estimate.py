@@ -270,8 +270,8 @@ def _honest_sigma(sol) -> np.ndarray:
     is the gravimeter drift of a datasheet that the smoother's model does not hold and passes
     into the estimate (docs/method.md, "Honest sigma").
     """
-    sig = np.asarray(sol.sigma_smooth, float)
     ident = getattr(sol, "identification", None) or {}
+    sig = np.asarray(sol.sigma_smooth, float) * float(ident.get("smoother_sigma_scale", 1.0))
     extra = math.hypot(
         float(ident.get("drift_sigma_passed_mps2", 0.0)), float(ident.get("field_sigma_missed_mps2", 0.0))
     )

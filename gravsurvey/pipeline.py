@@ -35,7 +35,7 @@ from .truth import read_truth_csv, truth_at  # noqa: F401  (public here for note
 
 log = logging.getLogger("gravsurvey")
 
-CACHE_VERSION = 5
+CACHE_VERSION = 6
 
 
 # --------------------------------------------------------------------------
@@ -292,7 +292,10 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
     (``est.drift_sigma_passed``) for the drift's posterior sigma.  When no drift is taken off
     but the lines set the datasheet's aside, the datasheet drift in ``est.sigma`` shrinks to
     the fitted one (:func:`gravsurvey.drift.passed_drift_factor`; ``sigma_drift_passed_mgal`` in
-    the report).  The fit's facts go to ``est.estimator["drift"]`` (summary.json).
+    the report).  A datasheet drift given in the config (``drift.sigma_mps2``, ``drift.tau_s``)
+    first takes the place of the default one the identification passed into ``est.sigma``
+    (:func:`datasheet_drift_passed`).  The fit's facts go to ``est.estimator["drift"]``
+    (summary.json).
 
     Returns
     -------
@@ -300,10 +303,18 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
         Notes for the flight (a drift larger than the datasheet prior).
     """
     from .drift import DriftOptions, passed_drift_factor, separate_drift
+    from .inm.identify import DRIFT_DEFAULT_SIGMA_MPS2, DRIFT_DEFAULT_TAU_S
 
     options = options if options is not None else DriftOptions()
     if est.smoothed is None:
         return []
+    configured = (options.sigma_mps2, options.tau_s) != (DRIFT_DEFAULT_SIGMA_MPS2, DRIFT_DEFAULT_TAU_S)
+    if est.drift_sigma_passed > 0.0 and configured:
+        # the smoother's identification passed the default datasheet drift into the sigma;
+        # the configured one (drift.sigma_mps2, drift.tau_s) is the gravimeter's
+        passed = datasheet_drift_passed(est, options)
+        _trade_drift_sigma(est, passed)
+        est.drift_sigma_passed = passed
     labels = np.full(len(est.time), "", dtype=object)
     for s in segs:
         # survey lines only: tie lines cross them, and the smoother's along-track low-pass of a
@@ -325,6 +336,8 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
             _trade_drift_sigma(est, passed)
             est.drift_sigma_passed = passed
             report = {**report, "sigma_drift_passed_mgal": passed / MGAL}
+        elif configured:
+            report = {**report, "sigma_drift_passed_mgal": est.drift_sigma_passed / MGAL}
     est.estimator = {**est.estimator, "drift": report}
     if drift is None:
         return []
@@ -337,6 +350,26 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
             f"(over 3x the prior drift.sigma_mps2); it was taken off (drift_mgal in profiles.csv)"
         )
     return notes
+
+
+def datasheet_drift_passed(est: FlightEstimate, options) -> float:
+    """1-sigma of the drift ``options`` (``drift.sigma_mps2``, ``drift.tau_s``) that the
+    smoother passes into ``est``, m/s^2: :func:`gravsurvey.inm.identify.drift_sigma_passed` over
+    each piece's identification and span, the largest; without an identification report (an
+    estimate built by hand) the estimate's own figure scaled by the drift's sigma (to which it
+    is proportional)."""
+    from .inm.identify import DRIFT_DEFAULT_SIGMA_MPS2, drift_sigma_passed
+
+    ident = est.estimator.get("identification") or {}
+    passed = []
+    for i, rep in enumerate(ident.get("segments", [ident])):
+        on = np.flatnonzero(np.asarray(est.segment) == i)
+        if on.size and "spectral_model" in rep:
+            span = float(est.time[on[-1]] - est.time[on[0]])
+            passed.append(drift_sigma_passed(rep, span, options.sigma_mps2, options.tau_s))
+    if passed:
+        return max(passed)
+    return est.drift_sigma_passed * options.sigma_mps2 / DRIFT_DEFAULT_SIGMA_MPS2
 
 
 def _trade_drift_sigma(est: FlightEstimate, sigma) -> None:

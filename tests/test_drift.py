@@ -376,3 +376,40 @@ def test_near_the_threshold_both_drifts_are_weighed(seed):
     # and the weighed drift helps: the error left is below the drift's
     on = lab != ""
     assert rms_about_mean((g - est - field)[on]) < rms_about_mean((g - field)[on])
+
+
+def test_a_configured_datasheet_drift_is_the_one_the_sigma_passes():
+    """drift.sigma_mps2 / drift.tau_s (the gravimeter's datasheet) replace the default drift the
+    identification passed into the sigma, also where the stage takes nothing off; with the
+    identification's spectral model the passed part is recomputed for them, without one it
+    scales with the drift's sigma."""
+    import dataclasses
+
+    from gravsurvey.inm.identify import drift_sigma_passed
+    from gravsurvey.pipeline import datasheet_drift_passed, estimate_drift
+
+    est, segs, field, lab = _flight_estimate()
+    sigma0 = est.sigma.copy()
+    estimate_drift(est, segs, DriftOptions(estimate=False, sigma_mps2=2.0 * MGAL))
+    assert est.drift is None
+    np.testing.assert_allclose(est.sigma, np.sqrt(sigma0**2 - (0.8 * MGAL) ** 2 + (1.6 * MGAL) ** 2))
+    assert est.estimator["drift"]["sigma_drift_passed_mgal"] == pytest.approx(1.6)
+    # the defaults leave the sigma as the identification made it
+    est, segs, field, lab = _flight_estimate()
+    estimate_drift(est, segs, DriftOptions(estimate=False))
+    np.testing.assert_array_equal(est.sigma, sigma0)
+    # with the identification's report: drift_sigma_passed for the configured figures
+    rep = {
+        "spectral_model": {
+            "anomaly_sigma_mps2": 3e-4,
+            "anomaly_tau_s": 2000.0,
+            "white_mps2": 1e-5,
+            "height_sigma_m": 0.05,
+        },
+        "height_dt_s": 0.2,
+    }
+    est = dataclasses.replace(est, estimator={"identification": rep})
+    options = DriftOptions(sigma_mps2=0.5 * MGAL, tau_s=3000.0)
+    want = drift_sigma_passed(rep, float(est.time[-1] - est.time[0]), 0.5 * MGAL, 3000.0)
+    assert datasheet_drift_passed(est, options) == pytest.approx(want)
+    assert want != pytest.approx(0.5 * drift_sigma_passed(rep, float(est.time[-1] - est.time[0])))

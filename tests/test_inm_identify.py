@@ -532,3 +532,59 @@ def test_field_the_data_cannot_exclude_is_in_the_stated_sigma():
     _, rep_s = _refine(strong)
     assert rep_s["signal_seen_to_m"] is not None
     assert rep_s["field_sigma_unexcluded_mps2"] == 0.0
+
+
+def _shaped(rng, psd, n, dt):
+    """A stationary realisation of the two-sided PSD ``psd`` (on ``rfftfreq(n, dt)``), (n,)."""
+    return np.fft.irfft(np.fft.rfft(rng.standard_normal(n)) * np.sqrt(psd / dt), n)
+
+
+def test_smoother_sigma_scale_turns_the_models_sigma_into_the_error_on_the_field_seen():
+    """The steady-state smoother of a Markov prior, applied (in the frequency domain) to
+    realisations of a field plus the noise: its error is the prior's own sigma when the field IS
+    that Markov process (scale 1), and the own sigma times ``smoother_sigma_scale`` when the field
+    falls off faster, as one seen from the air does (an exp(-f / f0) spectrum: scale well
+    under 1).  Truth: the realised fields."""
+    rng = np.random.default_rng(11)
+    n, dt = 4096, 1.0
+    f = np.fft.rfftfreq(n, dt)
+    sigma, tau = 2e-4, 600.0
+    s_n = (1e-5) ** 2 * dt + 0.05**2 * 0.2 * (2 * np.pi * f) ** 4
+    s_g = I._markov_psd(f, sigma, tau)
+    h = s_g / (s_g + s_n)
+    band = slice(1, n // 2)  # the mean and the Nyquist bin aside
+    own = math.sqrt(float(np.sum((s_g * s_n / (s_g + s_n))[band])) * 2.0 / (n * dt))
+    upward = 2.0 * s_g[1] * np.exp(-f / 1e-3)
+    for field, want_scale in ((s_g, (0.97, 1.03)), (upward, (0.25, 0.8))):
+        scale = I.smoother_sigma_scale(f[band], field[band], s_n[band], sigma, tau)
+        assert want_scale[0] < scale < want_scale[1], scale
+        err = []
+        for _ in range(40):
+            g = _shaped(rng, field, n, dt)
+            y = g + _shaped(rng, s_n, n, dt)
+            e = np.fft.irfft(np.fft.rfft(y) * h, n) - g
+            err.append(np.mean((e - e.mean()) ** 2))
+        assert math.sqrt(np.mean(err)) == pytest.approx(scale * own, rel=0.05)
+    # nothing to scale by: 1; a field far above the prior: held at the upper bound
+    assert I.smoother_sigma_scale(f[band], 0.0 * s_g[band], 0.0 * s_n[band], sigma, tau) == 1.0
+    assert I.smoother_sigma_scale(f[band], 1e6 * s_g[band], s_n[band], sigma, tau) == I.SIGMA_SCALE_BOUNDS[1]
+
+
+def test_the_product_sigma_is_the_smoothers_scaled_to_the_field_seen(noisy_flight):
+    """On a flight over point masses (a field unlike the Markov prior) the identification
+    states the scale, and the product's sigma is the smoother's times it (with the drift and
+    missed parts in quadrature); the smoother's part then matches its error within 40 %
+    (the smoother's own sigma overstates it)."""
+    s, rec, init = noisy_flight
+    sol = estimate_anomaly(rec, InmParams(), init, "platform")
+    rep = sol.identification
+    scale = rep["smoother_sigma_scale"]
+    assert 0.25 <= scale < 0.9
+    extra = math.hypot(rep["drift_sigma_passed_mps2"], rep["field_sigma_missed_mps2"])
+    est = from_inm_solution(sol)
+    assert np.allclose(est.sigma, np.hypot(scale * sol.sigma_smooth, extra))
+    keep = (sol.time > sol.time[0] + 600) & (sol.time < sol.time[-1] - 600)
+    err = rms_mid(sol, s)
+    own = float(np.median(sol.sigma_smooth[keep])) / MGAL
+    assert abs(scale * own / err - 1.0) < abs(own / err - 1.0)
+    assert 0.6 < scale * own / err < 1.4

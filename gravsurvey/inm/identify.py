@@ -59,6 +59,7 @@ __all__ = [
     "wide_prior_params",
     "refine_prior",
     "prior_risk",
+    "smoother_sigma_scale",
     "straight_weight",
     "keep_default_prior",
     "prior_for_resolution",
@@ -87,6 +88,10 @@ _ORDER = ("anomaly_sigma_mps2", "anomaly_tau_s", "white_mps2", "height_sigma_m")
 WHITE_MAX_FACTOR = 4.0
 #: ... else this one-second sigma (1 mGal/sqrt(Hz), a typical gravimeter datasheet figure), m/s^2.
 WHITE_DEFAULT_MPS2 = 1e-5
+
+#: Range of :func:`smoother_sigma_scale`: the seen field's spectrum is an estimate, and a
+#: factor beyond it would say more than one flight's periodogram can.
+SIGMA_SCALE_BOUNDS = (0.25, 4.0)
 
 #: Horizontal specific force (m/s^2) above which an epoch counts as manoeuvring (about 3 deg of
 #: bank); such epochs, dilated by :data:`MANOEUVRE_MARGIN_S`, are left out of the fit.
@@ -994,6 +999,34 @@ def prior_risk(f, s_signal, s_noise, sigma, tau) -> float:
     return float(np.sum((1.0 - h) ** 2 * s_signal + h**2 * s_noise))
 
 
+def smoother_sigma_scale(f, s_signal, s_noise, sigma, tau) -> float:
+    """Factor from the smoother's own 1-sigma to its expected error on the field seen.
+
+    The RTS smoother's covariance is its model's: under the Markov prior ``S_g`` its error
+    variance is ``sum S_g S_n / (S_g + S_n)`` (the same sum as :func:`prior_risk` with
+    ``S_s = S_g``).  A field seen from the air falls off faster than the Markov tail, so over
+    the same bands the error the chosen smoother makes on the field the spectrum shows
+    (:func:`prior_risk` with ``S_s`` the counted field) is smaller; on the unseen flights about
+    half (docs/method.md, "Honest sigma").  The square root of the two sums' ratio, in
+    [:data:`SIGMA_SCALE_BOUNDS`]; 1 when either is nil.
+
+    Parameters
+    ----------
+    f : ndarray, shape (K,)
+        Frequencies of the first pass's periodogram, Hz.
+    s_signal, s_noise : ndarray, shape (K,)
+        The field counted in each bin and the noise, (m/s^2)^2/Hz.
+    sigma, tau : float
+        The chosen Markov prior, m/s^2 and s.
+    """
+    s_g = _markov_psd(f, sigma, tau)
+    own = float(np.sum(s_g * s_noise / (s_g + s_noise)))
+    seen = prior_risk(f, s_signal, s_noise, sigma, tau)
+    if not (own > 0.0 and seen > 0.0):
+        return 1.0
+    return float(np.clip(math.sqrt(seen / own), *SIGMA_SCALE_BOUNDS))
+
+
 def keep_default_prior(params, report, speed_mps: float, min_s: float, span_s: float = 0.0):
     """The anomaly prior as configured or defaulted (a record too short to identify it).
 
@@ -1383,6 +1416,7 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     report["spectral_model"] = dataclasses.asdict(model)
     report["resolution_m"] = wiener_resolution_m(model, v, dt_h)
     report["expected_error_mgal"] = math.sqrt(max(expected, 0.0)) / 1e-5
+    report["smoother_sigma_scale"] = smoother_sigma_scale(f, s_sig, s_n, model.anomaly_sigma_mps2, model.anomaly_tau_s)
     report["field_std_seen_mgal"] = math.sqrt(var_field) / 1e-5
     report["signal_seen_to_m"] = (v / (2.0 * float(f[s_sig > 0].max()))) if np.any(s_sig > 0) else None
     return new, report

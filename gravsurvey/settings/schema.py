@@ -354,13 +354,17 @@ class DriftSection(Section):
     block_s: float = _dr("block_s", "block length of the field-plus-drift fit, s", ge=10, le=3600)
     sigma_mps2: float = _dr(
         "sigma_mps2",
-        "centre of the prior on the drift's Gauss-Markov sigma, and the datasheet drift taken off when the lines "
-        "cannot fit one (a datasheet figure), m/s^2",
+        "centre of the prior on the drift's Gauss-Markov sigma, the datasheet drift taken off when the lines "
+        "cannot fit one, and the drift the stated sigma (`sigma_mgal`) carries where none is taken off "
+        "(a datasheet figure), m/s^2",
         gt=0,
         le=1e-3,
     )
     tau_s: float = _dr(
-        "tau_s", "centre of the prior on the drift's correlation time, and the datasheet drift's, s", gt=0, le=1e6
+        "tau_s",
+        "centre of the prior on the drift's correlation time, and the datasheet drift's (also in the stated sigma), s",
+        gt=0,
+        le=1e6,
     )
 
 
