@@ -258,6 +258,8 @@ def identification_log_lines(est: FlightEstimate) -> list[str]:
             tail.append(resolution_statement(piece["resolution_m"]))
         if piece.get("expected_error_mgal") is not None:
             tail.append(f"expected error {float(piece['expected_error_mgal']):.3g} mGal")
+        if piece.get("smoother_sigma_scale") is not None:
+            tail.append(f"smoother's sigma x {float(piece['smoother_sigma_scale']):.2f} for the field seen")
         where = f" (piece {i + 1} of {len(pieces)})" if len(pieces) > 1 else ""
         out.append(f"{est.name}: model{where}: " + "; ".join(items) + ("; " + ", ".join(tail) if tail else ""))
     drift = est.estimator.get("drift")

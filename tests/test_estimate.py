@@ -294,6 +294,7 @@ def test_the_log_states_the_identified_model_and_the_drift():
         "altimeter_sigma_m": {"value": 0.05, "sigma_factor": 1.04, "how": "identified"},
         "resolution_m": 4200.0,
         "expected_error_mgal": 0.41,
+        "smoother_sigma_scale": 0.62,
     }
     e = from_inm_solution(s, name="F01")
     e.estimator["drift"] = {"used": False, "reason": "1 line(s): the drift needs two or more"}
@@ -301,6 +302,9 @@ def test_the_log_states_the_identified_model_and_the_drift():
     assert lines[0].startswith("F01: model: anomaly sigma 3.2 mGal, least expected error")
     assert "anomaly correlation length 25 km" in lines[0] and "height noise 0.05 m (x/ 1.04), identified" in lines[0]
     assert "resolution 4.2 km" in lines[0] and "expected error 0.41 mGal" in lines[0]
+    assert "smoother's sigma x 0.62 for the field seen" in lines[0]
+    # the product's sigma is the smoother's times that factor (no drift or missed field here)
+    np.testing.assert_allclose(e.sigma, 0.62 * np.asarray(s.sigma_smooth))
     assert lines[1] == "F01: drift: not taken off: 1 line(s): the drift needs two or more"
     assert identification_log_lines(from_classic_like()) == []
 
