@@ -59,6 +59,7 @@ __all__ = [
     "wide_prior_params",
     "refine_prior",
     "prior_risk",
+    "tapered_periodogram",
     "prewhitened_periodogram",
     "smoother_sigma_scale",
     "straight_weight",
@@ -1000,17 +1001,46 @@ def prior_risk(f, s_signal, s_noise, sigma, tau) -> float:
     return float(np.sum((1.0 - h) ** 2 * s_signal + h**2 * s_noise))
 
 
+def tapered_periodogram(g, weight, dt_s: float):
+    """Two-sided periodogram of ``g`` through the Hann taper times ``weight``.
+
+    ``g`` less a weighted polynomial (:data:`DETREND_ORDER`), ``dt |FFT(w g)|^2 / sum w^2``.
+
+    Parameters
+    ----------
+    g : ndarray, shape (N,)
+        The first pass's estimate, m/s^2.
+    weight : ndarray, shape (N,)
+        :func:`straight_weight`, in [0, 1].
+    dt_s : float
+        Sample spacing, s.
+
+    Returns
+    -------
+    f : ndarray, shape N // 2 + 1
+        ``rfftfreq(N, dt_s)``, Hz.
+    p : ndarray, shape like ``f``
+        (m/s^2)^2/Hz.
+    """
+    g = np.asarray(g, float)
+    k = np.linspace(-1.0, 1.0, g.size)
+    w = np.hanning(g.size) * np.asarray(weight, float)
+    g = g - np.polyval(np.polyfit(k, g, DETREND_ORDER, w=np.sqrt(w) + 1e-12), k)
+    return np.fft.rfftfreq(g.size, dt_s), dt_s * np.abs(np.fft.rfft(w * g)) ** 2 / np.sum(w**2)
+
+
 def prewhitened_periodogram(g, weight, dt_s: float):
     """Two-sided periodogram of ``g`` on the straight stretches, prewhitened against leakage.
 
     The first differences of ``g`` (a field's steep spectrum flattened by ``f^2``, the offsets
     between lines gone), less a weighted straight line (the quadratic of ``g``,
     :data:`DETREND_ORDER`), through the Hann taper times ``weight`` (zero in turns, short
-    cosine ramps between), divided by ``|2 sin(pi f dt)|^2``.  The plain tapered periodogram's
-    ramps spread a strong field's long-wavelength power over the bands where the smoother's
-    resolution is decided (quick U102, a 45 mGal field: 3-5x the field's spectrum at 100-200 s
-    periods, 23x at 75 s); this one is within 1.1-1.4x there, but leaks a steep noise spectrum
-    downwards instead, so :func:`refine_prior` takes the smaller of the two per bin.
+    cosine ramps between), divided by ``|2 sin(pi f dt)|^2``.  The ramps of the plain one
+    (:func:`tapered_periodogram`) spread a strong field's long-wavelength power over the bands
+    where the smoother's resolution is decided (quick U102, a 45 mGal field: 3-5x the field's
+    spectrum at 100-200 s periods, 23x at 75 s); this one is within 1.1-1.4x there, but leaks a
+    steep noise spectrum downwards instead, so :func:`refine_prior` takes the smaller of the two
+    per bin.
 
     Parameters
     ----------
@@ -1322,12 +1352,7 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     # the field's variance at long wavelengths, as the wide pass sees it (before detrending):
     # the prior must be able to hold it (below)
     var_seen = field_variance_seen(g, wt, dt_s)
-    g_raw = g
-    k = np.linspace(-1.0, 1.0, n)
-    w = np.hanning(n) * wt
-    g = g - np.polyval(np.polyfit(k, g, DETREND_ORDER, w=np.sqrt(w) + 1e-12), k)
-    p = dt_s * np.abs(np.fft.rfft(w * g)) ** 2 / np.sum(w**2)
-    f = np.fft.rfftfreq(n, dt_s)
+    f, p = tapered_periodogram(g, wt, dt_s)
     sel = slice(3, n // 2)
     f, p = f[sel], p[sel]
     s_n = _noise_psd_g(f, noise, dt_h)
@@ -1388,7 +1413,7 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     # it and the prewhitened one, per bin: each leakage only adds power); the stated sigma
     # counts the field the plain one shows as well (docs/benchmarks.md, "Leakage in the first
     # pass's periodogram")
-    f_pw, p_pw = prewhitened_periodogram(g_raw, wt, dt_s)
+    f_pw, p_pw = prewhitened_periodogram(g, wt, dt_s)
     s_sig, _, _ = counted(np.minimum(p, np.interp(f, f_pw, p_pw)))
     s_sig_c, s_pt, lowest = counted(p)
     # candidates
