@@ -1040,23 +1040,8 @@ def prewhitened_periodogram(g, weight, dt_s: float):
     where the smoother's resolution is decided (quick U102, a 45 mGal field: 3-5x the field's
     spectrum at 100-200 s periods, 23x at 75 s); this one is within 1.1-1.4x there, but leaks a
     steep noise spectrum downwards instead, so :func:`refine_prior` takes the smaller of the two
-    per bin.
-
-    Parameters
-    ----------
-    g : ndarray, shape (N,)
-        The first pass's estimate, m/s^2.
-    weight : ndarray, shape (N,)
-        :func:`straight_weight`, in [0, 1].
-    dt_s : float
-        Sample spacing, s.
-
-    Returns
-    -------
-    f : ndarray, shape (N - 1) // 2 + 1
-        ``rfftfreq(N - 1, dt_s)``, Hz.
-    p : ndarray, shape like ``f``
-        (m/s^2)^2/Hz; ``p[0] = 0``.
+    per bin.  Parameters as :func:`tapered_periodogram`; it returns ``(f, p)`` on
+    ``rfftfreq(N - 1, dt_s)`` (Hz; (m/s^2)^2/Hz, ``p[0] = 0``).
     """
     g = np.asarray(g, float)
     wt = np.asarray(weight, float)
