@@ -318,6 +318,13 @@ def noisy_flight():
     return (s, *record_and_truth_start(s))
 
 
+@pytest.fixture(scope="module")
+def noisy_solution(noisy_flight):
+    """The default (identified) estimate of :func:`noisy_flight`, computed once for the module."""
+    s, rec, init = noisy_flight
+    return estimate_anomaly(rec, InmParams(), init, "platform")
+
+
 def record_and_truth_start(s):
     """The FlightRecord of a simulation (IMU and heights, no GNSS) and its true initial state."""
     rec = FlightRecord(
@@ -339,9 +346,9 @@ def rms_mid(sol, s):
     return float(np.sqrt(np.mean((e - e.mean()) ** 2))) / MGAL
 
 
-def test_identified_flight_beats_the_seed_defaults_and_reports_itself(noisy_flight):
+def test_identified_flight_beats_the_seed_defaults_and_reports_itself(noisy_flight, noisy_solution):
     s, rec, init = noisy_flight
-    ident = estimate_anomaly(rec, InmParams(), init, "platform")
+    ident = noisy_solution
     seed = estimate_anomaly(rec, InmParams(identify=False), init, "platform")
     rep = ident.identification
     # the height noise comes back within 5 % (simulated: 0.05 m); reported with how and a factor
@@ -353,12 +360,12 @@ def test_identified_flight_beats_the_seed_defaults_and_reports_itself(noisy_flig
     assert rms_mid(ident, s) < rms_mid(seed, s)
 
 
-def test_dropped_height_samples_do_not_stop_the_identification(noisy_flight):
+def test_dropped_height_samples_do_not_stop_the_identification(noisy_flight, noisy_solution):
     """A receiver that drops 1 % of its epochs at random (a break every ~20 s at 5 Hz): the
     short gaps are filled for the fit, which still finds the height noise and the prior, and
     the estimate stays as good (before: no stretch of 60 s, the default prior, 3x the error)."""
     s, rec, init = noisy_flight
-    full = estimate_anomaly(rec, InmParams(), init, "platform")
+    full = noisy_solution
     keep = np.random.default_rng(3).random(rec.altimeter.time.size) >= 0.01
     keep[[0, -1]] = True
     holed = dataclasses.replace(rec, altimeter=AltimeterChannel(rec.altimeter.time[keep], rec.altimeter.height[keep]))
@@ -385,12 +392,12 @@ def test_dropped_height_samples_do_not_stop_the_identification(noisy_flight):
     assert rms_mid(sol, s) < 1.05 * rms_mid(estimate_anomaly(cut, known, init, "platform"), s)
 
 
-def test_jittered_height_stamps_do_not_stop_the_identification(noisy_flight):
+def test_jittered_height_stamps_do_not_stop_the_identification(noisy_flight, noisy_solution):
     """A logger's receive times: the 5 Hz heights stamped 40 ms (1-sigma) off their grid. Before,
     every step more than half a sample off ended a stretch: none reached 20 s and the default
     prior was used."""
     s, rec, init = noisy_flight
-    full = estimate_anomaly(rec, InmParams(), init, "platform")
+    full = noisy_solution
     t = rec.altimeter.time + np.random.default_rng(8).normal(0.0, 0.04, rec.altimeter.time.size)
     order = np.argsort(t)
     jittered = dataclasses.replace(rec, altimeter=AltimeterChannel(t[order], rec.altimeter.height[order]))
@@ -570,13 +577,13 @@ def test_smoother_sigma_scale_turns_the_models_sigma_into_the_error_on_the_field
     assert I.smoother_sigma_scale(f[band], 1e6 * s_g[band], s_n[band], sigma, tau) == I.SIGMA_SCALE_BOUNDS[1]
 
 
-def test_the_product_sigma_is_the_smoothers_scaled_to_the_field_seen(noisy_flight):
+def test_the_product_sigma_is_the_smoothers_scaled_to_the_field_seen(noisy_flight, noisy_solution):
     """On a flight over point masses (a field unlike the Markov prior) the identification
     states the scale, and the product's sigma is the smoother's times it (with the drift and
     missed parts in quadrature); the smoother's part then matches its error within 40 %
     (the smoother's own sigma overstates it)."""
     s, rec, init = noisy_flight
-    sol = estimate_anomaly(rec, InmParams(), init, "platform")
+    sol = noisy_solution
     rep = sol.identification
     scale = rep["smoother_sigma_scale"]
     assert 0.25 <= scale < 0.9
