@@ -84,6 +84,8 @@ BOUNDS = {
     "white_mps2": (1e-8, 1e-3),
     "height_sigma_m": (1e-4, 50.0),
 }
+#: :class:`SpectralModel` fields of the sensors' noise (the others are the anomaly's prior).
+NOISE_KEYS = ("white_mps2", "height_sigma_m")
 _ORDER = ("anomaly_sigma_mps2", "anomaly_tau_s", "white_mps2", "height_sigma_m")
 
 #: The white level is used only when the likelihood pins it within this 1-sigma factor ...
@@ -837,13 +839,18 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
             f"samples or {MAX_FILL_S:g} s) filled by linear interpolation for the fit"
         )
     report["height_samples_filled"] = n_filled
-    fit = fit_vertical_spectrum(t, e, man, fixed=fixed)
+    # the noise levels are fitted with the anomaly's spectrum free even where the config sets the
+    # prior: the prior is the smoother's, a Markov process that need not be the field's spectrum,
+    # and held in the fit it made the white level absorb the misfit (a random-walk prior of 283
+    # mGal fixed on quick unseen U006: white 69 mGal in 1 s, 16.9 mGal off for 1.9 by default)
+    noise_fixed = {k: val for k, val in fixed.items() if k in NOISE_KEYS}
+    fit = fit_vertical_spectrum(t, e, man, fixed=noise_fixed)
     whole_flight = False
     if fit is None:
         # no straight stretches long enough (a flight of turns): the noise levels from the whole
         # flight; the turns' attitude-error leak then counts as noise, which errs on the side of
         # smoothing
-        fit = fit_vertical_spectrum(t, e, None, fixed=fixed)
+        fit = fit_vertical_spectrum(t, e, None, fixed=noise_fixed)
         whole_flight = fit is not None
         if fit is not None:
             report["warnings"].append(
@@ -868,7 +875,7 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
                 "how": "config" if k in given else "default",
             }
         return params, report
-    m = fit.model
+    m = dataclasses.replace(fit.model, **{k: val for k, val in fixed.items() if k not in NOISE_KEYS})
     white_how = "identified"
     factor_w = fit.sigma_factor.get("white_mps2")
     if "white_mps2" not in fixed and (factor_w is None or factor_w > WHITE_MAX_FACTOR):
@@ -932,15 +939,16 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
             how = "target_resolution_m"
         if k == "gravimeter_white_mps2" and how == "identified":
             how = white_how
-        report[k] = {"value": getattr(new, k), "sigma_factor": fit.sigma_factor.get(src[k]), "how": how}
-    for k in fit.at_bound:
+        factor = None if k in given else fit.sigma_factor.get(src[k])
+        report[k] = {"value": getattr(new, k), "sigma_factor": factor, "how": how}
+    for k in (k for k in fit.at_bound if k not in fixed):
         # only the height noise is used as fitted: a white level at its bound is replaced by the
         # datasheet figure above, and the anomaly prior is chosen again by refine_prior
         used_as_fitted = k == "height_sigma_m" and report["altimeter_sigma_m"]["how"] == "identified"
         report["warnings" if used_as_fitted else "notes"].append(
             f"model identification: {k} ended on its bound {BOUNDS[k]} (SI); the data say little about it"
         )
-    if fit.unresolved:
+    if fit.unresolved and "anomaly_lambda_per_m" not in given:
         report["anomaly_lambda_per_m"]["how"] = "identified (lower bound: straight stretches too short)"
     report["seconds_used"] = fit.seconds_used
     report["straight_runs"] = fit.n_runs
