@@ -147,6 +147,21 @@ def _runs(mask):
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
 
 
+def _line_residuals(truth_mgal, mask, dt_s):
+    """Per scored run (line) of at least 16 samples: (truth less its least-squares straight
+    line, that straight line), m/s^2."""
+    x_all = np.asarray(truth_mgal, float) * MGAL
+    out = []
+    for a, b in _runs(mask):
+        if b - a < 16:
+            continue
+        x = x_all[a:b]
+        t = np.arange(x.size) * dt_s
+        trend = np.polyval(np.polyfit(t, x, 1), t)
+        out.append((x - trend, trend))
+    return out
+
+
 def truth_psd(truth_mgal, mask, dt_s=1.0):
     """One-sided PSD ((m/s^2)^2/Hz) of the true disturbance on the scored samples.
 
@@ -173,24 +188,18 @@ def truth_psd(truth_mgal, mask, dt_s=1.0):
     """
     from scipy.signal import periodogram
 
-    x_all = np.asarray(truth_mgal, float) * MGAL
-    runs = [(a, b) for a, b in _runs(mask) if b - a >= 16]
-    if not runs:
+    lines = _line_residuals(truth_mgal, mask, dt_s)
+    if not lines:
         return None, None
-    n_max = max(b - a for a, b in runs)
-    f = np.fft.rfftfreq(n_max, dt_s)
+    f = np.fft.rfftfreq(max(r.size for r, _ in lines), dt_s)
     df = f[1]
     within = np.zeros_like(f)
     weights, variances, trends = [], [], []
-    for a, b in runs:
-        x = x_all[a:b]
-        t = np.arange(x.size) * dt_s
-        trend = np.polyval(np.polyfit(t, x, 1), t)
-        r = x - trend
+    for r, trend in lines:
         fk, pd = periodogram(np.diff(r), fs=1.0 / dt_s, window="blackmanharris", detrend="constant")
         pk = pd[1:] / (2.0 * np.sin(np.pi * fk[1:] * dt_s)) ** 2
-        within[1:] += np.interp(f[1:], fk[1:], pk) * (b - a)
-        weights.append(b - a)
+        within[1:] += np.interp(f[1:], fk[1:], pk) * r.size
+        weights.append(r.size)
         variances.append(np.var(r))
         trends.append(trend)
     w = np.asarray(weights, float)
@@ -225,19 +234,13 @@ def truth_psd_multitaper(truth_mgal, mask, dt_s=1.0):
     """
     from scipy.signal.windows import dpss
 
-    x_all = np.asarray(truth_mgal, float) * MGAL
-    runs = [(a, b) for a, b in _runs(mask) if b - a >= 16]
-    if not runs:
+    lines = _line_residuals(truth_mgal, mask, dt_s)
+    if not lines:
         return None, None
-    n_max = max(b - a for a, b in runs)
-    f = np.fft.rfftfreq(n_max, dt_s)
+    f = np.fft.rfftfreq(max(r.size for r, _ in lines), dt_s)
     within = np.zeros_like(f)
     weights, trends = [], []
-    for a, b in runs:
-        x = x_all[a:b]
-        t = np.arange(x.size) * dt_s
-        trend = np.polyval(np.polyfit(t, x, 1), t)
-        r = x - trend
+    for r, trend in lines:
         d = np.diff(r)
         d = d - d.mean()
         fk = np.fft.rfftfreq(d.size, dt_s)
@@ -251,8 +254,8 @@ def truth_psd_multitaper(truth_mgal, mask, dt_s=1.0):
         in_lobe = float(pk[lobe].sum() * fk[1])
         if in_lobe > 0:
             pk[lobe] *= max(np.var(r) - resolved, 0.0) / in_lobe
-        within[1:] += np.interp(f[1:], fk[1:], pk[1:]) * (b - a)
-        weights.append(b - a)
+        within[1:] += np.interp(f[1:], fk[1:], pk[1:]) * r.size
+        weights.append(r.size)
         trends.append(trend)
     psd = within / float(sum(weights))
     psd[0] = 0.0
