@@ -112,6 +112,9 @@ _ORDER = tuple(BOUNDS)
 CONSTANT_VAR = (100.0 * MGAL) ** 2
 #: Epochs per piece of the posterior evaluation.
 POSTERIOR_CHUNK = 4096
+#: Field sigmas (multiples of the blocks' standard deviation) over which the drift's posterior
+#: sigma is averaged (:func:`drift_posterior`): 1/64 to 4, in factors of 2.
+FIELD_SIGMA_GRID = tuple(2.0**k for k in range(-6, 3))
 #: Sigma of the drift in the null model (effectively none), m/s^2.
 NO_DRIFT_MPS2 = 1e-3 * MGAL
 
@@ -366,32 +369,69 @@ def _fit_against_no_drift(blocks, lines, options, datasheet, nll_without_drift=N
     )
 
 
-def drift_posterior(fit: DriftFit, blocks, time):
-    """Posterior mean and sigma of the drift at ``time`` (s), m/s^2, shape (N,) each.
-
-    The sigma leaves out the part common to the whole flight (the constant absorbs it, as the
-    gravimeter bias; the product's sigma is of the error about its mean).
-    """
-    b = np.asarray(blocks, float)
-    y, dist, lag = _block_geometry(b)
-    k = _covariance(fit.vector, dist, lag)
-    chol = np.linalg.cholesky(k)
+def _posterior_at(v, b, y, dist, lag, t):
+    """Posterior mean of the drift at ``t`` and its variance about the flight mean, under the
+    hyperparameters ``v`` (:data:`BOUNDS` order); None where ``v`` is not positive definite."""
+    try:
+        chol = np.linalg.cholesky(_covariance(v, dist, lag))
+    except np.linalg.LinAlgError:
+        return None
+    s_d, tau = v[2], v[3]
     alpha = np.linalg.solve(chol.T, np.linalg.solve(chol, y))
-    t = np.asarray(time, float)
     mean = np.empty(t.size)
     # in chunks: an (epochs x blocks) matrix of a 10-h flight would take 100s of MB
     for a in range(0, t.size, POSTERIOR_CHUNK):
         dt = np.abs(t[a : a + POSTERIOR_CHUNK, None] - b[None, :, 0])
-        mean[a : a + POSTERIOR_CHUNK] = (fit.drift_sigma_mps2**2 * np.exp(-dt / fit.drift_tau_s)) @ alpha
+        mean[a : a + POSTERIOR_CHUNK] = (s_d**2 * np.exp(-dt / tau)) @ alpha
     # posterior covariance of the drift at the blocks, then of its deviation from its mean
-    k_bb = fit.drift_sigma_mps2**2 * np.exp(-lag / fit.drift_tau_s)
+    k_bb = s_d**2 * np.exp(-lag / tau)
     w = np.linalg.solve(chol, k_bb)
     post = k_bb - w.T @ w
     m = post.shape[0]
     centre = np.eye(m) - 1.0 / m
     var_b = np.clip(np.diag(centre @ post @ centre), 0.0, None)
-    sigma = np.sqrt(np.interp(t, b[:, 0], var_b))
-    return mean, sigma
+    return mean, np.interp(t, b[:, 0], var_b)
+
+
+def drift_posterior(fit: DriftFit, blocks, time, field_sigmas=FIELD_SIGMA_GRID):
+    """Posterior mean and sigma of the drift at ``time`` (s), m/s^2, shape (N,) each.
+
+    The mean is the fit's.  The sigma leaves out the part common to the whole flight (the
+    constant absorbs it, as the gravimeter bias; the product's sigma is of the error about its
+    mean) and holds what the blocks leave open of the field's size: it is the posterior's
+    spread averaged over field sigmas ``field_sigmas`` x the blocks' standard deviation (and the
+    fit's own), each weighed by its likelihood with the other hyperparameters held, about the
+    fit's mean.  Where the likelihood is flat in the field's sigma (few lines: a field of 0.01
+    or 0.9 mGal explains the blocks as well, and the drift with it) the fit's own posterior
+    claims a certainty the data do not give (docs/method.md, "Drift from the lines").
+    ``field_sigmas`` empty: the fit's own posterior alone.
+    """
+    b = np.asarray(blocks, float)
+    y, dist, lag = _block_geometry(b)
+    t = np.asarray(time, float)
+    v0 = fit.vector
+    mean, var = _posterior_at(v0, b, y, dist, lag, t)
+    # the average is taken at the blocks' times and interpolated, as the variance itself is:
+    # the drift is smooth over a block, and the epochs would cost a posterior mean each
+    tb = b[:, 0]
+    own_b, var_b = _posterior_at(v0, b, y, dist, lag, tb)
+    lo, hi = BOUNDS["field_sigma_mps2"]
+    candidates = [(_neg_log_likelihood(v0, dist, lag, y), own_b, var_b)]
+    for k in np.asarray(field_sigmas, float) * max(float(np.std(y)), lo):
+        v = v0.copy()
+        v[0] = min(max(k, lo), hi)
+        nll = _neg_log_likelihood(v, dist, lag, y)
+        post = _posterior_at(v, b, y, dist, lag, tb) if math.isfinite(nll) else None
+        if post is not None:
+            candidates.append((nll, *post))
+    best = min(c[0] for c in candidates)
+    total, acc = 0.0, np.zeros_like(tb)
+    for nll, m_i, var_i in candidates:
+        w = math.exp(-(nll - best))
+        gap = m_i - own_b
+        acc += w * (var_i + (gap - gap.mean()) ** 2)
+        total += w
+    return mean, np.sqrt(np.interp(t, tb, acc / total))
 
 
 def passed_drift_factor(report: dict, options: DriftOptions = DriftOptions()) -> float:

@@ -413,3 +413,31 @@ def test_a_configured_datasheet_drift_is_the_one_the_sigma_passes():
     want = drift_sigma_passed(rep, float(est.time[-1] - est.time[0]), 0.5 * MGAL, 3000.0)
     assert datasheet_drift_passed(est, options) == pytest.approx(want)
     assert want != pytest.approx(0.5 * drift_sigma_passed(rep, float(est.time[-1] - est.time[0])))
+
+
+@pytest.mark.parametrize(
+    "seed, field_scale, collapsed", [(2, 0.2, True), (6, 0.2, True), (3, 1.0, False), (5, 1.0, False)]
+)
+def test_drift_sigma_holds_what_the_blocks_leave_open_of_the_field(seed, field_scale, collapsed):
+    """A weak field under a 2.4 mGal drift on four lines: the likelihood hardly tells a field of
+    0.01 mGal from one of 1 mGal, and where the fit ends on the small one its own posterior
+    claims the drift to 0.01-0.02 mGal while it is 0.5-1.0 off (error/sigma 24-71).  The sigma
+    averaged over the field's size (drift_posterior) is 5x larger or more there (7-17x); where the fit
+    found the field it is the fit's own (within 5 %)."""
+    t, lat, lon, east, north, lab = survey(lines=4)
+    rng = np.random.default_rng(seed)
+    drift = markov(t.size, 1.0, 500.0, 2.4 * MGAL, rng)
+    g = field_scale * field_at(east, north, seed) + drift + rng.standard_normal(t.size) * 0.3 * MGAL
+    blocks, lines = line_blocks(t, east, north, g, lab, BLOCK_S)
+    fit = fit_drift(blocks, lines, DriftOptions())
+    mean, sigma = drift_posterior(fit, blocks, t)
+    own_mean, own_sigma = drift_posterior(fit, blocks, t, field_sigmas=())
+    np.testing.assert_array_equal(mean, own_mean)  # the estimate is the fit's
+    on = lab != ""
+    err = rms_about_mean((drift - mean)[on])
+    s, s_own = (math.sqrt(np.mean(x[on] ** 2)) for x in (sigma, own_sigma))
+    if collapsed:
+        assert fit.field_sigma_mps2 < 0.05 * MGAL and err > 10 * s_own
+        assert s > 5 * s_own and err / s < 0.5 * err / s_own
+    else:
+        assert s == pytest.approx(s_own, rel=0.05) and 0.7 < err / s < 1.5
