@@ -410,7 +410,10 @@ def drift_posterior(fit: DriftFit, blocks, time, field_sigmas=FIELD_SIGMA_GRID):
     y, dist, lag = _block_geometry(b)
     t = np.asarray(time, float)
     v0 = fit.vector
-    mean, var = _posterior_at(v0, b, y, dist, lag, t)
+    own = _posterior_at(v0, b, y, dist, lag, t)
+    if own is None:  # a fitted model's covariance is positive definite: its likelihood was finite
+        raise np.linalg.LinAlgError("drift model covariance not positive definite")
+    mean = own[0]
     # the average is taken at the blocks' times and interpolated, as the variance itself is:
     # the drift is smooth over a block, and the epochs would cost a posterior mean each
     tb = b[:, 0]
