@@ -145,6 +145,21 @@ def test_exit_70_internal_error_is_one_line(monkeypatch, capsys, tmp_path):
     assert _nonblank(stderr) == ["gravsurvey: internal error: ZeroDivisionError: float division by zero"]
 
 
+def test_sigint_while_the_cli_installs_its_handler_is_exit_130(monkeypatch, capsys, tmp_path):
+    """A Ctrl-C before cli.main's own handling is in place (it imports ``signal`` to install it;
+    seen once at 0.1 s under load): the console entry point ends it with the one line and 130."""
+    from gravsurvey import console
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "_install_sigint_flag", interrupted)
+    with pytest.raises(SystemExit) as exit_:
+        console.main(["run", str(tmp_path / "x.yaml")])
+    assert exit_.value.code == 130
+    assert _nonblank(capsys.readouterr().err) == [console.INTERRUPTED_LINE]
+
+
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_exit_130_on_sigint_publishes_nothing(seed_run, tmp_path, jobs):
     """SIGINT (Ctrl-C) in the middle of a run: exit 130, one line, no output file published and
