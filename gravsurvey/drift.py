@@ -369,28 +369,31 @@ def _fit_against_no_drift(blocks, lines, options, datasheet, nll_without_drift=N
     )
 
 
-def _posterior_at(v, b, y, dist, lag, t):
-    """Posterior mean of the drift at ``t`` and its variance about the flight mean, under the
-    hyperparameters ``v`` (:data:`BOUNDS` order); None where ``v`` is not positive definite."""
+def _posterior_at(v, b, y, dist, lag, *times):
+    """Under the hyperparameters ``v`` (:data:`BOUNDS` order): the drift's posterior variance
+    about the flight mean at the blocks, then its posterior mean at each array of ``times``
+    (s); None where ``v`` is not positive definite."""
     try:
         chol = np.linalg.cholesky(_covariance(v, dist, lag))
     except np.linalg.LinAlgError:
         return None
     s_d, tau = v[2], v[3]
     alpha = np.linalg.solve(chol.T, np.linalg.solve(chol, y))
-    mean = np.empty(t.size)
-    # in chunks: an (epochs x blocks) matrix of a 10-h flight would take 100s of MB
-    for a in range(0, t.size, POSTERIOR_CHUNK):
-        dt = np.abs(t[a : a + POSTERIOR_CHUNK, None] - b[None, :, 0])
-        mean[a : a + POSTERIOR_CHUNK] = (s_d**2 * np.exp(-dt / tau)) @ alpha
+    means = []
+    for t in times:
+        mean = np.empty(t.size)
+        # in chunks: an (epochs x blocks) matrix of a 10-h flight would take 100s of MB
+        for a in range(0, t.size, POSTERIOR_CHUNK):
+            dt = np.abs(t[a : a + POSTERIOR_CHUNK, None] - b[None, :, 0])
+            mean[a : a + POSTERIOR_CHUNK] = (s_d**2 * np.exp(-dt / tau)) @ alpha
+        means.append(mean)
     # posterior covariance of the drift at the blocks, then of its deviation from its mean
     k_bb = s_d**2 * np.exp(-lag / tau)
     w = np.linalg.solve(chol, k_bb)
     post = k_bb - w.T @ w
     m = post.shape[0]
     centre = np.eye(m) - 1.0 / m
-    var_b = np.clip(np.diag(centre @ post @ centre), 0.0, None)
-    return mean, np.interp(t, b[:, 0], var_b)
+    return (np.clip(np.diag(centre @ post @ centre), 0.0, None), *means)
 
 
 def drift_posterior(fit: DriftFit, blocks, time, field_sigmas=FIELD_SIGMA_GRID):
@@ -409,17 +412,16 @@ def drift_posterior(fit: DriftFit, blocks, time, field_sigmas=FIELD_SIGMA_GRID):
     b = np.asarray(blocks, float)
     y, dist, lag = _block_geometry(b)
     t = np.asarray(time, float)
-    v0 = fit.vector
-    own = _posterior_at(v0, b, y, dist, lag, t)
-    if own is None:  # a fitted model's covariance is positive definite: its likelihood was finite
-        raise np.linalg.LinAlgError("drift model covariance not positive definite")
-    mean = own[0]
     # the average is taken at the blocks' times and interpolated, as the variance itself is:
     # the drift is smooth over a block, and the epochs would cost a posterior mean each
     tb = b[:, 0]
-    own_b, var_b = _posterior_at(v0, b, y, dist, lag, tb)
+    v0 = fit.vector
+    own = _posterior_at(v0, b, y, dist, lag, tb, t)
+    if own is None:  # a fitted model's covariance is positive definite: its likelihood was finite
+        raise np.linalg.LinAlgError("drift model covariance not positive definite")
+    var_b, own_b, mean = own
     lo, hi = BOUNDS["field_sigma_mps2"]
-    candidates = [(_neg_log_likelihood(v0, dist, lag, y), own_b, var_b)]
+    candidates = [(_neg_log_likelihood(v0, dist, lag, y), var_b, own_b)]
     for k in np.asarray(field_sigmas, float) * max(float(np.std(y)), lo):
         v = v0.copy()
         v[0] = min(max(k, lo), hi)
@@ -429,7 +431,7 @@ def drift_posterior(fit: DriftFit, blocks, time, field_sigmas=FIELD_SIGMA_GRID):
             candidates.append((nll, *post))
     best = min(c[0] for c in candidates)
     total, acc = 0.0, np.zeros_like(tb)
-    for nll, m_i, var_i in candidates:
+    for nll, var_i, m_i in candidates:
         w = math.exp(-(nll - best))
         gap = m_i - own_b
         acc += w * (var_i + (gap - gap.mean()) ** 2)

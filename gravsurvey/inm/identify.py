@@ -1380,35 +1380,31 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     # bands of >= 8 bins, log-spaced: the periodogram's scatter (100 % per bin) averages down
     edges = np.unique(np.concatenate([[0], np.geomspace(8, max(valid.sum(), 9), 24).astype(int)]))
     idx_valid = np.flatnonzero(valid)
+    # the bands and their margins depend on the noise only; the field counted in them on the
+    # periodogram
+    bands = [ii for ii in (idx_valid[a:b] for a, b in zip(edges[:-1], edges[1:])) if ii.size]
+    band_margin = [float(np.mean(s_n[ii]) * SIGNAL_MARGIN_SE / math.sqrt(ii.size)) for ii in bands]
+    # the lowest band's bins and margin: the field it cannot exclude (below)
+    lowest = (bands[0], band_margin[0]) if bands else None
 
     def counted(pp):
-        # the field counted per bin (with the margin), the unbiased excess (without it, for the
-        # sigma) and the lowest band's bins and margin (the field it cannot exclude, below)
+        # the field counted per bin (with the margin) and the unbiased excess (without it, for
+        # the sigma)
         sig, pt = np.zeros_like(f), np.zeros_like(f)
-        low = None
-        bands, band_excess, band_margin = [], [], []
-        for a, b in zip(edges[:-1], edges[1:]):
-            ii = idx_valid[a:b]
-            if ii.size == 0:
-                continue
-            bands.append(ii)
-            band_excess.append(float(np.mean(pp[ii] / h1[ii] ** 2) - np.mean(s_n[ii])))
-            band_margin.append(float(np.mean(s_n[ii]) * SIGNAL_MARGIN_SE / math.sqrt(ii.size)))
-            if low is None:
-                low = (ii, band_margin[-1])
         if bands:
+            band_excess = [float(np.mean(pp[ii] / h1[ii] ** 2) - np.mean(s_n[ii])) for ii in bands]
             sig_b, pt_b = band_field(band_excess, band_margin, [ii.size for ii in bands])
             for ii, a, b in zip(bands, sig_b, pt_b):
                 sig[ii], pt[ii] = a, b
-        return sig, pt, low
+        return sig, pt
 
     # the prior is chosen on the periodogram with the taper's leakage held down (the smaller of
     # it and the prewhitened one, per bin: each leakage only adds power); the stated sigma
     # counts the field the plain one shows as well (docs/benchmarks.md, "Leakage in the first
     # pass's periodogram")
     f_pw, p_pw = prewhitened_periodogram(g, wt, dt_s)
-    s_sig, _, _ = counted(np.minimum(p, np.interp(f, f_pw, p_pw)))
-    s_sig_c, s_pt, lowest = counted(p)
+    s_sig, _ = counted(np.minimum(p, np.interp(f, f_pw, p_pw)))
+    s_sig_c, s_pt = counted(p)
     # candidates
     tau_fixed = 1.0 / (params.anomaly_lambda_per_m * v) if "anomaly_lambda_per_m" in given else None
     sig_fixed = params.anomaly_sigma_mps2 if "anomaly_sigma_mps2" in given else None
