@@ -303,6 +303,44 @@ def test_oracle_bound_sees_short_wavelengths_near_the_ends_of_the_lines():
     assert best_possible <= rms <= 1.05 * achieved
 
 
+def _markov_plus_white(rng, n, tau, white):
+    """A unit Gauss-Markov series of correlation time ``tau`` samples plus white noise, (n,)."""
+    from scipy.signal import lfilter
+
+    a = math.exp(-1.0 / tau)
+    x = lfilter([math.sqrt(1.0 - a * a)], [1.0, -a], rng.standard_normal(n))
+    return x + white * rng.standard_normal(n)
+
+
+def test_a_right_sigma_scores_inside_the_range_the_benchmark_gives_it():
+    """bench_unseen.sigma_ratio_range: on errors with a sigma right for the error about its mean,
+    the flight's error/sigma lies inside the stated 5-95 % range on most realisations (measured
+    0.94 and 0.84 at correlation times of 1/100 and 1/10 of the record), the range widens with
+    the correlation time, and a sigma half the right one scores outside it."""
+    bench = _bench()
+    rng = np.random.default_rng(11)
+    n = 3000
+    widths = []
+    for tau, need in ((30.0, 0.85), (300.0, 0.72)):
+        errs = [_markov_plus_white(rng, n, tau, 0.5) for _ in range(150)]
+        # the right sigma: the error's mean square about its mean, over the realisations
+        sigma = np.full(n, math.sqrt(np.mean([np.mean((e - e.mean()) ** 2) for e in errs])))
+        inside, out_half, width = 0, 0, []
+        for k, e in enumerate(errs[:60]):
+            z = bench.sigma_ratio_rms(e, sigma)
+            lo, hi = bench.sigma_ratio_range(e, sigma, draws=200, seed=k)
+            if k == 0:
+                assert bench.sigma_ratio_range(3.0 * e, 3.0 * sigma, draws=200, seed=k) == pytest.approx((lo, hi))
+            inside += lo <= z <= hi
+            out_half += bench.sigma_ratio_rms(e, sigma / 2.0) > hi
+            width.append(hi - lo)
+        assert inside / 60 >= need, (tau, inside)
+        assert out_half / 60 >= 0.95, (tau, out_half)
+        widths.append(np.median(width))
+    assert widths[1] > 1.5 * widths[0]  # measured: 1.93
+    assert bench.sigma_ratio_range(np.ones(8), np.ones(8)) is None
+
+
 def test_matched_anomaly_prior_recovers_a_markov_field():
     """The oracle's anomaly prior fit returns the parameters of a known Gauss-Markov field."""
     from gravsurvey.simulate.field import markov_disturbance
