@@ -315,7 +315,7 @@ def _markov_plus_white(rng, n, tau, white):
 def test_a_right_sigma_scores_inside_the_range_the_benchmark_gives_it():
     """bench_unseen.sigma_ratio_range: on errors with a sigma right for the error about its mean,
     the flight's error/sigma lies inside the stated 5-95 % range on most realisations (measured
-    0.94 and 0.84 at correlation times of 1/100 and 1/10 of the record), the range widens with
+    0.92 and 0.83 at correlation times of 1/100 and 1/10 of the record), the range widens with
     the correlation time, and a sigma half the right one scores outside it."""
     bench = _bench()
     rng = np.random.default_rng(11)
@@ -337,7 +337,7 @@ def test_a_right_sigma_scores_inside_the_range_the_benchmark_gives_it():
         assert inside / 60 >= need, (tau, inside)
         assert out_half / 60 >= 0.95, (tau, out_half)
         widths.append(np.median(width))
-    assert widths[1] > 1.5 * widths[0]  # measured: 1.93
+    assert widths[1] > 1.5 * widths[0]  # measured: 1.97
     assert bench.sigma_ratio_range(np.ones(8), np.ones(8)) is None
 
 
