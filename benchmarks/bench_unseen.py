@@ -39,7 +39,10 @@ gravimeter drift (bias + Gauss-Markov, ``gravsurvey.simulate.run.gravimeter_slow
 scored samples, and ``kalman less drift``, the RMS of the smoothed Kalman estimate's error (before
 the drift stage takes off what the lines show) with that drift taken off: where the second is
 near the bound and the default is not, the flight's loss is the drift its lines could not tell
-from the field.  ``--quick`` caps every drawn flight at 40 min and 50 Hz IMU (the
+from the field.  ``error/sigma`` is the RMS of the final product's error (mean taken off) over
+its stated sigma, with the 5-95 % range a right sigma would score on that flight's error
+(:func:`sigma_ratio_range`): outside it, the miss is the sigma's, not chance.  ``--quick`` caps
+every drawn flight at 40 min and 50 Hz IMU (the
 same draws otherwise) for a fast check.  ``--model KEY=VALUE`` gives the default run a
 ``model`` section (a datasheet figure a user would know); ``--accel-bias B1,B2`` replaces the
 drawn horizontal accelerometer biases (a tactical IMU's).  Uses public API only.
