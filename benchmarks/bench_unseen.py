@@ -348,13 +348,18 @@ def median_resolution_km(summary, key="resolution_m"):
     return float(np.median(vals)) / 1000.0 if vals else None
 
 
-def sigma_ratio_rms(err, sigma) -> float | None:
-    """RMS of (error minus its mean) / stated 1-sigma over the finite samples (1 when calibrated)."""
+def _normalised_error(err, sigma) -> np.ndarray:
+    """(error minus its mean) / stated 1-sigma over the samples where both are finite (and the
+    sigma positive), shape (m,)."""
     e, s = np.asarray(err, float), np.asarray(sigma, float)
     ok = np.isfinite(e) & np.isfinite(s) & (s > 0)
-    if not ok.any():
-        return None
-    return float(np.sqrt(np.mean(((e[ok] - e[ok].mean()) / s[ok]) ** 2)))
+    return (e[ok] - e[ok].mean()) / s[ok]
+
+
+def sigma_ratio_rms(err, sigma) -> float | None:
+    """RMS of (error minus its mean) / stated 1-sigma over the finite samples (1 when calibrated)."""
+    u = _normalised_error(err, sigma)
+    return float(np.sqrt(np.mean(u**2))) if u.size else None
 
 
 #: draws of the error/sigma a right sigma would show (:func:`sigma_ratio_range`)
@@ -390,12 +395,10 @@ def sigma_ratio_range(err, sigma, draws=NULL_DRAWS, seed=0, percentiles=(5.0, 95
     -------
     (low, high) : tuple of float, or None when fewer than 16 finite samples
     """
-    e, s = np.asarray(err, float), np.asarray(sigma, float)
-    ok = np.isfinite(e) & np.isfinite(s) & (s > 0)
-    if ok.sum() < 16:
-        return None
-    u = (e[ok] - e[ok].mean()) / s[ok]
+    u = _normalised_error(err, sigma)
     n = u.size
+    if n < 16:
+        return None
     m = 2 * n
     amp = np.abs(np.fft.rfft(u - u.mean(), m))
     rng = np.random.default_rng(seed)
@@ -488,10 +491,11 @@ def evaluate_flight(
     row["drift_rms"], _ = rms_after_bias(drift[mask])
     row["kalman_less_drift_rms"], _ = rms_after_bias((p["kalman_mgal"] - tr - drift)[mask])
     # honest uncertainty (issue 12 item 2): the final product's error over its stated sigma
-    row["default_z"] = sigma_ratio_rms((p["disturbance_mgal"] - tr)[mask], p["sigma_mgal"][mask])
+    err, sig = (p["disturbance_mgal"] - tr)[mask], p["sigma_mgal"][mask]
+    row["default_z"] = sigma_ratio_rms(err, sig)
     # what a right sigma would score on this flight's error (its 5-95 % range): a flight
     # outside it is miscalibrated, not unlucky
-    row["default_z_range"] = sigma_ratio_range((p["disturbance_mgal"] - tr)[mask], p["sigma_mgal"][mask])
+    row["default_z_range"] = sigma_ratio_range(err, sig)
     for tag in ("oracle", "classic"):
         if tag in prof:
             q = prof[tag]

@@ -370,15 +370,17 @@ def _fit_against_no_drift(blocks, lines, options, datasheet, nll_without_drift=N
 
 
 def _posterior_at(v, b, y, dist, lag, *times):
-    """Under the hyperparameters ``v`` (:data:`BOUNDS` order): the drift's posterior variance
-    about the flight mean at the blocks, then its posterior mean at each array of ``times``
-    (s); None where ``v`` is not positive definite."""
+    """Under the hyperparameters ``v`` (:data:`BOUNDS` order): the blocks' negative
+    log-likelihood (:func:`_neg_log_likelihood`, from the same factorisation), the drift's
+    posterior variance about the flight mean at the blocks, then its posterior mean at each
+    array of ``times`` (s); None where ``v`` is not positive definite."""
     try:
         chol = np.linalg.cholesky(_covariance(v, dist, lag))
     except np.linalg.LinAlgError:
         return None
     s_d, tau = v[2], v[3]
     alpha = np.linalg.solve(chol.T, np.linalg.solve(chol, y))
+    nll = 0.5 * float(y @ alpha) + float(np.sum(np.log(np.diag(chol))))
     means = []
     for t in times:
         mean = np.empty(t.size)
@@ -393,7 +395,7 @@ def _posterior_at(v, b, y, dist, lag, *times):
     post = k_bb - w.T @ w
     m = post.shape[0]
     centre = np.eye(m) - 1.0 / m
-    return (np.clip(np.diag(centre @ post @ centre), 0.0, None), *means)
+    return (nll, np.clip(np.diag(centre @ post @ centre), 0.0, None), *means)
 
 
 def drift_posterior(fit: DriftFit, blocks, time, field_sigmas=FIELD_SIGMA_GRID):
@@ -419,16 +421,15 @@ def drift_posterior(fit: DriftFit, blocks, time, field_sigmas=FIELD_SIGMA_GRID):
     own = _posterior_at(v0, b, y, dist, lag, tb, t)
     if own is None:  # a fitted model's covariance is positive definite: its likelihood was finite
         raise np.linalg.LinAlgError("drift model covariance not positive definite")
-    var_b, own_b, mean = own
+    nll0, var_b, own_b, mean = own
     lo, hi = BOUNDS["field_sigma_mps2"]
-    candidates = [(_neg_log_likelihood(v0, dist, lag, y), var_b, own_b)]
+    candidates = [(nll0, var_b, own_b)]
     for k in np.asarray(field_sigmas, float) * max(float(np.std(y)), lo):
         v = v0.copy()
         v[0] = min(max(k, lo), hi)
-        nll = _neg_log_likelihood(v, dist, lag, y)
-        post = _posterior_at(v, b, y, dist, lag, tb) if math.isfinite(nll) else None
+        post = _posterior_at(v, b, y, dist, lag, tb)
         if post is not None:
-            candidates.append((nll, *post))
+            candidates.append(post)
     best = min(c[0] for c in candidates)
     total, acc = 0.0, np.zeros_like(tb)
     for nll, var_i, m_i in candidates:
