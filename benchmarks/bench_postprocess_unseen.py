@@ -4,7 +4,7 @@ Runs each cached unseen flight (benchmarks/bench_unseen.py prepares them) with t
 configuration and ``postprocess.method`` set to each method in turn, and prints the RMS after
 bias against truth on the scored line epochs (bench_unseen's scoring) and the stated resolution.
 
-    python benchmarks/bench_postprocess_unseen.py [--quick] [--flights N] [--cache DIR]
+    python benchmarks/bench_postprocess_unseen.py [--quick] [--flights N] [--first-seed S] [--cache DIR]
 """
 
 from __future__ import annotations
@@ -21,6 +21,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_unseen import (
     CACHE,
+    QUICK_MAX_DURATION_S,
+    QUICK_MAX_IMU_HZ,
     median_resolution_km,
     truth_lines,
     prepare_flight,
@@ -38,14 +40,15 @@ METHODS = ("none", "ti_cosphi", "cosphi", "sure")
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--flights", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=0, help="seed of the first flight (to split a run)")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--cache", type=Path, default=CACHE)
     a = ap.parse_args(argv)
     rows = []
-    for seed in range(a.flights):
+    for seed in range(a.first_seed, a.first_seed + a.flights):
         spec = draw_flight_spec(seed)
         if a.quick:
-            spec = limit_spec(spec, max_duration_s=2400.0, max_imu_hz=50.0)
+            spec = limit_spec(spec, QUICK_MAX_DURATION_S, QUICK_MAX_IMU_HZ)
         folder = prepare_flight(spec, a.cache)
         truth = read_truth_csv(folder / "F01" / "truth.csv")
         truth["line"] = np.array(truth_lines(folder / "F01" / "truth.csv"), dtype=object)
