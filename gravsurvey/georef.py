@@ -1,9 +1,11 @@
 """Map projection of the georeferenced profile (pyproj).
 
 Geodetic positions (radians, WGS84) to projected easting/northing in metres:
-UTM by default, the zone and hemisphere picked from the data (the zone of
-the median longitude, north if the median latitude is >= 0), or any
-projected CRS given by its EPSG code (config ``output.epsg``).
+by default UTM, the zone and hemisphere picked from the data (the zone of
+the median longitude, north if the median latitude is >= 0), or, where the
+median latitude is outside UTM's extent (north of 84 deg N, south of 80 deg S),
+the Universal Polar Stereographic grid of that pole; or any projected CRS given
+by its EPSG code (config ``output.epsg``).
 """
 
 from __future__ import annotations
@@ -13,6 +15,30 @@ import math
 import numpy as np
 
 from .errors import ConfigError
+
+
+#: UTM's extent, deg: north of the first and south of the second the UPS grids take over
+#: (NGA.SIG.0012, the UTM/UPS standard).
+UTM_MAX_LAT_DEG = 84.0
+UTM_MIN_LAT_DEG = -80.0
+#: WGS 84 / UPS North (E,N) and WGS 84 / UPS South (E,N): easting first, as UTM (32661 and
+#: 32761 are the same grids with the axes named northing first).
+UPS_NORTH_EPSG = 5041
+UPS_SOUTH_EPSG = 5042
+
+
+def default_epsg(lat, lon) -> int:
+    """EPSG code of the default grid of the points (rad): their UTM zone (:func:`utm_epsg`), or
+    UPS North / South where the median latitude is beyond UTM's extent (polar surveys)."""
+    lat = np.asarray(lat, float)
+    ok = np.isfinite(lat) & np.isfinite(np.asarray(lon, float))
+    if ok.any():
+        mid = math.degrees(float(np.median(lat[ok])))
+        if mid > UTM_MAX_LAT_DEG:
+            return UPS_NORTH_EPSG
+        if mid < UTM_MIN_LAT_DEG:
+            return UPS_SOUTH_EPSG
+    return utm_epsg(lat, lon)
 
 
 def utm_epsg(lat, lon) -> int:
@@ -36,7 +62,8 @@ def project(lat, lon, epsg=None, key: str = "output.epsg"):
     lat, lon : array_like
         Geodetic latitude and longitude, rad (WGS84).
     epsg : int or None
-        Target projected CRS; None picks the UTM zone from the data.
+        Target projected CRS; None picks the default grid from the data (:func:`default_epsg`:
+        the UTM zone, UPS beyond UTM's extent).
     key : str
         Config key named in error messages.
 
@@ -58,7 +85,7 @@ def project(lat, lon, epsg=None, key: str = "output.epsg"):
     lat = np.asarray(lat, float)
     lon = np.asarray(lon, float)
     if epsg is None:
-        epsg = utm_epsg(lat, lon)
+        epsg = default_epsg(lat, lon)
     if isinstance(epsg, bool) or not isinstance(epsg, (int, np.integer)):
         raise ConfigError(f"{key}: expected an integer EPSG code, got {epsg!r}")
     try:

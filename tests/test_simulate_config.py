@@ -46,6 +46,7 @@ CASES = [
     (("flights", 0, "rates", "altimeter_hz"), 20.5, "flights[0].rates.altimeter_hz", "<= 20"),
     (("flights", 0, "plan", "duration_s"), -5.0, "flights[0].plan.duration_s", "> 0"),
     (("flights", 0, "plan", "max_bank_deg"), 60.0, "flights[0].plan.max_bank_deg", "<= 35"),
+    (("flights", 0, "plan", "origin_lat_deg"), 89.5, "flights[0].plan.origin_lat_deg", "<= 89 deg"),
     (("flights", 0, "triad"), "gimbal", "flights[0].triad", "platform"),
     (("flights", 0, "start_utc"), "yesterday", "flights[0].start_utc", "ISO 8601"),
     (("flights", 0, "start_utc"), "2024-06-01T08:00:00", "flights[0].start_utc", "time zone"),
@@ -160,3 +161,12 @@ def test_gnss_and_altimeter_up_to_20_hz():
     sim = quick_sim(gnss_hz=20.0, altimeter_hz=20.0, imu_hz=40.0)
     f = load_sim_config(sim).flights[0]
     assert f["rates"]["gnss_hz"] == 20.0 and f["rates"]["altimeter_hz"] == 20.0
+
+
+def test_polar_plans_are_simulated_up_to_where_lines_would_reach_the_pole():
+    """The survey map is exact at any latitude (docs/simulate.md): a line along the 89 deg S
+    parallel is a valid plan; one heading north from 89 deg N for 60 km would pass 89.5 deg."""
+    assert load_sim_config(quick_sim(lat_deg=-89.0, heading_deg=90.0, duration_s=3600.0)) is not None
+    with pytest.raises(ConfigError, match=r"flights\[0\]\.plan\.duration_s: .*reach latitude 89\.54 deg.*<= 89\.5 deg"):
+        load_sim_config(quick_sim(lat_deg=89.0, heading_deg=0.0))
+

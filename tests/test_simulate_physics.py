@@ -71,7 +71,9 @@ def test_rest_at_height_north_component_is_plumb_line_curvature(lat_deg):
     assert np.abs(np.linalg.norm(f, axis=1) - boule_gamma(lat, h)).max() < 1e-9
 
 
-@pytest.mark.parametrize("lat_deg,v,h", [(45.0, 50.0, 1000.0), (-60.0, 100.0, 300.0), (10.0, 80.0, 3000.0)])
+@pytest.mark.parametrize(
+    "lat_deg,v,h", [(45.0, 50.0, 1000.0), (-60.0, 100.0, 300.0), (10.0, 80.0, 3000.0), (-87.0, 80.0, 2000.0)]
+)
 def test_level_flight_due_east_eotvos(lat_deg, v, h):
     out = simulate_flight(quick_sim(lat_deg=lat_deg, speed_mps=v, altitude_m=h, duration_s=1800.0))
     lat = math.radians(lat_deg)

@@ -192,6 +192,13 @@ def parse_utc(v, path):
     return calendar.timegm(d.timetuple()) * 1_000_000_000 + d.microsecond * 1000
 
 
+#: Latitude limits of the plan, deg: the survey map (trajectory.py) is linear in latitude and
+#: longitude, so its truth is exact at any latitude, but its east scale is that of the origin's
+#: parallel and a line may not reach the pole.
+MAX_ORIGIN_LAT_DEG = 89.0
+MAX_REACH_LAT_DEG = 89.5
+
+
 def _validate_plan(p, path, rates):
     given = set(p) if isinstance(p, dict) else set()
     p = _merge(p, DEFAULT_PLAN, path)
@@ -201,7 +208,7 @@ def _validate_plan(p, path, rates):
     for k in ("origin_lat_deg", "origin_lon_deg"):
         if p[k] is None:
             raise ConfigError(f"{path}.{k}: missing required key (deg)")
-    p["origin_lat_deg"] = number(p["origin_lat_deg"], f"{path}.origin_lat_deg", "deg", -80.0, 80.0)
+    p["origin_lat_deg"] = number(p["origin_lat_deg"], f"{path}.origin_lat_deg", "deg", -MAX_ORIGIN_LAT_DEG, MAX_ORIGIN_LAT_DEG)
     p["origin_lon_deg"] = number(p["origin_lon_deg"], f"{path}.origin_lon_deg", "deg", -180.0, 360.0)
     p["altitude_m"] = number(p["altitude_m"], f"{path}.altitude_m", "m", -400.0, 15000.0)
     p["speed_mps"] = number(p["speed_mps"], f"{path}.speed_mps", "m/s", 1.0, 300.0)
@@ -274,9 +281,10 @@ def _validate_plan(p, path, rates):
             f"{MAP_MAX_NORTH_SOUTH_M / 1000:.0f} km"
         )
     lat_reach = p["origin_lat_deg"] + math.degrees(north / 6.36e6) * (1 if p["origin_lat_deg"] >= 0 else -1)
-    if abs(lat_reach) > 85.0:
+    if abs(lat_reach) > MAX_REACH_LAT_DEG:
         raise ConfigError(
-            f"{path}.{key}: the planned lines reach latitude {lat_reach:.1f} deg; the survey map allows |lat| <= 85 deg"
+            f"{path}.{key}: the planned lines reach latitude {lat_reach:.2f} deg; the survey map allows "
+            f"|lat| <= {MAX_REACH_LAT_DEG:g} deg"
         )
     return p
 
