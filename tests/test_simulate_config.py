@@ -169,4 +169,3 @@ def test_polar_plans_are_simulated_up_to_where_lines_would_reach_the_pole():
     assert load_sim_config(quick_sim(lat_deg=-89.0, heading_deg=90.0, duration_s=3600.0)) is not None
     with pytest.raises(ConfigError, match=r"flights\[0\]\.plan\.duration_s: .*reach latitude 89\.54 deg.*<= 89\.5 deg"):
         load_sim_config(quick_sim(lat_deg=89.0, heading_deg=0.0))
-

@@ -208,7 +208,9 @@ def _validate_plan(p, path, rates):
     for k in ("origin_lat_deg", "origin_lon_deg"):
         if p[k] is None:
             raise ConfigError(f"{path}.{k}: missing required key (deg)")
-    p["origin_lat_deg"] = number(p["origin_lat_deg"], f"{path}.origin_lat_deg", "deg", -MAX_ORIGIN_LAT_DEG, MAX_ORIGIN_LAT_DEG)
+    p["origin_lat_deg"] = number(
+        p["origin_lat_deg"], f"{path}.origin_lat_deg", "deg", -MAX_ORIGIN_LAT_DEG, MAX_ORIGIN_LAT_DEG
+    )
     p["origin_lon_deg"] = number(p["origin_lon_deg"], f"{path}.origin_lon_deg", "deg", -180.0, 360.0)
     p["altitude_m"] = number(p["altitude_m"], f"{path}.altitude_m", "m", -400.0, 15000.0)
     p["speed_mps"] = number(p["speed_mps"], f"{path}.speed_mps", "m/s", 1.0, 300.0)
