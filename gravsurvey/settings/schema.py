@@ -1082,7 +1082,10 @@ class OutputSection(Section):
 
     dir: str = Field("out", description="output directory (relative to the config file; `-o` overrides)", min_length=1)
     epsg: Optional[int] = Field(
-        None, description="projected CRS of `easting_m`/`northing_m` (null: the UTM zone of the data)", gt=0
+        None,
+        description="projected CRS of `easting_m`/`northing_m` (null: the UTM zone of the data; UPS North / "
+        "South, EPSG 5041 / 5042, where the data's median latitude is north of 84 deg N or south of 80 deg S)",
+        gt=0,
     )
     plots: bool = Field(True, description="write PNG plots")
     xyz: bool = Field(True, description="write Geosoft XYZ")
