@@ -254,6 +254,12 @@ def _covariance(v, dist, lag, drift=True):
     return k
 
 
+def _gaussian_nll(y, alpha, chol) -> float:
+    """Negative log-likelihood (constant dropped) of ``y`` under ``K = L L^T``, from ``alpha =
+    K^-1 y`` and the factor ``chol`` (its diagonal is ``L``'s)."""
+    return 0.5 * float(y @ alpha) + float(np.sum(np.log(np.diag(chol))))
+
+
 def _neg_log_likelihood(v, dist, lag, y):
     """Gaussian negative log-likelihood (constant dropped), +inf where not positive definite."""
     from scipy.linalg import LinAlgError, cho_factor, cho_solve
@@ -262,8 +268,7 @@ def _neg_log_likelihood(v, dist, lag, y):
         c = cho_factor(_covariance(v, dist, lag), lower=True, check_finite=False)
     except LinAlgError:
         return math.inf
-    a = cho_solve(c, y, check_finite=False)
-    return 0.5 * float(y @ a) + float(np.sum(np.log(np.diag(c[0]))))
+    return _gaussian_nll(y, cho_solve(c, y, check_finite=False), c[0])
 
 
 def _prior_penalty(v, options: DriftOptions) -> float:
@@ -380,7 +385,7 @@ def _posterior_at(v, b, y, dist, lag, *times):
         return None
     s_d, tau = v[2], v[3]
     alpha = np.linalg.solve(chol.T, np.linalg.solve(chol, y))
-    nll = 0.5 * float(y @ alpha) + float(np.sum(np.log(np.diag(chol))))
+    nll = _gaussian_nll(y, alpha, chol)
     means = []
     for t in times:
         mean = np.empty(t.size)

@@ -481,6 +481,12 @@ def radii_of_curvature(lat, ellipsoid: Ellipsoid = WGS84):
     return ellipsoid.a * (1 - e2) / w**3, ellipsoid.a / w
 
 
+def wrap_deg(angle_deg):
+    """Angles (longitudes, headings, their differences) wrapped to [-180, 180) deg, as a
+    receiver writes a longitude; any shape."""
+    return (np.asarray(angle_deg, float) + 180.0) % 360.0 - 180.0
+
+
 def mat_ie(t, omega: float = OMEGA_E):
     """Rotation matrices ECEF -> inertial at times ``t`` (s after the reference epoch), ``(..., 3, 3)``."""
     t = np.asarray(t, dtype=float)

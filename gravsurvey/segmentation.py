@@ -20,7 +20,7 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 
 from gravsurvey.errors import ConfigError, DataError
-from gravsurvey.geodesy import radii_of_curvature
+from gravsurvey.geodesy import radii_of_curvature, wrap_deg
 
 __all__ = [
     "Segment",
@@ -114,11 +114,6 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     m = np.concatenate(([False], np.asarray(mask, dtype=bool), [False]))
     d = np.flatnonzero(m[1:] != m[:-1])
     return [(int(a), int(b)) for a, b in zip(d[::2], d[1::2])]
-
-
-def _wrap_deg(a):
-    """Wrap angles to [-180, 180) deg."""
-    return (np.asarray(a) + 180.0) % 360.0 - 180.0
 
 
 def _circmean_deg(h_deg: np.ndarray) -> float:
@@ -292,7 +287,7 @@ def segment_lines(
             return
         h0 = _circmean_deg(heading[a:b])
         v0 = float(np.median(speed_s[a:b]))
-        ok = (np.abs(_wrap_deg(heading[a:b] - h0)) <= heading_tol_deg) & (np.abs(speed_s[a:b] - v0) <= speed_tol_mps)
+        ok = (np.abs(wrap_deg(heading[a:b] - h0)) <= heading_tol_deg) & (np.abs(speed_s[a:b] - v0) <= speed_tol_mps)
         if ok.all():
             pieces.append([a, b, h0, v0])
             return
@@ -316,14 +311,14 @@ def segment_lines(
     grown = []
     win = max(1, int(round(2.0 * smooth_s / dt)))
     for a, b, h0, v0 in pieces:
-        dev = np.abs(_wrap_deg(heading - h0))
+        dev = np.abs(wrap_deg(heading - h0))
         dv = np.abs(speed_s - v0)
         ok = usable & (dev <= heading_tol_deg) & (dv <= speed_tol_mps)  # usable excludes non-finite rows
         while a > 0 and ok[a - 1]:
             a -= 1
         while b < n and ok[b]:
             b += 1
-        mad_h = 1.4826 * np.median(np.abs(_wrap_deg(heading[a:b] - _circmean_deg(heading[a:b]))))
+        mad_h = 1.4826 * np.median(np.abs(wrap_deg(heading[a:b] - _circmean_deg(heading[a:b]))))
         mad_v = 1.4826 * np.median(np.abs(speed_s[a:b] - np.median(speed_s[a:b])))
         edge_h = float(np.clip(4.0 * mad_h, 2.0, heading_tol_deg))
         edge_v = float(np.clip(4.0 * mad_v, 1.0, speed_tol_mps))
@@ -384,13 +379,13 @@ def segment_lines(
         dur = np.array([cum[b - 1] - cum[a] for a, b in straight])  # weights: line length
         bins = np.arange(0.0, 180.0, 5.0)
         # axial distance |ax - c| (mod 180) = |wrap(2 (ax - c))| / 2
-        axial = np.abs(_wrap_deg(2.0 * (ax[None, :] - bins[:, None]))) / 2.0
+        axial = np.abs(wrap_deg(2.0 * (ax[None, :] - bins[:, None]))) / 2.0
         score = (dur[None, :] * (axial <= tie_angle_deg / 2.0)).sum(axis=1)
         near = axial[int(np.argmax(score))] <= tie_angle_deg / 2.0
         d2 = np.radians(2.0 * ax[near])
         dom = (np.degrees(np.arctan2((dur[near] * np.sin(d2)).sum(), (dur[near] * np.cos(d2)).sum())) / 2.0) % 180.0
         for (a, b), x in zip(straight, ax):
-            diff = abs(_wrap_deg(2.0 * (x - dom))) / 2.0
+            diff = abs(wrap_deg(2.0 * (x - dom))) / 2.0
             if transit_angle_deg is None:
                 kinds[(a, b)] = "tie" if diff > tie_angle_deg else "line"
             elif diff <= transit_angle_deg:
@@ -442,7 +437,7 @@ def _heading_drift_deg(t, heading_unwrapped_deg) -> float:
 
 def _same_heading(heading, a0, b0, a1, b1, tol):
     """Do heading[a0:b0] and heading[a1:b1] belong to one line? Means within tol / 2."""
-    return abs(_wrap_deg(_circmean_deg(heading[a0:b0]) - _circmean_deg(heading[a1:b1]))) <= 0.5 * tol
+    return abs(wrap_deg(_circmean_deg(heading[a0:b0]) - _circmean_deg(heading[a1:b1]))) <= 0.5 * tol
 
 
 def segments_from_windows(time_s, windows: list[dict], *, key_path: str = "lines.windows") -> list[Segment]:

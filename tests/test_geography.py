@@ -9,7 +9,7 @@ takes over (``georef.default_epsg``). The simulator's survey map is exact at any
 can be flown at each latitude.
 
 *Antimeridian.* The survey map runs its longitude on across 180 deg; the simulator's written
-GNSS and truth longitudes are wrapped (``simulate.run.wrap_lon_deg``), so the record jumps from
+GNSS and truth longitudes are wrapped (``geodesy.wrap_deg``), so the record jumps from
 +179.99 to -179.99 deg as a real one does. The same flight flown at 20 deg E is the reference;
 the sensors are noiseless, so a mishandled wrap (a 360 deg step, a 40000 km jump in position)
 would stand out of an error of 0.008 mGal.
@@ -25,7 +25,8 @@ import yaml
 
 from gravsurvey.georef import UPS_NORTH_EPSG, UPS_SOUTH_EPSG, default_epsg, project
 from gravsurvey.pipeline import run_survey
-from gravsurvey.simulate.run import quick_sim, simulate_flight, simulate_to_dir, wrap_lon_deg
+from gravsurvey.geodesy import wrap_deg
+from gravsurvey.simulate.run import quick_sim, simulate_flight, simulate_to_dir
 from gravsurvey.simulate.trajectory import map_scales
 
 ALTITUDE_M = 1500.0
@@ -135,8 +136,8 @@ def _line_error(tmp_path, lon_deg, heading_deg):
     return float(np.std(err[keep])), float(np.std(truth[keep])), lon
 
 
-def test_wrap_lon_deg():
-    assert wrap_lon_deg(np.array([180.0, 181.25, -181.25, 359.0, 0.0, -180.0])) == pytest.approx(
+def test_wrap_deg():
+    assert wrap_deg(np.array([180.0, 181.25, -181.25, 359.0, 0.0, -180.0])) == pytest.approx(
         [-180.0, -178.75, 178.75, -1.0, 0.0, -180.0]
     )
 

@@ -315,7 +315,8 @@ def _markov_plus_white(rng, n, tau, white):
 def test_a_right_sigma_scores_inside_the_range_the_benchmark_gives_it():
     """bench_unseen.sigma_ratio_range: on errors with a sigma right for the error about its mean,
     the flight's error/sigma lies inside the stated 5-95 % range on most realisations (measured
-    0.92 and 0.83 at correlation times of 1/100 and 1/10 of the record), the range widens with
+    0.92 and 0.83 on these 60 at correlation times of 1/100 and 1/10 of the record; 0.94 and
+    0.84 over more, docs/benchmarks.md), the range widens with
     the correlation time, and a sigma half the right one scores outside it."""
     bench = _bench()
     rng = np.random.default_rng(11)

@@ -25,6 +25,7 @@ import numpy as np
 import yaml
 
 from gravsurvey.errors import ConfigError
+from gravsurvey.geodesy import wrap_deg
 
 from .sensors import (
     DEGPH,
@@ -128,12 +129,6 @@ class FlightSimulation:
     gradient_time: np.ndarray | None = None
     gradient_t_eotvos: np.ndarray | None = None
     gradient_error_eotvos: np.ndarray | None = None
-
-
-def wrap_lon_deg(lon_deg):
-    """Longitude in [-180, 180) deg, as receivers write it: the survey map's longitude runs on
-    across the antimeridian (and around a pole), a recorded one does not."""
-    return (np.asarray(lon_deg, float) + 180.0) % 360.0 - 180.0
 
 
 def _gradient_channel(plan, cfg: SimConfig, f: dict, flight_index: int, ell):
@@ -284,7 +279,8 @@ def _truth_table(plan, t_rel, start_ns, t_ns, anomaly: _Anomaly):
         an = anomaly(kin)
         line[sl] = kin.label
         cols["lat_deg"][sl] = np.degrees(kin.lat)
-        cols["lon_deg"][sl] = wrap_lon_deg(np.degrees(kin.lon))
+        # written as a receiver writes it; the survey map's longitude runs on across 180 deg
+        cols["lon_deg"][sl] = wrap_deg(np.degrees(kin.lon))
         cols["height_m"][sl] = kin.height
         cols["ve_mps"][sl], cols["vn_mps"][sl], cols["vu_mps"][sl] = kin.vel_n.T
         cols["roll_deg"][sl] = np.degrees(kin.roll)
@@ -386,7 +382,7 @@ def simulate_flight(sim, flight_index: int = 0) -> FlightSimulation:
         gnss_time_ns=gnss_ns + start,
         gnss_time=gnss_ns / 1e9,
         gnss_lat_deg=np.degrees(kin_g.lat + dlat),
-        gnss_lon_deg=wrap_lon_deg(np.degrees(kin_g.lon + dlon)),
+        gnss_lon_deg=wrap_deg(np.degrees(kin_g.lon + dlon)),
         gnss_height=kin_g.height + dh,
         truth=truth,
         truth_table=truth_table,

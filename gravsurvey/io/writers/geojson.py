@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 
+from ...geodesy import wrap_deg
 from .atomic import atomic_write_text
 from .columns import format_utc, line_groups
 from .jsonout import to_jsonable
@@ -13,7 +14,7 @@ from .jsonout import to_jsonable
 
 def _split_antimeridian(lon, lat):
     """Cut a lon/lat polyline where it crosses +-180 deg (RFC 7946 section 3.1.9)."""
-    lon = ((np.asarray(lon, float) + 180.0) % 360.0) - 180.0
+    lon = wrap_deg(lon)
     lat = np.asarray(lat, float)
     parts = [[[lon[0], lat[0]]]]
     for i in range(1, lon.size):
@@ -90,9 +91,10 @@ def write_geojson(
         geom = None
         if ok.size >= 2:
             lo, la = lon[ok], lat[ok]
-            if np.all(np.abs(np.diff(((lo + 180.0) % 360.0) - 180.0)) <= 180.0):
+            lo_w = wrap_deg(lo)
+            if np.all(np.abs(np.diff(lo_w)) <= 180.0):
                 # no antimeridian crossing (the usual case): vectorised
-                parts = [np.round(np.column_stack([((lo + 180.0) % 360.0) - 180.0, la]), 7).tolist()]
+                parts = [np.round(np.column_stack([lo_w, la]), 7).tolist()]
             else:
                 parts = _split_antimeridian(lo, la)
                 parts = [[[round(float(x), 7), round(float(y), 7)] for x, y in p] for p in parts]
