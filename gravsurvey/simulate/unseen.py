@@ -7,6 +7,8 @@ machinery (:func:`gravsurvey.simulate.run.simulate_to_dir`) into a folder with t
 ``truth.csv``, a ``survey.yaml`` that holds only what a user knows (file layout, topics, rates
 implied by the files, triad; no ``model`` block; docs/simulate.md) and, for the benchmark's
 "oracle-tuned" column, an ``oracle.yaml`` with the matched model.
+:func:`draw_issue_flight_spec` draws flights as issue 12 describes the three of its table
+(``benchmarks/bench_issue_flights.py``).
 
 This module is part of the simulator: it shares no code with the estimator (only
 ``gravsurvey.geodesy``).
@@ -38,7 +40,9 @@ __all__ = [
     "NOMINAL_SENSORS",
     "NOMINAL_TURBULENCE",
     "RANGES",
+    "ISSUE_FLIGHTS",
     "draw_flight_spec",
+    "draw_issue_flight_spec",
     "limit_spec",
     "noise_psd",
     "peak_disturbance",
@@ -90,6 +94,8 @@ MIN_LINE_S = 300.0
 #: Sources per km of survey line, and their bounds.
 SOURCES_PER_KM = 1.0 / 15.0
 MIN_SOURCES, MAX_SOURCES = 3, 40
+#: Source kinds drawn (equal weight per entry): half point masses, a quarter dipoles and prisms.
+SOURCE_KINDS = ("point_masses", "point_masses", "dipoles", "prisms")
 #: Clearance between a source and the aircraft's height, m.
 MIN_CLEARANCE_M = 100.0
 #: wavelength = pi x (distance of the source below the aircraft): the spectrum of a point mass
@@ -210,8 +216,9 @@ def peak_disturbance(key, item, altitude, z, ell):
     return float(np.max(np.abs(gravity_disturbance(model, r_e, ell))))
 
 
-def _random_field(rng, plan, altitude, ell, sources_out: list) -> dict:
-    """Point masses, dipoles and prisms near the lines; amplitudes and wavelengths drawn."""
+def _random_field(rng, plan, altitude, ell, sources_out: list, kinds=SOURCE_KINDS) -> dict:
+    """Sources of ``kinds`` (drawn with equal weight per entry) near the lines; amplitudes and
+    wavelengths drawn."""
     scale = _log_uniform(rng, *RANGES["field_scale_mgal"])
     line_km = plan["lines"]["count"] * plan["lines"]["length_m"] / 1000.0
     n_src = int(min(MAX_SOURCES, max(MIN_SOURCES, round(line_km * SOURCES_PER_KM))))
@@ -221,7 +228,7 @@ def _random_field(rng, plan, altitude, ell, sources_out: list) -> dict:
     wl_hi = RANGES["wavelength_m"][1]
     field = {"type": "model", "point_masses": [], "dipoles": [], "prisms": []}
     for _ in range(n_src):
-        kind = str(rng.choice(["point_masses", "point_masses", "dipoles", "prisms"]))
+        kind = str(rng.choice(list(kinds)))
         wavelength = _log_uniform(rng, wl_lo, wl_hi)
         z = wavelength / WAVELENGTH_PER_DEPTH
         x, y = _track_point(rng, plan)
@@ -292,7 +299,16 @@ def draw_flight_spec(seed: int) -> dict:
     plan = _grid_plan(rng, speed, altitude, heading, lat0, lon0, target, ell)
     sources: list = []
     field, scale = _random_field(rng, plan, altitude, ell, sources)
-    name = f"U{seed:03d}"
+    rates = (imu_hz, gnss_hz, alt_hz)
+    return _assembled_spec(
+        seed, f"U{seed:03d}", triad, rates, target, plan, turb, sensors, factors, field, scale, sources
+    )
+
+
+def _assembled_spec(seed, name, triad, rates, target, plan, turb, sensors, factors, field, scale, sources) -> dict:
+    """The spec mapping of one drawn flight (:func:`draw_flight_spec`'s Returns), its SIM checked."""
+    imu_hz, gnss_hz, alt_hz = rates
+    ell = WGS84
     day = 1 + seed % 28
     sim = {
         "name": f"unseen_{name}",
@@ -325,11 +341,11 @@ def draw_flight_spec(seed: int) -> dict:
         "imu_hz": imu_hz,
         "altimeter_hz": alt_hz,
         "gnss_hz": gnss_hz,
-        "speed_mps": speed,
-        "altitude_m": altitude,
-        "heading_deg": heading,
-        "origin_lat_deg": lat0,
-        "origin_lon_deg": lon0,
+        "speed_mps": plan["speed_mps"],
+        "altitude_m": plan["altitude_m"],
+        "heading_deg": plan["lines"]["heading_deg"],
+        "origin_lat_deg": plan["origin_lat_deg"],
+        "origin_lon_deg": plan["origin_lon_deg"],
         "target_duration_s": target,
         "duration_s": float(built.duration),
         "line_count": plan["lines"]["count"],
@@ -342,6 +358,89 @@ def draw_flight_spec(seed: int) -> dict:
         "sources": sources,
         "sim": sim,
     }
+
+
+#: The three flights of issue 12's table as the issue describes them (an independent
+#: simulator's; its exact draws are unknown): point masses plus dipoles, 60-90 min at 72 m/s,
+#: the nominal sensors with a gravimeter of 1 mGal/sqrt(Hz) white + Gauss-Markov + a 2 mGal
+#: bias.  Per kind: triad, IMU rate (Hz; a pair is drawn log-uniform), GNSS and height rate
+#: (Hz), height noise (m), turbulence (x :data:`NOMINAL_TURBULENCE`).
+ISSUE_FLIGHTS = {
+    "A": {
+        "triad": "platform",
+        "imu_hz": (20, 100),
+        "aux_hz": (1, 10),
+        "height_sigma_m": (0.03, 0.10),
+        "turbulence": 1.0,
+    },
+    "B": {
+        "triad": "strapdown",
+        "imu_hz": (20, 100),
+        "aux_hz": (1, 10),
+        "height_sigma_m": (0.03, 0.10),
+        "turbulence": 1.0,
+    },
+    "C": {
+        "triad": "strapdown",
+        "imu_hz": (100, 100),
+        "aux_hz": (1, 1),
+        "height_sigma_m": (0.10, 0.10),
+        "turbulence": 3.0,
+    },
+}
+#: Their speed, m/s, and duration range, s.
+ISSUE_SPEED_MPS = 72.0
+ISSUE_DURATION_S = (3600.0, 5400.0)
+#: Their sources: point masses and dipoles, one in four a dipole.
+ISSUE_SOURCE_KINDS = ("point_masses", "point_masses", "point_masses", "dipoles")
+
+
+def draw_issue_flight_spec(kind: str, seed: int) -> dict:
+    """Draw one flight like issue 12's table (:data:`ISSUE_FLIGHTS`): what the issue states is
+    fixed, the rest (field, altitude, heading, lines, the gravimeter's correlation time) drawn as
+    in :func:`draw_flight_spec`.
+
+    Parameters
+    ----------
+    kind : {"A", "B", "C"}
+        A: platform; B: strapdown; C: strapdown, 100 Hz IMU, 1 Hz GNSS and height, 10 cm height
+        noise, turbulence x3.
+    seed : int >= 0
+        Same (kind, seed) -> the same flight; named ``I<kind><seed>`` (``IA00``).
+
+    Returns
+    -------
+    dict
+        As :func:`draw_flight_spec`.
+    """
+    if kind not in ISSUE_FLIGHTS:
+        raise ValueError(f"draw_issue_flight_spec: kind must be one of {sorted(ISSUE_FLIGHTS)}, got {kind!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"draw_issue_flight_spec: seed must be an integer >= 0, got {seed!r}")
+    seed = int(seed)
+    spec = ISSUE_FLIGHTS[kind]
+    rng = np.random.default_rng([SEED_TAG, 12, "ABC".index(kind), seed])
+    imu_hz = _int_log_uniform(rng, *spec["imu_hz"])
+    aux_hz = _int_log_uniform(rng, *spec["aux_hz"])
+    altitude = float(rng.uniform(*RANGES["altitude_m"]))
+    heading = float(rng.uniform(0.0, 360.0))
+    target = float(rng.uniform(*ISSUE_DURATION_S))
+    lat0 = float(rng.uniform(*RANGES["origin_lat_deg"]))
+    lon0 = float(rng.uniform(-180.0, 180.0))
+    sensors = copy.deepcopy(NOMINAL_SENSORS)
+    sensors["altimeter"]["sigma_m"] = _log_uniform(rng, *spec["height_sigma_m"])
+    sensors["gravimeter"]["markov_lambda_per_s"] = _log_uniform(rng, *RANGES["gravimeter_lambda_per_s"])
+    factors = {"altimeter.sigma_m": sensors["altimeter"]["sigma_m"] / NOMINAL_SENSORS["altimeter"]["sigma_m"]}
+    turb = {k: float(v * spec["turbulence"]) for k, v in NOMINAL_TURBULENCE.items()}
+    factors.update({f"turbulence.{k}": spec["turbulence"] for k in NOMINAL_TURBULENCE})
+    plan = _grid_plan(rng, ISSUE_SPEED_MPS, altitude, heading, lat0, lon0, target, WGS84)
+    sources: list = []
+    field, scale = _random_field(rng, plan, altitude, WGS84, sources, ISSUE_SOURCE_KINDS)
+    rates = (imu_hz, aux_hz, aux_hz)
+    name = f"I{kind}{seed:02d}"
+    return _assembled_spec(
+        seed, name, spec["triad"], rates, target, plan, turb, sensors, factors, field, scale, sources
+    )
 
 
 def limit_spec(spec: dict, max_duration_s: float | None = None, max_imu_hz: float | None = None) -> dict:
