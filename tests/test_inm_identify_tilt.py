@@ -131,8 +131,12 @@ def test_a_leak_the_data_contradict_is_not_taken_off_and_is_reported(rolling_str
     rep = sol.identification
     assert rep["tilt_leak"]["applied"] is False
     assert rep["tilt_leak"]["leak_mps2"] > rep["tilt_leak"]["vertical_white_mps2"]
-    assert rep["gravimeter_white_mps2"]["how"] == "identified"
-    assert rep["gravimeter_white_mps2"]["value"] == rep["tilt_leak"]["vertical_white_mps2"]
+    # nor is the vertical white (4e-5, against the simulated gravimeter's 1e-5) taken as the
+    # gravimeter's: the data do not tell it from the datasheet figure (identify.WHITE_MIN_LOG_LR)
+    white = rep["gravimeter_white_mps2"]
+    assert white["how"].startswith("default (the data do not exclude it")
+    assert white["value"] == I.WHITE_DEFAULT_MPS2
+    assert 0.0 <= rep["white_log_likelihood_ratio"] < I.WHITE_MIN_LOG_LR
     warned = [w for w in sol.warnings if "quieter than that" in w]
     assert len(warned) == 1 and "accel_noise_mps2 = 0.005" in warned[0]
 

@@ -68,6 +68,7 @@ __all__ = [
     "model_resolution_m",
     "horizontal_prior",
     "drift_sigma_passed",
+    "white_log_likelihood_ratio",
     "tilt_leak_factor",
     "tilt_leak_exceeds_white",
     "white_less_tilt_leak",
@@ -92,6 +93,14 @@ _ORDER = ("anomaly_sigma_mps2", "anomaly_tau_s", "white_mps2", "height_sigma_m")
 WHITE_MAX_FACTOR = 4.0
 #: ... else this one-second sigma (1 mGal/sqrt(Hz), a typical gravimeter datasheet figure), m/s^2.
 WHITE_DEFAULT_MPS2 = 1e-5
+#: ... and only when the data exclude that figure: the fit with the white level held at
+#: :data:`WHITE_DEFAULT_MPS2` must be worse by this log-likelihood (2: about the 95 % point of a
+#: likelihood-ratio test of one parameter).  The Hessian's factor alone was not enough: the
+#: likelihood is flat in the white level wherever it hides under the anomaly, so a factor of
+#: 1.4 stood for a level 16x the gravimeter's that the data preferred by 1.9 only (a strapdown
+#: flight in heavy turbulence, 1 Hz heights: the product went flat, 1.69 mGal for a bound of
+#: 0.89; docs/benchmarks.md, "Flights like issue 12's table").
+WHITE_MIN_LOG_LR = 2.0
 
 #: Range of :func:`smoother_sigma_scale`: the seen field's spectrum is an estimate, and a
 #: factor beyond it would say more than one flight's periodogram can.
@@ -786,6 +795,29 @@ def prior_for_resolution(
     return dataclasses.replace(model, anomaly_sigma_mps2=sigma)
 
 
+def white_log_likelihood_ratio(time, residual_m, manoeuvring, fit: VerticalFit, fixed: dict | None = None) -> float:
+    """How far the data exclude the datasheet white level: the log-likelihood of ``fit`` over
+    the same fit with the white level held at :data:`WHITE_DEFAULT_MPS2`.
+
+    Parameters
+    ----------
+    time, residual_m, manoeuvring, fixed
+        As given to :func:`fit_vertical_spectrum` for ``fit``.
+    fit : VerticalFit
+        The fit with the white level free.
+
+    Returns
+    -------
+    float
+        >= 0 up to the optimiser's tolerance (``inf`` when the held fit fails); about half a
+        chi-square of one degree of freedom when the white level is the datasheet's.
+    """
+    held = fit_vertical_spectrum(
+        time, residual_m, manoeuvring, fixed={**(fixed or {}), "white_mps2": WHITE_DEFAULT_MPS2}
+    )
+    return math.inf if held is None else float(held.nll - fit.nll)
+
+
 def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, ellipsoid: Ellipsoid = WGS84):
     """Identify the ``model:`` noise levels and anomaly prior of one flight.
 
@@ -915,6 +947,18 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
                 f"{report['tilt_leak']['tilt_rms_deg']:.1f} deg RMS tilt ({leak:.2g}): the horizontal "
                 "accelerometers are quieter than that; give accel_noise_mps2 from the datasheet"
             )
+        if own is None:
+            # the vertical white taken whole as the gravimeter's: only a level the data tell from
+            # the datasheet's (the Hessian's factor is local, and the likelihood is flat in the
+            # white level below the anomaly's; where the leak is taken off, white_less_tilt_leak
+            # floors the remainder at the datasheet figure already)
+            held = white_log_likelihood_ratio(t, e, man, fit, noise_fixed)
+            report["white_log_likelihood_ratio"] = held
+            if held < WHITE_MIN_LOG_LR:
+                m = dataclasses.replace(m, white_mps2=WHITE_DEFAULT_MPS2)
+                white_how = (
+                    f"default (the data do not exclude it: log-likelihood ratio {held:.1f} < {WHITE_MIN_LOG_LR:g})"
+                )
     if params.target_resolution_m is not None:
         m = prior_for_resolution(m, v, params.target_resolution_m, fit.dt_s)
     found = {
