@@ -85,18 +85,23 @@ def tactical_flight():
 
 
 def test_datasheet_bias_taken_off_restores_a_tactical_strapdown_flight(tactical_flight):
-    """With 14 states the bias is taken for tilt: the identification on the unaided vertical
-    channel reads its leak as noise and the estimate is twice as far off.  With the datasheet
-    figure in the config the bias is estimated, taken off, the model identified again, and the
+    """With 14 states the bias is taken for tilt: its leak shows in the unaided vertical channel
+    as a white level of 9e-5 m/s^2.  Taken as the gravimeter's noise (before the white-level rule,
+    identify.WHITE_MIN_LOG_LR) it made the estimate twice as far off (1.292 mGal for 0.696); the
+    data do not tell it from the datasheet figure, which now holds (0.771).  With the datasheet
+    bias in the config the bias is estimated, taken off, the model identified again, and the
     vertical is as on the flight without the bias (the biases themselves within their sigma)."""
     clean, biased, _ = tactical_flight
     rms_clean = _rms_mgal(clean, estimate_anomaly(record_and_initial(clean)[0], InmParams(), None, "strapdown"))
-    rms_biased = _rms_mgal(biased, estimate_anomaly(record_and_initial(biased)[0], InmParams(), None, "strapdown"))
+    plain = estimate_anomaly(record_and_initial(biased)[0], InmParams(), None, "strapdown")
+    rms_biased = _rms_mgal(biased, plain)
     sol = estimate_anomaly(record_and_initial(biased)[0], inm_params({"accel_bias_mps2": 1e-3}), None, "strapdown")
     rms_key = _rms_mgal(biased, sol)
-    # measured: 0.696 mGal as drawn, 1.292 with the bias, 0.688 with the bias and the key
-    assert rms_biased > 1.5 * rms_clean
-    assert rms_key < 1.1 * rms_clean
+    # measured: 0.696 mGal as drawn, 0.771 with the bias, 0.688 with the bias and the key
+    assert plain.identification["tilt_leak"]["vertical_white_mps2"] > 5e-5
+    assert plain.identification["gravimeter_white_mps2"]["how"].startswith("default (the data do not exclude it")
+    assert rms_biased < 1.25 * rms_clean
+    assert rms_key < min(1.1 * rms_clean, rms_biased)
     assert sol.x_smooth.shape[1] == N_STATE_BIAS and sol.accel_bias_taken_off
     # measured: 1.017e-3 / -0.692e-3, sigma 2.2e-5: the drawn bias plus the simulator's
     # accelerometer errors; the second pass confirmed the first pass's correction
