@@ -365,21 +365,10 @@ def _assembled_spec(seed, name, triad, rates, target, plan, turb, sensors, facto
 #: the nominal sensors with a gravimeter of 1 mGal/sqrt(Hz) white + Gauss-Markov + a 2 mGal
 #: bias.  Per kind: triad, IMU rate (Hz; a pair is drawn log-uniform), GNSS and height rate
 #: (Hz), height noise (m), turbulence (x :data:`NOMINAL_TURBULENCE`).
+_ISSUE_COMMON = {"imu_hz": (20, 100), "aux_hz": (1, 10), "height_sigma_m": (0.03, 0.10), "turbulence": 1.0}
 ISSUE_FLIGHTS = {
-    "A": {
-        "triad": "platform",
-        "imu_hz": (20, 100),
-        "aux_hz": (1, 10),
-        "height_sigma_m": (0.03, 0.10),
-        "turbulence": 1.0,
-    },
-    "B": {
-        "triad": "strapdown",
-        "imu_hz": (20, 100),
-        "aux_hz": (1, 10),
-        "height_sigma_m": (0.03, 0.10),
-        "turbulence": 1.0,
-    },
+    "A": {**_ISSUE_COMMON, "triad": "platform"},
+    "B": {**_ISSUE_COMMON, "triad": "strapdown"},
     "C": {
         "triad": "strapdown",
         "imu_hz": (100, 100),
