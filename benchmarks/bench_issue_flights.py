@@ -87,12 +87,12 @@ def print_table(rows) -> None:
         lo, hi = goal_ratio_range(kind)
         failed = len(ks) - ratios.size
         if ratios.size == 0:
-            print(f"{kind}: no flight scored ({failed} failed)")
+            print(f"- {kind}: no flight scored ({failed} failed)")
             continue
         zs = [r.get("default_z") for r in ks if r.get("default_z") is not None]
         in_range = sum(0.7 <= z <= 1.5 for z in zs)
         print(
-            f"{kind} ({ISSUE_FLIGHTS[kind]['triad']}, {len(ks)} flights): default / bound median "
+            f"- {kind} ({ISSUE_FLIGHTS[kind]['triad']}, {len(ks)} flights): default / bound median "
             f"{np.median(ratios):.2f}, worst {ratios.max():.2f}; at or below the issue's goal/bound "
             f"{lo:.2f} (strict) on {int((ratios <= lo).sum())}, {hi:.2f} on {int((ratios <= hi).sum())}; "
             f"error/sigma in [0.7, 1.5] on {in_range} of {len(zs)}" + (f"; {failed} failed" if failed else "")

@@ -447,6 +447,6 @@ def test_issue_flights_table_counts_against_the_issues_ratio(capsys):
     out = capsys.readouterr().out
     assert "| IA02 | s | 0.60 |" in out and "| 1.50 |" in out and "DataError: x" in out
     assert (
-        "A (platform, 4 flights): default / bound median 1.30, worst 1.50; at or below the issue's "
+        "- A (platform, 4 flights): default / bound median 1.30, worst 1.50; at or below the issue's "
         "goal/bound 1.03 (strict) on 1, 1.38 on 2; error/sigma in [0.7, 1.5] on 2 of 3; 1 failed"
     ) in out
