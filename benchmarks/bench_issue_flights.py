@@ -40,8 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import bench_unseen as bu  # noqa: E402
 
-from gravsurvey.errors import GravsurveyError  # noqa: E402
-from gravsurvey.simulate.unseen import ISSUE_FLIGHTS, draw_issue_flight_spec, spec_summary  # noqa: E402
+from gravsurvey.simulate.unseen import ISSUE_FLIGHTS, draw_issue_flight_spec  # noqa: E402
 
 #: Issue 12's goal (mGal) and its Wiener bound range (mGal) per flight kind.
 ISSUE_GOALS = {"A": (0.40, (0.29, 0.39)), "B": (0.50, (0.36, 0.41)), "C": (0.75, (0.64, 0.67))}
@@ -51,10 +50,6 @@ def goal_ratio_range(kind: str) -> tuple[float, float]:
     """The issue's goal over its bound for ``kind``: (goal / upper bound, goal / lower bound)."""
     goal, (lo, hi) = ISSUE_GOALS[kind]
     return goal / hi, goal / lo
-
-
-def _fmt(v, nd=2):
-    return "-" if v is None or not np.isfinite(v) else f"{v:.{nd}f}"
 
 
 def print_table(rows) -> None:
@@ -70,15 +65,15 @@ def print_table(rows) -> None:
         ratio = r["default_rms"] / r["bound_rms"] if r.get("default_rms") and r.get("bound_rms") else None
         r["default_per_bound"] = ratio
         z_rng = r.get("default_z_range")
-        z_txt = _fmt(r.get("default_z")) + (f" ({z_rng[0]:.2f}-{z_rng[1]:.2f})" if z_rng else "")
+        z_txt = bu.fmt(r.get("default_z")) + (f" ({z_rng[0]:.2f}-{z_rng[1]:.2f})" if z_rng else "")
         res = " / ".join(
-            _fmt(r.get(k), 1) for k in ("default_resolution_km", "classic_resolution_km", "bound_resolution_km")
+            bu.fmt(r.get(k), 1) for k in ("default_resolution_km", "classic_resolution_km", "bound_resolution_km")
         )
         err = r.get("default_error")
         print(
-            f"| {r['name']} | {r['summary']} | {err if err else _fmt(r.get('default_rms'))} | {_fmt(r.get('kalman_rms'))} "
-            f"| {_fmt(r.get('classic_rms'))} | {_fmt(r.get('bound_rms'))} | {_fmt(ratio)} | {lo:.2f}-{hi:.2f} "
-            f"| {z_txt} | {_fmt(r.get('drift_rms'))} | {res} |"
+            f"| {r['name']} | {r['summary']} | {err if err else bu.fmt(r.get('default_rms'))} | {bu.fmt(r.get('kalman_rms'))} "
+            f"| {bu.fmt(r.get('classic_rms'))} | {bu.fmt(r.get('bound_rms'))} | {bu.fmt(ratio)} | {lo:.2f}-{hi:.2f} "
+            f"| {z_txt} | {bu.fmt(r.get('drift_rms'))} | {res} |"
         )
     print()
     for kind in sorted({r["kind"] for r in rows}):
@@ -120,17 +115,12 @@ def main(argv=None):
         for seed in range(a.first_seed, a.first_seed + a.flights):
             spec = draw_issue_flight_spec(kind, seed)
             t0 = time.perf_counter()
-            try:
-                folder = bu.prepare_flight(spec, a.cache)
-                row = bu.evaluate_flight(spec, folder, runs)
-            except GravsurveyError as exc:  # one bad flight must not hide the others' rows
-                row = {"name": spec["name"], "seed": seed, "summary": spec_summary(spec)}
-                row["default_error"] = f"{type(exc).__name__}: {exc}"
+            row = bu.run_flight(spec, a.cache, runs)
             row["kind"] = kind
             rows.append(row)
             print(
-                f"{row['summary']}: default {_fmt(row.get('default_rms'))} classic {_fmt(row.get('classic_rms'))} "
-                f"bound {_fmt(row.get('bound_rms'))} mGal ({time.perf_counter() - t0:.0f} s)",
+                f"{row['summary']}: default {bu.fmt(row.get('default_rms'))} classic {bu.fmt(row.get('classic_rms'))} "
+                f"bound {bu.fmt(row.get('bound_rms'))} mGal ({time.perf_counter() - t0:.0f} s)",
                 file=sys.stderr,
                 flush=True,
             )

@@ -516,6 +516,29 @@ def evaluate_flight(
     return row
 
 
+def run_flight(
+    spec, cache=CACHE, runs=("default", "oracle", "classic"), heights: str = "altimeter", model=None
+) -> dict:
+    """:func:`prepare_flight` then :func:`evaluate_flight`; a flight the pipeline refuses gives a
+    row with ``default_error`` (one bad flight must not hide the others' rows).  ``simulate_s``:
+    the time spent simulating (0 when cached), s."""
+    t0 = time.perf_counter()
+    try:
+        folder = prepare_flight(spec, cache)
+        t_sim = time.perf_counter() - t0
+        row = evaluate_flight(spec, folder, runs, heights, model)
+    except GravsurveyError as exc:
+        t_sim = time.perf_counter() - t0
+        row = {
+            "name": spec["name"],
+            "seed": spec["seed"],
+            "summary": spec_summary(spec),
+            "default_error": f"{type(exc).__name__}: {exc}",
+        }
+    row["simulate_s"] = t_sim
+    return row
+
+
 def truth_lines(path):
     """The simulator's line label per row of a truth.csv (``line`` column), as a list of str."""
     with open(path, newline="") as fh:
@@ -524,12 +547,13 @@ def truth_lines(path):
     return [r[i] for r in rows[1:]]
 
 
-def _fmt(v, nd=2):
+def fmt(v, nd=2):
+    """``v`` with ``nd`` decimals, ``-`` for None or a non-finite float."""
     return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{nd}f}"
 
 
 def _range(lo_hi):
-    return "" if not lo_hi else f" ({_fmt(lo_hi[0])}-{_fmt(lo_hi[1])})"
+    return "" if not lo_hi else f" ({fmt(lo_hi[0])}-{fmt(lo_hi[1])})"
 
 
 def print_table(rows):
@@ -547,13 +571,13 @@ def print_table(rows):
         cov = r.get("default_coverage")
         cov = f" ({cov:.0%} covered)" if cov is not None and cov < 0.995 else ""
         print(
-            f"| {r['name']} | {r['summary'].split(' ', 1)[1]} | {_fmt(r.get('default_rms'))}{cov} | "
-            f"{_fmt(r.get('kalman_rms'))} | {_fmt(r.get('oracle_rms'))} | {_fmt(r.get('classic_rms'))} | "
-            f"{_fmt(b)} | {_fmt(ratio)} | {_fmt(kr)} | {_fmt(r.get('default_resolution_km'), 1)} / "
-            f"{_fmt(r.get('classic_resolution_km'), 1)} / {_fmt(r.get('bound_resolution_km'), 1)} | "
-            f"{_fmt(r.get('truth_std_mgal'))} | {_fmt(r.get('default_z'))}{_range(r.get('default_z_range'))} | "
-            f"{_fmt(r.get('drift_rms'))} | "
-            f"{_fmt(r.get('kalman_less_drift_rms'))} |" + (f" {err}" if err else "")
+            f"| {r['name']} | {r['summary'].split(' ', 1)[1]} | {fmt(r.get('default_rms'))}{cov} | "
+            f"{fmt(r.get('kalman_rms'))} | {fmt(r.get('oracle_rms'))} | {fmt(r.get('classic_rms'))} | "
+            f"{fmt(b)} | {fmt(ratio)} | {fmt(kr)} | {fmt(r.get('default_resolution_km'), 1)} / "
+            f"{fmt(r.get('classic_resolution_km'), 1)} / {fmt(r.get('bound_resolution_km'), 1)} | "
+            f"{fmt(r.get('truth_std_mgal'))} | {fmt(r.get('default_z'))}{_range(r.get('default_z_range'))} | "
+            f"{fmt(r.get('drift_rms'))} | "
+            f"{fmt(r.get('kalman_less_drift_rms'))} |" + (f" {err}" if err else "")
         )
     print()
     for key in ("default", "kalman", "oracle", "classic", "kalman_less_drift"):
@@ -676,27 +700,14 @@ def main(argv=None):
             spec = limit_spec(spec, QUICK_MAX_DURATION_S, QUICK_MAX_IMU_HZ)
         if accel_bias is not None:
             spec = with_accel_bias(spec, accel_bias)
-        t0 = time.perf_counter()
-        try:
-            folder = prepare_flight(spec, a.cache)
-            t_sim = time.perf_counter() - t0
-            row = evaluate_flight(spec, folder, tuple(a.runs.split(",")), a.heights, model)
-        except GravsurveyError as exc:  # one bad flight must not hide the others' rows
-            t_sim = time.perf_counter() - t0
-            row = {
-                "name": spec["name"],
-                "seed": spec["seed"],
-                "summary": spec_summary(spec),
-                "default_error": f"{type(exc).__name__}: {exc}",
-            }
-        row["simulate_s"] = t_sim
+        row = run_flight(spec, a.cache, tuple(a.runs.split(",")), a.heights, model)
         rows.append(row)
         print(
-            f"{row['summary']}: default {_fmt(row.get('default_rms'))} kalman {_fmt(row.get('kalman_rms'))} "
-            f"oracle {_fmt(row.get('oracle_rms'))} classic {_fmt(row.get('classic_rms'))} "
-            f"bound {_fmt(row.get('bound_rms'))} mGal (sim {t_sim:.0f} s, run "
+            f"{row['summary']}: default {fmt(row.get('default_rms'))} kalman {fmt(row.get('kalman_rms'))} "
+            f"oracle {fmt(row.get('oracle_rms'))} classic {fmt(row.get('classic_rms'))} "
+            f"bound {fmt(row.get('bound_rms'))} mGal (sim {row['simulate_s']:.0f} s, run "
             f"{row.get('default_s', 0):.0f}/{row.get('oracle_s', 0):.0f}/{row.get('classic_s', 0):.0f} s, "
-            f"error/sigma {_fmt(row.get('default_z'))})",
+            f"error/sigma {fmt(row.get('default_z'))})",
             file=sys.stderr,
             flush=True,
         )

@@ -13,8 +13,9 @@ from .jsonout import to_jsonable
 
 
 def _split_antimeridian(lon, lat):
-    """Cut a lon/lat polyline where it crosses +-180 deg (RFC 7946 section 3.1.9)."""
-    lon = wrap_deg(lon)
+    """Cut a lon/lat polyline (lon wrapped to [-180, 180) deg) where it crosses +-180 deg (RFC
+    7946 section 3.1.9)."""
+    lon = np.asarray(lon, float)
     lat = np.asarray(lat, float)
     parts = [[[lon[0], lat[0]]]]
     for i in range(1, lon.size):
@@ -96,7 +97,7 @@ def write_geojson(
                 # no antimeridian crossing (the usual case): vectorised
                 parts = [np.round(np.column_stack([lo_w, la]), 7).tolist()]
             else:
-                parts = _split_antimeridian(lo, la)
+                parts = _split_antimeridian(lo_w, la)
                 parts = [[[round(float(x), 7), round(float(y), 7)] for x, y in p] for p in parts]
             geom = (
                 {"type": "LineString", "coordinates": parts[0]}
