@@ -92,6 +92,63 @@ def test_local_plane_distances():
     assert abs(d - d_true) < 1e-3 * d_true
 
 
+def placed(east, north, lat0_deg, lon0_deg):
+    """Geodetic lat, lon (rad) of points at ``hypot(east, north)`` m and azimuth
+    ``atan2(east, north)`` from (lat0, lon0) along great circles (the spherical destination
+    formula)."""
+    lat0, lon0 = math.radians(lat0_deg), math.radians(lon0_deg)
+    d = np.hypot(east, north) / R_EARTH
+    az = np.arctan2(east, north)
+    lat = np.arcsin(np.sin(lat0) * np.cos(d) + np.cos(lat0) * np.sin(d) * np.cos(az))
+    lon = lon0 + np.arctan2(np.sin(az) * np.sin(d) * np.cos(lat0), np.cos(d) - np.sin(lat0) * np.sin(lat))
+    return lat, (lon + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def great_circle_m(lat1, lon1, lat2, lon2):
+    """Haversine distance, m."""
+    a = np.sin((lat2 - lat1) / 2) ** 2 + np.cos(lat1) * np.cos(lat2) * np.sin((lon2 - lon1) / 2) ** 2
+    return 2.0 * R_EARTH * np.arcsin(np.sqrt(a))
+
+
+@pytest.mark.parametrize(("lat0_deg", "lon0_deg"), [(45.0, 10.0), (-17.0, 180.0), (89.9, 30.0), (-90.0, 0.0)])
+def test_local_plane_is_true_across_the_antimeridian_and_the_poles(lat0_deg, lon0_deg):
+    # the survey centred on the antimeridian, on the pole and near it: an equirectangular plane
+    # about the mean longitude put the antimeridian's two halves ~40000 km apart
+    t, _, _, e, n, lab = survey()
+    e, n = e - 30000.0, n - 5000.0
+    lat, lon = placed(e, n, lat0_deg, lon0_deg)
+    x, y = local_plane(lat, lon)
+    # every pair's distance (a sample of pairs) within 1e-4 of the great circle's
+    rng = np.random.default_rng(0)
+    i, j = rng.integers(0, t.size, 400), rng.integers(0, t.size, 400)
+    d_true = great_circle_m(lat[i], lon[i], lat[j], lon[j])
+    d = np.hypot(x[i] - x[j], y[i] - y[j])
+    assert np.all(np.abs(d - d_true) <= 1e-4 * d_true + 1e-3), np.max(np.abs(d - d_true))
+    # unknown positions stay unknown
+    lat[5] = np.nan
+    x2, y2 = local_plane(lat, lon)
+    assert np.isnan(x2[5]) and np.isnan(y2[5]) and np.isfinite(x2[6])
+
+
+def test_drift_is_the_same_across_the_antimeridian_and_over_the_pole():
+    rng = np.random.default_rng(4)
+    t, _, _, e, n, lab = survey()
+    field = field_at(e, n)
+    drift = markov(t.size, 1.0, 1500.0, 2.0 * MGAL, rng)
+    g = field + drift + 0.3 * MGAL * rng.standard_normal(t.size)
+    e, n = e - 30000.0, n - 5000.0
+    out = {}
+    for where in ((45.0, 10.0), (-17.0, 180.0), (89.95, 0.0)):
+        lat, lon = placed(e, n, *where)
+        est, sigma, rep = separate_drift(t, lat, lon, g, lab)
+        assert rep["used"], (where, rep)
+        out[where] = est
+    ref = out[(45.0, 10.0)]
+    for where, est in out.items():
+        # the same survey, the same drift: the plane keeps its geometry to ~1e-5
+        assert rms_about_mean(est - ref) < 0.01 * rms_about_mean(ref), where
+
+
 def test_blocks_stay_on_one_line():
     t, lat, lon, e, n, lab = survey(lines=3)
     b, lines = line_blocks(t, e, n, np.zeros_like(t), lab, 90.0)
