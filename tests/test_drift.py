@@ -4,6 +4,7 @@ Synthetic surveys with known truth: a smooth 2D field (Gaussian bumps 8-30 km wi
 parallel lines, a Gauss-Markov drift in time, white noise.
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -381,11 +382,8 @@ def test_tie_lines_are_left_out():
 
 
 def test_pieces_of_a_flight_trade_their_datasheet_drift():
-    from gravsurvey.pipeline import estimate_drift
-
-    import dataclasses
-
     from gravsurvey.estimate import concatenate_estimates
+    from gravsurvey.pipeline import estimate_drift
 
     # a flight split at a gap: its pieces' datasheet drift, the largest, is what sigma holds
     est, segs, field, lab = _flight_estimate()
@@ -440,7 +438,6 @@ def test_a_configured_datasheet_drift_is_the_one_the_sigma_passes():
     identification passed into the sigma, also where the stage takes nothing off; with the
     identification's spectral model the passed part is recomputed for them, without one it
     scales with the drift's sigma."""
-    import dataclasses
 
     from gravsurvey.inm.identify import drift_sigma_passed
     from gravsurvey.pipeline import datasheet_drift_passed, estimate_drift
@@ -477,16 +474,20 @@ def test_a_configured_datasheet_drift_is_the_one_the_sigma_passes():
 )
 def test_drift_sigma_holds_what_the_blocks_leave_open_of_the_field(seed, field_scale, collapsed):
     """A weak field under a 2.4 mGal drift on four lines: the likelihood hardly tells a field of
-    0.01 mGal from one of 1 mGal, and where the fit ends on the small one its own posterior
-    claims the drift to 0.01-0.02 mGal while it is 0.5-1.0 off (error/sigma 24-71).  The sigma
-    averaged over the field's size (drift_posterior) is 5x larger or more there (7-17x); where the fit
-    found the field it is the fit's own (within 5 %)."""
+    0.01 mGal from one of 1 mGal, and where a fit ends on the small one (a local optimum: with
+    three starts the fit did on these two seeds) its own posterior claims the drift to 0.01-0.02
+    mGal while it is 0.5-1.0 off (error/sigma 24-71).  The sigma averaged over the field's size
+    (drift_posterior) is 5x larger or more there (7-17x); where the fit found the field it is
+    the fit's own (within 5 %)."""
     t, lat, lon, east, north, lab = survey(lines=4)
     rng = np.random.default_rng(seed)
     drift = markov(t.size, 1.0, 500.0, 2.4 * MGAL, rng)
     g = field_scale * field_at(east, north, seed) + drift + rng.standard_normal(t.size) * 0.3 * MGAL
     blocks, lines = line_blocks(t, east, north, g, lab, BLOCK_S)
     fit = fit_drift(blocks, lines, DriftOptions())
+    if collapsed:
+        # the small-field optimum the three-start fit ended on (0.011-0.015 mGal over 2-3 km)
+        fit = dataclasses.replace(fit, field_sigma_mps2=0.013 * MGAL, field_length_m=2500.0)
     mean, sigma = drift_posterior(fit, blocks, t)
     own_mean, own_sigma = drift_posterior(fit, blocks, t, field_sigmas=())
     np.testing.assert_array_equal(mean, own_mean)  # the estimate is the fit's
@@ -498,3 +499,30 @@ def test_drift_sigma_holds_what_the_blocks_leave_open_of_the_field(seed, field_s
         assert s > 5 * s_own and err / s < 0.5 * err / s_own
     else:
         assert s == pytest.approx(s_own, rel=0.05) and 0.7 < err / s < 1.5
+
+
+@pytest.mark.parametrize("seed", [2, 6, 10])
+def test_the_fit_finds_the_best_optimum_whatever_the_plane(seed, monkeypatch):
+    """A weak field under a 2.4 mGal drift on four lines has optima along the field's length;
+    with three starts the fit ended on a worse one on seeds 6 and 10 (negative log-likelihood
+    0.12 and 0.40 above the best; on 3 of 119 suite flights a 1e-3 change of the plane's scale
+    moved it between optima 1-2.5 apart).  The fit is within 0.1 of the best over a dense grid
+    of starts, and the same on a plane stretched by 1e-3."""
+    import gravsurvey.drift as drift_module
+
+    t, lat, lon, east, north, lab = survey(lines=4)
+    rng = np.random.default_rng(seed)
+    drift = markov(t.size, 1.0, 500.0, 2.4 * MGAL, rng)
+    g = 0.2 * field_at(east, north, seed) + drift + rng.standard_normal(t.size) * 0.3 * MGAL
+
+    def nll(stretch=1.0):
+        blocks, lines = line_blocks(t, east * stretch, north, g, lab, BLOCK_S)
+        fit = fit_drift(blocks, lines, DriftOptions())
+        return fit.nll_without_drift - fit.log_lr, fit
+
+    own, _ = nll()
+    stretched, _ = nll(1.001)
+    monkeypatch.setattr(drift_module, "FIELD_LENGTH_STARTS_M", tuple(np.geomspace(300.0, 9e5, 24)))
+    dense, _ = nll()
+    assert own <= dense + 0.1, (own, dense)
+    assert stretched == pytest.approx(own, abs=0.05)
