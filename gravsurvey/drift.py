@@ -180,11 +180,11 @@ class DriftFit:
 def local_plane(lat, lon, radius_m: float = 6371000.0):
     """East and north (m) about the survey's centre, azimuthal equidistant on a sphere; shape (N,) each.
 
-    The centre is the mean of the positions as unit vectors (a flight across the antimeridian
-    or over a pole has its centre among its points, where a mean of longitudes puts it half a
-    world away); distances and azimuths from it are true, so a line's neighbours stay at their
-    true distances at any latitude (an equirectangular plane stretched east-west by
-    ``cos(lat) / cos(lat0)``: 30 % across 200 km at 85 deg).  Not
+    The centre is the mean of the positions as unit vectors (for a flight over a pole, or across
+    the antimeridian with its longitudes wrapped, a mean of longitudes puts it half a world
+    away); distances and azimuths from it are true, so a line's neighbours stay at their true
+    distances at any latitude (an equirectangular plane stretched east-west by
+    ``cos(lat) / cos(lat0)``: over 30 % across 200 km at 85 deg).  Not
     :func:`gravsurvey.georef.project` (UTM): the fit is sensitive to a change of scale of a few
     1e-4 (U016 0.68 -> 0.72 mGal measured), and its results are stated with this plane.
 

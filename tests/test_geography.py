@@ -45,9 +45,10 @@ def _run(sim, out):
     return rows, json.loads((folder / "summary.json").read_text()), folder
 
 
-def _survey(tmp_path, lat_deg):
-    """Simulate a 3-line grid with a tie at ``lat_deg``, run the default config, return
-    ``(rms_mgal, truth_std_mgal, summary, output folder)`` on the line and tie epochs."""
+def _survey(tmp_path, lat_deg, lon_deg=LON0_DEG):
+    """Simulate a 3-line grid with a tie at ``lat_deg``, starting at ``lon_deg``, run the default
+    config, return ``(rms_mgal, truth_std_mgal, summary, output folder)`` on the line and tie
+    epochs."""
     rm, rp = map_scales(math.radians(lat_deg), ALTITUDE_M)
     rng = np.random.default_rng(7)
     masses = []
@@ -56,7 +57,7 @@ def _survey(tmp_path, lat_deg):
         masses.append(
             {
                 "lat_deg": lat_deg + math.degrees(north / rm),
-                "lon_deg": LON0_DEG + math.degrees(east / rp),
+                "lon_deg": wrap_deg(lon_deg + math.degrees(east / rp)),
                 "depth_m": float(rng.uniform(4e3, 9e3)),
                 "mass_kg": float(rng.choice([-1.0, 1.0]) * rng.uniform(1e14, 4e14)),
             }
@@ -64,7 +65,7 @@ def _survey(tmp_path, lat_deg):
     plan = {
         "kind": "grid",
         "origin_lat_deg": lat_deg,
-        "origin_lon_deg": LON0_DEG,
+        "origin_lon_deg": lon_deg,
         "altitude_m": ALTITUDE_M,
         "speed_mps": 80.0,
         "lines": {"count": 3, "spacing_m": 4000.0, "length_m": 40000.0, "heading_deg": 90.0},
@@ -74,7 +75,7 @@ def _survey(tmp_path, lat_deg):
     sim = quick_sim(
         imu_hz=10, gnss_hz=2, noise=True, triad="strapdown", field={"type": "model", "point_masses": masses}, plan=plan
     )
-    rows, summary, folder = _run(sim, tmp_path / f"lat{lat_deg:+.0f}")
+    rows, summary, folder = _run(sim, tmp_path / f"lat{lat_deg:+.0f}_lon{lon_deg:+.0f}")
     rows = [r for r in rows if r["line"]]
     err = np.array([float(r["error_mgal"]) for r in rows])
     truth = np.array([float(r["truth_mgal"]) for r in rows])
@@ -140,6 +141,22 @@ def test_wrap_deg():
     assert wrap_deg(np.array([180.0, 181.25, -181.25, 359.0, 0.0, -180.0])) == pytest.approx(
         [-180.0, -178.75, 178.75, -1.0, 0.0, -180.0]
     )
+
+
+def test_a_survey_across_the_antimeridian_is_as_accurate_as_elsewhere(tmp_path, mid_latitude):
+    # three lines and a tie from 179.8 deg E to 179.7 deg W: the drift stage, crossovers and grid
+    # see both halves of the survey as one
+    rms_mid, truth_mid, summary_mid, _ = mid_latitude
+    rms, truth, summary, folder = _survey(tmp_path, 45.0, 179.8)
+    with open(folder / "profiles.csv") as fh:
+        lon = np.array([float(r["lon_deg"]) for r in csv.DictReader(x for x in fh if not x.startswith("#"))])
+    assert lon.max() > 179.8 and lon.min() < -179.6  # across it, wrapped as written
+    assert truth == pytest.approx(truth_mid, rel=0.05)
+    assert rms == pytest.approx(rms_mid, rel=0.1)
+    drift, drift_mid = (x["flights"]["F01"]["estimator"]["drift"] for x in (summary, summary_mid))
+    assert drift["used"] == drift_mid["used"]
+    assert summary["crossovers"]["count"] == summary_mid["crossovers"]["count"] >= 2
+    assert (folder / "grid.nc").is_file()
 
 
 def test_simulated_gnss_longitude_is_wrapped_across_the_antimeridian():
