@@ -506,8 +506,8 @@ def test_drift_sigma_holds_what_the_blocks_leave_open_of_the_field(seed, field_s
 def test_the_fit_finds_the_best_optimum_whatever_the_plane(seed, monkeypatch):
     """A weak field under a 2.4 mGal drift on four lines has optima along the field's length;
     with three starts the fit ended on a worse one on seeds 6 and 10 (negative log-likelihood
-    0.12 and 0.40 above the best; on 3 of 119 suite flights a 1e-3 change of the plane's scale
-    moved it between optima 1-2.5 apart).  The fit is within 0.1 of the best over a dense grid
+    0.12 and 0.40 above the best; on the suite's quick U217 and U004 a 1e-3 change of the
+    plane's scale moved it between optima 1.0 and 2.5 apart).  The fit is within 0.1 of the best over a dense grid
     of starts, and the same on a plane stretched by 1e-3."""
     import gravsurvey.drift as drift_module
 
