@@ -551,7 +551,10 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
         drift; its fitted sigma and correlation time) or ``"datasheet"`` (the test does not, but
         the blocks do not speak against the datasheet drift; its ``reason`` says so);
         ``reason`` when not used; the fit's facts (:meth:`DriftFit.report`, those of the model
-        used) and ``datasheet_log_likelihood_ratio`` when the datasheet model was fitted.
+        used) and ``datasheet_log_likelihood_ratio`` when the datasheet model was fitted;
+        ``rough_field_log_likelihood_ratio`` where the fitted drift's ratio is at least
+        :data:`ROUGH_CHECK_MIN_LOG_LR`: the same fit under an exponential field, whose ratio,
+        where smaller, is the one tested and weighed.
     """
 
     def not_used(reason, **facts):
