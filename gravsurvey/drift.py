@@ -601,9 +601,8 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
         if rough is not None:
             rep["rough_field_log_likelihood_ratio"] = rough.log_lr
             log_lr = min(log_lr, rough.log_lr)
-    reason = (
-        f"the lines do not show a drift beyond the datasheet's (log-likelihood ratio {log_lr:.1f} < {MIN_LOG_LR:g})"
-    )
+    shown = f"{fit.log_lr:.1f}" + (f", under a rough field {log_lr:.1f}" if log_lr < fit.log_lr else "")
+    reason = f"the lines do not show a drift beyond the datasheet's (log-likelihood ratio {shown} < {MIN_LOG_LR:g})"
     ds_facts = {} if ds is None else {"datasheet_log_likelihood_ratio": ds.log_lr}
     if log_lr < MIN_LOG_LR and not ds_ok:
         if ds is None:

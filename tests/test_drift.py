@@ -544,6 +544,7 @@ def test_a_drift_is_taken_only_where_a_rough_field_needs_it_too():
     )
     assert rep["log_likelihood_ratio"] > 5.0 and rep["rough_field_log_likelihood_ratio"] < 1.0, rep
     assert rep["model"] == "datasheet" and rep["fitted_weight"] < 0.2
+    assert "log-likelihood ratio 5.3, under a rough field 0.0 < 3" in rep["reason"], rep["reason"]
     on = lab != ""
     true = d["true_drift_mps2"]
     assert rms_about_mean((true - est)[on]) < 1.05 * rms_about_mean(true[on])
