@@ -596,23 +596,19 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
     # in a way the smooth model can only call drift (quick U221: a 6.7 mGal drift under a 123
     # mGal field, log-likelihood ratio 5.3, 0.02 with the rough field)
     log_lr = fit.log_lr
+    # the test statistics beside the model's facts, in every report
+    tests = {} if ds is None else {"datasheet_log_likelihood_ratio": ds.log_lr}
     if log_lr >= ROUGH_CHECK_MIN_LOG_LR:
         rough = fit_drift(blocks, lines, options, kernel="exponential")
         if rough is not None:
-            rep["rough_field_log_likelihood_ratio"] = rough.log_lr
+            tests["rough_field_log_likelihood_ratio"] = rough.log_lr
             log_lr = min(log_lr, rough.log_lr)
     shown = f"{fit.log_lr:.1f}" + (f", under a rough field {log_lr:.1f}" if log_lr < fit.log_lr else "")
     reason = f"the lines do not show a drift beyond the datasheet's (log-likelihood ratio {shown} < {MIN_LOG_LR:g})"
-    ds_facts = {} if ds is None else {"datasheet_log_likelihood_ratio": ds.log_lr}
     if log_lr < MIN_LOG_LR and not ds_ok:
-        if ds is None:
-            return not_used(reason, **rep)
-        return not_used(
-            f"{reason}; nor a drift of the datasheet's size (log-likelihood ratio {ds.log_lr:.1f} "
-            f"< {DATASHEET_MIN_LOG_LR:g})",
-            **rep,
-            **ds_facts,
-        )
+        if ds is not None:
+            reason += f"; nor a drift of the datasheet's size (log-likelihood ratio {ds.log_lr:.1f} < {DATASHEET_MIN_LOG_LR:g})"
+        return not_used(reason, **rep, **tests)
     # the two models of the drift weighed by the data rather than chosen at the test's
     # threshold: the fitted drift's weight is even at MIN_LOG_LR (its two free parameters'
     # price) and grows with the evidence; the other is the datasheet drift, or none where the
@@ -635,9 +631,7 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
     else:
         model = "datasheet"
         facts = {"reason": reason, **ds.report(), "log_likelihood_ratio": fit.log_lr, "block_s": block}
-        if "rough_field_log_likelihood_ratio" in rep:
-            facts["rough_field_log_likelihood_ratio"] = rep["rough_field_log_likelihood_ratio"]
-    report = {"used": True, "model": model, **facts, **ds_facts, "fitted_weight": w}
+    report = {"used": True, "model": model, **facts, **tests, "fitted_weight": w}
     return mean, sigma, {**report, "drift_rms_mgal": float(np.std(mean) / MGAL)}
 
 
