@@ -77,6 +77,9 @@ class FlightEstimate:
     drift : ndarray, shape (N,) or None
         Gravimeter drift told from the field by the lines (:func:`gravsurvey.drift.separate_drift`),
         m/s^2, taken off ``smoothed`` before post-processing; None when not estimated or not used.
+    field_filter : ndarray, shape (N,) or None
+        What the field filter took off the estimate less the drift on each line
+        (:func:`gravsurvey.drift.field_filter`), m/s^2; None when not applied.
     drift_sigma_passed : float
         The datasheet drift ``sigma`` holds in quadrature because the smoother passes it
         (``identification.drift_sigma_passed_mps2``; the largest of a flight's pieces), m/s^2;
@@ -134,6 +137,7 @@ class FlightEstimate:
     segment: np.ndarray | None = None
     smoothed: np.ndarray | None = None
     drift: np.ndarray | None = None
+    field_filter: np.ndarray | None = None
     drift_sigma_passed: float = 0.0
     forward: np.ndarray | None = None
     forward_sigma: np.ndarray | None = None

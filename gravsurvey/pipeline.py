@@ -14,6 +14,7 @@ import dataclasses
 import hashlib
 import json
 import logging
+import math
 import platform
 import time
 import traceback
@@ -158,6 +159,9 @@ def line_products(est: FlightEstimate, segs, postprocess_options, model=None) ->
     product = est.disturbance
     # the smoothed estimate less the drift the lines identified (estimate_drift), if any
     base = est.smoothed if est.smoothed is None or est.drift is None else est.smoothed - est.drift
+    if base is not None and est.field_filter is not None:
+        base = base - est.field_filter
+    filtered_lines = (est.estimator.get("drift") or {}).get("field_filter", {}).get("lines", {})
     final = np.full(n, np.nan)
     line = np.full(n, "", dtype=object)
     seg_out, line_info, notes = [], {}, []
@@ -192,8 +196,9 @@ def line_products(est: FlightEstimate, segs, postprocess_options, model=None) ->
                 context=(base, a, b),
             )
             if info.get("method") == "none":
-                # the product is the smoother's own estimate: state the smoother's resolution
-                info["resolution_m"] = float(est.resolution_m)
+                # the product is the smoother's own estimate (and the field filter's, where it
+                # ran): state the resolution of both together
+                info["resolution_m"] = float(filtered_lines.get(s.name, {}).get("resolution_m", est.resolution_m))
         final[a:b] = z
         line[a:b] = s.name
         line_info[s.name] = {
@@ -285,7 +290,7 @@ _IDENTIFIED_LOG = (
 )
 
 
-def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
+def estimate_drift(est: FlightEstimate, segs, options=None, filter_lines: bool = True) -> list:
     """Tell the gravimeter drift from the field by the flight's lines, in place.
 
     :func:`gravsurvey.drift.separate_drift` over the smoothed estimate on the survey-line
@@ -297,7 +302,8 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
     the report).  A datasheet drift given in the config (``drift.sigma_mps2``, ``drift.tau_s``)
     first takes the place of the default one the identification passed into ``est.sigma``
     (:func:`datasheet_drift_passed`).  The fit's facts go to ``est.estimator["drift"]``
-    (summary.json).
+    (summary.json).  Where a drift is taken off, ``filter_lines`` and ``drift.field_filter``
+    also filter each line against the drift's residual (:func:`filter_field`).
 
     Returns
     -------
@@ -344,6 +350,8 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
     if drift is None:
         return []
     est.drift = drift
+    if filter_lines and options.field_filter:
+        sigma = filter_field(est, segs, sigma, report)
     _trade_drift_sigma(est, sigma)
     notes = []
     if report["drift_rms_mgal"] > 3.0 * options.sigma_mps2 / MGAL:
@@ -352,6 +360,119 @@ def estimate_drift(est: FlightEstimate, segs, options=None) -> list:
             f"(over 3x the prior drift.sigma_mps2); it was taken off (drift_mgal in profiles.csv)"
         )
     return notes
+
+
+def _product_is_smoothed(postprocess_options) -> bool:
+    """Whether the lines' product is the smoothed estimate as it is (post-processing method
+    ``none``, the default): only then does the field filter run (another post-processor sets
+    its own resolution)."""
+    from .wavelet import DEFAULT_METHOD
+
+    method = getattr(postprocess_options, "method", None) or "default"
+    return (DEFAULT_METHOD if method == "default" else method) == "none"
+
+
+def filter_field(est: FlightEstimate, segs, sigma, report: dict):
+    """The field filter (:func:`gravsurvey.drift.field_filter`) on every line and tie line of
+    >= 8 epochs where the drift fit's field applies (:func:`gravsurvey.drift.field_filter_applies`),
+    in place: ``est.field_filter`` holds what it took off, ``report["field_filter"]`` its facts
+    per line (summary.json ``estimator.drift.field_filter``: the expected error, what was taken
+    off, the gain's peak and the resolution of the smoother and the filter together).
+
+    Parameters
+    ----------
+    sigma : ndarray, shape (N,)
+        The drift's posterior 1-sigma, m/s^2.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        ``sigma`` with the filtered lines' residual replaced by the filter's expected error
+        (scaled along the line as the posterior was).
+    """
+    from .drift import field_filter, field_filter_applies, field_filter_gain
+
+    sigma = np.array(sigma, float)
+    n = len(est.time)
+    if n < 2:
+        return sigma
+    dt = float(np.median(np.diff(est.time)))
+    base = est.smoothed - est.drift
+    taken = np.zeros(n)
+    lines = {}
+    for s in segs:
+        a, b = int(s.start_index), int(s.stop_index)
+        if s.kind not in ("line", "tie") or b - a < 8:
+            continue
+        speed = float(np.nanmean(est.speed[a:b]))
+        length = speed * float(est.time[b - 1] - est.time[a])
+        if not (np.isfinite(speed) and speed > 0.0) or not field_filter_applies(report, length):
+            continue
+        seg_sigma = sigma[a:b]
+        residual = float(np.median(seg_sigma))
+        chunk = base[a:b]
+        if residual <= 0.0 or not np.all(np.isfinite(chunk)):
+            continue
+        f_sig = float(report["field_sigma_mgal"]) * MGAL
+        f_len = float(report["field_length_km"]) * 1000.0
+        tau = float(report["drift_tau_s"])
+        filtered, error = field_filter(chunk, dt, speed, f_sig, f_len, residual, tau)
+        taken[a:b] = chunk - filtered
+        sigma[a:b] = seg_sigma * (error / residual)
+        freq = np.geomspace(1e-6, 0.5 / dt, 2000)
+        gain = field_filter_gain(freq, f_sig, f_len, speed, residual, tau) * _smoother_gain(est, a, freq)
+        lines[s.name] = {
+            "error_sigma_mgal": error / MGAL,
+            "residual_sigma_mgal": residual / MGAL,
+            "taken_off_rms_mgal": float(np.sqrt(np.mean(taken[a:b] ** 2))) / MGAL,
+            "gain_peak": float(gain.max()),
+            "resolution_m": _half_gain_resolution(freq, gain, speed),
+        }
+    if lines:
+        est.field_filter = taken
+        report["field_filter"] = {"lines": lines}
+    return sigma
+
+
+def _smoother_gain(est: FlightEstimate, index: int, freq):
+    """The smoother's steady-state gain at ``freq`` (Hz) for the piece holding epoch ``index``
+    (:func:`gravsurvey.inm.identify.smoother_gain` of its identified model); a brick wall at the
+    stated resolution where the identification holds no model."""
+    from .inm.identify import SpectralModel, smoother_gain
+
+    ident = est.estimator.get("identification") or {}
+    pieces = ident.get("segments")
+    if pieces is not None:
+        k = int(est.segment[index]) if est.segment is not None and 0 <= index < len(est.segment) else -1
+        ident = pieces[k] if 0 <= k < len(pieces) else {}
+    spec, dt_h = ident.get("spectral_model"), ident.get("height_dt_s")
+    if spec and dt_h:
+        return smoother_gain(freq, SpectralModel(**spec), float(dt_h))
+    speed = float(np.nanmedian(est.speed))
+    res = float(est.resolution_m)
+    if res == math.inf:
+        # a flat estimate: nothing resolved
+        return np.zeros_like(freq)
+    if not np.isfinite(res) or res <= 0.0:
+        # not stated: the filter's gain alone
+        return np.ones_like(freq)
+    return (freq <= speed / (2.0 * res)).astype(float)
+
+
+def _half_gain_resolution(freq, gain, speed: float) -> float:
+    """Half-wavelength (m) where ``gain`` falls below 1/2 above its peak; inf where it never
+    reaches 1/2 (nothing resolved)."""
+    k = int(np.argmax(gain))
+    if gain[k] < 0.5:
+        return float("inf")
+    below = np.flatnonzero(gain[k:] < 0.5)
+    if below.size == 0:
+        return speed / (2.0 * float(freq[-1]))
+    j = k + int(below[0])
+    # the crossing between the two grid points, linear in log frequency
+    lo, hi = math.log(freq[j - 1]), math.log(freq[j])
+    frac = (gain[j - 1] - 0.5) / (gain[j - 1] - gain[j])
+    return speed / (2.0 * math.exp(lo + frac * (hi - lo)))
 
 
 def datasheet_drift_passed(est: FlightEstimate, options) -> float:
@@ -414,7 +535,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
     t = time.perf_counter()
     segs = line_segments(cfg, fl, est)
     t_drift = time.perf_counter()
-    notes += estimate_drift(est, segs, cfg.drift)
+    notes += estimate_drift(est, segs, cfg.drift, filter_lines=_product_is_smoothed(cfg.postprocess))
     timings["drift_s"] = time.perf_counter() - t_drift
     est.line_segments, est.line_info, line_notes = line_products(est, segs, cfg.postprocess, cfg.model)
     notes += line_notes

@@ -47,6 +47,7 @@ from ..geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef, mat_
 __all__ = [
     "IDENTIFIED_KEYS",
     "SpectralModel",
+    "smoother_gain",
     "VerticalFit",
     "vertical_psd",
     "vertical_residual",
@@ -1029,6 +1030,15 @@ def wide_prior_params(params, report, speed_mps: float):
     return dataclasses.replace(
         params, anomaly_sigma_mps2=m.anomaly_sigma_mps2, anomaly_lambda_per_m=1.0 / (m.anomaly_tau_s * v)
     )
+
+
+def smoother_gain(freq_hz, model: SpectralModel, dt_h: float) -> np.ndarray:
+    """Steady-state transfer ``S_g / (S_g + S_n)`` of the smoother of ``model`` (its Markov
+    prior against the vertical channel's noise, height samples ``dt_h`` s apart) at
+    ``freq_hz``; :func:`wiener_resolution_m` is where it is 1/2."""
+    f = np.asarray(freq_hz, float)
+    s_g = _markov_psd(f, model.anomaly_sigma_mps2, model.anomaly_tau_s)
+    return s_g / (s_g + _noise_psd_g(f, model, dt_h))
 
 
 def _noise_psd_g(f, m: SpectralModel, dt_h: float):

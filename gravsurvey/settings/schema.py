@@ -366,6 +366,12 @@ class DriftSection(Section):
         gt=0,
         le=1e6,
     )
+    field_filter: bool = _dr(
+        "field_filter",
+        "where a drift is taken off, Wiener-filter each line against what the lines left of it (the drift fit's "
+        "field against the drift's posterior; its resolution is stated with the smoother's); only with "
+        "`postprocess.method` none, the default",
+    )
 
 
 # ============================================================================ checks (survey level)
