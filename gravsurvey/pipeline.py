@@ -221,17 +221,24 @@ def model_used(est: FlightEstimate, model, index: int):
     The anomaly correlation decides the seed-004 solvability at a line's speed, so a check
     against the configured (default) prior would warn about a model that was not used.
     """
-    ident = est.estimator.get("identification") or {}
-    pieces = ident.get("segments")
-    if pieces is not None:
-        k = int(est.segment[index]) if est.segment is not None and 0 <= index < len(est.segment) else -1
-        ident = pieces[k] if 0 <= k < len(pieces) else {}
+    ident = _identification_at(est, index)
     found = {}
     for key in ("anomaly_sigma_mps2", "anomaly_lambda_per_m"):
         item = ident.get(key)
         if isinstance(item, dict) and item.get("value") is not None:
             found[key] = float(item["value"])
     return dataclasses.replace(model, **found) if found else model
+
+
+def _identification_at(est: FlightEstimate, index: int) -> dict:
+    """The identification report of the piece of the flight holding epoch ``index`` (the
+    flight's own where it was estimated whole; empty where there is none)."""
+    ident = est.estimator.get("identification") or {}
+    pieces = ident.get("segments")
+    if pieces is not None:
+        k = int(est.segment[index]) if est.segment is not None and 0 <= index < len(est.segment) else -1
+        ident = pieces[k] if 0 <= k < len(pieces) else {}
+    return ident
 
 
 def identification_log_lines(est: FlightEstimate) -> list[str]:
@@ -440,11 +447,7 @@ def _smoother_gain(est: FlightEstimate, index: int, freq):
     stated resolution where the identification holds no model."""
     from .inm.identify import SpectralModel, smoother_gain
 
-    ident = est.estimator.get("identification") or {}
-    pieces = ident.get("segments")
-    if pieces is not None:
-        k = int(est.segment[index]) if est.segment is not None and 0 <= index < len(est.segment) else -1
-        ident = pieces[k] if 0 <= k < len(pieces) else {}
+    ident = _identification_at(est, index)
     spec, dt_h = ident.get("spectral_model"), ident.get("height_dt_s")
     if spec and dt_h:
         return smoother_gain(freq, SpectralModel(**spec), float(dt_h))
