@@ -30,28 +30,36 @@ UPS_SOUTH_EPSG = 5042
 def default_epsg(lat, lon) -> int:
     """EPSG code of the default grid of the points (rad): their UTM zone (:func:`utm_epsg`), or
     UPS North / South where the median latitude is beyond UTM's extent (polar surveys)."""
-    lat = np.asarray(lat, float)
-    ok = np.isfinite(lat) & np.isfinite(np.asarray(lon, float))
-    if ok.any():
-        mid = math.degrees(float(np.median(lat[ok])))
-        if mid > UTM_MAX_LAT_DEG:
+    mid = _median_position_deg(lat, lon)
+    if mid is not None:
+        if mid[0] > UTM_MAX_LAT_DEG:
             return UPS_NORTH_EPSG
-        if mid < UTM_MIN_LAT_DEG:
+        if mid[0] < UTM_MIN_LAT_DEG:
             return UPS_SOUTH_EPSG
-    return utm_epsg(lat, lon)
+    return utm_epsg(lat, lon, mid)
 
 
-def utm_epsg(lat, lon) -> int:
-    """EPSG code of the WGS84 / UTM zone containing the median of the points (rad)."""
+def utm_epsg(lat, lon, median_deg=None) -> int:
+    """EPSG code of the WGS84 / UTM zone containing the median of the points (rad);
+    ``median_deg``: that median (lat, lon in degrees) when already computed."""
+    mid = median_deg if median_deg is not None else _median_position_deg(lat, lon)
+    if mid is None:
+        raise ValueError("utm_epsg: no finite positions")
+    zone = int((mid[1] + 180.0) // 6.0) % 60 + 1
+    return (32600 if mid[0] >= 0.0 else 32700) + zone
+
+
+def _median_position_deg(lat, lon):
+    """(median latitude, median longitude wrapped to [-180, 180)) in degrees of the finite
+    points (rad; longitudes unwrapped first, so a survey across the antimeridian has its median
+    there), or None where there is none."""
     lat = np.asarray(lat, float)
     lon = np.asarray(lon, float)
     ok = np.isfinite(lat) & np.isfinite(lon)
     if not ok.any():
-        raise ValueError("utm_epsg: no finite positions")
+        return None
     lon_deg = (math.degrees(float(np.median(np.unwrap(lon[ok])))) + 180.0) % 360.0 - 180.0
-    zone = int((lon_deg + 180.0) // 6.0) % 60 + 1
-    north = float(np.median(lat[ok])) >= 0.0
-    return (32600 if north else 32700) + zone
+    return math.degrees(float(np.median(lat[ok]))), lon_deg
 
 
 def project(lat, lon, epsg=None, key: str = "output.epsg"):
