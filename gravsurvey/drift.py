@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geodesy import MGAL
-from .inm.identify import DRIFT_DEFAULT_SIGMA_MPS2, DRIFT_DEFAULT_TAU_S
+from .inm.identify import DRIFT_DEFAULT_SIGMA_MPS2, DRIFT_DEFAULT_TAU_S, markov_psd
 
 __all__ = [
     "BLOCK_S",
@@ -68,7 +68,6 @@ __all__ = [
     "passed_drift_factor",
     "fitted_weight",
     "track_psd_matern32",
-    "gauss_markov_psd",
     "field_filter_gain",
     "field_filter",
     "field_filter_applies",
@@ -679,20 +678,12 @@ def track_psd_matern32(freq_hz, sigma, length_m, speed_mps):
     return 4.0 * float(sigma) ** 2 * a**3 / (a**2 + w**2) ** 2
 
 
-def gauss_markov_psd(freq_hz, sigma, tau_s):
-    """Two-sided PSD of a first-order Gauss-Markov process, ``2 sigma^2 lam / (lam^2 + w^2)``,
-    (m/s^2)^2/Hz (``lam = 1 / tau_s``)."""
-    lam = 1.0 / float(tau_s)
-    w = 2.0 * math.pi * np.asarray(freq_hz, float)
-    return 2.0 * float(sigma) ** 2 * lam / (lam**2 + w**2)
-
-
 def field_filter_gain(freq_hz, field_sigma, field_length_m, speed_mps, residual_sigma, tau_s):
     """Gain ``S_F / (S_F + S_R)`` of :func:`field_filter` at ``freq_hz``: the field of the drift
     fit along the track (:func:`track_psd_matern32`) against the drift the lines left
-    (:func:`gauss_markov_psd` of its posterior sigma and the fit's correlation time)."""
+    (:func:`gravsurvey.inm.identify.markov_psd` of its posterior sigma and the fit's correlation time)."""
     s_f = track_psd_matern32(freq_hz, field_sigma, field_length_m, speed_mps)
-    s_r = gauss_markov_psd(freq_hz, residual_sigma, tau_s)
+    s_r = markov_psd(freq_hz, residual_sigma, tau_s)
     return s_f / (s_f + s_r)
 
 
@@ -755,7 +746,7 @@ def field_filter(g, dt_s, speed_mps, field_sigma, field_length_m, residual_sigma
     # spectra's corners
     fe = np.geomspace(1e-8, 0.5 / dt_s, 4000)
     s_f = track_psd_matern32(fe, field_sigma, field_length_m, speed_mps)
-    s_r = gauss_markov_psd(fe, residual_sigma, tau_s)
+    s_r = markov_psd(fe, residual_sigma, tau_s)
     y = s_f * s_r / (s_f + s_r)
     var = 2.0 * float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(fe)))
     return filtered, float(min(math.sqrt(max(var, 0.0)), residual_sigma))

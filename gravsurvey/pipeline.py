@@ -405,6 +405,11 @@ def filter_field(est: FlightEstimate, segs, sigma, report: dict):
         return sigma
     dt = float(np.median(np.diff(est.time)))
     base = est.smoothed - est.drift
+    f_sig = float(report.get("field_sigma_mgal") or 0.0) * MGAL
+    f_len = float(report.get("field_length_km") or 0.0) * 1000.0
+    tau = float(report.get("drift_tau_s") or 0.0)
+    # where the gains are evaluated for the resolution
+    freq = np.geomspace(1e-6, 0.5 / dt, 2000)
     taken = np.zeros(n)
     lines = {}
     for s in segs:
@@ -420,13 +425,9 @@ def filter_field(est: FlightEstimate, segs, sigma, report: dict):
         chunk = base[a:b]
         if residual <= 0.0 or not np.all(np.isfinite(chunk)):
             continue
-        f_sig = float(report["field_sigma_mgal"]) * MGAL
-        f_len = float(report["field_length_km"]) * 1000.0
-        tau = float(report["drift_tau_s"])
         filtered, error = field_filter(chunk, dt, speed, f_sig, f_len, residual, tau)
         taken[a:b] = chunk - filtered
         sigma[a:b] = seg_sigma * (error / residual)
-        freq = np.geomspace(1e-6, 0.5 / dt, 2000)
         gain = field_filter_gain(freq, f_sig, f_len, speed, residual, tau) * _smoother_gain(est, a, freq)
         lines[s.name] = {
             "error_sigma_mgal": error / MGAL,

@@ -563,7 +563,8 @@ def test_a_drift_is_taken_only_where_a_rough_field_needs_it_too():
 def test_the_filters_spectra_integrate_to_their_variances_and_transform_to_their_covariances():
     """Physics: each two-sided PSD integrates to sigma^2 and its cosine transform is the
     covariance it stands for (Matern-3/2 along the track at speed v, Gauss-Markov in time)."""
-    from gravsurvey.drift import gauss_markov_psd, track_psd_matern32
+    from gravsurvey.drift import track_psd_matern32
+    from gravsurvey.inm.identify import markov_psd
 
     f = np.linspace(0.0, 2.0, 400001)
     df = f[1] - f[0]
@@ -572,7 +573,7 @@ def test_the_filters_spectra_integrate_to_their_variances_and_transform_to_their
     for lag in (0.0, 50.0, 200.0, 600.0):
         for psd, cov in (
             (track_psd_matern32(f, sigma, length, speed), sigma**2 * (1 + a * lag) * math.exp(-a * lag)),
-            (gauss_markov_psd(f, sigma, tau), sigma**2 * math.exp(-lag / tau)),
+            (markov_psd(f, sigma, tau), sigma**2 * math.exp(-lag / tau)),
         ):
             y = psd * np.cos(2.0 * math.pi * f * lag)
             got = 2.0 * float(np.sum(0.5 * (y[1:] + y[:-1])) * df)

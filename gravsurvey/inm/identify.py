@@ -48,6 +48,7 @@ __all__ = [
     "IDENTIFIED_KEYS",
     "SpectralModel",
     "smoother_gain",
+    "markov_psd",
     "VerticalFit",
     "vertical_psd",
     "vertical_residual",
@@ -1037,7 +1038,7 @@ def smoother_gain(freq_hz, model: SpectralModel, dt_h: float) -> np.ndarray:
     prior against the vertical channel's noise, height samples ``dt_h`` s apart) at
     ``freq_hz``; :func:`wiener_resolution_m` is where it is 1/2."""
     f = np.asarray(freq_hz, float)
-    s_g = _markov_psd(f, model.anomaly_sigma_mps2, model.anomaly_tau_s)
+    s_g = markov_psd(f, model.anomaly_sigma_mps2, model.anomaly_tau_s)
     return s_g / (s_g + _noise_psd_g(f, model, dt_h))
 
 
@@ -1046,7 +1047,10 @@ def _noise_psd_g(f, m: SpectralModel, dt_h: float):
     return m.white_mps2**2 + m.height_sigma_m**2 * dt_h * (2.0 * math.pi * f) ** 4
 
 
-def _markov_psd(f, sigma, tau):
+def markov_psd(f, sigma, tau):
+    """Two-sided PSD of a first-order Gauss-Markov process of ``sigma`` (broadcast) and
+    correlation time ``tau`` (s) at ``f`` (Hz): ``2 sigma^2 lam / (lam^2 + w^2)``, ``lam = 1 /
+    tau``, ``w = 2 pi f``; it integrates to ``sigma^2`` over all frequencies."""
     lam = 1.0 / tau
     return 2.0 * sigma**2 * lam / (lam**2 + (2.0 * math.pi * f) ** 2)
 
@@ -1058,7 +1062,7 @@ def prior_risk(f, s_signal, s_noise, sigma, tau) -> float:
     steady-state transfer of the RTS smoother built on the Markov prior ``S_g`` - applied to a
     signal of spectrum ``S_s``, whatever its shape.
     """
-    s_g = _markov_psd(f, sigma, tau)
+    s_g = markov_psd(f, sigma, tau)
     h = s_g / (s_g + s_noise)
     return float(np.sum((1.0 - h) ** 2 * s_signal + h**2 * s_noise))
 
@@ -1140,7 +1144,7 @@ def smoother_sigma_scale(f, s_signal, s_noise, sigma, tau) -> float:
     sigma, tau : float
         The chosen Markov prior, m/s^2 and s.
     """
-    s_g = _markov_psd(f, sigma, tau)
+    s_g = markov_psd(f, sigma, tau)
     own = float(np.sum(s_g * s_noise / (s_g + s_noise)))
     seen = prior_risk(f, s_signal, s_noise, sigma, tau)
     if not (own > 0.0 and seen > 0.0):
@@ -1404,7 +1408,7 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     f, p = f[sel], p[sel]
     s_n = _noise_psd_g(f, noise, dt_h)
     tau1 = 1.0 / (wide.anomaly_lambda_per_m * v)
-    s_g1 = _markov_psd(f, wide.anomaly_sigma_mps2, tau1)
+    s_g1 = markov_psd(f, wide.anomaly_sigma_mps2, tau1)
     h1 = s_g1 / (s_g1 + s_n)
     valid = h1 >= 0.5
     # calibrate the noise level on the first pass itself: in the top octave of its band (half
@@ -1425,7 +1429,7 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     def first_pass_noise(x):
         # the noise in the wide pass's estimate: the noise PSD through that pass's transfer
         sn = k_n * _noise_psd_g(x, noise, dt_h)
-        sg = _markov_psd(x, wide.anomaly_sigma_mps2, tau1)
+        sg = markov_psd(x, wide.anomaly_sigma_mps2, tau1)
         return sn * (sg / (sg + sn)) ** 2
 
     var_field = max(
@@ -1481,11 +1485,11 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     fallback = None
     sig_v = np.asarray(sigmas, float)
     # the Markov PSD scales with sigma^2: one integral per correlation time, all of them at once
-    unit_vars = _windowed_variances(lambda x: _markov_psd(x[None, :], 1.0, np.asarray(taus, float)[:, None]), span)
+    unit_vars = _windowed_variances(lambda x: markov_psd(x[None, :], 1.0, np.asarray(taus, float)[:, None]), span)
     for tau, unit_var in zip(taus, unit_vars):
         # every sigma of this correlation time at once; the same arithmetic, element by element,
         # as one candidate at a time (so the same choice, ties included: first of the least)
-        s_lo = _markov_psd(f_lo, sig_v, tau)
+        s_lo = markov_psd(f_lo, sig_v, tau)
         score = s_lo / (s_lo + s_n_lo) / PASS_BELOW_GAIN
         if var_field > 0.0:
             score = np.minimum(score, sig_v * sig_v * unit_var / var_field / FIELD_VAR_HELD)
@@ -1495,7 +1499,7 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
         ok = np.flatnonzero(score >= 1.0)
         if ok.size == 0:
             continue
-        s_g = _markov_psd(f[None, :], sig_v[ok, None], tau)
+        s_g = markov_psd(f[None, :], sig_v[ok, None], tau)
         h = s_g / (s_g + s_n)
         risk = np.sum((1.0 - h) ** 2 * s_sig + h**2 * s_n, axis=1)
         i = int(np.argmin(risk))
@@ -1513,7 +1517,7 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     expected = prior_risk(f, s_sig_c, s_n, model.anomaly_sigma_mps2, model.anomaly_tau_s) * 2.0 / (n * dt_s)
     # the field the margin did not count (bands within two standard errors of the noise), as
     # the chosen smoother removes it: not in the filter's model, so not in its sigma either
-    s_g = _markov_psd(f, model.anomaly_sigma_mps2, model.anomaly_tau_s)
+    s_g = markov_psd(f, model.anomaly_sigma_mps2, model.anomaly_tau_s)
     h = s_g / (s_g + s_n)
     missed = float(np.sum((1.0 - h) ** 2 * np.maximum(s_pt - s_sig_c, 0.0))) * 2.0 / (n * dt_s)
     # where no band stands out, the prior flattens the estimate and the unbiased excess can be
@@ -1674,9 +1678,9 @@ def drift_sigma_passed(
     k_n = float(report.get("noise_scale", 1.0))
 
     def passed(f):
-        s_g = _markov_psd(f, m.anomaly_sigma_mps2, m.anomaly_tau_s)
+        s_g = markov_psd(f, m.anomaly_sigma_mps2, m.anomaly_tau_s)
         h = s_g / (s_g + k_n * _noise_psd_g(f, m, dt_h))
-        return _markov_psd(f, sigma_d, tau_d) * h * h
+        return markov_psd(f, sigma_d, tau_d) * h * h
 
     # window 1 s: the product's epoch (no further averaging)
     return math.sqrt(max(windowed_variance(passed, 1.0, float(span_s)), 0.0))
