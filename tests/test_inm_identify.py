@@ -674,3 +674,44 @@ def test_prewhitened_periodogram_holds_a_strong_fields_leakage_down():
         white.append(np.mean(p2[band2]) / (noise**2 * dt))
     assert np.mean(plain) > 50.0
     assert 0.5 < np.mean(white) < 4.0
+
+
+def _geodesic_track(speed_mps, rate_hz, seconds, lat0_deg, lon0_deg, azimuth_deg, noise_m, seed):
+    """Fixes along a geodesic flown at ``speed_mps`` (pyproj's geodesic, not our geodesy), with
+    white horizontal and vertical noise of ``noise_m``; lat, lon in rad."""
+    import pyproj
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 1.0 / rate_hz)
+    geod = pyproj.Geod(ellps="WGS84")
+    n = t.size
+    lon, lat, _ = geod.fwd(np.full(n, lon0_deg), np.full(n, lat0_deg), np.full(n, azimuth_deg), speed_mps * t)
+    # noise east and north in metres, put on the angles at this latitude (1 deg ~ 111 km)
+    lat = np.radians(lat) + rng.standard_normal(n) * noise_m / 6.37e6
+    lon = np.radians(lon) + rng.standard_normal(n) * noise_m / (6.37e6 * math.cos(math.radians(lat0_deg)))
+    h = 1500.0 + rng.standard_normal(n) * noise_m
+    return t, lat, lon, h
+
+
+@pytest.mark.parametrize(
+    "rate_hz, lat0, lon0, azimuth",
+    [(17.0, 47.0, 11.0, 37.0), (1.0, -62.0, -70.0, 180.0), (20.0, 10.0, 179.99, 90.0)],
+)
+def test_median_ground_speed_is_not_biased_by_fast_noisy_fixes(rate_hz, lat0, lon0, azimuth):
+    from gravsurvey.inm.solve import median_ground_speed
+
+    t, lat, lon, h = _geodesic_track(70.0, rate_hz, 1200.0, lat0, lon0, azimuth, 1.0, 3)
+    v = median_ground_speed(t, lat, lon, h)
+    assert abs(v - 70.0) < 0.2, v
+    if rate_hz > 10:
+        # what consecutive fixes give (the old estimate): biased up by the noise
+        assert median_ground_speed(t, lat, lon, h, baseline_s=1e-6) > 1.04 * 70.0
+
+
+def test_median_ground_speed_skips_gaps_and_needs_two_fixes():
+    from gravsurvey.inm.solve import median_ground_speed
+
+    t, lat, lon, h = _geodesic_track(90.0, 5.0, 600.0, 30.0, 0.0, 300.0, 0.5, 4)
+    lat[100:400] = np.nan
+    assert abs(median_ground_speed(t, lat, lon, h) - 90.0) < 0.2
+    assert median_ground_speed(t[:1], lat[:1], lon[:1], h[:1]) is None
