@@ -715,3 +715,13 @@ def test_median_ground_speed_skips_gaps_and_needs_two_fixes():
     lat[100:400] = np.nan
     assert abs(median_ground_speed(t, lat, lon, h) - 90.0) < 0.2
     assert median_ground_speed(t[:1], lat[:1], lon[:1], h[:1]) is None
+
+
+def test_median_ground_speed_sorts_the_fixes_and_takes_short_records():
+    from gravsurvey.inm.solve import median_ground_speed
+
+    t, lat, lon, h = _geodesic_track(60.0, 10.0, 300.0, 52.0, 5.0, 45.0, 0.3, 5)
+    perm = np.random.default_rng(6).permutation(t.size)
+    assert abs(median_ground_speed(t[perm], lat[perm], lon[perm], h[perm]) - 60.0) < 0.2
+    # a record shorter than the baseline: the fixes it has
+    assert abs(median_ground_speed(t[:10], lat[:10], lon[:10], h[:10], baseline_s=5.0) - 60.0) < 5.0

@@ -247,8 +247,8 @@ def stack_measurements(parts):
 #: Shortest record (s) whose anomaly prior is identified; shorter ones keep the default prior.
 MIN_REFINE_S = 900.0
 
-#: Shortest time (s) between the two GNSS fixes of one speed in :func:`_typical_speed`: the
-#: fixes' noise (1 m) over 2 s adds 0.7 m/s to a component, a few mm/s to a 70-m/s norm.
+#: Shortest time (s) between the two GNSS fixes of one speed in :func:`median_ground_speed`:
+#: the fixes' noise (1 m) over 2 s adds 0.7 m/s to a component, a few mm/s to a 70-m/s norm.
 SPEED_BASELINE_S = 2.0
 
 #: The passes stop once the initial-attitude correction is below this, rad (0.001 deg).
@@ -1107,7 +1107,7 @@ def median_ground_speed(time_s, lat, lon, height, ellipsoid: Ellipsoid = WGS84, 
     Parameters
     ----------
     time_s : ndarray (n,)
-        Fix times, s, increasing.
+        Fix times, s (sorted here).
     lat, lon : ndarray (n,)
         Geodetic latitude and longitude, rad.
     height : ndarray (n,)
@@ -1123,7 +1123,8 @@ def median_ground_speed(time_s, lat, lon, height, ellipsoid: Ellipsoid = WGS84, 
     """
     t, lat, lon, h = (np.asarray(a, float) for a in (time_s, lat, lon, height))
     ok = np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
-    t, lat, lon, h = t[ok], lat[ok], lon[ok], h[ok]
+    order = np.argsort(t[ok], kind="stable")
+    t, lat, lon, h = t[ok][order], lat[ok][order], lon[ok][order], h[ok][order]
     if t.size < 2:
         return None
     # the first fix at least baseline_s after each fix (the last fix where none is)
@@ -1132,7 +1133,10 @@ def median_ground_speed(time_s, lat, lon, height, ellipsoid: Ellipsoid = WGS84, 
     m_r, n_r = radii_of_curvature(lat, ellipsoid)
     d_north = (lat[j] - lat) * (m_r + h)
     d_east = np.angle(np.exp(1j * (lon[j] - lon))) * (n_r + h) * np.cos(lat)
-    use = dt > 0
+    # the full baseline where the record has it (the last fixes' shorter ones are noisier)
+    use = dt >= baseline_s
+    if not use.any():
+        use = dt > 0
     v = np.hypot(d_north, d_east)[use] / dt[use]
     v = v[np.isfinite(v)]
     return float(np.median(v)) if v.size else None
