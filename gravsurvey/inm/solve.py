@@ -1123,8 +1123,8 @@ def median_ground_speed(time_s, lat, lon, height, ellipsoid: Ellipsoid = WGS84, 
     """
     t, lat, lon, h = (np.asarray(a, float) for a in (time_s, lat, lon, height))
     ok = np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
-    order = np.argsort(t[ok], kind="stable")
-    t, lat, lon, h = t[ok][order], lat[ok][order], lon[ok][order], h[ok][order]
+    keep = np.flatnonzero(ok)[np.argsort(t[ok], kind="stable")]
+    t, lat, lon, h = t[keep], lat[keep], lon[keep], h[keep]
     if t.size < 2:
         return None
     # the first fix at least baseline_s after each fix (the last fix where none is)
@@ -1132,7 +1132,7 @@ def median_ground_speed(time_s, lat, lon, height, ellipsoid: Ellipsoid = WGS84, 
     dt = t[j] - t
     m_r, n_r = radii_of_curvature(lat, ellipsoid)
     d_north = (lat[j] - lat) * (m_r + h)
-    d_east = np.angle(np.exp(1j * (lon[j] - lon))) * (n_r + h) * np.cos(lat)
+    d_east = ((lon[j] - lon + math.pi) % (2.0 * math.pi) - math.pi) * (n_r + h) * np.cos(lat)
     # the full baseline where the record has it (the last fixes' shorter ones are noisier)
     use = dt >= baseline_s
     if not use.any():
