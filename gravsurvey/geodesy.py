@@ -481,6 +481,34 @@ def radii_of_curvature(lat, ellipsoid: Ellipsoid = WGS84):
     return ellipsoid.a * (1 - e2) / w**3, ellipsoid.a / w
 
 
+def local_displacement(lat_a, lon_a, lat_b, lon_b, height=0.0, ellipsoid: Ellipsoid = WGS84):
+    """East and north displacement from point ``a`` to point ``b`` a short way off, m.
+
+    The latitude and longitude differences (the longitude's wrapped to [-pi, pi), so across the
+    antimeridian too) times the radii of curvature at the mean latitude, at ``height`` above
+    the ellipsoid: the local tangent plane, good to a part in 1e5 over a few km (GNSS residuals,
+    steps between fixes), not for distances across a survey (:mod:`pyproj` there).
+
+    Parameters
+    ----------
+    lat_a, lon_a, lat_b, lon_b : array_like
+        rad; broadcast together.
+    height : array_like
+        m above the ellipsoid.
+    ellipsoid : Ellipsoid
+
+    Returns
+    -------
+    east, north : ndarray
+        m, the broadcast shape.
+    """
+    lat_a, lat_b = np.asarray(lat_a, float), np.asarray(lat_b, float)
+    mid = 0.5 * (lat_a + lat_b)
+    m_rad, n_rad = radii_of_curvature(mid, ellipsoid)
+    d_lon = (np.asarray(lon_b, float) - np.asarray(lon_a, float) + np.pi) % (2.0 * np.pi) - np.pi
+    return d_lon * (n_rad + height) * np.cos(mid), (lat_b - lat_a) * (m_rad + height)
+
+
 def wrap_deg(angle_deg):
     """Angles (longitudes, headings, their differences) wrapped to [-180, 180) deg, as a
     receiver writes a longitude; any shape."""

@@ -160,3 +160,28 @@ def test_zonal4_remainder_changes_slowly():
             worst[jj] = max(worst[jj], np.linalg.norm(rest(p + d, jj) - rest(p, jj)) / 10.0)
     assert worst[j4] < 1e-12  # measured 7.2e-13
     assert worst[0.0] > 5e-11
+
+
+@pytest.mark.parametrize(
+    "lat_deg, lon_deg, az_deg",
+    [(45.0, 10.0, 30.0), (-62.0, 179.99, 95.0), (0.0, -179.995, 270.0), (84.0, 20.0, 200.0)],
+)
+def test_local_displacement_matches_geodesic(lat_deg, lon_deg, az_deg):
+    """A 3-km step (across the antimeridian, at the equator, at 84 N) against pyproj's geodesic
+    on the WGS84 ellipsoid: its length within 1 cm, its direction at the middle within 1e-6 rad; at 5 km of
+    height the step scales by (R + h) / R with R the radius of curvature along it."""
+    import pyproj
+
+    geod = pyproj.Geod(ellps="WGS84")
+    lon_b, lat_b, _ = geod.fwd(lon_deg, lat_deg, az_deg, 3000.0)
+    east, north = gd.local_displacement(*np.radians([lat_deg, lon_deg, lat_b, lon_b]))
+    assert abs(np.hypot(east, north) - 3000.0) < 0.01
+    # the step's direction at its middle: the mean of its azimuths at both ends (meridians
+    # converge by 1e-4 rad over 3 km at 45 deg)
+    _, az_back, _ = geod.inv(lon_deg, lat_deg, lon_b, lat_b)
+    mid_az = np.radians(az_deg) + 0.5 * gd.wrap_deg(az_back + 180.0 - az_deg) * np.pi / 180.0
+    assert abs((np.arctan2(east, north) - mid_az + np.pi) % (2.0 * np.pi) - np.pi) < 1e-6
+    # at height: each component scaled by its own radius (M + h) / M, (N + h) / N
+    e_h, n_h = gd.local_displacement(*np.radians([lat_deg, lon_deg, lat_b, lon_b]), height=5000.0)
+    m_rad, n_rad = gd.radii_of_curvature(np.radians(0.5 * (lat_deg + lat_b)))
+    np.testing.assert_allclose([e_h, n_h], [east * (n_rad + 5000.0) / n_rad, north * (m_rad + 5000.0) / m_rad])

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError, DataError
-from ..geodesy import WGS84, Ellipsoid, mat_en, mat_ie, radii_of_curvature
+from ..geodesy import WGS84, Ellipsoid, local_displacement, mat_en, mat_ie
 from .errormodel import (
     BA,
     BG,
@@ -542,9 +542,9 @@ def _check_track(record, params, sol, ellipsoid):
         return
     lat = np.interp(tg[ok], sol.time, sol.lat)
     lon = np.interp(tg[ok], sol.time, np.unwrap(sol.lon))
-    m, n = radii_of_curvature(lat, ellipsoid)
-    d_lon = (np.asarray(gn.lon, float)[ok] - lon + math.pi) % (2.0 * math.pi) - math.pi
-    d = np.hypot((np.asarray(gn.lat, float)[ok] - lat) * m, d_lon * n * np.cos(lat))
+    d = np.hypot(
+        *local_displacement(lat, lon, np.asarray(gn.lat, float)[ok], np.asarray(gn.lon, float)[ok], 0.0, ellipsoid)
+    )
     rms = float(np.sqrt(np.mean(d * d)))
     sol.gnss_residual_rms_m = rms
     # 1 s epochs interpolated between: allow the speed x interpolation error on top of the sigma;
@@ -666,9 +666,10 @@ def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None) -> Gnss
     t = tg[ok]
     la = np.interp(t, t_e, lat)
     lo = np.interp(t, t_e, np.unwrap(lon))
-    m, n = radii_of_curvature(la, ellipsoid)
-    d_lon = (lo - np.asarray(gn.lon, float)[ok] + math.pi) % (2.0 * math.pi) - math.pi
-    res = np.stack([d_lon * n * np.cos(la), (la - np.asarray(gn.lat, float)[ok]) * m], axis=1)
+    # the navigation's offset from the fixes, east and north
+    res = np.stack(
+        local_displacement(np.asarray(gn.lat, float)[ok], np.asarray(gn.lon, float)[ok], la, lo, 0.0, ellipsoid), axis=1
+    )
     vel = np.stack([np.interp(t, t_e, vel_n[:, j]) for j in range(2)], axis=1)
     return gnss_latency_fit(t, res, vel)
 
@@ -1130,9 +1131,7 @@ def median_ground_speed(time_s, lat, lon, height, ellipsoid: Ellipsoid = WGS84, 
     # the first fix at least baseline_s after each fix (the last fix where none is)
     j = np.minimum(np.searchsorted(t, t + baseline_s), t.size - 1)
     dt = t[j] - t
-    m_r, n_r = radii_of_curvature(lat, ellipsoid)
-    d_north = (lat[j] - lat) * (m_r + h)
-    d_east = ((lon[j] - lon + math.pi) % (2.0 * math.pi) - math.pi) * (n_r + h) * np.cos(lat)
+    d_east, d_north = local_displacement(lat, lon, lat[j], lon[j], h, ellipsoid)
     # the full baseline where the record has it (the last fixes' shorter ones are noisier)
     use = dt >= baseline_s
     if not use.any():

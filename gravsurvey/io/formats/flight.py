@@ -85,14 +85,12 @@ def position_jumps(time_ns, lat, lon, max_speed: float):
     speed : ndarray, shape (k,)
         The implied speeds, m/s.
     """
-    from gravsurvey.geodesy import radii_of_curvature
+    from gravsurvey.geodesy import local_displacement
 
     if len(time_ns) < 2:
         return np.zeros(0, int), np.zeros(0)
-    lat = np.asarray(lat, float)
-    lon = np.unwrap(np.asarray(lon, float))
-    m_rad, n_rad = radii_of_curvature(0.5 * (lat[1:] + lat[:-1]))
-    d = np.hypot(np.diff(lat) * m_rad, np.diff(lon) * n_rad * np.cos(0.5 * (lat[1:] + lat[:-1])))
+    lat, lon = np.asarray(lat, float), np.asarray(lon, float)
+    d = np.hypot(*local_displacement(lat[:-1], lon[:-1], lat[1:], lon[1:]))
     v = d / (np.diff(time_ns) / NS)
     idx = np.flatnonzero(v > max_speed)
     return idx, v[idx]
