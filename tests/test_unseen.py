@@ -376,6 +376,32 @@ def test_a_right_sigma_scores_inside_the_range_the_benchmark_gives_it():
     assert bench.sigma_ratio_range(np.ones(8), np.ones(8)) is None
 
 
+def test_missed_field_is_what_the_smoother_takes_off_a_sinusoid():
+    """bench_unseen.missed_field: a sinusoid of amplitude A at f0 loses (1 - H(f0)) A / sqrt(2)
+    RMS through the smoother of the reported model (its noise scaled by ``noise_scale``); a
+    long-wavelength one nearly nothing; no spectral model, no answer."""
+    from gravsurvey.inm.identify import SpectralModel, smoother_gain
+
+    bench = _bench()
+    dt, n = 1.0, 40000
+    t = np.arange(n) * dt
+    model = {"anomaly_sigma_mps2": 1e-5, "anomaly_tau_s": 600.0, "white_mps2": 1e-5, "height_sigma_m": 0.05}
+    ident = {"spectral_model": model, "height_dt_s": 1.0, "noise_scale": 4.0}
+    mask = np.zeros(n, bool)
+    mask[10000:30000] = True
+    scaled = SpectralModel(**{**model, "white_mps2": 2e-5, "height_sigma_m": 0.1})
+    for period, amp in ((1000.0, 3.0), (400.0, 2.0), (20000.0, 5.0)):
+        f0 = 1.0 / period
+        gain = float(smoother_gain(np.array([f0]), scaled, 1.0)[0])
+        expected = (1.0 - gain) * amp / math.sqrt(2.0)
+        got = bench.missed_field(amp * np.sin(2 * np.pi * f0 * t), mask, dt, ident)
+        assert got == pytest.approx(expected, rel=0.02, abs=0.002), (period, gain)
+    # the noise scale matters: unscaled, the smoother passes more
+    lo = bench.missed_field(2.0 * np.sin(2 * np.pi * t / 400.0), mask, dt, {**ident, "noise_scale": 1.0})
+    assert lo < bench.missed_field(2.0 * np.sin(2 * np.pi * t / 400.0), mask, dt, ident)
+    assert bench.missed_field(np.ones(n), mask, dt, {"height_dt_s": 1.0}) is None
+
+
 def test_matched_anomaly_prior_recovers_a_markov_field():
     """The oracle's anomaly prior fit returns the parameters of a known Gauss-Markov field."""
     from gravsurvey.simulate.field import markov_disturbance
