@@ -381,6 +381,107 @@ def drop_clock_restarts(raw: dict, min_jump_s: float = 1.0):
     return notes, loss
 
 
+#: Nominal gravity for the platform-axes check, m/s^2 (9.78 at the equator, 9.83 at the poles).
+G_NOMINAL_MPS2 = 9.81
+#: Range of the median third-axis specific force of a platform triad, in units of
+#: :data:`G_NOMINAL_MPS2`: the platform is held level, so over a flight that axis reads gravity
+#: (vertical accelerations average out; a 45-degree bank, held level by the platform, leaves it at
+#: g).  Outside, the axes are not the platform's east-north-up ones (a down axis reads -1).
+PLATFORM_UP_RANGE = (0.7, 1.3)
+#: A platform triad held level turns about its horizontal axes at the Earth's and the transport
+#: rate only (< 0.005 deg/s); an aircraft's body in a banked turn at 1-2 deg/s (10-s means of
+#: the simulated strapdown flights: 1.4-1.7 deg/s).  Horizontal rates above this, deg/s ...
+PLATFORM_TILT_RATE_DEGPS = 0.3
+#: ... in 10-s means (gyro noise and turbulence average out) ...
+PLATFORM_RATE_WINDOW_S = 10.0
+#: ... for this long in total, s (one turn between lines), make the triad a body-fixed one.
+PLATFORM_TILT_MIN_S = 30.0
+
+
+def check_platform_axes(record, triad: str, names: ChannelNames | None = None, key_path: str = "imu_axes") -> list[str]:
+    """A platform triad's third axis points up: its median specific force is about +g.
+
+    A stabilised platform's axes are east, north and up (``triad: platform``); the navigation
+    takes the third for the vertical.  Read with its up axis reversed (a forward-right-down
+    declaration, ``imu_axes: FRD``, of a platform logged forward-left-up, or the other way round)
+    or with the vertical on another axis, the mechanization runs away within minutes or, worse,
+    integrates a mirrored vertical channel: this check names the cause first.  A body-fixed IMU
+    declared ``platform`` banks with the aircraft: its gyros turn about the horizontal axes at
+    1-2 deg/s in turns, where a platform held level turns at the Earth's rate
+    (:data:`PLATFORM_TILT_RATE_DEGPS`); that is refused first, naming ``triad``.  A strapdown
+    triad is aligned from the data in any orientation and is not checked.
+
+    Parameters
+    ----------
+    record : FlightRecord
+        Its IMU specific force on the triad after ``imu_axes``, shape (n, 3), m/s^2.
+    triad : {"platform", "strapdown"}
+    names : ChannelNames, optional
+        For the message: the IMU file and its columns.
+    key_path : str
+        The config key of the axes declaration, for the message.
+
+    Returns
+    -------
+    list of str
+        One passed-check note for a platform triad, none otherwise.
+
+    Raises
+    ------
+    DataError
+        The median third-axis specific force outside :data:`PLATFORM_UP_RANGE` x g, naming the
+        file, the axis that carries gravity and its sign, and ``key_path``; or horizontal turn
+        rates of a body-fixed IMU, naming the gyro columns and the flight's ``triad`` key.
+    """
+    if triad != "platform":
+        return []
+    _check_platform_rates(record, names, key_path.rsplit(".", 1)[0] + ".triad" if "." in key_path else "triad")
+    f = np.asarray(record.imu.specific_force_t, float)
+    if f.ndim != 2 or f.shape[1] != 3 or f.shape[0] == 0:
+        return []
+    med = np.nanmedian(f, axis=0)
+    if not np.all(np.isfinite(med)):
+        return []
+    up = float(med[2]) / G_NOMINAL_MPS2
+    lo, hi = PLATFORM_UP_RANGE
+    if lo <= up <= hi:
+        return [f"{PASSED}platform axes: median up-axis specific force {med[2]:+.3f} m/s^2"]
+    where = names.column("imu", "fx", "fy", "fz") if names is not None else "imu"
+    k = int(np.argmax(np.abs(med)))
+    axis = f"{'+-'[int(med[k] < 0)]}{'xyz'[k]}"
+    raise DataError(
+        f"{where}: the platform triad's third axis reads a median specific force of {med[2]:+.3f} m/s^2 "
+        f"(after {key_path}), expected about +{G_NOMINAL_MPS2:g} (up); gravity lies on the triad's {axis} axis "
+        f"(median ({med[0]:+.2f}, {med[1]:+.2f}, {med[2]:+.2f}) m/s^2): check {key_path} (FLU and RFU keep "
+        "the third axis up, FRD turns it down) and the column order"
+    )
+
+
+def _check_platform_rates(record, names: ChannelNames | None, triad_key: str) -> None:
+    """Refuse a "platform" triad whose gyros show it banking with the aircraft
+    (:data:`PLATFORM_TILT_RATE_DEGPS` for :data:`PLATFORM_TILT_MIN_S`)."""
+    t = np.asarray(record.imu.time, float)
+    w = np.asarray(record.imu.angular_rate_t, float)
+    if t.size < 3 or w.ndim != 2 or w.shape[1] < 2:
+        return
+    dt = float(np.median(np.diff(t)))
+    k = int(round(PLATFORM_RATE_WINDOW_S / dt)) if dt > 0 else 0
+    if k < 1 or t.size <= k:
+        return
+    c = np.vstack([np.zeros(2), np.cumsum(np.nan_to_num(w[:, :2]), axis=0)])
+    rate = np.degrees(np.hypot(*((c[k:] - c[:-k]) / k).T))
+    above_s = float(np.count_nonzero(rate > PLATFORM_TILT_RATE_DEGPS)) * dt
+    if above_s < PLATFORM_TILT_MIN_S:
+        return
+    where = names.column("imu", "wx", "wy") if names is not None else "imu"
+    raise DataError(
+        f"{where}: the platform triad turns about its horizontal axes at up to {rate.max():.2f} deg/s "
+        f"({PLATFORM_RATE_WINDOW_S:g}-s means; {above_s:.0f} s above {PLATFORM_TILT_RATE_DEGPS:g} deg/s), where a "
+        "stabilised platform holds level (the Earth's rate, under 0.005 deg/s): a body-fixed IMU? "
+        f"set {triad_key}: strapdown"
+    )
+
+
 def check_overlap(record, names: ChannelNames | None = None, min_fraction: float = 0.5) -> list[str]:
     """Channels must overlap the IMU in time.
 

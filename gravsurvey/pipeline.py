@@ -516,11 +516,23 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
     timings["ingest_s"] = time.perf_counter() - t
 
     # input consistency (gravsurvey/consistency.py): clocks, overlap, GNSS vs IMU
-    from .consistency import CheckOptions, channel_names, check_gnss_consistency, check_overlap, check_result
+    from .consistency import (
+        CheckOptions,
+        channel_names,
+        check_gnss_consistency,
+        check_overlap,
+        check_platform_axes,
+        check_result,
+    )
 
     checks = getattr(cfg, "checks", None) or CheckOptions()
     names = channel_names(fl.ingest, cfg.base_dir)
     notes += [f"{fl.name}: {n}" for n in check_overlap(record, names)]
+    if getattr(fl.ingest, "kind", "") != "gravimeter":
+        # a gravimeter file's vertical is built z-up from its reading (io/formats/flight.py); its
+        # level is checked against the GNSS below
+        axes_key = f"flights[{fl.index}].imu_axes"
+        notes += [f"{fl.name}: {n}" for n in check_platform_axes(record, fl.triad, names, axes_key)]
     notes += [
         f"{fl.name}: {n}"
         for n in check_gnss_consistency(

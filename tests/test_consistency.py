@@ -326,6 +326,120 @@ def test_implausible_gnss_speed_names_the_columns(tmp_path):
         process_flight(cfg, fl)
 
 
+def _flip(*cols):
+    return lambda p: d.map_columns(p, "imu", {c: (lambda x: -x) for c in cols})
+
+
+def _swap_x_z(p):
+    def fn(head, rows):
+        i, k = head.index("fx_mps2"), head.index("fz_mps2")
+        for r in rows:
+            r[i], r[k] = r[k], r[i]
+        return rows
+
+    d.edit(p, "imu", fn)
+
+
+@pytest.mark.parametrize(
+    "prep, extra, axis",
+    [
+        # a platform logged forward-right-down, read as the default forward-left-up
+        (_flip("fy_mps2", "fz_mps2"), "", "-z"),
+        (_flip("wy_radps", "wz_radps", "fy_mps2", "fz_mps2"), "", "-z"),
+        # a forward-left-up platform declared FRD
+        (None, "    imu_axes: FRD\n", "-z"),
+        # the vertical in the first column
+        (_swap_x_z, "", "+x"),
+    ],
+)
+def test_platform_axes_not_up_name_the_axes_key(tmp_path, prep, extra, axis):
+    """A platform triad whose third axis does not read +g is an error naming the IMU columns, the
+    axis gravity lies on and ``imu_axes``, before any navigation (not a run-away or a mirrored
+    vertical channel)."""
+    cfg_path = d.copy_sample(tmp_path / "s")
+    if extra:
+        text = cfg_path.read_text()
+        cfg_path.write_text(text.replace("  triad: platform\n", "  triad: platform\n" + extra.replace("    ", "  "), 1))
+    if prep is not None:
+        prep(tmp_path / "s")
+    cfg = load_config(cfg_path, output_dir=tmp_path / "out")
+    with pytest.raises(DataError) as exc:
+        process_flight(cfg, cfg.flights[0])
+    msg = str(exc.value)
+    assert "imu.csv columns fx_mps2, fy_mps2, fz_mps2: the platform triad's third axis" in msg
+    assert f"gravity lies on the triad's {axis} axis" in msg and "flights[0].imu_axes" in msg and "\n" not in msg
+
+
+def test_platform_axes_check_passes_a_level_platform_and_skips_strapdown(intact):
+    """The intact platform sample passes with a note of its up-axis reading; a strapdown triad is
+    aligned from the data in any orientation and is not checked, however it is turned."""
+    from types import SimpleNamespace
+
+    from gravsurvey.consistency import check_platform_axes
+
+    assert any("platform axes: median up-axis specific force +9.8" in n for n in intact.estimator["checks_passed"])
+    t, still = np.arange(100.0), np.zeros((100, 3))
+    down = SimpleNamespace(
+        imu=SimpleNamespace(time=t, angular_rate_t=still, specific_force_t=np.tile([0.1, 0.0, -9.8], (100, 1)))
+    )
+    assert check_platform_axes(down, "strapdown") == []
+    with pytest.raises(DataError, match=r"^imu: .* -9\.800 m/s\^2 \(after imu_axes\).*-z axis"):
+        check_platform_axes(down, "platform")
+    # the platform held level in a 45-degree turn: the third axis still reads g
+    turn = SimpleNamespace(
+        imu=SimpleNamespace(time=t, angular_rate_t=still, specific_force_t=np.tile([6.9, 0.0, 9.8], (100, 1)))
+    )
+    assert check_platform_axes(turn, "platform")[0].startswith("passed: platform axes")
+
+
+def test_body_fixed_imu_declared_platform_names_the_triad_key(tmp_path):
+    """The strapdown sample (grid_ros2) declared ``triad: platform``: its gyros bank with the
+    aircraft in the turns, so the flight is refused before navigation, naming the gyro channel
+    and ``flights[i].triad`` (before: "the navigation did not settle ... gyro bias", a wrong hint)."""
+    import shutil
+
+    src = Path(__file__).resolve().parents[1] / "sample_data" / "grid_ros2"
+    dst = tmp_path / "g"
+    shutil.copytree(src, dst)
+    cfg_path = dst / "survey.yaml"
+    cfg_path.write_text(cfg_path.read_text().replace("triad: strapdown", "triad: platform"))
+    cfg = load_config(cfg_path, output_dir=tmp_path / "out")
+    for fl in cfg.flights:
+        with pytest.raises(DataError) as exc:
+            process_flight(cfg, fl)
+        msg = str(exc.value)
+        assert "the platform triad turns about its horizontal axes at up to 1." in msg
+        assert f"set flights[{fl.index}].triad: strapdown" in msg and "\n" not in msg
+
+
+def test_platform_rate_check_needs_a_sustained_tilt():
+    """Earth-rate gyros pass; 40 s of a 1 deg/s roll rate (a bank in and out) is a body-fixed
+    IMU; 20 s of it (less than one turn) and a single 1-s spike are not."""
+    from types import SimpleNamespace
+
+    from gravsurvey.consistency import check_platform_axes
+
+    t = np.arange(0.0, 1200.0, 0.1)
+    f = np.tile([0.0, 0.0, 9.81], (t.size, 1))
+    earth = np.tile([0.0, 5.0e-5, 5.0e-5], (t.size, 1))
+
+    def rec(w):
+        return SimpleNamespace(imu=SimpleNamespace(time=t, specific_force_t=f, angular_rate_t=w))
+
+    assert check_platform_axes(rec(earth), "platform")[0].startswith("passed: platform axes")
+    for seconds, refused in ((40.0, True), (20.0, False)):
+        w = earth.copy()
+        w[(t > 300) & (t < 300 + seconds), 0] = np.radians(1.0)
+        if refused:
+            with pytest.raises(DataError, match=r"^imu: the platform triad turns .*set triad: strapdown$"):
+                check_platform_axes(rec(w), "platform")
+        else:
+            check_platform_axes(rec(w), "platform")
+    spike = earth.copy()
+    spike[(t > 500) & (t < 501), 1] = 1.0
+    check_platform_axes(rec(spike), "platform")
+
+
 def test_wrong_initial_position_names_the_key(tmp_path):
     """A configured ``initial`` that the data contradict is a config error naming the key (exit 2;
     inm.params.resolve_initial_state checks it against GNSS before anything is processed)."""

@@ -946,7 +946,8 @@ class FlightSection(Section):
         json_schema_extra={"type_text": "`FLU` \\| `FRD` \\| `RFU` \\| 3x3 matrix"},
         description="the IMU's axis convention: `FLU` forward-left-up (gravsurvey's "
         "own), `FRD` forward-right-down (VectorNav, Xsens, iMAR, NovAtel), `RFU` "
-        "right-forward-up, or a 3x3 proper rotation `M` with `vec_flu = M vec_sensor`",
+        "right-forward-up, or a 3x3 proper rotation `M` with `vec_flu = M vec_sensor`; "
+        "with `triad: platform` the third axis must then read +g (checked before processing)",
     )
     gnss_lever_arm_m: list[float] = Field(
         default_factory=lambda: [0.0, 0.0, 0.0],
