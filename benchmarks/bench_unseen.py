@@ -391,7 +391,7 @@ def missed_field(truth_mgal, mask, dt_s: float, identification: dict) -> float |
     Returns
     -------
     float or None
-        None when the run reports no spectral model (a prior from the config).
+        None when the run reports no spectral model (identification off, or nothing to fit).
     """
     model = identification.get("spectral_model")
     if not model or identification.get("height_dt_s") is None:

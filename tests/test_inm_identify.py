@@ -280,6 +280,39 @@ def test_band_field_keeps_lines_past_a_gap_and_drops_a_chance_excess():
     assert np.all(np.minimum.accumulate(np.maximum(ratio - 1.0, 0.0))[4:] == 0)
 
 
+def test_band_field_holds_the_uncounted_bands_under_the_counted_decay():
+    """Past the last counted band, the unbiased count (the stated sigma's missed field) stays
+    under the counted bands' exponential decay: a field seen from the air falls off at least as
+    upward continuation makes it, so an excess there that does not (the noise's, the
+    gravimeter's) is not the field's.  Without the bands' frequencies the count is as before;
+    an excess under the decay is kept; the counted field (the prior's) never changes."""
+    freq = np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]) * 1e-3
+    field = 1e-8 * np.exp(-(freq - freq[0]) / 1e-3)  # exp(-f / 1 mHz): 1e-8 .. 6.7e-11
+    margin = np.full(freq.size, 1e-9)
+    excess = field.copy()
+    excess[3:] = [9e-10, 8e-10, 7e-10]  # within the margin, near flat: not the field's fall-off
+    bins = np.full(freq.size, 10)
+    counted0, unbiased0 = I.band_field(excess, margin, bins)
+    counted, unbiased = I.band_field(excess, margin, bins, freq)
+    np.testing.assert_array_equal(counted, counted0)
+    assert np.all(counted[:3] > 0) and np.all(counted[3:] == 0)
+    np.testing.assert_array_equal(unbiased[:3], unbiased0[:3])
+    # the counted bands' own decay (less the margin) continued: about e^-1 per mHz
+    expected = counted[2] * np.exp(np.polyfit(freq[:3], np.log(counted[:3]), 1)[0] * (freq[3:] - freq[2]))
+    np.testing.assert_allclose(unbiased[3:], np.minimum(unbiased0[3:], expected), rtol=1e-12)
+    assert np.all(unbiased[3:] < 0.5 * unbiased0[3:])
+    # an excess under the decay is kept whole
+    follow = field.copy()
+    follow[3:] = 0.5 * expected
+    _, kept = I.band_field(follow, margin, bins, freq)
+    np.testing.assert_allclose(kept[3:], I.band_field(follow, margin, bins)[1][3:])
+    assert np.all(kept[3:] > 0)
+    # one counted band: no decay to continue
+    one = excess.copy()
+    one[1:3] = 5e-10
+    np.testing.assert_array_equal(I.band_field(one, margin, bins, freq)[1], I.band_field(one, margin, bins)[1])
+
+
 def test_non_increasing_fit():
     fit = I.non_increasing_fit
     np.testing.assert_allclose(fit([3.0, 2.0, 1.0], [1, 1, 1]), [3.0, 2.0, 1.0])
