@@ -34,6 +34,7 @@ import numpy as np
 
 from .errors import DataError, GravsurveyError
 from .geodesy import MGAL, WGS84, geodetic_to_ecef, normal_gravity_ecef
+from .io.checks import G_STD
 from .utc import utc_iso
 
 #: Fastest plausible ground speed of a survey aircraft or ship, m/s (a jet at cruise is
@@ -381,10 +382,8 @@ def drop_clock_restarts(raw: dict, min_jump_s: float = 1.0):
     return notes, loss
 
 
-#: Nominal gravity for the platform-axes check, m/s^2 (9.78 at the equator, 9.83 at the poles).
-G_NOMINAL_MPS2 = 9.81
-#: Range of the median third-axis specific force of a platform triad, in units of
-#: :data:`G_NOMINAL_MPS2`: the platform is held level, so over a flight that axis reads gravity
+#: Range of the median third-axis specific force of a platform triad, in units of the standard
+#: gravity ``io.checks.G_STD`` (9.78 at the equator, 9.83 at the poles): the platform is held level, so over a flight that axis reads gravity
 #: (vertical accelerations average out; a 45-degree bank, held level by the platform, leaves it at
 #: g).  Outside, the axes are not the platform's east-north-up ones (a down axis reads -1).
 PLATFORM_UP_RANGE = (0.7, 1.3)
@@ -398,7 +397,7 @@ PLATFORM_RATE_WINDOW_S = 10.0
 PLATFORM_TILT_MIN_S = 30.0
 
 
-def check_platform_axes(record, triad: str, names: ChannelNames | None = None, key_path: str = "imu_axes") -> list[str]:
+def check_platform_axes(record, triad: str, names: ChannelNames | None = None, key_prefix: str = "") -> list[str]:
     """A platform triad's third axis points up: its median specific force is about +g.
 
     A stabilised platform's axes are east, north and up (``triad: platform``); the navigation
@@ -418,8 +417,8 @@ def check_platform_axes(record, triad: str, names: ChannelNames | None = None, k
     triad : {"platform", "strapdown"}
     names : ChannelNames, optional
         For the message: the IMU file and its columns.
-    key_path : str
-        The config key of the axes declaration, for the message.
+    key_prefix : str
+        The flight's config key (``flights[i]``), for the messages' ``imu_axes`` and ``triad``.
 
     Returns
     -------
@@ -430,19 +429,20 @@ def check_platform_axes(record, triad: str, names: ChannelNames | None = None, k
     ------
     DataError
         The median third-axis specific force outside :data:`PLATFORM_UP_RANGE` x g, naming the
-        file, the axis that carries gravity and its sign, and ``key_path``; or horizontal turn
+        file, the axis that carries gravity and its sign, and ``imu_axes``; or horizontal turn
         rates of a body-fixed IMU, naming the gyro columns and the flight's ``triad`` key.
     """
     if triad != "platform":
         return []
-    _check_platform_rates(record, names, key_path.rsplit(".", 1)[0] + ".triad" if "." in key_path else "triad")
+    key_path = f"{key_prefix}.imu_axes" if key_prefix else "imu_axes"
+    _check_platform_rates(record, names, f"{key_prefix}.triad" if key_prefix else "triad")
     f = np.asarray(record.imu.specific_force_t, float)
     if f.ndim != 2 or f.shape[1] != 3 or f.shape[0] == 0:
         return []
     med = np.nanmedian(f, axis=0)
     if not np.all(np.isfinite(med)):
         return []
-    up = float(med[2]) / G_NOMINAL_MPS2
+    up = float(med[2]) / G_STD
     lo, hi = PLATFORM_UP_RANGE
     if lo <= up <= hi:
         return [f"{PASSED}platform axes: median up-axis specific force {med[2]:+.3f} m/s^2"]
@@ -451,7 +451,7 @@ def check_platform_axes(record, triad: str, names: ChannelNames | None = None, k
     axis = f"{'+-'[int(med[k] < 0)]}{'xyz'[k]}"
     raise DataError(
         f"{where}: the platform triad's third axis reads a median specific force of {med[2]:+.3f} m/s^2 "
-        f"(after {key_path}), expected about +{G_NOMINAL_MPS2:g} (up); gravity lies on the triad's {axis} axis "
+        f"(after {key_path}), expected about +{G_STD:.2f} (up); gravity lies on the triad's {axis} axis "
         f"(median ({med[0]:+.2f}, {med[1]:+.2f}, {med[2]:+.2f}) m/s^2): check {key_path} (FLU and RFU keep "
         "the third axis up, FRD turns it down) and the column order"
     )
@@ -468,8 +468,7 @@ def _check_platform_rates(record, names: ChannelNames | None, triad_key: str) ->
     k = int(round(PLATFORM_RATE_WINDOW_S / dt)) if dt > 0 else 0
     if k < 1 or t.size <= k:
         return
-    c = np.vstack([np.zeros(2), np.cumsum(np.nan_to_num(w[:, :2]), axis=0)])
-    rate = np.degrees(np.hypot(*((c[k:] - c[:-k]) / k).T))
+    rate = np.degrees(np.hypot(*_box(np.nan_to_num(w[:, :2]), k).T))
     above_s = float(np.count_nonzero(rate > PLATFORM_TILT_RATE_DEGPS)) * dt
     if above_s < PLATFORM_TILT_MIN_S:
         return

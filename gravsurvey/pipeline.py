@@ -531,8 +531,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
     if getattr(fl.ingest, "kind", "") != "gravimeter":
         # a gravimeter file's vertical is built z-up from its reading (io/formats/flight.py); its
         # level is checked against the GNSS below
-        axes_key = f"flights[{fl.index}].imu_axes"
-        notes += [f"{fl.name}: {n}" for n in check_platform_axes(record, fl.triad, names, axes_key)]
+        notes += [f"{fl.name}: {n}" for n in check_platform_axes(record, fl.triad, names, f"flights[{fl.index}]")]
     notes += [
         f"{fl.name}: {n}"
         for n in check_gnss_consistency(
