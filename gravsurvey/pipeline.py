@@ -319,6 +319,7 @@ def estimate_drift(est: FlightEstimate, segs, options=None, filter_lines: bool =
     """
     from .drift import DriftOptions, passed_drift_factor, separate_drift
     from .inm.identify import DRIFT_DEFAULT_SIGMA_MPS2, DRIFT_DEFAULT_TAU_S
+    from .segmentation import along_line_legs
 
     options = options if options is not None else DriftOptions()
     if est.smoothed is None:
@@ -331,11 +332,11 @@ def estimate_drift(est: FlightEstimate, segs, options=None, filter_lines: bool =
         _trade_drift_sigma(est, passed)
         est.drift_sigma_passed = passed
     labels = np.full(len(est.time), "", dtype=object)
-    for s in segs:
-        # survey lines only: tie lines cross them, and the smoother's along-track low-pass of a
-        # short-wavelength field differs between crossing directions (seen as drift)
-        if s.kind == "line":
-            labels[int(s.start_index) : int(s.stop_index)] = s.name
+    for s in along_line_legs(segs):
+        # survey lines and the turns' offset legs near their heading only: tie lines cross
+        # them, and the smoother's along-track low-pass of a short-wavelength field differs
+        # between crossing directions (seen as drift)
+        labels[int(s.start_index) : int(s.stop_index)] = s.name
     # an unbounded resolution (a flat estimate: no field along the lines for the stage's field
     # model to misread) leaves the resolution guard off: on the four quick unseen flights with
     # one, the drift taken off moved U233 0.67 -> 0.12 mGal, U217 0.65 -> 0.62, U018 0.33 ->

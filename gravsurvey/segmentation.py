@@ -33,6 +33,14 @@ __all__ = [
 ]
 
 KINDS = ("line", "tie", "turn", "static", "transit")
+
+#: A straight off the lines' direction by more than half the heading tolerance and shorter than
+#: this fraction of the median aligned line is a connecting leg of a turn (kind ``"transit"``).
+CONNECTING_LEG_FRACTION = 0.25
+
+#: Transits within this of the lines' direction count with the lines in the drift stage
+#: (:func:`along_line_legs`), deg: the default ``transit_angle_deg``.
+ALONG_LINE_DEG = 20.0
 #: ``lines.mode`` values: detection, explicit windows, the whole flight as one line
 SEGMENTATION_MODES = ("auto", "windows", "whole")
 
@@ -190,7 +198,10 @@ def segment_lines(
     Straight pieces within ``transit_angle_deg`` of it are lines, those within
     ``transit_angle_deg`` of its perpendicular are tie (control) lines, and the straight pieces
     in between are transits (kind ``"transit"``, named ``transit01, ...``: processed, but not
-    lines, like turns). With ``transit_angle_deg`` None, pieces more than ``tie_angle_deg``
+    lines, like turns). So is a straight within ``transit_angle_deg`` of the lines but more than
+    ``heading_tol_deg / 2`` off their direction and shorter than
+    :data:`CONNECTING_LEG_FRACTION` of the median line that is on it: the offset leg of a
+    procedure or teardrop turn, a few km flown 10-15 deg off the line before turning back. With ``transit_angle_deg`` None, pieces more than ``tie_angle_deg``
     from the dominant direction are tie lines and nothing is a transit.
 
     Parameters
@@ -394,6 +405,21 @@ def segment_lines(
                 kinds[(a, b)] = "tie"
             else:
                 kinds[(a, b)] = "transit"
+        if transit_angle_deg is not None:
+            # a turn flown as an offset leg and a turn back (a procedure or teardrop turn) holds
+            # a straight of a few km some 10-15 deg off the lines: a connecting leg, not a survey
+            # line (the unseen suite's turns made 7 flown lines into 13)
+            diffs = {k: abs(wrap_deg(2.0 * (x - dom))) / 2.0 for k, x in zip(straight, ax)}
+            aligned = [cum[b - 1] - cum[a] for a, b in straight if diffs[(a, b)] <= 0.5 * heading_tol_deg]
+            if aligned:
+                typical = float(np.median(aligned))
+                for a, b in straight:
+                    if (
+                        kinds[(a, b)] == "line"
+                        and diffs[(a, b)] > 0.5 * heading_tol_deg
+                        and cum[b - 1] - cum[a] < CONNECTING_LEG_FRACTION * typical
+                    ):
+                        kinds[(a, b)] = "transit"
 
     # Assemble the full cover: lines/ties, then the rest as static or turn runs.
     label = np.zeros(n, dtype=np.int8)  # 0 turn, 1 static, 2 straight
@@ -419,6 +445,44 @@ def segment_lines(
         counters[kind] += 1
         out.append(Segment(f"{prefix[kind]}{counters[kind]:02d}", kind, int(a), int(b), float(hd)))
     return out
+
+
+def along_line_legs(segs, max_angle_deg: float = ALONG_LINE_DEG) -> list:
+    """The survey lines and the transits within ``max_angle_deg`` of the lines' axial direction.
+
+    Those transits are the offset legs of procedure turns (:data:`CONNECTING_LEG_FRACTION`):
+    not survey lines, but straight, steady flight near the lines' heading between them, whose
+    data the drift stage uses like a line's (a leg crossing the lines is left out there: the
+    smoother's along-track low-pass of a short field differs between crossing directions).
+
+    Parameters
+    ----------
+    segs : list of Segment
+    max_angle_deg : float
+        Largest axial heading difference of a transit from the lines' mean direction, deg.
+
+    Returns
+    -------
+    list of Segment
+        In the order of ``segs``.
+    """
+    lines = [s for s in segs if s.kind == "line" and np.isfinite(s.heading_deg)]
+    if not lines:
+        return [s for s in segs if s.kind == "line"]
+    # axial mean of the lines' headings, weighted by their samples
+    w = np.array([s.stop_index - s.start_index for s in lines], float)
+    d2 = np.radians(2.0 * np.array([s.heading_deg for s in lines]))
+    dom = (np.degrees(np.arctan2(np.sum(w * np.sin(d2)), np.sum(w * np.cos(d2)))) / 2.0) % 180.0
+    return [
+        s
+        for s in segs
+        if s.kind == "line"
+        or (
+            s.kind == "transit"
+            and np.isfinite(s.heading_deg)
+            and abs(wrap_deg(2.0 * (s.heading_deg - dom))) / 2.0 <= max_angle_deg
+        )
+    ]
 
 
 def _heading_drift_deg(t, heading_unwrapped_deg) -> float:

@@ -10,6 +10,7 @@ from gravsurvey.crossovers import find_crossovers
 from gravsurvey.segmentation import (
     Segment,
     SegmentationOptions,
+    along_line_legs,
     segment_flight,
     segment_lines,
     segment_table,
@@ -457,6 +458,41 @@ def test_line_length_is_by_distance_not_time():
     assert not [s for s in segs if s.kind in ("line", "tie")]
 
 
+def test_offset_leg_of_a_turn_is_not_a_line():
+    # lines joined by procedure turns: 13 deg off the line, a 3.6 km straight, then the turn
+    # back (the unseen suite's turns); a short line on the lines' own heading stays a line
+    legs = [
+        ("line", 0.0, 600.0),
+        ("turn", 1.5, -13.0),
+        ("line", 347.0, 60.0),
+        ("turn", 3.0, 193.0),
+        ("line", 180.0, 600.0),
+        ("turn", 1.5, -13.0),
+        ("line", 167.0, 60.0),
+        ("turn", 3.0, 193.0),
+        ("line", 0.0, 600.0),
+        ("turn", 3.0, 180.0),
+        ("line", 180.0, 100.0),
+    ]
+    t, lat, lon, vel, lab = build_track(legs, heading_noise_deg=1.0)
+    segs = segment_lines(t, lat, lon, vel)
+    straight = [(s.name, s.kind) for s in segs if s.kind in ("line", "tie", "transit")]
+    assert straight == [
+        ("L01", "line"),
+        ("transit01", "transit"),
+        ("L02", "line"),
+        ("transit02", "transit"),
+        ("L03", "line"),
+        ("L04", "line"),
+    ]
+    # the offset legs are the flown 3.6 km (and the ends of the gentle turns within the heading
+    # tolerance), not pieces of a line
+    legs_m = [60.0 * (t[s.stop_index - 1] - t[s.start_index]) for s in segs if s.kind == "transit"]
+    assert all(3000.0 < x < 4500.0 for x in legs_m), legs_m
+    # the drift stage takes them with the lines (straight flight near the lines' heading)
+    assert [s.name for s in along_line_legs(segs)] == ["L01", "transit01", "L02", "transit02", "L03", "L04"]
+
+
 def test_transit_is_recognised_by_heading():
     # two north-south lines, one east-west tie, and a straight transit at 45 deg
     legs = [
@@ -472,6 +508,8 @@ def test_transit_is_recognised_by_heading():
     segs = segment_lines(t, lat, lon, vel)
     straight = [(s.name, s.kind) for s in segs if s.kind in ("line", "tie", "transit")]
     assert straight == [("L01", "line"), ("L02", "line"), ("T01", "tie"), ("transit01", "transit")]
+    # a transit 45 deg off the lines crosses them: not with the lines in the drift stage
+    assert [s.name for s in along_line_legs(segs)] == ["L01", "L02"]
     # with transit detection off, the 45-deg leg is a line or a tie again (tie_angle_deg rule)
     segs = segment_lines(t, lat, lon, vel, transit_angle_deg=None)
     assert [s.kind for s in segs if s.kind != "turn"][-1] in ("line", "tie")
