@@ -458,25 +458,22 @@ def test_line_length_is_by_distance_not_time():
     assert not [s for s in segs if s.kind in ("line", "tie")]
 
 
+def straight_legs(legs, **kw):
+    """A track of ``legs`` (1-deg heading noise) segmented: (time, segments, [(name, kind)] of
+    the straight ones)."""
+    t, lat, lon, vel, _ = build_track(legs, heading_noise_deg=1.0)
+    segs = segment_lines(t, lat, lon, vel, **kw)
+    return t, segs, [(s.name, s.kind) for s in segs if s.kind in ("line", "tie", "transit")]
+
+
 def test_offset_leg_of_a_turn_is_not_a_line():
     # lines joined by procedure turns: 13 deg off the line, a 3.6 km straight, then the turn
     # back (the unseen suite's turns); a short line on the lines' own heading stays a line
-    legs = [
-        ("line", 0.0, 600.0),
-        ("turn", 1.5, -13.0),
-        ("line", 347.0, 60.0),
-        ("turn", 3.0, 193.0),
-        ("line", 180.0, 600.0),
-        ("turn", 1.5, -13.0),
-        ("line", 167.0, 60.0),
-        ("turn", 3.0, 193.0),
-        ("line", 0.0, 600.0),
-        ("turn", 3.0, 180.0),
-        ("line", 180.0, 100.0),
-    ]
-    t, lat, lon, vel, lab = build_track(legs, heading_noise_deg=1.0)
-    segs = segment_lines(t, lat, lon, vel)
-    straight = [(s.name, s.kind) for s in segs if s.kind in ("line", "tie", "transit")]
+    legs = []
+    for heading, offset in ((0.0, 347.0), (180.0, 167.0)):
+        legs += [("line", heading, 600.0), ("turn", 1.5, -13.0), ("line", offset, 60.0), ("turn", 3.0, 193.0)]
+    legs += [("line", 0.0, 600.0), ("turn", 3.0, 180.0), ("line", 180.0, 100.0)]
+    t, segs, straight = straight_legs(legs)
     assert straight == [
         ("L01", "line"),
         ("transit01", "transit"),
@@ -504,14 +501,12 @@ def test_transit_is_recognised_by_heading():
         ("turn", 3.0, 315.0),
         ("line", 45.0, 200.0),
     ]
-    t, lat, lon, vel, lab = build_track(legs, heading_noise_deg=1.0)
-    segs = segment_lines(t, lat, lon, vel)
-    straight = [(s.name, s.kind) for s in segs if s.kind in ("line", "tie", "transit")]
+    t, segs, straight = straight_legs(legs)
     assert straight == [("L01", "line"), ("L02", "line"), ("T01", "tie"), ("transit01", "transit")]
     # a transit 45 deg off the lines crosses them: not with the lines in the drift stage
     assert [s.name for s in along_line_legs(segs)] == ["L01", "L02"]
     # with transit detection off, the 45-deg leg is a line or a tie again (tie_angle_deg rule)
-    segs = segment_lines(t, lat, lon, vel, transit_angle_deg=None)
+    _, segs, _ = straight_legs(legs, transit_angle_deg=None)
     assert [s.kind for s in segs if s.kind != "turn"][-1] in ("line", "tie")
     with pytest.raises(ConfigError, match=r"^lines\.transit_angle_deg: expected a number in \(0, 45\), got 50$"):
         segmentation_options({"transit_angle_deg": 50})
