@@ -30,6 +30,7 @@ __all__ = [
     "segments_from_windows",
     "segment_flight",
     "segment_table",
+    "along_line_legs",
 ]
 
 KINDS = ("line", "tie", "turn", "static", "transit")
@@ -41,6 +42,7 @@ CONNECTING_LEG_FRACTION = 0.25
 #: Transits within this of the lines' direction count with the lines in the drift stage
 #: (:func:`along_line_legs`), deg: the default ``transit_angle_deg``.
 ALONG_LINE_DEG = 20.0
+
 #: ``lines.mode`` values: detection, explicit windows, the whole flight as one line
 SEGMENTATION_MODES = ("auto", "windows", "whole")
 
@@ -55,15 +57,17 @@ class Segment:
     Attributes
     ----------
     name : str
-        ``L01, L02, ...`` for lines, ``T01, ...`` for tie lines, ``turn01, ...``, ``static01, ...``
-        (numbered in time order within each kind); the configured name for time windows.
+        ``L01, L02, ...`` for lines, ``T01, ...`` for tie lines, ``turn01, ...``, ``static01, ...``,
+        ``transit01, ...`` (numbered in time order within each kind); the configured name for
+        time windows.
     kind : str
-        ``"line"``, ``"tie"``, ``"turn"`` or ``"static"``.
+        ``"line"``, ``"tie"``, ``"transit"``, ``"turn"`` or ``"static"``.
     start_index, stop_index : int
         Sample range ``[start_index, stop_index)`` (Python slice convention) into the arrays the
         segmentation was computed on.
     heading_deg : float
-        Mean track heading (clockwise from north, [0, 360)) for lines and tie lines, NaN otherwise.
+        Mean track heading (clockwise from north, [0, 360)) for lines, tie lines and transits,
+        NaN otherwise.
     """
 
     name: str
@@ -201,8 +205,9 @@ def segment_lines(
     lines, like turns). So is a straight within ``transit_angle_deg`` of the lines but more than
     ``heading_tol_deg / 2`` off their direction and shorter than
     :data:`CONNECTING_LEG_FRACTION` of the median line that is on it: the offset leg of a
-    procedure or teardrop turn, a few km flown 10-15 deg off the line before turning back. With ``transit_angle_deg`` None, pieces more than ``tie_angle_deg``
-    from the dominant direction are tie lines and nothing is a transit.
+    procedure or teardrop turn, a few km flown 10-15 deg off the line before turning back.
+    With ``transit_angle_deg`` None, pieces more than ``tie_angle_deg`` from the dominant
+    direction are tie lines and nothing is a transit.
 
     Parameters
     ----------
