@@ -383,9 +383,10 @@ def drop_clock_restarts(raw: dict, min_jump_s: float = 1.0):
 
 
 #: Range of the median third-axis specific force of a platform triad, in units of the standard
-#: gravity ``io.checks.G_STD`` (9.78 at the equator, 9.83 at the poles): the platform is held level, so over a flight that axis reads gravity
-#: (vertical accelerations average out; a 45-degree bank, held level by the platform, leaves it at
-#: g).  Outside, the axes are not the platform's east-north-up ones (a down axis reads -1).
+#: gravity ``io.checks.G_STD`` (9.78 at the equator, 9.83 at the poles): the platform is held
+#: level, so over a flight that axis reads gravity (vertical accelerations average out; a
+#: 45-degree bank, held level by the platform, leaves it at g).  Outside, the axes are not the
+#: platform's east-north-up ones (a down axis reads -1).
 PLATFORM_UP_RANGE = (0.7, 1.3)
 #: A platform triad held level turns about its horizontal axes at the Earth's and the transport
 #: rate only (< 0.005 deg/s); an aircraft's body in a banked turn at 1-2 deg/s (10-s means of

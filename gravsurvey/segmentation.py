@@ -133,6 +133,18 @@ def _circmean_deg(h_deg: np.ndarray) -> float:
     return float(np.degrees(np.arctan2(np.mean(np.sin(r)), np.mean(np.cos(r)))) % 360.0)
 
 
+def _axial_mean_deg(h_deg, weights) -> float:
+    """Weighted mean of axial headings (a line and its reverse alike), deg in [0, 180)."""
+    d2 = np.radians(2.0 * np.asarray(h_deg, float))
+    w = np.asarray(weights, float)
+    return float(np.degrees(np.arctan2(np.sum(w * np.sin(d2)), np.sum(w * np.cos(d2)))) / 2.0) % 180.0
+
+
+def _axial_diff_deg(a_deg, b_deg):
+    """Axial distance |a - b| modulo 180 deg, in [0, 90]: ``|wrap(2 (a - b))| / 2``."""
+    return np.abs(wrap_deg(2.0 * (np.asarray(a_deg, float) - b_deg))) / 2.0
+
+
 def _check_track(time_s, lat_rad, lon_rad, vel_enu):
     t = np.asarray(time_s, dtype=float)
     if t.ndim != 1 or t.size < 2:
@@ -394,14 +406,12 @@ def segment_lines(
         ax = np.array([_circmean_deg(heading[a:b]) % 180.0 for a, b in straight])
         dur = np.array([cum[b - 1] - cum[a] for a, b in straight])  # weights: line length
         bins = np.arange(0.0, 180.0, 5.0)
-        # axial distance |ax - c| (mod 180) = |wrap(2 (ax - c))| / 2
-        axial = np.abs(wrap_deg(2.0 * (ax[None, :] - bins[:, None]))) / 2.0
+        axial = _axial_diff_deg(ax[None, :], bins[:, None])
         score = (dur[None, :] * (axial <= tie_angle_deg / 2.0)).sum(axis=1)
         near = axial[int(np.argmax(score))] <= tie_angle_deg / 2.0
-        d2 = np.radians(2.0 * ax[near])
-        dom = (np.degrees(np.arctan2((dur[near] * np.sin(d2)).sum(), (dur[near] * np.cos(d2)).sum())) / 2.0) % 180.0
-        for (a, b), x in zip(straight, ax):
-            diff = abs(wrap_deg(2.0 * (x - dom))) / 2.0
+        dom = _axial_mean_deg(ax[near], dur[near])
+        diffs = _axial_diff_deg(ax, dom)
+        for (a, b), diff in zip(straight, diffs):
             if transit_angle_deg is None:
                 kinds[(a, b)] = "tie" if diff > tie_angle_deg else "line"
             elif diff <= transit_angle_deg:
@@ -414,16 +424,11 @@ def segment_lines(
             # a turn flown as an offset leg and a turn back (a procedure or teardrop turn) holds
             # a straight of a few km some 10-15 deg off the lines: a connecting leg, not a survey
             # line (the unseen suite's turns made 7 flown lines into 13)
-            diffs = {k: abs(wrap_deg(2.0 * (x - dom))) / 2.0 for k, x in zip(straight, ax)}
-            aligned = [cum[b - 1] - cum[a] for a, b in straight if diffs[(a, b)] <= 0.5 * heading_tol_deg]
-            if aligned:
-                typical = float(np.median(aligned))
-                for a, b in straight:
-                    if (
-                        kinds[(a, b)] == "line"
-                        and diffs[(a, b)] > 0.5 * heading_tol_deg
-                        and cum[b - 1] - cum[a] < CONNECTING_LEG_FRACTION * typical
-                    ):
+            on_lines = diffs <= 0.5 * heading_tol_deg
+            if on_lines.any():
+                short = dur < CONNECTING_LEG_FRACTION * float(np.median(dur[on_lines]))
+                for (a, b), leg in zip(straight, short & ~on_lines):
+                    if leg and kinds[(a, b)] == "line":
                         kinds[(a, b)] = "transit"
 
     # Assemble the full cover: lines/ties, then the rest as static or turn runs.
@@ -474,19 +479,12 @@ def along_line_legs(segs, max_angle_deg: float = ALONG_LINE_DEG) -> list:
     lines = [s for s in segs if s.kind == "line" and np.isfinite(s.heading_deg)]
     if not lines:
         return [s for s in segs if s.kind == "line"]
-    # axial mean of the lines' headings, weighted by their samples
-    w = np.array([s.stop_index - s.start_index for s in lines], float)
-    d2 = np.radians(2.0 * np.array([s.heading_deg for s in lines]))
-    dom = (np.degrees(np.arctan2(np.sum(w * np.sin(d2)), np.sum(w * np.cos(d2)))) / 2.0) % 180.0
+    dom = _axial_mean_deg([s.heading_deg for s in lines], [s.stop_index - s.start_index for s in lines])
     return [
         s
         for s in segs
         if s.kind == "line"
-        or (
-            s.kind == "transit"
-            and np.isfinite(s.heading_deg)
-            and abs(wrap_deg(2.0 * (s.heading_deg - dom))) / 2.0 <= max_angle_deg
-        )
+        or (s.kind == "transit" and np.isfinite(s.heading_deg) and _axial_diff_deg(s.heading_deg, dom) <= max_angle_deg)
     ]
 
 
