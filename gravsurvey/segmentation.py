@@ -36,7 +36,8 @@ __all__ = [
 KINDS = ("line", "tie", "turn", "static", "transit")
 
 #: A straight off the lines' direction by more than half the heading tolerance and shorter than
-#: this fraction of the median aligned line is a connecting leg of a turn (kind ``"transit"``).
+#: this fraction of the median aligned line is a connecting leg of a turn (kind ``"transit"``);
+#: so is a straight on the ties' direction shorter than that which crosses no line.
 CONNECTING_LEG_FRACTION = 0.25
 
 #: Transits within this of the lines' direction count with the lines in the drift stage
@@ -145,6 +146,32 @@ def _axial_diff_deg(a_deg, b_deg):
     return np.abs(wrap_deg(2.0 * (np.asarray(a_deg, float) - b_deg))) / 2.0
 
 
+def _piece_ends(lat_rad, lon_rad, a: int, b: int):
+    """First and last finite position of samples ``[a, b)`` as (lat, lon) rad pairs, or None."""
+    ok = np.flatnonzero(np.isfinite(lat_rad[a:b]) & np.isfinite(lon_rad[a:b]))
+    if ok.size < 2:
+        return None
+    i, j = a + int(ok[0]), a + int(ok[-1])
+    return (float(lat_rad[i]), float(lon_rad[i])), (float(lat_rad[j]), float(lon_rad[j]))
+
+
+def _crosses(p, q) -> bool:
+    """Whether the straight pieces ``p`` and ``q`` (end pairs of :func:`_piece_ends`, or None)
+    intersect in the horizontal, on a local equirectangular plane (pieces of tens of km)."""
+    if p is None or q is None:
+        return False
+    lat0 = 0.5 * (p[0][0] + q[0][0])
+    lon0 = p[0][1]
+    xy = [((lon - lon0 + np.pi) % (2.0 * np.pi) - np.pi) * np.cos(lat0) for _, lon in (*p, *q)]
+    pts = [(x, lat - lat0) for x, (lat, _) in zip(xy, (*p, *q))]
+    (p0, p1, q0, q1) = pts
+
+    def side(o, u, v) -> float:
+        return (u[0] - o[0]) * (v[1] - o[1]) - (u[1] - o[1]) * (v[0] - o[0])
+
+    return side(p0, p1, q0) * side(p0, p1, q1) < 0.0 and side(q0, q1, p0) * side(q0, q1, p1) < 0.0
+
+
 def _check_track(time_s, lat_rad, lon_rad, vel_enu):
     t = np.asarray(time_s, dtype=float)
     if t.ndim != 1 or t.size < 2:
@@ -218,6 +245,9 @@ def segment_lines(
     ``heading_tol_deg / 2`` off their direction and shorter than
     :data:`CONNECTING_LEG_FRACTION` of the median line that is on it: the offset leg of a
     procedure or teardrop turn, a few km flown 10-15 deg off the line before turning back.
+    And so is a straight on the ties' direction shorter than that that crosses no line (its end
+    points joined, on a local plane): the connecting leg of a racetrack turn, flown between
+    the ends of neighbouring lines, which ties nothing.
     With ``transit_angle_deg`` None, pieces more than ``tie_angle_deg`` from the dominant
     direction are tie lines and nothing is a transit.
 
@@ -275,7 +305,7 @@ def segment_lines(
         smooth_s, merge_gap_s, tie_angle_deg = kw["smooth_s"], kw["merge_gap_s"], kw["tie_angle_deg"]
         speed_tol_mps = kw["speed_tol_mps"]
         min_line_m, transit_angle_deg = kw["min_line_m"], kw["transit_angle_deg"]
-    t, _lat, _lon, v = _check_track(time_s, lat_rad, lon_rad, vel_enu)
+    t, lat, lon, v = _check_track(time_s, lat_rad, lon_rad, vel_enu)
     n = t.size
     dt = float(np.median(np.diff(t)))
     w = max(1, int(round(smooth_s / dt)))
@@ -429,6 +459,14 @@ def segment_lines(
                 short = dur < CONNECTING_LEG_FRACTION * float(np.median(dur[on_lines]))
                 for (a, b), leg in zip(straight, short & ~on_lines):
                     if leg and kinds[(a, b)] == "line":
+                        kinds[(a, b)] = "transit"
+                # a turn flown as two 90-deg turns holds a straight of a few km across the lines
+                # between the ends of neighbouring lines: a connecting leg, not a tie line, when
+                # short and crossing no line (a tie line crosses the lines it ties)
+                ends = [_piece_ends(lat, lon, a, b) for a, b in straight]
+                line_ends = [e for e, ab in zip(ends, straight) if kinds[ab] == "line" and e is not None]
+                for (a, b), leg, e in zip(straight, short, ends):
+                    if leg and kinds[(a, b)] == "tie" and not any(_crosses(e, q) for q in line_ends):
                         kinds[(a, b)] = "transit"
 
     # Assemble the full cover: lines/ties, then the rest as static or turn runs.

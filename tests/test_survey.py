@@ -8,6 +8,7 @@ import pytest
 from gravsurvey.errors import ConfigError, DataError
 from gravsurvey.crossovers import find_crossovers
 from gravsurvey.segmentation import (
+    CONNECTING_LEG_FRACTION,
     Segment,
     SegmentationOptions,
     along_line_legs,
@@ -488,6 +489,32 @@ def test_offset_leg_of_a_turn_is_not_a_line():
     assert all(3000.0 < x < 4500.0 for x in legs_m), legs_m
     # the drift stage takes them with the lines (straight flight near the lines' heading)
     assert [s.name for s in along_line_legs(segs)] == ["L01", "transit01", "L02", "transit02", "L03", "L04"]
+
+
+def test_short_leg_across_the_lines_is_not_a_tie():
+    # a racetrack: lines joined by two 90-deg turns around a 3.6-km leg across the lines (a
+    # connecting leg, crossing no line), then a short tie line across two lines (a tie line)
+    legs = [("line", 0.0, 600.0)]
+    for sign, heading in ((1.0, 180.0), (-1.0, 0.0)):
+        legs += [("turn", 3.0, 90.0 * sign), ("line", 90.0, 60.0), ("turn", 3.0, 90.0 * sign)]
+        legs += [("line", heading, 600.0)]
+    legs += [("turn", 3.0, 180.0), ("line", 180.0, 300.0), ("turn", 3.0, 90.0), ("line", 270.0, 130.0)]
+    t, segs, straight = straight_legs(legs)
+    assert straight == [
+        ("L01", "line"),
+        ("transit01", "transit"),
+        ("L02", "line"),
+        ("transit02", "transit"),
+        ("L03", "line"),
+        ("L04", "line"),
+        ("T01", "tie"),
+    ]
+    # the short tie is shorter than a connecting leg may be: it is a tie because it crosses lines
+    lengths = {s.name: 60.0 * (t[s.stop_index - 1] - t[s.start_index]) for s in segs}
+    assert lengths["T01"] < CONNECTING_LEG_FRACTION * lengths["L01"]
+    # the same track with transit detection off: the legs across are tie lines (the old rule)
+    _, _, straight = straight_legs(legs, transit_angle_deg=None)
+    assert [k for _, k in straight].count("tie") == 3
 
 
 def test_transit_is_recognised_by_heading():

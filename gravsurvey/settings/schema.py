@@ -268,7 +268,8 @@ class LinesSection(Section):
         "transit_angle_deg",
         "straight legs within this of the dominant direction are lines, within this of its "
         "perpendicular tie lines, in between transits (not lines; so are the short offset legs of procedure "
-        "turns, docs/outputs.md), deg; null: no transits, `tie_angle_deg` decides",
+        "turns and the short connecting legs across the lines, docs/outputs.md), deg; null: no transits, "
+        "`tie_angle_deg` decides",
         gt=0,
         lt=45,
     )
