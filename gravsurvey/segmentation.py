@@ -211,6 +211,7 @@ def segment_lines(
     tie_angle_deg: float = 45.0,
     min_line_m: float = 2000.0,
     transit_angle_deg: float | None = 20.0,
+    line_heading_deg: float | None = None,
     options: "SegmentationOptions | None" = None,
 ) -> list[Segment]:
     """Split a flight into straight lines, tie lines, turns and static periods.
@@ -237,17 +238,18 @@ def segment_lines(
     pieces whose heading trend turns them by more than ``heading_tol_deg / 2`` over their
     length (pieces of a slow curve, flown under ``max_turn_rate_degps``).
 
-    The dominant direction is the axial heading (modulo 180 deg) carrying the most line length.
+    The dominant direction is the axial heading (modulo 180 deg) carrying the most line length
+    (``line_heading_deg``, the survey plan's, in its place when given).
     Straight pieces within ``transit_angle_deg`` of it are lines, those within
     ``transit_angle_deg`` of its perpendicular are tie (control) lines, and the straight pieces
     in between are transits (kind ``"transit"``, named ``transit01, ...``: processed, but not
-    lines, like turns). So is a straight within ``transit_angle_deg`` of the lines but more than
-    ``heading_tol_deg / 2`` off their direction and shorter than
-    :data:`CONNECTING_LEG_FRACTION` of the median line that is on it: the offset leg of a
+    lines, like turns). Against the flight's own dominant direction, so is a straight within
+    ``transit_angle_deg`` of it but more than ``heading_tol_deg / 2`` off and shorter than
+    :data:`CONNECTING_LEG_FRACTION` of the median straight that is on it: the offset leg of a
     procedure or teardrop turn, a few km flown 10-15 deg off the line before turning back.
-    And so is a straight on the ties' direction shorter than that that crosses no line (its end
-    points joined, on a local plane): the connecting leg of a racetrack turn, flown between
-    the ends of neighbouring lines, which ties nothing.
+    And so is a straight across it shorter than that which crosses none of the straights on it
+    (end points joined, on a local plane): the connecting leg of a racetrack turn, flown
+    between the ends of neighbouring lines, which ties nothing.
     With ``transit_angle_deg`` None, pieces more than ``tie_angle_deg`` from the dominant
     direction are tie lines and nothing is a transit.
 
@@ -284,6 +286,12 @@ def segment_lines(
     transit_angle_deg : float or None
         Largest axial heading difference of a line from the dominant direction, and of a tie
         line from its perpendicular, deg; pieces in between are transits.
+    line_heading_deg : float or None
+        The survey's line direction (the flight plan's), deg clockwise from north, either way
+        along the line (axial: 10 and 190 are one direction); it takes the dominant direction's
+        place in naming lines and tie lines, so a flight that flew only tie lines names them
+        ``T01...``. None: each flight's dominant direction. The legs of turns are told against
+        the flight's own dominant direction either way.
     options : SegmentationOptions, optional
         The ``lines:`` configuration; when given, its detection settings replace the keyword
         arguments above (its ``mode`` and ``windows`` are ignored here: see :func:`segment_flight`).
@@ -305,6 +313,7 @@ def segment_lines(
         smooth_s, merge_gap_s, tie_angle_deg = kw["smooth_s"], kw["merge_gap_s"], kw["tie_angle_deg"]
         speed_tol_mps = kw["speed_tol_mps"]
         min_line_m, transit_angle_deg = kw["min_line_m"], kw["transit_angle_deg"]
+        line_heading_deg = kw["line_heading_deg"]
     t, lat, lon, v = _check_track(time_s, lat_rad, lon_rad, vel_enu)
     n = t.size
     dt = float(np.median(np.diff(t)))
@@ -439,8 +448,10 @@ def segment_lines(
         axial = _axial_diff_deg(ax[None, :], bins[:, None])
         score = (dur[None, :] * (axial <= tie_angle_deg / 2.0)).sum(axis=1)
         near = axial[int(np.argmax(score))] <= tie_angle_deg / 2.0
-        dom = _axial_mean_deg(ax[near], dur[near])
-        diffs = _axial_diff_deg(ax, dom)
+        own = _axial_diff_deg(ax, _axial_mean_deg(ax[near], dur[near]))
+        # the lines' direction: the survey plan's where given (a flight that flew the tie lines
+        # has them as its own dominant direction), else the flight's own
+        diffs = own if line_heading_deg is None else _axial_diff_deg(ax, float(line_heading_deg) % 180.0)
         for (a, b), diff in zip(straight, diffs):
             if transit_angle_deg is None:
                 kinds[(a, b)] = "tie" if diff > tie_angle_deg else "line"
@@ -451,23 +462,31 @@ def segment_lines(
             else:
                 kinds[(a, b)] = "transit"
         if transit_angle_deg is not None:
+            # the legs of the flight's turns, against the flight's own direction (its lines, or
+            # the tie lines a tie flight flew)
+            along, across = own <= transit_angle_deg, own >= 90.0 - transit_angle_deg
+            straight_kind = np.array([kinds[ab] in ("line", "tie") for ab in straight])
             # a turn flown as an offset leg and a turn back (a procedure or teardrop turn) holds
             # a straight of a few km some 10-15 deg off the lines: a connecting leg, not a survey
             # line (the unseen suite's turns made 7 flown lines into 13)
-            on_lines = diffs <= 0.5 * heading_tol_deg
+            on_lines = own <= 0.5 * heading_tol_deg
             if on_lines.any():
                 short = dur < CONNECTING_LEG_FRACTION * float(np.median(dur[on_lines]))
-                for (a, b), leg in zip(straight, short & ~on_lines):
-                    if leg and kinds[(a, b)] == "line":
-                        kinds[(a, b)] = "transit"
+                for k, ab in enumerate(straight):
+                    if short[k] and along[k] and not on_lines[k] and straight_kind[k]:
+                        kinds[ab] = "transit"
                 # a turn flown as two 90-deg turns holds a straight of a few km across the lines
                 # between the ends of neighbouring lines: a connecting leg, not a tie line, when
                 # short and crossing no line (a tie line crosses the lines it ties)
                 ends = [_piece_ends(lat, lon, a, b) for a, b in straight]
-                line_ends = [e for e, ab in zip(ends, straight) if kinds[ab] == "line" and e is not None]
-                for (a, b), leg, e in zip(straight, short, ends):
-                    if leg and kinds[(a, b)] == "tie" and not any(_crosses(e, q) for q in line_ends):
-                        kinds[(a, b)] = "transit"
+                line_ends = [
+                    e
+                    for k, (e, ab) in enumerate(zip(ends, straight))
+                    if along[k] and kinds[ab] != "transit" and e is not None
+                ]
+                for k, (ab, e) in enumerate(zip(straight, ends)):
+                    if short[k] and across[k] and straight_kind[k] and not any(_crosses(e, q) for q in line_ends):
+                        kinds[ab] = "transit"
 
     # Assemble the full cover: lines/ties, then the rest as static or turn runs.
     label = np.zeros(n, dtype=np.int8)  # 0 turn, 1 static, 2 straight
@@ -496,7 +515,8 @@ def segment_lines(
 
 
 def along_line_legs(segs, max_angle_deg: float = ALONG_LINE_DEG) -> list:
-    """The survey lines and the transits within ``max_angle_deg`` of the lines' axial direction.
+    """The survey lines and the transits within ``max_angle_deg`` of the lines' axial direction
+    (a flight without lines: its tie lines and the transits near them).
 
     Those transits are the offset legs of procedure turns (:data:`CONNECTING_LEG_FRACTION`):
     not survey lines, but straight, steady flight near the lines' heading between them, whose
@@ -514,14 +534,17 @@ def along_line_legs(segs, max_angle_deg: float = ALONG_LINE_DEG) -> list:
     list of Segment
         In the order of ``segs``.
     """
-    lines = [s for s in segs if s.kind == "line" and np.isfinite(s.heading_deg)]
+    # a flight that flew only the tie lines (lines.line_heading_deg given) has them as its
+    # parallel legs
+    kind = "line" if any(s.kind == "line" for s in segs) else "tie"
+    lines = [s for s in segs if s.kind == kind and np.isfinite(s.heading_deg)]
     if not lines:
-        return [s for s in segs if s.kind == "line"]
+        return [s for s in segs if s.kind == kind]
     dom = _axial_mean_deg([s.heading_deg for s in lines], [s.stop_index - s.start_index for s in lines])
     return [
         s
         for s in segs
-        if s.kind == "line"
+        if s.kind == kind
         or (s.kind == "transit" and np.isfinite(s.heading_deg) and _axial_diff_deg(s.heading_deg, dom) <= max_angle_deg)
     ]
 
@@ -602,9 +625,10 @@ class SegmentationOptions:
         ``auto`` (straight-line detection, :func:`segment_lines`), ``windows`` (explicit time
         windows, :func:`segments_from_windows`) or ``whole`` (the whole flight is line ``L01``).
     min_line_s, heading_tol_deg, min_speed_mps, max_turn_rate_degps, max_vertical_speed_mps,
-    speed_tol_mps, smooth_s, merge_gap_s, tie_angle_deg, min_line_m, transit_angle_deg
+    speed_tol_mps, smooth_s, merge_gap_s, tie_angle_deg, min_line_m, transit_angle_deg,
+    line_heading_deg
         See :func:`segment_lines` (units in the names; ``max_vertical_speed_mps``,
-        ``min_line_s`` and ``transit_angle_deg`` may be null).
+        ``min_line_s``, ``transit_angle_deg`` and ``line_heading_deg`` may be null).
     windows : list of dict
         For ``mode: windows``: ``{name, start_s, stop_s[, kind]}``, s after the flight's first sample.
     """
@@ -622,6 +646,7 @@ class SegmentationOptions:
     windows: list = field(default_factory=list)
     min_line_m: float = 2000.0
     transit_angle_deg: float | None = 20.0
+    line_heading_deg: float | None = None
 
     @classmethod
     def keys(cls) -> tuple[str, ...]:

@@ -378,11 +378,22 @@ def test_tie_lines_are_left_out():
     from gravsurvey.pipeline import estimate_drift
     from gravsurvey.segmentation import Segment
 
+    # tie lines beside a flight's lines are left out (they cross them): one of the lines named a
+    # tie is not among the drift stage's lines
+    est, segs, field, lab = _flight_estimate()
+    mixed = [Segment(s.name, "tie" if i == 0 else "line", s.start_index, s.stop_index) for i, s in enumerate(segs)]
+    estimate_drift(est, mixed)
+    assert est.estimator["drift"]["lines"] == len(segs) - 1
+    # a flight that flew only tie lines (named so by lines.line_heading_deg) has them as its
+    # parallel legs: the same drift as with the legs named lines
+    est, segs, field, lab = _flight_estimate()
+    estimate_drift(est, segs)
+    as_lines = est.drift.copy()
     est, segs, field, lab = _flight_estimate()
     ties = [Segment(s.name.replace("L", "T"), "tie", s.start_index, s.stop_index) for s in segs]
     estimate_drift(est, ties)
-    assert est.drift is None
-    assert est.estimator["drift"] == {"used": False, "reason": "0 line(s): the drift needs two or more"}
+    assert est.estimator["drift"]["lines"] == len(segs)
+    np.testing.assert_array_equal(est.drift, as_lines)
 
 
 def test_pieces_of_a_flight_trade_their_datasheet_drift():

@@ -517,6 +517,36 @@ def test_short_leg_across_the_lines_is_not_a_tie():
     assert [k for _, k in straight].count("tie") == 3
 
 
+def test_tie_flight_names_its_legs_ties_with_the_plan_heading():
+    # a flight that flew the tie lines of a north-south survey (east-west, joined by racetrack
+    # turns): on its own its legs are lines; with the plan's line heading they are tie lines,
+    # the connecting legs still transits, and the drift stage takes the ties as its legs
+    legs = [("line", 90.0, 400.0)]
+    for sign, heading in ((1.0, 270.0), (-1.0, 90.0)):
+        legs += [("turn", 3.0, 90.0 * sign), ("line", 180.0, 60.0), ("turn", 3.0, 90.0 * sign)]
+        legs += [("line", heading, 400.0)]
+    _, segs, straight = straight_legs(legs)
+    assert [k for _, k in straight] == ["line", "transit", "line", "transit", "line"]
+    for heading in (0.0, 180.0, -360.0):
+        _, segs, straight = straight_legs(legs, line_heading_deg=heading)
+        assert straight == [
+            ("T01", "tie"),
+            ("transit01", "transit"),
+            ("T02", "tie"),
+            ("transit02", "transit"),
+            ("T03", "tie"),
+        ]
+        assert [s.name for s in along_line_legs(segs)] == ["T01", "T02", "T03"]
+    # the plan's heading along the flown legs changes nothing; from the config, the same
+    _, _, same = straight_legs(legs, line_heading_deg=270.0)
+    assert [k for _, k in same] == ["line", "transit", "line", "transit", "line"]
+    opts = segmentation_options({"line_heading_deg": 0})
+    t, lat, lon, vel, _ = build_track(legs, heading_noise_deg=1.0)
+    assert [s.kind for s in segment_lines(t, lat, lon, vel, options=opts) if s.kind != "turn"][0] == "tie"
+    with pytest.raises(ConfigError, match=r"^lines\.line_heading_deg: expected a number in \[-360, 360\], got 400$"):
+        segmentation_options({"line_heading_deg": 400})
+
+
 def test_transit_is_recognised_by_heading():
     # two north-south lines, one east-west tie, and a straight transit at 45 deg
     legs = [

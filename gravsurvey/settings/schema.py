@@ -273,6 +273,13 @@ class LinesSection(Section):
         gt=0,
         lt=45,
     )
+    line_heading_deg: Optional[float] = _ln(
+        "line_heading_deg",
+        "the survey plan's line direction, deg clockwise from north (axial: 10 and 190 alike), in the dominant "
+        "direction's place: a flight that flew only tie lines names them T01...; null: each flight's own",
+        ge=-360,
+        le=360,
+    )
     tie_angle_deg: float = _ln(
         "tie_angle_deg",
         "with `transit_angle_deg: null`: lines more than this from the dominant direction are tie lines, deg",
