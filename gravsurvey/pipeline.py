@@ -1176,6 +1176,25 @@ def write_survey_outputs(cfg: SurveyConfig, out_dir, results: list[FlightEstimat
     return _write_outputs(cfg, Path(out_dir), list(results), list(failed), OutputTransaction)
 
 
+def _flights_across(table, groups, kind_of) -> list[str]:
+    """:func:`gravsurvey.segmentation.flights_across_lines` over the table's lines, each line's
+    heading from its first and last projected position."""
+    from .segmentation import flights_across_lines
+
+    lines = []
+    for (flight, name), idx in groups.items():
+        if not name:
+            continue
+        e, n = table["easting_m"][idx], table["northing_m"][idx]
+        ok = np.flatnonzero(np.isfinite(e) & np.isfinite(n))
+        if ok.size < 2:
+            continue
+        de, dn = e[ok[-1]] - e[ok[0]], n[ok[-1]] - n[ok[0]]
+        heading = float(np.degrees(np.arctan2(de, dn)))
+        lines.append((flight, kind_of.get((flight, name), "line"), heading, float(np.hypot(de, dn))))
+    return flights_across_lines(lines)
+
+
 def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     """Survey products: base ties -> crossovers -> levelling -> grid, then every deliverable.
 
@@ -1194,6 +1213,8 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     groups = writers.line_groups(table["flight"], table["line"])
     kind_of = {(r.name, ln): info.get("kind", "line") for r in results for ln, info in r.line_info.items()}
     notes = []
+    if getattr(cfg.lines, "line_heading_deg", None) is None:
+        notes += _flights_across(table, groups, kind_of)
 
     # 1. base ties: absolute level and drift per tied flight
     ties, tie_corr, tie_notes = _apply_ties(cfg, results, rows)

@@ -31,6 +31,7 @@ __all__ = [
     "segment_flight",
     "segment_table",
     "along_line_legs",
+    "flights_across_lines",
 ]
 
 KINDS = ("line", "tie", "turn", "static", "transit")
@@ -547,6 +548,56 @@ def along_line_legs(segs, max_angle_deg: float = ALONG_LINE_DEG) -> list:
         if s.kind == kind
         or (s.kind == "transit" and np.isfinite(s.heading_deg) and _axial_diff_deg(s.heading_deg, dom) <= max_angle_deg)
     ]
+
+
+def flights_across_lines(lines, max_angle_deg: float = 45.0) -> list[str]:
+    """Notes for flights whose lines run across the survey's lines (a flight that flew the ties).
+
+    Each flight names its lines by its own dominant direction (:func:`segment_lines`), so a
+    flight that flew only the tie lines of a survey names them lines. The survey's direction is
+    that of the flights that flew tie lines too (their lines are lines by their own evidence),
+    or of all flights when none did: the axial direction carrying the most line length within
+    ``max_angle_deg``. A flight whose lines run more than ``max_angle_deg`` from it is named.
+
+    Parameters
+    ----------
+    lines : iterable of (flight, kind, heading_deg, length_m)
+        Every line and tie line of the survey: its flight's name, ``"line"`` or ``"tie"``, its
+        axial heading (deg from north; NaN: unknown, left out) and its length (m).
+    max_angle_deg : float
+        Largest axial difference of a flight's lines from the survey's direction, deg.
+
+    Returns
+    -------
+    list of str
+        One note per flight across, naming ``lines.line_heading_deg``.
+    """
+    per, with_ties = {}, set()
+    for flight, kind, heading, length in lines:
+        if kind == "tie":
+            with_ties.add(flight)
+        elif kind == "line" and np.isfinite(heading) and length > 0:
+            per.setdefault(flight, []).append((float(heading), float(length)))
+    if len(per) < 2:
+        return []
+    own = {f: (_axial_mean_deg(*zip(*v)), sum(w for _, w in v)) for f, v in per.items()}
+    ref_flights = [f for f in own if f in with_ties] or list(own)
+    heads = np.array([own[f][0] for f in ref_flights])
+    weights = np.array([own[f][1] for f in ref_flights])
+    near = _axial_diff_deg(heads[None, :], heads[:, None]) <= max_angle_deg
+    best = near[int(np.argmax((near * weights[None, :]).sum(axis=1)))]
+    ref = _axial_mean_deg(heads[best], weights[best])
+    by = ", ".join(f for f, b in zip(ref_flights, best) if b)
+    notes = []
+    for f, (h, _) in own.items():
+        diff = float(_axial_diff_deg(h, ref))
+        if diff > max_angle_deg:
+            notes.append(
+                f"lines: {f}'s lines run {diff:.0f} deg across the survey's ({ref:.0f} deg, the lines of {by}): "
+                "a flight that flew the tie lines? lines.line_heading_deg (the plan's line direction) names "
+                "its legs T01..."
+            )
+    return notes
 
 
 def _heading_drift_deg(t, heading_unwrapped_deg) -> float:

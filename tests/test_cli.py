@@ -130,6 +130,13 @@ def test_sample_survey_end_to_end(sample_run):
         across = [r for r in rows if r["flight_a"] != r["flight_b"]]
         assert len(across) >= 12 and summary["crossovers"]["count"] == len(rows)
         assert summary["levelling"]["decision"]["applied"]  # docs/survey.md, "The sample survey"
+        # F02 flew across F01's lines (its own "lines" are the survey's tie direction): said, with
+        # the key that names them tie lines (docs/outputs.md, "Line segmentation")
+        across_notes = [n for n in summary["notes"] if "across the survey's" in n]
+        assert len(across_notes) == 1 and across_notes[0].startswith("lines: F02's lines run 9")
+        assert "the lines of F01" in across_notes[0] and "lines.line_heading_deg" in across_notes[0]
+    else:
+        assert not any("across the survey's" in n for n in summary["notes"])
     bound = _bounds_from_docs()[name]
     assert summary["rms_vs_truth_mgal"] is not None
     assert summary["rms_vs_truth_mgal"] <= bound, (name, summary["rms_vs_truth_mgal"], bound)

@@ -12,6 +12,7 @@ from gravsurvey.segmentation import (
     Segment,
     SegmentationOptions,
     along_line_legs,
+    flights_across_lines,
     segment_flight,
     segment_lines,
     segment_table,
@@ -545,6 +546,25 @@ def test_tie_flight_names_its_legs_ties_with_the_plan_heading():
     assert [s.kind for s in segment_lines(t, lat, lon, vel, options=opts) if s.kind != "turn"][0] == "tie"
     with pytest.raises(ConfigError, match=r"^lines\.line_heading_deg: expected a number in \[-360, 360\], got 400$"):
         segmentation_options({"line_heading_deg": 400})
+
+
+def test_flight_across_the_survey_lines_is_named():
+    # F01 flew lines (north-south, 181 deg is the same axis) and ties; F02 flew four legs east-west:
+    # its own "lines" run across the survey's
+    lines = [("F01", "line", h, 30e3) for h in (1.0, 181.0, 359.0, 179.0)] + [("F01", "tie", 90.0, 20e3)]
+    lines += [("F02", "line", h, 20e3) for h in (89.0, 271.0, 92.0, 268.0)]
+    notes = flights_across_lines(lines)
+    assert len(notes) == 1 and notes[0].startswith(
+        "lines: F02's lines run 90 deg across the survey's (0 deg, the lines of F01)"
+    )
+    assert "lines.line_heading_deg" in notes[0]
+    # without tie lines anywhere, the direction with the most line length is the survey's
+    no_ties = [x for x in lines if x[1] == "line"] + [("F03", "line", 2.0, 30e3)]
+    assert [n.split("'")[0] for n in flights_across_lines(no_ties)] == ["lines: F02"]
+    # flights along one direction, one flight, unknown headings: nothing to say
+    assert flights_across_lines([("F01", "line", 0.0, 1e3), ("F02", "line", 170.0, 1e3)]) == []
+    assert flights_across_lines([x for x in lines if x[0] == "F02"]) == []
+    assert flights_across_lines([("F01", "line", 0.0, 1e3), ("F02", "line", float("nan"), 1e3)]) == []
 
 
 def test_transit_is_recognised_by_heading():
