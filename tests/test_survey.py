@@ -460,6 +460,17 @@ def test_line_length_is_by_distance_not_time():
     assert not [s for s in segs if s.kind in ("line", "tie")]
 
 
+#: Three lines joined by turns with a straight leg each (transits), then a fourth line.
+LINES_AND_LEGS = [
+    ("L01", "line"),
+    ("transit01", "transit"),
+    ("L02", "line"),
+    ("transit02", "transit"),
+    ("L03", "line"),
+    ("L04", "line"),
+]
+
+
 def straight_legs(legs, **kw):
     """A track of ``legs`` (1-deg heading noise) segmented: (time, segments, [(name, kind)] of
     the straight ones)."""
@@ -476,14 +487,7 @@ def test_offset_leg_of_a_turn_is_not_a_line():
         legs += [("line", heading, 600.0), ("turn", 1.5, -13.0), ("line", offset, 60.0), ("turn", 3.0, 193.0)]
     legs += [("line", 0.0, 600.0), ("turn", 3.0, 180.0), ("line", 180.0, 100.0)]
     t, segs, straight = straight_legs(legs)
-    assert straight == [
-        ("L01", "line"),
-        ("transit01", "transit"),
-        ("L02", "line"),
-        ("transit02", "transit"),
-        ("L03", "line"),
-        ("L04", "line"),
-    ]
+    assert straight == LINES_AND_LEGS
     # the offset legs are the flown 3.6 km (and the ends of the gentle turns within the heading
     # tolerance), not pieces of a line
     legs_m = [60.0 * (t[s.stop_index - 1] - t[s.start_index]) for s in segs if s.kind == "transit"]
@@ -501,15 +505,7 @@ def test_short_leg_across_the_lines_is_not_a_tie():
         legs += [("line", heading, 600.0)]
     legs += [("turn", 3.0, 180.0), ("line", 180.0, 300.0), ("turn", 3.0, 90.0), ("line", 270.0, 130.0)]
     t, segs, straight = straight_legs(legs)
-    assert straight == [
-        ("L01", "line"),
-        ("transit01", "transit"),
-        ("L02", "line"),
-        ("transit02", "transit"),
-        ("L03", "line"),
-        ("L04", "line"),
-        ("T01", "tie"),
-    ]
+    assert straight == LINES_AND_LEGS + [("T01", "tie")]
     # the short tie is shorter than a connecting leg may be: it is a tie because it crosses lines
     lengths = {s.name: 60.0 * (t[s.stop_index - 1] - t[s.start_index]) for s in segs}
     assert lengths["T01"] < CONNECTING_LEG_FRACTION * lengths["L01"]
