@@ -142,6 +142,19 @@ def test_sample_survey_end_to_end(sample_run):
     assert summary["rms_vs_truth_mgal"] <= bound, (name, summary["rms_vs_truth_mgal"], bound)
 
 
+def test_flights_across_only_for_detected_lines(tmp_path):
+    # lines: {mode: whole} makes each flight one line L01 from take-off to landing: its direction
+    # is no survey direction, and the note on flights across the lines is not made
+    src = _copy_sample("grid_ros2", tmp_path)
+    cfg = src / "survey.yaml"
+    cfg.write_text(cfg.read_text().replace("lines: {mode: auto}", "lines: {mode: whole}"))
+    r = gs("run", cfg, "-o", tmp_path / "out", "--no-plots")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert [ln for fl in summary["flights"].values() for ln in fl["lines"]] == ["L01", "L01"]
+    assert not any("across the survey's" in n for n in summary["notes"])
+
+
 def test_rerun_skips_unchanged_and_check_passes(tmp_path):
     src = _copy_sample("seed_line", tmp_path)
     out = tmp_path / "out"
