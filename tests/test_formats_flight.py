@@ -263,13 +263,14 @@ def test_data_errors(tmp_path):
 def test_positions_from_the_gravimeter_file(tmp_path):
     d, truth = ship(tmp_path, n=600)
     o = gravimeter_options({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL})
-    with pytest.warns(Warning, match="taken at 0 m"):
+    # the meter's own clock is the time base (said, as every fact of the reading)
+    with pytest.warns(Warning, match="taken at 0 m"), pytest.warns(Warning, match="DGS.dat: time from the meter clock"):
         rec = gravimeter_record(o, d)
     assert rec.gnss.time.size == 600 and np.all(rec.altimeter.height == 0.0)
     # the meter's 12-decimal degrees are the track: the record keeps them exactly
     assert np.degrees(rec.gnss.lat[0]) == pytest.approx(48.07, abs=1e-12)
     o = gravimeter_options({"format": "dgs_laptop", "file": "DGS.dat", "offset_mgal": OFFSET_MGAL, "height_m": 12.0})
-    with pytest.warns(Warning, match="height 12 m"):
+    with pytest.warns(Warning, match="height 12 m"), pytest.warns(Warning, match="time from the meter clock"):
         assert np.all(gravimeter_record(o, d).altimeter.height == 12.0)
 
 
@@ -310,8 +311,12 @@ def test_position_jumps_are_reported(tmp_path):
             "nav": {"format": "nmea", "file": "nav.gps"},
         }
     )
-    with pytest.warns(
-        Warning, match=r"navigation: 1 position jump\(s\) implying more than 25 m/s at 149 s \(200\d m/s\)"
+    with (
+        pytest.warns(
+            Warning, match=r"navigation: 1 position jump\(s\) implying more than 25 m/s at 149 s \(200\d m/s\)"
+        ),
+        pytest.warns(Warning, match="DGS.dat: time from the meter clock"),
+        pytest.warns(Warning, match=r"nav.gps: time from the fix clock; logger - fix = \+0.000 s \(median\)"),
     ):
         gravimeter_record(o, d)
 
