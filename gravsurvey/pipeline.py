@@ -1214,7 +1214,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     kind_of = {(r.name, ln): info.get("kind", "line") for r in results for ln, info in r.line_info.items()}
     notes = []
     detected = getattr(cfg.lines, "mode", "auto") == "auto"
-    auto = {fl.name for fl in cfg.flights if fl.lines_windows is None} if detected else set()
+    auto = {fl.name for fl in cfg.flights if getattr(fl, "lines_windows", None) is None} if detected else set()
     if getattr(cfg.lines, "line_heading_deg", None) is None and auto:
         # flights named by their own direction only (windows name their lines themselves)
         notes += _flights_across(table, {k: v for k, v in groups.items() if k[0] in auto}, kind_of)
