@@ -18,7 +18,7 @@ import numpy as np
 
 from gravsurvey.errors import DataError
 
-__all__ = ["Crossovers", "find_crossovers"]
+__all__ = ["Crossovers", "find_crossovers", "intersect_segments"]
 
 
 @dataclass
@@ -172,8 +172,8 @@ class _Track:
         self.bbox = (np.nanmin(self.emin), np.nanmax(self.emax), np.nanmin(self.nmin), np.nanmax(self.nmax))
 
 
-def _intersect(pa0, pa1, pb0, pb1, last_a, last_b):
-    """Segment-segment intersection, vectorised.
+def intersect_segments(pa0, pa1, pb0, pb1, last_a, last_b):
+    """Segment-segment intersection, vectorised (points as rows ``(k, 2)``, broadcast).
 
     Returns t (fraction along a), u (fraction along b), sin of the crossing angle, and a mask.
     Segments are half-open ([p0, p1)) except each line's last segment, so a crossing exactly at a
@@ -288,7 +288,7 @@ def find_crossovers(
         pa1 = np.column_stack([A.e[sa + 1], A.n[sa + 1]])
         pb0 = np.column_stack([B.e[sb], B.n[sb]])
         pb1 = np.column_stack([B.e[sb + 1], B.n[sb + 1]])
-        tt, uu, sin, ok = _intersect(pa0, pa1, pb0, pb1, sa == A.nseg - 1, sb == B.nseg - 1)
+        tt, uu, sin, ok = intersect_segments(pa0, pa1, pb0, pb1, sa == A.nseg - 1, sb == B.nseg - 1)
         ok &= sin >= sin_min - 1e-12
         if not ok.any():
             continue

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
+from gravsurvey.crossovers import intersect_segments
 from gravsurvey.errors import ConfigError, DataError
 from gravsurvey.geodesy import radii_of_curvature, wrap_deg
 
@@ -147,30 +148,20 @@ def _axial_diff_deg(a_deg, b_deg):
     return np.abs(wrap_deg(2.0 * (np.asarray(a_deg, float) - b_deg))) / 2.0
 
 
-def _piece_ends(lat_rad, lon_rad, a: int, b: int):
-    """First and last finite position of samples ``[a, b)`` as (lat, lon) rad pairs, or None."""
-    ok = np.flatnonzero(np.isfinite(lat_rad[a:b]) & np.isfinite(lon_rad[a:b]))
-    if ok.size < 2:
-        return None
-    i, j = a + int(ok[0]), a + int(ok[-1])
-    return (float(lat_rad[i]), float(lon_rad[i])), (float(lat_rad[j]), float(lon_rad[j]))
+def _piece_ends_en(lat_rad, lon_rad, pieces):
+    """First and last finite position of each piece ``[a, b)``, east and north (m) on the
+    flight's local plane (:func:`gravsurvey.drift.local_plane`): two arrays of shape (k, 2),
+    NaN rows for a piece with fewer than two finite positions."""
+    from gravsurvey.drift import local_plane
 
-
-def _crosses(p, q) -> bool:
-    """Whether the straight pieces ``p`` and ``q`` (end pairs of :func:`_piece_ends`, or None)
-    intersect in the horizontal, on a local equirectangular plane (pieces of tens of km)."""
-    if p is None or q is None:
-        return False
-    lat0 = 0.5 * (p[0][0] + q[0][0])
-    lon0 = p[0][1]
-    xy = [((lon - lon0 + np.pi) % (2.0 * np.pi) - np.pi) * np.cos(lat0) for _, lon in (*p, *q)]
-    pts = [(x, lat - lat0) for x, (lat, _) in zip(xy, (*p, *q))]
-    (p0, p1, q0, q1) = pts
-
-    def side(o, u, v) -> float:
-        return (u[0] - o[0]) * (v[1] - o[1]) - (u[1] - o[1]) * (v[0] - o[0])
-
-    return side(p0, p1, q0) * side(p0, p1, q1) < 0.0 and side(q0, q1, p0) * side(q0, q1, p1) < 0.0
+    idx = np.zeros((len(pieces), 2), dtype=int)
+    have = np.zeros(len(pieces), dtype=bool)
+    for k, (a, b) in enumerate(pieces):
+        ok = np.flatnonzero(np.isfinite(lat_rad[a:b]) & np.isfinite(lon_rad[a:b]))
+        if ok.size >= 2:
+            idx[k], have[k] = (a + ok[0], a + ok[-1]), True
+    east, north = local_plane(np.where(have[:, None], lat_rad[idx], np.nan), lon_rad[idx])
+    return np.column_stack([east[:, 0], north[:, 0]]), np.column_stack([east[:, 1], north[:, 1]])
 
 
 def _check_track(time_s, lat_rad, lon_rad, vel_enu):
@@ -479,15 +470,14 @@ def segment_lines(
                 # a turn flown as two 90-deg turns holds a straight of a few km across the lines
                 # between the ends of neighbouring lines: a connecting leg, not a tie line, when
                 # short and crossing no line (a tie line crosses the lines it ties)
-                ends = [_piece_ends(lat, lon, a, b) for a, b in straight]
-                line_ends = [
-                    e
-                    for k, (e, ab) in enumerate(zip(ends, straight))
-                    if along[k] and kinds[ab] != "transit" and e is not None
-                ]
-                for k, (ab, e) in enumerate(zip(straight, ends)):
-                    if short[k] and across[k] and straight_kind[k] and not any(_crosses(e, q) for q in line_ends):
-                        kinds[ab] = "transit"
+                legs = short & across & straight_kind
+                if legs.any():
+                    p0, p1 = _piece_ends_en(lat, lon, straight)
+                    on = along & np.array([kinds[ab] != "transit" for ab in straight])
+                    for k in np.flatnonzero(legs):
+                        crossed = intersect_segments(p0[[k]], p1[[k]], p0[on], p1[on], True, True)[3]
+                        if not crossed.any():
+                            kinds[straight[k]] = "transit"
 
     # Assemble the full cover: lines/ties, then the rest as static or turn runs.
     label = np.zeros(n, dtype=np.int8)  # 0 turn, 1 static, 2 straight
