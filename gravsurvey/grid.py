@@ -25,6 +25,10 @@ Steps, all automatic from the data (nothing here knows the truth of a simulation
    spacing, fixed random state) over the damping candidates :data:`DAMPINGS` (unless
    configured); the one with the lowest held-out RMS is used for the final fit on all data;
    that RMS (mGal) and R^2 are reported as the grid's cross-validation score.
+4. Sigma: each cell's 1-sigma (:func:`_grid_sigma`): the ordinary-kriging interpolation error
+   of a covariance fitted to the lines, the data's stated errors (not averaged down across
+   lines) and the fit's misfit, the field's part scaled so that the cross-validation residuals
+   of step 3 have the spread it predicts (docs/survey.md, "The grid's sigma").
 
 Units: m, mGal (named); the grid's coordinates are the projected easting/northing of the
 survey (its EPSG code is written into the netCDF file).
@@ -39,7 +43,17 @@ import numpy as np
 
 from gravsurvey.errors import DataError
 
-__all__ = ["GRID_METHODS", "GridOptions", "GridResult", "thin_lines", "line_spacing", "grid_lines", "write_grid_netcdf"]
+__all__ = [
+    "GRID_METHODS",
+    "GridOptions",
+    "GridResult",
+    "thin_lines",
+    "line_spacing",
+    "field_covariance",
+    "kriging_variance",
+    "grid_lines",
+    "write_grid_netcdf",
+]
 
 GRID_METHODS = ("equivalent_sources", "spline")
 #: damping candidates tried by cross-validation (harmonica's damping of the source coefficients)
@@ -59,6 +73,16 @@ MAX_FIT_POINTS = 4000
 REPEAT_LINE_M = 100.0
 #: the grid is at least this fine relative to the line spacing
 SPACING_PER_LINE_SPACING = 0.25
+#: nearest thinned points in each cell's kriging variance (the grid's sigma layer)
+SIGMA_NEIGHBOURS = 32
+#: field correlation lengths tried by :func:`field_covariance`, in line spacings
+COVARIANCE_LENGTHS = tuple(float(x) for x in np.geomspace(0.1, 30.0, 40))
+#: longest along-line lag in the field covariance fit, in line spacings
+COVARIANCE_MAX_LAG = 4.0
+#: most cells kriged for the sigma layer (finer grids: kriged on a coarser lattice, interpolated)
+SIGMA_MAX_CELLS = 10_000
+#: range of the cross-validation's scale on the field's part of the grid's error variance
+CV_SCALE_RANGE = (1e-4, 1e4)
 
 
 @dataclass
@@ -113,6 +137,9 @@ class GridResult:
         :data:`MAX_FIT_POINTS` bins).
     candidates : list of dict
         Every (depth_m, damping, cv_rms_mgal) tried.
+    sigma_mgal : ndarray, shape (ny, nx) or None
+        1-sigma of ``value_mgal`` about the survey's level (NaN where the value is);
+        ``sigma_info`` how it was found (:func:`_grid_sigma`).
     """
 
     easting_m: np.ndarray
@@ -130,6 +157,8 @@ class GridResult:
     n_data: int
     candidates: list = field(default_factory=list)
     thinning_m: float = float("nan")
+    sigma_mgal: np.ndarray | None = None
+    sigma_info: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
         """JSON-able facts for summary.json."""
@@ -151,10 +180,11 @@ class GridResult:
             "min_mgal": float(v.min()) if v.size else None,
             "max_mgal": float(v.max()) if v.size else None,
             "candidates": self.candidates,
+            "sigma": self.sigma_info or None,
         }
 
 
-def thin_lines(easting_m, northing_m, height_m, value_mgal, line_id, step_m: float):
+def thin_lines(easting_m, northing_m, height_m, value_mgal, line_id, step_m: float, extra=()):
     """Block means along each line in bins of ``step_m`` of along-track distance.
 
     Parameters
@@ -163,27 +193,36 @@ def thin_lines(easting_m, northing_m, height_m, value_mgal, line_id, step_m: flo
     line_id : array_like, shape (n,)
         Any hashable label per sample; a line's samples in along-track order.
     step_m : float
+    extra : sequence of array_like, shape (n,)
+        More per-sample quantities averaged in the same bins (NaN allowed: a bin holding one
+        is NaN); returned after the line labels.
 
     Returns
     -------
     e, n, h, v : ndarray, shape (m,)
+        Bins in line order, and along each line in along-track order.
     line : ndarray, shape (m,)
         The line label of each bin.
+    *extra : ndarray, shape (m,)
+        One per ``extra`` given.
     """
     e = np.asarray(easting_m, float)
     n = np.asarray(northing_m, float)
     h = np.asarray(height_m, float)
     v = np.asarray(value_mgal, float)
+    more = [np.broadcast_to(np.asarray(x, float), e.shape) for x in extra]
     lid = np.asarray(line_id).astype(str)
     ok = np.isfinite(e) & np.isfinite(n) & np.isfinite(h) & np.isfinite(v)
     e, n, h, v, lid = e[ok], n[ok], h[ok], v[ok], lid[ok]
+    more = [x[ok] for x in more]
     if e.size == 0:
         z = np.zeros(0)
-        return z, z, z, z, np.zeros(0, dtype=str)
+        return (z, z, z, z, np.zeros(0, dtype=str), *(z for _ in more))
     names, code = np.unique(lid, return_inverse=True)
     # along-track distance restarts at every line (samples of a line are contiguous after a stable sort)
     order = np.argsort(code, kind="stable")
     e, n, h, v, code = e[order], n[order], h[order], v[order], code[order]
+    more = [x[order] for x in more]
     step = np.hypot(np.diff(e), np.diff(n))
     new = np.concatenate(([True], code[1:] != code[:-1]))
     step = np.concatenate(([0.0], step))
@@ -196,7 +235,7 @@ def thin_lines(easting_m, northing_m, height_m, value_mgal, line_id, step_m: flo
     mean = lambda x: np.bincount(inv, x) / cnt  # noqa: E731
     first = np.zeros(cnt.size, np.int64)
     first[inv[::-1]] = np.arange(inv.size)[::-1]
-    return mean(e), mean(n), mean(h), mean(v), names[code[first]]
+    return (mean(e), mean(n), mean(h), mean(v), names[code[first]], *(mean(x) for x in more))
 
 
 def line_spacing(easting_m, northing_m, line) -> float:
@@ -249,6 +288,229 @@ def line_spacing(easting_m, northing_m, line) -> float:
     return float(np.median(d))
 
 
+def matern32(r_over_l):
+    """Matern-3/2 correlation ``(1 + sqrt(3) x) exp(-sqrt(3) x)`` of distance over length."""
+    x = np.sqrt(3.0) * np.abs(r_over_l)
+    return (1.0 + x) * np.exp(-x)
+
+
+def matern52(r_over_l):
+    """Matern-5/2 correlation ``(1 + sqrt(5) x + 5 x^2 / 3) exp(-sqrt(5) x)``."""
+    x = np.sqrt(5.0) * np.abs(r_over_l)
+    return (1.0 + x + x * x / 3.0) * np.exp(-x)
+
+
+def layer_correlation(r_over_l):
+    """Correlation ``(1 + x^2)^(-3/2)`` of the vertical attraction of random point sources on a
+    layer at depth ``l / 2`` below the data (its power spectrum ``exp(-2 |k| depth)``)."""
+    return (1.0 + np.square(r_over_l)) ** -1.5
+
+
+#: covariance shapes :func:`field_covariance` chooses from
+CORRELATIONS = {"matern32": matern32, "matern52": matern52, "layer": layer_correlation}
+
+
+def _noise_correlation(dist_m, length_m):
+    """Along-line correlation of a line's data errors, ``exp(-d / length)`` (0 length: white)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = np.exp(-dist_m / length_m)
+    return np.where(length_m > 0.0, rho, (dist_m == 0.0).astype(float))
+
+
+def sample_spacing(easting_m, northing_m, line) -> np.ndarray:
+    """Each sample's line's median along-track sample spacing, m, shape (n,) (NaN for a line
+    of one sample or with a non-finite position)."""
+    e = np.asarray(easting_m, float)
+    n = np.asarray(northing_m, float)
+    _, code = np.unique(np.asarray(line).astype(str), return_inverse=True)
+    out = np.full(e.size, np.nan)
+    step = np.hypot(np.diff(e), np.diff(n))
+    same = (code[1:] == code[:-1]) & np.isfinite(step)
+    for c in np.unique(code[1:][same]):
+        out[code == c] = np.median(step[same & (code[1:] == c)])
+    return out
+
+
+def bin_mean_variance_ratio(bin_m, spacing_m, length_m) -> np.ndarray:
+    """Variance of a bin's mean over a sample's, for errors correlated along the line as
+    ``exp(-d / length_m)``: the continuous average over ``bin_m``,
+    ``2 (l/T)^2 (T/l - 1 + exp(-T/l))``, but never below one over the samples in the bin.
+
+    Parameters
+    ----------
+    bin_m : float
+    spacing_m, length_m : ndarray, shape (m,)
+        Sample spacing (NaN: one sample per bin) and correlation length (0: white), m.
+    """
+    count = np.maximum(1.0, bin_m / np.where(np.isfinite(spacing_m) & (spacing_m > 0), spacing_m, bin_m))
+    white = ~(length_m > 0.0)
+    x = bin_m / np.where(white, 1.0, length_m)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        cont = np.where(x > 1e-6, 2.0 * (x - 1.0 + np.exp(-x)) / np.square(x), 1.0)
+    cont = np.where(white, 0.0, cont)
+    return np.clip(np.maximum(cont, 1.0 / count), 0.0, 1.0)
+
+
+def field_covariance(easting_m, northing_m, value_mgal, line, noise_sigma_mgal, noise_length_m, max_lag_m, lengths_m):
+    """The field's covariance from the lines: ``s2 * corr(r / length)``, the shape ``corr`` of
+    :data:`CORRELATIONS` and its length that fit the along-line empirical covariance (less the
+    data errors' own covariance) best in least squares.
+
+    Parameters
+    ----------
+    easting_m, northing_m, value_mgal : ndarray, shape (m,)
+        Thinned points, each line's points together and in along-track order
+        (:func:`thin_lines`).
+    line : ndarray, shape (m,)
+        Line label per point.
+    noise_sigma_mgal, noise_length_m : ndarray, shape (m,)
+        The data's 1-sigma error (NaN: unknown) and its along-line correlation length (0: white).
+    max_lag_m : float
+        Longest lag fitted, m.
+    lengths_m : sequence of float
+        Correlation lengths tried, m.
+
+    Returns
+    -------
+    shape : str
+        The correlation of the best fit, a key of :data:`CORRELATIONS`.
+    s2_mgal2 : float
+        The field's variance, mGal^2.
+    length_m : float
+    nugget_mgal2 : float
+        The points' variance not explained by the field at lag 0 (their error where it is not
+        given), mGal^2, >= 0.
+    """
+    e, n = np.asarray(easting_m, float), np.asarray(northing_m, float)
+    x = np.asarray(value_mgal, float) - float(np.mean(value_mgal))
+    sig = np.nan_to_num(np.asarray(noise_sigma_mgal, float), nan=0.0)
+    ell = np.asarray(noise_length_m, float)
+    lab = np.asarray(line).astype(str)
+    nbins = 24  # lag bins of max_lag_m / 24
+    csum = np.zeros(nbins)
+    dsum = np.zeros(nbins)
+    cnt = np.zeros(nbins)
+    for j in range(1, min(x.size, 400)):
+        same = lab[j:] == lab[:-j]
+        d = np.hypot(e[j:] - e[:-j], n[j:] - n[:-j])
+        use = same & (d < max_lag_m)
+        if not use.any():
+            break
+        noise = sig[j:] * sig[:-j] * _noise_correlation(d, 0.5 * (ell[j:] + ell[:-j]))
+        b = np.minimum((d[use] / max_lag_m * nbins).astype(int), nbins - 1)
+        csum += np.bincount(b, (x[j:] * x[:-j] - noise)[use], nbins)
+        dsum += np.bincount(b, d[use], nbins)
+        cnt += np.bincount(b, minlength=nbins)
+    c0 = float(np.mean(x**2))
+    ok = cnt >= 5
+    if not ok.any():
+        return "matern32", max(c0 - float(np.mean(sig**2)), 0.0), float(lengths_m[len(lengths_m) // 2]), c0
+    c = csum[ok] / cnt[ok]
+    d = dsum[ok] / cnt[ok]
+    w = cnt[ok]
+    best = None
+    for shape, corr in CORRELATIONS.items():
+        for length in lengths_m:
+            rho = corr(d / length)
+            s2 = max(float(np.sum(w * c * rho) / np.sum(w * rho * rho)), 0.0)
+            sse = float(np.sum(w * (c - s2 * rho) ** 2))
+            if best is None or sse < best[0]:
+                best = (sse, shape, s2, float(length))
+    _, shape, s2, length = best
+    # the field cannot hold more variance than the points show
+    s2 = min(s2, c0)
+    return shape, s2, length, max(c0 - s2, 0.0)
+
+
+def kriging_variance(
+    data_xy,
+    data_sigma,
+    data_line,
+    data_noise_length,
+    target_xy,
+    s2,
+    length_m,
+    *,
+    shape: str = "matern32",
+    k: int = SIGMA_NEIGHBOURS,
+    target_sigma=None,
+    chunk: int = 2048,
+):
+    """The field's and the data errors' parts of the error variance of an ordinary-kriging
+    interpolation at ``target_xy`` from the ``k`` nearest points.
+
+    The field is a Gaussian process of unknown constant mean and covariance
+    ``s2 * corr(r / length_m)`` (``corr`` the correlation :data:`CORRELATIONS` names ``shape``);
+    a point's value is the field plus an error of 1-sigma ``data_sigma`` correlated along its
+    line as ``exp(-d / data_noise_length)``. The weights ``w`` (summing to one: the local level
+    is unknown, as a grid's is) are those of that model. The field part is the interpolation's
+    error ``s2 - 2 w.k + w.K.w``; the error part is the neighbours' error variance weighted by
+    ``|w|``: not reduced by averaging across lines, whose errors the model cannot tell
+    independent (a survey's lines share a flight's errors).
+
+    Parameters
+    ----------
+    data_xy : ndarray, shape (n, 2)
+        Easting, northing of the points, m.
+    data_sigma, data_noise_length : ndarray, shape (n,)
+        mGal, m.
+    data_line : ndarray of int, shape (n,)
+        Line code per point.
+    target_xy : ndarray, shape (m, 2)
+    s2 : float
+        Field variance, mGal^2.
+    length_m : float
+    k : int
+        Neighbours used per target.
+    target_sigma : ndarray, shape (m,), optional
+        Given when the targets are data points themselves (held out): their own error variance
+        is added to the error part (the value less its prediction).
+
+    Returns
+    -------
+    field, error : ndarray, shape (m,)
+        mGal^2.
+    """
+    from scipy.spatial import cKDTree
+
+    corr = CORRELATIONS[shape]
+    data_xy = np.asarray(data_xy, float)
+    target_xy = np.asarray(target_xy, float)
+    field_var = np.zeros(target_xy.shape[0])
+    error_var = np.zeros(target_xy.shape[0])
+    if target_xy.shape[0] == 0:
+        return field_var, error_var
+    k = int(min(k, data_xy.shape[0]))
+    _, nb = cKDTree(data_xy).query(target_xy, k=k)
+    nb = np.asarray(nb).reshape(target_xy.shape[0], k)
+    jitter = 1e-9 * (s2 + float(np.max(data_sigma)) ** 2) + 1e-12
+    for a in range(0, target_xy.shape[0], chunk):
+        idx = nb[a : a + chunk]
+        c = idx.shape[0]
+        p = data_xy[idx]  # (c, k, 2)
+        dd = np.sqrt(np.sum((p[:, :, None, :] - p[:, None, :, :]) ** 2, axis=-1))
+        sig = data_sigma[idx]
+        ell = data_noise_length[idx]
+        same = data_line[idx][:, :, None] == data_line[idx][:, None, :]
+        noise = sig[:, :, None] * sig[:, None, :] * _noise_correlation(dd, 0.5 * (ell[:, :, None] + ell[:, None, :]))
+        kf = s2 * corr(dd / length_m)
+        kk = np.zeros((c, k + 1, k + 1))
+        kk[:, :k, :k] = kf + np.where(same, noise, 0.0) + np.eye(k)[None] * jitter
+        kk[:, :k, k] = 1.0
+        kk[:, k, :k] = 1.0
+        dt = np.sqrt(np.sum((p - target_xy[a : a + chunk, None, :]) ** 2, axis=-1))
+        ks = s2 * corr(dt / length_m)
+        w = np.linalg.solve(kk, np.concatenate([ks, np.ones((c, 1))], axis=1)[..., None])[:, :k, 0]
+        fv = s2 - 2.0 * np.sum(w * ks, axis=1) + np.einsum("ci,cij,cj->c", w, kf, w)
+        aw = np.abs(w)
+        ev = np.sum(aw * sig**2, axis=1) / np.sum(aw, axis=1)
+        if target_sigma is not None:
+            ev += target_sigma[a : a + chunk] ** 2
+        field_var[a : a + chunk] = fv
+        error_var[a : a + chunk] = ev
+    return np.clip(field_var, 0.0, None), error_var
+
+
 def point_source_jacobian(coordinates, points) -> np.ndarray:
     """Green's function ``1 / distance`` of unit point sources, the Jacobian of harmonica's
     Cartesian ``EquivalentSources``.
@@ -299,7 +561,16 @@ def _fit_predict(method, depth, damping, coords_fit, v_fit, coords_pred):
 
 
 def grid_lines(
-    easting_m, northing_m, height_m, value_mgal, line, options: GridOptions | None = None, *, random_state: int = 0
+    easting_m,
+    northing_m,
+    height_m,
+    value_mgal,
+    line,
+    options: GridOptions | None = None,
+    *,
+    random_state: int = 0,
+    sigma_mgal=None,
+    noise_length_m=None,
 ) -> GridResult:
     """Grid line data (module docstring); see :func:`_grid_lines` for the parameters.
 
@@ -307,16 +578,26 @@ def grid_lines(
     machine, lost 30x (0.83 s vs 0.03 s for one 600 x 600 solve measured on the 2-core CI host),
     so BLAS runs single-threaded inside (threadpoolctl, a scikit-learn dependency).
     """
+    kw = {"sigma_mgal": sigma_mgal, "noise_length_m": noise_length_m}
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover - scikit-learn (verde, harmonica) brings it
-        return _grid_lines(easting_m, northing_m, height_m, value_mgal, line, options, random_state=random_state)
+        return _grid_lines(easting_m, northing_m, height_m, value_mgal, line, options, random_state=random_state, **kw)
     with threadpool_limits(limits=1, user_api="blas"):
-        return _grid_lines(easting_m, northing_m, height_m, value_mgal, line, options, random_state=random_state)
+        return _grid_lines(easting_m, northing_m, height_m, value_mgal, line, options, random_state=random_state, **kw)
 
 
 def _grid_lines(
-    easting_m, northing_m, height_m, value_mgal, line, options: GridOptions | None = None, *, random_state: int = 0
+    easting_m,
+    northing_m,
+    height_m,
+    value_mgal,
+    line,
+    options: GridOptions | None = None,
+    *,
+    random_state: int = 0,
+    sigma_mgal=None,
+    noise_length_m=None,
 ) -> GridResult:
     """Grid line data (module docstring).
 
@@ -329,6 +610,12 @@ def _grid_lines(
     options : GridOptions, optional
     random_state : int
         For the cross-validation folds (fixed: results are reproducible).
+    sigma_mgal : array_like, shape (n,), optional
+        The values' 1-sigma error, mGal (NaN or None: unknown, then taken from the data's
+        variance the field does not explain).
+    noise_length_m : float or array_like, shape (n,), optional
+        Along-line correlation length of those errors, m (e.g. the line's resolution; None: 0,
+        white).
 
     Returns
     -------
@@ -354,7 +641,13 @@ def _grid_lines(
         raise DataError("grid: the lines do not have a measurable spacing (all on one track?)")
     spacing = o.spacing_m or SPACING_PER_LINE_SPACING * ls
     step = THIN_PER_SPACING * spacing
-    e, n, h, v, lab = thin_lines(easting_m, northing_m, height_m, value_mgal, line, step)
+    nsamp = np.asarray(easting_m).shape
+    extra = (
+        np.full(nsamp, np.nan) if sigma_mgal is None else np.asarray(sigma_mgal, float),
+        np.zeros(nsamp) if noise_length_m is None else np.broadcast_to(np.asarray(noise_length_m, float), nsamp),
+        sample_spacing(easting_m, northing_m, line),
+    )
+    e, n, h, v, lab, sig, ell, dl = thin_lines(easting_m, northing_m, height_m, value_mgal, line, step, extra)
     for _ in range(8):
         if e.size <= MAX_FIT_POINTS:
             break
@@ -362,9 +655,10 @@ def _grid_lines(
         # more coarsely along the lines (never across them) so memory and time stay bounded; a
         # step below the sample spacing thins nothing, so it grows until the points fit
         step = max(step * e.size / MAX_FIT_POINTS, 1.5 * step)
-        e, n, h, v, lab = thin_lines(easting_m, northing_m, height_m, value_mgal, line, step)
+        e, n, h, v, lab, sig, ell, dl = thin_lines(easting_m, northing_m, height_m, value_mgal, line, step, extra)
     if e.size < 10:
         raise DataError(f"grid: only {e.size} data points after thinning to {step:.0f} m; need >= 10")
+    sig = sig * np.sqrt(bin_mean_variance_ratio(step, dl, ell))
     altitude = o.altitude_m if o.altitude_m is not None else float(np.median(h))
     maxdist = o.max_distance_m or MAX_DISTANCE_PER_LINE_SPACING * ls
     coords = (e, n, h)
@@ -387,6 +681,7 @@ def _grid_lines(
     if not splits:
         raise DataError(f"grid: the data span less than 2 blocks of {ls:.0f} m: cannot cross-validate")
     cands = []
+    residuals = []
     for dep in depths:
         for dmp in damps:
             res = np.full(v.size, np.nan)
@@ -398,14 +693,21 @@ def _grid_lines(
             rms = float(np.sqrt(np.nanmean(res**2)))
             r2 = float(1.0 - np.nansum(res**2) / np.sum((v - v.mean()) ** 2))
             cands.append({"depth_m": dep, "damping": dmp, "cv_rms_mgal": rms, "cv_r2": r2})
-    best = min(cands, key=lambda c: c["cv_rms_mgal"])
+            residuals.append(res)
+    ibest = min(range(len(cands)), key=lambda i: cands[i]["cv_rms_mgal"])
+    best = cands[ibest]
     region = (e.min(), e.max(), n.min(), n.max())
     ge, gn = vd.grid_coordinates(region, spacing=spacing, meshgrid=False, adjust="region")
     GE, GN = np.meshgrid(ge, gn)
-    pred_coords = (GE.ravel(), GN.ravel(), np.full(GE.size, altitude))
-    val = _fit_predict(o.method, best["depth_m"], best["damping"], coords, v, pred_coords).reshape(GE.shape)
+    # the grid's cells and the points themselves (the fit's misfit enters the sigma) in one call
+    pred_coords = tuple(np.concatenate([a.ravel(), b]) for a, b in zip((GE, GN, np.full(GE.shape, altitude)), coords))
+    pred = _fit_predict(o.method, best["depth_m"], best["damping"], coords, v, pred_coords)
+    val = pred[: GE.size].reshape(GE.shape)
     mask = vd.distance_mask((e, n), maxdist=maxdist, coordinates=(GE, GN))
     val = np.where(mask, val, np.nan)
+    sigma, sigma_info = _grid_sigma(
+        e, n, v, lab, sig, ell, ls, splits, residuals[ibest], v - pred[GE.size :], GE, GN, mask
+    )
     return GridResult(
         easting_m=np.asarray(ge, float),
         northing_m=np.asarray(gn, float),
@@ -422,7 +724,98 @@ def _grid_lines(
         n_data=int(v.size),
         candidates=cands,
         thinning_m=float(step),
+        sigma_mgal=sigma,
+        sigma_info=sigma_info,
     )
+
+
+def _grid_sigma(e, n, v, lab, sig, ell, line_spacing_m, splits, cv_residual, fit_residual, GE, GN, mask):
+    """The grid's 1-sigma layer (docs/survey.md, "The grid's sigma"): the kriging error of the
+    field's covariance fitted to the lines (:func:`field_covariance`, :func:`kriging_variance`),
+    scaled so that the grid's own cross-validation residuals have the spread it predicts.
+
+    Parameters
+    ----------
+    e, n, v, lab, sig, ell : ndarray, shape (m,)
+        The thinned points (:func:`thin_lines`): position (m), value and its 1-sigma (mGal, NaN
+        unknown), line label, error correlation length (m).
+    splits : list of (train, test) index arrays
+        The cross-validation folds; ``cv_residual`` (m,) the chosen fit's held-out residuals.
+    fit_residual : ndarray, shape (m,)
+        The points less the final fit at the points, mGal.
+    GE, GN, mask : ndarray, shape (ny, nx)
+
+    Returns
+    -------
+    sigma : ndarray, shape (ny, nx)
+        mGal; NaN where ``mask`` is False.
+    info : dict
+        JSON-able facts for summary.json.
+    """
+    _, code = np.unique(lab, return_inverse=True)
+    ell = np.where(np.isfinite(ell) & (ell > 0.0), ell, 0.0)
+    known = np.isfinite(sig)
+    shape, s2, length, nugget = field_covariance(
+        e,
+        n,
+        v,
+        lab,
+        sig,
+        ell,
+        COVARIANCE_MAX_LAG * line_spacing_m,
+        [f * line_spacing_m for f in COVARIANCE_LENGTHS],
+    )
+    # an error not given is what the points show beyond the field
+    sig = np.where(known, sig, np.sqrt(nugget))
+    # what the fit cannot hold along the lines (its sources' depth smooths wavelengths shorter
+    # than about the line spacing), beyond the points' own errors: in every cell, held out or not
+    misfit = max(float(np.mean(fit_residual**2) - np.mean(sig**2)), 0.0)
+    xy = np.column_stack([e, n])
+    ok = np.isfinite(cv_residual)
+    # the held-out residuals' squares against what the model predicts for them: the errors'
+    # part as stated, the field's part scaled (its variance as the cross-validation sees it)
+    field_cv = np.zeros(v.size)
+    error_cv = np.zeros(v.size)
+    for tr, te in splits:
+        field_cv[te], error_cv[te] = kriging_variance(
+            xy[tr], sig[tr], code[tr], ell[tr], xy[te], s2, length, shape=shape, target_sigma=sig[te]
+        )
+    spare = float(np.sum(cv_residual[ok] ** 2) - np.sum(error_cv[ok]) - misfit * int(ok.sum()))
+    total = float(np.sum(field_cv[ok]))
+    scale = float(np.clip(spare / total, *CV_SCALE_RANGE)) if total > 0.0 else 1.0
+    sigma = np.full(GE.shape, np.nan)
+    # the sigma varies over the line spacing, not the cell: a grid finer than SIGMA_MAX_CELLS
+    # cells is kriged on every step-th row and column and interpolated between them
+    step = max(1, math.ceil(math.sqrt(mask.sum() / SIGMA_MAX_CELLS)))
+    rows = np.unique(np.r_[np.arange(0, GE.shape[0], step), GE.shape[0] - 1])
+    cols = np.unique(np.r_[np.arange(0, GE.shape[1], step), GE.shape[1] - 1])
+    if step > 1:
+        from scipy.interpolate import RegularGridInterpolator
+
+        ce, cn = np.meshgrid(GE[0, cols], GN[rows, 0])
+        parts = kriging_variance(xy, sig, code, ell, np.column_stack([ce.ravel(), cn.ravel()]), s2, length, shape=shape)
+        coarse = (scale * parts[0] + parts[1] + misfit).reshape(ce.shape)
+        fine = RegularGridInterpolator((GN[rows, 0], GE[0, cols]), coarse)(np.column_stack([GN[mask], GE[mask]]))
+        sigma[mask] = np.sqrt(fine)
+    else:
+        cells = np.column_stack([GE[mask], GN[mask]])
+        field_cell, error_cell = kriging_variance(xy, sig, code, ell, cells, s2, length, shape=shape)
+        sigma[mask] = np.sqrt(scale * field_cell + error_cell + misfit)
+    filled = sigma[mask]
+    info = {
+        "method": "kriging",
+        "covariance": shape,
+        "field_sigma_mgal": float(np.sqrt(s2)),
+        "field_length_m": length,
+        "data_sigma_mgal": float(np.median(sig)),
+        "data_sigma_from": "stated" if known.all() else "data" if not known.any() else "stated and data",
+        "data_sigma_length_m": float(np.median(ell)),
+        "misfit_mgal": float(np.sqrt(misfit)),
+        "field_variance_cv_scale": scale,
+        "median_mgal": float(np.median(filled)) if filled.size else None,
+        "max_mgal": float(np.max(filled)) if filled.size else None,
+    }
+    return sigma, info
 
 
 def write_grid_netcdf(
@@ -437,7 +830,7 @@ def write_grid_netcdf(
     """Write a grid as CF-1.8 netCDF (netCDF3 via scipy; readable by GMT, QGIS, xarray).
 
     Variables: ``easting`` (x, m), ``northing`` (y, m), ``<variable>`` (y, x) in mGal with
-    ``grid_mapping = "crs"``; ``crs`` carries ``spatial_ref``/``crs_wkt`` (WKT from pyproj) and
+    ``grid_mapping = "crs"`` and, when the grid has one, its 1-sigma ``<variable>_sigma`` (mGal); ``crs`` carries ``spatial_ref``/``crs_wkt`` (WKT from pyproj) and
     ``epsg_code``. Global attributes: title, Conventions, altitude, method, cross-validation
     score and whatever ``attrs`` adds (software version, processing parameters).
 
@@ -481,7 +874,19 @@ def write_grid_netcdf(
         except Exception:  # an unknown code still gets written as a label
             crs_attrs = {"epsg_code": f"EPSG:{int(crs_epsg)}"}
     crs_attrs = {k: (v if isinstance(v, (str, int, float)) else str(v)) for k, v in crs_attrs.items()}
-    ds = xr.Dataset({variable: da, "crs": xr.DataArray(np.int32(0), attrs=crs_attrs)})
+    layers = {variable: da}
+    if grid.sigma_mgal is not None:
+        layers[f"{variable}_sigma"] = xr.DataArray(
+            grid.sigma_mgal.astype("float32"),
+            dims=("northing", "easting"),
+            coords=da.coords,
+            attrs={
+                "long_name": f"1-sigma of {variable} about the survey's level (kriging error, docs/survey.md)",
+                "units": "mGal",
+                "grid_mapping": "crs",
+            },
+        )
+    ds = xr.Dataset({**layers, "crs": xr.DataArray(np.int32(0), attrs=crs_attrs)})
     glob = {
         "title": title,
         "Conventions": "CF-1.8",

@@ -788,6 +788,14 @@ class RunResult:
             xo = self.summary.get("crossovers", {})
             if xo.get("count"):
                 yield f"crossovers: {xo['count']}, RMS {xo['rms_mgal']:.3f} mGal (RMS/sqrt2 {xo['rms_over_sqrt2_mgal']:.3f})"
+            gr = self.summary.get("grid") or {}
+            if gr.get("shape"):
+                sg = (gr.get("sigma") or {}).get("median_mgal")
+                yield (
+                    f"grid: {gr['shape'][0]} x {gr['shape'][1]} cells of {gr['spacing_m']:.0f} m, "
+                    f"cross-validation RMS {gr['cv_rms_mgal']:.2f} mGal"
+                    + (f", 1-sigma median {sg:.2f} mGal" if sg is not None else "")
+                )
             for fname, fs in self.summary.get("flights", {}).items():
                 if fs.get("rms_vs_truth_mgal") is not None:
                     yield f"{fname}: RMS vs truth {fs['rms_vs_truth_mgal']:.3f} mGal over lines"
@@ -1307,6 +1315,13 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
 
         lab = np.where(in_line, table["flight"].astype(str), "")
         lab = np.char.add(np.char.add(lab, "/"), table["line"].astype(str))
+        # a line's errors are correlated over about its resolution (the smoother's and filter's)
+        err_len = np.zeros(lab.size)
+        for r in results:
+            for name, info in r.line_info.items():
+                idx = groups.get((r.name, name))
+                if idx is not None and info.get("resolution_m"):
+                    err_len[idx] = float(info["resolution_m"])
         try:
             grid = grid_lines(
                 table["easting_m"][in_line],
@@ -1315,6 +1330,8 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                 table["levelled_mgal"][in_line],
                 lab[in_line],
                 gopt,
+                sigma_mgal=table["sigma_mgal"][in_line],
+                noise_length_m=err_len[in_line],
             )
             grid_info = grid.summary()
         except (DataError, np.linalg.LinAlgError, ValueError) as exc:
@@ -1514,7 +1531,13 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                             else "at the flight heights"
                         )
                         + f"; cross-validation RMS {grid.cv_rms_mgal:.2f} mGal"
+                        + (
+                            f"\n1-sigma (dashed contours) median {grid.sigma_info['median_mgal']:.2f} mGal"
+                            if (grid.sigma_info or {}).get("median_mgal") is not None
+                            else ""
+                        )
                     ),
+                    sigma_mgal=grid.sigma_mgal,
                 )
         summary["output_sha256"] = tx.file_hashes()
         writers.write_json(tx.path("summary.json"), summary)

@@ -476,8 +476,10 @@ def figure_grid_map(
     crs_label: str = "",
     title: str = "",
     note: str = "",
+    sigma_mgal=None,
 ):
-    """Map of a grid: colour in mGal, flight lines, scale bar, CRS label.
+    """Map of a grid: colour in mGal, flight lines, scale bar, CRS label, and the grid's 1-sigma
+    as dashed labelled contours.
 
     Parameters
     ----------
@@ -493,6 +495,8 @@ def figure_grid_map(
         E.g. ``"EPSG:32632 WGS 84 / UTM zone 32N"``: written on the map and the axes.
     title, note : str
         ``note`` (e.g. the grid altitude and cross-validation score) goes under the title.
+    sigma_mgal : array_like, shape (ny, nx), optional
+        The grid's 1-sigma, mGal: contoured (gid ``sigma``) where it varies.
 
     Returns
     -------
@@ -527,6 +531,20 @@ def figure_grid_map(
                 te[a:b], tn[a:b], color="black", linewidth=0.6, gid="tracks", label="flight lines" if first else None
             )
             first = False
+    if sigma_mgal is not None:
+        sg = np.asarray(sigma_mgal, float)
+        fs = sg[np.isfinite(sg)]
+        if fs.size and float(fs.max()) > float(fs.min()):
+            levels = np.unique(np.round(np.linspace(float(fs.min()), float(fs.max()), 6)[1:-1], 2))
+            levels = levels[levels > 0]
+            if levels.size:
+                cs = ax.contour(
+                    ge, gn, np.ma.masked_invalid(sg), levels=levels, colors="0.25", linewidths=0.8, linestyles="dashed"
+                )
+                cs.set_gid("sigma")
+                ax.clabel(cs, fmt="%g", fontsize=7)
+                ax.plot([], [], color="0.25", linewidth=0.8, linestyle="dashed", label="1-sigma, mGal")
+    if ax.get_legend_handles_labels()[1]:
         ax.legend(loc="upper right", fontsize=8)
     ax.set_aspect("equal", adjustable="datalim")
     x0, x1 = float(np.nanmin(ge)), float(np.nanmax(ge))

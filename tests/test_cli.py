@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from gravsurvey.io.writers import read_xyz
@@ -135,6 +136,15 @@ def test_sample_survey_end_to_end(sample_run):
         across_notes = [n for n in summary["notes"] if "across the survey's" in n]
         assert len(across_notes) == 1 and across_notes[0].startswith("lines: F02's lines run 9")
         assert "the lines of F01" in across_notes[0] and "lines.line_heading_deg" in across_notes[0]
+        # the grid's sigma layer from the profiles' stated sigma (docs/survey.md, "The grid's sigma")
+        gs_ = summary["grid"]["sigma"]
+        assert gs_["data_sigma_from"] == "stated" and gs_["data_sigma_length_m"] > 0
+        import xarray as xr
+
+        with xr.open_dataset(out / "grid.nc", engine="scipy") as ds:
+            sg = ds["gravity_disturbance_sigma"].values
+            assert np.array_equal(np.isfinite(sg), np.isfinite(ds["gravity_disturbance"].values))
+            assert np.nanmin(sg) > 0 and np.nanmedian(sg) == pytest.approx(gs_["median_mgal"], rel=1e-3)
     else:
         assert not any("across the survey's" in n for n in summary["notes"])
     bound = _bounds_from_docs()[name]

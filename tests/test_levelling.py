@@ -224,6 +224,15 @@ def test_survey_outputs_tie_level_grid_and_metadata(tmp_path):
     assert summary["grid"]["cv_rms_mgal"] > 0 and summary["grid"]["spacing_m"] == pytest.approx(750.0, rel=0.01)
     for f in ("grid.nc", "grid_map.png", "levelling.png", "profiles.csv", "profiles.xyz", "lines.geojson"):
         assert (out / f).is_file(), f
+    # the grid's sigma layer, from the profiles' stated sigma
+    gs = summary["grid"]["sigma"]
+    assert gs["data_sigma_from"] == "stated" and gs["median_mgal"] > 0
+    import xarray as xr
+
+    with xr.open_dataset(out / "grid.nc", engine="scipy") as ds:
+        sig = ds["gravity_disturbance_sigma"].values
+        assert np.array_equal(np.isfinite(sig), np.isfinite(ds["gravity_disturbance"].values))
+        assert np.nanmedian(sig) == pytest.approx(gs["median_mgal"], rel=1e-3)
     prof = read_profiles_csv(out / "profiles.csv")
     line = prof["line"].astype(str) != ""
     shift = prof["disturbance_mgal"][line] - prof["levelled_mgal"][line]
