@@ -1311,7 +1311,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     gopt = cfg.grid if cfg.grid is not None else GridOptions()
     n_lines = sum(1 for k in groups if kind_of.get(k, "line") in ("line", "tie"))
     if gopt.enabled is not False and n_lines >= 2:
-        from .grid import grid_lines
+        from .grid import grid_lines, sigma_notes
 
         lab = np.where(in_line, table["flight"].astype(str), "")
         lab = np.char.add(np.char.add(lab, "/"), table["line"].astype(str))
@@ -1334,6 +1334,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                 noise_length_m=err_len[in_line],
             )
             grid_info = grid.summary()
+            notes.extend(sigma_notes(grid.sigma_info))
         except (DataError, np.linalg.LinAlgError, ValueError) as exc:
             notes.append(f"grid: not computed: {exc}")
             grid_info = {"error": str(exc)}

@@ -341,3 +341,15 @@ def test_kriging_variance_limits():
     np.testing.assert_allclose(err, 0.09, rtol=1e-9)
     f2, err2 = kriging_variance(xy, sig, code, ell, targets[:1], 4.0, 2000.0, target_sigma=np.array([0.3]))
     assert err2[0] == pytest.approx(0.18)
+
+
+def test_sigma_notes_say_a_cross_validation_mismatch():
+    from gravsurvey.grid import sigma_notes
+
+    over = sigma_notes({"cv_rms_mgal": 1.40, "cv_rms_predicted_mgal": 2.83})
+    assert len(over) == 1 and over[0].startswith("grid: the cross-validation residuals (1.40 mGal RMS)")
+    assert "may over-state" in over[0]
+    under = sigma_notes({"cv_rms_mgal": 2.0, "cv_rms_predicted_mgal": 1.0})
+    assert len(under) == 1 and "may under-state" in under[0]
+    assert sigma_notes({"cv_rms_mgal": 1.0, "cv_rms_predicted_mgal": 1.4}) == []
+    assert sigma_notes({}) == []
