@@ -409,7 +409,9 @@ def field_covariance(easting_m, northing_m, value_mgal, line, noise_sigma_mgal, 
     c0 = float(np.mean(x**2))
     ok = cnt >= 5
     if not ok.any():
-        return "matern32", max(c0 - float(np.mean(sig**2)), 0.0), float(lengths_m[len(lengths_m) // 2]), c0
+        # too few pairs within the lag range to fit: the field is what the errors leave
+        s2 = max(c0 - float(np.mean(sig**2)), 0.0)
+        return "matern32", s2, float(lengths_m[len(lengths_m) // 2]), c0 - s2
     c = csum[ok] / cnt[ok]
     d = dsum[ok] / cnt[ok]
     w = cnt[ok]
@@ -480,7 +482,12 @@ def kriging_variance(
 
     corr = CORRELATIONS[shape]
     data_xy = np.asarray(data_xy, float)
+    data_sigma = np.asarray(data_sigma, float)
+    data_line = np.asarray(data_line)
+    data_noise_length = np.asarray(data_noise_length, float)
     target_xy = np.asarray(target_xy, float)
+    if target_sigma is not None:
+        target_sigma = np.asarray(target_sigma, float)
     field_var = np.zeros(target_xy.shape[0])
     error_var = np.zeros(target_xy.shape[0])
     if target_xy.shape[0] == 0:
@@ -731,8 +738,9 @@ def grid_lines(
 
 
 def _grid_sigma(e, n, v, lab, sig, ell, line_spacing_m, splits, cv_residual, fit_residual, GE, GN, mask):
-    """The grid's 1-sigma layer (docs/survey.md, "The grid's sigma"): the kriging error of the
-    field's covariance fitted to the lines (:func:`field_covariance`, :func:`kriging_variance`),
+    """The grid's 1-sigma layer (docs/survey.md, "The grid's sigma"): the ordinary-kriging error
+    under the field's covariance fitted to the lines (:func:`field_covariance`,
+    :func:`kriging_variance`), the data's stated errors and the fit's misfit, the field's part
     scaled so that the grid's own cross-validation residuals have the spread it predicts.
 
     Parameters
