@@ -534,7 +534,8 @@ def figure_grid_map(
     if sigma_mgal is not None:
         sg = np.asarray(sigma_mgal, float)
         fs = sg[np.isfinite(sg)]
-        if fs.size and float(fs.max()) > float(fs.min()):
+        # contours need a 2 x 2 grid at least and a sigma that varies
+        if min(sg.shape[-2:]) >= 2 and fs.size and float(fs.max()) > float(fs.min()):
             levels = np.unique(np.round(np.linspace(float(fs.min()), float(fs.max()), 6)[1:-1], 2))
             levels = levels[levels > 0]
             if levels.size:
