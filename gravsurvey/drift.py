@@ -67,6 +67,8 @@ __all__ = [
     "separate_drift",
     "passed_drift_factor",
     "fitted_weight",
+    "matern32",
+    "exponential",
     "track_psd_matern32",
     "field_filter_gain",
     "field_filter",
@@ -283,18 +285,20 @@ def _block_geometry(blocks):
     return y, dist, lag
 
 
-def _matern32(r, length):
+def matern32(r, length):
+    """Matern-3/2 correlation ``(1 + s) exp(-s)``, ``s = sqrt(3) r / length`` (r >= 0, m)."""
     s = math.sqrt(3.0) * r / length
     return (1.0 + s) * np.exp(-s)
 
 
-def _exponential(r, length):
+def exponential(r, length):
+    """Exponential (first-order Gauss-Markov) correlation ``exp(-r / length)`` (r >= 0)."""
     return np.exp(-r / length)
 
 
 #: The field's correlation functions: the model's (Matern-3/2, smooth as a potential field at
 #: flight height) and the rough one a drift must also be needed under (:func:`separate_drift`).
-FIELD_KERNELS = {"matern32": _matern32, "exponential": _exponential}
+FIELD_KERNELS = {"matern32": matern32, "exponential": exponential}
 
 
 def _covariance(v, dist, lag, drift=True, kernel="matern32"):

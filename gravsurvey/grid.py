@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gravsurvey.drift import exponential, matern32
 from gravsurvey.errors import DataError
 
 __all__ = [
@@ -293,32 +294,28 @@ def line_spacing(easting_m, northing_m, line) -> float:
     return float(np.median(d))
 
 
-def matern32(r_over_l):
-    """Matern-3/2 correlation ``(1 + sqrt(3) x) exp(-sqrt(3) x)`` of distance over length."""
-    x = np.sqrt(3.0) * np.abs(r_over_l)
-    return (1.0 + x) * np.exp(-x)
-
-
-def matern52(r_over_l):
-    """Matern-5/2 correlation ``(1 + sqrt(5) x + 5 x^2 / 3) exp(-sqrt(5) x)``."""
-    x = np.sqrt(5.0) * np.abs(r_over_l)
+def matern52(r, length):
+    """Matern-5/2 correlation ``(1 + x + x^2 / 3) exp(-x)``, ``x = sqrt(5) r / length``."""
+    x = math.sqrt(5.0) * r / length
     return (1.0 + x + x * x / 3.0) * np.exp(-x)
 
 
-def layer_correlation(r_over_l):
-    """Correlation ``(1 + x^2)^(-3/2)`` of the vertical attraction of random point sources on a
-    layer at depth ``l / 2`` below the data (its power spectrum ``exp(-2 |k| depth)``)."""
-    return (1.0 + np.square(r_over_l)) ** -1.5
+def layer_correlation(r, length):
+    """Correlation ``(1 + (r / length)^2)^(-3/2)`` of the vertical attraction of random point
+    sources on a layer at depth ``length / 2`` below the data (its power spectrum
+    ``exp(-2 |k| depth)``)."""
+    return (1.0 + np.square(r / length)) ** -1.5
 
 
-#: covariance shapes :func:`field_covariance` chooses from
+#: covariance shapes :func:`field_covariance` chooses from, each ``corr(r, length)`` (the
+#: Matern-3/2 is the drift stage's, :func:`gravsurvey.drift.matern32`)
 CORRELATIONS = {"matern32": matern32, "matern52": matern52, "layer": layer_correlation}
 
 
 def _noise_correlation(dist_m, length_m):
     """Along-line correlation of a line's data errors, ``exp(-d / length)`` (0 length: white)."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        rho = np.exp(-dist_m / length_m)
+        rho = exponential(dist_m, length_m)
     return np.where(length_m > 0.0, rho, (dist_m == 0.0).astype(float))
 
 
@@ -357,7 +354,7 @@ def bin_mean_variance_ratio(bin_m, spacing_m, length_m) -> np.ndarray:
 
 
 def field_covariance(easting_m, northing_m, value_mgal, line, noise_sigma_mgal, noise_length_m, max_lag_m, lengths_m):
-    """The field's covariance from the lines: ``s2 * corr(r / length)``, the shape ``corr`` of
+    """The field's covariance from the lines: ``s2 * corr(r, length)``, the shape ``corr`` of
     :data:`CORRELATIONS` and its length that fit the along-line empirical covariance (less the
     data errors' own covariance) best in least squares.
 
@@ -418,7 +415,7 @@ def field_covariance(easting_m, northing_m, value_mgal, line, noise_sigma_mgal, 
     best = None
     for shape, corr in CORRELATIONS.items():
         for length in lengths_m:
-            rho = corr(d / length)
+            rho = corr(d, length)
             s2 = max(float(np.sum(w * c * rho) / np.sum(w * rho * rho)), 0.0)
             sse = float(np.sum(w * (c - s2 * rho) ** 2))
             if best is None or sse < best[0]:
@@ -447,7 +444,7 @@ def kriging_variance(
     interpolation at ``target_xy`` from the ``k`` nearest points.
 
     The field is a Gaussian process of unknown constant mean and covariance
-    ``s2 * corr(r / length_m)`` (``corr`` the correlation :data:`CORRELATIONS` names ``shape``);
+    ``s2 * corr(r, length_m)`` (``corr`` the correlation :data:`CORRELATIONS` names ``shape``);
     a point's value is the field plus an error of 1-sigma ``data_sigma`` correlated along its
     line as ``exp(-d / data_noise_length)``. The weights ``w`` (summing to one: the local level
     is unknown, as a grid's is) are those of that model. The field part is the interpolation's
@@ -505,13 +502,13 @@ def kriging_variance(
         ell = data_noise_length[idx]
         same = data_line[idx][:, :, None] == data_line[idx][:, None, :]
         noise = sig[:, :, None] * sig[:, None, :] * _noise_correlation(dd, 0.5 * (ell[:, :, None] + ell[:, None, :]))
-        kf = s2 * corr(dd / length_m)
+        kf = s2 * corr(dd, length_m)
         kk = np.zeros((c, k + 1, k + 1))
         kk[:, :k, :k] = kf + np.where(same, noise, 0.0) + np.eye(k)[None] * jitter
         kk[:, :k, k] = 1.0
         kk[:, k, :k] = 1.0
         dt = np.sqrt(np.sum((p - target_xy[a : a + chunk, None, :]) ** 2, axis=-1))
-        ks = s2 * corr(dt / length_m)
+        ks = s2 * corr(dt, length_m)
         w = np.linalg.solve(kk, np.concatenate([ks, np.ones((c, 1))], axis=1)[..., None])[:, :k, 0]
         fv = s2 - 2.0 * np.sum(w * ks, axis=1) + np.einsum("ci,cij,cj->c", w, kf, w)
         aw = np.abs(w)
@@ -796,20 +793,23 @@ def _grid_sigma(e, n, v, lab, sig, ell, line_spacing_m, splits, cv_residual, fit
     # the sigma varies over the line spacing, not the cell: a grid finer than SIGMA_MAX_CELLS
     # cells is kriged on every step-th row and column and interpolated between them
     step = max(1, math.ceil(math.sqrt(mask.sum() / SIGMA_MAX_CELLS)))
-    rows = np.unique(np.r_[np.arange(0, GE.shape[0], step), GE.shape[0] - 1])
-    cols = np.unique(np.r_[np.arange(0, GE.shape[1], step), GE.shape[1] - 1])
+    if step > 1:
+        rows = np.unique(np.r_[np.arange(0, GE.shape[0], step), GE.shape[0] - 1])
+        cols = np.unique(np.r_[np.arange(0, GE.shape[1], step), GE.shape[1] - 1])
+        at = np.meshgrid(GE[0, cols], GN[rows, 0])
+    else:
+        at = (GE[mask], GN[mask])
+    field_part, error_part = kriging_variance(
+        xy, sig, code, ell, np.column_stack([a.ravel() for a in at]), s2, length, shape=shape
+    )
+    var = scale * field_part + error_part + misfit
     if step > 1:
         from scipy.interpolate import RegularGridInterpolator
 
-        ce, cn = np.meshgrid(GE[0, cols], GN[rows, 0])
-        parts = kriging_variance(xy, sig, code, ell, np.column_stack([ce.ravel(), cn.ravel()]), s2, length, shape=shape)
-        coarse = (scale * parts[0] + parts[1] + misfit).reshape(ce.shape)
-        fine = RegularGridInterpolator((GN[rows, 0], GE[0, cols]), coarse)(np.column_stack([GN[mask], GE[mask]]))
-        sigma[mask] = np.sqrt(fine)
-    else:
-        cells = np.column_stack([GE[mask], GN[mask]])
-        field_cell, error_cell = kriging_variance(xy, sig, code, ell, cells, s2, length, shape=shape)
-        sigma[mask] = np.sqrt(scale * field_cell + error_cell + misfit)
+        var = RegularGridInterpolator((GN[rows, 0], GE[0, cols]), var.reshape(at[0].shape))(
+            np.column_stack([GN[mask], GE[mask]])
+        )
+    sigma[mask] = np.sqrt(var)
     filled = sigma[mask]
     info = {
         "method": "kriging",

@@ -262,12 +262,13 @@ def test_bin_mean_variance_ratio_against_a_direct_sum():
 
 def test_field_covariance_recovers_a_gaussian_process():
     """Lines drawn from a Matern-3/2 field of known variance and length: both recovered."""
-    from gravsurvey.grid import field_covariance, matern32
+    from gravsurvey.drift import matern32
+    from gravsurvey.grid import field_covariance
 
     rng = np.random.default_rng(5)
     s = np.arange(0.0, 30000.0, 250.0)
     true_s2, true_len = 4.0, 3000.0
-    cov = true_s2 * matern32(np.abs(s[:, None] - s[None, :]) / true_len)
+    cov = true_s2 * matern32(np.abs(s[:, None] - s[None, :]), true_len)
     chol = np.linalg.cholesky(cov + 1e-9 * np.eye(s.size))
     e, n, v, lab = [], [], [], []
     for k in range(40):  # independent lines (far apart)
