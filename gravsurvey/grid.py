@@ -44,6 +44,7 @@ import numpy as np
 
 from gravsurvey.drift import exponential, matern32
 from gravsurvey.errors import DataError
+from gravsurvey.pool import single_threaded_blas
 
 __all__ = [
     "GRID_METHODS",
@@ -570,20 +571,12 @@ def _fit_predict(method, depth, damping, coords_fit, v_fit, coords_pred):
 
 
 def _single_threaded_blas(func):
-    """``func`` run with BLAS single-threaded (threadpoolctl, a scikit-learn dependency).
-
-    The grid's fits are small dense solves: multi-threaded BLAS gains nothing on them and, on a
-    busy machine, lost 30x (0.83 s vs 0.03 s for one 600 x 600 solve measured on the 2-core CI
-    host).
-    """
+    """``func`` run inside :func:`gravsurvey.pool.single_threaded_blas` (the grid's fits are
+    small dense solves that BLAS threads only slow down)."""
 
     @functools.wraps(func)
     def single(*args, **kwargs):
-        try:
-            from threadpoolctl import threadpool_limits
-        except ImportError:  # pragma: no cover - scikit-learn (verde, harmonica) brings it
-            return func(*args, **kwargs)
-        with threadpool_limits(limits=1, user_api="blas"):
+        with single_threaded_blas():
             return func(*args, **kwargs)
 
     return single

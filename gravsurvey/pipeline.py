@@ -9,7 +9,6 @@ and writes the deliverables atomically into the output directory under a lock.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import hashlib
 import json
@@ -32,6 +31,7 @@ from .errors import INTERRUPT, DataError, GravsurveyError, os_fault
 from .estimate import FlightEstimate, concatenate_estimates, from_classic, from_inm_solution
 from .geodesy import MGAL
 from .io.writers import resolution_statement, to_jsonable
+from .pool import single_threaded_blas
 from .truth import read_truth_csv, truth_at  # noqa: F401  (public here for notebooks and benchmarks)
 
 log = logging.getLogger("gravsurvey")
@@ -80,31 +80,14 @@ def line_segments(cfg: SurveyConfig, fl: FlightConfig, est: FlightEstimate) -> l
     return segment_lines(est.time, est.lat, est.lon, est.vel_n, options=cfg.lines)
 
 
-def _single_threaded_blas():
-    """Context in which BLAS (numpy's and scipy's OpenBLAS) runs on one thread.
-
-    A flight's linear algebra is small (3 x 3 to 18 x 18 matrices, L-BFGS-B's vectors of a few
-    parameters): BLAS threads only add their start and spin-wait, and on a busy 2-core machine
-    they cost the identification 0.81 s of CPU against 0.17 s single-threaded (warm 1-h 100 Hz
-    flight, median of 3 runs; whole run_survey 2.25 -> 1.61 s CPU; profiles.csv identical).
-    Same mechanism as :func:`gravsurvey.grid.grid_lines` (threadpoolctl, which scikit-learn,
-    a dependency of verde and harmonica, brings).
-    """
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - scikit-learn (verde, harmonica) brings it
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
-
-
 def process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
     """Process one flight. Raises GravsurveyError subclasses for data/config problems.
 
     Warnings raised by any stage become lines of ``FlightEstimate.notes`` (and of the log and
     summary.json) instead of being printed: a cron run that succeeds prints nothing.  BLAS runs
-    single-threaded inside (:func:`_single_threaded_blas`).
+    single-threaded inside (:func:`gravsurvey.pool.single_threaded_blas`).
     """
-    with warnings.catch_warnings(record=True) as caught, _single_threaded_blas():
+    with warnings.catch_warnings(record=True) as caught, single_threaded_blas():
         warnings.simplefilter("always")
         result = _process_flight(cfg, fl)
     seen = set(result.notes)
