@@ -4,7 +4,7 @@
 Usage::
 
     python benchmarks/bench_unseen.py [--flights N] [--quick] [--first-seed S] [--json out.json]
-        [--runs default,oracle,classic] [--heights altimeter|gnss] [--model KEY=VALUE ...] [--accel-bias B1,B2]
+        [--runs default,oracle,classic] [--heights altimeter|gnss|carrier-phase] [--model KEY=VALUE ...] [--accel-bias B1,B2]
 
 Draws ``N`` (default 20) flights with seeds ``S .. S+N-1`` from the unseen-flight generator
 (``gravsurvey.simulate.unseen``: random fields, noise x0.3-x3, rates, triads, headings,
@@ -47,7 +47,10 @@ error/sigma with the truth's in its place.  ``--quick`` caps
 every drawn flight at 40 min and 50 Hz IMU (the
 same draws otherwise) for a fast check.  ``--model KEY=VALUE`` gives the default run a
 ``model`` section (a datasheet figure a user would know); ``--accel-bias B1,B2`` replaces the
-drawn horizontal accelerometer biases (a tactical IMU's).  Uses public API only.
+drawn horizontal accelerometer biases (a tactical IMU's).  ``--heights gnss`` gives the default run
+the GNSS fixes' heights as its height channel; ``--heights carrier-phase`` makes the GNSS
+carrier-phase grade and its heights the only height channel (:func:`with_carrier_phase_gnss`).
+Uses public API only.
 """
 
 from __future__ import annotations
@@ -492,21 +495,37 @@ def with_accel_bias(spec: dict, bias_mps2) -> dict:
     return out
 
 
+def with_carrier_phase_gnss(spec: dict) -> dict:
+    """The drawn flight with carrier-phase (PPK) GNSS and no altimeter of its own: the GNSS
+    heights carry the drawn altimeter's white noise (``sigma_m``, at the GNSS rate), the
+    horizontal positions half of it, and the altimeter is left exact and unused (its sigma 0, so
+    :func:`gravsurvey.simulate.unseen.noise_psd`, the bound's noise, counts the GNSS heights
+    alone).  The commonest airborne set-up: heights from post-processed carrier-phase GNSS, no
+    radar or laser altimeter.  The name is unchanged, the cache folder's hash differs."""
+    out = json.loads(json.dumps(spec))
+    sensors = out["sim"]["flights"][0]["sensors"]
+    sigma = float(sensors["altimeter"]["sigma_m"])
+    sensors["gnss"] = {**sensors.get("gnss", {}), "horizontal_sigma_m": 0.5 * sigma, "vertical_sigma_m": sigma}
+    sensors["altimeter"] = {**sensors["altimeter"], "sigma_m": 0.0}
+    return out
+
+
 def evaluate_flight(
     spec, folder: Path, runs=("default", "oracle", "classic"), heights: str = "altimeter", model=None
 ) -> dict:
     """Run default / oracle / classic on one prepared flight and score them against truth.
 
-    ``heights="gnss"``: the default run takes the GNSS heights as its height channel
-    (:func:`gnss_heights_config`; the bound still assumes the altimeter).  ``model`` (dict): a
-    ``model`` section for the default run (:func:`model_config`).
+    ``heights="gnss"`` or ``"carrier-phase"``: the default run takes the GNSS heights as its
+    height channel (:func:`gnss_heights_config`; with ``"gnss"`` the bound still assumes the
+    altimeter; ``"carrier-phase"`` expects a spec of :func:`with_carrier_phase_gnss`).
+    ``model`` (dict): a ``model`` section for the default run (:func:`model_config`).
     """
     truth = read_truth_csv(folder / "F01" / "truth.csv")
     truth["line"] = np.array(truth_lines(folder / "F01" / "truth.csv"), dtype=object)
     row = {"name": spec["name"], "seed": spec["seed"], "summary": spec_summary(spec)}
     prof = {}
-    default_cfg = gnss_heights_config(folder) if heights == "gnss" else "survey.yaml"
-    suffix = "_gnss_heights" if heights == "gnss" else ""
+    default_cfg = gnss_heights_config(folder) if heights in ("gnss", "carrier-phase") else "survey.yaml"
+    suffix = "_gnss_heights" if heights in ("gnss", "carrier-phase") else ""
     if model:
         default_cfg = model_config(folder, model, default_cfg)
         suffix += "_model"
@@ -724,10 +743,12 @@ def main(argv=None):
     )
     ap.add_argument(
         "--heights",
-        choices=("altimeter", "gnss"),
+        choices=("altimeter", "gnss", "carrier-phase"),
         default="altimeter",
         help="height channel of the default run: the simulated altimeter, or the GNSS fixes' heights "
-        "(a log without an altimeter; docs/benchmarks.md 'GNSS heights as the height channel')",
+        "(a log without an altimeter; docs/benchmarks.md 'GNSS heights as the height channel'); "
+        "carrier-phase: the GNSS made carrier-phase grade (its heights with the drawn altimeter's "
+        "noise) and the only height channel",
     )
     ap.add_argument(
         "--model",
@@ -768,6 +789,8 @@ def main(argv=None):
             spec = limit_spec(spec, QUICK_MAX_DURATION_S, QUICK_MAX_IMU_HZ)
         if accel_bias is not None:
             spec = with_accel_bias(spec, accel_bias)
+        if a.heights == "carrier-phase":
+            spec = with_carrier_phase_gnss(spec)
         row = run_flight(spec, a.cache, tuple(a.runs.split(",")), a.heights, model)
         rows.append(row)
         print(

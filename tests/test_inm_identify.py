@@ -313,6 +313,27 @@ def test_band_field_holds_the_uncounted_bands_under_the_counted_decay():
     np.testing.assert_array_equal(I.band_field(one, margin, bins, freq)[1], I.band_field(one, margin, bins)[1])
 
 
+def test_band_margin_is_the_standard_error_of_the_band_mean():
+    """A band's margin is SIGNAL_MARGIN_SE standard errors of its mean excess where it holds no
+    field: each bin scatters as its own noise times Exp(1).  Checked by drawing such bands, for
+    flat noise and for the height noise's f^4 across the lowest band of a short flight (bins
+    3-10, 120x), where the flat-noise formula ``mean / sqrt(m)`` understates the scatter 1.45x
+    (and a chance excess then counted as field)."""
+    rng = np.random.default_rng(7)
+    for s_n in (np.full(8, 3e-9), 1e-10 * np.arange(3.0, 11.0) ** 4):
+        draws = s_n * rng.exponential(size=(40000, s_n.size))
+        spread = float(np.std(draws.mean(axis=1) - s_n.mean()))
+        assert I.band_margin(s_n) / I.SIGNAL_MARGIN_SE == pytest.approx(spread, rel=0.02)
+        # a chance excess beyond the margin: about as rare as the margin's normal tail says
+        # (2 standard errors: 2.3 % one-sided; the Exp(1) skew makes it a little more)
+        beyond = float(np.mean(draws.mean(axis=1) - s_n.mean() > I.band_margin(s_n)))
+        assert 0.01 < beyond < 0.06, beyond
+    flat = np.full(8, 3e-9)
+    assert I.band_margin(flat) == pytest.approx(I.SIGNAL_MARGIN_SE * 3e-9 / math.sqrt(8))
+    steep = 1e-10 * np.arange(3.0, 11.0) ** 4
+    assert I.band_margin(steep) > 1.4 * I.SIGNAL_MARGIN_SE * steep.mean() / math.sqrt(steep.size)
+
+
 def test_non_increasing_fit():
     fit = I.non_increasing_fit
     np.testing.assert_allclose(fit([3.0, 2.0, 1.0], [1, 1, 1]), [3.0, 2.0, 1.0])
@@ -611,8 +632,9 @@ def test_field_the_data_cannot_exclude_is_in_the_stated_sigma():
     # the vertical channel's noise referred to the disturbance (two-sided): the white level, and
     # the height's white noise (sigma^2 dt_h at dt_h = 0.2 s) differentiated twice
     m = REFINE_NOISE
-    s_n = float(np.mean(m.white_mps2**2 + m.height_sigma_m**2 * 0.2 * (2 * np.pi * f) ** 4))
-    expected = math.sqrt(8 * s_n * 2.0 / math.sqrt(8) * 2.0 / (n * dt))
+    s_n = m.white_mps2**2 + m.height_sigma_m**2 * 0.2 * (2 * np.pi * f) ** 4
+    margin = 2.0 * math.sqrt(float(np.sum(s_n**2))) / 8  # I.band_margin: 2 standard errors of the band mean
+    expected = math.sqrt(8 * margin * 2.0 / (n * dt))
     assert rep["field_sigma_unexcluded_mps2"] == pytest.approx(expected, rel=0.1)
     assert rep["field_sigma_missed_mps2"] == rep["field_sigma_unexcluded_mps2"]
     strong = 3.0 * MGAL * np.sin(2 * np.pi * 6.5 / (n * dt) * t)

@@ -448,6 +448,30 @@ def test_gnss_heights_config_takes_the_fixes_as_the_height_channel(tmp_path):
         bench.gnss_heights_config(tmp_path, "csv.yaml")
 
 
+def test_carrier_phase_gnss_is_the_only_height_channel():
+    """``bench_unseen.py --heights carrier-phase``: the GNSS heights carry the drawn altimeter's
+    noise and the horizontal positions half of it; the altimeter is exact (unused), so the
+    bound's noise counts the GNSS heights alone, at the GNSS rate; the draw is otherwise the
+    same and its cache folder differs."""
+    bench = _bench()
+    sp = U.draw_flight_spec(3)
+    cp = bench.with_carrier_phase_gnss(sp)
+    fl, fl0 = cp["sim"]["flights"][0], sp["sim"]["flights"][0]
+    sigma = fl0["sensors"]["altimeter"]["sigma_m"]
+    assert fl["sensors"]["gnss"]["vertical_sigma_m"] == sigma
+    assert fl["sensors"]["gnss"]["horizontal_sigma_m"] == 0.5 * sigma
+    assert fl["sensors"]["altimeter"]["sigma_m"] == 0.0
+    assert fl0["sensors"]["altimeter"]["sigma_m"] == sigma  # the draw itself is untouched
+    assert fl["sensors"]["gravimeter"] == fl0["sensors"]["gravimeter"] and fl["plan"] == fl0["plan"]
+    assert bench._spec_hash(cp) != bench._spec_hash(sp)
+    f = np.array([0.01, 0.1])
+    heights_only = {"sensors": {"gnss": {"vertical_sigma_m": sigma}}, "rates": fl["rates"]}
+    no_heights = {**fl, "sensors": {**fl["sensors"], "gnss": {}, "altimeter": {}}}
+    np.testing.assert_allclose(U.noise_psd(fl, f) - U.noise_psd(no_heights, f), U.noise_psd(heights_only, f))
+    w = 2.0 * math.pi * f
+    np.testing.assert_allclose(U.noise_psd(heights_only, f), 2.0 * w**4 * sigma**2 / fl["rates"]["gnss_hz"])
+
+
 def test_issue_flights_table_counts_against_the_issues_ratio(capsys):
     """benchmarks/bench_issue_flights.py: each flight's default / bound is set against the
     issue's goal over its bound (A: 0.40 over 0.29-0.39 mGal), strict and generous end; a

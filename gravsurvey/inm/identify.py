@@ -60,6 +60,7 @@ __all__ = [
     "wiener_resolution_m",
     "wide_prior_params",
     "refine_prior",
+    "band_margin",
     "prior_risk",
     "tapered_periodogram",
     "prewhitened_periodogram",
@@ -1290,6 +1291,27 @@ def field_variance_seen(g, weight, dt_s: float, window_s: float = FIELD_VAR_WIND
     return float(np.sum(w * (lp - mean) ** 2) / np.sum(w))
 
 
+def band_margin(noise_psd) -> float:
+    """:data:`SIGNAL_MARGIN_SE` standard errors of a band's mean excess over the noise, where the
+    band holds no field, (m/s^2)^2/Hz.
+
+    Each bin of a periodogram scatters as its own mean times an Exp(1) variate, so the mean of
+    ``P / H1^2`` over a band of ``m`` bins whose noise is ``S_n,i`` has the standard error
+    ``sqrt(sum S_n,i^2) / m``; ``mean(S_n) / sqrt(m)`` only where the noise is flat across the
+    band.  Where it is not, the band's top bins set the scatter: the height noise rises as
+    ``f^4``, 120x across the lowest band (bins 3-10) of a short flight with metre-level GNSS
+    heights, whose scatter ``mean / sqrt(m)`` understates 1.45x, so that a chance excess
+    counted as field (docs/benchmarks.md, "The band's margin where the noise is not flat").
+
+    Parameters
+    ----------
+    noise_psd : ndarray, shape (m,)
+        ``S_n`` at the band's bins (as ``P / H1^2`` sees it), (m/s^2)^2/Hz.
+    """
+    s = np.asarray(noise_psd, float)
+    return float(SIGNAL_MARGIN_SE * np.sqrt(np.sum(s * s)) / s.size)
+
+
 def non_increasing_fit(values, weights) -> np.ndarray:
     """Weighted least-squares non-increasing fit of ``values`` (pool adjacent violators).
 
@@ -1458,10 +1480,10 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     # the bands and their margins depend on the noise only; the field counted in them on the
     # periodogram
     bands = [ii for ii in (idx_valid[a:b] for a, b in zip(edges[:-1], edges[1:])) if ii.size]
-    band_margin = [float(np.mean(s_n[ii]) * SIGNAL_MARGIN_SE / math.sqrt(ii.size)) for ii in bands]
+    margins = [band_margin(s_n[ii]) for ii in bands]
     band_freq = [float(np.mean(f[ii])) for ii in bands]
     # the lowest band's bins and margin: the field it cannot exclude (below)
-    lowest = (bands[0], band_margin[0]) if bands else None
+    lowest = (bands[0], margins[0]) if bands else None
 
     def counted(pp):
         # the field counted per bin (with the margin) and the unbiased excess (without it, for
@@ -1469,7 +1491,7 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
         sig, pt = np.zeros_like(f), np.zeros_like(f)
         if bands:
             band_excess = [float(np.mean(pp[ii] / h1[ii] ** 2) - np.mean(s_n[ii])) for ii in bands]
-            sig_b, pt_b = band_field(band_excess, band_margin, [ii.size for ii in bands], band_freq)
+            sig_b, pt_b = band_field(band_excess, margins, [ii.size for ii in bands], band_freq)
             for ii, a, b in zip(bands, sig_b, pt_b):
                 sig[ii], pt[ii] = a, b
         return sig, pt
