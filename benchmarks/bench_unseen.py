@@ -5,6 +5,7 @@ Usage::
 
     python benchmarks/bench_unseen.py [--flights N] [--quick] [--first-seed S] [--json out.json]
         [--runs default,oracle,classic] [--heights altimeter|gnss|carrier-phase] [--model KEY=VALUE ...] [--accel-bias B1,B2]
+        [--gravimeter-drift MGAL_PER_H]
 
 Draws ``N`` (default 20) flights with seeds ``S .. S+N-1`` from the unseen-flight generator
 (``gravsurvey.simulate.unseen``: random fields, noise x0.3-x3, rates, triads, headings,
@@ -35,7 +36,7 @@ too small where full-length U006's error is decided (docs/simulate.md); the JSON
 ``bound_formula_rms``.  Resolutions (half wavelength, km): stated by the default and classic
 products (median over lines), and the bound filter's (Wiener gain 1/2).  Prints a Markdown table and the median and
 worst ratio RMS / bound.  Two columns split the default's error: ``drift``, the RMS of the drawn
-gravimeter drift (bias + Gauss-Markov, ``gravsurvey.simulate.run.gravimeter_slow_error``) over the
+gravimeter drift (bias + Gauss-Markov + linear, ``gravsurvey.simulate.run.gravimeter_slow_error``) over the
 scored samples, and ``kalman less drift``, the RMS of the smoothed Kalman estimate's error (before
 the drift stage takes off what the lines show) with that drift taken off: where the second is
 near the bound and the default is not, the flight's loss is the drift its lines could not tell
@@ -49,7 +50,8 @@ same draws otherwise) for a fast check.  ``--model KEY=VALUE`` gives the default
 ``model`` section (a datasheet figure a user would know); ``--accel-bias B1,B2`` replaces the
 drawn horizontal accelerometer biases (a tactical IMU's).  ``--heights gnss`` gives the default run
 the GNSS fixes' heights as its height channel; ``--heights carrier-phase`` makes the GNSS
-carrier-phase grade and its heights the only height channel (:func:`with_carrier_phase_gnss`).
+carrier-phase grade and its heights the only height channel (:func:`with_carrier_phase_gnss`);
+``--gravimeter-drift MGAL_PER_H`` adds a linear gravimeter drift (:func:`with_gravimeter_drift`).
 Uses public API only.
 """
 
@@ -495,6 +497,16 @@ def with_accel_bias(spec: dict, bias_mps2) -> dict:
     return out
 
 
+def with_gravimeter_drift(spec: dict, mgal_per_h: float) -> dict:
+    """The drawn flight with a linear gravimeter drift of ``mgal_per_h`` added (from its first
+    sample; a spring meter's or a strapdown gravimeter's drift where no base ties take it off).
+    The bound's noise leaves it out (not stationary); the ``drift`` column counts it.  The name
+    is unchanged, the cache folder's hash differs."""
+    out = json.loads(json.dumps(spec))
+    out["sim"]["flights"][0]["sensors"]["gravimeter"]["drift_mgal_per_h"] = float(mgal_per_h)
+    return out
+
+
 def with_carrier_phase_gnss(spec: dict) -> dict:
     """The drawn flight with carrier-phase (PPK) GNSS and no altimeter of its own: the GNSS
     heights carry the drawn altimeter's white noise (``sigma_m``, at the GNSS rate), the
@@ -765,6 +777,13 @@ def main(argv=None):
         help="replace the drawn horizontal accelerometer biases by these, m/s^2 (a tactical IMU's; "
         "docs/benchmarks.md 'Accelerometer bias taken off between passes')",
     )
+    ap.add_argument(
+        "--gravimeter-drift",
+        type=float,
+        default=None,
+        metavar="MGAL_PER_H",
+        help="add a linear gravimeter drift, mGal/h (docs/benchmarks.md 'A linear gravimeter drift')",
+    )
     a = ap.parse_args(argv)
     if a.flights < 1:
         ap.error("--flights must be >= 1")
@@ -791,6 +810,8 @@ def main(argv=None):
             spec = with_accel_bias(spec, accel_bias)
         if a.heights == "carrier-phase":
             spec = with_carrier_phase_gnss(spec)
+        if a.gravimeter_drift is not None:
+            spec = with_gravimeter_drift(spec, a.gravimeter_drift)
         row = run_flight(spec, a.cache, tuple(a.runs.split(",")), a.heights, model)
         rows.append(row)
         print(

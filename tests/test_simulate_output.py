@@ -163,6 +163,20 @@ def test_gravimeter_slow_error_is_the_simulations_own_draw():
     assert np.std(s.truth["gravimeter_error"] - err) > 10 * np.std(np.diff(err))
     with pytest.raises(ConfigError, match="no flight with index 1"):
         gravimeter_slow_error(sim, 1)
+    # a linear drift (mGal/h from the first sample) is in the error and in its slow part; the
+    # other errors' draws are unchanged
+    sim["flights"][0]["sensors"]["gravimeter"]["drift_mgal_per_h"] = -2.0
+    d = simulate_flight(sim)
+    t_ns2, err2 = gravimeter_slow_error(sim)
+    ramp = -2.0e-5 / 3600.0 * (t_ns2 - t_ns2[0]) / 1e9
+    np.testing.assert_allclose(err2 - err, ramp, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d.truth["gravimeter_drift"], ramp, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d.truth["gravimeter_error"] - s.truth["gravimeter_error"], ramp, rtol=0, atol=1e-12)
+    assert np.array_equal(d.truth["gravimeter_markov"], s.truth["gravimeter_markov"])
+    assert abs(ramp[-1]) == pytest.approx(2.0e-5 * 900.0 / 3600.0, rel=0.01)
+    sim["flights"][0]["sensors"]["gravimeter"]["drift_mgal_per_h"] = "fast"
+    with pytest.raises(ConfigError, match=r"gravimeter.drift_mgal_per_h: expected a number \(mGal/h\)"):
+        simulate_flight(sim)
 
 
 def _tree_bytes(d):

@@ -472,6 +472,18 @@ def test_carrier_phase_gnss_is_the_only_height_channel():
     np.testing.assert_allclose(U.noise_psd(heights_only, f), 2.0 * w**4 * sigma**2 / fl["rates"]["gnss_hz"])
 
 
+def test_gravimeter_drift_is_added_to_the_draw():
+    """``bench_unseen.py --gravimeter-drift``: the drawn flight with a linear gravimeter drift,
+    the rest of the draw as it was, in a cache folder of its own."""
+    bench = _bench()
+    sp = U.draw_flight_spec(5)
+    dr = bench.with_gravimeter_drift(sp, -1.5)
+    g, g0 = dr["sim"]["flights"][0]["sensors"]["gravimeter"], sp["sim"]["flights"][0]["sensors"]["gravimeter"]
+    assert g["drift_mgal_per_h"] == -1.5 and "drift_mgal_per_h" not in g0
+    assert {k: v for k, v in g.items() if k != "drift_mgal_per_h"} == g0
+    assert bench._spec_hash(dr) != bench._spec_hash(sp)
+
+
 def test_issue_flights_table_counts_against_the_issues_ratio(capsys):
     """benchmarks/bench_issue_flights.py: each flight's default / bound is set against the
     issue's goal over its bound (A: 0.40 over 0.29-0.39 mGal), strict and generous end; a

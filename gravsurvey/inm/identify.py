@@ -1474,7 +1474,10 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     var_field = max(
         var_seen - FIELD_VAR_NOISE_MARGIN * windowed_variance(first_pass_noise, FIELD_VAR_WINDOW_S, span), 0.0
     )
-    # bands of >= 8 bins, log-spaced: the periodogram's scatter (100 % per bin) averages down
+    # the lowest band of 8 bins, then log-spaced bands (1 bin and up at the low end, wider
+    # above): the periodogram's scatter (100 % per bin) averages down where the bands widen,
+    # and each band's margin follows its own size (band_margin); bands of 8 bins at least
+    # were measured and lost (docs/benchmarks.md, "The band's margin where the noise is not flat")
     edges = np.unique(np.concatenate([[0], np.geomspace(8, max(valid.sum(), 9), 24).astype(int)]))
     idx_valid = np.flatnonzero(valid)
     # the bands and their margins depend on the noise only; the field counted in them on the

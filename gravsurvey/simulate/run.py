@@ -91,7 +91,8 @@ class FlightSimulation:
         ``line`` (n,) segment names, ``distance`` (n,) along-track ground
         distance (m); sensor-error truth ``accel_error_t`` (n, 3) m/s^2,
         ``gravimeter_error`` (n,) (= ``accel_error_t[:, 2]``),
-        ``gravimeter_markov`` (n,), ``gyro_error_t`` (n, 3) rad/s,
+        ``gravimeter_markov`` (n,), ``gravimeter_drift`` (n,) (the linear drift),
+        ``gyro_error_t`` (n, 3) rad/s,
         ``altimeter_error`` (m,) m at altimeter times, ``gnss_error`` (k, 3)
         (dlat rad, dlon rad, dh m) at GNSS times.
     truth_table : dict
@@ -350,6 +351,7 @@ def simulate_flight(sim, flight_index: int = 0) -> FlightSimulation:
         "accel_error_t": errs.accel_t,
         "gravimeter_error": errs.accel_t[:, 2].copy(),
         "gravimeter_markov": errs.gravimeter_markov,
+        "gravimeter_drift": errs.gravimeter_drift,
         "gyro_error_t": errs.gyro_t,
         "altimeter_error": alt_err,
         "gnss_error": np.stack([dlat, dlon, dh], axis=-1),
@@ -396,7 +398,7 @@ def simulate_flight(sim, flight_index: int = 0) -> FlightSimulation:
 def gravimeter_slow_error(sim, flight_index: int = 0):
     """The slow part of one simulated flight's gravimeter error, as :func:`simulate_flight` draws it.
 
-    The bias plus the Gauss-Markov error (the white part left out), from the same random streams
+    The bias plus the Gauss-Markov error and the linear drift (the white part left out), from the same random streams
     as the simulation but without its kinematics, field and logs: for scoring how much of an
     estimate's error is the drift a flight cannot tell from the field (benchmarks/bench_unseen.py).
 
@@ -410,13 +412,13 @@ def gravimeter_slow_error(sim, flight_index: int = 0):
     time_unix_ns : ndarray (n,), int64
         IMU sample times, Unix ns.
     error_mps2 : ndarray (n,)
-        ``bias + Markov`` of the gravimeter (third accelerometer), m/s^2; equal to
-        ``truth["gravimeter_markov"] + bias`` of :func:`simulate_flight`.
+        ``bias + Markov + drift`` of the gravimeter (third accelerometer), m/s^2; equal to
+        ``truth["gravimeter_markov"] + truth["gravimeter_drift"] + bias`` of :func:`simulate_flight`.
     """
     # the plan's duration sets the sample count; only the errors of the simulation are needed
     _, f, _, imu_ns, errs = _plan_and_imu_errors(sim, flight_index)
     bias = float(f["sensors"]["gravimeter"]["bias_mps2"])
-    return imu_ns + int(f["start_unix_ns"]), bias + errs.gravimeter_markov
+    return imu_ns + int(f["start_unix_ns"]), bias + errs.gravimeter_markov + errs.gravimeter_drift
 
 
 def _plan_and_imu_errors(sim, flight_index: int):

@@ -22,7 +22,9 @@ the noise averaged over 1 s, i.e. a white noise of two-sided spectral density
 * accelerometers x, y: constant bias + white noise;
 * gravimeter (triad z axis, the seed's third accelerometer): constant bias +
   stationary first-order Gauss-Markov ``df3/dt = -lambda f3 + sqrt(2 lambda)
-  sigma u`` (exact discretisation) + optional white noise;
+  sigma u`` (exact discretisation) + optional white noise + optional linear drift
+  from the flight's first sample (a spring meter's or a strapdown gravimeter's
+  drift without base ties; ``drift_mgal_per_h``);
 * gyros: constant bias + white drift (deg/h);
 * altimeter: ``h + A + sigma w`` (mean ``A``);
 * GNSS: independent white noise in east, north (m, converted to angles through
@@ -43,6 +45,8 @@ from .trajectory import Kinematics, earth_rate_n, mat_ne
 
 #: deg/h in rad/s.
 DEGPH = math.pi / 180.0 / 3600.0
+#: 1 mGal/h in m/s^2 per s
+MGAL_PER_H = 1e-5 / 3600.0
 
 
 def total_gravitation_n(kin: Kinematics, anomaly_n, ellipsoid: Ellipsoid = WGS84):
@@ -161,13 +165,16 @@ class ImuErrors:
     """Truth of the IMU errors added to the ideal outputs, ``(n, 3)`` each.
 
     ``accel_t``: total accelerometer error (x, y: bias + white; z = gravimeter:
-    bias + Markov + white), m/s^2; ``gravimeter_markov`` (n,) the Markov part
-    of the z error, m/s^2; ``gyro_t`` total gyro error, rad/s.
+    bias + Markov + white + linear drift), m/s^2; ``gravimeter_markov`` (n,) the
+    Markov part of the z error, m/s^2; ``gyro_t`` total gyro error, rad/s;
+    ``gravimeter_drift`` (n,) the linear drift part of the z error, m/s^2 (zeros
+    without ``gravimeter.drift_mgal_per_h``).
     """
 
     accel_t: np.ndarray
     gravimeter_markov: np.ndarray
     gyro_t: np.ndarray
+    gravimeter_drift: np.ndarray | None = None
 
 
 def imu_errors(n, rate_hz, cfg, rng) -> ImuErrors:
@@ -190,9 +197,11 @@ def imu_errors(n, rate_hz, cfg, rng) -> ImuErrors:
     w_gyr = rng.standard_normal((n, 3))
     a = np.zeros((n, 3))
     a[:, :2] = np.asarray(acc["bias_mps2"], dtype=float) + acc["white_sigma_mps2"] * sq * w_acc
-    a[:, 2] = grv["bias_mps2"] + markov + grv["white_sigma_mps2"] * sq * w_grv
+    # a ramp from the first sample: no draw, so the other errors' realisations stay as they were
+    drift = float(grv.get("drift_mgal_per_h", 0.0)) * MGAL_PER_H * np.arange(n) / rate_hz
+    a[:, 2] = grv["bias_mps2"] + markov + grv["white_sigma_mps2"] * sq * w_grv + drift
     g = np.asarray(gyr["bias_degph"], dtype=float) * DEGPH + gyr["white_drift_degph"] * DEGPH * sq * w_gyr
-    return ImuErrors(accel_t=a, gravimeter_markov=markov, gyro_t=g)
+    return ImuErrors(accel_t=a, gravimeter_markov=markov, gyro_t=g, gravimeter_drift=drift)
 
 
 #: Order of the 6 independent gradient-tensor components written to the logs.

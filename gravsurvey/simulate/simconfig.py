@@ -64,7 +64,13 @@ DEFAULT_TURBULENCE = {
 }
 DEFAULT_SENSORS = {
     "accelerometer": {"white_sigma_mps2": 0.0, "bias_mps2": [0.0, 0.0]},
-    "gravimeter": {"bias_mps2": 0.0, "markov_sigma_mps2": 0.0, "markov_lambda_per_s": 0.025, "white_sigma_mps2": 0.0},
+    "gravimeter": {
+        "bias_mps2": 0.0,
+        "markov_sigma_mps2": 0.0,
+        "markov_lambda_per_s": 0.025,
+        "white_sigma_mps2": 0.0,
+        "drift_mgal_per_h": 0.0,
+    },
     "gyro": {"bias_degph": [0.0, 0.0, 0.0], "white_drift_degph": 0.0},
     "altimeter": {"sigma_m": 0.0, "mean_m": 0.0},
     "gnss": {"horizontal_sigma_m": 0.0, "vertical_sigma_m": 0.0},
@@ -347,6 +353,8 @@ def _validate_flight(f, path, index):
                 d[k] = number(v, f"{sp}.{k}", "1/s", 0.0, 100.0, lo_open=True)
             elif k in ("mean_m",):
                 d[k] = number(v, f"{sp}.{k}", "m", -1e4, 1e4)
+            elif k == "drift_mgal_per_h":
+                d[k] = number(v, f"{sp}.{k}", "mGal/h", -1e3, 1e3)
             else:
                 d[k] = number(v, f"{sp}.{k}", unit, 0.0)
         s[sec] = d
