@@ -174,7 +174,7 @@ class ImuErrors:
     accel_t: np.ndarray
     gravimeter_markov: np.ndarray
     gyro_t: np.ndarray
-    gravimeter_drift: np.ndarray | None = None
+    gravimeter_drift: np.ndarray
 
 
 def imu_errors(n, rate_hz, cfg, rng) -> ImuErrors:
