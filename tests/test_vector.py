@@ -30,7 +30,7 @@ from gravsurvey.inm.mechanization import mechanize
 from gravsurvey.inm.params import InitialState, InmParams, accel_bias_states_for
 from gravsurvey.settings import inm_params
 from gravsurvey.inm.solve import estimate_anomaly
-from gravsurvey.inm.vector import ARCSEC, OBSERVABLE_SIGMA_RATIO, deflections_rad, resolution_filter
+from gravsurvey.inm.vector import ARCSEC, OBSERVABLE_SIGMA_RATIO, deflections_rad, horizontal_outputs, resolution_filter
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
 from gravsurvey.simulate.field import anomalous_potential, field_model_from_dict
 from gravsurvey.simulate.run import quick_sim, simulate_flight
@@ -387,7 +387,7 @@ def test_horizontal_accuracy_with_heading_changes(grid_flight):
     e = _errors(s, sol)
     rms = np.sqrt(np.mean(e**2, axis=0))
     sig = np.sqrt(np.mean(sol.dg_horizontal_sigma**2, axis=0))
-    # measured: RMS 1.58 / 1.89 mGal (north / east), sigma 1.33 / 1.33; truth std 1.90 / 2.14
+    # measured: RMS 1.58 / 1.89 mGal (north / east), sigma 1.43 / 1.43; truth std 1.90 / 2.14
     assert np.all(rms < 3.0 * MGAL)
     assert np.all(rms < 2.0 * sig)
     # at 10 km half-wavelength (both profiles low-passed): measured 0.91 / 1.47 mGal
@@ -408,7 +408,7 @@ def test_turns_make_a_strong_field_observable():
     sol = estimate_anomaly(_record(s), inm_params(NAV_MODEL), None, "strapdown")
     e = _errors(s, sol)
     # measured: 66 % of the prior sigma (median), 93 % of the epochs marked observable, RMS
-    # 3.80 / 4.48 mGal against sigma 3.79 / 3.80, correlation with the truth 0.90 / 0.89
+    # 3.80 / 4.48 mGal against sigma 4.07 / 4.07, correlation with the truth 0.90 / 0.89
     assert np.mean(sol.horizontal_observable) > 0.5
     assert np.all(np.sqrt(np.mean(e**2, axis=0)) < 2.0 * np.sqrt(np.mean(sol.dg_horizontal_sigma**2, axis=0)))
     truth = sol.dg_horizontal - e
@@ -435,6 +435,47 @@ def test_straight_line_is_marked_unobservable_and_turns_help(grid_flight, straig
         assert np.all(np.sqrt(np.mean(e**2, axis=0)) < 2.0 * np.sqrt(np.mean(sol.dg_horizontal_sigma**2, axis=0)))
     # measured: grid median 0.86 against 0.94 on the line
     assert ratio["grid"] < ratio["line"] - 0.04
+
+
+def test_stated_sigma_adds_half_the_vertical_missed_field_per_component():
+    """Each horizontal component's stated variance is the smoother's plus half the vertical's
+    missed field variance (a harmonic field's two horizontal components carry the vertical's
+    power); the observability flag stays the smoother's own."""
+    from gravsurvey.inm.errormodel import GH
+
+    n = 5
+    x = np.zeros((n, N_STATE_VECTOR))
+    x[:, GH[0]], x[:, GH[1]] = 1e-5, -2e-5
+    p = np.zeros((n, N_STATE_VECTOR, N_STATE_VECTOR))
+    own = np.array([0.3, 0.5, 1.0, 2.0, 4.0]) * MGAL
+    p[:, GH[0], GH[0]] = own**2
+    p[:, GH[1], GH[1]] = (2.0 * own) ** 2
+    prior = 4.0 * MGAL
+    dg0, sig0, obs0 = horizontal_outputs(x, p, prior)
+    dg, sig, obs = horizontal_outputs(x, p, prior, field_sigma_missed_mps2=2.5 * math.sqrt(2.0) * MGAL)
+    np.testing.assert_allclose(sig0, np.stack([own, 2.0 * own], axis=1))
+    np.testing.assert_allclose(sig**2, sig0**2 + (2.5 * MGAL) ** 2)
+    np.testing.assert_array_equal(dg, dg0)
+    np.testing.assert_array_equal(obs, obs0)
+    # own sigma east 0.6, 1, 2, 4, 8 mGal against 0.71 x 4 = 2.83 mGal: the first three epochs;
+    # by the stated sigma (east 2.6, 2.7, 3.2, ...) the third would not be
+    np.testing.assert_array_equal(obs, [True, True, True, False, False])
+    assert sig[2, 1] > OBSERVABLE_SIGMA_RATIO * prior
+
+
+def test_a_line_whose_vertical_shows_no_field_states_the_horizontal_field_it_misses(straight_flight):
+    """The constant-heading line across the sample's sources with identification on: the vertical
+    sees no field (resolution ~32 km), the horizontal prior follows it down, and the smoother's
+    own sigma (0.20 mGal) was 2.5-6x below the errors (0.50 / 1.23 mGal); with the vertical's
+    missed field in it the stated sigma covers them within 2x."""
+    sol = estimate_anomaly(_record(straight_flight), inm_params(NAV_MODEL), None, "strapdown")
+    missed = float(sol.identification["field_sigma_missed_mps2"])
+    # measured: 1.1 mGal of vertical field missed; stated sigma 0.80 / 0.80 mGal
+    assert missed > 0.5 * MGAL
+    sig = np.sqrt(np.mean(sol.dg_horizontal_sigma**2, axis=0))
+    assert np.all(sig >= missed / math.sqrt(2.0))
+    rms = np.sqrt(np.mean(_errors(straight_flight, sol) ** 2, axis=0))
+    assert np.all(rms < 2.0 * sig) and np.all(rms > 0.5 * sig)
 
 
 def test_gravsurvey_run_with_the_switch(tmp_path):

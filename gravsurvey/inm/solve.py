@@ -476,7 +476,7 @@ def estimate_anomaly(
     sol.initial_corrections = pv_corrections
     if hsol is not None:
         sol.dg_horizontal, sol.dg_horizontal_sigma, sol.horizontal_observable = horizontal_outputs(
-            out["x_s"], out["p_s"], hprior[0]
+            out["x_s"], out["p_s"], hprior[0], float(ident.get("field_sigma_missed_mps2", 0.0))
         )
         ident["horizontal_prior"] = {
             "sigma_mps2": hprior[0],

@@ -31,8 +31,18 @@ OBSERVABLE_SIGMA_RATIO = 1.0 / math.sqrt(2.0)
 ARCSEC = math.pi / (180.0 * 3600.0)
 
 
-def horizontal_outputs(x_s, p_s, sigma_prior_mps2: float):
+def horizontal_outputs(x_s, p_s, sigma_prior_mps2: float, field_sigma_missed_mps2: float = 0.0):
     """Horizontal disturbance, its 1-sigma and the observability flag from the smoothed states.
+
+    The 1-sigma is the smoother's and, in quadrature, the horizontal share of the field the
+    vertical identification left out of the prior (``field_sigma_missed_mps2``, the vertical's
+    :func:`gravsurvey.inm.identify.refine_prior` figure): the horizontal prior follows the
+    vertical estimate (:func:`gravsurvey.inm.identify.horizontal_prior`), so where that is
+    flattened the horizontal one is too, and a harmonic field's two horizontal components carry
+    the vertical's power between them (``S_along + S_across = S_up``): each ``1 / sqrt(2)`` of
+    the vertical's missed field.  Without it a line whose vertical shows no field stated 0.20
+    mGal against errors of 0.5 / 1.2 mGal (docs/benchmarks.md, "Vector gravimetry").  The flag
+    compares the smoother's own sigma with the prior's.
 
     Parameters
     ----------
@@ -43,6 +53,9 @@ def horizontal_outputs(x_s, p_s, sigma_prior_mps2: float):
     sigma_prior_mps2 : float
         Stationary prior sigma of each component, m/s^2
         (:func:`gravsurvey.inm.identify.horizontal_prior`).
+    field_sigma_missed_mps2 : float
+        The vertical disturbance's missed field (summary.json
+        ``identification.field_sigma_missed_mps2``), m/s^2; 0 leaves the smoother's sigma.
 
     Returns
     -------
@@ -56,7 +69,8 @@ def horizontal_outputs(x_s, p_s, sigma_prior_mps2: float):
     dg = np.ascontiguousarray(x_s[:, GH])
     sig = np.sqrt(np.stack([p_s[:, GH[0], GH[0]], p_s[:, GH[1], GH[1]]], axis=1))
     observable = np.all(sig < OBSERVABLE_SIGMA_RATIO * sigma_prior_mps2, axis=1)
-    return dg, sig, observable
+    missed = float(field_sigma_missed_mps2) / math.sqrt(2.0)
+    return dg, (np.hypot(sig, missed) if missed > 0.0 else sig), observable
 
 
 def deflections_rad(dg_horizontal, lat, height, ellipsoid: Ellipsoid = WGS84):
