@@ -191,7 +191,7 @@ class GridResult:
         }
 
 
-def thin_lines(easting_m, northing_m, height_m, value_mgal, line_id, step_m: float, extra=()):
+def thin_lines(easting_m, northing_m, height_m, value_mgal, line_id, step_m: float, extra=(), counts: bool = False):
     """Block means along each line in bins of ``step_m`` of along-track distance.
 
     Parameters
@@ -203,6 +203,8 @@ def thin_lines(easting_m, northing_m, height_m, value_mgal, line_id, step_m: flo
     extra : sequence of array_like, shape (n,)
         More per-sample quantities averaged in the same bins (NaN allowed: a bin holding one
         is NaN); returned after the line labels.
+    counts : bool
+        Also return the number of samples averaged in each bin (last).
 
     Returns
     -------
@@ -212,6 +214,8 @@ def thin_lines(easting_m, northing_m, height_m, value_mgal, line_id, step_m: flo
         The line label of each bin.
     *extra : ndarray, shape (m,)
         One per ``extra`` given.
+    count : ndarray, shape (m,)
+        Samples per bin (float), when ``counts``.
     """
     e = np.asarray(easting_m, float)
     n = np.asarray(northing_m, float)
@@ -224,7 +228,7 @@ def thin_lines(easting_m, northing_m, height_m, value_mgal, line_id, step_m: flo
     more = [x[ok] for x in more]
     if e.size == 0:
         z = np.zeros(0)
-        return (z, z, z, z, np.zeros(0, dtype=str), *(z for _ in more))
+        return (z, z, z, z, np.zeros(0, dtype=str), *(z for _ in more), *((z,) if counts else ()))
     names, code = np.unique(lid, return_inverse=True)
     # along-track distance restarts at every line (samples of a line are contiguous after a stable sort)
     order = np.argsort(code, kind="stable")
@@ -242,7 +246,8 @@ def thin_lines(easting_m, northing_m, height_m, value_mgal, line_id, step_m: flo
     mean = lambda x: np.bincount(inv, x) / cnt  # noqa: E731
     first = np.zeros(cnt.size, np.int64)
     first[inv[::-1]] = np.arange(inv.size)[::-1]
-    return (mean(e), mean(n), mean(h), mean(v), names[code[first]], *(mean(x) for x in more))
+    tail = (cnt.astype(float),) if counts else ()
+    return (mean(e), mean(n), mean(h), mean(v), names[code[first]], *(mean(x) for x in more), *tail)
 
 
 def line_spacing(easting_m, northing_m, line) -> float:
@@ -341,7 +346,8 @@ def bin_mean_variance_ratio(bin_m, spacing_m, length_m) -> np.ndarray:
 
     Parameters
     ----------
-    bin_m : float
+    bin_m : float or ndarray, shape (m,)
+        The stretch of line each bin's samples cover, m.
     spacing_m, length_m : ndarray, shape (m,)
         Sample spacing (NaN: one sample per bin) and correlation length (0: white), m.
     """
@@ -643,7 +649,9 @@ def grid_lines(
         np.zeros(nsamp) if noise_length_m is None else np.broadcast_to(np.asarray(noise_length_m, float), nsamp),
         sample_spacing(easting_m, northing_m, line),
     )
-    e, n, h, v, lab, sig, ell, dl = thin_lines(easting_m, northing_m, height_m, value_mgal, line, step, extra)
+    e, n, h, v, lab, sig, ell, dl, cnt = thin_lines(
+        easting_m, northing_m, height_m, value_mgal, line, step, extra, True
+    )
     for _ in range(8):
         if e.size <= MAX_FIT_POINTS:
             break
@@ -651,10 +659,15 @@ def grid_lines(
         # more coarsely along the lines (never across them) so memory and time stay bounded; a
         # step below the sample spacing thins nothing, so it grows until the points fit
         step = max(step * e.size / MAX_FIT_POINTS, 1.5 * step)
-        e, n, h, v, lab, sig, ell, dl = thin_lines(easting_m, northing_m, height_m, value_mgal, line, step, extra)
+        e, n, h, v, lab, sig, ell, dl, cnt = thin_lines(
+            easting_m, northing_m, height_m, value_mgal, line, step, extra, True
+        )
     if e.size < 10:
         raise DataError(f"grid: only {e.size} data points after thinning to {step:.0f} m; need >= 10")
-    sig = sig * np.sqrt(bin_mean_variance_ratio(step, dl, ell))
+    # a bin averages the samples it holds: at a line's end or beside a gap (NaN values) fewer
+    # than the step over the line's spacing, over a shorter stretch of the line
+    held = np.where(np.isfinite(dl) & (dl > 0.0), np.minimum(cnt * dl, step), step)
+    sig = sig * np.sqrt(bin_mean_variance_ratio(held, dl, ell))
     altitude = o.altitude_m if o.altitude_m is not None else float(np.median(h))
     maxdist = o.max_distance_m or MAX_DISTANCE_PER_LINE_SPACING * ls
     coords = (e, n, h)

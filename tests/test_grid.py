@@ -107,6 +107,43 @@ def test_thinning_and_spacing():
     assert te.size == 22  # 0..1000 m in 100-m bins: 11 per line (the last holds one sample)
     assert set(tl) == {"F/L1", "F/L2"}
     assert line_spacing(te, tn, tl) == pytest.approx(3000.0)
+    # the samples each bin averages: 10, and 1 in the last; a gap (NaN values) leaves fewer
+    *_, cnt = thin_lines(e, n, np.zeros(202), np.arange(202.0), lab, 100.0, counts=True)
+    np.testing.assert_array_equal(cnt, ([10.0] * 10 + [1.0]) * 2)
+    v = np.arange(202.0)
+    v[23:30] = np.nan
+    *_, cnt = thin_lines(e, n, np.zeros(202), v, lab, 100.0, counts=True)
+    assert cnt[2] == 3.0 and cnt.sum() == 202 - 7
+
+
+def test_grid_sigma_of_a_bin_counts_the_samples_it_holds(monkeypatch):
+    """The stated error of a thinned point is reduced by the samples its bin holds: a line's last,
+    partial bin and a bin beside a gap keep more of it than a full bin."""
+    import gravsurvey.grid as grid_mod
+
+    seen = {}
+    real = grid_mod.bin_mean_variance_ratio
+
+    def spy(bin_m, spacing_m, length_m):
+        seen["bin_m"] = np.broadcast_to(np.asarray(bin_m, float), np.shape(spacing_m)).copy()
+        return real(bin_m, spacing_m, length_m)
+
+    monkeypatch.setattr(grid_mod, "bin_mean_variance_ratio", spy)
+    s = np.arange(0.0, 6005.0, 10.0)
+    e = np.concatenate([np.full(s.size, k * 1000.0) for k in range(4)])
+    n = np.concatenate([s] * 4)
+    lab = np.repeat([f"F/L{k + 1}" for k in range(4)], s.size)
+    v = np.sin(e / 3000.0) + np.cos(n / 2000.0)
+    v[1000:1040] = np.nan  # line 2: 400 m without values
+    grid_lines(
+        e, n, np.full(e.size, 500.0), v, lab, sigma_mgal=np.full(e.size, 0.2), options=GridOptions(spacing_m=250.0)
+    )
+    held = seen["bin_m"]
+    # 250-m bins at 10-m spacing: 25 samples, 250 m; the lines' last bins hold 1 sample (10 m);
+    # the bins around the gap fewer than 25
+    assert held.max() == pytest.approx(250.0)
+    assert np.sum(held < 250.0) >= 4 + 1
+    assert held.min() == pytest.approx(10.0)
 
 
 def test_grid_errors():
@@ -256,6 +293,10 @@ def test_bin_mean_variance_ratio_against_a_direct_sum():
     direct = np.exp(-np.abs(i[:, None] - i[None, :]) * dt / ell).sum() / c**2
     got = bin_mean_variance_ratio(c * dt, np.array([dt]), np.array([ell]))[0]
     assert got == pytest.approx(direct, rel=0.1)
+    # a bin per point, each over the stretch its samples cover
+    np.testing.assert_allclose(
+        bin_mean_variance_ratio(np.array([500.0, 100.0]), np.array([100.0, 100.0]), np.array([0.0, 0.0])), [0.2, 1.0]
+    )
     # errors correlated far beyond the bin: no reduction
     assert bin_mean_variance_ratio(100.0, np.array([10.0]), np.array([1e6]))[0] == pytest.approx(1.0, abs=1e-3)
 
