@@ -120,7 +120,6 @@ def run(plan: str, sensors: str, scale: float):
         # the smoother's own sigma against the prior (the stated one adds the vertical's missed
         # field, vector.horizontal_outputs)
         ratio=float(np.median(np.sqrt(np.clip(sol.dg_horizontal_sigma**2 - missed**2, 0.0, None)) / prior)),
-        stated_missed_mgal=missed / MGAL,
         observable=float(np.mean(sol.horizontal_observable)),
         corr=[float(np.corrcoef(sol.dg_horizontal[:, i], truth[:, i])[0, 1]) for i in range(2)],
         resolution_km=sol.resolution_m / 1000.0,
