@@ -474,6 +474,7 @@ def test_a_line_whose_vertical_shows_no_field_states_the_horizontal_field_it_mis
     assert missed > 0.5 * MGAL
     sig = np.sqrt(np.mean(sol.dg_horizontal_sigma**2, axis=0))
     assert np.all(sig >= missed / math.sqrt(2.0))
+    assert sol.identification["horizontal_prior"]["field_sigma_missed_mps2"] == pytest.approx(missed / math.sqrt(2.0))
     rms = np.sqrt(np.mean(_errors(straight_flight, sol) ** 2, axis=0))
     assert np.all(rms < 2.0 * sig) and np.all(rms > 0.5 * sig)
 

@@ -475,13 +475,16 @@ def estimate_anomaly(
     sol = _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, k + 1, corrections)
     sol.initial_corrections = pv_corrections
     if hsol is not None:
+        missed = float(ident.get("field_sigma_missed_mps2", 0.0))
         sol.dg_horizontal, sol.dg_horizontal_sigma, sol.horizontal_observable = horizontal_outputs(
-            out["x_s"], out["p_s"], hprior[0], float(ident.get("field_sigma_missed_mps2", 0.0))
+            out["x_s"], out["p_s"], hprior[0], missed
         )
         ident["horizontal_prior"] = {
             "sigma_mps2": hprior[0],
             "lambda_per_m": hprior[1],
             "observable_fraction": float(np.mean(sol.horizontal_observable)),
+            # in the stated sigma of each component beside the smoother's (vector.horizontal_outputs)
+            "field_sigma_missed_mps2": missed / math.sqrt(2.0),
         }
     if gnss_used:
         _, db, sol.gyro_bias_sigma_t = _pass_correction(out)
