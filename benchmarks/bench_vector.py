@@ -88,7 +88,7 @@ def run(plan: str, sensors: str, scale: float):
     truth = np.stack([np.interp(sol.time, s.truth["time"], s.truth[k]) for k in ("dg_north", "dg_east")], axis=1)
     err = sol.dg_horizontal - truth
     prior = sol.identification["horizontal_prior"]["sigma_mps2"]
-    missed = float(sol.identification.get("field_sigma_missed_mps2", 0.0)) / np.sqrt(2.0)
+    missed = sol.identification["horizontal_prior"]["field_sigma_missed_mps2"]
     v = float(np.median(sol.speed))
     g_true = np.interp(sol.time, s.truth["time"], s.truth["disturbance"])
     vert = estimate_anomaly(rec, inm_params(model), None, "strapdown")

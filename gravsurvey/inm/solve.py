@@ -66,7 +66,7 @@ from .params import (
     initial_state_from_gnss,
     solvability_warnings,
 )
-from .vector import horizontal_outputs
+from .vector import horizontal_outputs, missed_field_per_component
 
 __all__ = ["InmSolution", "estimate_anomaly", "solvability_warnings", "initial_state_from_gnss"]
 
@@ -484,7 +484,7 @@ def estimate_anomaly(
             "lambda_per_m": hprior[1],
             "observable_fraction": float(np.mean(sol.horizontal_observable)),
             # in the stated sigma of each component beside the smoother's (vector.horizontal_outputs)
-            "field_sigma_missed_mps2": missed / math.sqrt(2.0),
+            "field_sigma_missed_mps2": missed_field_per_component(missed),
         }
     if gnss_used:
         _, db, sol.gyro_bias_sigma_t = _pass_correction(out)

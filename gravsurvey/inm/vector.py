@@ -18,7 +18,14 @@ import numpy as np
 from ..geodesy import WGS84, Ellipsoid, normal_gravity
 from .errormodel import GH
 
-__all__ = ["OBSERVABLE_SIGMA_RATIO", "horizontal_outputs", "deflections_rad", "resolution_filter", "ARCSEC"]
+__all__ = [
+    "OBSERVABLE_SIGMA_RATIO",
+    "horizontal_outputs",
+    "missed_field_per_component",
+    "deflections_rad",
+    "resolution_filter",
+    "ARCSEC",
+]
 
 #: The horizontal components count as determined by the data where both posterior sigmas are
 #: below this fraction of the prior's: the data removed at least half of the prior variance.
@@ -29,6 +36,13 @@ OBSERVABLE_SIGMA_RATIO = 1.0 / math.sqrt(2.0)
 
 #: One arcsecond, rad.
 ARCSEC = math.pi / (180.0 * 3600.0)
+
+
+def missed_field_per_component(field_sigma_missed_mps2: float) -> float:
+    """Each horizontal component's share of the vertical's missed field, m/s^2: a harmonic field's
+    two horizontal components carry the vertical's power between them, ``1 / sqrt(2)`` each
+    (:func:`horizontal_outputs`)."""
+    return float(field_sigma_missed_mps2) / math.sqrt(2.0)
 
 
 def horizontal_outputs(x_s, p_s, sigma_prior_mps2: float, field_sigma_missed_mps2: float = 0.0):
@@ -69,7 +83,7 @@ def horizontal_outputs(x_s, p_s, sigma_prior_mps2: float, field_sigma_missed_mps
     dg = np.ascontiguousarray(x_s[:, GH])
     sig = np.sqrt(np.stack([p_s[:, GH[0], GH[0]], p_s[:, GH[1], GH[1]]], axis=1))
     observable = np.all(sig < OBSERVABLE_SIGMA_RATIO * sigma_prior_mps2, axis=1)
-    missed = float(field_sigma_missed_mps2) / math.sqrt(2.0)
+    missed = missed_field_per_component(field_sigma_missed_mps2)
     return dg, (np.hypot(sig, missed) if missed > 0.0 else sig), observable
 
 
