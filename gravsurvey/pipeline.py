@@ -922,6 +922,11 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
     summary = {}
     if ordered:
         summary = _write_outputs(cfg, out_dir, ordered, failed, OutputTransaction)
+        # the survey stage's warnings (a base tie not applied, levelling or a grid not made, lines
+        # left unlevelled) reach the log and the CLI like the flights' own, not summary.json alone
+        for n in summary.get("notes", []):
+            log.warning("%s", n)
+            notes.append(n)
     summary_timing = time.perf_counter() - t_out
     log.info("outputs written in %.1f s; total %.1f s", summary_timing, time.perf_counter() - t_start)
     if not ordered:

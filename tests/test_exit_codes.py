@@ -316,6 +316,29 @@ def test_warnings_reach_stderr_and_log_with_a_count(tmp_path, quiet):
     assert _nonblank(r2.stderr)[-1] == "1 warning"
 
 
+def test_survey_stage_warnings_reach_stderr_and_log(tmp_path):
+    """A warning of the survey stage (here a base tie whose window holds none of the flight: the
+    flight stays on a relative level) is printed, logged and counted like a flight's own, not
+    left in summary.json alone."""
+    src = tmp_path / "mc"
+    shutil.copytree(SAMPLES / "markov_csv", src)
+    cfg = src / "survey.yaml"
+    text = cfg.read_text()
+    tie = "  tie: {base_gravity_mgal: 980000, before: {start_s: 1.0e+7, stop_s: 1.00001e+7}}\n"
+    cfg.write_text(text.replace("  truth: F01/truth.csv\n", "  truth: F01/truth.csv\n" + tie))
+    out = tmp_path / "out"
+    r = gs("run", cfg, "-o", out)
+    assert r.returncode == 0, r.stderr
+    lines = _nonblank(r.stderr)
+    assert len(lines) == 2 and lines[-1] == "1 warning", r.stderr
+    assert lines[0].startswith("warning: F01: base tie not applied, the flight stays on a relative level: ")
+    assert "flights[0].tie.before" in lines[0]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["notes"] == [lines[0][len("warning: ") :]]
+    log = (out / "gravsurvey.log").read_text()
+    assert re.search(r" WARNING F01: base tie not applied, the flight stays on a relative level: ", log)
+
+
 def test_csv_cut_inside_its_last_line_is_processed_and_exit_1(tmp_path):
     """An IMU CSV cut 20 bytes into its last line (a logger stopped mid-write): the flight is
     processed from the complete lines, the damage is one line on stderr naming the file, the
