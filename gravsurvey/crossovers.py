@@ -18,7 +18,7 @@ import numpy as np
 
 from gravsurvey.errors import DataError
 
-__all__ = ["Crossovers", "find_crossovers", "intersect_segments"]
+__all__ = ["Crossovers", "find_crossovers", "intersect_segments", "with_continuation"]
 
 
 @dataclass
@@ -26,7 +26,9 @@ class Crossovers:
     """Crossover points between lines and their statistics.
 
     Row ``k`` is one intersection of line ``a`` (earlier in the input list) with line ``b``.
-    ``diff_mgal = value_a_mgal - value_b_mgal``. Rows whose value is NaN on either line are kept
+    ``diff_mgal = value_a_mgal - value_b_mgal - continuation_mgal``: the level error the
+    crossover shows, the field's own change between the two lines' heights taken off
+    (:func:`with_continuation`; 0 until then). Rows whose value is NaN on either line are kept
     but left out of all statistics.
 
     Attributes
@@ -36,7 +38,11 @@ class Crossovers:
         Intersection point, m (the projected coordinates the lines came in).
     time_a_s, time_b_s : ndarray, shape (k,)
         Time on each line at the intersection (interpolated), s.
-    value_a_mgal, value_b_mgal, diff_mgal : ndarray, shape (k,)
+    height_a_m, height_b_m : ndarray, shape (k,)
+        Height of each line at the intersection (interpolated), m; NaN where the lines came
+        without heights.
+    value_a_mgal, value_b_mgal, continuation_mgal, diff_mgal : ndarray, shape (k,)
+        ``continuation_mgal``: the field at ``height_a_m`` less the field at ``height_b_m``.
     angle_deg : ndarray, shape (k,)
         Crossing angle of the two tracks, deg in (0, 90].
     per_line : list of dict
@@ -52,8 +58,11 @@ class Crossovers:
     northing_m: np.ndarray
     time_a_s: np.ndarray
     time_b_s: np.ndarray
+    height_a_m: np.ndarray
+    height_b_m: np.ndarray
     value_a_mgal: np.ndarray
     value_b_mgal: np.ndarray
+    continuation_mgal: np.ndarray
     diff_mgal: np.ndarray
     angle_deg: np.ndarray
     per_line: list = field(default_factory=list)
@@ -67,8 +76,11 @@ class Crossovers:
         "northing_m",
         "time_a_s",
         "time_b_s",
+        "height_a_m",
+        "height_b_m",
         "value_a_mgal",
         "value_b_mgal",
+        "continuation_mgal",
         "diff_mgal",
         "angle_deg",
     )
@@ -134,19 +146,20 @@ def _line_arrays(ln: dict, i: int):
     nn = np.asarray(ln["northing_m"], dtype=float)
     v = np.asarray(ln["value_mgal"], dtype=float)
     t = np.asarray(ln["time_s"], dtype=float)
-    if not (e.ndim == 1 and e.shape == nn.shape == v.shape == t.shape):
+    h = np.asarray(ln["height_m"], dtype=float) if ln.get("height_m") is not None else np.full(e.shape, np.nan)
+    if not (e.ndim == 1 and e.shape == nn.shape == v.shape == t.shape == h.shape):
         raise DataError(
             f"crossovers: line {ln['flight']}/{ln['line']}: easting_m, northing_m, value_mgal, time_s "
-            f"must be 1-D of equal length, got {e.shape}, {nn.shape}, {v.shape}, {t.shape}"
+            f"(and height_m) must be 1-D of equal length, got {e.shape}, {nn.shape}, {v.shape}, {t.shape}, {h.shape}"
         )
-    return e, nn, v, t
+    return e, nn, v, t, h
 
 
 class _Track:
     """A line's polyline with per-chunk bounding boxes (the prefilter)."""
 
-    def __init__(self, e, n, v, t, chunk):
-        self.e, self.n, self.v, self.t = e, n, v, t
+    def __init__(self, e, n, v, t, h, chunk):
+        self.e, self.n, self.v, self.t, self.h = e, n, v, t, h
         m = e.size
         self.nseg = max(m - 1, 0)
         ok = np.isfinite(e) & np.isfinite(n)
@@ -208,8 +221,9 @@ def find_crossovers(
     ----------
     lines : list of dict
         ``{"flight": str, "line": str, "easting_m": (m,), "northing_m": (m,),
-        "value_mgal": (m,), "time_s": (m,)}``; (flight, line) must be unique. Samples with a
-        non-finite position are gaps in the track.
+        "value_mgal": (m,), "time_s": (m,)}`` and optionally ``"height_m": (m,)`` (the heights
+        at the crossovers, for :func:`with_continuation`); (flight, line) must be unique.
+        Samples with a non-finite position are gaps in the track.
     min_angle_deg : float
         Shallower crossings are dropped, deg: near-parallel tracks have an ill-defined
         intersection (repeated lines are compared by other means).
@@ -233,13 +247,13 @@ def find_crossovers(
     keys = []
     seen = set()
     for i, ln in enumerate(lines):
-        e, nn, v, t = _line_arrays(ln, i)
+        e, nn, v, t, h = _line_arrays(ln, i)
         key = (str(ln["flight"]), str(ln["line"]))
         if key in seen:
             raise DataError(f"crossovers: line {key[0]}/{key[1]} given twice")
         seen.add(key)
         keys.append(key)
-        tracks.append(_Track(e, nn, v, t, int(chunk)))
+        tracks.append(_Track(e, nn, v, t, h, int(chunk)))
     sin_min = math.sin(math.radians(min_angle_deg))
     rows = {c: [] for c in Crossovers.COLUMNS}
     # candidate pairs: overlapping bounding boxes, found vectorised (a Python loop over all
@@ -313,8 +327,11 @@ def find_crossovers(
         rows["northing_m"].append(A.n[sa] + tt * (A.n[sa + 1] - A.n[sa]))
         rows["time_a_s"].append(ta)
         rows["time_b_s"].append(tb)
+        rows["height_a_m"].append(A.h[sa] + tt * (A.h[sa + 1] - A.h[sa]))
+        rows["height_b_m"].append(B.h[sb] + uu * (B.h[sb + 1] - B.h[sb]))
         rows["value_a_mgal"].append(va)
         rows["value_b_mgal"].append(vb)
+        rows["continuation_mgal"].append(np.zeros(m))
         rows["diff_mgal"].append(va - vb)
         rows["angle_deg"].append(np.degrees(np.arcsin(np.clip(sin, 0.0, 1.0))))
     cols = {}
@@ -323,6 +340,33 @@ def find_crossovers(
         cols[c] = np.concatenate(parts) if parts else np.zeros(0, dtype=object if obj else float)
     x = Crossovers(**cols)
     x.per_line = _per_line_stats(x, keys)
+    return x
+
+
+def with_continuation(crossovers: Crossovers, continuation_mgal) -> Crossovers:
+    """The crossovers with the field's change between the two lines' heights taken off.
+
+    Parameters
+    ----------
+    crossovers : Crossovers
+    continuation_mgal : array_like, shape (k,)
+        Field at ``height_a_m`` less field at ``height_b_m`` at each crossover, mGal
+        (:func:`gravsurvey.grid.continuation_difference`); NaN is taken as 0.
+
+    Returns
+    -------
+    Crossovers
+        A copy: ``continuation_mgal`` as given, ``diff_mgal = value_a_mgal - value_b_mgal -
+        continuation_mgal``, the per-line statistics of those differences.
+    """
+    c = np.nan_to_num(np.asarray(continuation_mgal, float), nan=0.0)
+    if c.shape != crossovers.diff_mgal.shape:
+        raise DataError(f"crossovers: {c.size} continuation values for {len(crossovers)} crossovers")
+    cols = {k: getattr(crossovers, k) for k in Crossovers.COLUMNS}
+    cols["continuation_mgal"] = c
+    cols["diff_mgal"] = crossovers.value_a_mgal - crossovers.value_b_mgal - c
+    x = Crossovers(**cols)
+    x.per_line = _per_line_stats(x, [(p["flight"], p["line"]) for p in crossovers.per_line])
     return x
 
 

@@ -55,6 +55,7 @@ __all__ = [
     "field_covariance",
     "kriging_variance",
     "grid_lines",
+    "continuation_difference",
     "sigma_notes",
     "write_grid_netcdf",
 ]
@@ -576,6 +577,87 @@ def _fit_predict(method, depth, damping, coords_fit, v_fit, coords_pred):
     return point_source_predict(coords_pred, eqs.points_, eqs.coefs_)
 
 
+def _thinned_for_fit(easting_m, northing_m, height_m, value_mgal, line, o: GridOptions, extra=()):
+    """The line spacing, the cell size, the thinning step and the thinned points of a fit.
+
+    The line spacing from a coarse thinning (100 m bins), then the lines averaged in bins of one
+    cell (``thin_lines`` with ``extra`` and ``counts``), coarser until at most
+    :data:`MAX_FIT_POINTS` bins remain.
+
+    Returns
+    -------
+    line_spacing_m, spacing_m, step_m : float
+    thinned : tuple
+        :func:`thin_lines` ``(..., counts=True)`` of the data and ``extra``.
+    """
+    e0 = np.asarray(easting_m, float)
+    n0 = np.asarray(northing_m, float)
+    ok = np.isfinite(e0) & np.isfinite(n0) & np.isfinite(np.asarray(value_mgal, float))
+    if len(np.unique(np.asarray(line).astype(str)[ok])) < 2:
+        raise DataError("grid: need at least 2 lines with values to grid")
+    e, n, _h, _v, lab = thin_lines(easting_m, northing_m, height_m, value_mgal, line, 100.0)
+    ls = line_spacing(e, n, lab)
+    if not ls > 0:
+        raise DataError("grid: the lines do not have a measurable spacing (all on one track?)")
+    spacing = o.spacing_m or SPACING_PER_LINE_SPACING * ls
+    step = THIN_PER_SPACING * spacing
+    thinned = thin_lines(easting_m, northing_m, height_m, value_mgal, line, step, extra, True)
+    for _ in range(8):
+        if thinned[0].size <= MAX_FIT_POINTS:
+            break
+        # the fit is a dense (points x sources) least-squares problem: a large survey is thinned
+        # more coarsely along the lines (never across them) so memory and time stay bounded; a
+        # step below the sample spacing thins nothing, so it grows until the points fit
+        step = max(step * thinned[0].size / MAX_FIT_POINTS, 1.5 * step)
+        thinned = thin_lines(easting_m, northing_m, height_m, value_mgal, line, step, extra, True)
+    if thinned[0].size < 10:
+        raise DataError(f"grid: only {thinned[0].size} data points after thinning to {step:.0f} m; need >= 10")
+    return ls, spacing, step, thinned
+
+
+def _block_folds(e, n, line_spacing_m: float, cv_folds: int, random_state: int) -> list:
+    """Block k-fold splits (blocks of one line spacing) of the points; a small survey may have
+    fewer blocks than folds: as many folds as it allows."""
+    import verde as vd
+
+    for k in range(cv_folds, 1, -1):
+        try:
+            folds = vd.BlockKFold(spacing=line_spacing_m, n_splits=k, shuffle=True, random_state=random_state)
+            return list(folds.split(np.column_stack([e, n])))
+        except ValueError:
+            continue
+    raise DataError(f"grid: the data span less than 2 blocks of {line_spacing_m:.0f} m: cannot cross-validate")
+
+
+def _cross_validated_fit(method, depths, damps, coords, v, splits):
+    """Held-out residuals of every (depth, damping) candidate over ``splits``.
+
+    Returns
+    -------
+    candidates : list of dict
+        ``depth_m, damping, cv_rms_mgal, cv_r2`` each.
+    residuals : list of ndarray, shape (m,)
+        Held-out residual of every point, per candidate.
+    best : int
+        The candidate of least held-out RMS.
+    """
+    cands = []
+    residuals = []
+    for dep in depths:
+        for dmp in damps:
+            res = np.full(v.size, np.nan)
+            for tr, te in splits:
+                pred = _fit_predict(method, dep, dmp, tuple(c[tr] for c in coords), v[tr], tuple(c[te] for c in coords))
+                res[te] = v[te] - pred
+            rms = float(np.sqrt(np.nanmean(res**2)))
+            spread = float(np.sum((v - v.mean()) ** 2))
+            # a constant field has no variance to explain: R^2 undefined
+            r2 = float(1.0 - np.nansum(res**2) / spread) if spread > 0.0 else float("nan")
+            cands.append({"depth_m": dep, "damping": dmp, "cv_rms_mgal": rms, "cv_r2": r2})
+            residuals.append(res)
+    return cands, residuals, min(range(len(cands)), key=lambda i: cands[i]["cv_rms_mgal"])
+
+
 def _single_threaded_blas(func):
     """``func`` run inside :func:`gravsurvey.pool.single_threaded_blas` (the grid's fits are
     small dense solves that BLAS threads only slow down)."""
@@ -631,39 +713,14 @@ def grid_lines(
     import verde as vd
 
     o = options or GridOptions()
-    e0 = np.asarray(easting_m, float)
-    n0 = np.asarray(northing_m, float)
-    ok = np.isfinite(e0) & np.isfinite(n0) & np.isfinite(np.asarray(value_mgal, float))
-    if len(np.unique(np.asarray(line).astype(str)[ok])) < 2:
-        raise DataError("grid: need at least 2 lines with values to grid")
-    # line spacing from a coarse thinning (100 m bins), then the real thinning
-    e, n, _h, _v, lab = thin_lines(easting_m, northing_m, height_m, value_mgal, line, 100.0)
-    ls = line_spacing(e, n, lab)
-    if not ls > 0:
-        raise DataError("grid: the lines do not have a measurable spacing (all on one track?)")
-    spacing = o.spacing_m or SPACING_PER_LINE_SPACING * ls
-    step = THIN_PER_SPACING * spacing
     nsamp = np.asarray(easting_m).shape
     extra = (
         np.full(nsamp, np.nan) if sigma_mgal is None else np.asarray(sigma_mgal, float),
         np.zeros(nsamp) if noise_length_m is None else np.broadcast_to(np.asarray(noise_length_m, float), nsamp),
         sample_spacing(easting_m, northing_m, line),
     )
-    e, n, h, v, lab, sig, ell, dl, cnt = thin_lines(
-        easting_m, northing_m, height_m, value_mgal, line, step, extra, True
-    )
-    for _ in range(8):
-        if e.size <= MAX_FIT_POINTS:
-            break
-        # the fit is a dense (points x sources) least-squares problem: a large survey is thinned
-        # more coarsely along the lines (never across them) so memory and time stay bounded; a
-        # step below the sample spacing thins nothing, so it grows until the points fit
-        step = max(step * e.size / MAX_FIT_POINTS, 1.5 * step)
-        e, n, h, v, lab, sig, ell, dl, cnt = thin_lines(
-            easting_m, northing_m, height_m, value_mgal, line, step, extra, True
-        )
-    if e.size < 10:
-        raise DataError(f"grid: only {e.size} data points after thinning to {step:.0f} m; need >= 10")
+    ls, spacing, step, thinned = _thinned_for_fit(easting_m, northing_m, height_m, value_mgal, line, o, extra)
+    e, n, h, v, lab, sig, ell, dl, cnt = thinned
     # a bin averages the samples it holds: at a line's end or beside a gap (NaN values) fewer
     # than the step over the line's spacing, over a shorter stretch of the line
     held = np.where(np.isfinite(dl) & (dl > 0.0), np.minimum(cnt * dl, step), step)
@@ -678,34 +735,8 @@ def grid_lines(
     else:
         depths = [o.depth_m] if o.depth_m is not None else [DEPTH_FACTOR * ls]
         damps = [o.damping] if o.damping is not None else list(DAMPINGS)
-    # a small survey may have fewer line-spacing blocks than folds: use as many folds as it allows
-    splits = []
-    for k in range(o.cv_folds, 1, -1):
-        try:
-            folds = vd.BlockKFold(spacing=ls, n_splits=k, shuffle=True, random_state=random_state)
-            splits = list(folds.split(np.column_stack([e, n])))
-            break
-        except ValueError:
-            continue
-    if not splits:
-        raise DataError(f"grid: the data span less than 2 blocks of {ls:.0f} m: cannot cross-validate")
-    cands = []
-    residuals = []
-    for dep in depths:
-        for dmp in damps:
-            res = np.full(v.size, np.nan)
-            for tr, te in splits:
-                pred = _fit_predict(
-                    o.method, dep, dmp, tuple(c[tr] for c in coords), v[tr], tuple(c[te] for c in coords)
-                )
-                res[te] = v[te] - pred
-            rms = float(np.sqrt(np.nanmean(res**2)))
-            spread = float(np.sum((v - v.mean()) ** 2))
-            # a constant field has no variance to explain: R^2 undefined
-            r2 = float(1.0 - np.nansum(res**2) / spread) if spread > 0.0 else float("nan")
-            cands.append({"depth_m": dep, "damping": dmp, "cv_rms_mgal": rms, "cv_r2": r2})
-            residuals.append(res)
-    ibest = min(range(len(cands)), key=lambda i: cands[i]["cv_rms_mgal"])
+    splits = _block_folds(e, n, ls, o.cv_folds, random_state)
+    cands, residuals, ibest = _cross_validated_fit(o.method, depths, damps, coords, v, splits)
     best = cands[ibest]
     region = (e.min(), e.max(), n.min(), n.max())
     ge, gn = vd.grid_coordinates(region, spacing=spacing, meshgrid=False, adjust="region")
@@ -738,6 +769,85 @@ def grid_lines(
         sigma_mgal=sigma,
         sigma_info=sigma_info,
     )
+
+
+@_single_threaded_blas
+def continuation_difference(
+    easting_m,
+    northing_m,
+    height_m,
+    value_mgal,
+    line,
+    at_easting_m,
+    at_northing_m,
+    height_a_m,
+    height_b_m,
+    options: GridOptions | None = None,
+    *,
+    random_state: int = 0,
+) -> tuple[np.ndarray, dict]:
+    """How much the field differs between two heights at given points, from the lines.
+
+    Equivalent sources fitted to the line data as :func:`grid_lines` fits them (the same
+    thinning, source depth and cross-validated damping; the method is always equivalent
+    sources: a 2-D spline cannot continue), evaluated at each point at both heights. At a
+    crossover of lines flown at different heights, this is the part of the difference that is
+    the field's, not a level error (:func:`gravsurvey.crossovers.find_crossovers`).
+
+    Parameters
+    ----------
+    easting_m, northing_m, height_m, value_mgal : array_like, shape (n,)
+        The line samples: projected position (m), ellipsoidal height (m), value (mGal); NaN
+        rows ignored.
+    line : array_like of str, shape (n,)
+        Line label per sample, samples of a line in time order.
+    at_easting_m, at_northing_m, height_a_m, height_b_m : array_like, shape (k,)
+        The points and their two heights, m.
+    options : GridOptions, optional
+        ``spacing_m``, ``depth_m``, ``damping``, ``cv_folds`` as for the grid.
+
+    Returns
+    -------
+    difference_mgal : ndarray, shape (k,)
+        Field at ``height_a_m`` less field at ``height_b_m``, mGal.
+    info : dict
+        ``depth_m``, ``damping``, ``cv_rms_mgal`` of the fit, ``n_data``.
+
+    Raises
+    ------
+    DataError
+        As :func:`grid_lines`: fewer than 2 lines, too few points, or too small to
+        cross-validate.
+    """
+    o = options or GridOptions()
+    ls, _spacing, _step, thinned = _thinned_for_fit(easting_m, northing_m, height_m, value_mgal, line, o)
+    e, n, h, v = thinned[:4]
+    coords = (e, n, h)
+    depths = [o.depth_m] if o.depth_m is not None else [DEPTH_FACTOR * ls]
+    damps = [o.damping] if o.damping is not None else list(DAMPINGS)
+    splits = _block_folds(e, n, ls, o.cv_folds, random_state)
+    cands, _residuals, ibest = _cross_validated_fit("equivalent_sources", depths, damps, coords, v, splits)
+    best = cands[ibest]
+    ae = np.asarray(at_easting_m, float)
+    an = np.asarray(at_northing_m, float)
+    ha = np.asarray(height_a_m, float)
+    hb = np.asarray(height_b_m, float)
+    k = ae.size
+    pred = _fit_predict(
+        "equivalent_sources",
+        best["depth_m"],
+        best["damping"],
+        coords,
+        v,
+        (np.concatenate([ae, ae]), np.concatenate([an, an]), np.concatenate([ha, hb])),
+    )
+    info = {
+        "depth_m": best["depth_m"],
+        "damping": best["damping"],
+        "cv_rms_mgal": best["cv_rms_mgal"],
+        "n_data": int(v.size),
+    }
+    return pred[:k] - pred[k:], info
 
 
 def _grid_sigma(e, n, v, lab, sig, ell, line_spacing_m, splits, cv_residual, fit_residual, GE, GN, mask):

@@ -1026,6 +1026,11 @@ def horizontal_columns(results: list[FlightEstimate], ellipsoid=None) -> dict:
 
 #: a line's horizontal components are meaningful when at least this share of its epochs is observable
 HORIZONTAL_MEANINGFUL_FRACTION = 0.5
+#: Crossovers of lines more than this far apart in height (m) have the field's change between
+#: the two heights predicted and taken off their differences (:func:`_continued_crossovers`);
+#: 1 m changes a 10-mGal field of 10 km wavelength by 0.006 mGal, so lines flown within a metre
+#: of each other are compared as they are.
+CONTINUATION_MIN_DH_M = 1.0
 
 
 def _product_name(line_stat: dict, drift_off: bool = False) -> str:
@@ -1172,6 +1177,66 @@ def write_survey_outputs(cfg: SurveyConfig, out_dir, results: list[FlightEstimat
     return _write_outputs(cfg, Path(out_dir), list(results), list(failed), OutputTransaction)
 
 
+def _continued_crossovers(cfg, xo, table, in_line, value_mgal) -> tuple:
+    """The crossovers with the field's change between the two lines' heights taken off.
+
+    Where two lines cross more than :data:`CONTINUATION_MIN_DH_M` apart in height, part of
+    their difference is the field's own (it weakens upwards): it is predicted by equivalent
+    sources fitted to the lines as the grid fits them (:func:`gravsurvey.grid.continuation_difference`,
+    the ``grid:`` settings) and taken off, so that the crossover statistics and the levelling
+    see level errors only (docs/survey.md, "Crossovers at different heights").
+
+    Returns
+    -------
+    crossovers : gravsurvey.crossovers.Crossovers
+    continuation : dict or None
+        For summary.json (``crossovers.continuation``): the largest height difference (m), the
+        RMS and largest field change taken off (mGal), the fit's depth, damping and
+        cross-validation RMS; None where no two crossing lines differ in height.
+    notes : list of str
+        When the prediction could not be made although the heights differ.
+    """
+    from .crossovers import with_continuation
+    from .grid import GridOptions, continuation_difference
+
+    dh = np.abs(xo.height_a_m - xo.height_b_m)
+    dh = dh[np.isfinite(dh) & xo.valid]
+    if not (dh.size and dh.max() > CONTINUATION_MIN_DH_M):
+        return xo, None, []
+    lab = np.char.add(np.char.add(table["flight"].astype(str), "/"), table["line"].astype(str))
+    try:
+        cont, fit = continuation_difference(
+            table["easting_m"][in_line],
+            table["northing_m"][in_line],
+            table["height_m"][in_line],
+            value_mgal[in_line],
+            lab[in_line],
+            xo.easting_m,
+            xo.northing_m,
+            xo.height_a_m,
+            xo.height_b_m,
+            cfg.grid if cfg.grid is not None else GridOptions(),
+        )
+    except (DataError, np.linalg.LinAlgError, ValueError) as exc:
+        return (
+            xo,
+            None,
+            [
+                f"crossovers: lines cross up to {dh.max():.0f} m apart in height, but the field's change "
+                f"between the heights could not be predicted ({exc}): the crossover differences and "
+                "the levelling include it"
+            ],
+        )
+    cont = np.where(np.isfinite(xo.height_a_m - xo.height_b_m) & xo.valid, cont, 0.0)
+    info = {
+        "max_height_difference_m": float(dh.max()),
+        "rms_mgal": float(np.sqrt(np.mean(cont[xo.valid] ** 2))),
+        "max_mgal": float(np.max(np.abs(cont))),
+        "fit": fit,
+    }
+    return with_continuation(xo, cont), info, []
+
+
 def _flights_across(table, groups, kind_of) -> list[str]:
     """:func:`gravsurvey.segmentation.flights_across_lines` over the table's lines, each line's
     heading from its first and last projected position."""
@@ -1233,12 +1298,15 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
                 # the flight's common time base: find_crossovers tells a real crossing of two
                 # lines of one flight from a track touching itself by their time separation
                 "time_s": time_s[idx],
+                "height_m": table["height_m"][idx],
                 "sigma_mgal": table["sigma_mgal"][idx],
                 "index": idx,
             }
         )
     xo = find_crossovers([{k: v for k, v in ln.items() if k not in ("index", "sigma_mgal")} for ln in lines])
-    xo_stats = xo.statistics()
+    xo, continuation, continuation_notes = _continued_crossovers(cfg, xo, table, in_line, tied_value)
+    notes += continuation_notes
+    xo_stats = {**xo.statistics(), "continuation": continuation}
 
     # 3. levelling of the tied values: the tie corrections at the crossover times, then the adjustment
     from .levelling import LevellingOptions
@@ -1259,7 +1327,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
         xo_tied = Crossovers(**{c: getattr(xo, c) for c in Crossovers.COLUMNS})
         xo_tied.value_a_mgal = xo.value_a_mgal - ca
         xo_tied.value_b_mgal = xo.value_b_mgal - cb
-        xo_tied.diff_mgal = xo_tied.value_a_mgal - xo_tied.value_b_mgal
+        xo_tied.diff_mgal = xo_tied.value_a_mgal - xo_tied.value_b_mgal - xo.continuation_mgal
         lev = choose_levelling(xo_tied, lines, lopt, tied_flights=list(ties))
         understated = understated_sigma_note(lev)
         if understated:

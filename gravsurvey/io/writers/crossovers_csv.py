@@ -10,7 +10,7 @@ from .columns import CROSSOVER_COLUMNS, csv_text_field, format_float_column, met
 
 def write_crossovers_csv(path, crossovers, metadata: dict | None = None) -> None:
     """Write ``crossovers.csv``: header row, one row per crossover (columns as
-    :data:`CROSSOVER_COLUMNS`, ``diff_mgal = value_a_mgal - value_b_mgal``).
+    :data:`CROSSOVER_COLUMNS`, ``diff_mgal = value_a_mgal - value_b_mgal - continuation_mgal``).
 
     Parameters
     ----------
@@ -21,8 +21,11 @@ def write_crossovers_csv(path, crossovers, metadata: dict | None = None) -> None
         "northing_m": 3,
         "time_a_s": 3,
         "time_b_s": 3,
+        "height_a_m": 3,
+        "height_b_m": 3,
         "value_a_mgal": 4,
         "value_b_mgal": 4,
+        "continuation_mgal": 4,
         "diff_mgal": 4,
         "angle_deg": 2,
     }
