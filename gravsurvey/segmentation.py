@@ -400,12 +400,14 @@ def segment_lines(
             grown.append([a, b])
     # Remove overlaps (two pieces that grew into each other), then merge across short gaps.
     grown.sort()
+    # each merged piece keeps the grown pieces it was made of (below)
     merged: list[list] = []
     for a, b in grown:
         if merged and a <= merged[-1][1]:
-            pa, pb = merged[-1]
+            pa, pb = merged[-1][:2]
             if _same_heading(heading, pa, pb, a, b, heading_tol_deg):
                 merged[-1][1] = max(pb, b)
+                merged[-1][2].append((a, b))
                 continue
             a = merged[-1][1]
             if b - a < 2:
@@ -418,18 +420,31 @@ def segment_lines(
             and _same_heading(heading, merged[-1][0], merged[-1][1], a, b, heading_tol_deg)
         ):
             merged[-1][1] = b
+            merged[-1][2].append((a, b))
             continue
-        merged.append([a, b])
+        merged.append([a, b, [(a, b)]])
     # along-track length of each piece from the raw ground speed (trapezoid rule)
     gs = np.hypot(vv[:, 0], vv[:, 1])
     cum = np.concatenate(([0.0], np.cumsum(0.5 * (gs[1:] + gs[:-1]) * np.diff(t))))
-    straight = [
-        (a, b)
-        for a, b in merged
-        if cum[b - 1] - cum[a] >= min_line_m
-        and (min_line_s is None or t[b - 1] - t[a] >= min_line_s)
-        and _heading_drift_deg(t[a:b], heading_u[a:b]) <= 0.5 * heading_tol_deg
-    ]
+
+    def is_straight(a, b):
+        return (
+            cum[b - 1] - cum[a] >= min_line_m
+            and (min_line_s is None or t[b - 1] - t[a] >= min_line_s)
+            and _heading_drift_deg(t[a:b], heading_u[a:b]) <= 0.5 * heading_tol_deg
+        )
+
+    straight = []
+    for a, b, parts in merged:
+        if is_straight(a, b):
+            straight.append((a, b))
+            continue
+        # a piece grown out of the slow start of a turn (a wide turn, a climbing one: under the
+        # turn-rate limit) overlaps the line before it and merges with it, and the whole then
+        # curves: the line is its longest straight part, not lost with the curve
+        ok = [(pa, pb) for pa, pb in parts if is_straight(pa, pb)]
+        if ok:
+            straight.append(max(ok, key=lambda ab: ab[1] - ab[0]))
 
     # Dominant axial direction by line time: histogram of doubled angles, 5-deg bins.
     kinds = {}

@@ -1,6 +1,7 @@
 """Line segmentation and crossovers, checked against tracks and geometry built here."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -584,3 +585,18 @@ def test_transit_is_recognised_by_heading():
     with pytest.raises(ConfigError, match=r"^lines\.transit_angle_deg: expected a number in \(0, 45\), got 50$"):
         segmentation_options({"transit_angle_deg": 50})
     assert segmentation_options({"transit_angle_deg": None}).transit_angle_deg is None
+
+
+def test_line_ending_in_a_slow_turn_is_kept():
+    """A line whose turn starts slowly (a climbing turn between lines flown at two altitudes:
+    0.1 deg/s for a minute, under the turn-rate limit): the start of the turn is a straight
+    candidate within the heading tolerance that grows back over the line and merges with it, and
+    the whole then curves. The line must stay a line (it was lost as a turn). The track is the
+    estimate's of an unseen-suite flight (quick U210) flown with its lines at 1024 and 1824 m
+    (`lines.altitudes_m`), 1400 s around its middle line (tests/data/slow_turn_track.npz)."""
+    d = np.load(Path(__file__).parent / "data" / "slow_turn_track.npz")
+    segs = segment_lines(d["time_s"], d["lat_rad"], d["lon_rad"], d["vel_enu_mps"].astype(float))
+    lines = [(s.start_index, s.stop_index) for s in segs if s.kind == "line"]
+    # the middle line: level (|vertical speed| < 0.25 m/s over each minute) from 250 s to 970 s,
+    # the climb before it ending at ~180 s and the turn after it starting at ~950 s
+    assert any(a <= 250 and b >= 950 for a, b in lines), [(s.name, s.kind, s.start_index, s.stop_index) for s in segs]

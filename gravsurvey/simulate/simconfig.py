@@ -51,7 +51,7 @@ DEFAULT_PLAN = {
     "static_end_s": 0.0,
     "ramp_s": 60.0,
 }
-DEFAULT_LINES = {"count": None, "spacing_m": None, "length_m": None, "heading_deg": 90.0}
+DEFAULT_LINES = {"count": None, "spacing_m": None, "length_m": None, "heading_deg": 90.0, "altitudes_m": None}
 DEFAULT_TIES = {"count": 0, "spacing_m": 0.0, "altitude_m": None}
 DEFAULT_TURBULENCE = {
     "vertical_sigma_m": 0.0,
@@ -263,6 +263,15 @@ def _validate_plan(p, path, rates):
         g["spacing_m"] = number(g["spacing_m"], f"{path}.lines.spacing_m", "m", 0.0, lo_open=True)
         g["length_m"] = number(g["length_m"], f"{path}.lines.length_m", "m", 0.0, lo_open=True)
         g["heading_deg"] = number(g["heading_deg"], f"{path}.lines.heading_deg", "deg", -360.0, 360.0)
+        if g["altitudes_m"] is not None:
+            alts = g["altitudes_m"]
+            if not isinstance(alts, list) or not alts:
+                raise ConfigError(
+                    f"{path}.lines.altitudes_m: expected a non-empty list of heights (m), got {_describe(alts)}"
+                )
+            g["altitudes_m"] = [
+                number(a, f"{path}.lines.altitudes_m[{i}]", "m", -400.0, 15000.0) for i, a in enumerate(alts)
+            ]
         p["lines"] = g
         t = _merge(p["ties"], DEFAULT_TIES, f"{path}.ties")
         t["count"] = number(t["count"], f"{path}.ties.count", "lines", 0, 500, integer=True)

@@ -877,13 +877,16 @@ def grid_lines(plan_cfg):
     e, r = _unit(psi), _unit(psi + 0.5 * math.pi)
     n, d, length = g["count"], g["spacing_m"], g["length_m"]
     alt = plan_cfg["altitude_m"]
+    # lines.altitudes_m: line i at altitudes_m[i % len] (a survey flown at several levels)
+    alts = g.get("altitudes_m") or [alt]
     out = []
     for i in range(n):
         base = i * d * r
+        h = alts[i % len(alts)]
         if i % 2 == 0:
-            out.append((f"L{i + 1:02d}", base, psi, length, alt))
+            out.append((f"L{i + 1:02d}", base, psi, length, h))
         else:
-            out.append((f"L{i + 1:02d}", base + length * e, psi + math.pi, length, alt))
+            out.append((f"L{i + 1:02d}", base + length * e, psi + math.pi, length, h))
     ties = plan_cfg.get("ties") or {}
     m = ties.get("count", 0)
     if m and n > 1:
