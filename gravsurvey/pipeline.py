@@ -36,7 +36,7 @@ from .truth import read_truth_csv, truth_at  # noqa: F401  (public here for note
 
 log = logging.getLogger("gravsurvey")
 
-CACHE_VERSION = 6
+CACHE_VERSION = 7
 
 
 # --------------------------------------------------------------------------

@@ -339,6 +339,40 @@ def test_survey_stage_warnings_reach_stderr_and_log(tmp_path):
     assert re.search(r" WARNING F01: base tie not applied, the flight stays on a relative level: ", log)
 
 
+def _stamp_row(path: Path, k: int, stamp: str) -> None:
+    """Give the ``k``-th data row of a sample CSV the time stamp ``stamp`` (its first field)."""
+    lines = path.read_text().splitlines()
+    data = [i for i, ln in enumerate(lines) if ln[:1].isdigit()]
+    lines[data[k]] = stamp + "," + lines[data[k]].split(",", 1)[1]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_stray_time_stamps_are_dropped_with_a_warning_not_a_memory_bomb(tmp_path):
+    """One IMU row and one GNSS row stamped 0 (a logger glitch): before, every grid over the
+    channel's time spanned 55 years (13-26 GB; a run was killed at 24 GB). Now each is dropped
+    with a warning naming its channel and time, and the flight's result is the intact one's."""
+    intact = tmp_path / "intact"
+    shutil.copytree(SAMPLES / "markov_csv", intact)
+    src = tmp_path / "mc"
+    shutil.copytree(SAMPLES / "markov_csv", src)
+    _stamp_row(src / "F01" / "imu.csv", 500, "0")
+    _stamp_row(src / "F01" / "gnss.csv", 100, "0")
+    r0 = gs("run", intact / "survey.yaml", "-o", tmp_path / "out0", "--no-plots")
+    r = gs("run", src / "survey.yaml", "-o", tmp_path / "out", "--no-plots")
+    assert r0.returncode == 0 and r.returncode == 0, r.stderr
+    lines = _nonblank(r.stderr)
+    assert lines[-1] == "2 warnings", r.stderr
+    for ch in ("imu", "gnss"):
+        assert any(
+            ln.startswith(f"warning: F01: {ch}: dropped 1 sample(s) with stray time stamps")
+            and "1970-01-01T00:00:00Z" in ln
+            for ln in lines
+        ), r.stderr
+    rms0 = json.loads((tmp_path / "out0" / "summary.json").read_text())["rms_vs_truth_mgal"]
+    rms = json.loads((tmp_path / "out" / "summary.json").read_text())["rms_vs_truth_mgal"]
+    assert rms == pytest.approx(rms0, rel=0.02)
+
+
 def test_csv_cut_inside_its_last_line_is_processed_and_exit_1(tmp_path):
     """An IMU CSV cut 20 bytes into its last line (a logger stopped mid-write): the flight is
     processed from the complete lines, the damage is one line on stderr naming the file, the

@@ -154,6 +154,45 @@ def test_conflicting_duplicates_keep_first():
     np.testing.assert_array_equal(t2, [1, 2, 3])
 
 
+@pytest.mark.parametrize(
+    "stray_ns, shown",
+    [
+        (0, "1 at 1970-01-01T00:00:00Z"),  # a stamp of 0
+        (-1_741_608_050 * 10**9, "1 at 1914-10-24T11:59:10Z"),  # negative
+        (7_258_118_400 * 10**9, "1 at 2200-01-01T00:00:00Z"),  # year 2200
+        (1_741_608_000 * 10**9 - 1024 * 7 * 86_400 * 10**9, "1 at 2005-07-25T12:00:00Z"),  # a GPS week rollover
+    ],
+)
+def test_a_stray_time_stamp_is_dropped_not_a_decades_long_channel(stray_ns, shown):
+    """One sample stamped decades (or a GPS week rollover) away from its 1,000 neighbours: a
+    logger glitch. Kept, the channel would span decades and every grid over its time would take
+    tens of GB (a run was killed at 24 GB); it is dropped and said, and the steps to and from it
+    are no backward steps."""
+    t = 1_741_608_000 * 10**9 + np.arange(1000, dtype=np.int64) * 10**7
+    t[500] = stray_ns
+    v = np.arange(1000.0)
+    t2, (v2,), rep = ck.repair_time(t, [v])
+    assert len(t2) == 999 and 500.0 not in v2 and np.all(np.diff(t2) > 0)
+    assert rep.n_stray == 1 and rep.n_backward == 0
+    msgs = [f.message for f in ck.time_findings("imu", rep, int(t2[0])) if f.check == "stray"]
+    assert msgs == [
+        f"imu: dropped 1 sample(s) with stray time stamps, over 1 h from all the channel's other samples: {shown}"
+    ]
+
+
+def test_no_stray_stamps_in_two_halves_or_a_long_gap():
+    """Two halves of a flight an hour and a half apart (a gap, not a glitch), and a 1-Hz channel
+    whose last three fixes come after a 2-h gap, keep every sample; a 1-Hz channel's single fix
+    two hours off is dropped."""
+    base = 1_741_608_000 * 10**9
+    halves = np.concatenate([np.arange(500), 5400 * 100 + np.arange(500)]).astype(np.int64) * 10**7 + base
+    assert ck.repair_time(halves, [])[2].n_stray == 0
+    fixes = np.concatenate([np.arange(960), 960 + 7200 + np.arange(3)]).astype(np.int64) * 10**9 + base
+    assert ck.repair_time(fixes, [])[2].n_stray == 0
+    one = np.concatenate([np.arange(960), [960 + 7200]]).astype(np.int64) * 10**9 + base
+    assert ck.repair_time(one, [])[2].n_stray == 1
+
+
 def _record():
     t = np.arange(0.0, 10.0, 0.5)
     alt_t = np.array([0.0, 1.0, 2.0, 6.0, 7.0])

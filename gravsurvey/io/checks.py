@@ -36,6 +36,15 @@ REST_ACCEL_STD = 0.05  # m/s^2
 RATE_TOL = 0.2
 RATE_IRREGULAR_WARN = 0.01  # warn when more than 1 % of steps are irregular
 MAX_LISTED = 10  # gaps/backward steps listed individually
+#: Stray time stamps: a cluster of samples more than STRAY_GAP_NS from every other sample of its
+#: channel, holding at most STRAY_MAX_FRACTION of them or STRAY_MIN_SAMPLES (a 1-Hz channel's
+#: single stamp), and fewer than STRAY_MAX_SAMPLES, is
+#: a logger glitch (a stamp of 0, of year 9999, a GPS week off) and is dropped: kept, it would
+#: make the channel span decades, and every grid over its time a memory bomb
+STRAY_GAP_NS = 3600 * 10**9
+STRAY_MAX_FRACTION = 0.001
+STRAY_MIN_SAMPLES = 2
+STRAY_MAX_SAMPLES = 1000
 
 
 @dataclass
@@ -61,6 +70,8 @@ class TimeReport:
     nominal_step_ns: float = float("nan")
     duplicates: int = 0  # same stamp, same values: dropped
     conflicting_duplicates: int = 0  # same stamp, different values: first kept
+    stray: list = field(default_factory=list)  # (t_first_ns, t_last_ns, count) of dropped stray clusters
+    n_stray: int = 0
     backward: list = field(default_factory=list)  # (index, t_prev_ns, t_ns) of backward steps
     n_backward: int = 0
     gaps: list = field(default_factory=list)  # (t_before_ns, t_after_ns) after repair
@@ -74,7 +85,8 @@ def repair_time(time_ns, values, gap_factor=5.0):
 
     Samples are put in time order (stable sort, so equal stamps keep file order); samples with
     a stamp equal to the previous one are dropped (counted as duplicates, or conflicting
-    duplicates when their values differ: the first is kept).  Backward steps in the input
+    duplicates when their values differ: the first is kept); a few samples far from all others
+    are dropped as stray stamps (:data:`STRAY_GAP_NS`, counted).  Backward steps in the input
     order are listed with their times.  Gaps are steps longer than ``gap_factor`` times the
     nominal step (the median step).
 
@@ -95,6 +107,14 @@ def repair_time(time_ns, values, gap_factor=5.0):
     """
     t = np.asarray(time_ns, dtype=np.int64)
     rep = TimeReport(n_in=len(t))
+    if len(t) > 1:
+        # stray stamps first: the steps to and from them are no backward steps of the channel
+        order = np.argsort(t, kind="stable")
+        keep = np.empty(len(t), bool)
+        keep[order] = _stray_keep(t[order], rep)
+        if not keep.all():
+            t = t[keep]
+            values = [v[keep] for v in values]
     if len(t) > 1:
         d = np.diff(t)
         back = np.flatnonzero(d < 0)
@@ -133,6 +153,25 @@ def repair_time(time_ns, values, gap_factor=5.0):
     return t, values, rep
 
 
+def _stray_keep(t_sorted, rep: TimeReport) -> np.ndarray:
+    """Which of the sorted stamps to keep: not those of stray clusters (:data:`STRAY_GAP_NS`),
+    which ``rep`` counts and lists."""
+    keep = np.ones(len(t_sorted), bool)
+    cut = np.flatnonzero(np.diff(t_sorted) > STRAY_GAP_NS) + 1
+    if not len(cut):
+        return keep
+    bounds = np.concatenate([[0], cut, [len(t_sorted)]])
+    sizes = np.diff(bounds)
+    small = (sizes <= max(STRAY_MAX_FRACTION * len(t_sorted), STRAY_MIN_SAMPLES)) & (sizes < STRAY_MAX_SAMPLES)
+    if small.all():
+        return keep
+    for a, b in zip(bounds[:-1][small], bounds[1:][small]):
+        keep[a:b] = False
+        rep.stray.append((int(t_sorted[a]), int(t_sorted[b - 1]), int(b - a)))
+    rep.n_stray = int((~keep).sum())
+    return keep
+
+
 def time_findings(channel, rep: TimeReport, t0_ns=0):
     """Findings (notes/warnings) describing a :class:`TimeReport`; times as s after t0."""
     out = []
@@ -150,6 +189,22 @@ def time_findings(channel, rep: TimeReport, t0_ns=0):
                 "warning",
                 f"{channel}: {rep.conflicting_duplicates} samples share a time stamp "
                 "with different values; kept the first of each",
+            )
+        )
+    if rep.n_stray:
+        from gravsurvey.utc import utc_iso
+
+        lst = ", ".join(
+            f"{n} at {utc_iso(a, 0)}" + ("" if a == b else f"..{utc_iso(b, 0)}") for a, b, n in rep.stray[:MAX_LISTED]
+        )
+        out.append(
+            Finding(
+                channel,
+                "stray",
+                "warning",
+                f"{channel}: dropped {rep.n_stray} sample(s) with stray time stamps, over "
+                f"{STRAY_GAP_NS // 3_600_000_000_000} h from all the channel's other samples: {lst}",
+                rep.n_stray,
             )
         )
     if rep.n_backward:
