@@ -65,6 +65,28 @@ def test_spikes_and_steps_are_found_where_they_are(rate_hz):
     assert np.max(np.abs(fixed[ok])) < 4 * se + 1e-3
 
 
+@pytest.mark.parametrize("rate_hz", [1.0, 5.0, 20.0])
+@pytest.mark.parametrize("n_s, level", [(3.0, 0.0), (8.0, 0.0), (1.0, 0.0), (5.0, 1600.0)])
+def test_a_short_block_of_wrong_heights_is_dropped_not_two_steps(rate_hz, n_s, level):
+    """A radar altimeter's no-lock zeros (or a burst of one wrong value) for a few seconds: the
+    samples are dropped like spikes. Before, a 3-s block of zeros at 1 Hz was read as two steps
+    of the wrong sizes (-184 and +869 m 19 s apart) and gave 142 mGal of error."""
+    t, e = _residual(rate_hz, 5)
+    h = 1000.0 + np.zeros(t.size)  # the measured height, flown level at 1000 m
+    k = np.searchsorted(t, 1200.0)
+    m = int(round(n_s * rate_hz))
+    h_bad = h.copy()
+    h_bad[k : k + m] = level
+    faults = Q.find_height_faults(t, e - (h_bad - h), h_bad)
+    assert faults.steps == []
+    assert set(faults.spikes.tolist()) == set(range(k, k + m))
+    # a block longer than BLOCK_MAX_S with a level change that stays is a step, not a block
+    h_step = h.copy()
+    h_step[k:] += 0.8
+    faults = Q.find_height_faults(t, e - (h_step - h), h_step)
+    assert [i for i, _ in faults.steps] == [k] and faults.spikes.size == 0
+
+
 def test_a_step_in_the_heights_is_repaired_before_the_estimate(noisy_flight):  # noqa: F811
     """A 0.3-m jump of the heights in mid-flight (a GNSS height re-fixing its ambiguities):
     taken off before the filter, the estimate is as good as without it, and the user is told."""

@@ -107,6 +107,15 @@ def test_unit_mistakes_stop_load_flight_with_channel_named(tmp_path):
     with pytest.warns(DataWarning, match="values are in g"):
         rec = load_flight(warn, tmp_path)
     assert any("values are in g" in n for n in rec.notes)
+    # a finding about another channel names that channel's file, not the IMU's
+    _write_flight_csv(tmp_path, d)
+    g = (tmp_path / "gnss.csv").read_text().splitlines()
+    rows = [r.split(",") for r in g[1:]]
+    ddmm = [",".join([r[0], repr(float(r[1]) * 100.0), *r[2:]]) for r in rows]  # 47.5 deg as 4750
+    (tmp_path / "gnss.csv").write_text("\n".join([g[0], *ddmm]) + "\n")
+    with pytest.raises(DataError) as exc:
+        load_flight(opts, tmp_path)
+    assert "gnss.csv: implausible data: gnss: latitude" in str(exc.value) and "imu.csv" not in str(exc.value)
 
 
 def test_a_short_quiet_period_gives_no_gyro_unit_verdict():

@@ -52,6 +52,12 @@ SAME_FRACTION = 0.9
 #: A spike: a sample off the mean of its neighbours by more than this many robust sigmas, its
 #: neighbours off theirs the other way (:func:`gravsurvey.io.checks.single_sample_outliers`).
 SPIKE_K = 8.0
+#: A short block: a run of samples entered and left by opposite jumps of the residual
+#: (:func:`short_blocks`), lasting at most this, s (a radar altimeter's no-lock zeros, a
+#: logger's burst of a wrong value): dropped like a spike.
+#: Kept, its two edges were read as two steps of the wrong sizes (three zero readings of a 1-Hz
+#: altimeter at 1000 m: "steps" of -184 and +869 m, 142 mGal of error).
+BLOCK_MAX_S = 10.0
 #: Means of the residual over this span before the step search, s (at most the sample spacing
 #: coarser: a 1 Hz channel is searched sample by sample).
 STEP_BIN_S = 0.5
@@ -166,6 +172,45 @@ def _bins(t, e, dt):
     first = np.flatnonzero(np.concatenate([[True], k[1:] != k[:-1]]))
     counts = np.diff(np.concatenate([first, [t.size]]))
     return np.add.reduceat(t, first) / counts, np.add.reduceat(e, first) / counts, first
+
+
+def short_blocks(t, e, dt) -> np.ndarray:
+    """Samples of short blocks of the residual (:data:`BLOCK_MAX_S`): entered by a jump and left
+    by a jump the other way that undoes at least half of it, within :data:`BLOCK_MAX_S`, each
+    jump off the residual's median step by more than :data:`SPIKE_K` robust sigmas of the steps
+    (the steps' median is the inertial height error's slope, their spread the noise).
+
+    Parameters
+    ----------
+    t, e : ndarray (k,)
+        Times (s, increasing) and the residual (m).
+    dt : float
+        Median sample spacing, s (unused: the blocks are found sample by sample).
+
+    Returns
+    -------
+    ndarray of int
+        Indices into ``t``.
+    """
+    if t.size < 16:
+        return np.zeros(0, np.int64)
+    dd = np.diff(e)
+    sig = robust_sigma(dd)
+    if not sig > 0.0:
+        return np.zeros(0, np.int64)
+    z = (dd - float(np.median(dd))) / sig
+    big = np.flatnonzero(np.abs(z) > SPIKE_K)
+    out = []
+    a = 0
+    while a + 1 < big.size:
+        i, j = int(big[a]), int(big[a + 1])
+        # samples i+1..j lie between the jumps
+        if t[j] - t[i + 1] <= BLOCK_MAX_S and z[i] * z[j] < 0 and abs(z[i] + z[j]) < 0.5 * max(abs(z[i]), abs(z[j])):
+            out.append(np.arange(i + 1, j + 1))
+            a += 2
+        else:
+            a += 1
+    return np.concatenate(out).astype(np.int64) if out else np.zeros(0, np.int64)
 
 
 def _side_fit(tb, eb, lo, hi, at):
@@ -288,8 +333,12 @@ def find_height_faults(time, residual_m, height_m=None) -> HeightFaults:
     live = np.flatnonzero(keep)
     spikes = live[single_sample_outliers(e[live], SPIKE_K)]
     keep[spikes] = False
-    idx = np.flatnonzero(keep)
     dt = float(np.median(np.diff(t)))
+    live = np.flatnonzero(keep)
+    blocks = live[short_blocks(t[live], e[live], dt)]
+    spikes = np.union1d(spikes, blocks)
+    keep[blocks] = False
+    idx = np.flatnonzero(keep)
     steps = [(int(idx[k]), size) for k, size in _find_steps(t[idx], e[idx], dt)]
     dropped = np.union1d(frozen, spikes).astype(np.int64)
     return HeightFaults(spikes=dropped, steps=steps, frozen=int(frozen.size))

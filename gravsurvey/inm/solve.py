@@ -508,7 +508,7 @@ def estimate_anomaly(
         ident["gnss_latency"] = gnss_latency.report()
         if gnss_latency.taken_off:
             ident["warnings"] = [
-                f"{record.source or 'record'}: gnss: {gnss_latency.text()}, taken off (the aided track's residual "
+                f"{record.source_of('gnss')}: gnss: {gnss_latency.text()}, taken off (the aided track's residual "
                 'follows the horizontal velocity; docs/method.md, "GNSS latency")'
             ] + list(ident.get("warnings", []))
     if gnss_used:
@@ -576,7 +576,7 @@ def _repaired_heights(record, nav, ellipsoid):
         return record, [], {}
     coarse, ratio = coarse_height_offset(nav, alt_t[inside], alt_h[inside], ellipsoid)
     if coarse is not None:
-        source = record.source or "record"
+        source = record.source_of("altimeter")
         what = (
             f"{source}: altimeter: the heights match the inertial height {coarse:+.2f} s earlier than their stamps "
             f"(the high-passed residual's variance {ratio:.3g}x smaller)"
@@ -637,7 +637,7 @@ def _repaired_heights(record, nav, ellipsoid):
     if steps:
         listed = ", ".join(f"{b:+.2f} m at {a:.0f} s" for a, b in steps)
         what.append(f"{len(steps)} step(s) taken off the heights after them ({listed} after the record's start)")
-    source = record.source or "record"
+    source = record.source_of("altimeter")
     return (
         record,
         [
@@ -726,7 +726,7 @@ def _altimeter(record):
     alt_h = np.asarray(record.altimeter.height, float)
     good = np.isfinite(alt_h)
     if not good.any():
-        raise DataError(f"{record.source or 'record'}: altimeter.height: no finite samples")
+        raise DataError(f"{record.source_of('altimeter')}: altimeter.height: no finite samples")
     return alt_t[good], alt_h[good]
 
 

@@ -608,11 +608,16 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
             why = [n for n in notes if n.startswith(f"{role}: ")]
             raise DataError(f"{src}: no usable {role} samples" + (f" ({'; '.join(why)})" if why else ""))
     raw, findings, _ = repair_and_check(raw, options)
-    errors = [f.message for f in findings if f.level == "error"]
+    errors = [f for f in findings if f.level == "error"]
     if errors and options.plausibility == "error":
-        src = options.mcap_path if options.kind == "mcap" else raw["imu"].source
+        # each finding under the file its channel came from (an altimeter's heights in feet are
+        # the altimeter file's, not the IMU's)
+        by_source: dict = {}
+        for f in errors:
+            by_source.setdefault(str(raw[f.channel if f.channel in raw else "imu"].source), []).append(f.message)
         raise DataError(
-            f"{src}: implausible data: " + "; ".join(errors) + " (set checks.plausibility: warn to process anyway)"
+            "; ".join(f"{src}: implausible data: " + "; ".join(msgs) for src, msgs in by_source.items())
+            + " (set checks.plausibility: warn to process anyway)"
         )
     notes += [f.message for f in findings if f.level in ("warning", "error")]
     for n in notes:
@@ -644,6 +649,7 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
         notes=notes,
         data_loss=_data_loss(options, base_dir, content) + csv_loss + clock_loss,
         gradient=gradient,
+        sources={role: str(ch.source) for role, ch in raw.items()},
     )
 
 

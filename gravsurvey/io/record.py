@@ -84,6 +84,12 @@ class FlightRecord:
     notes: list[str] = field(default_factory=list)
     data_loss: list[str] = field(default_factory=list)
     gradient: GradientChannel | None = None  # optional gravity-gradiometer channel
+    #: role -> the file (or file and topic) it came from, for messages about one channel
+    sources: dict = field(default_factory=dict)
+
+    def source_of(self, role: str) -> str:
+        """The file a channel came from (``source``, all of the flight's files, when unknown)."""
+        return str(self.sources.get(role) or self.source or "record")
 
     def epochs(self, rate_hz):
         """Filter epochs (s) at ``rate_hz`` from the first IMU sample through the last one.
@@ -204,4 +210,6 @@ def slice_record(record: FlightRecord, t0: float, t1: float, margin_s: float = 0
             record.gnss.lon[g].copy(),
             record.gnss.height[g].copy(),
         )
-    return FlightRecord(t0_unix_ns=record.t0_unix_ns, imu=imu, altimeter=alt, gnss=gnss, source=record.source)
+    return FlightRecord(
+        t0_unix_ns=record.t0_unix_ns, imu=imu, altimeter=alt, gnss=gnss, source=record.source, sources=record.sources
+    )
