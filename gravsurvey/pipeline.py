@@ -930,8 +930,30 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
     summary_timing = time.perf_counter() - t_out
     log.info("outputs written in %.1f s; total %.1f s", summary_timing, time.perf_counter() - t_start)
     if not ordered:
-        summary = {"survey": cfg.name}
+        summary = _write_failed_run(cfg, out_dir, failed, OutputTransaction) if failed else {"survey": cfg.name}
     return RunResult(out_dir, processed, skipped, failed, notes, summary, data_loss)
+
+
+def _write_failed_run(cfg, out_dir, failed, OutputTransaction) -> dict:
+    """No flight could be processed: ``summary.json`` says so (``failed_flights``), and the
+    deliverables an earlier run left in the folder are removed (the transaction's manifest),
+    as a partly failed run drops the failed flights' ones: a folder never shows a previous
+    run's profiles as the result of this one."""
+    from .io import writers
+
+    summary = {
+        "survey": cfg.name,
+        "software": {"name": "gravsurvey", "version": __version__, "python": platform.python_version()},
+        "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "config": {"path": str(cfg.path), "sha256": _file_sha256(cfg.path), "settings": cfg.raw},
+        "processing_method": cfg.processing_method,
+        "flights": {},
+        "failed_flights": [f.splitlines()[0] for f in failed],
+        "notes": ["no flight was processed: no deliverables (an earlier run's in this folder were removed)"],
+    }
+    with OutputTransaction(out_dir) as tx:
+        writers.write_json(tx.path("summary.json"), summary)
+    return summary
 
 
 def _profile_table(cfg: SurveyConfig, results: list[FlightEstimate]):

@@ -373,6 +373,26 @@ def test_stray_time_stamps_are_dropped_with_a_warning_not_a_memory_bomb(tmp_path
     assert rms == pytest.approx(rms0, rel=0.02)
 
 
+def test_a_rerun_whose_flights_all_fail_leaves_no_earlier_deliverables(tmp_path):
+    """A folder holding a good run, rerun after the IMU log was emptied: every flight fails (exit
+    1), and summary.json says so instead of the earlier run's profiles passing for this run's
+    (fuzzing, 2026-12-04: the earlier profiles.csv and summary.json stayed, failed_flights: [])."""
+    src = tmp_path / "mc"
+    shutil.copytree(SAMPLES / "markov_csv", src)
+    out = tmp_path / "out"
+    assert gs("run", src / "survey.yaml", "-o", out, "--no-plots").returncode == 0
+    assert (out / "profiles.csv").is_file()
+    imu = src / "F01" / "imu.csv"
+    imu.write_text("".join(ln for ln in imu.read_text().splitlines(True) if not ln[:1].isdigit()))
+    r = gs("run", src / "survey.yaml", "-o", out, "--no-plots")
+    assert r.returncode == 1 and "F01" in r.stderr, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["flights"] == {} and len(summary["failed_flights"]) == 1
+    assert summary["failed_flights"][0].startswith("F01: ")
+    deliverables = [p.name for p in out.iterdir() if not p.name.startswith(".") and p.name != "gravsurvey.log"]
+    assert deliverables == ["summary.json"], deliverables
+
+
 def test_csv_cut_inside_its_last_line_is_processed_and_exit_1(tmp_path):
     """An IMU CSV cut 20 bytes into its last line (a logger stopped mid-write): the flight is
     processed from the complete lines, the damage is one line on stderr naming the file, the

@@ -2,6 +2,7 @@
 
 import csv
 import datetime as dt
+import errno
 import json
 import math
 import os
@@ -329,6 +330,50 @@ def test_transaction_publishes_on_success_and_nothing_on_error(tmp_path):
     with pytest.raises(ValueError, match="relative path"):
         with w.OutputTransaction(out) as tx:
             tx.path("../escape.txt")
+
+
+def _published(out):
+    return {
+        str(p.relative_to(out)): p.read_text() for p in out.rglob("*") if p.is_file() and not p.name.startswith(".")
+    }
+
+
+def test_an_error_while_publishing_leaves_the_previous_outputs(tmp_path, monkeypatch):
+    """A rename that fails half-way (a file nobody may replace, a full disk) or a folder in the
+    way of an output file: the folder is the previous run's afterwards, not a mix (fuzzing,
+    2026-12-04: the new lines.geojson beside the previous summary.json)."""
+    from gravsurvey.io.writers import atomic
+
+    out = tmp_path / "out"
+    with w.OutputTransaction(out) as tx:
+        for name in ("a.csv", "b.csv", "summary.json"):
+            tx.path(name).write_text("old")
+    before = _published(out)
+    real_replace = os.replace
+    calls = []
+
+    def fail_third(src, dst):
+        calls.append(str(dst))
+        if len(calls) == 3 and ".previous-versions" not in str(src):
+            raise OSError(errno.EACCES, "Permission denied", str(dst))
+        real_replace(src, dst)
+
+    monkeypatch.setattr(atomic.os, "replace", fail_third)
+    with pytest.raises(OSError, match="Permission denied"):
+        with w.OutputTransaction(out) as tx:
+            for name in ("a.csv", "b.csv", "new.csv", "summary.json"):
+                tx.path(name).write_text("new")
+    monkeypatch.setattr(atomic.os, "replace", real_replace)
+    assert _published(out) == before  # a.csv and b.csv back to "old", new.csv gone
+    assert not [p for p in out.iterdir() if p.name.startswith(".staging-")]
+    # a folder in the way: refused before anything is renamed
+    (out / "b.csv").unlink()
+    (out / "b.csv").mkdir()
+    with pytest.raises(IsADirectoryError, match="a folder is in the way"):
+        with w.OutputTransaction(out) as tx:
+            for name in ("a.csv", "b.csv", "summary.json"):
+                tx.path(name).write_text("newer")
+    assert _published(out) == {"a.csv": "old", "summary.json": "old"}
 
 
 def test_ctrl_c_during_publish_waits_for_the_commit(tmp_path, monkeypatch):

@@ -55,6 +55,8 @@ def atomic_write_text(path, text: str) -> None:
 
 _STAGING_PREFIX = ".staging-"
 _MANIFEST = ".gravsurvey-files.json"
+#: Inside the staging folder: the previous versions of the published files, for a rollback.
+_PREVIOUS = ".previous-versions"
 
 
 def _fsync_dir(path) -> None:
@@ -130,7 +132,9 @@ class OutputTransaction:
     (``.gravsurvey-files.json``) but not produced by this run are deleted, the new manifest is
     written (atomically) and the staging directory removed. On an exception the staging
     directory is removed and nothing in ``out_dir`` changes; so does a clean exit that staged no
-    file.
+    file, and an ``OSError`` while publishing (a folder in the way of a file, a file nobody may
+    replace, a full disk): the files already renamed go back to their previous versions (hard
+    links kept in the staging folder) before it is raised.
 
     Guarantee (SIGKILL or power loss at any moment): no file is ever visible under its final name
     partly written (every final name is reached by an atomic rename of a complete, fsync-ed file),
@@ -218,14 +222,36 @@ class OutputTransaction:
             with open(src, "rb") as fh:
                 os.fsync(fh.fileno())
         _fsync_dir(self.staging)
+        # a name that cannot take a file (a folder there) fails before anything is published
         for name in names:
             dst = self.out_dir / name
-            if dst.parent != self.out_dir:
-                dst.parent.mkdir(parents=True, exist_ok=True)
-                dirs.add(dst.parent)
-            os.replace(self.staging / name, dst)
-            if name == SUMMARY_NAME:
-                _fsync_dir(self.out_dir)
+            if dst.is_dir() and not dst.is_symlink():
+                raise IsADirectoryError(errno.EISDIR, "a folder is in the way of an output file", str(dst))
+        done = []  # (name, previous version kept in the staging folder, or None)
+        try:
+            for name in names:
+                dst = self.out_dir / name
+                if dst.parent != self.out_dir:
+                    dst.parent.mkdir(parents=True, exist_ok=True)
+                    dirs.add(dst.parent)
+                keep = self._keep_previous(dst, name)
+                os.replace(self.staging / name, dst)
+                done.append((name, keep))
+                if name == SUMMARY_NAME:
+                    _fsync_dir(self.out_dir)
+        except OSError:
+            # an error half-way (a file nobody may replace, a full disk): the files already
+            # published go back to their previous versions (or away), so the folder is the
+            # previous run's, not a mix
+            for name, keep in reversed(done):
+                try:
+                    if keep is not None:
+                        os.replace(keep, self.out_dir / name)
+                    else:
+                        (self.out_dir / name).unlink()
+                except OSError:
+                    pass
+            raise
         for d in dirs:
             _fsync_dir(d)
         for old in previous:
@@ -238,6 +264,20 @@ class OutputTransaction:
         _fsync_dir(self.out_dir)
         self.published = names
         return names
+
+    def _keep_previous(self, dst: Path, name: str):
+        """A hard link (a copy where links fail) of ``dst``'s current version in the staging
+        folder, for a rollback; None when there is none. ``dst`` itself stays in place, so a
+        kill at any moment leaves every output complete (the previous or the new version)."""
+        if not dst.is_file():
+            return None
+        keep = self.staging / _PREVIOUS / name
+        keep.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.link(dst, keep)
+        except OSError:
+            shutil.copy2(dst, keep)
+        return keep
 
     def _cleanup(self) -> None:
         if self._fd is not None:
