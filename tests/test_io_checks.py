@@ -202,6 +202,32 @@ def test_no_stray_stamps_in_two_halves_or_a_long_gap():
     assert ck.repair_time(one, [])[2].n_stray == 1
 
 
+def test_heights_that_disagree_with_the_gnss_along_the_flight_are_not_an_offset():
+    """The height channel against the GNSS heights (fuzzing, 2026-12-04: each of these ran with
+    exit 0 and a warning of a constant offset, 2-20x the intact error): a drift of 50 m over the
+    flight and a height above ground are errors, a pressure altitude wandering by 17 m a warning,
+    a constant geoid offset the offset warning, code-grade GNSS noise (3 m) nothing; a height in
+    kilometres is named as such."""
+    rng = np.random.default_rng(0)
+    n = 1000
+    ref = 1500.0 + 20.0 * np.sin(np.linspace(0, 6, n))  # GNSS heights, m
+
+    def verdict(h):
+        (f,) = [f for f in ck.check_height("altimeter", h, "m", ref) if f.check == "height vs GNSS"]
+        return f.level, f.message
+
+    assert verdict(ref + np.linspace(0.0, 50.0, n))[0] == "error"
+    level, msg = verdict(ref - 178.0 + 120.0 * np.sin(np.linspace(0, 9, n)))
+    assert level == "error" and "varying over" in msg and "height above ground" in msg
+    level, msg = verdict(ref - 44.0 + np.linspace(0.0, 17.0, n))
+    assert level == "warning" and "varying over" in msg
+    level, msg = verdict(ref - 30.0 + 0.05 * rng.standard_normal(n))
+    assert level == "warning" and "heights are -30 m from the GNSS heights" in msg
+    assert verdict(ref + 3.0 * rng.standard_normal(n))[0] == "ok"
+    level, msg = verdict(ref / 1000.0)
+    assert level == "error" and "kilometres declared as metres" in msg
+
+
 def _record():
     t = np.arange(0.0, 10.0, 0.5)
     alt_t = np.array([0.0, 1.0, 2.0, 6.0, 7.0])

@@ -642,6 +642,12 @@ def repair_imu_glitches(f, w, accel_unit="m/s^2", gyro_unit="rad/s"):
 #: A median offset of a height channel from the GNSS heights beyond this is a warning, m (1.5 mGal
 #: of normal gravity; the simulated flights, the same height measured twice, differ by < 0.1 m).
 HEIGHT_OFFSET_WARN_M = 5.0
+#: The spread (5-95 %) of the height channel less the GNSS heights above which the two are not
+#: the same height with an offset (a barometric altitude, a height above ground, a drifting
+#: sensor, a GNSS height that jumps): a warning above the first, an error above the second
+#: (0.3086 mGal of level per metre; code-grade GNSS heights of 3 m noise spread over 10 m).
+HEIGHT_SPREAD_WARN_M = 12.0
+HEIGHT_SPREAD_ERROR_M = 20.0
 
 
 def check_height(channel, h, unit="m", ref=None):
@@ -669,7 +675,17 @@ def check_height(channel, h, unit="m", ref=None):
         sel = np.abs(ref) > 100.0
         if sel.sum() > 10:
             r = float(np.median(h[sel] / ref[sel]))
-            name = _ratio_name(r, [("feet declared as metres", 1 / 0.3048), ("metres declared as feet", 0.3048)])
+            name = _ratio_name(
+                r,
+                [
+                    ("feet declared as metres", 1 / 0.3048),
+                    ("metres declared as feet", 0.3048),
+                    ("kilometres declared as metres", 1e-3),
+                    ("metres declared as kilometres", 1e3),
+                ],
+            )
+            diff = h - ref
+            p5, p95 = (float(x) for x in np.percentile(diff, [5.0, 95.0]))
             if name:
                 out.append(
                     Finding(
@@ -678,6 +694,21 @@ def check_height(channel, h, unit="m", ref=None):
                         "error",
                         f"{channel}: heights are {r:.4g} x the GNSS heights: {name}?",
                         r,
+                    )
+                )
+            elif p95 - p5 > HEIGHT_SPREAD_WARN_M:
+                # not an offset: the level error follows the difference along the flight
+                out.append(
+                    Finding(
+                        channel,
+                        "height vs GNSS",
+                        "error" if p95 - p5 > HEIGHT_SPREAD_ERROR_M else "warning",
+                        f"{channel}: heights differ from the GNSS heights by {float(np.median(diff)):+.3g} m "
+                        f"(median), varying over {p5:+.3g}..{p95:+.3g} m (5-95 %): not one height with an offset - "
+                        "a barometric altitude, a height above ground, a drifting sensor or GNSS heights that "
+                        f"jump? Expected ellipsoidal heights of the IMU; {p95 - p5:.3g} m is "
+                        f"{(p95 - p5) * 0.3086:.2g} mGal of level",
+                        p95 - p5,
                     )
                 )
             else:
