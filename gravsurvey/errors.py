@@ -76,16 +76,41 @@ class DataWarning(UserWarning):
     """Something in the data was repaired or looks suspicious; processing continues."""
 
 
+#: Other spellings of units, for :func:`suggest` (letters alone do not tell "dps" is deg/s).
+UNIT_SPELLINGS = {
+    "dps": "deg/s",
+    "deg/sec": "deg/s",
+    "degrees/s": "deg/s",
+    "dph": "deg/h",
+    "deg/hr": "deg/h",
+    "rad/sec": "rad/s",
+    "rps": "rad/s",
+    "m/s2": "m/s^2",
+    "m/s/s": "m/s^2",
+    "mps2": "m/s^2",
+    "m/s**2": "m/s^2",
+    "mgal": "mGal",
+    "feet": "ft",
+    "foot": "ft",
+    "meters": "m",
+    "metres": "m",
+    "eotvos": "E",
+}
+
+
 def suggest(word, choices) -> str:
     """``" (did you mean 'x'?)"`` for the choice nearest to ``word``, or ``""``.
 
-    A choice equal to ``word`` up to case wins; otherwise the closest by
-    :func:`difflib.get_close_matches` with a similarity of at least 0.5.
+    A choice equal to ``word`` up to case wins, then one that is another spelling of the same
+    unit (:data:`UNIT_SPELLINGS`); otherwise the closest by :func:`difflib.get_close_matches`
+    with a similarity of at least 0.5.
     """
     import difflib
 
     names = [str(c) for c in choices]
     same = [c for c in names if c.lower() == str(word).lower()]
+    spelled = UNIT_SPELLINGS.get(str(word).strip().lower())
+    same = same or ([spelled] if spelled in names else [])
     near = same or difflib.get_close_matches(str(word), names, n=1, cutoff=0.5)
     return f" (did you mean {near[0]!r}?)" if near else ""
 

@@ -12,6 +12,12 @@ def test_suggest_prefers_a_case_match_then_the_closest_name():
     assert suggest("colour", ["speed_mps", "height_m"]) == ""
     assert suggest(7, [1, 2, 3.5]) == ""  # non-strings are compared as text
     assert suggest(3, [1, 2, 3.5]) == " (did you mean '3.5'?)"
+    # another spelling of a unit (fuzzing, 2026-12-04: "dps" was answered with 'rad/s')
+    gyro = ["rad/s", "deg/s", "deg/h", "rad", "deg"]
+    assert suggest("dps", gyro) == " (did you mean 'deg/s'?)"
+    assert suggest("DPH", gyro) == " (did you mean 'deg/h'?)"
+    assert suggest("feet", ["m", "ft"]) == " (did you mean 'ft'?)"
+    assert suggest("dps", ["m", "ft"]) == ""  # a spelling of a unit not among the choices
 
 
 def test_check_keys_names_the_key_path_and_the_valid_keys():

@@ -180,3 +180,22 @@ def test_short_line_in_the_middle_names_file_and_line(tmp_path):
     _write(tmp_path, "\n".join(lines).encode())
     with pytest.raises(DataError, match=r"imu.csv: line 102: \d fields, header has 7"):
         load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
+
+
+def test_a_bad_value_is_shown_cut_short_and_nanoseconds_as_seconds_named(tmp_path):
+    """A block of NUL bytes in a time field is shown as its first 40 characters and its length,
+    not as a 16-kB error line; integer nanoseconds declared as seconds are named as such, not an
+    internal OverflowError (fuzzing, 2026-12-04)."""
+    lines = texts()["imu"].split("\n")
+    lines[101] = "\x00" * 4000 + "," + lines[101].split(",", 1)[1]
+    _write(tmp_path, "\n".join(lines).encode())
+    with pytest.raises(DataError) as exc:
+        load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
+    msg = str(exc.value)
+    assert "imu.csv: line 102, column 'time_ns': expected integer nanoseconds, got '" in msg
+    assert msg.endswith("... (4000 characters)") and len(msg) < 500, msg[:600]
+    _write(tmp_path)
+    with pytest.raises(
+        DataError, match=r"imu.csv: line 2, column 'time_ns': expected seconds, got '\d+': past the year 2262"
+    ):
+        load_flight(ingest_options({"inputs": CSV_IN, "csv": {"time_format": "s"}}, "f"), tmp_path)

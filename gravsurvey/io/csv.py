@@ -73,6 +73,17 @@ GRADIENT_LOWER_COLUMNS = {"txy": "tyx_eotvos", "txz": "tzx_eotvos", "tyz": "tzy_
 DEFAULT_GPS_TIME_COLUMNS = ["gps_week", "gps_sow"]
 
 
+#: Characters of a bad value shown in a message (a block of NUL bytes or a binary line would
+#: otherwise fill kilobytes of one error line).
+SHOWN_CHARS = 40
+
+
+def _shown(s: str) -> str:
+    """``repr`` of a bad field, stripped and cut to :data:`SHOWN_CHARS` characters."""
+    s = s.strip()
+    return repr(s[:SHOWN_CHARS]) + (f"... ({len(s)} characters)" if len(s) > SHOWN_CHARS else "")
+
+
 def _seconds_to_ns(strs, path, lines, col):
     """Decimal-second strings -> int64 ns, exactly (no float rounding)."""
     out = np.empty(len(strs), np.int64)
@@ -89,9 +100,14 @@ def _seconds_to_ns(strs, path, lines, col):
         ):
             raise DataError(
                 f"{path}: line {lines[k]}, column {col!r}: expected seconds "
-                f"(decimal, at most 9 fractional digits), got {s!r}"
+                f"(decimal, at most 9 fractional digits), got {_shown(s)}"
             )
         v = int(ip or "0") * 10**9 + int((fp + "000000000")[:9])
+        if v >= 2**63:
+            raise DataError(
+                f"{path}: line {lines[k]}, column {col!r}: expected seconds, got {_shown(s)}: past the year "
+                "2262 (nanoseconds declared as seconds? csv.time_format)"
+            )
         out[k] = -v if neg else v
     return out
 
@@ -107,7 +123,7 @@ def _ns(strs, path, lines, col):
                     raise ValueError
             except ValueError:
                 raise DataError(
-                    f"{path}: line {lines[k]}, column {col!r}: expected integer nanoseconds, got {s.strip()!r}"
+                    f"{path}: line {lines[k]}, column {col!r}: expected integer nanoseconds, got {_shown(s)}"
                 ) from None
         raise
 
@@ -123,7 +139,7 @@ def _iso(strs, path, lines, col):
         if "+" in s[10:] or "-" in s[10:]:
             raise DataError(
                 f"{path}: line {lines[k]}, column {col!r}: expected ISO 8601 UTC "
-                f"time (ending in Z or +00:00 or no offset), got {strs[k].strip()!r}"
+                f"time (ending in Z or +00:00 or no offset), got {_shown(strs[k])}"
             )
         clean.append(s)
     try:
@@ -292,7 +308,7 @@ def read_csv_channel(
                     float(s)
                 except ValueError:
                     raise DataError(
-                        f"{path}: line {line_no[k]}, column {c!r}: expected a number, got {s.strip()!r}"
+                        f"{path}: line {line_no[k]}, column {c!r}: expected a number, got {_shown(s)}"
                     ) from None
             raise
         if kind is not None:
@@ -319,7 +335,7 @@ def read_csv_channel(
                 except ValueError:
                     k = next(k for k, s_ in enumerate(strs) if not _is_float(s_))
                     raise DataError(
-                        f"{path}: line {line_no[k]}, column {c!r}: expected a number, got {strs[k].strip()!r}"
+                        f"{path}: line {line_no[k]}, column {c!r}: expected a number, got {_shown(strs[k])}"
                     ) from None
         values = {
             "gradient": np.stack(
