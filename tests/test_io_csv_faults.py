@@ -199,3 +199,17 @@ def test_a_bad_value_is_shown_cut_short_and_nanoseconds_as_seconds_named(tmp_pat
         DataError, match=r"imu.csv: line 2, column 'time_ns': expected seconds, got '\d+': past the year 2262"
     ):
         load_flight(ingest_options({"inputs": CSV_IN, "csv": {"time_format": "s"}}, "f"), tmp_path)
+
+
+def test_a_gnss_row_with_no_fix_is_dropped_not_a_jump_of_the_track(tmp_path):
+    """A receiver writes latitude 0, longitude 0 and height 0 without a fix: the row is dropped
+    with a warning, not taken for a 5,000-km jump that refuses the flight (fuzzing, 2026-12-04)."""
+    t = texts()
+    g = t["gnss"].split("\n")
+    g[3] = g[3].split(",", 1)[0] + ",0,0,0"
+    for role, text in {**t, "gnss": "\n".join(g)}.items():
+        (tmp_path / f"{role}.csv").write_text(text)
+    with pytest.warns(DataWarning, match=r"gnss: dropped 1 samples at latitude 0, longitude 0 \(no fix\)"):
+        rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
+    assert rec.gnss.time.size == len([ln for ln in t["gnss"].split("\n")[1:] if ln]) - 1
+    assert np.all(rec.gnss.lat != 0.0)

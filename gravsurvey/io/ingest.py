@@ -458,6 +458,19 @@ def _drop_nonfinite(ch: RawChannel, notes):
         ch.values = {k: v[ok] for k, v in ch.values.items()}
 
 
+def _drop_no_fix(ch: RawChannel, notes):
+    """Drop GNSS samples at latitude 0 and longitude 0 exactly: what receivers write with no fix
+    (a survey at the Gulf of Guinea's null point would have some other digit in 15); say how
+    many. Kept, one such row made the track jump by 5,000 km and refused the whole flight."""
+    if ch.role != "gnss" or "lat_deg" not in ch.values or not len(ch.time_ns):
+        return
+    zero = (np.asarray(ch.values["lat_deg"]) == 0.0) & (np.asarray(ch.values["lon_deg"]) == 0.0)
+    if zero.any() and not zero.all():
+        notes.append(f"gnss: dropped {int(zero.sum())} samples at latitude 0, longitude 0 (no fix) ({ch.source})")
+        ch.time_ns = ch.time_ns[~zero]
+        ch.values = {k: v[~zero] for k, v in ch.values.items()}
+
+
 def imu_units(options: IngestOptions) -> tuple:
     """The declared (accelerometer, gyro) units of a flight's IMU channel."""
     units = options.csv_units if options.kind == "csv" else options.mcap_units
@@ -590,6 +603,7 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
     raw, content = read_raw_channels(options, base_dir, notes, csv_loss)
     for ch in raw.values():
         _drop_nonfinite(ch, notes)
+        _drop_no_fix(ch, notes)
     for role, off in options.time_offsets_ns.items():
         # clocks known to differ (time_offsets_s), before anything compares the channels
         if role in raw:
