@@ -553,6 +553,18 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
         tr = read_truth_csv(fl.truth_spec or fl.truth)
         unix = record.t0_unix_ns + np.round(est.time * 1e9).astype(np.int64)
         est.truth_mgal = truth_at(tr, unix)
+        covered = float(np.mean(np.isfinite(est.truth_mgal))) if est.truth_mgal.size else 0.0
+        if covered < 0.5:
+            # a truth of another flight or day, or in other time units: every score would be
+            # null (or of a sliver) without a word
+            from .utc import utc_iso
+
+            notes.append(
+                f"{fl.name}: flights[{fl.index}].truth covers {100 * covered:.0f} % of the flight "
+                f"(truth {utc_iso(int(tr['time_ns'][0]), 0)}..{utc_iso(int(tr['time_ns'][-1]), 0)}, flight "
+                f"{utc_iso(int(unix[0]), 0)}..{utc_iso(int(unix[-1]), 0)}): another flight's, or its times "
+                "in other units?"
+            )
 
     est.name = fl.name
     est.t0_unix_ns = int(record.t0_unix_ns)

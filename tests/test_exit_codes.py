@@ -393,6 +393,26 @@ def test_a_rerun_whose_flights_all_fail_leaves_no_earlier_deliverables(tmp_path)
     assert deliverables == ["summary.json"], deliverables
 
 
+def test_a_truth_of_another_day_is_said_not_scored_as_nothing(tmp_path):
+    """A truth file whose times miss the flight (another day's, or in other units): every score
+    was null without a word (fuzzing, 2026-12-04); a warning names the key and both spans."""
+    src = tmp_path / "mc"
+    shutil.copytree(SAMPLES / "markov_csv", src)
+    truth = src / "F01" / "truth.csv"
+    lines = truth.read_text().splitlines()
+    day = 86_400 * 10**9
+    for i, ln in enumerate(lines):
+        if ln[:1].isdigit():
+            t, rest = ln.split(",", 1)
+            lines[i] = f"{int(t) + day},{rest}"
+    truth.write_text("\n".join(lines) + "\n")
+    r = gs("run", src / "survey.yaml", "-o", tmp_path / "out", "--no-plots")
+    assert r.returncode == 0, r.stderr
+    warned = [ln for ln in _nonblank(r.stderr) if ln.startswith("warning: ")]
+    assert len(warned) == 1 and "flights[0].truth covers 0 % of the flight" in warned[0], r.stderr
+    assert "(truth 2025-03-11T12:00:00Z.." in warned[0] and "flight 2025-03-10T12:00:00Z.." in warned[0]
+
+
 def test_csv_cut_inside_its_last_line_is_processed_and_exit_1(tmp_path):
     """An IMU CSV cut 20 bytes into its last line (a logger stopped mid-write): the flight is
     processed from the complete lines, the damage is one line on stderr naming the file, the
