@@ -506,6 +506,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
         check_gnss_consistency,
         check_overlap,
         check_platform_axes,
+        check_platform_gyros,
         check_result,
     )
 
@@ -522,6 +523,9 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
             record, names, checks, cfg.ellipsoid, fl.initial_given, f"flights[{fl.index}].initial"
         )
     ]
+    if getattr(fl.ingest, "kind", "") != "gravimeter":
+        # against the GNSS track, once the checks above have found it sound
+        notes += [f"{fl.name}: {n}" for n in check_platform_gyros(record, fl.triad, names, f"flights[{fl.index}]")]
 
     t = time.perf_counter()
     est, seg_notes, segment_loss = estimate_flight(cfg, fl, record, checks, names)

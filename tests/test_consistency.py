@@ -370,6 +370,40 @@ def test_platform_axes_not_up_name_the_axes_key(tmp_path, prep, extra, axis):
     assert f"gravity lies on the triad's {axis} axis" in msg and "flights[0].imu_axes" in msg and "\n" not in msg
 
 
+def _swap_wx_wy(p):
+    def fn(head, rows):
+        i, k = head.index("wx_radps"), head.index("wy_radps")
+        for r in rows:
+            r[i], r[k] = r[k], r[i]
+        return rows
+
+    d.edit(p, "imu", fn)
+
+
+@pytest.mark.parametrize(
+    "prep, slopes",
+    [
+        (_flip("wx_radps"), "x -1.00, y +1.00, z +1.00"),
+        (_flip("wy_radps"), "x +1.00, y -1.00, z +1.00"),
+        (_flip("wz_radps"), "x +1.00, y +1.00, z -1.00"),
+        (_swap_wx_wy, "x -4.0"),
+    ],
+)
+def test_platform_gyro_axis_negated_or_swapped_names_the_gyro_columns(tmp_path, prep, slopes):
+    """A platform's gyro axis negated, or two swapped: each gyro's 60-s means against the rate
+    of an east-north-up frame along the GNSS track (Earth's rate and transport rate) have slope
+    -1 or far from 1 instead of +1. Before (fuzzing, 2026-12-04) these ran with exit 0 at 1.8-5.3x
+    the intact error; now an error naming the gyro columns and imu_axes."""
+    cfg_path = d.copy_sample(tmp_path / "s")
+    prep(tmp_path / "s")
+    cfg = load_config(cfg_path, output_dir=tmp_path / "out")
+    with pytest.raises(DataError) as exc:
+        process_flight(cfg, cfg.flights[0])
+    msg = str(exc.value)
+    assert "imu.csv columns wx_radps, wy_radps, wz_radps: the platform gyros do not turn" in msg
+    assert f"give slopes {slopes}" in msg and "flights[0].imu_axes" in msg and "\n" not in msg
+
+
 def test_platform_axes_check_passes_a_level_platform_and_skips_strapdown(intact):
     """The intact platform sample passes with a note of its up-axis reading; a strapdown triad is
     aligned from the data in any orientation and is not checked, however it is turned."""
@@ -378,6 +412,9 @@ def test_platform_axes_check_passes_a_level_platform_and_skips_strapdown(intact)
     from gravsurvey.consistency import check_platform_axes
 
     assert any("platform axes: median up-axis specific force +9.8" in n for n in intact.estimator["checks_passed"])
+    # and its gyros turn with the Earth and the track (slopes 1.000 on the simulated platforms)
+    (rates,) = [n for n in intact.estimator["checks_passed"] if "platform gyros" in n]
+    assert "platform gyros: slopes on the Earth's and the transport rate x +1.00, y +1.00, z +1.00" in rates
     t, still = np.arange(100.0), np.zeros((100, 3))
     down = SimpleNamespace(
         imu=SimpleNamespace(time=t, angular_rate_t=still, specific_force_t=np.tile([0.1, 0.0, -9.8], (100, 1)))
