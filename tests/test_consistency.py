@@ -319,6 +319,33 @@ def test_moderate_unexplained_mismatch_is_a_note_not_an_error(tmp_path):
         check_gnss_consistency(rec, channel_names(fl.ingest, cfg.base_dir), CheckOptions(max_gravity_mismatch_mgal=150))
 
 
+def test_heights_in_metres_declared_as_feet_are_named_in_a_warning(tmp_path):
+    """Both height channels in metres declared as feet: they agree with each other, and normal
+    gravity at the converted heights is 341 mGal off the IMU's, under the 500-mGal limit that
+    holds an accelerometer's bias; that the other conversion takes it to 16 mGal is said
+    (fuzzing, 2026-12-04: silent, 2.8x the error)."""
+    from gravsurvey.consistency import channel_names, check_gnss_consistency
+
+    cfg_path = d.copy_sample(tmp_path / "s")
+    text = cfg_path.read_text()
+    cfg_path.write_text(text.replace("  triad: platform\n", "  triad: platform\n  csv: {units: {height: ft}}\n", 1))
+    cfg = load_config(cfg_path, output_dir=tmp_path / "out")
+    fl = cfg.flights[0]
+    rec = load_flight(fl.ingest, cfg.base_dir)
+    notes = check_gnss_consistency(rec, channel_names(fl.ingest, cfg.base_dir), CheckOptions())
+    (hint,) = [n for n in notes if "converted the other way" in n]
+    assert "gnss.csv column height_m: the IMU measures a specific force -3" in hint
+    assert "height in metres but declared as feet?" in hint
+    # the intact sample: no such note
+    cfg2, fl2 = _flight(tmp_path / "ok")
+    rec2 = load_flight(fl2.ingest, cfg2.base_dir)
+    assert not [
+        n
+        for n in check_gnss_consistency(rec2, channel_names(fl2.ingest, cfg2.base_dir), CheckOptions())
+        if "converted" in n
+    ]
+
+
 def test_implausible_gnss_speed_names_the_columns(tmp_path):
     # latitude steps 20x too large (e.g. a scale error): the track "flies" at ~1200 m/s
     cfg, fl = _flight(tmp_path, lambda p: d.map_columns(p, "gnss", {"lat_deg": lambda x: x[0] + 20 * (x - x[0])}))
