@@ -76,6 +76,11 @@ MIN_OFFSET_SIGNAL_MPS2 = 0.02
 #: Correlation an IMU-GNSS offset estimate needs before an offset beyond the limit fails a flight.
 OFFSET_VERDICT_CORRELATION = 0.9
 
+#: An IMU covering less than this share of an aiding channel's time span is said in a note (its
+#: stamps at a wrong rate or in other units - a log at 10 Hz stamped at 20 Hz spans half the
+#: GNSS's - or its log cut short).
+IMU_COVER_FRACTION = 0.8
+
 #: Prefix of a note that records a check passed (a fact for summary.json, not a warning).
 PASSED = "passed: "
 
@@ -627,6 +632,13 @@ def check_overlap(record, names: ChannelNames | None = None, min_fraction: float
             notes.append(
                 f"{role} covers only {100 * ov / (a1 - a0):.0f} % of the IMU time span: imu "
                 f"{span_text(t0, a0, a1)}, {role} {span_text(t0, b0, b1)}"
+            )
+        elif ov < IMU_COVER_FRACTION * (b1 - b0):
+            # the IMU is the short one: its stamps at the wrong rate or in other units, or its log cut
+            notes.append(
+                f"imu covers only {100 * ov / (b1 - b0):.0f} % of the {role} time span: imu "
+                f"{span_text(t0, a0, a1)}, {role} {span_text(t0, b0, b1)} (IMU stamps at a wrong rate or "
+                "in other units, or its log cut short?)"
             )
     return notes
 
@@ -1246,9 +1258,14 @@ def plan_segments(record, opts: CheckOptions, names: ChannelNames | None = None)
                 f"segment {span_text(t0, a, b)} between gaps is shorter than {MIN_SEGMENT_S:g} s: not estimated"
             )
     if not keep:
+        splits = "; ".join(n for n in notes if n.startswith("split"))
+        # without a split the whole record is short: its time stamps may be in other units
+        why = splits or (
+            f"the IMU samples span {imu_t[-1] - imu_t[0]:.3g} s, {span_text(t0, float(imu_t[0]), float(imu_t[-1]))}: "
+            "a record that short, or time stamps in other units (milliseconds written as nanoseconds? csv.time_format)"
+        )
         raise DataError(
-            f"{record.source or 'record'}: no piece of the flight between gaps is at least "
-            f"{MIN_SEGMENT_S:g} s long ({'; '.join(n for n in notes if n.startswith('split'))})"
+            f"{record.source or 'record'}: no piece of the flight between gaps is at least {MIN_SEGMENT_S:g} s long ({why})"
         )
     return keep, notes, dropped
 

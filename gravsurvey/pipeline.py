@@ -87,9 +87,19 @@ def process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
     summary.json) instead of being printed: a cron run that succeeds prints nothing.  BLAS runs
     single-threaded inside (:func:`gravsurvey.pool.single_threaded_blas`).
     """
+    early: list[str] = []  # the flight's notes so far, kept for a failure's report
     with warnings.catch_warnings(record=True) as caught, single_threaded_blas():
         warnings.simplefilter("always")
-        result = _process_flight(cfg, fl)
+        try:
+            result = _process_flight(cfg, fl, early)
+        except GravsurveyError as exc:
+            # what was noticed before the failure (a channel covering half the others' span,
+            # a unit hint) often names its cause: the run prints it with the failure
+            from .consistency import PASSED
+
+            lines = [n for n in early if PASSED not in n] + [f"{fl.name}: {w.message}" for w in caught]
+            exc.flight_notes = list(dict.fromkeys(lines))
+            raise
     seen = set(result.notes)
     for w in caught:
         line = f"{fl.name}: {w.message}"
@@ -489,11 +499,11 @@ def _trade_drift_sigma(est: FlightEstimate, sigma) -> None:
     est.sigma = np.sqrt(np.clip(est.sigma**2 - est.drift_sigma_passed**2, 0.0, None) + np.square(sigma))
 
 
-def _process_flight(cfg: SurveyConfig, fl: FlightConfig) -> FlightEstimate:
+def _process_flight(cfg: SurveyConfig, fl: FlightConfig, notes: list) -> FlightEstimate:
+    """:func:`process_flight`'s work; ``notes`` (empty) collects the flight's notes as they come."""
     from .io.ingest import load_flight
 
     timings = {}
-    notes: list[str] = []
     t = time.perf_counter()
     record = load_flight(fl.ingest, cfg.base_dir)
     notes += [f"{fl.name}: {n}" for n in record.notes]
@@ -748,7 +758,7 @@ def _worker(config_path: str, output_dir: str, index: int):
     try:
         return ("ok", process_flight(cfg, fl))
     except GravsurveyError as exc:
-        return ("error", f"{fl.name}: {exc}")
+        return ("error", f"{fl.name}: {exc}", getattr(exc, "flight_notes", []))
     except Exception as exc:  # a bug in one flight must not stop the others
         return ("bug", f"{fl.name}: internal error {type(exc).__name__}: {exc}\n{traceback.format_exc()}")
 
@@ -898,9 +908,10 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
                 for fut in as_completed(futs):
                     fl = futs[fut]
                     try:
-                        status, payload = fut.result()
+                        status, payload, *early = fut.result()
                     except Exception as exc:  # worker died (e.g. killed, out of memory)
-                        status, payload = "bug", f"{fl.name}: worker process failed: {exc}"
+                        status, payload, early = "bug", f"{fl.name}: worker process failed: {exc}", []
+                    notes.extend(early[0] if early else [])
                     _collect(fl, status, payload)
                     if bar:
                         bar.update(1)
@@ -915,6 +926,7 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
                         raise KeyboardInterrupt from exc
                     if isinstance(exc, GravsurveyError):
                         status, payload = "error", f"{fl.name}: {exc}"
+                        notes.extend(getattr(exc, "flight_notes", []))
                     else:
                         status, payload = (
                             "bug",

@@ -413,6 +413,29 @@ def test_a_truth_of_another_day_is_said_not_scored_as_nothing(tmp_path):
     assert "(truth 2025-03-11T12:00:00Z.." in warned[0] and "flight 2025-03-10T12:00:00Z.." in warned[0]
 
 
+def test_a_failed_flight_still_reports_what_was_noticed_before(tmp_path):
+    """An IMU log at 10 Hz stamped as 20 Hz (its stamps span half the GNSS's): the flight fails
+    later in the navigation, and the warning that names the cause - the IMU covering half the
+    other channels' span - is printed with the failure, not lost with the flight (fuzzing,
+    2026-12-04: only "the navigation did not settle ... set model.gyro_bias_sigma_degph")."""
+    src = tmp_path / "mc"
+    shutil.copytree(SAMPLES / "markov_csv", src)
+    imu = src / "F01" / "imu.csv"
+    lines = imu.read_text().splitlines()
+    data = [i for i, ln in enumerate(lines) if ln[:1].isdigit()]
+    t0 = int(lines[data[0]].split(",", 1)[0])
+    for i in data:
+        t, rest = lines[i].split(",", 1)
+        lines[i] = f"{t0 + (int(t) - t0) // 2},{rest}"
+    imu.write_text("\n".join(lines) + "\n")
+    r = gs("run", src / "survey.yaml", "-o", tmp_path / "out", "--no-plots")
+    assert r.returncode == 1, r.stderr
+    out = _nonblank(r.stderr)
+    assert any(ln.startswith("warning: F01: imu covers only 50 % of the gnss time span") for ln in out), r.stderr
+    assert any(ln.startswith("gravsurvey: flight failed: F01: ") for ln in out), r.stderr
+    assert "Traceback" not in r.stderr
+
+
 def test_csv_cut_inside_its_last_line_is_processed_and_exit_1(tmp_path):
     """An IMU CSV cut 20 bytes into its last line (a logger stopped mid-write): the flight is
     processed from the complete lines, the damage is one line on stderr naming the file, the
