@@ -962,6 +962,17 @@ def _run_locked(cfg, out_dir, jobs, force, progress, t_start, OutputTransaction)
     return RunResult(out_dir, processed, skipped, failed, notes, summary, data_loss)
 
 
+def _summary_head(cfg) -> dict:
+    """summary.json's first keys: the survey, the software, when, the config and the method."""
+    return {
+        "survey": cfg.name,
+        "software": {"name": "gravsurvey", "version": __version__, "python": platform.python_version()},
+        "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "config": {"path": str(cfg.path), "sha256": _file_sha256(cfg.path), "settings": cfg.raw},
+        "processing_method": cfg.processing_method,
+    }
+
+
 def _write_failed_run(cfg, out_dir, failed, OutputTransaction) -> dict:
     """No flight could be processed: ``summary.json`` says so (``failed_flights``), and the
     deliverables an earlier run left in the folder are removed (the transaction's manifest),
@@ -970,11 +981,7 @@ def _write_failed_run(cfg, out_dir, failed, OutputTransaction) -> dict:
     from .io import writers
 
     summary = {
-        "survey": cfg.name,
-        "software": {"name": "gravsurvey", "version": __version__, "python": platform.python_version()},
-        "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "config": {"path": str(cfg.path), "sha256": _file_sha256(cfg.path), "settings": cfg.raw},
-        "processing_method": cfg.processing_method,
+        **_summary_head(cfg),
         "flights": {},
         "failed_flights": [f.splitlines()[0] for f in failed],
         "notes": ["no flight was processed: no deliverables (an earlier run's in this folder were removed)"],
@@ -1498,11 +1505,7 @@ def _write_outputs(cfg, out_dir, results, failed, OutputTransaction) -> dict:
     # every line's stated resolution travels with the table into each file (issue 12 item 4)
     metadata["resolution"] = {f"{st['flight']}/{st['line']}": st["resolution_note"] for st in line_stats}
     summary = {
-        "survey": cfg.name,
-        "software": {"name": "gravsurvey", "version": __version__, "python": platform.python_version()},
-        "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "config": {"path": str(cfg.path), "sha256": _file_sha256(cfg.path), "settings": cfg.raw},
-        "processing_method": cfg.processing_method,
+        **_summary_head(cfg),
         "crs_epsg": epsg,
         "crs": metadata["crs"],
         "level": {

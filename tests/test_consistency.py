@@ -357,14 +357,37 @@ def _flip(*cols):
     return lambda p: d.map_columns(p, "imu", {c: (lambda x: -x) for c in cols})
 
 
-def _swap_x_z(p):
-    def fn(head, rows):
-        i, k = head.index("fx_mps2"), head.index("fz_mps2")
-        for r in rows:
-            r[i], r[k] = r[k], r[i]
-        return rows
+def _swap(a, b):
+    """Swap two IMU columns of the sample copied to ``p``."""
 
-    d.edit(p, "imu", fn)
+    def prep(p):
+        def fn(head, rows):
+            i, k = head.index(a), head.index(b)
+            for r in rows:
+                r[i], r[k] = r[k], r[i]
+            return rows
+
+        d.edit(p, "imu", fn)
+
+    return prep
+
+
+_swap_x_z = _swap("fx_mps2", "fz_mps2")
+
+
+def _refusal(tmp_path, prep, extra="") -> str:
+    """The DataError text of processing the sample with ``extra`` flight keys and ``prep``
+    applied to its files."""
+    cfg_path = d.copy_sample(tmp_path / "s")
+    if extra:
+        text = cfg_path.read_text()
+        cfg_path.write_text(text.replace("  triad: platform\n", "  triad: platform\n" + extra.replace("    ", "  "), 1))
+    if prep is not None:
+        prep(tmp_path / "s")
+    cfg = load_config(cfg_path, output_dir=tmp_path / "out")
+    with pytest.raises(DataError) as exc:
+        process_flight(cfg, cfg.flights[0])
+    return str(exc.value)
 
 
 @pytest.mark.parametrize(
@@ -383,28 +406,9 @@ def test_platform_axes_not_up_name_the_axes_key(tmp_path, prep, extra, axis):
     """A platform triad whose third axis does not read +g is an error naming the IMU columns, the
     axis gravity lies on and ``imu_axes``, before any navigation (not a run-away or a mirrored
     vertical channel)."""
-    cfg_path = d.copy_sample(tmp_path / "s")
-    if extra:
-        text = cfg_path.read_text()
-        cfg_path.write_text(text.replace("  triad: platform\n", "  triad: platform\n" + extra.replace("    ", "  "), 1))
-    if prep is not None:
-        prep(tmp_path / "s")
-    cfg = load_config(cfg_path, output_dir=tmp_path / "out")
-    with pytest.raises(DataError) as exc:
-        process_flight(cfg, cfg.flights[0])
-    msg = str(exc.value)
+    msg = _refusal(tmp_path, prep, extra)
     assert "imu.csv columns fx_mps2, fy_mps2, fz_mps2: the platform triad's third axis" in msg
     assert f"gravity lies on the triad's {axis} axis" in msg and "flights[0].imu_axes" in msg and "\n" not in msg
-
-
-def _swap_wx_wy(p):
-    def fn(head, rows):
-        i, k = head.index("wx_radps"), head.index("wy_radps")
-        for r in rows:
-            r[i], r[k] = r[k], r[i]
-        return rows
-
-    d.edit(p, "imu", fn)
 
 
 @pytest.mark.parametrize(
@@ -413,7 +417,7 @@ def _swap_wx_wy(p):
         (_flip("wx_radps"), "x -1.00, y +1.00, z +1.00"),
         (_flip("wy_radps"), "x +1.00, y -1.00, z +1.00"),
         (_flip("wz_radps"), "x +1.00, y +1.00, z -1.00"),
-        (_swap_wx_wy, "x -4.0"),
+        (_swap("wx_radps", "wy_radps"), "x -4.0"),
     ],
 )
 def test_platform_gyro_axis_negated_or_swapped_names_the_gyro_columns(tmp_path, prep, slopes):
@@ -421,12 +425,7 @@ def test_platform_gyro_axis_negated_or_swapped_names_the_gyro_columns(tmp_path, 
     of an east-north-up frame along the GNSS track (Earth's rate and transport rate) have slope
     -1 or far from 1 instead of +1. Before (fuzzing, 2026-12-04) these ran with exit 0 at 1.8-5.3x
     the intact error; now an error naming the gyro columns and imu_axes."""
-    cfg_path = d.copy_sample(tmp_path / "s")
-    prep(tmp_path / "s")
-    cfg = load_config(cfg_path, output_dir=tmp_path / "out")
-    with pytest.raises(DataError) as exc:
-        process_flight(cfg, cfg.flights[0])
-    msg = str(exc.value)
+    msg = _refusal(tmp_path, prep)
     assert "imu.csv columns wx_radps, wy_radps, wz_radps: the platform gyros do not turn" in msg
     assert f"give slopes {slopes}" in msg and "flights[0].imu_axes" in msg and "\n" not in msg
 
