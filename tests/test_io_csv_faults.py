@@ -216,3 +216,24 @@ def test_a_gnss_row_with_no_fix_is_dropped_not_a_jump_of_the_track(tmp_path):
     assert any(m.startswith("gnss: dropped 1 samples at latitude 0, longitude 0 (no fix)") for m in said), said
     assert rec.gnss.time.size == len([ln for ln in t["gnss"].split("\n")[1:] if ln]) - 1
     assert np.all(rec.gnss.lat != 0.0)
+
+
+def test_quoted_fields_are_read_and_another_delimiter_is_named(tmp_path):
+    """A spreadsheet's export quotes every field: read as the plain file; a file separated by
+    semicolons names csv.delimiter, not csv.columns (fuzzing, 2026-12-04)."""
+    _write(tmp_path)
+    plain = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
+    for role in ("imu", "altimeter", "gnss"):
+        p = tmp_path / f"{role}.csv"
+        p.write_text("\n".join(",".join(f'"{x}"' for x in ln.split(",")) for ln in p.read_text().splitlines()) + "\n")
+    quoted = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
+    np.testing.assert_array_equal(quoted.imu.specific_force_t, plain.imu.specific_force_t)
+    np.testing.assert_array_equal(quoted.gnss.lat, plain.gnss.lat)
+    _write(tmp_path)
+    p = tmp_path / "imu.csv"
+    p.write_text(p.read_text().replace(",", ";"))
+    with pytest.raises(
+        DataError,
+        match=r"imu.csv: line 1: column 'time_ns' missing from the header .*the header holds ';': set csv.delimiter$",
+    ):
+        load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)

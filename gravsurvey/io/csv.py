@@ -249,12 +249,20 @@ def read_csv_channel(
             cut = (line_no.pop(), data_lines.pop())
     if header is None:
         raise DataError(f"{path}: no header row (expected columns {', '.join(_flat(cols.values()))})")
+    # a spreadsheet's export quotes every field: names and values are read without the quotes
+    quoted = bool(header) and all(len(h) >= 2 and h[0] == h[-1] and h[0] in "\"'" for h in header)
+    if quoted:
+        header = [h[1:-1] for h in header]
     index = {}
     for name in _flat(cols.values()):
         if name not in header:
+            # the header read as one field holding another separator, or quoted names: the file's
+            # layout, not its column names, is what the config must say
+            other = [d for d in (";", "\t", "|", ",") if d != delimiter and len(header) == 1 and d in header[0]]
+            hint = f"the header holds {other[0]!r}: set csv.delimiter" if other else f"set csv.columns.{role}"
             raise DataError(
                 f"{path}: line {header_line}: column {name!r} missing from the "
-                f"header (has {', '.join(header)}); set csv.columns.{role}"
+                f"header (has {', '.join(_shown(h) if len(h) > SHOWN_CHARS else h for h in header)}); {hint}"
             )
         index[name] = header.index(name)
     ncol = len(header)
@@ -263,6 +271,8 @@ def read_csv_channel(
     n = len(data_lines)
     # split; count fields per line first so a short/long line is reported exactly
     rows = [ln.split(delimiter) for ln in data_lines]
+    if quoted:
+        rows = [[f.strip().strip("\"'") for f in r] for r in rows]
     for k, r in enumerate(rows):
         if len(r) != ncol:
             raise DataError(f"{path}: line {line_no[k]}: {len(r)} fields, header has {ncol}")
