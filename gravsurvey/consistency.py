@@ -589,11 +589,30 @@ def _check_platform_rates(record, names: ChannelNames | None, triad_key: str) ->
     if above_s < PLATFORM_TILT_MIN_S:
         return
     where = names.column("imu", "wx", "wy") if names is not None else "imu"
+    # a level platform whose rates are read in a unit too small: its steady rate vector is the
+    # Earth's (and the transport) rate times the units' ratio, not a body's turns and gusts
+    steady = np.linalg.norm(np.nanmedian(w, axis=0)) / (WGS84.omega)
+    unit = next(
+        (
+            text
+            for text, k in (
+                ("deg/h declared as deg/s", 3600.0),
+                ("deg/s declared as rad/s", 180.0 / math.pi),
+                ("deg/h declared as rad/s", 3600.0 * 180.0 / math.pi),
+            )
+            if abs(steady / k - 1.0) < 0.3
+        ),
+        None,
+    )
     raise DataError(
         f"{where}: the platform triad turns about its horizontal axes at up to {rate.max():.2f} deg/s "
         f"({PLATFORM_RATE_WINDOW_S:g}-s means; {above_s:.0f} s above {PLATFORM_TILT_RATE_DEGPS:g} deg/s), where a "
-        "stabilised platform holds level (the Earth's rate, under 0.005 deg/s): a body-fixed IMU? "
-        f"set {triad_key}: strapdown"
+        "stabilised platform holds level (the Earth's rate, under 0.005 deg/s): "
+        + (
+            f"its median rate vector is {steady:.0f} x the Earth's rate: gyros in {unit}? (csv.units.gyro)"
+            if unit
+            else f"a body-fixed IMU? set {triad_key}: strapdown"
+        )
     )
 
 

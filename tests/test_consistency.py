@@ -430,6 +430,16 @@ def test_platform_gyro_axis_negated_or_swapped_names_the_gyro_columns(tmp_path, 
     assert f"give slopes {slopes}" in msg and "flights[0].imu_axes" in msg and "\n" not in msg
 
 
+def test_platform_gyros_in_a_smaller_unit_are_named_not_a_body_fixed_imu(tmp_path):
+    """A level platform's gyros written in deg/h and declared deg/s read 3600 x the Earth's rate
+    steadily: the refusal names the unit, not a body-fixed IMU (fuzzing, 2026-12-04)."""
+    scale = 180.0 / np.pi * 3600.0
+    prep = lambda p: d.map_columns(p, "imu", {c: (lambda x: x * scale) for c in ("wx_radps", "wy_radps", "wz_radps")})  # noqa: E731
+    msg = _refusal(tmp_path, prep, "    csv: {units: {gyro: deg/s}}\n")
+    assert "the platform triad turns about its horizontal axes" in msg
+    assert "x the Earth's rate: gyros in deg/h declared as deg/s? (csv.units.gyro)" in msg and "strapdown" not in msg
+
+
 def test_platform_axes_check_passes_a_level_platform_and_skips_strapdown(intact):
     """The intact platform sample passes with a note of its up-axis reading; a strapdown triad is
     aligned from the data in any orientation and is not checked, however it is turned."""
