@@ -251,7 +251,7 @@ SECOND_FLIGHT = "- name: F02\n  inputs: {mcap: F01/F01_json.mcap}\n  truth: F01/
         (
             "lines: {mode: whole}",
             "model: {filter_rate_hz: abc}\nlines: {mode: whole}",
-            "model.filter_rate_hz: expected a number > 0, got 'abc'",
+            "model.filter_rate_hz: expected a number >= 0.2, got 'abc'",
         ),
         (
             "lines: {mode: whole}",

@@ -35,7 +35,7 @@ def test_defaults_are_seed_004():
         ),
         ({"altimeter_sigma_m": -1.0}, "model.altimeter_sigma_m: expected a number >= 0, got -1.0"),
         ({"gravimeter_lambda_per_s": -0.1}, "model.gravimeter_lambda_per_s: expected a number >= 0, got -0.1"),
-        ({"filter_rate_hz": 0}, "model.filter_rate_hz: expected a number > 0, got 0"),
+        ({"filter_rate_hz": 0}, "model.filter_rate_hz: expected a number >= 0.2, got 0"),
         ({"anomaly_sigma_mps2": "big"}, "model.anomaly_sigma_mps2: expected a number >= 0, got 'big'"),
         ({"accel_noise_mps2": True}, "model.accel_noise_mps2: expected a number >= 0, got True"),
         ({"radius_source": "gps"}, "model.radius_source: expected one of altimeter, computed, got 'gps'"),
@@ -74,7 +74,7 @@ def test_settings_built_in_python_have_defaults_and_the_same_rules():
     assert p == inm_params({}) and p.given == frozenset()
     assert InmParams(altimeter_sigma_m=0.3).given == frozenset({"altimeter_sigma_m"})
     assert inm_params({"altimeter_sigma_m": 1.0}).given == frozenset({"altimeter_sigma_m"})  # written = held
-    with pytest.raises(ConfigError, match=r"^model\.filter_rate_hz: expected a number > 0, got -1$"):
+    with pytest.raises(ConfigError, match=r"^model\.filter_rate_hz: expected a number >= 0\.2, got -1$"):
         InmParams(filter_rate_hz=-1)
 
 

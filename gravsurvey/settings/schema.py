@@ -140,7 +140,11 @@ class ModelSection(Section):
         gt=0,
         le=0.5,
     )
-    filter_rate_hz: float = _m("filter_rate_hz", "Kalman epoch rate, Hz (the IMU rate is decimated)", gt=0)
+    filter_rate_hz: float = _m(
+        "filter_rate_hz",
+        "Kalman epoch rate, Hz (the IMU rate is decimated; at least 0.2: the lines are found on 10-s means of the epochs)",
+        ge=0.2,
+    )
     accel_noise_mps2: float = _m(
         "accel_noise_mps2",
         "sigma_f1 = sigma_f2, horizontal accelerometer white noise, m/s^2 (one-second sigma); on a strapdown "
