@@ -77,6 +77,22 @@ def drop_between(dst, name, a_s, b_s):
     edit(dst, name, lambda h, rows: [r for r in rows if not (t0 + a_s * NS < int(r[0]) < t0 + b_s * NS)])
 
 
+def hold_between(dst, name, a_s, b_s):
+    """Every value of one channel between a_s and b_s repeats the last row before a_s (a stalled
+    receiver or logger); the time stamps go on."""
+    t0 = t0_ns(dst)
+
+    def fn(head, rows):
+        held = None
+        for i, r in enumerate(rows):
+            if t0 + a_s * NS <= int(r[0]) < t0 + b_s * NS:
+                held = held or rows[i - 1][1:]
+                r[1:] = held
+        return rows
+
+    edit(dst, name, fn)
+
+
 def restart_clock(dst, name, at_s, back_s):
     """From ``at_s`` on, the channel's clock reads ``back_s`` less (a clock restart)."""
     shift_after(dst, at_s, -back_s, names=(name,))

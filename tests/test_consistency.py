@@ -734,3 +734,22 @@ def test_one_absurd_csv_value_is_dropped_and_the_flight_processes(tmp_path, inta
     r = process_flight(cfg, fl)
     assert any("imu: dropped 1 samples with NaN/inf or absurd" in n for n in r.notes)
     assert abs(_rms_on_lines(r) - _rms_on_lines(intact)) < 0.2
+
+
+def test_held_gnss_fixes_and_a_stale_imu_are_dropped_and_the_flight_processes(tmp_path):
+    """20 s of GNSS fixes held (a receiver repeating its last position) refused the flight as 'the
+    navigation left the GNSS track by 165 m'; 5 s of a repeated IMU message failed a strapdown
+    flight with 4918 mGal (fuzzing, 2026-12-04). Both are dropped, named, and left as gaps."""
+
+    def prep(p):
+        d.hold_between(p, "gnss", 400, 420)
+        d.hold_between(p, "imu", 300, 310)
+
+    cfg, fl = _flight(tmp_path, prep)
+    r = process_flight(cfg, fl)
+    said = [n for n in r.notes if "(a stalled receiver or logger)" in n]
+    assert any("gnss.csv): dropped 20 sample(s) in 1 run(s) that repeat the previous position" in n for n in said)
+    assert any("imu.csv): dropped 100 sample(s) in 1 run(s) that repeat all six values" in n for n in said)
+    # the IMU's 10-s hole is longer than checks.max_imu_gap_s: two segments, 6.4 mGal measured
+    assert any("estimated 2 of 2 segments" in n for n in r.notes)
+    assert _rms_on_lines(r) < 7.0

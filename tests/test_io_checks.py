@@ -353,3 +353,49 @@ def test_a_real_imus_shocks_are_not_glitches():
             assert ck.single_sample_outliers(v[:, j], ck.IMU_SPIKE_K, ck.IMU_SPIKE_TAIL).size == 0
             unguarded += ck.single_sample_outliers(v[:, j], ck.IMU_SPIKE_K).size
     assert unguarded > 0
+
+
+# ----------------------------------------------------------------------------- frozen channels
+def _track(n=3000, hz=10.0, speed=80.0, seed=0):
+    """A GNSS track due north at ``speed`` m/s from 47 N, full-precision noise (0.02 m)."""
+    rng = np.random.default_rng(seed)
+    t = 1_700_000_000 * 10**9 + np.round(np.arange(n) * 1e9 / hz).astype(np.int64)
+    north = speed * np.arange(n) / hz + rng.normal(0, 0.02, n)
+    lat = 47.0 + north / ck.M_PER_DEG
+    lon = 11.0 + rng.normal(0, 0.02, n) / ck.M_PER_DEG
+    return t, lat, lon, 800.0 + rng.normal(0, 0.05, n)
+
+
+def test_held_gnss_fixes_are_found_exactly_and_only_while_moving():
+    t, lat, lon, h = _track()
+    for a, b in ((100, 101), (500, 700)):  # one held epoch, and 20 s of them
+        lat[a:b], lon[a:b], h[a:b] = lat[a - 1], lon[a - 1], h[a - 1]
+    got = ck.frozen_gnss(t, lat, lon, h)
+    assert got.tolist() == [100] + list(range(500, 700))
+    # at rest a receiver (or a simulator without noise) may repeat a fix: that is no fault
+    t, lat, lon, h = _track(speed=0.0)
+    lat[500:700], lon[500:700], h[500:700] = lat[499], lon[499], h[499]
+    assert ck.frozen_gnss(t, lat, lon, h).size == 0
+
+
+def test_coarse_digits_of_a_crawling_ship_are_not_held_fixes():
+    # 2 m/s at 10 Hz written with 5 decimals (1.1 m): each value repeats for about 5 epochs
+    t, lat, lon, h = _track(n=6000, speed=2.0)
+    lat, lon, h = np.round(lat, 5), np.round(lon, 5), np.round(h, 0)
+    assert len(ck.repeat_runs(np.stack([lat, lon, h], axis=1))) > 100
+    assert ck.frozen_gnss(t, lat, lon, h).size == 0
+
+
+def test_a_stale_imu_message_repeated_while_moving_is_found():
+    tg, lat, lon, _ = _track(n=600)
+    rng = np.random.default_rng(1)
+    n = 6000
+    ti = tg[0] + np.round(np.arange(n) * 1e7).astype(np.int64)  # 100 Hz
+    f = np.array([0.0, 0.0, 9.81]) + rng.normal(0, 0.05, (n, 3))
+    w = rng.normal(0, 1e-3, (n, 3))
+    f[2001:2500], w[2001:2500] = f[2000], w[2000]  # 5 s held
+    f[3001:3003], w[3001:3003] = f[3000], w[3000]  # a message logged three times: harmless, kept
+    assert ck.frozen_imu(ti, f, w, tg, lat, lon).tolist() == list(range(2001, 2500))
+    # no GNSS, or a GNSS at rest: a repeating IMU may be the record's nature (noiseless, quantised)
+    assert ck.frozen_imu(ti, f, w).size == 0
+    assert ck.frozen_imu(ti, f, w, tg, np.full(600, 47.0), np.full(600, 11.0)).size == 0

@@ -514,6 +514,34 @@ def _increments_to_rates(ch: RawChannel, nominal_step_ns: int, options: IngestOp
     ]
 
 
+def _drop(ch: RawChannel, idx) -> None:
+    keep = np.ones(len(ch.time_ns), bool)
+    keep[idx] = False
+    ch.time_ns = ch.time_ns[keep]
+    ch.values = {k: np.asarray(v)[keep] for k, v in ch.values.items()}
+
+
+def _drop_frozen(raw: dict) -> list:
+    """Drop GNSS epochs and IMU samples that repeat their predecessor while the aircraft moves
+    (:func:`checks.frozen_gnss`, :func:`checks.frozen_imu`); one warning per channel."""
+    out = []
+    g = raw.get("gnss")
+    gt = glat = glon = None
+    if g is not None and len(g.time_ns) > 2:
+        bad = ck.frozen_gnss(g.time_ns, g.values["lat_deg"], g.values["lon_deg"], g.values["height"])
+        if bad.size:
+            out.append(ck.frozen_finding("gnss", g.source, g.time_ns, bad, "the previous position"))
+            _drop(g, bad)
+        gt, glat, glon = g.time_ns, g.values["lat_deg"], g.values["lon_deg"]
+    imu = raw.get("imu")
+    if imu is not None and len(imu.time_ns) > 2:
+        bad = ck.frozen_imu(imu.time_ns, imu.values["specific_force"], imu.values["angular_rate"], gt, glat, glon)
+        if bad.size:
+            out.append(ck.frozen_finding("imu", imu.source, imu.time_ns, bad, "all six values of the previous sample"))
+            _drop(imu, bad)
+    return out
+
+
 def repair_and_check(raw: dict, options: IngestOptions):
     """Time repair and plausibility findings for every channel.
 
@@ -534,6 +562,7 @@ def repair_and_check(raw: dict, options: IngestOptions):
         reports[role] = rep
         findings += ck.time_findings(role, rep, t0)
         findings += ck.check_epoch(role, t)
+    findings += _drop_frozen(raw)
     if "imu" in raw:
         ch = raw["imu"]
         findings += _increments_to_rates(ch, reports["imu"].nominal_step_ns, options)
