@@ -479,13 +479,15 @@ def check_platform_axes(record, triad: str, names: ChannelNames | None = None, k
     )
 
 
-def platform_rate_slopes(record, block_s: float = PLATFORM_RATE_BLOCK_S, ellipsoid=WGS84):
+def platform_rate_slopes(record, block_s: float = PLATFORM_RATE_BLOCK_S, ellipsoid=WGS84, lat_sign: float = 1.0):
     """Each platform gyro against the rate of an east-north-up frame along the GNSS track.
 
     Over spans of ``block_s``: the mean angular rate of each gyro, and the frame's rate in
     inertial space the track implies, ``(-v_N / (M + h), Omega cos(lat) + v_E / (N + h),
     Omega sin(lat) + v_E tan(lat) / (N + h))`` (velocity from a line fitted to the GNSS
-    positions of the span).
+    positions of the span). ``lat_sign = -1`` takes the latitudes with the other sign (a
+    hypothesis about the GNSS column: the Earth's vertical rate and the rate about east change
+    sign with it).
 
     Returns
     -------
@@ -504,7 +506,7 @@ def platform_rate_slopes(record, block_s: float = PLATFORM_RATE_BLOCK_S, ellipso
     if g is None or len(g.time) < 10 or w.ndim != 2 or w.shape[1] != 3 or not np.any(w):
         return nan
     t = np.asarray(g.time, float)
-    lat = np.asarray(g.lat, float)
+    lat = lat_sign * np.asarray(g.lat, float)
     lon = np.unwrap(np.asarray(g.lon, float))
     h = np.asarray(g.height, float)
     ti = np.asarray(imu.time, float)
@@ -565,6 +567,18 @@ def check_platform_gyros(record, triad: str, names: ChannelNames | None = None, 
     text = ", ".join(f"{'xyz'[k]} {slopes[k]:+.2f}" for k in judged)
     if all(lo <= slopes[k] <= hi for k in judged):
         return [f"{PASSED}platform gyros: slopes on the Earth's and the transport rate {text} ({blocks} spans)"]
+    flipped, _, _ = platform_rate_slopes(record, lat_sign=-1.0)
+    if all(np.isfinite(flipped[k]) and lo <= flipped[k] <= hi for k in judged):
+        # the Earth's vertical rate and the transport rate about east change sign with the
+        # latitude: a survey south of the equator written without its sign reads as two gyro
+        # axes negated
+        where = names.column("gnss", "lat") if names is not None else "gnss latitude"
+        raise DataError(
+            f"{where}: the platform gyros turn as an east-north-up platform does along the GNSS track with "
+            f"its latitudes' sign flipped (slopes {', '.join(f'{chr(120 + k)} {flipped[k]:+.2f}' for k in judged)}; "
+            f"as written {text}, expected +1): the latitudes' sign is wrong (a survey south of the equator "
+            "written without its sign, or the hemisphere column left out)?"
+        )
     where = names.column("imu", "wx", "wy", "wz") if names is not None else "imu"
     raise DataError(
         f"{where}: the platform gyros do not turn as an east-north-up platform along the GNSS track does: "

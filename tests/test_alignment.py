@@ -14,6 +14,7 @@ import pytest
 from gravsurvey.errors import ConfigError, DataError
 from gravsurvey.geodesy import MGAL, WGS84
 from gravsurvey.inm.alignment import (
+    hemisphere_check,
     ACCEL_BIAS_SIGMA_MPS2,
     align,
     attitude_from_mat_nb,
@@ -166,6 +167,38 @@ def test_levelling_and_gyrocompassing_synthetic():
     # a tactical gyro (1 deg/h bias sigma): heading sigma 5.6 deg -> refused, says why
     _, cov, warn = gyrocompass(f_b, w_b, lat, 600.0, 1.0 * DEGPH, 0.1 * DEGPH)
     assert warn and "gyro too noisy for gyrocompassing" in warn[0] and cov[2, 2] >= math.pi**2
+
+
+def test_the_gyros_at_rest_refuse_a_latitude_of_the_wrong_sign():
+    """The vertical Earth rate Omega sin(lat) changes sign at the equator: a southern survey's
+    latitudes written without the sign are refused naming the GNSS file (fuzzing, 2026-12-04:
+    "the navigation did not settle ... set model.gyro_bias_sigma_degph")."""
+    lat = math.radians(-33.9)
+    up = np.array([0.0, 0.0, 1.0])
+    w = WGS84.omega * np.array([0.0, math.cos(lat), math.sin(lat)])
+    args = (600.0, 0.05 * DEGPH, 0.01 * DEGPH, "gnss.csv")
+    hemisphere_check(up, w, lat, *args)  # as written: passes
+    with pytest.raises(DataError) as exc:
+        hemisphere_check(up, w, -lat, *args)
+    msg = str(exc.value)
+    assert msg.startswith(
+        "gnss.csv: at rest the gyros read a vertical Earth rate of -8.39 deg/h, the one at latitude 33.90 S"
+    )
+    assert "the latitudes' sign is wrong" in msg and "\n" not in msg
+    # no verdict where the two hemispheres look alike: near the equator, or with a poor gyro
+    near = math.radians(0.5)
+    hemisphere_check(up, WGS84.omega * np.array([0.0, math.cos(near), -math.sin(near)]), near, *args)
+    hemisphere_check(up, w, -lat, 600.0, 10.0 * DEGPH, 0.01 * DEGPH, "gnss.csv")
+
+
+def test_a_southern_flight_and_its_mirror_image_align(static_start):
+    """The simulated flight at 47 N passes; with its latitudes negated align() refuses it."""
+    rec = _record(static_start)
+    align(rec, _params())
+    g = rec.gnss
+    rec.gnss = GnssChannel(g.time, -np.asarray(g.lat), g.lon, g.height)
+    with pytest.raises(DataError, match="the latitudes' sign is wrong"):
+        align(rec, _params())
 
 
 def test_static_span_detects_the_static_start(static_start, in_flight):

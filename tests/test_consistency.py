@@ -430,6 +430,16 @@ def test_platform_gyro_axis_negated_or_swapped_names_the_gyro_columns(tmp_path, 
     assert f"give slopes {slopes}" in msg and "flights[0].imu_axes" in msg and "\n" not in msg
 
 
+def test_platform_latitudes_of_the_wrong_sign_name_the_latitude_column(tmp_path):
+    """With the GNSS latitudes negated the platform's gyros read slopes x -1, z -1 (the Earth's
+    vertical rate and the rate about east change sign): named as the latitude's sign, not as two
+    gyro axes negated."""
+    msg = _refusal(tmp_path, lambda p: d.map_columns(p, "gnss", {"lat_deg": lambda x: -x}))
+    assert "gnss.csv column lat_deg: the platform gyros turn as an east-north-up platform does" in msg
+    assert "slopes x +1.00, y +1.00, z +1.00; as written x -1.00, y +1.00, z -1.00" in msg
+    assert "the latitudes' sign is wrong" in msg and "\n" not in msg
+
+
 def test_platform_gyros_in_a_smaller_unit_are_named_not_a_body_fixed_imu(tmp_path):
     """A level platform's gyros written in deg/h and declared deg/s read 3600 x the Earth's rate
     steadily: the refusal names the unit, not a body-fixed IMU (fuzzing, 2026-12-04)."""

@@ -319,6 +319,51 @@ def gyrocompass(
     return mat_nt, cov, warn
 
 
+def hemisphere_check(
+    up_t, w_mean_t, lat, duration_s, gyro_bias_sigma_radps, gyro_noise_radps, source, omega=WGS84.omega
+):
+    """Refuse a GNSS latitude whose sign the gyros contradict at rest.
+
+    At rest the gyros read the Earth's rate, whose vertical part ``Omega sin(lat)`` changes
+    sign at the equator. A survey south of it written without the sign (or with the hemisphere
+    column left out) has the vertical rate of the other hemisphere: the navigation then turns
+    at ``2 Omega sin(lat)`` (22 deg/h at 47 deg) and failed as "did not settle" with advice
+    about the gyro bias (fuzzing, 2026-12-04). Judged only when the rate matches the other
+    hemisphere within ``4 sigma + 20 %`` and misses this one by three times that.
+
+    Parameters
+    ----------
+    up_t : ndarray, shape (3,)
+        The vertical on the triad (from levelling).
+    w_mean_t : ndarray, shape (3,)
+        Mean angular rate over the static span, rad/s.
+    lat : float
+        The GNSS latitude, rad.
+    duration_s, gyro_bias_sigma_radps, gyro_noise_radps : float
+        As :func:`gyrocompass`.
+    source : str
+        The GNSS file, for the message.
+
+    Raises
+    ------
+    DataError
+    """
+    degph = math.radians(1.0) / 3600.0
+    gyro_err = math.sqrt(gyro_bias_sigma_radps**2 + gyro_noise_radps**2 / max(duration_s, 1e-9))
+    up_rate = float(np.dot(w_mean_t, up_t))
+    expected = omega * math.sin(lat)
+    tol = 4.0 * gyro_err + 0.2 * abs(expected)
+    if abs(up_rate + expected) <= tol and abs(up_rate - expected) > 3.0 * tol:
+        hemi = "N" if lat >= 0 else "S"
+        raise DataError(
+            f"{source}: at rest the gyros read a vertical Earth rate of {up_rate / degph:+.2f} deg/h, the one at "
+            f"latitude {abs(math.degrees(lat)):.2f} {'S' if hemi == 'N' else 'N'}; the GNSS latitude "
+            f"{abs(math.degrees(lat)):.2f} {hemi} expects {expected / degph:+.2f}: the latitudes' sign is wrong "
+            "(a survey south of the equator written without its sign, or the hemisphere column left out)? "
+            "(else an up-gyro bias that large: set model.gyro_bias_sigma_degph to the gyro's datasheet bias)"
+        )
+
+
 def _any_perpendicular(up):
     a = np.eye(3)[int(np.argmin(np.abs(up)))]
     v = a - (a @ up) * up
@@ -568,6 +613,10 @@ def align(record, params=None, ellipsoid: Ellipsoid = WGS84, lat=None) -> Alignm
             omega=ellipsoid.omega,
         )
         warn += gw
+        if not gw and have_gnss:
+            hemisphere_check(
+                mat[2], w[sel].mean(axis=0), lat, static, s_b, s_n, record.source_of("gnss"), ellipsoid.omega
+            )
         # the Earth turns under the static triad: C_it(t0) uses ENU at t0 (mean taken at mid-span;
         # the heading moves by W sin(lat) T/2, below 0.01 deg for 10 min)
         candidates.append(Alignment(mat, cov, "static-gyrocompass" if not gw else "static-levelling", static, static))
