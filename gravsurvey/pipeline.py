@@ -518,6 +518,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig, notes: list) -> FlightE
         check_platform_axes,
         check_platform_gyros,
         check_result,
+        check_strapdown_axes,
     )
 
     checks = getattr(cfg, "checks", None) or CheckOptions()
@@ -536,6 +537,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig, notes: list) -> FlightE
     if getattr(fl.ingest, "kind", "") != "gravimeter":
         # against the GNSS track, once the checks above have found it sound
         notes += [f"{fl.name}: {n}" for n in check_platform_gyros(record, fl.triad, names, f"flights[{fl.index}]")]
+        notes += [f"{fl.name}: {n}" for n in check_strapdown_axes(record, fl.triad, names, f"flights[{fl.index}]")]
 
     t = time.perf_counter()
     est, seg_notes, segment_loss = estimate_flight(cfg, fl, record, checks, names)

@@ -46,6 +46,9 @@ from ..geodesy import (
 )
 from .mechanization import propagate_attitude
 
+#: Half width of the GNSS (and IMU) fits of :func:`match_residual_rms`, s: 0.5-m GNSS noise at
+#: 5 Hz leaves 0.05 m/s per axis (0.3 m/s with the alignment's 1-s fits).
+MATCH_CHECK_HALF_WINDOW_S = 3.0
 #: Heading sigma above which gyrocompassing is refused (the GNSS/motion method is used).
 GYROCOMPASS_MAX_SIGMA_DEG = 2.0
 #: Prior sigma of a horizontal accelerometer bias used for the levelling sigma, m/s^2
@@ -404,6 +407,28 @@ def gnss_inertial_velocity(gnss_time, lat, lon, height, t_query, half_window_s, 
     tg = np.asarray(gnss_time, float)
     r_e = geodetic_to_ecef(np.asarray(lat, float), np.asarray(lon, float), np.asarray(height, float), ellipsoid)
     r_i = np.einsum("nij,nj->ni", mat_ie(tg, ellipsoid.omega), r_e)
+    return local_quadratic(tg, r_i, t_query, half_window_s)
+
+
+def local_quadratic(time, values, t_query, half_window_s):
+    """Value and slope at ``t_query`` of quadratics fitted to ``values`` over ``+-half_window_s``.
+
+    Parameters
+    ----------
+    time : ndarray, shape (k,)
+        s, increasing.
+    values : ndarray, shape (k, 3)
+    t_query : ndarray, shape (m,)
+        s.
+    half_window_s : float
+
+    Returns
+    -------
+    value, slope : ndarray, shape (m, 3)
+        NaN where fewer than 3 samples lie in the window or the query is not inside them.
+    """
+    tg = np.asarray(time, float)
+    r_i = np.asarray(values, float)
     tq = np.atleast_1d(np.asarray(t_query, float))
     out_r = np.full((tq.size, 3), np.nan)
     out_v = np.full((tq.size, 3), np.nan)
@@ -466,6 +491,105 @@ def wahba(a, b):
     return u @ np.diag([1.0, 1.0, d]) @ vt
 
 
+def match_vectors(
+    time,
+    f_t,
+    w_t,
+    gnss,
+    window_s,
+    ellipsoid: Ellipsoid = WGS84,
+    spacing_s=MATCH_SPACING_S,
+    c_t0=None,
+    half_window_s=None,
+    smooth_imu=False,
+):
+    """Both sides of the velocity-matching equation over ``[time[0], time[0] + window_s]``.
+
+    ``v_i(t_k) - int G_i dt = v_i(t_r) + C_it(t0) int C_t0_t f_t dt``: ``a`` the GNSS side, ``b``
+    the IMU side on the triad axes at ``time[0]``, both centred (which removes ``v_i(t_r)``), so
+    that ``a = R b`` for the rotation ``R = C_it(t0)`` of a consistent triad.
+
+    Parameters
+    ----------
+    time, f_t, w_t, gnss, window_s, ellipsoid, spacing_s, c_t0
+        As :func:`velocity_matching`.
+    half_window_s : float, optional
+        Half width of the GNSS fits, s (default: 1.5 GNSS steps, at least 1 s).
+    smooth_imu : bool
+        Fit the IMU side alike (its velocity integrated to a position at the GNSS times, the
+        same quadratics' slope): the fits' smoothing then cancels from ``a - R b``, and wide
+        fits take the GNSS noise out of the comparison.
+
+    Returns
+    -------
+    a, b : ndarray, shape (k, 3)
+        m/s.
+    tq : ndarray, shape (k,)
+        Matched epochs, s.
+
+    Raises
+    ------
+    DataError
+        Fewer than 4 epochs with GNSS on both sides.
+    """
+    t = np.asarray(time, float)
+    f = np.asarray(f_t, float)
+    if c_t0 is None:
+        c_t0 = propagate_attitude(t, w_t, np.eye(3))
+    a_t0 = np.einsum("nij,nj->ni", c_t0, f)  # specific force on the triad axes at t0
+    # cumulative integral (trapezoid) of C_t0_t f
+    u_cum = np.zeros((t.size, 3))
+    u_cum[1:] = np.cumsum(0.5 * (a_t0[1:] + a_t0[:-1]) * np.diff(t)[:, None], axis=0)
+    tg = np.asarray(gnss.time, float)
+    rate = (tg.size - 1) / (tg[-1] - tg[0]) if tg.size > 1 else 1.0
+    hw = max(1.0, 1.5 / rate) if half_window_s is None else float(half_window_s)
+    t_end = min(t[-1], t[0] + window_s, tg[-1])
+    tq = np.arange(max(t[0], tg[0]) + hw, t_end - hw + 1e-9, spacing_s)
+    if tq.size < 4:
+        raise DataError("alignment: too little GNSS data at the start of the flight for an in-motion alignment")
+    r_q, v_q = gnss_inertial_velocity(tg, gnss.lat, gnss.lon, gnss.height, tq, hw, ellipsoid)
+    ok = np.all(np.isfinite(v_q), axis=1)
+    tq, r_q, v_q = tq[ok], r_q[ok], v_q[ok]
+    if tq.size < 4:
+        raise DataError(
+            "alignment: too little gap-free GNSS data at the start of the flight for an in-motion alignment"
+        )
+    # gravitation along the GNSS track (inertial axes), integrated by the trapezoid rule
+    m_ie = mat_ie(tq, ellipsoid.omega)
+    r_e = np.einsum("nji,nj->ni", m_ie, r_q)
+    g_i = np.einsum("nij,nj->ni", m_ie, normal_gravitation_ecef(r_e, ellipsoid))
+    g_cum = np.zeros_like(g_i)
+    g_cum[1:] = np.cumsum(0.5 * (g_i[1:] + g_i[:-1]) * np.diff(tq)[:, None], axis=0)
+    if smooth_imu:
+        pos = np.zeros_like(u_cum)
+        pos[1:] = np.cumsum(0.5 * (u_cum[1:] + u_cum[:-1]) * np.diff(t)[:, None], axis=0)
+        inside = (tg >= t[0]) & (tg <= t[-1])
+        pos_g = np.stack([np.interp(tg[inside], t, pos[:, i]) for i in range(3)], axis=1)
+        _, u_q = local_quadratic(tg[inside], pos_g, tq, hw)
+        keep = np.all(np.isfinite(u_q), axis=1)
+        tq, g_cum, u_q, v_q = tq[keep], g_cum[keep] - g_cum[keep][0], u_q[keep], v_q[keep]
+    else:
+        u_q = np.stack([np.interp(tq, t, u_cum[:, i]) for i in range(3)], axis=1)
+    # v(t_k) - int G = v(t_r) + C_it(t0) u(t_k): the unknown v(t_r) is removed by centring both
+    # sides (differencing against one GNSS velocity would put that fit's error into every epoch)
+    a = v_q - g_cum
+    b = u_q
+    return a - a.mean(axis=0), b - b.mean(axis=0), tq
+
+
+def match_residual_rms(
+    time, f_t, w_t, gnss, ellipsoid: Ellipsoid = WGS84, half_window_s=MATCH_CHECK_HALF_WINDOW_S
+) -> float:
+    """RMS of ``|a - R b|`` of the best rotation (:func:`match_vectors` with both sides fitted
+    alike, :func:`wahba`) over the whole of ``time``, m/s: what is left of the GNSS noise and
+    the gyro drift for a consistent triad; tens of m/s through turns for a gyro axis of the
+    wrong sign."""
+    t = np.asarray(time, float)
+    a, b, _ = match_vectors(t, f_t, w_t, gnss, t[-1] - t[0], ellipsoid, half_window_s=half_window_s, smooth_imu=True)
+    res = a - b @ wahba(a, b).T
+    return float(np.sqrt(np.mean(np.sum(res * res, axis=1))))
+
+
 def velocity_matching(
     time,
     f_t,
@@ -505,40 +629,7 @@ def velocity_matching(
         Matched epochs.
     """
     t = np.asarray(time, float)
-    f = np.asarray(f_t, float)
-    if c_t0 is None:
-        c_t0 = propagate_attitude(t, w_t, np.eye(3))
-    a_t0 = np.einsum("nij,nj->ni", c_t0, f)  # specific force on the triad axes at t0
-    # cumulative integral (trapezoid) of C_t0_t f
-    u_cum = np.zeros((t.size, 3))
-    u_cum[1:] = np.cumsum(0.5 * (a_t0[1:] + a_t0[:-1]) * np.diff(t)[:, None], axis=0)
-    tg = np.asarray(gnss.time, float)
-    rate = (tg.size - 1) / (tg[-1] - tg[0]) if tg.size > 1 else 1.0
-    hw = max(1.0, 1.5 / rate)
-    t_end = min(t[-1], t[0] + window_s, tg[-1])
-    tq = np.arange(max(t[0], tg[0]) + hw, t_end - hw + 1e-9, spacing_s)
-    if tq.size < 4:
-        raise DataError("alignment: too little GNSS data at the start of the flight for an in-motion alignment")
-    r_q, v_q = gnss_inertial_velocity(tg, gnss.lat, gnss.lon, gnss.height, tq, hw, ellipsoid)
-    ok = np.all(np.isfinite(v_q), axis=1)
-    tq, r_q, v_q = tq[ok], r_q[ok], v_q[ok]
-    if tq.size < 4:
-        raise DataError(
-            "alignment: too little gap-free GNSS data at the start of the flight for an in-motion alignment"
-        )
-    # gravitation along the GNSS track (inertial axes), integrated by the trapezoid rule
-    m_ie = mat_ie(tq, ellipsoid.omega)
-    r_e = np.einsum("nji,nj->ni", m_ie, r_q)
-    g_i = np.einsum("nij,nj->ni", m_ie, normal_gravitation_ecef(r_e, ellipsoid))
-    g_cum = np.zeros_like(g_i)
-    g_cum[1:] = np.cumsum(0.5 * (g_i[1:] + g_i[:-1]) * np.diff(tq)[:, None], axis=0)
-    u_q = np.stack([np.interp(tq, t, u_cum[:, i]) for i in range(3)], axis=1)
-    # v(t_k) - int G = v(t_r) + C_it(t0) u(t_k): the unknown v(t_r) is removed by centring both
-    # sides (differencing against one GNSS velocity would put that fit's error into every epoch)
-    a = v_q - g_cum
-    b = u_q
-    a = a - a.mean(axis=0)
-    b = b - b.mean(axis=0)
+    a, b, tq = match_vectors(t, f_t, w_t, gnss, window_s, ellipsoid, spacing_s, c_t0)
     rot = wahba(a, b)
     res = a - b @ rot.T
     dof = max(3 * res.shape[0] - 6, 1)
