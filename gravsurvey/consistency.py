@@ -421,13 +421,14 @@ PLATFORM_RATE_MIN_BLOCKS = 5
 #: the accelerometers resolved through the gyros, :func:`gravsurvey.inm.alignment.match_vectors`)
 #: over windows of this length, s (short: a MEMS gyro's drift tilts the triad by 0.3 deg in 2 min)
 STRAPDOWN_AXES_WINDOW_S = 120.0
-#: ... the this many windows with the largest change of the GNSS velocity (turns carry the test)
-STRAPDOWN_AXES_WINDOWS = 4
+#: ... the this many windows with the largest change of the GNSS velocity (turns and speed
+#: changes carry the test), not overlapping
+STRAPDOWN_AXES_WINDOWS = 6
 #: ... that change at least this much, m/s (a 180-deg turn at 80 m/s: 160) ...
 STRAPDOWN_AXES_MIN_DV_MPS = 20.0
 #: ... in at least this many windows: a column fault (an axis negated, two swapped, one axis of
-#: both sensors negated) is named when its hypothesis fits this many times better (median over
-#: the windows). Measured on two simulated strapdown flights (0.5-m GNSS, navigation-grade
+#: both sensors negated) is named when its hypothesis fits this many times better (RMS over the
+#: windows). Measured on two simulated strapdown flights (0.5-m GNSS, navigation-grade
 #: gyros): the nearest wrong hypothesis fits 8-13x worse than the columns as written, the
 #: accelerometer's lateral axis negated 8-15x worse than its own fix, a gyro axis negated
 #: hundreds of times; the sample grid_ros2's flights (100 Hz) 3.1-3.8x; a 10 deg/h gyro with 2-m
@@ -646,7 +647,7 @@ def strapdown_axis_hypotheses():
 
 def strapdown_axis_fit(record, ellipsoid=WGS84):
     """Velocity-matching residuals of the columns as written and of each column fault
-    (:func:`strapdown_axis_hypotheses`) over the turns of the flight.
+    (:func:`strapdown_axis_hypotheses`) over the manoeuvres of the flight (turns, speed changes).
 
     Returns
     -------
@@ -703,7 +704,7 @@ def check_strapdown_axes(record, triad: str, names: ChannelNames | None = None, 
     accelerometer axis of the wrong sign ran with exit 0 at 2.4x the intact error or failed as
     "|disturbance| reaches 1373 mGal", a gyro axis as a mechanization run-away (fuzzing,
     2026-12-04). A passed-check note otherwise; nothing for a platform triad, without GNSS, or
-    without turns to judge by. Run after the GNSS checks: it trusts the track.
+    without manoeuvres to judge by. Run after the GNSS checks: it trusts the track.
 
     Raises
     ------
@@ -715,20 +716,25 @@ def check_strapdown_axes(record, triad: str, names: ChannelNames | None = None, 
     base, faults = strapdown_axis_fit(record)
     if base.size < STRAPDOWN_AXES_MIN_WINDOWS:
         return []
-    ratios = [(float(np.median(base / np.maximum(r, 1e-12))), d, q, r) for d, q, r in faults]
+
+    def pooled(r):
+        # one window of turns shows a gyro fault that straight accelerations hide
+        return float(np.sqrt(np.mean(np.square(r))))
+
+    ratios = [(pooled(base) / max(pooled(r), 1e-12), d, q, r) for d, q, r in faults]
     ratio, desc, quants, r = max(ratios, key=lambda x: x[0])
-    fit = f"{float(np.median(r)):.2g} m/s against {float(np.median(base)):.2g} m/s as written"
+    fit = f"{pooled(r):.2g} m/s against {pooled(base):.2g} m/s as written"
     if ratio < STRAPDOWN_AXES_RATIO:
         return [
-            f"{PASSED}strapdown axes: the columns as written fit the GNSS track best (median velocity-matching "
-            f"residual {float(np.median(base)):.2g} m/s over {base.size} turns; the nearest fault, {desc}, "
+            f"{PASSED}strapdown axes: the columns as written fit the GNSS track best (velocity-matching "
+            f"residual {pooled(base):.2g} m/s RMS over {base.size} manoeuvres; the nearest fault, {desc}, "
             f"{1.0 / ratio:.1f}x worse)"
         ]
     where = names.column("imu", *quants) if names is not None else "imu"
     key_path = f"{key_prefix}.imu_axes" if key_prefix else "imu_axes"
     raise DataError(
-        f"{where}: the strapdown IMU's motion fits the GNSS track {ratio:.1f}x better with {desc} (median "
-        f"velocity-matching residual over {base.size} turns of {STRAPDOWN_AXES_WINDOW_S:g} s: {fit}): check the "
+        f"{where}: the strapdown IMU's motion fits the GNSS track {ratio:.1f}x better with {desc} (velocity-"
+        f"matching residual, RMS over {base.size} manoeuvres of {STRAPDOWN_AXES_WINDOW_S:g} s: {fit}): check the "
         f"columns' signs and order ({key_path} turns both sensors alike)"
     )
 

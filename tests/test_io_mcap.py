@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import struct
 import warnings
 
@@ -352,3 +353,27 @@ def test_json_field_names_not_matching_mapping_is_a_clear_error(tmp_path):
         r"messages .* could not be decoded .*specific_force_t",
     ):
         load_flight(ingest_options({"inputs": {"mcap": "n.mcap"}}, "f"), tmp_path)
+
+
+@pytest.mark.parametrize(
+    "topics, says",
+    [
+        (
+            {"imu": "/gnss", "altimeter": "/altimeter", "gnss": "/imu"},
+            "topic /gnss (f.topics.imu): its sensor_msgs/msg/NavSatFix messages carry GNSS positions, not IMU samples",
+        ),
+        (
+            {"imu": "/imu", "altimeter": "/gnss", "gnss": "/altimeter"},
+            "topic /altimeter (f.topics.gnss): its geometry_msgs/msg/PointStamped messages carry no GNSS positions",
+        ),
+    ],
+)
+def test_topics_given_in_the_wrong_order_are_named(topics, says):
+    """A topic of another kind for a role (fuzzing, 2026-12-04: "internal error KeyError: 'lat_deg'")."""
+    base = Path(__file__).resolve().parents[1] / "sample_data" / "grid_ros2"
+    opts = ingest_options({"inputs": {"mcap": "F01/F01_ros2.mcap"}, "topics": topics}, "f")
+    with pytest.raises(DataError) as exc:
+        load_flight(opts, base)
+    msg = str(exc.value)
+    assert says in msg and "topics given in the wrong order?" in msg and "\n" not in msg
+    assert "the file's topics: /imu (sensor_msgs/msg/Imu), /altimeter (geometry_msgs/msg/PointStamped)" in msg

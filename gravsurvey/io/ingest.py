@@ -313,6 +313,31 @@ def select_channels(content: McapContent, options: IngestOptions, notes: list):
     return out
 
 
+#: What each role's messages must carry (decoded field names), and what to call them.
+ROLE_VALUES = {
+    "imu": (("specific_force", "angular_rate"), "IMU samples"),
+    "altimeter": (("height",), "heights"),
+    "gnss": (("lat_deg", "lon_deg", "height"), "GNSS positions"),
+}
+
+
+def _require_role_values(role, vals, src, content, ids, options) -> None:
+    """Refuse a topic whose messages are not the role's kind (topics given in the wrong order)."""
+    need, what = ROLE_VALUES.get(role, ((), ""))
+    if all(k in vals for k in need):
+        return
+    carries = next(
+        (w for r, (n, w) in ROLE_VALUES.items() if n and all(k in vals for k in n) and r != "altimeter"), None
+    )
+    listing = ", ".join(
+        f"{c.topic} ({content.schema_name(cid) or 'no schema'})" for cid, c in sorted(content.channels.items())
+    )
+    raise DataError(
+        f"{src} ({options.key_path}.topics.{role}): its {content.schema_name(ids[0]) or 'schemaless'} messages carry "
+        f"{carries + ', not ' + what if carries else 'no ' + what}: topics given in the wrong order? (the file's topics: {listing})"
+    )
+
+
 def read_raw_channels(options: IngestOptions, base_dir, notes: list, data_loss: list | None = None):
     """Read the files named by ``options``: role -> :class:`RawChannel` (GNSS may be absent).
 
@@ -349,6 +374,7 @@ def read_raw_channels(options: IngestOptions, base_dir, notes: list, data_loss: 
             t = np.concatenate([b.time_ns for b in blocks])
             lt = np.concatenate([b.log_time_ns for b in blocks])
             vals = {k: np.concatenate([b.values[k] for b in blocks]) for k in blocks[0].values}
+            _require_role_values(role, vals, src, content, ids, options)
             if role == "altimeter":
                 vals = {"height": vals["height"]}
             enc = content.channels[ids[0]].message_encoding
