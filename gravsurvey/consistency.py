@@ -27,6 +27,7 @@ Limits and their derivation: docs/reliability.md, "Gaps, clocks, consistency".
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -435,6 +436,8 @@ STRAPDOWN_AXES_MIN_DV_MPS = 20.0
 #: GNSS blurs them all to 0.8-1.0 (no verdict). Noise draws every ratio towards 1, never past it.
 STRAPDOWN_AXES_MIN_WINDOWS = 2
 STRAPDOWN_AXES_RATIO = 2.0
+#: The hypothesis of the GNSS latitudes' sign (:func:`strapdown_axis_fit`).
+LATITUDE_SIGN_FAULT = "the GNSS latitudes' sign flipped"
 
 
 def check_platform_axes(record, triad: str, names: ChannelNames | None = None, key_prefix: str = "") -> list[str]:
@@ -683,13 +686,22 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
         if len(chosen) == STRAPDOWN_AXES_WINDOWS:
             break
     hyps = strapdown_axis_hypotheses()
+    # the track mirrored about the equator (latitudes of the wrong sign) is mirrored against the
+    # IMU too, and would otherwise be read as a negated axis
+    mirrored = dataclasses.replace(g, lat=-np.asarray(g.lat, float))
+    hyps.append((LATITUDE_SIGN_FAULT, ("lat",), None))
     base, res = [], [[] for _ in hyps]
     for k in chosen:
         i0, i1 = np.searchsorted(t, [starts[k], starts[k] + win])
         tt, ff, ww = t[i0:i1], f[i0:i1], w[i0:i1]
         try:
             r0 = match_residual_rms(tt, ff, ww, g, ellipsoid)
-            rs = [match_residual_rms(tt, *tr(ff, ww), g, ellipsoid) for _, _, tr in hyps]
+            rs = [
+                match_residual_rms(tt, *tr(ff, ww), g, ellipsoid)
+                if tr is not None
+                else match_residual_rms(tt, ff, ww, mirrored, ellipsoid)
+                for _, _, tr in hyps
+            ]
         except DataError:  # a gap in the window
             continue
         base.append(r0)
@@ -730,6 +742,13 @@ def check_strapdown_axes(record, triad: str, names: ChannelNames | None = None, 
             f"residual {pooled(base):.2g} m/s RMS over {base.size} manoeuvres; the nearest fault, {desc}, "
             f"{1.0 / ratio:.1f}x worse)"
         ]
+    if desc == LATITUDE_SIGN_FAULT:
+        where = names.column("gnss", "lat") if names is not None else "gnss latitude"
+        raise DataError(
+            f"{where}: the strapdown IMU's motion fits the GNSS track {ratio:.1f}x better with {desc} (velocity-"
+            f"matching residual, RMS over {base.size} manoeuvres of {STRAPDOWN_AXES_WINDOW_S:g} s: {fit}): a survey "
+            "south of the equator written without its sign, or the hemisphere column left out?"
+        )
     where = names.column("imu", *quants) if names is not None else "imu"
     key_path = f"{key_prefix}.imu_axes" if key_prefix else "imu_axes"
     raise DataError(

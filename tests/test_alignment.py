@@ -631,3 +631,20 @@ def test_strapdown_axes_check_passes_a_mems_gyro_and_a_noisy_gnss():
     best = max(float(np.median(base / r)) for _, _, r in faults)
     assert best < 0.5 * STRAPDOWN_AXES_RATIO  # measured 0.99: no verdict either way
     assert check_strapdown_axes(rec, "strapdown")[0].startswith("passed: strapdown axes")
+
+
+def test_strapdown_latitudes_of_the_wrong_sign_name_the_latitude_column(in_flight):
+    """The GNSS track mirrored about the equator is mirrored against the IMU as well: named as
+    the latitudes' sign (not as the accelerometer's z axis negated, which fits 19x better than
+    the columns as written too), with no static start to gyrocompass on."""
+    from gravsurvey.consistency import ChannelNames, check_strapdown_axes
+
+    rec = _record(in_flight)
+    g = rec.gnss
+    rec.gnss = GnssChannel(g.time, -np.asarray(g.lat), g.lon, g.height)
+    names = ChannelNames({"gnss": "gnss.csv"}, {"gnss": {"lat": "lat_deg"}})
+    with pytest.raises(DataError) as exc:
+        check_strapdown_axes(rec, "strapdown", names)
+    msg = str(exc.value)
+    assert msg.startswith("gnss.csv column lat_deg: the strapdown IMU's motion fits the GNSS track")
+    assert "better with the GNSS latitudes' sign flipped" in msg and "south of the equator" in msg
