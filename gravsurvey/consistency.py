@@ -436,8 +436,9 @@ STRAPDOWN_AXES_MIN_DV_MPS = 20.0
 #: GNSS blurs them all to 0.8-1.0 (no verdict). Noise draws every ratio towards 1, never past it.
 STRAPDOWN_AXES_MIN_WINDOWS = 2
 STRAPDOWN_AXES_RATIO = 2.0
-#: The hypothesis of the GNSS latitudes' sign (:func:`strapdown_axis_fit`).
-LATITUDE_SIGN_FAULT = "the GNSS latitudes' sign flipped"
+#: The hypotheses of the GNSS latitudes' and longitudes' sign (:func:`strapdown_axis_fit`): the
+#: track mirrored about the equator or the Greenwich meridian is mirrored against the IMU too.
+GNSS_SIGN_FAULTS = {"lat": "the GNSS latitudes' sign flipped", "lon": "the GNSS longitudes' sign flipped"}
 
 
 def check_platform_axes(record, triad: str, names: ChannelNames | None = None, key_prefix: str = "") -> list[str]:
@@ -686,10 +687,13 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
         if len(chosen) == STRAPDOWN_AXES_WINDOWS:
             break
     hyps = strapdown_axis_hypotheses()
-    # the track mirrored about the equator (latitudes of the wrong sign) is mirrored against the
-    # IMU too, and would otherwise be read as a negated axis
-    mirrored = dataclasses.replace(g, lat=-np.asarray(g.lat, float))
-    hyps.append((LATITUDE_SIGN_FAULT, ("lat",), None))
+    # a track mirrored about the equator or the Greenwich meridian (a coordinate of the wrong sign)
+    # is mirrored against the IMU too, and would otherwise be read as a negated axis
+    mirrored = {
+        "lat": dataclasses.replace(g, lat=-np.asarray(g.lat, float)),
+        "lon": dataclasses.replace(g, lon=-np.asarray(g.lon, float)),
+    }
+    hyps += [(GNSS_SIGN_FAULTS["lat"], ("lat",), None), (GNSS_SIGN_FAULTS["lon"], ("lon",), None)]
     base, res = [], [[] for _ in hyps]
     for k in chosen:
         i0, i1 = np.searchsorted(t, [starts[k], starts[k] + win])
@@ -699,8 +703,8 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
             rs = [
                 match_residual_rms(tt, *tr(ff, ww), g, ellipsoid)
                 if tr is not None
-                else match_residual_rms(tt, ff, ww, mirrored, ellipsoid)
-                for _, _, tr in hyps
+                else match_residual_rms(tt, ff, ww, mirrored[q[0]], ellipsoid)
+                for _, q, tr in hyps
             ]
         except DataError:  # a gap in the window
             continue
@@ -742,12 +746,14 @@ def check_strapdown_axes(record, triad: str, names: ChannelNames | None = None, 
             f"residual {pooled(base):.2g} m/s RMS over {base.size} manoeuvres; the nearest fault, {desc}, "
             f"{1.0 / ratio:.1f}x worse)"
         ]
-    if desc == LATITUDE_SIGN_FAULT:
-        where = names.column("gnss", "lat") if names is not None else "gnss latitude"
+    if quants in (("lat",), ("lon",)):
+        q = quants[0]
+        where = names.column("gnss", q) if names is not None else f"gnss {q}"
+        side = "south of the equator" if q == "lat" else "west of Greenwich"
         raise DataError(
             f"{where}: the strapdown IMU's motion fits the GNSS track {ratio:.1f}x better with {desc} (velocity-"
             f"matching residual, RMS over {base.size} manoeuvres of {STRAPDOWN_AXES_WINDOW_S:g} s: {fit}): a survey "
-            "south of the equator written without its sign, or the hemisphere column left out?"
+            f"{side} written without its sign, or the hemisphere column left out?"
         )
     where = names.column("imu", *quants) if names is not None else "imu"
     key_path = f"{key_prefix}.imu_axes" if key_prefix else "imu_axes"

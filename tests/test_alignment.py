@@ -633,18 +633,25 @@ def test_strapdown_axes_check_passes_a_mems_gyro_and_a_noisy_gnss():
     assert check_strapdown_axes(rec, "strapdown")[0].startswith("passed: strapdown axes")
 
 
-def test_strapdown_latitudes_of_the_wrong_sign_name_the_latitude_column(in_flight):
-    """The GNSS track mirrored about the equator is mirrored against the IMU as well: named as
-    the latitudes' sign (not as the accelerometer's z axis negated, which fits 19x better than
-    the columns as written too), with no static start to gyrocompass on."""
+@pytest.mark.parametrize(
+    "q, col, side", [("lat", "lat_deg", "south of the equator"), ("lon", "lon_deg", "west of Greenwich")]
+)
+def test_strapdown_coordinates_of_the_wrong_sign_name_their_column(in_flight, q, col, side):
+    """The GNSS track mirrored about the equator (or the Greenwich meridian) is mirrored against the
+    IMU as well: named as the coordinate's sign (fuzzing, 2026-12-04: the negated latitudes read as
+    the accelerometer's z axis negated, the negated longitudes as the latitudes' sign), with no
+    static start to gyrocompass on."""
     from gravsurvey.consistency import ChannelNames, check_strapdown_axes
 
     rec = _record(in_flight)
     g = rec.gnss
-    rec.gnss = GnssChannel(g.time, -np.asarray(g.lat), g.lon, g.height)
-    names = ChannelNames({"gnss": "gnss.csv"}, {"gnss": {"lat": "lat_deg"}})
+    rec.gnss = GnssChannel(
+        g.time, -np.asarray(g.lat) if q == "lat" else g.lat, -np.asarray(g.lon) if q == "lon" else g.lon, g.height
+    )
+    names = ChannelNames({"gnss": "gnss.csv"}, {"gnss": {"lat": "lat_deg", "lon": "lon_deg"}})
     with pytest.raises(DataError) as exc:
         check_strapdown_axes(rec, "strapdown", names)
     msg = str(exc.value)
-    assert msg.startswith("gnss.csv column lat_deg: the strapdown IMU's motion fits the GNSS track")
-    assert "better with the GNSS latitudes' sign flipped" in msg and "south of the equator" in msg
+    assert msg.startswith(f"gnss.csv column {col}: the strapdown IMU's motion fits the GNSS track")
+    word = "latitudes" if q == "lat" else "longitudes"
+    assert f"better with the GNSS {word}' sign flipped" in msg and side in msg and "\n" not in msg
