@@ -272,7 +272,8 @@ SECOND_FLIGHT = "- name: F02\n  inputs: {mcap: F01/F01_json.mcap}\n  truth: F01/
         (
             "lines: {mode: whole}",
             SECOND_FLIGHT.replace("mcap: F01/F01_json.mcap", "csv: {imu: i.csv}"),
-            "flights[1].inputs.csv.altimeter: missing required key (altimeter CSV file)",
+            "flights[1].inputs.csv.altimeter: missing: give the altimeter CSV file, or the GNSS file (its heights are "
+            "then the height channel)",
         ),
         (
             "lines: {mode: whole}",

@@ -223,3 +223,22 @@ def test_header_only_csv_is_a_clear_error(tmp_path):
     (tmp_path / "imu.csv").write_text("# nothing logged\ntime_ns,fx_mps2,fy_mps2,fz_mps2,wx_radps,wy_radps,wz_radps\n")
     with pytest.raises(DataError, match=r"imu.csv: no usable imu samples"):
         load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
+
+
+def test_an_imu_and_a_gnss_only_read_the_gnss_heights_as_the_height_channel(tmp_path):
+    """Without ``inputs.csv.altimeter`` the GNSS file's heights are the height channel (its own
+    column names too); without either the error names the key and both ways out."""
+    d = static_flight(seconds=5.0)
+    _write_flight_csv(tmp_path, d)
+    text = (tmp_path / "gnss.csv").read_text().replace("time_ns,lat_deg,lon_deg,height_m", "t,lat,lon,h_ell")
+    (tmp_path / "gnss.csv").write_text(text)
+    cols = {"gnss": {"time": "t", "lat": "lat", "lon": "lon", "height": "h_ell"}}
+    flight = {"inputs": {"csv": {"imu": "imu.csv", "gnss": "gnss.csv"}}, "csv": {"columns": cols}}
+    rec = load_flight(ingest_options(flight, "flights[0]"), tmp_path)
+    np.testing.assert_array_equal(rec.altimeter.height, rec.gnss.height)
+    np.testing.assert_allclose(rec.altimeter.height, d["gh"])
+    with pytest.raises(
+        ConfigError,
+        match=r"flights\[0\]\.inputs\.csv\.altimeter: missing: give the altimeter CSV file, or the GNSS file",
+    ):
+        ingest_options({"inputs": {"csv": {"imu": "imu.csv"}}}, "flights[0]")

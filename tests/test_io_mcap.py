@@ -377,3 +377,16 @@ def test_topics_given_in_the_wrong_order_are_named(topics, says):
     msg = str(exc.value)
     assert says in msg and "topics given in the wrong order?" in msg and "\n" not in msg
     assert "the file's topics: /imu (sensor_msgs/msg/Imu), /altimeter (geometry_msgs/msg/PointStamped)" in msg
+
+
+def test_an_mcap_without_an_altimeter_topic_reads_the_gnss_heights(tmp_path):
+    """An IMU and a GNSS only: the GNSS topic's heights are the height channel, said in a note."""
+    d = static_flight(seconds=3.0)
+    d["alt_t"], d["h"] = d["alt_t"][:0], d["h"][:0]
+    write_ros2(tmp_path / "f.mcap", d)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rec = load_flight(ingest_options({"inputs": {"mcap": "f.mcap"}}, "f"), tmp_path)
+    np.testing.assert_allclose(rec.altimeter.height, d["gh"])
+    said = [str(w.message) for w in caught]
+    assert "altimeter: topic /altimeter absent; the GNSS heights of /gnss are the height channel" in said

@@ -304,6 +304,11 @@ def select_channels(content: McapContent, options: IngestOptions, notes: list):
             )
         elif role == "gnss":
             out[role] = []
+        elif role == "altimeter" and (gnss := _gnss_topic(content, options, by_topic)):
+            # an IMU and a GNSS only: the GNSS heights are the height channel (as a CSV flight
+            # without inputs.csv.altimeter reads them)
+            out[role] = [c for c in by_topic[gnss] if c in content.decoded]
+            notes.append(f"altimeter: topic {topic} absent; the GNSS heights of {gnss} are the height channel")
         else:
             raise DataError(
                 f"{path}: no {role} channel: topic {topic} absent and no channel "
@@ -311,6 +316,17 @@ def select_channels(content: McapContent, options: IngestOptions, notes: list):
                 + ("; set topics.altimeter to a NavSatFix topic to use GNSS heights" if role == "altimeter" else "")
             )
     return out
+
+
+def _gnss_topic(content: McapContent, options: IngestOptions, by_topic: dict) -> str | None:
+    """The topic the GNSS role will read (configured, or the one GNSS-schema topic), if any."""
+    topic = options.topics["gnss"]
+    if any(c in content.decoded for c in by_topic.get(topic, [])):
+        return topic
+    if "gnss" in options.topics_explicit:
+        return None
+    cands = sorted({content.channels[c].topic for c in content.decoded if content.role_of_schema(c) == "gnss"})
+    return cands[0] if len(cands) == 1 else None
 
 
 #: What each role's messages must carry (decoded field names), and what to call them.

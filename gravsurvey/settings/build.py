@@ -199,6 +199,9 @@ def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", b
         o.kind = "csv"
         assert f.inputs.csv is not None  # exactly one input kind (InputsSection)
         o.csv_paths = {r: p for r, p in section_dict(f.inputs.csv).items() if p is not None}
+        if "altimeter" not in o.csv_paths:
+            # an IMU and a GNSS only: the GNSS heights are the height channel (CsvInputs)
+            o.csv_paths = {"imu": o.csv_paths["imu"], "altimeter": o.csv_paths["gnss"], **o.csv_paths}
     if f.inputs.nav is not None:
         o.nav = f.inputs.nav.model_dump(exclude_none=True)
     given_topics = f.topics.given()
@@ -216,6 +219,11 @@ def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", b
     for role, names in section_dict(f.csv.columns).items():
         if names is not None:
             o.csv_columns[role] = {q: v for q, v in section_dict(names).items() if v is not None}
+    if o.kind == "csv" and f.inputs.csv.altimeter is None and "gnss" in o.csv_columns:
+        # the GNSS file read as the altimeter: its time and height columns as named for the GNSS
+        o.csv_columns["altimeter"] = {
+            q: v for q, v in o.csv_columns["gnss"].items() if q in ("time", "height")
+        } | o.csv_columns.get("altimeter", {})
     if "units" in f.csv.given():
         o.csv_units = section_dict(f.csv.units)
     o.csv_delimiter = f.csv.delimiter

@@ -767,9 +767,22 @@ class CsvInputs(Section):
     """``inputs.csv``: one CSV file per channel."""
 
     imu: str = Field(..., description="IMU CSV file", min_length=1)
-    altimeter: str = Field(..., description="altimeter CSV file", min_length=1)
+    altimeter: Optional[str] = Field(
+        None,
+        description="altimeter CSV file (default: the GNSS file: its heights are the height channel)",
+        min_length=1,
+    )
     gnss: Optional[str] = Field(None, description="GNSS CSV file", min_length=1)
     gradient: Optional[str] = Field(None, description="gravity-gradient CSV file", min_length=1)
+
+    @model_validator(mode="after")
+    def _height_channel(self):
+        if self.altimeter is None and self.gnss is None:
+            raise fail(
+                "missing: give the altimeter CSV file, or the GNSS file (its heights are then the height channel)",
+                ("altimeter",),
+            )
+        return self
 
 
 class NavSection(Section):
