@@ -807,6 +807,23 @@ def _check_platform_rates(record, names: ChannelNames | None, triad_key: str) ->
     )
 
 
+def _stamp_unit_hint(t0_ns: int, imu_span, other_span, role: str) -> str | None:
+    """``"the <channel> stamps read 1,000x too small: in microseconds ..."`` when one channel's
+    Unix start time is a power of 1000 times the other's (within 1 %), else None."""
+    ref = t0_ns * 1e-9
+    a0, b0 = ref + imu_span[0], ref + other_span[0]
+    for small, big, name in ((a0, b0, "imu"), (b0, a0, role)):
+        if not (0 < small and big > 0):
+            continue
+        for k, unit in ((1e3, "microseconds"), (1e6, "milliseconds"), (1e9, "seconds")):
+            if abs(big / (small * k) - 1.0) < 0.01:
+                return (
+                    f"the {name} stamps read {k:,.0f}x too small: in {unit} but declared as nanoseconds "
+                    "(csv.time_format, or the time column)?"
+                )
+    return None
+
+
 def check_overlap(record, names: ChannelNames | None = None, min_fraction: float = 0.5) -> list[str]:
     """Channels must overlap the IMU in time.
 
@@ -835,8 +852,11 @@ def check_overlap(record, names: ChannelNames | None = None, min_fraction: float
         if ov <= 0:
             raise DataError(
                 f"imu ({fi}) {span_text(t0, a0, a1)} and {role} ({fr}) {span_text(t0, b0, b1)} "
-                f"do not overlap in time ({max(a0, b0) - min(a1, b1):.1f} s apart): a clock out of "
-                "step or files of different flights?"
+                f"do not overlap in time ({max(a0, b0) - min(a1, b1):.1f} s apart): "
+                + (
+                    _stamp_unit_hint(t0, (a0, a1), (b0, b1), role)
+                    or "a clock out of step or files of different flights?"
+                )
             )
         if ov < min_fraction * (a1 - a0):
             notes.append(

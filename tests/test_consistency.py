@@ -148,6 +148,22 @@ def test_imu_clock_an_hour_out_of_step_is_an_error_naming_both_channels(tmp_path
         process_flight(cfg, fl)
 
 
+@pytest.mark.parametrize("factor, unit", [(10**3, "microseconds"), (10**6, "milliseconds")])
+def test_gnss_stamps_in_a_larger_unit_than_nanoseconds_are_named(tmp_path, factor, unit):
+    """GNSS stamps in us or ms under a time column read as ns (fuzzing, 2026-12-04: 'a clock out of
+    step or files of different flights?')."""
+
+    def prep(p):
+        d.edit(p, "gnss", lambda h, rows: [[str(int(r[0]) // factor)] + r[1:] for r in rows])
+
+    cfg, fl = _flight(tmp_path, prep)
+    with pytest.raises(DataError) as exc:
+        process_flight(cfg, fl)
+    msg = str(exc.value)
+    assert "do not overlap in time" in msg and "\n" not in msg
+    assert f"the gnss stamps read {factor:,}x too small: in {unit} but declared as nanoseconds" in msg
+
+
 def test_imu_clock_restart_is_placed_by_gnss(tmp_path):
     """Measured before: 6.3 mGal here (279 mGal in the issue's case), exit 0, nothing said."""
     cfg, fl = _flight(tmp_path, lambda p: d.restart_clock(p, "imu", 600, 300))
