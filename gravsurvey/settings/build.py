@@ -219,7 +219,7 @@ def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", b
     for role, names in section_dict(f.csv.columns).items():
         if names is not None:
             o.csv_columns[role] = {q: v for q, v in section_dict(names).items() if v is not None}
-    if o.kind == "csv" and f.inputs.csv.altimeter is None and "gnss" in o.csv_columns:
+    if o.kind == "csv" and f.inputs.csv is not None and f.inputs.csv.altimeter is None and "gnss" in o.csv_columns:
         # the GNSS file read as the altimeter: its time and height columns as named for the GNSS
         o.csv_columns["altimeter"] = {
             q: v for q, v in o.csv_columns["gnss"].items() if q in ("time", "height")
