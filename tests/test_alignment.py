@@ -655,3 +655,18 @@ def test_strapdown_coordinates_of_the_wrong_sign_name_their_column(in_flight, q,
     assert msg.startswith(f"gnss.csv column {col}: the strapdown IMU's motion fits the GNSS track")
     word = "latitudes" if q == "lat" else "longitudes"
     assert f"better with the GNSS {word}' sign flipped" in msg and side in msg and "\n" not in msg
+
+
+def test_near_the_pole_the_motion_aligns_without_a_gyrocompassing_warning():
+    """At 86 N the Earth rate's horizontal part is 1.05 deg/h: a 0.05 deg/h gyro cannot
+    gyrocompass (2.7 deg), the motion gives the heading, and that is no warning (fuzzing,
+    2026-12-04: every high-latitude flight warned 'gyro too noisy for gyrocompassing')."""
+    plan = {**_grid(120.0), "origin_lat_deg": 86.0}
+    sim = quick_sim(
+        plan=plan, triad="strapdown", noise=SENSORS, field="seed_smooth", gnss_hz=5.0, altimeter_hz=5.0, seed=5
+    )
+    s = simulate_flight(sim)
+    al = align(_record(s), _params(gyro_bias_sigma_degph=0.05))
+    assert al.method == "static-levelling+velocity-matching" and al.warnings == []
+    th = _theta_n(al.mat_nt, s.truth["mat_nt"][0])
+    assert np.all(np.abs(th) < 3.0 * np.sqrt(np.diag(al.cov_n)))

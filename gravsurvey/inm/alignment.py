@@ -685,7 +685,7 @@ def align(record, params=None, ellipsoid: Ellipsoid = WGS84, lat=None) -> Alignm
         lat = float(np.asarray(gn.lat, float)[np.isfinite(gn.lat)][0])
     if have_gnss and static > 0.0:
         static = min(static, gnss_static_span(gn, float(t[0]), p.gnss_horizontal_sigma_m, ellipsoid))
-    candidates = []
+    candidates, static_warn = [], []
     s_b = math.radians(p.gyro_bias_sigma_degph) / 3600.0
     s_n = math.radians(p.gyro_drift_degph) / 3600.0
     if static >= MIN_STATIC_S:
@@ -704,6 +704,7 @@ def align(record, params=None, ellipsoid: Ellipsoid = WGS84, lat=None) -> Alignm
             omega=ellipsoid.omega,
         )
         warn += gw
+        static_warn = list(gw)
         if not gw and have_gnss:
             hemisphere_check(
                 mat[2], w[sel].mean(axis=0), lat, static, s_b, s_n, record.source_of("gnss"), ellipsoid.omega
@@ -761,6 +762,10 @@ def align(record, params=None, ellipsoid: Ellipsoid = WGS84, lat=None) -> Alignm
             f"poor alignment: heading sigma {math.degrees(out.sigma_heading_rad):.2g} deg after "
             f"{out.converge_s:.0f} s (no motion: straight, steady flight does not show the heading)"
         )
+    elif static_warn:
+        # the motion gave the heading: why gyrocompassing could not is no warning (at 86 deg the
+        # Earth rate's horizontal part is 1 deg/h, and every high-latitude flight would say so)
+        warn = [w for w in warn if w not in static_warn]
     out.warnings = warn
     return out
 
