@@ -661,6 +661,7 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
         Each hypothesis with its residuals.
     """
     from .inm.alignment import gnss_inertial_velocity, match_residual_rms
+    from .inm.mechanization import propagate_attitude
 
     g, imu = record.gnss, record.imu
     empty = (np.zeros(0), [])
@@ -698,12 +699,16 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
     for k in chosen:
         i0, i1 = np.searchsorted(t, [starts[k], starts[k] + win])
         tt, ff, ww = t[i0:i1], f[i0:i1], w[i0:i1]
+        # the gyros' attitude history once per window: only a gyro hypothesis changes it
+        c_t0 = propagate_attitude(tt, ww, np.eye(3))
         try:
-            r0 = match_residual_rms(tt, ff, ww, g, ellipsoid)
+            r0 = match_residual_rms(tt, ff, ww, g, ellipsoid, c_t0=c_t0)
             rs = [
-                match_residual_rms(tt, *tr(ff, ww), g, ellipsoid)
+                match_residual_rms(
+                    tt, *tr(ff, ww), g, ellipsoid, c_t0=None if any(x.startswith("w") for x in q) else c_t0
+                )
                 if tr is not None
-                else match_residual_rms(tt, ff, ww, mirrored[q[0]], ellipsoid)
+                else match_residual_rms(tt, ff, ww, mirrored[q[0]], ellipsoid, c_t0=c_t0)
                 for _, q, tr in hyps
             ]
         except DataError:  # a gap in the window

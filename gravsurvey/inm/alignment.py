@@ -578,14 +578,16 @@ def match_vectors(
 
 
 def match_residual_rms(
-    time, f_t, w_t, gnss, ellipsoid: Ellipsoid = WGS84, half_window_s=MATCH_CHECK_HALF_WINDOW_S
+    time, f_t, w_t, gnss, ellipsoid: Ellipsoid = WGS84, half_window_s=MATCH_CHECK_HALF_WINDOW_S, c_t0=None
 ) -> float:
     """RMS of ``|a - R b|`` of the best rotation (:func:`match_vectors` with both sides fitted
     alike, :func:`wahba`) over the whole of ``time``, m/s: what is left of the GNSS noise and
     the gyro drift for a consistent triad; tens of m/s through turns for a gyro axis of the
-    wrong sign."""
+    wrong sign. ``c_t0``: the gyros' attitude history, when already propagated."""
     t = np.asarray(time, float)
-    a, b, _ = match_vectors(t, f_t, w_t, gnss, t[-1] - t[0], ellipsoid, half_window_s=half_window_s, smooth_imu=True)
+    a, b, _ = match_vectors(
+        t, f_t, w_t, gnss, t[-1] - t[0], ellipsoid, c_t0=c_t0, half_window_s=half_window_s, smooth_imu=True
+    )
     res = a - b @ wahba(a, b).T
     return float(np.sqrt(np.mean(np.sum(res * res, axis=1))))
 
