@@ -237,3 +237,22 @@ def test_quoted_fields_are_read_and_another_delimiter_is_named(tmp_path):
         match=r"imu.csv: line 1: column 'time_ns' missing from the header .*the header holds ';': set csv.delimiter$",
     ):
         load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
+
+
+def test_a_repeated_header_of_logs_joined_end_to_end_is_skipped_and_said(tmp_path):
+    """Two logs joined end to end, the second with its own header (fuzzing, 2026-12-04: the flight
+    refused at "expected integer nanoseconds, got 'time_ns'"): the header line is skipped with a
+    warning naming the file and line, every sample kept."""
+    t = texts()
+    lines = t["imu"].split("\n")
+    joined = "\n".join(lines[:150] + [lines[0]] + lines[150:])
+    for role, text in {**t, "imu": joined}.items():
+        (tmp_path / f"{role}.csv").write_text(text)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
+    said = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+    assert any(
+        m.endswith("imu.csv: skipped 1 repeated header line(s) (line 151): logs joined end to end?") for m in said
+    ), said
+    assert rec.imu.time.size == len([ln for ln in lines[1:] if ln])

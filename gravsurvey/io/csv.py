@@ -78,6 +78,10 @@ DEFAULT_GPS_TIME_COLUMNS = ["gps_week", "gps_sow"]
 SHOWN_CHARS = 40
 
 
+#: Repeated header lines listed by number in the note.
+MAX_SHOWN_LINES = 5
+
+
 def _shown(s: str) -> str:
     """``repr`` of a bad field, stripped and cut to :data:`SHOWN_CHARS` characters."""
     s = s.strip()
@@ -232,7 +236,7 @@ def read_csv_channel(
         raise DataError(f"{path}: not UTF-8 text (byte {exc.start}); expected a CSV file") from None
     all_lines = text.splitlines()
     header = None
-    data_lines, line_no = [], []
+    data_lines, line_no, repeated = [], [], []
     for i, ln in enumerate(all_lines, start=1):
         s = ln.strip()
         if not s or s.startswith("#"):
@@ -241,8 +245,21 @@ def read_csv_channel(
             header = [h.strip() for h in s.split(delimiter)]
             header_line = i
             continue
+        if s.split(delimiter)[0].strip() == header[0] and [h.strip() for h in s.split(delimiter)] == header:
+            # the header again: logs joined end to end (a logger that restarted writes a new one)
+            repeated.append(i)
+            continue
         data_lines.append(ln)
         line_no.append(i)
+    if repeated:
+        msg = (
+            f"{path}: skipped {len(repeated)} repeated header line(s) (line {', '.join(map(str, repeated[:MAX_SHOWN_LINES]))}"
+            f"{' ...' if len(repeated) > MAX_SHOWN_LINES else ''}): logs joined end to end?"
+        )
+        if notes is None and data_loss is None:
+            warnings.warn(msg, DataWarning, stacklevel=2)
+        if notes is not None:
+            notes.append(msg)
     cut = None  # the unterminated last data line: (line number, its text)
     if data_lines and line_no[-1] == len(all_lines) and not text.endswith(("\n", "\r")):
         if header is not None and len(data_lines[-1].split(delimiter)) <= len(header):
