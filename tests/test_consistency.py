@@ -758,7 +758,7 @@ def test_one_absurd_csv_value_is_dropped_and_the_flight_processes(tmp_path, inta
 
     cfg, fl = _flight(tmp_path, prep)
     r = process_flight(cfg, fl)
-    assert any("imu: dropped 1 samples with NaN/inf or absurd" in n for n in r.notes)
+    assert any("imu: dropped 1 samples with empty, NaN/inf or absurd" in n for n in r.notes)
     assert abs(_rms_on_lines(r) - _rms_on_lines(intact)) < 0.2
 
 

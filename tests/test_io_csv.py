@@ -92,7 +92,7 @@ def test_units_and_custom_columns(tmp_path):
         ("time_ns,height_m\n1,2\n2,3,4\n", r"bad.csv: line 3: 3 fields, header has 2"),
         ("time_ns,alt\n1,2\n", r"bad.csv: line 1: column 'height_m' missing from the header"),
         ("# only comments\n", r"bad.csv: no header row"),
-        ("time_ns,height_m\n1,\n", r"bad.csv: line 2, column 'height_m': expected a number, got ''"),
+        ("time_ns,height_m\n1,n/a\n", r"bad.csv: line 2, column 'height_m': expected a number, got 'n/a'"),
         ("time_ns,height_m\n99999999999999999999,1\n", r"line 2, column 'time_ns': expected integer"),
     ],
 )
@@ -211,7 +211,7 @@ def test_nonfinite_samples_dropped_with_warning(tmp_path):
         warnings.simplefilter("always")
         rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
     msgs = [str(w.message) for w in caught if w.category is DataWarning]
-    assert any(m.startswith("altimeter: dropped 2 samples with NaN/inf or absurd") for m in msgs)
+    assert any(m.startswith("altimeter: dropped 2 samples with empty, NaN/inf or absurd") for m in msgs)
     # the hole left behind is one 0.3 s step in 27: flagged by the rate-stability check
     assert any(m.startswith("altimeter: nominal rate 10 Hz, 3.70 % of steps off") for m in msgs)
     np.testing.assert_array_equal(rec.altimeter.height, np.delete(d["h"], [4, 5]))

@@ -168,7 +168,7 @@ def test_nonfinite_values_dropped_and_counted(rows, bad):
             warnings.simplefilter("always", DataWarning)
             rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp)
     msgs = [str(w.message) for w in caught]
-    assert any(f"imu: dropped {len(rows)} samples with NaN/inf or absurd" in m for m in msgs), msgs
+    assert any(f"imu: dropped {len(rows)} samples with empty, NaN/inf or absurd" in m for m in msgs), msgs
     d = static_flight(seconds=3.0)
     keep = np.setdiff1d(np.arange(300), rows)
     np.testing.assert_array_equal(rec.imu.specific_force_t, d["f"][keep])
@@ -256,3 +256,21 @@ def test_a_repeated_header_of_logs_joined_end_to_end_is_skipped_and_said(tmp_pat
         m.endswith("imu.csv: skipped 1 repeated header line(s) (line 151): logs joined end to end?") for m in said
     ), said
     assert rec.imu.time.size == len([ln for ln in lines[1:] if ln])
+
+
+def test_empty_cells_are_no_value_their_rows_dropped_and_counted(tmp_path):
+    """A GNSS export leaves the cells of an epoch without a fix empty (fuzzing, 2026-12-04: the
+    flight refused at "column 'lat_deg': expected a number, got ''"): those rows are dropped
+    and counted like NaN, the rest kept."""
+    t = texts()
+    g = t["gnss"].split("\n")
+    for k in (5, 6, 7):
+        g[k] = g[k].split(",", 1)[0] + ",,,"
+    for role, text in {**t, "gnss": "\n".join(g)}.items():
+        (tmp_path / f"{role}.csv").write_text(text)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
+    said = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+    assert any(m.startswith("gnss: dropped 3 samples with empty, NaN/inf or absurd") for m in said), said
+    assert rec.gnss.time.size == len([ln for ln in g[1:] if ln]) - 3

@@ -326,7 +326,9 @@ def read_csv_channel(
     vals = {}
     for q, kind in QUANTITIES[role]:
         c = cols[q]
-        strs = [r[index[c]] for r in rows]
+        # an empty cell is no value (a receiver without a fix): NaN, its row dropped and counted
+        # with the other non-finite ones on ingest
+        strs = [x if x.strip() else "nan" for x in (r[index[c]] for r in rows)]
         try:
             v = np.array(strs, dtype=np.float64) if n else np.zeros(0)
         except ValueError:

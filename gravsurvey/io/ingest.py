@@ -493,7 +493,7 @@ def _drop_nonfinite(ch: RawChannel, notes):
                 ok &= a2[:, j] <= DAMAGE_ABS_MAX
     if not ok.all():
         notes.append(
-            f"{ch.role}: dropped {int((~ok).sum())} samples with NaN/inf or absurd "
+            f"{ch.role}: dropped {int((~ok).sum())} samples with empty, NaN/inf or absurd "
             f"(> {DAMAGE_ABS_MAX:g}) values ({ch.source})"
         )
         ch.time_ns = ch.time_ns[ok]
