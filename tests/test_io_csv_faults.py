@@ -274,3 +274,22 @@ def test_empty_cells_are_no_value_their_rows_dropped_and_counted(tmp_path):
     said = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
     assert any(m.startswith("gnss: dropped 3 samples with empty, NaN/inf or absurd") for m in said), said
     assert rec.gnss.time.size == len([ln for ln in g[1:] if ln]) - 3
+
+
+def test_a_decimal_comma_is_read_in_a_file_separated_by_semicolons(tmp_path):
+    """A spreadsheet in a locale with a decimal comma writes ``9,81`` separated by ``;``: read as
+    the same numbers bit for bit."""
+    t = texts()
+    ref = load_flight(ingest_options({"inputs": CSV_IN}, "f"), _written(tmp_path / "a", t))
+    local = {r: text.replace(",", ";").replace(".", ",") for r, text in t.items()}
+    flight = {"inputs": CSV_IN, "csv": {"delimiter": ";"}}
+    rec = load_flight(ingest_options(flight, "f"), _written(tmp_path / "b", local))
+    np.testing.assert_array_equal(rec.imu.specific_force_t, ref.imu.specific_force_t)
+    np.testing.assert_array_equal(rec.gnss.lat, ref.gnss.lat)
+
+
+def _written(d, texts_by_role):
+    d.mkdir(parents=True, exist_ok=True)
+    for role, text in texts_by_role.items():
+        (d / f"{role}.csv").write_text(text)
+    return d

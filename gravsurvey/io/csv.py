@@ -249,6 +249,9 @@ def read_csv_channel(
             # the header again: logs joined end to end (a logger that restarted writes a new one)
             repeated.append(i)
             continue
+        if delimiter != "," and "," in ln:
+            # a locale with a decimal comma writes ';'- or tab-separated files: 9,81 is 9.81
+            ln = ln.replace(",", ".")
         data_lines.append(ln)
         line_no.append(i)
     if repeated:
