@@ -829,6 +829,25 @@ def _stamp_unit_hint(t0_ns: int, imu_span, other_span, role: str) -> str | None:
     return None
 
 
+def _clock_hint(record) -> str | None:
+    """``"the IMU runs ... relative to the gnss ..."`` when the GNSS record is the IMU's shifted in
+    time (both ends alike) and the specific forces agree at that lag; else None."""
+    shift = _common_shift(record)
+    if shift is None:
+        return None
+    off, c = estimate_time_offset(record, centre_s=shift)
+    if off is None or not c >= OFFSET_VERDICT_CORRELATION:
+        return None
+    hours = abs(off) / 3600.0
+    zone = (
+        f" ({hours:.0f} h: local time in one file?)" if hours >= 0.99 and abs(hours - round(hours)) * 3600 < 60 else ""
+    )
+    return (
+        f"the IMU runs {off:+.2f} s relative to the gnss{zone} (cross-correlation of specific force, r = {c:.2f}): "
+        f"give the flight time_offsets_s: {{gnss: {off:+.2f}}}"
+    )
+
+
 def check_overlap(record, names: ChannelNames | None = None, min_fraction: float = 0.5) -> list[str]:
     """Channels must overlap the IMU in time.
 
@@ -860,6 +879,7 @@ def check_overlap(record, names: ChannelNames | None = None, min_fraction: float
                 f"do not overlap in time ({max(a0, b0) - min(a1, b1):.1f} s apart): "
                 + (
                     _stamp_unit_hint(t0, (a0, a1), (b0, b1), role)
+                    or (_clock_hint(record) if role == "gnss" else None)
                     or "a clock out of step or files of different flights?"
                 )
             )
@@ -1093,8 +1113,9 @@ def imu_specific_force(time, specific_force_t, t_out, dt, window_s: float = KINE
     return smooth_imu(time, fm, t_out, dt, window_s, shift_s)
 
 
-def estimate_time_offset(record, max_lag_s: float = 30.0, step_s: float = 0.05):
-    """IMU-GNSS clock offset by cross-correlating the specific-force magnitudes.
+def estimate_time_offset(record, max_lag_s: float = 30.0, step_s: float = 0.05, centre_s: float = 0.0):
+    """IMU-GNSS clock offset by cross-correlating the specific-force magnitudes (lags within
+    ``max_lag_s`` of ``centre_s``).
 
     Returns
     -------
@@ -1127,7 +1148,7 @@ def estimate_time_offset(record, max_lag_s: float = 30.0, step_s: float = 0.05):
         den = math.sqrt(float(a @ a) * float(b @ b))
         return float(a @ b) / den if den > 0 else -np.inf
 
-    coarse = np.arange(-max_lag_s, max_lag_s + 1e-9, max(dt / 2, 0.5))
+    coarse = centre_s + np.arange(-max_lag_s, max_lag_s + 1e-9, max(dt / 2, 0.5))
     c = np.array([corr(x) for x in coarse])
     k = int(np.argmax(c))
     fine = np.arange(coarse[k] - 1.0, coarse[k] + 1.0 + 1e-9, step_s)
@@ -1206,6 +1227,20 @@ def mismatch_hints(record, ellipsoid=WGS84):
     cands.append(("height in feet but declared as metres", (lat, lon, h * 0.3048)))
     cands.append(("height in metres but declared as feet", (lat, lon, h / 0.3048)))
     return [(name, abs(gravity_mismatch(record, t, *x, ellipsoid)[0])) for name, x in cands]
+
+
+def _common_shift(record, max_lag_s: float = 30.0, tol: float = 0.01):
+    """IMU start minus GNSS start when both ends of the two records are offset alike (within
+    ``tol`` of the span) by more than ``max_lag_s``, s; else None."""
+    spans = channel_spans(record)
+    if "gnss" not in spans:
+        return None
+    a0, a1 = spans["imu"]
+    b0, b1 = spans["gnss"]
+    d0, d1 = a0 - b0, a1 - b1
+    if abs(d0) > max_lag_s and abs(d0 - d1) <= tol * max(a1 - a0, b1 - b0):
+        return 0.5 * (d0 + d1)
+    return None
 
 
 def check_gnss_consistency(
@@ -1312,6 +1347,13 @@ def check_gnss_consistency(
             f"(limit {opts.max_gravity_mismatch_mgal:g})"
         )
     off, c = estimate_time_offset(record)
+    shift = _common_shift(record)
+    if (off is None or not c >= OFFSET_VERDICT_CORRELATION) and shift is not None:
+        # both ends of the GNSS record offset alike from the IMU's by more than the search: a
+        # clock (or time zone) out of step, if the specific forces agree there
+        off2, c2 = estimate_time_offset(record, centre_s=shift)
+        if off2 is not None and c2 >= OFFSET_VERDICT_CORRELATION:
+            off, c = off2, c2
     if off is None:
         notes.append(f"{PASSED}imu-gnss time offset: not measurable (too little manoeuvring to correlate)")
     else:

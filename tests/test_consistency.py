@@ -164,6 +164,20 @@ def test_gnss_stamps_in_a_larger_unit_than_nanoseconds_are_named(tmp_path, facto
     assert f"the gnss stamps read {factor:,}x too small: in {unit} but declared as nanoseconds" in msg
 
 
+@pytest.mark.parametrize("shift_s, says", [(3600, "do not overlap in time"), (300, "clocks out of step")])
+def test_a_gnss_clock_minutes_or_hours_out_of_step_is_measured_and_named(tmp_path, shift_s, says):
+    """GNSS stamps an hour late (a file in local time) or five minutes late: measured by the
+    specific-force correlation at the lag of the records' ends (fuzzing, 2026-12-04: "a clock out
+    of step or files of different flights?", and for 600 s on a strapdown flight "the navigation
+    did not settle ... set model.gyro_bias_sigma_degph")."""
+    cfg, fl = _flight(tmp_path, lambda p: d.shift_after(p, -1, shift_s, names=("gnss",)))
+    with pytest.raises(DataError) as exc:
+        process_flight(cfg, fl)
+    msg = str(exc.value)
+    assert says in msg and f"give the flight time_offsets_s: {{gnss: -{shift_s}." in msg and "\n" not in msg
+    assert ("(1 h: local time in one file?)" in msg) == (shift_s == 3600)
+
+
 def test_imu_clock_restart_is_placed_by_gnss(tmp_path):
     """Measured before: 6.3 mGal here (279 mGal in the issue's case), exit 0, nothing said."""
     cfg, fl = _flight(tmp_path, lambda p: d.restart_clock(p, "imu", 600, 300))
