@@ -4,17 +4,21 @@ Free functions over arrays. Each either returns findings (one-line strings for t
 notes) or raises :class:`~gravsurvey.errors.DataError` naming the channel, file and column.
 ``pipeline._process_flight`` calls them in this order:
 
-1. :func:`check_overlap` - channels that do not overlap in time (a clock out of step).
+1. :func:`check_overlap` - channels that do not overlap in time (a clock out of step, stamps
+   in another unit), and :func:`check_platform_axes` - a platform triad's up axis and level.
 2. :func:`check_gnss_consistency` - GNSS track against the IMU: speed plausibility, the
    specific-force magnitude the GNSS kinematics imply vs the one the IMU measures (catches
    lat/lon swapped, radians declared as degrees, a wrong height unit), and the IMU-GNSS time
    offset by cross-correlating the two (:func:`estimate_time_offset`).
-3. :func:`plan_segments` - the flight is split at IMU gaps longer than
+3. Against the track once it has passed: :func:`check_platform_gyros` (a platform's gyros follow
+   the Earth's and the transport rate) and :func:`check_strapdown_axes` (a strapdown IMU's
+   columns: no negated or swapped axis, nor a coordinate of the wrong sign, fits better).
+4. :func:`plan_segments` - the flight is split at IMU gaps longer than
    ``CheckOptions.max_imu_gap_s`` and at gaps of all vertical aiding (altimeter and GNSS)
    longer than ``max_aiding_gap_s``; each segment is estimated on its own
    (:func:`gravsurvey.io.record.slice_record`) and the results concatenated with a NaN epoch
    between segments (:func:`gravsurvey.estimate.concatenate_estimates`).
-4. :func:`check_result` - the final product: non-finite values, |disturbance| beyond a
+5. :func:`check_result` - the final product: non-finite values, |disturbance| beyond a
    limit, a navigation that left the GNSS track, no survey lines.
 
 Clock restarts (a channel's time going back) are found on the raw int64 stamps before the

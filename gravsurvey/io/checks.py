@@ -840,11 +840,14 @@ def frozen_gnss(time_ns, lat_deg, lon_deg, height) -> np.ndarray:
     ndarray of int
         Indices of the held epochs.
     """
-    t = (np.asarray(time_ns) - time_ns[0]) * 1e-9 if len(time_ns) else np.zeros(0)
-    xy = _track_m(lat_deg, lon_deg) if len(t) else np.zeros((0, 2))
+    runs = repeat_runs(np.stack([lat_deg, lon_deg, height], axis=1))
+    if not runs:
+        return np.zeros(0, np.int64)
+    t = (np.asarray(time_ns) - time_ns[0]) * 1e-9
+    xy = _track_m(lat_deg, lon_deg)
     q = max(_resolution(lat_deg), _resolution(lon_deg)) * M_PER_DEG
     out = []
-    for a, b in repeat_runs(np.stack([lat_deg, lon_deg, height], axis=1)):
+    for a, b in runs:
         if b - a < FROZEN_MIN_REPEATS["gnss"] or b + 1 >= len(t):
             continue
         dist = float(np.hypot(*(xy[b + 1] - xy[a])))
