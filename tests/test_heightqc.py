@@ -87,6 +87,28 @@ def test_a_short_block_of_wrong_heights_is_dropped_not_two_steps(rate_hz, n_s, l
     assert [i for i, _ in faults.steps] == [k] and faults.spikes.size == 0
 
 
+@pytest.mark.parametrize("rate_hz", [1.0, 5.0])
+def test_the_way_back_of_a_block_is_found_with_its_first_step(rate_hz):
+    """A GNSS height that loses its ambiguities jumps and, re-fixed, jumps back: the first jump at
+    10 standard errors, the way back at 7 (under STEP_K alone). Taken off alone, the first step
+    turned a 120-s block into a permanent offset with a step back into it (fuzzing, 2026-12-04:
+    15.7 mGal against 2.2 intact); the way back is the opposite jump of a like size near it."""
+    t, e = _residual(rate_hz, 7)
+    se = 0.05 * np.sqrt(2 * 9.0 / (20.0 * rate_hz))
+    k1, k2 = np.searchsorted(t, 1000.0), np.searchsorted(t, 1120.0)
+    h = np.zeros(t.size)
+    h[k1:k2] += 10.0 * se
+    h[k2:] += 3.0 * se  # the way back falls 7 standard errors: 3 of the first 10 stay
+    faults = Q.find_height_faults(t, e - h)
+    (a, _), (b, _) = faults.steps
+    assert a == k1 and abs(b - k2) <= 1  # the weaker end placed within a sample (20 Hz: 0.05 s)
+    np.testing.assert_allclose([s for _, s in faults.steps], [10.0 * se, -7.0 * se], atol=3 * se)
+    # without the first the way back alone is below the threshold: nothing
+    h2 = np.zeros(t.size)
+    h2[k2:] -= 7.0 * se
+    assert Q.find_height_faults(t, e - h2).steps == []
+
+
 def test_a_step_in_the_heights_is_repaired_before_the_estimate(noisy_flight):  # noqa: F811
     """A 0.3-m jump of the heights in mid-flight (a GNSS height re-fixing its ambiguities):
     taken off before the filter, the estimate is as good as without it, and the user is told."""
