@@ -1356,7 +1356,8 @@ def check_gnss_consistency(
         # both ends of the GNSS record offset alike from the IMU's by more than the search: a
         # clock (or time zone) out of step, if the specific forces agree there
         off2, c2 = estimate_time_offset(record, centre_s=shift)
-        if off2 is not None and c2 >= OFFSET_VERDICT_CORRELATION:
+        # and clearly better than at the lags near zero (a grid's turns repeat with its lines)
+        if off2 is not None and c2 >= OFFSET_VERDICT_CORRELATION and not c2 <= c + 0.05:
             off, c = off2, c2
     if off is None:
         notes.append(f"{PASSED}imu-gnss time offset: not measurable (too little manoeuvring to correlate)")
