@@ -598,12 +598,14 @@ def check_platform_gyros(record, triad: str, names: ChannelNames | None = None, 
         # the Earth's vertical rate and the transport rate about east change sign with the
         # latitude: a survey south of the equator written without its sign reads as two gyro
         # axes negated
+        from .inm.alignment import SIGN_SLIPS
+
         where = names.column("gnss", "lat") if names is not None else "gnss latitude"
         raise DataError(
             f"{where}: the platform gyros turn as an east-north-up platform does along the GNSS track with "
             f"its latitudes' sign flipped (slopes {', '.join(f'{chr(120 + k)} {flipped[k]:+.2f}' for k in judged)}; "
-            f"as written {text}, expected +1): the latitudes' sign is wrong (a survey south of the equator "
-            "written without its sign, or the hemisphere column left out)?"
+            f"as written {text}, expected +1): the latitudes' sign is wrong "
+            f"({SIGN_SLIPS['lat'][bool(np.median(record.gnss.lat) < 0)]}, or the hemisphere column left out)?"
         )
     where = names.column("imu", "wx", "wy", "wz") if names is not None else "imu"
     raise DataError(
@@ -758,11 +760,13 @@ def check_strapdown_axes(record, triad: str, names: ChannelNames | None = None, 
     if quants in (("lat",), ("lon",)):
         q = quants[0]
         where = names.column("gnss", q) if names is not None else f"gnss {q}"
-        side = "south of the equator" if q == "lat" else "west of Greenwich"
+        from .inm.alignment import SIGN_SLIPS
+
+        negative = bool(np.median(getattr(record.gnss, q)) < 0)
         raise DataError(
             f"{where}: the strapdown IMU's motion fits the GNSS track {ratio:.1f}x better with {desc} (velocity-"
-            f"matching residual, RMS over {base.size} manoeuvres of {STRAPDOWN_AXES_WINDOW_S:g} s: {fit}): a survey "
-            f"{side} written without its sign, or the hemisphere column left out?"
+            f"matching residual, RMS over {base.size} manoeuvres of {STRAPDOWN_AXES_WINDOW_S:g} s: {fit}): "
+            f"{SIGN_SLIPS[q][negative]}, or the hemisphere column left out?"
         )
     where = names.column("imu", *quants) if names is not None else "imu"
     key_path = f"{key_prefix}.imu_axes" if key_prefix else "imu_axes"

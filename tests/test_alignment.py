@@ -634,7 +634,11 @@ def test_strapdown_axes_check_passes_a_mems_gyro_and_a_noisy_gnss():
 
 
 @pytest.mark.parametrize(
-    "q, col, side", [("lat", "lat_deg", "south of the equator"), ("lon", "lon_deg", "west of Greenwich")]
+    "q, col, side",
+    [
+        ("lat", "lat_deg", "north of the equator written negative"),
+        ("lon", "lon_deg", "east of Greenwich written negative"),
+    ],
 )
 def test_strapdown_coordinates_of_the_wrong_sign_name_their_column(in_flight, q, col, side):
     """The GNSS track mirrored about the equator (or the Greenwich meridian) is mirrored against the

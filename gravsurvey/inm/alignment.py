@@ -46,6 +46,11 @@ from ..geodesy import (
 )
 from .mechanization import propagate_attitude
 
+#: How a coordinate's sign slips, by (coordinate, written negative).
+SIGN_SLIPS = {
+    "lat": ("a survey south of the equator written without its sign", "a survey north of the equator written negative"),
+    "lon": ("a survey west of Greenwich written without its sign", "a survey east of Greenwich written negative"),
+}
 #: Half width of the GNSS (and IMU) fits of :func:`match_residual_rms`, s: 0.5-m GNSS noise at
 #: 5 Hz leaves 0.05 m/s per axis (0.3 m/s with the alignment's 1-s fits).
 MATCH_CHECK_HALF_WINDOW_S = 3.0
@@ -362,7 +367,7 @@ def hemisphere_check(
             f"{source}: at rest the gyros read a vertical Earth rate of {up_rate / degph:+.2f} deg/h, the one at "
             f"latitude {abs(math.degrees(lat)):.2f} {'S' if hemi == 'N' else 'N'}; the GNSS latitude "
             f"{abs(math.degrees(lat)):.2f} {hemi} expects {expected / degph:+.2f}: the latitudes' sign is wrong "
-            "(a survey south of the equator written without its sign, or the hemisphere column left out)? "
+            f"({SIGN_SLIPS['lat'][lat < 0]}, or the hemisphere column left out)? "
             "(else an up-gyro bias that large: set model.gyro_bias_sigma_degph to the gyro's datasheet bias)"
         )
 
