@@ -39,6 +39,16 @@ def texts(seconds=3.0):
     return {"imu": "\n".join(imu) + "\n", "altimeter": "\n".join(alt) + "\n", "gnss": "\n".join(gnss) + "\n"}
 
 
+def _loaded(tmp, texts_by_role):
+    """Write the CSV texts to ``tmp`` and load the flight: the record and the DataWarnings said."""
+    for role, text in texts_by_role.items():
+        (Path(tmp) / f"{role}.csv").write_text(text)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp)
+    return rec, [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+
+
 def _write(tmp, imu_bytes=None):
     for role, text in texts().items():
         (Path(tmp) / f"{role}.csv").write_bytes(text.encode() if role != "imu" or imu_bytes is None else imu_bytes)
@@ -207,12 +217,7 @@ def test_a_gnss_row_with_no_fix_is_dropped_not_a_jump_of_the_track(tmp_path):
     t = texts()
     g = t["gnss"].split("\n")
     g[3] = g[3].split(",", 1)[0] + ",0,0,0"
-    for role, text in {**t, "gnss": "\n".join(g)}.items():
-        (tmp_path / f"{role}.csv").write_text(text)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
-    said = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+    rec, said = _loaded(tmp_path, {**t, "gnss": "\n".join(g)})
     assert any(m.startswith("gnss: dropped 1 samples at latitude 0, longitude 0 (no fix)") for m in said), said
     assert rec.gnss.time.size == len([ln for ln in t["gnss"].split("\n")[1:] if ln]) - 1
     assert np.all(rec.gnss.lat != 0.0)
@@ -246,12 +251,7 @@ def test_a_repeated_header_of_logs_joined_end_to_end_is_skipped_and_said(tmp_pat
     t = texts()
     lines = t["imu"].split("\n")
     joined = "\n".join(lines[:150] + [lines[0]] + lines[150:])
-    for role, text in {**t, "imu": joined}.items():
-        (tmp_path / f"{role}.csv").write_text(text)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
-    said = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+    rec, said = _loaded(tmp_path, {**t, "imu": joined})
     assert any(
         m.endswith("imu.csv: skipped 1 repeated header line(s) (line 151): logs joined end to end?") for m in said
     ), said
@@ -266,12 +266,7 @@ def test_empty_cells_are_no_value_their_rows_dropped_and_counted(tmp_path):
     g = t["gnss"].split("\n")
     for k in (5, 6, 7):
         g[k] = g[k].split(",", 1)[0] + ",,,"
-    for role, text in {**t, "gnss": "\n".join(g)}.items():
-        (tmp_path / f"{role}.csv").write_text(text)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        rec = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path)
-    said = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+    rec, said = _loaded(tmp_path, {**t, "gnss": "\n".join(g)})
     assert any(m.startswith("gnss: dropped 3 samples with empty, NaN/inf or absurd") for m in said), said
     assert rec.gnss.time.size == len([ln for ln in g[1:] if ln]) - 3
 

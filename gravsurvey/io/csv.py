@@ -259,10 +259,7 @@ def read_csv_channel(
             f"{path}: skipped {len(repeated)} repeated header line(s) (line {', '.join(map(str, repeated[:MAX_SHOWN_LINES]))}"
             f"{' ...' if len(repeated) > MAX_SHOWN_LINES else ''}): logs joined end to end?"
         )
-        if notes is None and data_loss is None:
-            warnings.warn(msg, DataWarning, stacklevel=2)
-        if notes is not None:
-            notes.append(msg)
+        _say(msg, notes, data_loss)
     cut = None  # the unterminated last data line: (line number, its text)
     if data_lines and line_no[-1] == len(all_lines) and not text.endswith(("\n", "\r")):
         if header is not None and len(data_lines[-1].split(delimiter)) <= len(header):
@@ -390,6 +387,15 @@ def read_csv_channel(
     return t, values
 
 
+def _say(msg, notes, data_loss, stacklevel=3) -> None:
+    """A repair of the file into ``notes``, or issued as a DataWarning (at the caller's caller
+    ``stacklevel`` frames up) when the caller collects neither notes nor data loss."""
+    if notes is None and data_loss is None:
+        warnings.warn(msg, DataWarning, stacklevel=stacklevel)
+    if notes is not None:
+        notes.append(msg)
+
+
 def _report_cut_line(path, cut, ncol, cols, index, time_format, delimiter, notes, data_loss):
     """Say that the unterminated last line was dropped, and whether it is surely cut."""
     line, text = cut
@@ -416,10 +422,7 @@ def _report_cut_line(path, cut, ncol, cols, index, time_format, delimiter, notes
             f"{path}: last line (line {line}, {nbytes} bytes) has no line end, so its last "
             f"value may be cut short: 1 row dropped"
         )
-    if notes is None and data_loss is None:
-        warnings.warn(msg, DataWarning, stacklevel=3)
-    if notes is not None:
-        notes.append(msg)
+    _say(msg, notes, data_loss, stacklevel=4)
     if sure and data_loss is not None:
         data_loss.append(msg)
 
