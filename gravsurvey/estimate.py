@@ -247,6 +247,7 @@ def attitude_report(sol) -> dict:
         out["attitude_sigma_median_deg"] = {"roll": float(med[0]), "pitch": float(med[1]), "heading": float(med[2])}
         out["attitude_converge_s"] = float(sol.attitude_converge_s)
         out["gnss_residual_rms_m"] = float(sol.gnss_residual_rms_m)
+        out["gnss_residual_systematic_m"] = float(getattr(sol, "gnss_residual_systematic_m", np.nan))
     bias = getattr(sol, "gyro_bias_t", None)
     if bias is not None:
         # the passes re-linearise every GNSS-aided flight (attitude and gyro bias), platform too
