@@ -693,24 +693,29 @@ def test_an_imu_scale_fault_shows_as_a_systematic_departure_from_the_gnss_track(
 
 
 @pytest.mark.parametrize("which, q, k, scale", [("in_flight", "wz", 2, 1.01), ("static_start", "fx", 0, 1.05)])
-def test_an_imu_axis_scale_fault_is_named_with_its_factor(request, which, q, k, scale):
-    """A gyro's z scale 1 % off (56 mGal with exit 0 on a fuzzing flight) or an accelerometer's x
-    scale 5 % off (13.5 mGal; seen where the speed changes: the take-off run of the flight with a
-    static start): the factor that, dividing the axis, fits the GNSS velocity changes through the
-    manoeuvres is found to 0.2 % and named in a warning with the column."""
-    from gravsurvey.consistency import ChannelNames, check_strapdown_axes
+def test_an_imu_axis_scale_fault_is_found_named_and_divided_out(request, which, q, k, scale):
+    """A gyro's z scale 1 % off (56 mGal with exit 0 on a fuzzing flight, 2.23 corrected) or an
+    accelerometer's x scale 5 % off (13.5 mGal, 2.24 corrected; seen where the speed changes:
+    the take-off run of the flight with a static start): the factor that, dividing the axis,
+    best fits the GNSS velocity changes through the manoeuvres is found to 0.2 %, divided out
+    and named in a warning with the column; an intact flight is left as it is."""
+    from gravsurvey.consistency import ChannelNames, correct_strapdown_scale
 
     flight = request.getfixturevalue(which)
     names = ChannelNames({"imu": "imu.csv"}, {})
-    intact = check_strapdown_axes(_record(flight), "strapdown", names)
-    assert len(intact) == 1 and intact[0].startswith("passed: ")
+    rec = _record(flight)
+    same, notes = correct_strapdown_scale(rec, "strapdown", names)
+    assert same is rec and notes == []
 
     def scaled(f, w):
         (f if q[0] == "f" else w)[:, k] *= scale
         return f, w
 
-    notes = check_strapdown_axes(_with_columns(_record(flight), scaled), "strapdown", names)
-    (msg,) = notes[1:]
-    assert msg.startswith(f"imu.csv column {q}: the ") and "a scale-factor error of" in msg and "\n" not in msg
+    fixed, notes = correct_strapdown_scale(_with_columns(rec, scaled), "strapdown", names)
+    (msg,) = notes
+    assert msg.startswith(f"imu.csv column {q}: the ") and "divided out before the estimate" in msg and "\n" not in msg
     found = float(msg.split(" reads ")[1].split("x ")[0])
     assert abs(found - scale) < 0.002
+    arr = "specific_force_t" if q[0] == "f" else "angular_rate_t"
+    np.testing.assert_allclose(getattr(fixed.imu, arr)[:, k], getattr(rec.imu, arr)[:, k] * scale / found, rtol=1e-4)
+    assert correct_strapdown_scale(rec, "platform", names) == (rec, [])
