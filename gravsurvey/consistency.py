@@ -711,6 +711,24 @@ def manoeuvre_windows(record, ellipsoid=WGS84) -> list:
     return out
 
 
+def _matched_windows(record, ellipsoid) -> list:
+    """:func:`manoeuvre_windows` with the gyros' attitude history over each (only a gyro
+    hypothesis changes it) and the velocity-matching residual of the columns as written, m/s;
+    a window with a gap in the GNSS is left out."""
+    from .inm.alignment import match_residual_rms
+    from .inm.mechanization import propagate_attitude
+
+    out = []
+    for tt, ff, ww in manoeuvre_windows(record, ellipsoid):
+        c_t0 = propagate_attitude(tt, ww, np.eye(3))
+        try:
+            r0 = match_residual_rms(tt, ff, ww, record.gnss, ellipsoid, c_t0=c_t0)
+        except DataError:  # a gap in the window
+            continue
+        out.append((tt, ff, ww, c_t0, r0))
+    return out
+
+
 def strapdown_scale_fit(record, ellipsoid=WGS84) -> list:
     """Each IMU axis's scale factor as the GNSS track shows it: the factor ``s`` by which dividing
     the axis's readings best fits the GNSS velocity changes through the manoeuvres (RMS of the
@@ -726,24 +744,16 @@ def strapdown_scale_fit(record, ellipsoid=WGS84) -> list:
         :data:`STRAPDOWN_SCALE_MIN_RESIDUAL_MPS`.
     """
     from .inm.alignment import match_residual_rms
-    from .inm.mechanization import propagate_attitude
 
-    windows = []
-    for tt, ff, ww in manoeuvre_windows(record, ellipsoid):
-        try:
-            match_residual_rms(tt, ff, ww, record.gnss, ellipsoid)
-        except DataError:  # a gap in the window
-            continue
-        windows.append((tt, ff, ww, propagate_attitude(tt, ww, np.eye(3))))
+    windows = _matched_windows(record, ellipsoid)
     if len(windows) < STRAPDOWN_AXES_MIN_WINDOWS:
         return []
-    as_written = [match_residual_rms(tt, ff, ww, record.gnss, ellipsoid, c_t0=c) for tt, ff, ww, c in windows]
-    if float(np.sqrt(np.mean(np.square(as_written)))) <= STRAPDOWN_SCALE_MIN_RESIDUAL_MPS:
+    if float(np.sqrt(np.mean(np.square([w[4] for w in windows])))) <= STRAPDOWN_SCALE_MIN_RESIDUAL_MPS:
         return []
 
     def pooled(q, k, s):
         r = []
-        for tt, ff, ww, c in windows:
+        for tt, ff, ww, c, _ in windows:
             f2, w2 = ff, ww
             if q == "f":
                 f2 = ff.copy()
@@ -791,10 +801,9 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
         Each hypothesis with its residuals.
     """
     from .inm.alignment import match_residual_rms
-    from .inm.mechanization import propagate_attitude
 
     g = record.gnss
-    windows = manoeuvre_windows(record, ellipsoid)
+    windows = _matched_windows(record, ellipsoid)
     if not windows:
         return np.zeros(0), []
     hyps = strapdown_axis_hypotheses()
@@ -805,26 +814,17 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
         "lon": dataclasses.replace(g, lon=-np.asarray(g.lon, float)),
     }
     hyps += [(GNSS_SIGN_FAULTS["lat"], ("lat",), None), (GNSS_SIGN_FAULTS["lon"], ("lon",), None)]
-    base, res = [], [[] for _ in hyps]
-    for tt, ff, ww in windows:
-        # the gyros' attitude history once per window: only a gyro hypothesis changes it
-        c_t0 = propagate_attitude(tt, ww, np.eye(3))
-        try:
-            r0 = match_residual_rms(tt, ff, ww, g, ellipsoid, c_t0=c_t0)
-            rs = [
-                match_residual_rms(
-                    tt, *tr(ff, ww), g, ellipsoid, c_t0=None if any(x.startswith("w") for x in q) else c_t0
-                )
-                if tr is not None
-                else match_residual_rms(tt, ff, ww, mirrored[q[0]], ellipsoid, c_t0=c_t0)
-                for _, q, tr in hyps
-            ]
-        except DataError:  # a gap in the window
-            continue
-        base.append(r0)
-        for lst, r in zip(res, rs):
-            lst.append(r)
-    return np.array(base), [(d, q, np.array(r)) for (d, q, _), r in zip(hyps, res)]
+    res = [
+        [
+            match_residual_rms(tt, *tr(ff, ww), g, ellipsoid, c_t0=None if any(x.startswith("w") for x in q) else c_t0)
+            if tr is not None
+            else match_residual_rms(tt, ff, ww, mirrored[q[0]], ellipsoid, c_t0=c_t0)
+            for tt, ff, ww, c_t0, _ in windows
+        ]
+        for _, q, tr in hyps
+    ]
+    base = np.array([w[4] for w in windows])
+    return base, [(d, q, np.array(r)) for (d, q, _), r in zip(hyps, res)]
 
 
 def correct_strapdown_scale(record, triad: str, names: ChannelNames | None = None) -> tuple:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gravsurvey.geodesy import OMEGA_E
+from gravsurvey.geodesy import OMEGA_E, local_displacement
 
 G_STD = 9.80665  # m/s^2, the unit "g"
 DEG = np.pi / 180.0
@@ -771,7 +771,7 @@ FROZEN_MOVING_MPS = 1.0
 #: ... and (GNSS) by more than this many steps of the positions' recorded resolution over the held
 #: time: a CSV written with coarse digits repeats positions while crawling.
 FROZEN_QUANTA = 3.0
-#: Metres per degree of latitude (enough for a speed test).
+#: Metres per degree of latitude (the positions' written resolution in metres, roughly).
 M_PER_DEG = 111_320.0
 
 
@@ -811,14 +811,6 @@ def _resolution(x) -> float:
     return 0.0
 
 
-def _track_m(lat_deg, lon_deg):
-    """Local east/north coordinates of a track, m, shape (n, 2) (a flat Earth: a speed test)."""
-    lat = np.asarray(lat_deg, float)
-    lon = np.asarray(lon_deg, float)
-    c = np.cos(np.radians(np.median(lat)))
-    return np.stack([(lon - lon[0]) * M_PER_DEG * c, (lat - lat[0]) * M_PER_DEG], axis=1)
-
-
 def frozen_gnss(time_ns, lat_deg, lon_deg, height) -> np.ndarray:
     """GNSS epochs that hold the previous fix while the track moves (a receiver or logger
     repeating its last position), to drop.
@@ -844,13 +836,13 @@ def frozen_gnss(time_ns, lat_deg, lon_deg, height) -> np.ndarray:
     if not runs:
         return np.zeros(0, np.int64)
     t = (np.asarray(time_ns) - time_ns[0]) * 1e-9
-    xy = _track_m(lat_deg, lon_deg)
+    lat, lon = np.radians(np.asarray(lat_deg, float)), np.radians(np.asarray(lon_deg, float))
     q = max(_resolution(lat_deg), _resolution(lon_deg)) * M_PER_DEG
     out = []
     for a, b in runs:
         if b - a < FROZEN_MIN_REPEATS["gnss"] or b + 1 >= len(t):
             continue
-        dist = float(np.hypot(*(xy[b + 1] - xy[a])))
+        dist = float(np.hypot(*local_displacement(lat[a], lon[a], lat[b + 1], lon[b + 1])))
         v = dist / (t[b + 1] - t[a])
         if v >= FROZEN_MOVING_MPS and v * (t[b] - t[a]) > FROZEN_QUANTA * q:
             out.append(np.arange(a + 1, b + 1))
@@ -885,15 +877,16 @@ def frozen_imu(time_ns, f, w, gnss_time_ns=None, lat_deg=None, lon_deg=None) -> 
         return np.zeros(0, np.int64)
     ref = int(gnss_time_ns[0])
     tg = (np.asarray(gnss_time_ns) - ref) * 1e-9
-    xy = _track_m(lat_deg, lon_deg)
+    lat, lon = np.radians(np.asarray(lat_deg, float)), np.unwrap(np.radians(np.asarray(lon_deg, float)))
     out = []
     for a, b in runs:
         ta, tb = (int(time_ns[a]) - ref) * 1e-9 - 0.5, (int(time_ns[b]) - ref) * 1e-9 + 0.5
         if ta < tg[0] or tb > tg[-1]:
             continue
-        pa = [np.interp(ta, tg, xy[:, k]) for k in (0, 1)]
-        pb = [np.interp(tb, tg, xy[:, k]) for k in (0, 1)]
-        if math.hypot(pb[0] - pa[0], pb[1] - pa[1]) / (tb - ta) >= FROZEN_MOVING_MPS:
+        de, dn = local_displacement(
+            np.interp(ta, tg, lat), np.interp(ta, tg, lon), np.interp(tb, tg, lat), np.interp(tb, tg, lon)
+        )
+        if math.hypot(de, dn) / (tb - ta) >= FROZEN_MOVING_MPS:
             out.append(np.arange(a + 1, b + 1))
     return np.concatenate(out).astype(np.int64) if out else np.zeros(0, np.int64)
 

@@ -245,7 +245,7 @@ def read_csv_channel(
             header = [h.strip() for h in s.split(delimiter)]
             header_line = i
             continue
-        if s.split(delimiter)[0].strip() == header[0] and [h.strip() for h in s.split(delimiter)] == header:
+        if s.startswith(header[0]) and [h.strip() for h in s.split(delimiter)] == header:
             # the header again: logs joined end to end (a logger that restarted writes a new one)
             repeated.append(i)
             continue
@@ -326,12 +326,19 @@ def read_csv_channel(
     vals = {}
     for q, kind in QUANTITIES[role]:
         c = cols[q]
-        # an empty cell is no value (a receiver without a fix): NaN, its row dropped and counted
-        # with the other non-finite ones on ingest
-        strs = [x if x.strip() else "nan" for x in (r[index[c]] for r in rows)]
+        strs = [r[index[c]] for r in rows]
         try:
             v = np.array(strs, dtype=np.float64) if n else np.zeros(0)
         except ValueError:
+            # an empty cell is no value (a receiver without a fix): NaN, its row dropped and
+            # counted with the other non-finite ones on ingest (looked for only here: the
+            # common file has none, and the conversion above is the hot path)
+            strs = [x if x.strip() else "nan" for x in strs]
+            try:
+                v = np.array(strs, dtype=np.float64)
+            except ValueError:
+                v = None
+        if v is None:
             for k, s in enumerate(strs):
                 try:
                     float(s)
@@ -339,7 +346,7 @@ def read_csv_channel(
                     raise DataError(
                         f"{path}: line {line_no[k]}, column {c!r}: expected a number, got {_shown(s)}"
                     ) from None
-            raise
+            raise DataError(f"{path}: column {c!r}: values that do not convert to numbers")
         if kind is not None:
             unit = units.get(kind, next(iter(UNITS[kind])))
             factor = UNITS[kind][unit]
