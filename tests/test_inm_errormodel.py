@@ -127,3 +127,33 @@ def test_altimeter_measurement_assignment_and_missing():
     assert sorted(z[2]) == pytest.approx([-0.5, 1.0], abs=1e-3)
     assert np.isnan(z[5]).all() and np.isnan(z[3]).all()  # NaN height and out-of-range time dropped
     assert r[0, 0, 0] == 4.0
+
+
+def test_epochs_stay_evenly_spaced_where_the_imu_changes_rate():
+    from gravsurvey.inm.solve import filter_epochs
+
+    t = np.arange(0, 6001) / 20.0  # 20 Hz, 300 s
+    idx, half = filter_epochs(t, 1.0)
+    np.testing.assert_array_equal(idx, np.arange(0, t.size, 20))  # one rate: every 20th sample
+    assert half == pytest.approx(0.5, rel=1e-3)
+    gappy = np.delete(t, np.arange(2000, 2040))  # a 2-s gap: still one rate
+    idx, _ = filter_epochs(gappy, 1.0)
+    np.testing.assert_array_equal(idx, np.arange(0, gappy.size, 20))
+    # 20 Hz for 100 s, then 10 Hz (a logger that changed its rate): decimating by the mean
+    # rate's factor (15) put the epochs 0.75 s apart, then 1.5 s, and a 1-Hz altimeter's
+    # samples half way between two late epochs fell outside both windows
+    changed = np.concatenate([t[:2000], t[2000::2]])
+    idx, half = filter_epochs(changed, 1.0)
+    spacing = np.diff(changed[idx])
+    np.testing.assert_allclose(spacing, 1.0, atol=1e-9)
+    tr = parallel_flight(300.0, rate_hz=20.0)
+    keep = np.concatenate([np.arange(2000), np.arange(2000, t.size, 2)])
+    init = InitialState(tr["lat"][0], tr["lon"][0], 1000.0, tr["vel_n"][0], tr["mat_nt"][0])
+    nav = mechanize(tr["time"][keep], tr["f_t"][keep], tr["w_t"][keep], init, tr["time"][::20], tr["height"][::20])
+    alt_t = np.arange(0.0, 300.0, 1.0) + 0.25
+    alt = AltimeterMeasurement(alt_t, np.full(alt_t.size, 1000.0), 2.0)
+    z, _, _ = alt.build(nav, idx, half)
+    assert np.isfinite(z).sum() == alt_t.size  # every sample has its epoch
+    old_step = int(round((changed.size - 1) / (changed[-1] - changed[0])))
+    z_old, _, _ = alt.build(nav, np.arange(0, changed.size, old_step), 0.5 * old_step * 300.0 / (changed.size - 1))
+    assert np.isfinite(z_old).sum() < 0.9 * alt_t.size

@@ -154,6 +154,22 @@ def test_rate_stability_and_gap_threshold():
     assert ck.repair_time(gap, [], gap_factor=6.0)[2].n_gaps == 0
 
 
+def test_a_rate_change_within_the_record_is_named_with_its_span():
+    t = np.arange(0, 200_000) * 10_000_000  # 100 Hz, 2000 s
+    changed = np.concatenate([t[:100_000], t[100_000::2]])  # 50 Hz after 1000 s
+    _, _, rep = ck.repair_time(changed, [])
+    rate = next(x for x in ck.time_findings("imu", rep, t0_ns=0) if x.check == "rate")
+    assert rate.level == "warning"
+    assert "50 Hz over 1000.0-2000.0 s (the rate changed within the record)" in rate.message
+    rng = np.random.default_rng(3)
+    jit = t[:20_000] + (rng.random(20_000) < 0.05) * 4_000_000  # scattered late samples: no run
+    _, _, rep = ck.repair_time(jit, [])
+    assert (
+        rep.rate_runs == []
+        and "changed" not in next(x for x in ck.time_findings("imu", rep) if x.check == "rate").message
+    )
+
+
 def test_conflicting_duplicates_keep_first():
     t = np.array([1, 2, 2, 3], dtype=np.int64)
     v = np.array([10.0, 20.0, 21.0, 30.0])

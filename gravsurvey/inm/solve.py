@@ -929,6 +929,63 @@ def _horizontal_pass(record, params, nav, ellipsoid, g_vertical, one_pass):
     return (*out, hprior)
 
 
+#: Share of the decimated epochs' spacings off their median by more than
+#: :data:`EPOCH_SPACING_TOL` beyond which the IMU's rate is taken to change within the flight
+#: (not a few gaps) and the epochs are laid on a time grid instead.
+EPOCH_IRREGULAR_FRACTION = 0.05
+#: Relative departure of an epoch spacing from the median that counts as off.
+EPOCH_SPACING_TOL = 0.25
+
+
+def filter_epochs(time_s, rate_hz):
+    """The IMU samples that are the filter's epochs, and the half window of a measurement.
+
+    An IMU at one rate is decimated by the nearest integer factor of its mean rate to
+    ``rate_hz``.  Where that leaves the epochs unevenly spaced (more than
+    :data:`EPOCH_IRREGULAR_FRACTION` of the spacings off their median by over
+    :data:`EPOCH_SPACING_TOL`: the IMU's rate changed within the flight, e.g. 100 Hz then
+    50 Hz), each epoch is instead the IMU sample nearest a time grid at ``rate_hz``: the
+    epochs stay evenly spaced in time, so no measurement falls between two epochs' windows
+    and the identification's spectra see an even sampling.
+
+    Parameters
+    ----------
+    time_s : ndarray, shape (n,)
+        IMU sample times, s, increasing.
+    rate_hz : float
+        Filter epochs per second (``processing.filter_rate_hz``).
+
+    Returns
+    -------
+    idx : ndarray of int, shape (m,)
+        Indices of the epochs into ``time_s``.
+    half_window_s : float
+        Largest offset, s, of a measurement from the epoch it is assigned to.
+    """
+    t = np.asarray(time_s, float)
+    if t.size < 2 or not t[-1] > t[0]:
+        return np.arange(t.size), 0.5
+    imu_rate = (t.size - 1) / (t[-1] - t[0])
+    step = max(1, int(round(imu_rate / rate_hz)))
+    idx = np.arange(0, t.size, step)
+    spacing = np.diff(t[idx])
+    if spacing.size < 2:
+        return idx, 0.5 * step / imu_rate
+    typical = float(np.median(spacing))
+    off = np.abs(spacing - typical) > EPOCH_SPACING_TOL * typical
+    if np.mean(off) <= EPOCH_IRREGULAR_FRACTION:
+        return idx, 0.5 * step / imu_rate
+    period = 1.0 / rate_hz
+    grid = t[0] + period * np.arange(int(math.floor((t[-1] - t[0]) / period)) + 1)
+    pos = np.clip(np.searchsorted(t, grid), 1, t.size - 1)
+    near = np.where(grid - t[pos - 1] <= t[pos] - grid, pos - 1, pos)
+    idx = np.unique(near)
+    spacing = np.diff(t[idx])
+    # a measurement goes to its nearest epoch; the window only needs to reach across the
+    # widest spacing that is not a gap
+    return idx, 0.5 * max(period, float(np.quantile(spacing, 0.99)) if spacing.size else period)
+
+
 def _one_pass(
     record,
     params,
@@ -957,11 +1014,7 @@ def _one_pass(
     """
     t = nav.time
     alt_t, alt_h = _altimeter(record)
-    # filter epochs: IMU samples decimated by the nearest integer factor
-    imu_rate = (t.size - 1) / (t[-1] - t[0])
-    step = max(1, int(round(imu_rate / params.filter_rate_hz)))
-    idx = np.arange(0, t.size, step)
-    half = 0.5 * step / imu_rate
+    idx, half = filter_epochs(t, params.filter_rate_hz)
     geom = epoch_geometry(nav, idx, params.radius_source == "altimeter", ellipsoid)
     alt_dt = float(np.median(np.diff(alt_t))) if alt_t.size > 1 else 1.0
     gnss_used = bool(params.gnss_aiding) and record.gnss is not None and len(record.gnss.time) > 0

@@ -36,6 +36,9 @@ REST_ACCEL_STD = 0.05  # m/s^2
 # sample-rate stability: steps off nominal by more than this fraction count as irregular
 RATE_TOL = 0.2
 RATE_IRREGULAR_WARN = 0.01  # warn when more than 1 % of steps are irregular
+#: Shortest stretch of steps all off the nominal one that is named as the channel running at
+#: another rate, s.
+RATE_RUN_MIN_S = 10.0
 MAX_LISTED = 10  # gaps/backward steps listed individually
 #: Stray time stamps: a cluster of samples more than STRAY_GAP_NS from every other sample of its
 #: channel, holding at most STRAY_MAX_FRACTION of them or STRAY_MIN_SAMPLES (a 1-Hz channel's
@@ -79,6 +82,7 @@ class TimeReport:
     n_gaps: int = 0
     irregular_fraction: float = 0.0
     jitter: float = 0.0  # std(dt)/nominal over regular steps
+    rate_runs: list = field(default_factory=list)  # (t_first_ns, t_last_ns, rate_hz) at another rate
 
 
 def repair_time(time_ns, values, gap_factor=5.0):
@@ -151,7 +155,25 @@ def repair_time(time_ns, values, gap_factor=5.0):
         rep.irregular_fraction = float(np.mean(irr & regular)) if len(d) else 0.0
         dr = d[regular & ~irr]
         rep.jitter = float(np.std(dr) / nom) if len(dr) > 1 else 0.0
+        rep.rate_runs = _rate_runs(t, d, irr & regular)
     return t, values, rep
+
+
+def _rate_runs(t, d, off):
+    """Stretches of at least :data:`RATE_RUN_MIN_S` where every step is off the nominal one:
+    the channel ran at another rate there (a logger that changed its rate mid-flight), not
+    jitter.  ``(t_first_ns, t_last_ns, rate_hz)`` of the first :data:`MAX_LISTED`."""
+    if not off.any():
+        return []
+    edge = np.diff(np.concatenate([[0], off.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+    runs = []
+    for a, b in zip(starts, ends):
+        if (t[b] - t[a]) * 1e-9 >= RATE_RUN_MIN_S:
+            runs.append((int(t[a]), int(t[b]), 1e9 / float(np.median(d[a:b]))))
+            if len(runs) == MAX_LISTED:
+                break
+    return runs
 
 
 def _stray_keep(t_sorted, rep: TimeReport) -> np.ndarray:
@@ -241,7 +263,9 @@ def time_findings(channel, rep: TimeReport, t0_ns=0):
                 lvl,
                 f"{channel}: nominal rate {rate:.6g} Hz, "
                 f"{100 * rep.irregular_fraction:.2f} % of steps off by > "
-                f"{100 * RATE_TOL:.0f} %, jitter {100 * rep.jitter:.2f} %",
+                f"{100 * RATE_TOL:.0f} %, jitter {100 * rep.jitter:.2f} %"
+                + "".join(f"; {hz:.3g} Hz over {s(a):.1f}-{s(b):.1f} s" for a, b, hz in rep.rate_runs)
+                + (" (the rate changed within the record)" if rep.rate_runs else ""),
                 rate,
             )
         )
