@@ -146,6 +146,7 @@ class ChannelNames:
 
     files: dict  # role -> file (or file + topic)
     columns: dict  # role -> {quantity: column or field name}
+    section: str = "csv"  # the flight's input section: "csv" or "mcap" (its `units` keys)
 
     def column(self, role: str, *quantities: str) -> str:
         """``"<file> column <name>"`` (``columns <a>, <b>``) for a role's quantities."""
@@ -171,7 +172,7 @@ def channel_names(ingest, base_dir=None) -> ChannelNames:
             cols[role] = {
                 k: (v if isinstance(v, str) else "/".join(v)) for k, v in ingest.json_fields.get(role, {}).items()
             }
-    return ChannelNames(files, cols)
+    return ChannelNames(files, cols, "csv" if getattr(ingest, "kind", "csv") == "csv" else "mcap")
 
 
 def channel_spans(record) -> dict:
@@ -1355,6 +1356,15 @@ def gravity_mismatch(record, time, lat, lon, height, ellipsoid=WGS84, window_s: 
     return float(np.median(fi[ok] - fg[ok])), int(ok.sum())
 
 
+#: The ``units`` setting that reads the file as written, per unit mix-up of
+#: :func:`mismatch_hints` (a swap of columns has none: the column names are given instead).
+MIX_UP_UNITS = {
+    "latitude/longitude in radians but declared as degrees": "latlon: rad",
+    "height in feet but declared as metres": "height: ft",
+    "height in metres but declared as feet": "height: m",
+}
+
+
 def mismatch_hints(record, ellipsoid=WGS84):
     """Column mix-ups of the GNSS channel that would make its track agree with the IMU.
 
@@ -1458,7 +1468,8 @@ def check_gnss_consistency(
         )
         if good:
             cols = h_c if "height" in good[0] else latlon_c
-            raise DataError(f"{cols}: {what}: {good[0]}?")
+            fix = MIX_UP_UNITS.get(good[0])
+            raise DataError(f"{cols}: {what}: {good[0]}?" + (f" (set {names.section}.units.{fix})" if fix else ""))
         if abs(diff) > GROSS_MISMATCH_FACTOR * tol:
             raise DataError(
                 f"{names.column('gnss', 'lat', 'lon', 'height')}: {what}: wrong latitude, height "
@@ -1486,8 +1497,8 @@ def check_gnss_consistency(
         notes.append(
             f"{h_c}: the IMU measures a specific force {diff / MGAL:+.0f} mGal off the one the GNSS track and "
             f"normal gravity imply (median over {n} epochs), and {res / MGAL:.0f} mGal with the heights "
-            f"converted the other way: {name}? (else an accelerometer bias that large; the product's level "
-            "and its vertical accelerations follow the heights)"
+            f"converted the other way: {name}? (then set {names.section}.units.{MIX_UP_UNITS[name]}; else an "
+            "accelerometer bias that large; the product's level and its vertical accelerations follow the heights)"
         )
     elif np.isfinite(diff):
         # a passed check is a fact for summary.json, not a warning: a good flight prints nothing

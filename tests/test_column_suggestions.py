@@ -82,6 +82,9 @@ def test_gnss_columns_prefer_the_receiver_and_name_doubts():
         not in suggest_csv_settings(["t"] + [f"LinearAccel{a}" for a in "XYZ"] + [f"Gyro{a}" for a in "XYZ"])["columns"]
     )
     assert suggest_csv_settings(["a", "b", "c"])["columns"] == {}
+    # a position in radians: read as such (units.latlon), not a note to convert the file
+    s = suggest_csv_settings(["time [s]", "Latitude [rad]", "Longitude [rad]", "Height [m]"])
+    assert s["units"] == {"latlon": "rad"} and not any("degrees" in n for n in s["notes"])
 
 
 def test_the_suggestion_reads_the_real_vn310_as_the_hand_written_config(tmp_path):

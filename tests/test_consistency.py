@@ -318,13 +318,13 @@ def test_generated_restarts_drop_exactly_the_restarted_samples(n, frac, back_s, 
             "radians",
             lambda p: d.map_columns(p, "gnss", {"lat_deg": np.radians, "lon_deg": np.radians}),
             "columns lat_deg, lon_deg",
-            "radians",
+            "radians but declared as degrees? (set csv.units.latlon: rad)",
         ),
         (
             "feet",
             lambda p: [d.map_columns(p, n, {"height_m": lambda h: h / 0.3048}) for n in ("gnss", "altimeter")],
             "column height_m",
-            "feet",
+            "feet but declared as metres? (set csv.units.height: ft)",
         ),
     ],
 )
@@ -334,6 +334,29 @@ def test_gnss_column_mixups_name_the_column(tmp_path, case, prep, cols, hint):
         process_flight(cfg, fl)
     msg = str(exc.value)
     assert "gnss.csv " + cols in msg and hint in msg and "\n" not in msg
+
+
+def test_gnss_positions_in_radians_are_read_with_units_latlon(tmp_path):
+    """A receiver's export in radians, declared with ``csv.units.latlon: rad``: the same record
+    as the file in degrees (before the key, such a file had to be converted by hand)."""
+    cfg, fl = _flight(tmp_path / "deg")
+    want = load_flight(fl.ingest, cfg.base_dir).gnss
+    cfg_path = d.copy_sample(tmp_path / "rad")
+    d.map_columns(tmp_path / "rad", "gnss", {"lat_deg": np.radians, "lon_deg": np.radians})
+    text = cfg_path.read_text()
+    cfg_path.write_text(text.replace("  triad: platform\n", "  triad: platform\n  csv: {units: {latlon: rad}}\n", 1))
+    cfg2 = load_config(cfg_path, output_dir=tmp_path / "out")
+    got = load_flight(cfg2.flights[0].ingest, cfg2.base_dir).gnss
+    np.testing.assert_allclose(got.lat, want.lat, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(got.lon, want.lon, rtol=0, atol=1e-14)
+    np.testing.assert_array_equal(got.height, want.height)
+    # the same key for an MCAP's GNSS topic (units applied after decoding)
+    from gravsurvey.io.ingest import apply_units
+
+    vals = {"lat_deg": np.array([0.5]), "lon_deg": np.array([-2.0]), "height": np.array([10.0])}
+    out = apply_units("gnss", vals, {"latlon": "rad", "height": "ft"})
+    np.testing.assert_allclose([out["lat_deg"][0], out["lon_deg"][0]], np.degrees([0.5, -2.0]), rtol=1e-15)
+    assert out["height"][0] == pytest.approx(3.048, rel=1e-15) and vals["lat_deg"][0] == 0.5
 
 
 def test_moderate_unexplained_mismatch_is_a_note_not_an_error(tmp_path):
@@ -365,7 +388,7 @@ def test_heights_in_metres_declared_as_feet_are_named_in_a_warning(tmp_path):
     notes = check_gnss_consistency(rec, channel_names(fl.ingest, cfg.base_dir), CheckOptions())
     (hint,) = [n for n in notes if "converted the other way" in n]
     assert "gnss.csv column height_m: the IMU measures a specific force -3" in hint
-    assert "height in metres but declared as feet?" in hint
+    assert "height in metres but declared as feet? (then set csv.units.height: m;" in hint
     # the intact sample: no such note
     cfg2, fl2 = _flight(tmp_path / "ok")
     rec2 = load_flight(fl2.ingest, cfg2.base_dir)

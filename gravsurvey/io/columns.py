@@ -90,7 +90,7 @@ def suggest_csv_settings(header) -> dict:
     -------
     dict
         ``columns`` (role -> quantity -> column name or [week, seconds] names), ``units``
-        (``accel``, ``gyro``, ``height`` as found), ``time_format``, and ``notes`` (what was
+        (``accel``, ``gyro``, ``height``, ``latlon`` as found), ``time_format``, and ``notes`` (what was
         chosen among several candidates, what could not be placed). Empty ``columns`` when
         nothing was recognised.
     """
@@ -174,9 +174,15 @@ def suggest_csv_settings(header) -> dict:
         columns["gnss"] = {"lat": lat[0], "lon": lon[0], "height": hgt[0]}
         if time_cols:
             columns["gnss"] = {"time": time_cols, **columns["gnss"]}
+        in_rad = [c[2] in ("rad", "radians") for c in (lat, lon)]
+        if all(in_rad):
+            units["latlon"] = "rad"
         for c in (lat, lon):
-            if c[2] and c[2] not in ("deg", "degrees", "°"):
-                notes.append(f"{c[0]!r} is in {c[2]!r}: gravsurvey reads latitude and longitude in degrees")
+            if c[2] and c[2] not in ("deg", "degrees", "°") and not all(in_rad):
+                notes.append(
+                    f"{c[0]!r} is in {c[2]!r}: gravsurvey reads latitude and longitude in degrees (or radians, "
+                    "units.latlon: rad)"
+                )
         if hgt[2] in ("ft", "feet"):
             units["height"] = "ft"
         if {"msl", "geoid", "orthometric"} & set(hgt[1]):

@@ -30,6 +30,8 @@ UNITS = {
     "accel": {"m/s^2": 1.0, "g": 9.80665, "mGal": 1e-5, "m/s": 1.0},
     "gyro": {"rad/s": 1.0, "deg/s": np.pi / 180.0, "deg/h": np.pi / 180.0 / 3600.0, "rad": 1.0, "deg": np.pi / 180.0},
     "height": {"m": 1.0, "ft": 0.3048},
+    # GNSS latitude and longitude: kept in degrees (``lat_deg``), so the factor is to degrees
+    "latlon": {"deg": 1.0, "rad": 180.0 / np.pi},
     # gravity gradients: Eotvos (1 E = 1e-9 1/s^2) unless declared SI
     "gradient": {"E": 1e-9, "1/s^2": 1.0},
 }
@@ -41,7 +43,7 @@ INCREMENT_UNITS = {"accel": ("m/s",), "gyro": ("rad", "deg")}
 QUANTITIES = {
     "imu": (("fx", "accel"), ("fy", "accel"), ("fz", "accel"), ("wx", "gyro"), ("wy", "gyro"), ("wz", "gyro")),
     "altimeter": (("height", "height"),),
-    "gnss": (("lat", None), ("lon", None), ("height", "height")),
+    "gnss": (("lat", "latlon"), ("lon", "latlon"), ("height", "height")),
     "gradient": tuple((c, "gradient") for c in ("txx", "txy", "txz", "tyy", "tyz", "tzz")),
 }
 

@@ -157,7 +157,7 @@ def apply_units(role, values, units):
     ----------
     role : str
         ``"imu"`` (``specific_force``, ``angular_rate``), ``"gradient"`` (``gradient``) or a
-        height channel (``height``).
+        height channel (``height``; the GNSS's ``lat_deg`` and ``lon_deg`` too).
     values : dict of ndarray
         The channel's decoded arrays.
     units : dict or None
@@ -178,8 +178,12 @@ def apply_units(role, values, units):
     elif role == "gradient":
         if f["gradient"] != 1.0:
             out["gradient"] = values["gradient"] * f["gradient"]
-    elif f["height"] != 1.0:
-        out["height"] = values["height"] * f["height"]
+    else:
+        if f["height"] != 1.0:
+            out["height"] = values["height"] * f["height"]
+        if f["latlon"] != 1.0 and "lat_deg" in values:
+            out["lat_deg"] = values["lat_deg"] * f["latlon"]
+            out["lon_deg"] = values["lon_deg"] * f["latlon"]
     return out
 
 

@@ -625,6 +625,8 @@ UnitsSection = create_model(  # type: ignore[call-overload]
                     f" ({' and '.join(INCREMENT_UNITS[k])}: increments per sample, accel and gyro alike; "
                     "docs/input-formats.md)"
                     if k in INCREMENT_UNITS
+                    else " (the GNSS's latitude and longitude)"
+                    if k == "latlon"
                     else ""
                 ),
             ),
@@ -645,7 +647,7 @@ class McapSection(Section):
     units: UnitsSection = Field(
         default_factory=UnitsSection,
         description="units of accel, gyro, height, "  # type: ignore[valid-type]
-        "gradient",
+        "gradient, GNSS latitude/longitude (latlon)",
     )
     time_source: Literal["auto", "log_time"] = Field(
         "auto", description="`auto` (header.stamp / JSON time, else log_time) or `log_time`"
@@ -686,7 +688,7 @@ class CsvSection(Section):
     units: UnitsSection = Field(
         default_factory=UnitsSection,
         description="units of accel, gyro, height, "  # type: ignore[valid-type]
-        "gradient",
+        "gradient, GNSS latitude/longitude (latlon)",
     )
     delimiter: str = Field(",", description="one character such as `,` `;` or a tab")
     gps_leap_seconds: int = Field(18, description="GPS - UTC, s (time_format `iso`)", ge=0, le=100)
