@@ -166,6 +166,10 @@ def channel_names(ingest, base_dir=None) -> ChannelNames:
         for role, path in zip(roles, ingest.input_paths(base_dir)):
             files[role] = str(path)
             cols[role] = {**DEFAULT_COLUMNS.get(role, {}), **ingest.csv_columns.get(role, {})}
+            if {"x", "y", "z"} <= set(cols[role]):
+                # positions read as ECEF X, Y, Z: every geodetic quantity comes from all three
+                xyz = f"{cols[role]['x']}/{cols[role]['y']}/{cols[role]['z']} (ECEF)"
+                cols[role].update({q: xyz for q in ("lat", "lon", "height")})
     else:
         for role, topic in ingest.topics.items():
             files[role] = f"{ingest.mcap_path} topic {topic}"

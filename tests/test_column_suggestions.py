@@ -85,6 +85,12 @@ def test_gnss_columns_prefer_the_receiver_and_name_doubts():
     # a position in radians: read as such (units.latlon), not a note to convert the file
     s = suggest_csv_settings(["time [s]", "Latitude [rad]", "Longitude [rad]", "Height [m]"])
     assert s["units"] == {"latlon": "rad"} and not any("degrees" in n for n in s["notes"])
+    # positions as ECEF X, Y, Z (velocities beside them are not positions)
+    s = suggest_csv_settings(
+        ["time [s]"] + [f"GNSS1::VelEcef::{a} [m/s]" for a in "XYZ"] + [f"GNSS1::PosEcef::{a} [m]" for a in "XYZ"]
+    )
+    want = {"time": "time [s]", **{a: f"GNSS1::PosEcef::{a.upper()} [m]" for a in "xyz"}}
+    assert s["columns"]["gnss"] == want and s["columns"]["altimeter"] == want
 
 
 def test_the_suggestion_reads_the_real_vn310_as_the_hand_written_config(tmp_path):

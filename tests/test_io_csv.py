@@ -242,3 +242,30 @@ def test_an_imu_and_a_gnss_only_read_the_gnss_heights_as_the_height_channel(tmp_
         match=r"flights\[0\]\.inputs\.csv\.altimeter: missing: give the altimeter CSV file, or the GNSS file",
     ):
         ingest_options({"inputs": {"csv": {"imu": "imu.csv"}}}, "flights[0]")
+
+
+def test_gnss_positions_as_ecef_xyz_are_read_as_the_geodetic_ones(tmp_path):
+    """A receiver's or simulator's XYZ export (``csv.columns.gnss: {x, y, z}``): the same
+    latitudes, longitudes and heights as the geodetic file, the heights the height channel
+    when there is no altimeter file; x without y and z, or with lat, is refused at the key."""
+    from gravsurvey.geodesy import geodetic_to_ecef
+
+    d = static_flight(seconds=5.0)
+    _write_flight_csv(tmp_path, d)
+    want = load_flight(ingest_options({"inputs": CSV_IN}, "flights[0]"), tmp_path)
+    r = geodetic_to_ecef(np.radians(d["lat"]), np.radians(d["lon"]), d["gh"])
+    rows = ["t,X [m],Y [m],Z [m]"] + [f"{t},{x!r},{y!r},{z!r}" for t, (x, y, z) in zip(d["gnss_t"], r.tolist())]
+    (tmp_path / "xyz.csv").write_text("\n".join(rows) + "\n")
+    cols = {"gnss": {"time": "t", "x": "X [m]", "y": "Y [m]", "z": "Z [m]"}}
+    for inputs in (
+        {"imu": "imu.csv", "altimeter": "altimeter.csv", "gnss": "xyz.csv"},
+        {"imu": "imu.csv", "gnss": "xyz.csv"},
+    ):
+        rec = load_flight(ingest_options({"inputs": {"csv": inputs}, "csv": {"columns": cols}}, "flights[0]"), tmp_path)
+        np.testing.assert_allclose(rec.gnss.lat, want.gnss.lat, rtol=0, atol=1e-13)  # rad: < 1 um
+        np.testing.assert_allclose(rec.gnss.lon, want.gnss.lon, rtol=0, atol=1e-13)
+        np.testing.assert_allclose(rec.gnss.height, want.gnss.height, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(rec.altimeter.height, want.gnss.height, rtol=0, atol=1e-6)
+    for bad, said in (({"x": "X [m]"}, "no y, z"), ({"x": "X [m]", "y": "Y", "z": "Z", "lat": "lat"}, "also lat")):
+        with pytest.raises(ConfigError, match=rf"flights\[0\]\.csv\.columns\.gnss: ECEF positions .*{said}"):
+            ingest_options({"inputs": CSV_IN, "csv": {"columns": {"gnss": bad}}}, "flights[0]")

@@ -187,6 +187,26 @@ def suggest_csv_settings(header) -> dict:
             units["height"] = "ft"
         if {"msl", "geoid", "orthometric"} & set(hgt[1]):
             notes.append(f"{hgt[0]!r} looks like a height above sea level: the GNSS height must be ellipsoidal")
+    if "gnss" not in columns:
+        # positions as Earth-fixed X, Y, Z (``GNSS1::PosEcef::X [m]``, ``ecef_x``)
+        xyz = {}
+        for a in "xyz":
+            cands = [
+                (n, t)
+                for n, t, u in parsed
+                if t
+                and _axis(t) == a
+                and u in ("", "m")
+                and any("ecef" in w for w in t[:-1])
+                and not (set(t) & {"vel", "velocity", "acc", "accel"})
+            ]
+            if cands:
+                xyz[a] = _pick(cands)[0]
+        if len(xyz) == 3:
+            columns["gnss"] = ({"time": time_cols} if time_cols else {}) | xyz
+            notes.append("GNSS positions as ECEF X, Y, Z (m); the heights are taken from them")
+            if not hgt:
+                columns["altimeter"] = ({"time": time_cols} if time_cols else {}) | xyz
     if hgt:
         # the GNSS height is the altimeter when nothing else is
         columns["altimeter"] = {"height": hgt[0]}

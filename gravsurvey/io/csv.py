@@ -69,6 +69,11 @@ DEFAULT_COLUMNS = {
         "tzz": "tzz_eotvos",
     },
 }
+#: Columns that replace a GNSS file's latitude, longitude and height when all three are given:
+#: Earth-centred Earth-fixed coordinates, m (a receiver's or simulator's XYZ export), converted
+#: to geodetic on WGS84 at reading (GRS80's coordinates differ by under 0.1 mm).
+ECEF_QUANTITIES = ("x", "y", "z")
+
 #: Optional lower-triangle columns of a gradient CSV (a full 9-component tensor): when all
 #: three are in the header they are read and the tensor's symmetry is checked at ingestion.
 GRADIENT_LOWER_COLUMNS = {"txy": "tyx_eotvos", "txz": "tzx_eotvos", "tyz": "tzy_eotvos"}
@@ -182,7 +187,9 @@ def read_csv_channel(
     path : str or Path
     role : {"imu", "altimeter", "gnss", "gradient"}
     columns : dict, optional
-        quantity -> column name (``DEFAULT_COLUMNS[role]`` completed by these).  ``time`` is
+        quantity -> column name (``DEFAULT_COLUMNS[role]`` completed by these; for a GNSS or
+        height channel ``x``, ``y``, ``z`` all given: Earth-fixed positions, m, read instead of
+        ``lat``, ``lon``, ``height`` and converted, :data:`ECEF_QUANTITIES`).  ``time`` is
         one column, or two ``[week, seconds_of_week]`` for ``gps_week_sow``, or three
         ``[cycle, week, seconds_of_week]`` for a 10-bit week with its roll-over count
         (full week = 1024 cycle + week; VectorNav's ``GpsCycle, GpsWeek, GpsTow``).
@@ -227,6 +234,12 @@ def read_csv_channel(
     cols = dict(DEFAULT_COLUMNS[role])
     if time_format == "gps_week_sow":
         cols["time"] = list(DEFAULT_GPS_TIME_COLUMNS)
+    quantities = QUANTITIES[role]
+    ecef = role in ("gnss", "altimeter") and set(ECEF_QUANTITIES) <= set(columns or {})
+    if ecef:
+        # positions as X, Y, Z: the geodetic columns are not looked for
+        cols = {"time": cols["time"]}
+        quantities = tuple((q, None) for q in ECEF_QUANTITIES)
     cols.update(columns or {})
     units = dict(units or {})
     try:
@@ -326,7 +339,7 @@ def read_csv_channel(
         sow = _seconds_to_ns(tstr[-1], path, line_no, tcols[-1])
         t = (GPS_EPOCH_UNIX_S - gps_leap_seconds) * 10**9 + week * WEEK_NS + sow
     vals = {}
-    for q, kind in QUANTITIES[role]:
+    for q, kind in quantities:
         c = cols[q]
         strs = [r[index[c]] for r in rows]
         try:
@@ -355,6 +368,11 @@ def read_csv_channel(
             if factor != 1.0:
                 v = v * factor
         vals[q] = v
+    if ecef:
+        from ..geodesy import ecef_to_geodetic
+
+        lat, lon, h = ecef_to_geodetic(np.stack([vals["x"], vals["y"], vals["z"]], axis=1))
+        vals = {"lat": np.degrees(lat), "lon": np.degrees(lon), "height": h}
     if role == "imu":
         values = {
             "specific_force": np.stack([vals["fx"], vals["fy"], vals["fz"]], axis=1),

@@ -222,7 +222,7 @@ def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", b
     if o.kind == "csv" and f.inputs.csv is not None and f.inputs.csv.altimeter is None and "gnss" in o.csv_columns:
         # the GNSS file read as the altimeter: its time and height columns as named for the GNSS
         o.csv_columns["altimeter"] = {
-            q: v for q, v in o.csv_columns["gnss"].items() if q in ("time", "height")
+            q: v for q, v in o.csv_columns["gnss"].items() if q in ("time", "height", "x", "y", "z")
         } | o.csv_columns.get("altimeter", {})
     if "units" in f.csv.given():
         o.csv_units = section_dict(f.csv.units)

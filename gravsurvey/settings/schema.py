@@ -26,7 +26,7 @@ from ..errors import ConfigError
 from ..grid import GRID_METHODS, GridOptions
 from ..inm.params import RADIUS_SOURCES, TRIADS, InmParams
 from ..io.checks import HEIGHT_OK
-from ..io.csv import DEFAULT_COLUMNS, INCREMENT_UNITS, TIME_FORMATS, UNITS
+from ..io.csv import DEFAULT_COLUMNS, ECEF_QUANTITIES, INCREMENT_UNITS, TIME_FORMATS, UNITS
 from ..io.formats.flight import GRAVIMETER_FORMATS, NAV_FORMATS
 from ..truth import TRUTH_TIME_FORMATS
 from ..io.ingest import IngestOptions, imu_axes_matrix
@@ -581,10 +581,15 @@ class InitialSection(Section):
     )
 
 
-def _role_model(name: str, table: dict, desc: str, vector_keys=()) -> type:
-    """A section whose keys are the roles, each a mapping of quantity -> name(s) (from ``table``)."""
+def _role_model(name: str, table: dict, desc: str, vector_keys=(), optional=None) -> type:
+    """A section whose keys are the roles, each a mapping of quantity -> name(s) (from ``table``;
+    ``optional``: role -> {quantity: description} of keys without a default)."""
     roles = {}
     for role, names in table.items():
+        extra = {
+            q: (Optional[Any], Field(None, description=text, json_schema_extra={"type_text": "string"}))
+            for q, text in (optional or {}).get(role, {}).items()
+        }
         fields = {
             q: (
                 Optional[Any],
@@ -595,7 +600,7 @@ def _role_model(name: str, table: dict, desc: str, vector_keys=()) -> type:
                 ),
             )
             for q, v in names.items()
-        }
+        } | extra
         sub = create_model(f"{name}_{role}", __base__=Section, __doc__=f"{desc}: {role} channel", **fields)  # type: ignore[call-overload]
         roles[role] = (Optional[sub], Field(None, description=f"{role} channel"))
     return create_model(name, __base__=Section, __doc__=desc, **roles)  # type: ignore[call-overload]
@@ -610,7 +615,14 @@ def _names(v, allowed_lengths, what: str):
 
 
 JsonFields = _role_model("JsonFields", DEFAULT_JSON_FIELDS, "MCAP JSON field name", ("specific_force", "angular_rate"))
-CsvColumns = _role_model("CsvColumns", DEFAULT_COLUMNS, "CSV column name", ("time",))
+_ECEF_TEXT = {
+    q: f"CSV column name for ECEF {q.upper()}, m (no default; with x, y and z the positions are read as "
+    "Earth-centred Earth-fixed coordinates instead of lat/lon/height)"
+    for q in ECEF_QUANTITIES
+}
+CsvColumns = _role_model(
+    "CsvColumns", DEFAULT_COLUMNS, "CSV column name", ("time",), {"gnss": _ECEF_TEXT, "altimeter": _ECEF_TEXT}
+)
 UnitsSection = create_model(  # type: ignore[call-overload]
     "UnitsSection",
     __base__=Section,
@@ -705,6 +717,16 @@ class CsvSection(Section):
         for role, cm in self.columns:
             if cm is None:
                 continue
+            given = {q for q, v in cm if v is not None}
+            if given & set(ECEF_QUANTITIES):
+                missing = [q for q in ECEF_QUANTITIES if q not in given]
+                both = sorted(given & {"lat", "lon", "height"})
+                if missing or both:
+                    raise fail(
+                        "ECEF positions need the x, y and z columns together and no lat/lon/height, got "
+                        + (f"no {', '.join(missing)}" if missing else f"also {', '.join(both)}"),
+                        ("columns", role),
+                    )
             for q, v in cm:
                 if v is None:
                     continue
