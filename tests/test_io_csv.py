@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import warnings
 
 import numpy as np
@@ -269,3 +270,37 @@ def test_gnss_positions_as_ecef_xyz_are_read_as_the_geodetic_ones(tmp_path):
     for bad, said in (({"x": "X [m]"}, "no y, z"), ({"x": "X [m]", "y": "Y", "z": "Z", "lat": "lat"}, "also lat")):
         with pytest.raises(ConfigError, match=rf"flights\[0\]\.csv\.columns\.gnss: ECEF positions .*{said}"):
             ingest_options({"inputs": CSV_IN, "csv": {"columns": {"gnss": bad}}}, "flights[0]")
+
+
+def test_a_row_of_units_under_the_header_is_skipped_or_names_the_unit_key(tmp_path):
+    """An export writing the units in a second header row: skipped and said when they agree with
+    ``csv.units``; a unit that differs refuses the file naming the column and the key (read as
+    written, the rates would be 57x off)."""
+    d = static_flight(seconds=5.0)
+    _write_flight_csv(tmp_path, d)
+    want = load_flight(ingest_options({"inputs": CSV_IN}, "f"), tmp_path).imu
+    deg = "ns,m/s^2,m/s^2,m/s^2,deg/s,deg/s,deg/s"
+    for row, units, scale, error in (
+        ("ns,m/s^2,m/s^2,m/s^2,rad/s,rad/s,rad/s", None, 1.0, None),
+        ("[ns],[g],[g],[g],[rad/s],[rad/s],[rad/s]", {"accel": "g"}, 1.0 / 9.80665, None),
+        (
+            deg,
+            None,
+            1.0,
+            "column 'wx_radps': the row of units says 'deg/s', the config 'rad/s': set csv.units.gyro: 'deg/s'",
+        ),
+    ):
+        _write_flight_csv(tmp_path, d, acc_scale=scale)
+        lines = (tmp_path / "imu.csv").read_text().splitlines()
+        head = next(i for i, ln in enumerate(lines) if ln.startswith("time_ns"))
+        (tmp_path / "imu.csv").write_text("\n".join(lines[: head + 1] + [row] + lines[head + 1 :]) + "\n")
+        flight = {"inputs": CSV_IN} | ({"csv": {"units": units}} if units else {})
+        if error:
+            with pytest.raises(DataError, match=re.escape(f"imu.csv: line {head + 2}, {error}")):
+                load_flight(ingest_options(flight, "f"), tmp_path)
+            continue
+        said = rf"imu.csv: line {head + 2} read as a row of units under the header and skipped"
+        with pytest.warns(DataWarning, match=said):
+            got = load_flight(ingest_options(flight, "f"), tmp_path).imu
+        np.testing.assert_array_equal(got.time, want.time)
+        np.testing.assert_allclose(got.specific_force_t, want.specific_force_t, rtol=1e-15, atol=0)

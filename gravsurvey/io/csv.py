@@ -300,6 +300,13 @@ def read_csv_channel(
     ncol = len(header)
     if cut is not None:
         _report_cut_line(path, cut, ncol, cols, index, time_format, delimiter, notes, data_loss)
+    if data_lines and _units_row(path, data_lines[0], line_no[0], delimiter, ncol, quantities, cols, index, units):
+        _say(
+            f"{path}: line {line_no[0]} read as a row of units under the header and skipped",
+            notes,
+            data_loss,
+        )
+        data_lines, line_no = data_lines[1:], line_no[1:]
     n = len(data_lines)
     # split; count fields per line first so a short/long line is reported exactly
     rows = [ln.split(delimiter) for ln in data_lines]
@@ -412,6 +419,34 @@ def read_csv_channel(
     else:
         values = {"lat_deg": vals["lat"], "lon_deg": vals["lon"], "height": vals["height"]}
     return t, values
+
+
+def _units_row(path, line, k, delimiter, ncol, quantities, cols, index, units) -> bool:
+    """Whether the first data line is a row of units under the header (``s, m/s^2, deg/s``: an
+    export that writes the units apart from the names): no field is a number.
+
+    Raises
+    ------
+    DataError
+        The row names a unit of :data:`UNITS` for a column that differs from the declared one
+        (``csv.units``): the values would be read in the wrong unit.
+    """
+    fields = [f.strip().strip("\"'").strip("[]() ") for f in line.split(delimiter)]
+    if len(fields) != ncol or not any(fields) or any(_is_float(f) for f in fields):
+        return False
+    for q, kind in quantities:
+        if kind is None:
+            continue
+        text = fields[index[cols[q]]]
+        known = {u.lower(): u for u in UNITS[kind]}
+        said = text if text in UNITS[kind] else known.get(text.lower())
+        declared = units.get(kind, next(iter(UNITS[kind])))
+        if said is not None and said != declared:
+            raise DataError(
+                f"{path}: line {k}, column {cols[q]!r}: the row of units says {text!r}, the config "
+                f"{declared!r}: set csv.units.{kind}: {said!r}"
+            )
+    return True
 
 
 def _say(msg, notes, data_loss, stacklevel=3) -> None:
