@@ -102,6 +102,11 @@ def test_unit_mistakes_stop_load_flight_with_channel_named(tmp_path):
         r"g but declared as m/s\^2\?",
     ):
         load_flight(opts, tmp_path)
+    # gravity taken out (an INS's linear acceleration): named as such, not a unit
+    _write_flight_csv(tmp_path, dict(d, f=d["f"] - [0.0, 0.0, 9.80665]))
+    with pytest.raises(DataError, match=r"a linear acceleration \(gravity taken out\) instead of the specific force"):
+        load_flight(opts, tmp_path)
+    _write_flight_csv(tmp_path, d, acc_scale=1 / 9.80665)
     # plausibility: warn -> processed, the finding is a warning and a note
     warn = ingest_options({"inputs": CSV_IN, "checks": {"plausibility": "warn"}}, "f")
     with pytest.warns(DataWarning, match="values are in g"):

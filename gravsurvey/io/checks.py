@@ -351,6 +351,12 @@ def mean_std(x, axis):
     return np.squeeze(mean, axis=axis), np.sqrt(var)
 
 
+#: Median |specific force| below which, no unit mix-up explaining it, the accelerometer
+#: columns are named as a linear acceleration (gravity taken out), m/s^2: under the band of g
+#: read as m/s^2 (1 +- 15 %); an aircraft's own accelerations have a median of 0.05-0.5.
+LINEAR_ACCEL_MAX = 0.85
+
+
 def _ratio_name(r, candidates):
     for name, k in candidates:
         if abs(r / k - 1.0) < 0.15:
@@ -409,6 +415,13 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
                 ),
             ]
         hint = _ratio_name(med, candidates)
+        if hint is None and accel_unit == "m/s^2" and med < LINEAR_ACCEL_MAX:
+            # below g-declared-as-m/s^2 with no unit that explains it: an accelerometer output
+            # with gravity taken out (an INS's "linear" or "free" acceleration), the motion alone
+            hint = (
+                "a linear acceleration (gravity taken out) instead of the specific force the accelerometers "
+                "measure, gravity included"
+            )
         out.append(
             Finding(
                 "imu",
