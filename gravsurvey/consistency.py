@@ -1639,13 +1639,24 @@ def _aiding_gaps(record, max_gap_s):
     return find_gaps(t, max_gap_s)
 
 
-def plan_segments(record, opts: CheckOptions, names: ChannelNames | None = None):
-    """Split a flight at long IMU gaps and long gaps of all vertical aiding.
+def plan_segments(record, opts: CheckOptions, names: ChannelNames | None = None, start_given: bool = False):
+    """Split a flight at long IMU gaps and long gaps of all vertical aiding; start it at a late
+    first GNSS fix when the aircraft moved before it.
+
+    A first GNSS fix more than ``alignment.MAX_GNSS_LEAD_S`` after the first IMU sample places
+    the IMU's start only when the IMU rests until past the fix
+    (:func:`gravsurvey.inm.alignment.rest_through_gnss_lead`); otherwise the samples before the
+    fix are not estimated (no position to start from: extrapolated back over 150 s of taxi and
+    take-off, the start was 21 km off and the product 43 mGal wrong), and said.
 
     Parameters
     ----------
     record : FlightRecord
     opts : CheckOptions
+    names : ChannelNames, optional
+    start_given : bool
+        The config gives the position and velocity at the first IMU sample (``initial``): the
+        record is kept from its start whatever the GNSS.
 
     Returns
     -------
@@ -1683,6 +1694,17 @@ def plan_segments(record, opts: CheckOptions, names: ChannelNames | None = None)
             merged.append((a, b, what))
     segs = []
     start = imu_t[0]
+    from .inm.alignment import MAX_GNSS_LEAD_S, gnss_lead_s, rest_through_gnss_lead
+
+    lead = gnss_lead_s(record)
+    if lead > MAX_GNSS_LEAD_S and not start_given and not rest_through_gnss_lead(record):
+        start = imu_t[0] + lead
+        fg = names.files.get("gnss", "gnss") if names else "gnss"
+        notes.append(
+            f"the first GNSS fix ({fg}) comes {lead:.1f} s after the first IMU sample and the aircraft "
+            f"moved before it: {span_text(t0, float(imu_t[0]), start)} not estimated (no position to start from; "
+            "give the flight's initial position and velocity at the first IMU sample to use it)"
+        )
     for a, b, what in merged:
         a = max(a, start)
         if a > start:

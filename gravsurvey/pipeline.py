@@ -650,13 +650,17 @@ def inm_estimate(cfg: SurveyConfig, fl: FlightConfig, record, checks, names) -> 
     from .inm.solve import estimate_anomaly
     from .io.record import slice_record
 
-    initial = resolve_initial_state(
-        record, fl.triad, cfg.model, cfg.ellipsoid, fl.initial_given, f"flights[{fl.index}].initial"
-    )
     lever = getattr(fl.ingest, "gnss_lever_arm_m", None)
     t0 = int(record.t0_unix_ns)
-    spans, notes, loss = plan_segments(record, checks, names)
+    given = fl.initial_given or {}
+    start_given = all(k in given for k in ("lat_deg", "lon_deg", "height_m", "velocity_enu_mps"))
+    spans, notes, loss = plan_segments(record, checks, names, start_given=start_given)
     imu_t0, imu_t1 = float(record.imu.time[0]), float(record.imu.time[-1])
+    # the state at the first IMU sample only where a piece starts there (a late first GNSS fix
+    # after the aircraft moved cannot place it)
+    key = f"flights[{fl.index}].initial"
+    if spans[0][0] == imu_t0:
+        initial = resolve_initial_state(record, fl.triad, cfg.model, cfg.ellipsoid, fl.initial_given, key)
     if len(spans) == 1 and spans[0] == (imu_t0, imu_t1):
         sol = estimate_anomaly(record, cfg.model, initial, fl.triad, cfg.ellipsoid, gnss_lever_arm_t=lever)
         return from_inm_solution(sol, name=fl.name, t0_unix_ns=t0), notes, loss
@@ -678,10 +682,11 @@ def inm_estimate(cfg: SurveyConfig, fl: FlightConfig, record, checks, names) -> 
             loss.append(f"segment {span_text(record.t0_unix_ns, a, b)} not estimated: {exc}")
     if not parts:
         raise DataError(f"{record.source}: no segment of the flight could be estimated: {'; '.join(loss)}")
-    notes.append(
-        f"estimated {len(parts)} of {len(spans)} segments: "
-        + ", ".join(span_text(record.t0_unix_ns, p.time[0], p.time[-1]) for p in parts)
-    )
+    if len(spans) > 1 or len(parts) < len(spans):
+        notes.append(
+            f"estimated {len(parts)} of {len(spans)} segments: "
+            + ", ".join(span_text(record.t0_unix_ns, p.time[0], p.time[-1]) for p in parts)
+        )
     return concatenate_estimates(parts), notes, loss
 
 

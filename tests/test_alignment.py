@@ -719,3 +719,20 @@ def test_an_imu_axis_scale_fault_is_found_named_and_divided_out(request, which, 
     arr = "specific_force_t" if q[0] == "f" else "angular_rate_t"
     np.testing.assert_allclose(getattr(fixed.imu, arr)[:, k], getattr(rec.imu, arr)[:, k] * scale / found, rtol=1e-4)
     assert correct_strapdown_scale(rec, "platform", names) == (rec, [])
+
+
+def test_a_late_first_fix_confirms_the_rest_only_when_the_fixes_stay_put():
+    """The GNSS's part of the static test: a receiver that got its fix 60 s after power-on,
+    parked until 120 s, confirms the rest up to the IMU's own static span (before: no static
+    alignment at all, the first fix being after the first IMU sample); a late fix already
+    moving confirms nothing."""
+    from gravsurvey.inm.alignment import STATIC_BLOCK_S, STATIC_MARGIN_BLOCKS, gnss_static_span
+
+    t = np.arange(60.0, 300.0, 1.0)
+    lat0, lon0 = math.radians(47.0), math.radians(11.0)
+    north = np.where(t < 120.0, 0.0, 50.0 * (t - 120.0))  # parked, then rolling at 50 m/s
+    gn = GnssChannel(t, lat0 + north / 6.37e6, np.full(t.size, lon0), np.full(t.size, 800.0))
+    span = gnss_static_span(gn, 0.0, 1.0)
+    assert span == pytest.approx(120.0 + 1.0 - STATIC_MARGIN_BLOCKS * STATIC_BLOCK_S, abs=1.01)
+    moving = GnssChannel(t[70:], gn.lat[70:], gn.lon[70:], gn.height[70:])  # first fix at 130 s
+    assert gnss_static_span(moving, 0.0, 1.0) == 0.0

@@ -100,6 +100,46 @@ def test_imu_gap_of_a_minute_splits_the_flight(tmp_path):
     assert _rms_on_lines(r) < 7.0
 
 
+def test_a_late_first_gnss_fix_places_the_start_only_if_the_aircraft_waited_for_it(tmp_path, intact):
+    """A receiver's first fix 60 s after the IMU's start, the aircraft still parked: its fixes are
+    the start's position (before: a quadratic fit extrapolated back over the wait, 9.6 mGal
+    against 3.45 intact); 200 s after, the aircraft moving since 120 s: the estimate starts at
+    the fix, said (before: the start placed 200 s of taxi and climb away, 94.9 mGal, exit 0)."""
+    from gravsurvey.inm.alignment import gnss_lead_s, rest_through_gnss_lead
+
+    for late, rest in ((60.0, True), (200.0, False)):
+        cfg, fl = _flight(tmp_path / f"l{late:.0f}", lambda p, a=late: d.drop_between(p, "gnss", -10, a))
+        rec = load_flight(fl.ingest, cfg.base_dir)
+        assert gnss_lead_s(rec) == pytest.approx(late, abs=0.5) and rest_through_gnss_lead(rec) == rest
+        r = process_flight(cfg, fl)
+        said = [n for n in r.notes if "the first GNSS fix" in n]
+        if rest:
+            assert not said and r.time[0] == intact.time[0]
+            assert _rms_on_lines(r) < 1.05 * _rms_on_lines(intact)  # 3.47 measured
+        else:
+            assert len(said) == 1 and "comes 200.0 s after the first IMU sample and the aircraft moved" in said[0]
+            assert "(200.0 s) not estimated" in said[0] and r.time[0] == pytest.approx(late, abs=0.5)
+            assert _rms_on_lines(r) < 1.5 * _rms_on_lines(intact)  # 4.73 measured: the line from 20 s after the fix
+    # the start given in the config: kept from the IMU's first sample, the given values unchecked
+    tr = _truth_start(tmp_path / "l200")
+    cfg, fl = _flight(tmp_path / "given", lambda p: d.drop_between(p, "gnss", -10, 200.0), initial=tr)
+    assert process_flight(cfg, fl).time[0] == intact.time[0]
+
+
+def _truth_start(folder):
+    """The truth's position and velocity at the first sample, as an ``initial`` block."""
+    import csv
+
+    with open(Path(folder) / "s" / "F01" / "truth.csv") as fh:
+        row = next(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+    return {
+        "lat_deg": float(row["lat_deg"]),
+        "lon_deg": float(row["lon_deg"]),
+        "height_m": float(row["height_m"]),
+        "velocity_enu_mps": [float(row["ve_mps"]), float(row["vn_mps"]), float(row["vu_mps"])],
+    }
+
+
 def test_segment_that_cannot_be_reinitialised_is_data_loss(tmp_path):
     def prep(p):  # GNSS ends before an IMU gap: the second segment has no GNSS to start from
         d.drop_between(p, "gnss", 380, 2000)

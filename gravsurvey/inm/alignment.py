@@ -216,15 +216,53 @@ def static_span(time, f_t, w_t) -> float:
     return float(span)
 
 
+#: The first GNSS fix may come this long after the first IMU sample and still place it, s:
+#: beyond, the IMU record before the fix is placed only when it is at rest until the fix
+#: (:func:`rest_through_gnss_lead`).
+MAX_GNSS_LEAD_S = 2.0
+#: GNSS fixes at rest needed after a late first fix to take it as the position at the IMU's
+#: start (the IMU at rest from its start through them), s.
+GNSS_LEAD_REST_S = 5.0
+
+
+def gnss_lead_s(record) -> float:
+    """First finite GNSS fix minus the first IMU sample, s (0 without GNSS; < 0: the GNSS first)."""
+    gn = record.gnss
+    if gn is None or len(gn.time) == 0:
+        return 0.0
+    ok = np.isfinite(np.asarray(gn.lat, float)) & np.isfinite(np.asarray(gn.lon, float))
+    if not ok.any():
+        return 0.0
+    return float(np.asarray(gn.time, float)[ok][0] - float(record.imu.time[0]))
+
+
+def rest_through_gnss_lead(record) -> bool:
+    """Whether the IMU rests from its first sample until :data:`GNSS_LEAD_REST_S` past the first
+    GNSS fix (a receiver that got its fix after power-on, the aircraft parked): the first
+    fixes are then the position at the IMU's start.  Measured on the IMU alone
+    (:func:`static_span`), on the record up to a little past that point."""
+    lead = gnss_lead_s(record)
+    t = np.asarray(record.imu.time, float)
+    m = t <= t[0] + max(lead, 0.0) + 2.0 * GNSS_LEAD_REST_S
+    if m.sum() < 4:
+        return False
+    rest = static_span(t[m], np.asarray(record.imu.specific_force_t)[m], np.asarray(record.imu.angular_rate_t)[m])
+    return rest >= max(lead, 0.0) + GNSS_LEAD_REST_S
+
+
 def gnss_static_span(gnss, t0, sigma_m, ellipsoid: Ellipsoid = WGS84) -> float:
     """Time from ``t0`` until the GNSS positions move from the first one by more than
-    ``5 sigma_m + 0.5 m`` horizontally, s (0 when the first sample is after ``t0 + 2 s``)."""
+    ``5 sigma_m + 0.5 m`` horizontally, s.
+
+    A first fix after ``t0 +`` :data:`MAX_GNSS_LEAD_S` confirms a rest from ``t0`` only when the
+    fixes then stay put for :data:`GNSS_LEAD_REST_S` (the caller takes the lesser of this and
+    the IMU's own static span, which must cover the time before the fix); else 0."""
     tg = np.asarray(gnss.time, float)
     lat = np.asarray(gnss.lat, float)
     lon = np.asarray(gnss.lon, float)
     ok = np.isfinite(lat) & np.isfinite(lon)
     tg, lat, lon = tg[ok], lat[ok], lon[ok]
-    if tg.size < 2 or tg[0] > t0 + 2.0:
+    if tg.size < 2:
         return 0.0
     r = geodetic_to_ecef(lat, lon, np.zeros_like(lat), ellipsoid)
     up = r[0] / np.linalg.norm(r[0])
@@ -232,6 +270,8 @@ def gnss_static_span(gnss, t0, sigma_m, ellipsoid: Ellipsoid = WGS84) -> float:
     horiz = np.linalg.norm(d - np.outer(d @ up, up), axis=1)
     moved = np.flatnonzero(horiz > 5.0 * sigma_m + 0.5)
     end = tg[moved[0]] if moved.size else tg[-1]
+    if tg[0] > t0 + MAX_GNSS_LEAD_S and end - tg[0] < GNSS_LEAD_REST_S:
+        return 0.0
     return float(max(0.0, end - t0 - STATIC_MARGIN_BLOCKS * STATIC_BLOCK_S))
 
 

@@ -290,7 +290,11 @@ def initial_state_from_gnss(record, triad: str, attitude_deg=None, params=None, 
     """Initial state from the data at the first IMU sample.
 
     Position and velocity come from a quadratic least-squares fit to the GNSS
-    positions over the first 10 s (at least 3 samples).  A platform triad is
+    positions over the first 10 s (at least 3 samples); where the first fix came more than
+    ``alignment.MAX_GNSS_LEAD_S`` after the first IMU sample and the IMU rests until past it
+    (:func:`~gravsurvey.inm.alignment.rest_through_gnss_lead`), the mean of the first fixes at
+    rest and a zero velocity.  A record moving before a late first fix cannot be placed: the
+    pipeline starts its estimate at the fix (:func:`gravsurvey.consistency.plan_segments`).  A platform triad is
     ENU; a strapdown triad takes ``attitude_deg`` [roll, pitch, heading] when
     given, else the coarse alignment (:func:`gravsurvey.inm.alignment.align`), whose
     covariance and report travel with the state.
@@ -320,6 +324,23 @@ def initial_state_from_gnss(record, triad: str, attitude_deg=None, params=None, 
         mat_nt = np.eye(3)
     t0 = float(record.imu.time[0])
     t = np.asarray(gn.time, dtype=float)
+    from .alignment import GNSS_LEAD_REST_S, MAX_GNSS_LEAD_S, gnss_lead_s, rest_through_gnss_lead
+
+    if gnss_lead_s(record) > MAX_GNSS_LEAD_S and rest_through_gnss_lead(record):
+        # a fix that came after power-on, the aircraft parked until past it: the first fixes are
+        # the position at the first IMU sample (a fit extrapolated back over the wait amplified
+        # their noise: 79 m off after a 60-s wait), at rest
+        ok = np.isfinite(gn.lat) & np.isfinite(gn.lon) & np.isfinite(gn.height)
+        sel = np.flatnonzero(ok & (t <= t[ok][0] + GNSS_LEAD_REST_S))
+        return InitialState(
+            float(np.mean(np.asarray(gn.lat, float)[sel])),
+            float(np.mean(np.unwrap(np.asarray(gn.lon, float)[sel]))),
+            float(np.mean(np.asarray(gn.height, float)[sel])),
+            np.zeros(3),
+            mat_nt,
+            cov,
+            alignment,
+        )
     sel = np.flatnonzero(t <= t[0] + 10.0)
     if sel.size < 3:
         sel = np.arange(min(3, t.size))
@@ -436,6 +457,12 @@ def resolve_initial_state(
         base = initial_state_from_gnss(record, triad, att_given, params=p, ellipsoid=ell)
     m, n = radii_of_curvature(base.lat, ell)
     k = INITIAL_AGREEMENT_SIGMAS
+    from .alignment import MAX_GNSS_LEAD_S, gnss_lead_s, rest_through_gnss_lead
+
+    if gnss_lead_s(record) > MAX_GNSS_LEAD_S and not rest_through_gnss_lead(record):
+        # the first fix came late and the aircraft moved before it: the data cannot place the
+        # first IMU sample, so the given values are taken as they are
+        k = math.inf
     s_h = math.hypot(p.initial_position_sigma_m, p.gnss_horizontal_sigma_m)
     s_v = math.hypot(p.initial_position_sigma_m, p.gnss_vertical_sigma_m)
     # the GNSS fit's own velocity sigma (quadratic least squares, derivative at the first IMU sample)
