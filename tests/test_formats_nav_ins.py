@@ -143,7 +143,9 @@ def test_ins_flight_with_nmea_gnss_matches_the_csv_gnss_run(flight):
 def test_nav_config_and_data_errors(tmp_path, flight):
     d, _ = flight
     base = {"csv": {"imu": "F01/imu.csv", "altimeter": "F01/altimeter.csv"}}
-    with pytest.raises(ConfigError, match=r"^flights\[0\]\.inputs\.nav\.format: expected one of nmea, trajectory"):
+    with pytest.raises(
+        ConfigError, match=r"^flights\[0\]\.inputs\.nav\.format: expected one of nmea, trajectory, rtklib"
+    ):
         ingest_options_from_dict({"inputs": {**base, "nav": {"format": "gpx", "file": "x"}}})
     with pytest.raises(ConfigError, match=r"^flights\[0\]\.inputs\.nav\.fiel: unknown key"):
         ingest_options_from_dict({"inputs": {**base, "nav": {"format": "nmea", "fiel": "x"}}})
@@ -194,3 +196,97 @@ def test_trajectory_text_is_the_gnss_of_an_ins_flight(flight, tmp_path):
     assert np.array_equal(t, rows[:, 0].astype(np.int64))  # GPS time back to UTC exactly
     assert np.abs(np.degrees(rec.gnss.lat) - rows[:, 1]).max() < 1e-9
     assert np.abs(rec.gnss.height - rows[:, 3]).max() <= 0.0005 + 1e-9
+
+
+def _write_pos(rows, path, layout="llh", scale="GPST", height="ellipsoidal", quality=None):
+    """An RTKLIB .pos file of the simulator's GNSS rows, as rnx2rtkp writes it."""
+    from gravsurvey.geodesy import geodetic_to_ecef
+    from gravsurvey.io.formats.common import gps_leap_seconds
+
+    label = {"llh": "latitude(deg) longitude(deg)  height(m)", "xyz": "x-ecef(m)      y-ecef(m)      z-ecef(m)"}
+    label["dms"] = "latitude(d'\") longitude(d'\")  height(m)"
+    out = [
+        "% program   : RTKLIB ver.2.4.3 b34",
+        f"% (lat/lon/height=WGS84/{height},Q=1:fix,2:float,3:sbas,4:dgps,5:single,6:ppp,ns=# of satellites)",
+        f"%  {scale:<21} {label[layout]}   Q  ns   sdn(m)   sde(m)   sdu(m)  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio",
+    ]
+    for k, (t_ns, lat, lon, h) in enumerate(rows):
+        if scale == "GPST":
+            sec = int(t_ns) // 10**9 + gps_leap_seconds(int(t_ns) / 1e9)
+        else:
+            sec = int(t_ns) // 10**9 + (9 * 3600 if scale == "JST" else 0)
+        tm = datetime.fromtimestamp(sec, tz=timezone.utc)
+        stamp = f"{tm:%Y/%m/%d %H:%M:%S}.{int(t_ns) % 10**9 // 10**6:03d}"
+        if layout == "xyz":
+            x, y, z = geodetic_to_ecef(np.radians(lat), np.radians(lon), h).ravel()
+            p = f"{x:14.4f} {y:14.4f} {z:14.4f}"
+        elif layout == "dms":
+
+            def dms(v):
+                a = abs(v)
+                d, m = int(a), int((a - int(a)) * 60)
+                s = (a - d - m / 60.0) * 3600.0
+                return f"{'-' if v < 0 else ''}{d:d} {m:02d} {s:011.8f}"
+
+            p = f"{dms(lat)} {dms(lon)} {h:10.4f}"
+        else:
+            p = f"{lat:14.9f} {lon:14.9f} {h:10.4f}"
+        q = 1 if quality is None else quality[k]
+        out.append(f"{stamp} {p}   {q}  11   0.0040   0.0030   0.0100  -0.0010   0.0010  -0.0030   0.00    0.0")
+    path.write_text("\n".join(out) + "\n")
+
+
+@pytest.mark.parametrize("layout, scale", [("llh", "GPST"), ("xyz", "UTC"), ("dms", "JST")])
+def test_an_rtklib_solution_is_the_gnss_of_an_ins_flight(flight, tmp_path, layout, scale):
+    """An RTKLIB .pos file (the usual post-processed GNSS of a survey) read as the flight's GNSS:
+    the simulator's fixes back to the written digits, in each of RTKLIB's position layouts and
+    time scales; with all solutions fixed nothing is said."""
+    d, rows = flight
+    _write_pos(rows, tmp_path / "sol.pos", layout, scale)
+    nav = {"format": "rtklib", "file": str(tmp_path / "sol.pos")}
+    o = ingest_options_from_dict(
+        {
+            "inputs": {
+                "csv": {"imu": str(d / "F01" / "imu.csv"), "altimeter": str(d / "F01" / "altimeter.csv")},
+                "nav": nav,
+            }
+        }
+    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rec = load_flight(o)
+    assert not [w for w in caught if "gnss" in str(w.message)], [str(w.message) for w in caught]
+    t = rec.t0_unix_ns + np.round(rec.gnss.time * 1e9).astype(np.int64)
+    assert np.array_equal(t, rows[:, 0].astype(np.int64))
+    north_m = np.abs(np.degrees(rec.gnss.lat) - rows[:, 1]).max() * 111_320
+    assert north_m < {"llh": 1e-4, "xyz": 2e-4, "dms": 2e-4}[layout]  # 1e-9 deg, 0.1 mm, 1e-8 arcsec
+    assert np.abs(rec.gnss.height - rows[:, 3]).max() <= 1e-4
+
+
+def test_rtklib_heights_above_the_geoid_baselines_and_float_solutions_are_said(flight, tmp_path):
+    from gravsurvey.io.formats import read_rtklib_pos
+
+    d, rows = flight
+    base = {"csv": {"imu": str(d / "F01" / "imu.csv"), "altimeter": str(d / "F01" / "altimeter.csv")}}
+    _write_pos(rows, tmp_path / "geoid.pos", height="geodetic")
+    o = ingest_options_from_dict({"inputs": {**base, "nav": {"format": "rtklib", "file": str(tmp_path / "geoid.pos")}}})
+    with pytest.raises(
+        DataError, match=r"geoid\.pos: no ellipsoidal heights; expected ellipsoidal heights \(RTKLIB out-height"
+    ):
+        load_flight(o)
+    text = (
+        (tmp_path / "geoid.pos")
+        .read_text()
+        .replace("latitude(deg) longitude(deg)  height(m)", "e-baseline(m) n-baseline(m) u-baseline(m)")
+    )
+    (tmp_path / "enu.pos").write_text(text)
+    with pytest.raises(DataError, match=r"enu\.pos: line 3: east/north/up baselines hold no absolute position"):
+        read_rtklib_pos(tmp_path / "enu.pos")
+    q = [2 if k % 10 == 0 else 1 for k in range(len(rows))]
+    _write_pos(rows, tmp_path / "float.pos", quality=q)
+    tab = read_rtklib_pos(tmp_path / "float.pos")
+    assert np.array_equal(tab.columns["quality"], q)
+    assert any(f"solutions by quality: fix {q.count(1)}, float {q.count(2)} (not all fixed" in n for n in tab.notes)
+    with pytest.raises(DataError, match=r"traj\.txt: no RTKLIB column header"):
+        (tmp_path / "traj.txt").write_text("GPSDate, GPSTime, Latitude, Longitude, H-Ell\n")
+        read_rtklib_pos(tmp_path / "traj.txt")

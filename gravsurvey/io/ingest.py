@@ -78,7 +78,7 @@ class IngestOptions:
     key_path: str = "flight"
     base_dir: str | None = None  # relative input paths refer to it
     gravimeter: object = None  # io.formats.flight.GravimeterOptions for kind "gravimeter"
-    #: ``{format: nmea | trajectory, file, ...}``: a navigation file that is the flight's GNSS
+    #: ``{format: nmea | trajectory | rtklib, file, ...}``: a navigation file that is the flight's GNSS
     #: (``inputs.nav``, validated by gravsurvey.settings (NavSection))
     nav: dict | None = None
 
@@ -440,7 +440,7 @@ def read_raw_channels(options: IngestOptions, base_dir, notes: list, data_loss: 
 
 
 def read_gnss_file(options: IngestOptions, base_dir, notes: list, replaces=None) -> RawChannel:
-    """The GNSS channel from a navigation file (``inputs.nav``: NMEA or trajectory text).
+    """The GNSS channel from a navigation file (``inputs.nav``: NMEA, trajectory text or RTKLIB .pos).
 
     Heights must be ellipsoidal (NMEA: GGA altitude + geoid separation; trajectory: an
     ellipsoidal-height column): the INS and normal gravity refer to the ellipsoid, and a geoid
@@ -464,6 +464,8 @@ def read_gnss_file(options: IngestOptions, base_dir, notes: list, replaces=None)
         what = (
             "GGA sentences with the geoid separation (field 11)"
             if fmt == "nmea"
+            else "ellipsoidal heights (RTKLIB out-height = ellipsoidal)"
+            if fmt == "rtklib"
             else "an ellipsoidal height column (ell_ht, h_ell, ...)"
         )
         raise DataError(

@@ -813,7 +813,7 @@ class NavSection(Section):
     """``inputs.gravimeter.nav`` (the navigation of a gravimeter flight) or ``inputs.nav`` (an NMEA or
     GNSS trajectory file as the GNSS of an INS flight; heights must be ellipsoidal)."""
 
-    format: Literal[NAV_FORMATS] = Field(..., description="`nmea` or `trajectory`")  # type: ignore[valid-type]
+    format: Literal[NAV_FORMATS] = Field(..., description="`nmea`, `trajectory` or `rtklib` (an RTKLIB .pos solution)")  # type: ignore[valid-type]
     file: str = Field(..., description="navigation file", min_length=1)
     time_source: Optional[Literal["auto", "fix", "logger"]] = Field(
         None, description="nmea only: `auto`, `fix` (the fix clock) or `logger` (default `auto`)"
@@ -885,7 +885,8 @@ class GravimeterSection(Section):
             raise fail("only for format dgs_laptop (the others have one clock)", ("time_source",))
         if self.nav is None and not info["positions"]:
             raise fail(
-                f"missing; {fmt} files hold no positions: give nav: {{format: nmea|trajectory, file: ...}}", ("nav",)
+                f"missing; {fmt} files hold no positions: give nav: {{format: nmea|trajectory|rtklib, file: ...}}",
+                ("nav",),
             )
         return self
 
@@ -902,7 +903,7 @@ class InputsSection(Section):
     )
     nav: Optional[NavSection] = Field(
         None,
-        description="`{format: nmea|trajectory, file: f}`: a navigation file that is the flight's GNSS, next to "
+        description="`{format: nmea|trajectory|rtklib, file: f}`: a navigation file that is the flight's GNSS, next to "
         "`mcap` or `csv` (docs/input-formats.md)",
     )
 

@@ -22,3 +22,6 @@ __all__ += ["read_bgm_rgs", "read_bgm_serial", "read_zls"]
 from .trajectory import read_trajectory  # noqa: E402
 
 __all__ += ["read_trajectory"]
+from .rtklib import read_rtklib_pos  # noqa: E402
+
+__all__ += ["read_rtklib_pos"]

@@ -8,7 +8,7 @@ record built here has
 
 * ``imu``: ``specific_force_t = (0, 0, f_U)`` (a platform triad, z up) at the meter's epochs,
   ``angular_rate_t = 0`` (the meter measures no rotation; the classic chain needs none);
-* ``gnss``: positions and ellipsoidal heights from the navigation file (NMEA, trajectory) or
+* ``gnss``: positions and ellipsoidal heights from the navigation file (NMEA, trajectory, RTKLIB) or
   from the gravimeter file's own position columns (MGD77T, DGS laptop, BGM RGS);
 * ``altimeter``: the same heights (or a constant ``height_m``, e.g. a ship's meter at sea level).
 
@@ -24,7 +24,7 @@ Config (one flight's ``inputs.gravimeter``, see docs/input-formats.md)::
       time_source: auto         # dgs_laptop: auto | meter | logger
       height_m: 0.0             # constant ellipsoidal height of the meter (overrides nav heights)
       nav:                      # optional for formats with positions, required otherwise
-        format: nmea            # nmea | trajectory
+        format: nmea            # nmea | trajectory | rtklib
         file: nav.gps
         time_source: auto       # nmea: auto | fix | logger
         time_system: auto       # trajectory: auto | gps | utc
@@ -58,7 +58,7 @@ GRAVIMETER_FORMATS = {
     "bgm_serial": {"positions": False, "absolute": False, "marine": True},
     "bgm_rgs": {"positions": True, "absolute": True, "marine": True},
 }
-NAV_FORMATS = ("nmea", "trajectory")
+NAV_FORMATS = ("nmea", "trajectory", "rtklib")
 #: Median absolute gravity (m/s^2) outside this range means a missing or wrong tie/scale.
 GRAVITY_OK = (9.70, 9.85)
 #: Fastest plausible ground speed (m/s) between consecutive fixes: ship (~49 kn), aircraft.
@@ -135,6 +135,7 @@ DETECT_ORDER = (
     ("dgs_raw", "gravimeter", "read_dgs_raw"),
     ("zls", "gravimeter", "read_zls"),
     ("bgm_serial", "gravimeter", "read_bgm_serial"),
+    ("rtklib", "navigation", "read_rtklib_pos"),
     ("trajectory", "navigation", "read_trajectory"),
 )
 
@@ -228,11 +229,12 @@ def read_gravimeter(o: GravimeterOptions, base_dir=None) -> FormatTable:
 
 
 def read_navigation(nav: dict, base_dir=None, key_path: str = "inputs.gravimeter.nav") -> FormatTable:
-    """Read an ``inputs.gravimeter.nav`` file (NMEA or trajectory).
+    """Read an ``inputs.gravimeter.nav`` or ``inputs.nav`` file (NMEA, trajectory text, RTKLIB).
 
     A file the reader refuses is named with the format it does read as (:func:`detect_format`).
     """
     from .nmea import read_nmea
+    from .rtklib import read_rtklib_pos
     from .trajectory import read_trajectory
 
     p = Path(base_dir) / nav["file"] if base_dir is not None else Path(nav["file"])
@@ -241,6 +243,8 @@ def read_navigation(nav: dict, base_dir=None, key_path: str = "inputs.gravimeter
     try:
         if nav["format"] == "nmea":
             return read_nmea(p, time_source=nav.get("time_source", "auto"))
+        if nav["format"] == "rtklib":
+            return read_rtklib_pos(p)
         return read_trajectory(p, time_system=nav.get("time_system", "auto"))
     except DataError as exc:
         hints = {"navigation": f": {key_path}.format: {{other}}?", "gravimeter": ", not navigation"}
