@@ -1,5 +1,6 @@
 #!/usr/bin/env python
-"""Ingestion speed: our MCAP reader vs the mcap package's decoders, same files, same run.
+"""Ingestion speed: our MCAP reader vs the mcap package's decoders, our CSV reader vs pandas and
+numpy (and its own line-by-line path), same files, same run.
 
 Files: a simulated flight written by the simulator's writers (ROS 2 CDR and JSON MCAP, zstd
 chunks, IMU + altimeter + GNSS), and the real ROS 2 recording ``robot_localization_test1.mcap``
@@ -58,8 +59,43 @@ def _flight(path: Path, seconds: float, imu_hz: float = 100.0):
         135 + rng.normal(0, 1e-5, m),
         1000 + rng.normal(0, 1, m),
     )
-    files = write_flight_logs(path, "BENCH", ["mcap_json", "mcap_ros2"], logs)
-    return {"json": files[0], "ros2": files[1]}
+    files = write_flight_logs(path, "BENCH", ["mcap_json", "mcap_ros2", "csv"], logs)
+    return {"json": files[0], "ros2": files[1], "csv": next(f for f in files[2:] if Path(f).name == "imu.csv")}
+
+
+#: CSV readers, each run in a fresh process (its peak memory is the process's):
+#: name -> the statement that reads ``path`` and leaves the sample count in ``n``.
+CSV_READERS = {
+    "gravsurvey": "from gravsurvey.io.csv import read_csv_channel as r; n = len(r(path, 'imu')[0])",
+    "gravsurvey line by line": (
+        "import gravsurvey.io.csv as c; c.PLAIN_READ_MIN_BYTES = 2**62; n = len(c.read_csv_channel(path, 'imu')[0])"
+    ),
+    "pandas.read_csv": "import pandas as pd; n = len(pd.read_csv(path, comment='#'))",
+    "numpy.loadtxt": (
+        "import numpy as np; n = len(np.loadtxt((ln for ln in open(path) if not ln.startswith(('#', 'time'))), "
+        "delimiter=','))"
+    ),
+}
+
+
+def _csv_in_process(stmt, path, repeats):
+    """Best seconds over ``repeats`` fresh processes, their largest peak RSS (MiB), samples."""
+    import subprocess
+
+    code = (
+        "import resource, sys, time\n"
+        f"path = {str(path)!r}\n"
+        "t = time.perf_counter()\n"
+        f"{stmt}\n"
+        "dt = time.perf_counter() - t\n"
+        "print(n, dt, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)\n"
+    )
+    best, peak, n = float("inf"), 0.0, 0
+    for _ in range(repeats):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO)
+        a, b, c = out.stdout.split()
+        n, best, peak = int(a), min(best, float(b)), max(peak, float(c))
+    return n, best, peak
 
 
 def _ours(path, topics):
@@ -158,6 +194,25 @@ def run(quick: bool = False) -> list[dict]:
                     [("mcap_ros2", _mcap_ros2), ("mcap raw iteration", _mcap_raw)],
                 )
             )
+        size_mb = Path(files["csv"]).stat().st_size / 1e6
+        ours = None
+        for name, stmt in CSV_READERS.items():
+            n, t, peak = _csv_in_process(stmt, files["csv"], repeats)
+            ours = ours or (n, t)
+            if n != ours[0]:
+                raise RuntimeError(f"{name} read {n} rows of {files['csv']}, we read {ours[0]}")
+            rows.append(
+                {
+                    "file": f"simulated flight ({size_mb:.0f} MB)",
+                    "encoding": "csv",
+                    "reader": name,
+                    "messages": n,
+                    "seconds": t,
+                    "msgs_per_s": n / t,
+                    "ours_speedup": t / ours[1],
+                    "peak_mib": peak,
+                }
+            )
         read_mcap(files["ros2"])  # load the numba kernels before timing
         for label, enc, path, topics, peers in cases:
             n0, t0 = _time(_ours, path, topics, repeats=repeats)
@@ -191,11 +246,15 @@ def run(quick: bool = False) -> list[dict]:
 
 
 def format_rows(rows) -> str:
-    out = ["| file | enc | reader | messages | s | msgs/s | ours x faster |", "|---|---|---|---:|---:|---:|---:|"]
+    out = [
+        "| file | enc | reader | messages | s | msgs/s | ours x faster | peak MiB (csv: the reading process) |",
+        "|---|---|---|---:|---:|---:|---:|---:|",
+    ]
     for r in rows:
+        peak = f"{r['peak_mib']:.0f}" if "peak_mib" in r else "-"
         out.append(
             f"| {r['file']} | {r['encoding']} | {r['reader']} | {r['messages']} | "
-            f"{r['seconds']:.4f} | {r['msgs_per_s']:.4g} | {r['ours_speedup']:.1f} |"
+            f"{r['seconds']:.4f} | {r['msgs_per_s']:.4g} | {r['ours_speedup']:.1f} | {peak} |"
         )
     return "\n".join(out)
 

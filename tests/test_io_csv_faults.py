@@ -288,3 +288,76 @@ def _written(d, texts_by_role):
     for role, text in texts_by_role.items():
         (d / f"{role}.csv").write_text(text)
     return d
+
+
+def _variants():
+    """IMU CSV texts a logger or an export may write: plain ones and each kind of damage the
+    line-by-line reader names or repairs."""
+    t = texts()["imu"]
+    lines = t.split("\n")
+    head, rows = lines[0], [ln for ln in lines[1:] if ln]
+    seconds = "\n".join(
+        [head.replace("time_ns", "t_s")]
+        + [f"{int(r.split(',')[0]) // 10**9}.{int(r.split(',')[0]) % 10**9:09d}," + r.split(",", 1)[1] for r in rows]
+    )
+    return {
+        "plain": t,
+        "crlf": t.replace("\n", "\r\n"),
+        "bom": "\ufeff" + t,
+        "comments": "# logger v2\n# units SI\n" + t,
+        "extra column": "\n".join([head + ",temp_c"] + [r + ",21.5" for r in rows]) + "\n",
+        "trailing comma": "\n".join([head + ","] + [r + "," for r in rows]) + "\n",
+        "seconds": seconds + "\n",
+        "cut last line": t.rstrip("\n")[:-7],
+        "no final line end": t.rstrip("\n"),
+        "empty cell": t.replace(rows[5], ",".join(rows[5].split(",")[:3] + [""] + rows[5].split(",")[4:]), 1),
+        "short line": t.replace(rows[7], ",".join(rows[7].split(",")[:5]), 1),
+        "long line": t.replace(rows[7], rows[7] + ",1.0", 1),
+        "repeated header": "\n".join(lines[:50] + [head] + lines[50:]),
+        "units row": "\n".join([head, "ns,m/s^2,m/s^2,m/s^2,rad/s,rad/s,rad/s"] + lines[1:]),
+        "garbage": t.replace(rows[9], "x" * 30, 1),
+        "nan and inf": t.replace(
+            rows[3], ",".join(rows[3].split(",")[:2] + ["nan", "inf"] + rows[3].split(",")[4:]), 1
+        ),
+        "header spaces": t.replace(head, head.replace(",", ", "), 1),
+        "float time": t.replace(rows[2].split(",")[0], rows[2].split(",")[0] + ".5", 1),
+    }
+
+
+@pytest.mark.parametrize("name", list(_variants()))
+def test_a_large_file_read_at_once_is_read_as_line_by_line(tmp_path, monkeypatch, name):
+    """Files past ``PLAIN_READ_MIN_BYTES`` that are plain are read by pandas' C parser: the same
+    arrays bit for bit, dtype for dtype; anything not plain goes to the line-by-line reader,
+    so a damaged file gives the same error, repairs and notes whatever its size."""
+    import gravsurvey.io.csv as csv_mod
+
+    path = tmp_path / "imu.csv"
+    path.write_bytes(_variants()[name].encode())
+    cols = {"time": "t_s"} if name == "seconds" else None
+    fmt = "s" if name == "seconds" else "ns"
+
+    def read(min_bytes):
+        monkeypatch.setattr(csv_mod, "PLAIN_READ_MIN_BYTES", min_bytes)
+        notes, loss = [], []
+        try:
+            out = read_csv_channel(path, "imu", cols, fmt, notes=notes, data_loss=loss)
+        except DataError as exc:
+            return ("error", str(exc))
+        return out, notes, loss
+
+    careful, at_once = read(2**62), read(0)
+    plain = csv_mod.read_csv_at_once(
+        path, "imu", {**csv_mod.DEFAULT_COLUMNS["imu"], **(cols or {})}, csv_mod.QUANTITIES["imu"], fmt, {}, ",", False
+    )
+    # the plain files are read at once (the comparison is not of the careful reader with itself)
+    assert (plain is not None) == (
+        name in {"plain", "crlf", "bom", "comments", "extra column", "trailing comma", "seconds"}
+    )
+    if careful[0] == "error":
+        assert at_once == careful
+        return
+    (t1, v1, n1, l1), (t2, v2, n2, l2) = (*careful[0], *careful[1:]), (*at_once[0], *at_once[1:])
+    assert t1.dtype == t2.dtype == np.int64 and np.array_equal(t1, t2)
+    for k in v1:
+        assert v1[k].dtype == v2[k].dtype and np.array_equal(v1[k], v2[k], equal_nan=True), k
+    assert (n1, l1) == (n2, l2)
