@@ -610,9 +610,9 @@ def _check_track(record, params, sol, ellipsoid):
 #: Noise density (per-sample variance x spacing) of the altimeter over the GNSS heights' from
 #: which the GNSS's up component is weighed by its own identified noise instead of the default
 #: ``gnss_vertical_sigma_m`` (2 m): a survey GNSS beside a barometric-class altimeter was all
-#: but unused (2-m altimeter, 0.1-m GNSS on four 25-min simulated flights: 0.36-8.6 mGal ->
+#: but unused (2-m altimeter, 0.1-m GNSS on four 25-min simulated flights: 0.45-8.6 mGal ->
 #: 0.24-6.9; docs/method.md, "GNSS heights weighed by their own noise").  Below it (the
-#: altimeter as good or better, as on every flight of the unseen suite) nothing changes.
+#: altimeter as good or better, as on every flight of the unseen suites) nothing changes.
 GNSS_UP_DENSITY_RATIO = 2.0
 
 
