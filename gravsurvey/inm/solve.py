@@ -398,10 +398,13 @@ def estimate_anomaly(
                 gnss_up = _gnss_height_sigma(record, nav, ellipsoid)
                 if gnss_up is not None:
                     # GNSS heights quieter than the altimeter's: weighed by their own noise, not
-                    # the default figure (every pass, the identification's first pass too)
+                    # the default figure (every pass, the identification's first pass too), the
+                    # altimeter moved onto them (two channels metres apart, both weighed, made
+                    # the estimate jump at every gap of one of them: 64 mGal)
+                    record = gnss_up.pop("record")
                     given_params = dataclasses.replace(given_params, gnss_vertical_sigma_m=gnss_up["value"])
                     params = dataclasses.replace(params, gnss_vertical_sigma_m=gnss_up["value"])
-            if height_warnings:
+            if height_warnings or gnss_up is not None:
                 nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
             speed0 = _typical_speed(record, nav, ellipsoid)
         # every pass about this linearisation point: the navigation, the prior attitude and
@@ -629,13 +632,25 @@ def _gnss_height_sigma(record, nav, ellipsoid):
     gns = height_noise_density(nav, f_t, gn.time, gn.height, ellipsoid)
     if alt is None or gns is None or not alt[0] > GNSS_UP_DENSITY_RATIO * gns[0]:
         return None
+    # the altimeter's constant offset from the GNSS heights (the ellipsoidal reference)
+    at, ah = _altimeter(record)
+    gt, gh = np.asarray(gn.time, float), np.asarray(gn.height, float)
+    ok = np.isfinite(gh)
+    inside = (at >= gt[ok][0]) & (at <= gt[ok][-1])
+    if inside.sum() < 16:
+        return None
+    offset = float(np.median(np.interp(at[inside], gt[ok], gh[ok]) - ah[inside]))
+    moved = dataclasses.replace(record.altimeter, time=at, height=ah + offset)
     return {
         "value": gns[1],
         "sigma_factor": None,
         "how": (
             f"identified: the GNSS heights {gns[1]:.3g} m per {gns[2]:.3g}-s sample against the inertial height, "
-            f"the altimeter's {alt[1]:.3g} m per {alt[2]:.3g} s ({alt[0] / gns[0]:.0f}x the noise density)"
+            f"the altimeter's {alt[1]:.3g} m per {alt[2]:.3g} s ({alt[0] / gns[0]:.0f}x the noise density); "
+            f"the altimeter's heights moved {offset:+.2f} m onto the GNSS's"
         ),
+        "altimeter_offset_m": offset,
+        "record": dataclasses.replace(record, altimeter=moved),
     }
 
 
