@@ -395,13 +395,13 @@ def estimate_anomaly(
             record, height_warnings, height_facts = _repaired_heights(record, nav, ellipsoid)
             gnss_up = None
             if not gnss_heights and given_params.identify and "gnss_vertical_sigma_m" not in given_params.given:
-                gnss_up = _gnss_height_sigma(record, nav, ellipsoid)
-                if gnss_up is not None:
+                weighed = _gnss_height_sigma(record, nav, ellipsoid)
+                if weighed is not None:
                     # GNSS heights quieter than the altimeter's: weighed by their own noise, not
                     # the default figure (every pass, the identification's first pass too), the
                     # altimeter moved onto them (two channels metres apart, both weighed, made
                     # the estimate jump at every gap of one of them: 64 mGal)
-                    record = gnss_up.pop("record")
+                    gnss_up, record = weighed
                     given_params = dataclasses.replace(given_params, gnss_vertical_sigma_m=gnss_up["value"])
                     params = dataclasses.replace(params, gnss_vertical_sigma_m=gnss_up["value"])
             if height_warnings or gnss_up is not None:
@@ -623,7 +623,8 @@ def _gnss_height_sigma(record, nav, ellipsoid):
     """The GNSS heights' identified per-sample sigma where their noise density is
     :data:`GNSS_UP_DENSITY_RATIO` times below the altimeter's (both fitted against the inertial
     height, :func:`~gravsurvey.inm.identify.height_noise_density`), as a report entry
-    (``value`` m, ``how``); else None."""
+    (``value`` m, ``how``, ``altimeter_offset_m``), and the record with the altimeter's heights
+    moved onto the GNSS's by their median difference; else None."""
     gn = record.gnss
     if gn is None or len(gn.time) < 16:
         return None
@@ -641,7 +642,7 @@ def _gnss_height_sigma(record, nav, ellipsoid):
         return None
     offset = float(np.median(np.interp(at[inside], gt[ok], gh[ok]) - ah[inside]))
     moved = dataclasses.replace(record.altimeter, time=at, height=ah + offset)
-    return {
+    entry = {
         "value": gns[1],
         "sigma_factor": None,
         "how": (
@@ -650,8 +651,8 @@ def _gnss_height_sigma(record, nav, ellipsoid):
             f"the altimeter's heights moved {offset:+.2f} m onto the GNSS's"
         ),
         "altimeter_offset_m": offset,
-        "record": dataclasses.replace(record, altimeter=moved),
     }
+    return entry, dataclasses.replace(record, altimeter=moved)
 
 
 def _repaired_heights(record, nav, ellipsoid):
