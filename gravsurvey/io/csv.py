@@ -377,21 +377,15 @@ def read_csv_channel(
                         f"{path}: line {line_no[k]}, column {c!r}: expected a number, got {_shown(s)}"
                     ) from None
             raise DataError(f"{path}: column {c!r}: values that do not convert to numbers")
-        if kind is not None:
-            unit = units.get(kind, next(iter(UNITS[kind])))
-            factor = UNITS[kind][unit]
-            if factor != 1.0:
-                v = v * factor
-        vals[q] = v
+        vals[q] = _in_si(v, kind, units)
     if role != "gradient":
         return t, _channel_values(role, vals, ecef)
     lower = {q: vals[q] for q in ("txy", "txz", "tyz")}
     if all(c in header for c in GRADIENT_LOWER_COLUMNS.values()):
-        unit = units.get("gradient", next(iter(UNITS["gradient"])))
         for q, c in GRADIENT_LOWER_COLUMNS.items():
             strs = [r[header.index(c)] for r in rows]
             try:
-                lower[q] = np.array(strs, dtype=np.float64) * UNITS["gradient"][unit] if n else np.zeros(0)
+                lower[q] = _in_si(np.array(strs, dtype=np.float64), "gradient", units) if n else np.zeros(0)
             except ValueError:
                 k = next(k for k, s_ in enumerate(strs) if not _is_float(s_))
                 raise DataError(
@@ -414,6 +408,15 @@ def read_csv_channel(
         )
     }
     return t, values
+
+
+def _in_si(values, kind, units):
+    """``values`` of unit kind ``kind`` (None: no unit) in SI, by the declared ``units`` (the
+    kind's first unit, SI, when none is declared); the same array when the factor is 1."""
+    if kind is None:
+        return values
+    factor = UNITS[kind][units.get(kind, next(iter(UNITS[kind])))]
+    return values * factor if factor != 1.0 else values
 
 
 def _channel_values(role, vals, ecef):
@@ -506,19 +509,12 @@ def read_csv_at_once(path, role, cols, quantities, time_format, units, delimiter
         v = df[cols[q]].to_numpy(np.float64)
         if np.isnan(v).any():
             return None
-        if kind is not None:
-            factor = UNITS[kind][units.get(kind, next(iter(UNITS[kind])))]
-            if factor != 1.0:
-                v = v * factor
-        vals[q] = v
+        vals[q] = _in_si(v, kind, units)
     strs = df[tcol].tolist()
     if any(not isinstance(x, str) for x in strs):
         return None
     try:
-        if time_format == "ns":
-            t = np.array(strs).astype(np.int64)
-        else:
-            t = _seconds_to_ns(strs, path, [0] * len(strs), tcol)
+        t = (_ns if time_format == "ns" else _seconds_to_ns)(strs, path, [0] * len(strs), tcol)
     except (ValueError, OverflowError, DataError):
         return None
     return t, _channel_values(role, vals, ecef)

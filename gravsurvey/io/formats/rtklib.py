@@ -35,7 +35,16 @@ import numpy as np
 
 from gravsurvey.errors import DataError
 
-from .common import NS, LineTally, civil_to_ns, finish, gps_to_unix_ns, read_lines, week_sow_to_unix_ns
+from .common import (
+    GPS_EPOCH_UNIX_S,
+    NS,
+    LineTally,
+    civil_to_ns,
+    finish,
+    gps_to_unix_ns,
+    read_lines,
+    week_sow_to_unix_ns,
+)
 
 #: RTKLIB's solution quality flags (``Q``).
 QUALITY = {1: "fix", 2: "float", 3: "sbas", 4: "dgps", 5: "single", 6: "ppp"}
@@ -119,7 +128,7 @@ def read_rtklib_pos(path) -> "FormatTable":  # noqa: F821
                 hh, mm, ss = f[1].split(":")
                 t = civil_to_ns(y, mo, d, int(hh), int(mm), ss)
                 if scale == "GPST":
-                    t = gps_to_unix_ns(t - 315964800 * NS)
+                    t = gps_to_unix_ns(t - GPS_EPOCH_UNIX_S * NS)
                 else:
                     t -= TIME_SCALES[scale] * NS
             else:

@@ -34,7 +34,7 @@ import numpy as np
 
 from gravsurvey.errors import ConfigError, DataError
 
-from .common import LineTally, civil_to_ns, finish, gps_to_unix_ns, read_lines, week_sow_to_unix_ns
+from .common import GPS_EPOCH_UNIX_S, LineTally, civil_to_ns, finish, gps_to_unix_ns, read_lines, week_sow_to_unix_ns
 
 TIME_SYSTEMS = ("auto", "gps", "utc")
 
@@ -143,7 +143,7 @@ def read_trajectory(path, *, time_system: str = "auto") -> "FormatTable":  # noq
                 hh, mm, ss = f[col["time"]].strip().split(":")
                 t = civil_to_ns(y, mo, d, int(hh), int(mm), ss)
                 if scale == "gps":
-                    t = gps_to_unix_ns(t - 315964800 * 1_000_000_000)
+                    t = gps_to_unix_ns(t - GPS_EPOCH_UNIX_S * 1_000_000_000)
             row = {q: float(f[col[q]]) for q in vals}
         except ValueError as exc:
             tally.bad(n, f"unparsable field ({exc})", s)
