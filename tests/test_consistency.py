@@ -6,6 +6,7 @@ Every case is a damaged copy of sample_data/markov_csv written into a tmp dir
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -158,6 +159,80 @@ def test_short_imu_gap_is_bridged(tmp_path, intact):
     assert any("bridged by the mechanization" in n for n in r.notes)
     assert not any("segments" in n for n in r.notes)
     assert abs(_rms_on_lines(r) - _rms_on_lines(intact)) < 0.2
+
+
+@pytest.mark.parametrize(
+    "case, restamp, says, placed",
+    [
+        (
+            "whole seconds",
+            lambda t, rng: t // d.NS * d.NS,
+            "samples shared a time stamp with the one before",
+            "placed against the GNSS track, moved +0.45 s",
+        ),
+        ("20-ms jitter", lambda t, rng: t + np.round(rng.normal(0.0, 2e7, t.size)).astype(np.int64), "scatter", None),
+    ],
+)
+def test_imu_stamps_of_a_coarse_clock_or_a_host_lose_no_sample(tmp_path, intact, case, restamp, says, placed):
+    """The sample's 10-Hz IMU stamped to the whole second (nine samples in ten shared a stamp
+    and were dropped) or on arrival with 20 ms of jitter: every sample is kept, the stamps
+    rebuilt from the sample count and said, and the product is the intact one's (3.43 and 3.42
+    against 3.45 mGal; 3.41 and 3.46 with the samples dropped or the jitter integrated).  Cut to
+    the second, the stamps sit 0.45 s early on average: placed against the GNSS track (the
+    corrected track had departed from the GNSS by 2.3 m RMS, said in a note)."""
+    rng = np.random.default_rng(7)
+
+    def prep(p):
+        def fn(head, rows):
+            t = restamp(np.array([int(r[0]) for r in rows], dtype=np.int64), rng)
+            for r, v in zip(rows, t):
+                r[0] = str(int(v))
+            return rows
+
+        d.edit(p, "imu", fn)
+
+    cfg, fl = _flight(tmp_path, prep)
+    cfg0, fl0 = _flight(tmp_path / "intact", None)
+    n_intact = load_flight(fl0.ingest, cfg0.base_dir).imu.time.size
+    assert load_flight(fl.ingest, cfg.base_dir).imu.time.size == n_intact
+    r = process_flight(cfg, fl)
+    assert r.data_loss == [] and any("F01: imu: " in n and says in n and "rebuilt" in n for n in r.notes)
+    assert _rms_on_lines(r) == pytest.approx(_rms_on_lines(intact), rel=0.03)
+    assert not any("departs from the GNSS" in n for n in r.notes)
+    if placed:
+        assert any(placed in n for n in r.notes)
+        off = next(n for n in r.estimator["checks_passed"] if "time offset:" in n)
+        assert " runs +0.00 s relative to gnss" in off or " runs -0.00 s relative to gnss" in off
+
+
+def test_rebuilt_imu_stamps_are_placed_only_within_what_they_leave_unknown(tmp_path):
+    """Whole-second stamps of a 10-Hz IMU leave its time unknown by up to 0.45 s: an IMU 0.30 s
+    late is moved back onto the GNSS track's time; 2 s late is beyond that (a clock fault for the
+    time-offset check to name), and 0.1-s stamps (0.045 s unknown) are left to the GNSS latency
+    check: both returned as they were."""
+    from gravsurvey.io.checks import TimeReport
+    from gravsurvey.io.ingest import place_rebuilt_imu
+
+    cfg, fl = _flight(tmp_path)
+    rec = load_flight(fl.ingest, cfg.base_dir)
+    coarse = TimeReport(rebuilt="shared", rebuilt_stamp_step_ns=1e9, nominal_step_ns=1e8)
+
+    def late(s):
+        return dataclasses.replace(rec, imu=dataclasses.replace(rec.imu, time=rec.imu.time + s))
+
+    placed = place_rebuilt_imu(late(0.3), coarse)
+    assert placed.notes[-1].startswith("imu: the rebuilt stamps placed against the GNSS track, moved -0.30 s")
+
+    def absolute(r, ch):  # s after the intact record's t0
+        return (r.t0_unix_ns - rec.t0_unix_ns) * 1e-9 + getattr(r, ch).time
+
+    np.testing.assert_allclose(absolute(placed, "imu"), rec.imu.time, atol=0.051)
+    for ch in ("gnss", "altimeter"):  # the other channels' times as they were
+        np.testing.assert_allclose(absolute(placed, ch), getattr(rec, ch).time, atol=1e-9)
+    far = late(2.0)
+    assert place_rebuilt_imu(far, coarse) is far
+    fine = TimeReport(rebuilt="shared", rebuilt_stamp_step_ns=1e8 + 9e7, nominal_step_ns=1e8)
+    assert place_rebuilt_imu(late(0.3), fine).notes == rec.notes
 
 
 def test_aiding_gap_is_bridged_and_sigma_grows_across_it(tmp_path, intact):

@@ -420,3 +420,107 @@ def test_a_stale_imu_message_repeated_while_moving_is_found():
     # no GNSS, or a GNSS at rest: a repeating IMU may be the record's nature (noiseless, quantised)
     assert ck.frozen_imu(ti, f, w).size == 0
     assert ck.frozen_imu(ti, f, w, tg, np.full(600, 47.0), np.full(600, 11.0)).size == 0
+
+
+# ------------------------------------------------------------------ stamps that are not sampling times
+_T0 = 1_741_608_000 * 10**9
+_STEP = 20_000_000  # 50 Hz
+
+
+def _true_times(n=20_000, step=_STEP):
+    return _T0 + np.arange(n, dtype=np.int64) * step
+
+
+@pytest.mark.parametrize(
+    "kind, stamp, offset_ms",
+    [
+        # a 50-Hz IMU stamped by a clock of 0.1 s: cut to it (the samples come out (0.1 - 0.02) / 2
+        # s early on average), or rounded to it (right on average)
+        ("cut", lambda t: t // 100_000_000 * 100_000_000, -40.0),
+        ("rounded", lambda t: (t + 50_000_000) // 100_000_000 * 100_000_000, 0.0),
+        # blocks of five stamped when read, at the last sample: 40 ms late on average
+        ("blocks", lambda t: t.reshape(-1, 5)[:, -1].repeat(5), 40.0),
+    ],
+)
+def test_coarse_or_block_stamps_are_rebuilt_and_every_sample_kept(kind, stamp, offset_ms):
+    """Four in five samples shared a stamp and were dropped ("kept the first of each"): now the
+    stamps are rebuilt from the sample count, every sample kept, to well under a microsecond of
+    the sampling times apart from a constant offset (which the aided track's GNSS latency check
+    measures and takes off)."""
+    true = _true_times()
+    values = np.arange(true.size, dtype=float)
+    stamps = stamp(true)
+    t, (v,), rep = ck.repair_time(stamps, [values])
+    assert rep.n_out == true.size and rep.conflicting_duplicates == 0 and rep.rebuilt == "shared"
+    np.testing.assert_array_equal(v, values)
+    err = (t - true) * 1e-6  # ms
+    assert abs(err.mean() - offset_ms) < 1e-3 and err.std() < 1e-3
+    msg = next(f.message for f in ck.time_findings("imu", rep) if f.check == "stamps")
+    shared = true.size - np.unique(stamps).size
+    assert msg.startswith(f"imu: {shared} samples shared a time stamp with the one before (distinct stamps 0.1 s apart")
+    assert "for 50-Hz samples" in msg and "every sample kept" in msg
+
+
+def test_jittered_stamps_are_rebuilt_about_the_steady_rate():
+    """A host's arrival stamps (2 ms RMS on a 20-ms step) come back within 0.3 ms; a 400-Hz IMU
+    stamped in whole milliseconds (steps of 2 and 3 ms) to its 2.5-ms steps."""
+    true = _true_times()
+    rng = np.random.default_rng(11)
+    jittered = true + np.round(rng.normal(0.0, 2e6, true.size)).astype(np.int64)
+    t, _, rep = ck.repair_time(jittered, [])
+    assert rep.rebuilt == "jitter" and rep.n_out == true.size
+    assert np.sqrt(np.mean((t - true) ** 2.0)) < 0.3e6
+    assert rep.rebuilt_jitter == pytest.approx(np.sqrt(2.0) * 0.1, rel=0.1)  # steps scatter sqrt(2) x 2 ms
+    msg = next(f.message for f in ck.time_findings("imu", rep) if f.check == "stamps")
+    assert msg.startswith("imu: time stamps scatter 14.") and "rebuilt from the sample count" in msg
+    fast = _true_times(step=2_500_000)
+    t, _, rep = ck.repair_time(fast // 1_000_000 * 1_000_000, [])
+    assert rep.rebuilt == "jitter"
+    steps = np.diff(t)
+    # the 2-sample pattern leaves a ripple of the 1-ms stamp step over the 101-sample window
+    assert np.all(np.abs(steps - 2_500_000) <= 10_000) and abs(np.mean(t - fast) + 0.25e6) < 1e3
+
+
+def test_a_gap_within_coarse_stamps_stays_a_gap():
+    true = _true_times()
+    true = np.concatenate([true[:8000], true[8000:] + 60 * 10**9])  # a minute without samples
+    values = np.arange(true.size, dtype=float)  # the samples differ: none is written twice
+    t, _, rep = ck.repair_time(true // 100_000_000 * 100_000_000, [values])
+    assert rep.rebuilt == "shared" and rep.n_gaps == 1 and rep.n_out == true.size
+    err = (t - true) * 1e-6
+    assert np.all(np.abs(err + 40.0) < 1e-3)
+
+
+@pytest.mark.parametrize(
+    "case",
+    ["exact", "dropped samples and a gap", "rate change", "a few late samples", "1-Hz fixes, a third missing"],
+)
+def test_stamps_that_are_sampling_times_are_not_rebuilt(case):
+    """Exact stamps, a dropped sample here and there, a rate change within the record, a few
+    late samples and a GNSS whose epochs are often missing keep their stamps as written."""
+    true = _true_times()
+    rng = np.random.default_rng(5)
+    if case == "exact":
+        t = true
+    elif case == "dropped samples and a gap":
+        t = np.delete(true, [500, 9000, 9001, 9002, 9003, 9004, 9005, 9006, 15000])
+    elif case == "rate change":
+        t = np.concatenate([true[:10_000], true[10_000::2]])
+    elif case == "a few late samples":
+        t = true + (rng.random(true.size) < 0.05) * 8_000_000
+    else:
+        t = _T0 + np.flatnonzero(rng.random(5000) > 0.33).astype(np.int64) * 10**9
+    out, _, rep = ck.repair_time(t, [])
+    assert rep.rebuilt == "" and not any(f.check == "stamps" for f in ck.time_findings("x", rep))
+    np.testing.assert_array_equal(out, t)
+
+
+def test_centred_mean_is_symmetric_for_odd_and_even_widths():
+    x = np.arange(20.0)
+    for width in (1, 3, 4, 5):
+        m = ck.centred_mean(x, width)
+        half = width // 2
+        np.testing.assert_allclose(m[half : x.size - half], x[half : x.size - half])  # a line stays a line
+        assert np.all(m[:half] == m[half]) and np.all(m[x.size - half :] == m[x.size - half - 1])
+    saw = np.tile(np.arange(4.0), 25)  # the sawtooth of coarse stamps, period 4
+    np.testing.assert_allclose(ck.centred_mean(saw, 8), 1.5)

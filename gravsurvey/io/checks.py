@@ -49,6 +49,22 @@ STRAY_GAP_NS = 3600 * 10**9
 STRAY_MAX_FRACTION = 0.001
 STRAY_MIN_SAMPLES = 2
 STRAY_MAX_SAMPLES = 1000
+#: Samples sharing a stamp with different values, as a fraction of the channel, above which the
+#: stamps are a logger's quantised or buffered ones (a 50-Hz IMU stamped to 0.1 s, or a block of
+#: samples stamped when it was read) and are rebuilt from the sample count
+#: (:func:`rebuild_time_base`) instead of keeping the first sample of each stamp.
+REBUILD_DUPLICATE_FRACTION = 0.01
+#: Stamp jitter (RMS deviation of the steps from the nominal step, over it) above which the
+#: stamps are a host's arrival times about a steady sampling clock and are rebuilt.
+REBUILD_JITTER = 0.03
+#: Least half-width, in samples, of the window that smooths the stamps' deviation from a line.
+REBUILD_HALF_WINDOW = 50
+#: Without shared stamps, a step of this many nominal steps or more (a dropped sample) ends one
+#: stretch of the rebuild; with them, a step between stamps over ``gap_factor`` times its
+#: samples' share of time does.
+REBUILD_SPLIT_STEPS = 1.75
+#: A jitter rebuild that moves no stamp by this fraction of the step or more is not applied.
+REBUILD_MIN_SHIFT = 0.01
 
 
 @dataclass
@@ -83,6 +99,11 @@ class TimeReport:
     irregular_fraction: float = 0.0
     jitter: float = 0.0  # std(dt)/nominal over regular steps
     rate_runs: list = field(default_factory=list)  # (t_first_ns, t_last_ns, rate_hz) at another rate
+    rebuilt: str = ""  # "shared" or "jitter" when rebuild_time_base rebuilt the stamps
+    rebuilt_shared: int = 0  # samples that had shared a stamp with the one before
+    rebuilt_jitter: float = 0.0  # the stamps' jitter before the rebuild, RMS step deviation / step
+    rebuilt_shift_ns: float = 0.0  # largest |new - old| stamp
+    rebuilt_stamp_step_ns: float = 0.0  # median step between distinct stamps before the rebuild
 
 
 def repair_time(time_ns, values, gap_factor=5.0):
@@ -137,11 +158,32 @@ def repair_time(time_ns, values, gap_factor=5.0):
                 eq = (a == b) | (np.isnan(a) & np.isnan(b))
                 same &= eq.reshape(len(dup), -1).all(axis=1)
             rep.duplicates = int(same.sum())
-            rep.conflicting_duplicates = int((~same).sum())
+            # a sample written twice goes; samples that only share a stamp are dropped too,
+            # unless so many do that the stamps are the logger's (rebuilt below, all kept)
+            drop = dup[same]
+            if (~same).sum() < REBUILD_DUPLICATE_FRACTION * len(t):
+                drop = dup
+                rep.conflicting_duplicates = int((~same).sum())
             keep = np.ones(len(t), bool)
-            keep[dup] = False
+            keep[drop] = False
             t = t[keep]
             values = [v[keep] for v in values]
+        if len(t) > 1 and (np.any(np.diff(t) == 0) or _step_jitter(t, gap_factor) > REBUILD_JITTER):
+            rebuilt = rebuild_time_base(t, gap_factor)
+            if rebuilt is not None and (rebuilt[1]["kind"] == "shared" or _moves_stamps(t, rebuilt[0])):
+                new_t, info = rebuilt
+                rep.rebuilt, rep.rebuilt_shared = info["kind"], info["shared"]
+                rep.rebuilt_jitter, rep.rebuilt_stamp_step_ns = info["jitter"], info["stamp_step_ns"]
+                rep.rebuilt_shift_ns = float(np.max(np.abs(new_t - t)))
+                t = new_t
+            elif np.any(np.diff(t) == 0):
+                # no steady sampling clock under the shared stamps: the first of each, as before
+                dup = np.flatnonzero(np.diff(t) == 0) + 1
+                rep.conflicting_duplicates = len(dup)
+                keep = np.ones(len(t), bool)
+                keep[dup] = False
+                t = t[keep]
+                values = [v[keep] for v in values]
     rep.n_out = len(t)
     if len(t) > 1:
         d = np.diff(t).astype(np.float64)
@@ -157,6 +199,145 @@ def repair_time(time_ns, values, gap_factor=5.0):
         rep.jitter = float(np.std(dr) / nom) if len(dr) > 1 else 0.0
         rep.rate_runs = _rate_runs(t, d, irr & regular)
     return t, values, rep
+
+
+def _step_jitter(t, gap_factor) -> float:
+    """The steps' scatter from stamp to stamp over the nominal step: their RMS deviation, were
+    the stamps' errors white, from the median absolute change between consecutive steps (so a
+    rate that changed within the record, or a dropped sample now and then, is no jitter); gaps
+    left out, 0 for fewer than 4 steps."""
+    d = np.diff(np.asarray(t, np.int64)).astype(np.float64)
+    if d.size < 4:
+        return 0.0
+    nom = float(np.median(d))
+    if not nom > 0:
+        return 0.0
+    d = d[d <= gap_factor * nom]
+    if d.size < 4:
+        return 0.0
+    # white stamp errors e: steps d_k = e_k+1 - e_k + nom, changes d_k+1 - d_k with 3 times the
+    # steps' variance; 1.4826 x the median absolute value is a standard deviation
+    return float(1.4826 * np.median(np.abs(np.diff(d))) / math.sqrt(3.0) / nom)
+
+
+def centred_mean(x, width: int) -> np.ndarray:
+    """Running mean of ``x`` centred on each sample over ``width`` samples (an even width: the
+    mean of the two windows either side of the centre, so the kernel stays symmetric); within
+    half a window of either end, the first or last full window's mean.
+
+    Parameters
+    ----------
+    x : ndarray, shape (m,), m > width
+    width : int, >= 1
+
+    Returns
+    -------
+    ndarray, shape (m,)
+    """
+    x = np.asarray(x, np.float64)
+    m = x.size
+    c = np.concatenate([[0.0], np.cumsum(x)])
+    box = (c[width:] - c[:-width]) / width  # box[j]: mean of x[j : j + width]
+    if width % 2:
+        mid = box
+        lo = (width - 1) // 2
+    else:
+        mid = 0.5 * (box[:-1] + box[1:])
+        lo = width // 2
+    out = np.empty(m)
+    out[lo : lo + mid.size] = mid
+    out[:lo] = mid[0]
+    out[lo + mid.size :] = mid[-1]
+    return out
+
+
+def _moves_stamps(t, new) -> bool:
+    """Whether a rebuilt time base moves any stamp by :data:`REBUILD_MIN_SHIFT` of the median
+    step or more (stretches of exact stamps between dropped samples come back as they were)."""
+    d = np.diff(np.asarray(t, np.int64))
+    return bool(d.size) and float(np.max(np.abs(new - t))) >= REBUILD_MIN_SHIFT * float(np.median(d))
+
+
+def rebuild_time_base(time_ns, gap_factor=5.0):
+    """Stamps rebuilt from the sample count, where a logger's stamps are not the samples' times.
+
+    A sensor samples on its own steady clock; a logger that stamps the samples with a coarse
+    clock (a 50-Hz IMU stamped to 0.1 s: runs of five samples on one stamp), when it reads a
+    block of them (all stamped alike), or when each arrives at the host (a jitter of
+    milliseconds) writes stamps that scatter about the true times.  Dropping the samples that
+    share a stamp loses most of the record (four in five above); integrating across jittered
+    steps turns the specific force times each step's error into velocity noise.  Here, in the
+    stamps' order, stretch by stretch (a gap, or without shared stamps a dropped sample, ends
+    one), the stamps are fitted by a line against the sample number and their deviation from it
+    smoothed by a centred running mean over at least :data:`REBUILD_HALF_WINDOW` samples each
+    side (four times the longest run of one stamp): a rate that drifts slowly is followed, the
+    scatter averaged away.  Stamps rounded to their resolution come out right on average;
+    stamps of a block read later than it was sampled come out late by the block's mean delay,
+    which the GNSS latency check of the aided track measures and takes off.
+
+    Parameters
+    ----------
+    time_ns : ndarray of int64, shape (n,)
+        Non-decreasing stamps, ns since the Unix epoch, one per sample in the order sampled.
+    gap_factor : float
+        A step between consecutive distinct stamps over this many times the time its samples
+        take is a gap (the stretches are rebuilt apart).
+
+    Returns
+    -------
+    tuple or None
+        ``(time_ns, info)``: the rebuilt, strictly increasing stamps (int64, shape (n,)) and
+        ``info`` (``kind`` "shared" or "jitter", ``shared`` samples that had shared a stamp,
+        ``jitter`` of the steps before, ``stamp_step_ns`` median step between distinct stamps);
+        None where no steady sampling rate fits (the rebuilt stamps would not increase).
+    """
+    t = np.asarray(time_ns, np.int64)
+    n = t.size
+    if n < 8:
+        return None
+    start = np.flatnonzero(np.concatenate([[True], np.diff(t) != 0]))
+    runs = np.diff(np.concatenate([start, [n]]))
+    dstamp = np.diff(t[start]).astype(np.float64)
+    if dstamp.size < 2:
+        return None
+    per_sample = dstamp / runs[:-1]
+    step = float(np.median(per_sample))
+    if not step > 0:
+        return None
+    longest = int(runs.max())
+    # the smoothing window a whole number of the usual run: the sawtooth of coarse stamps
+    # averages out exactly instead of leaving a ripple of a stamp step over the window
+    usual = int(np.argmax(np.bincount(runs)))
+    width = usual * -(-(2 * max(REBUILD_HALF_WINDOW, 4 * longest) + 1) // usual)
+    stamp_step = float(np.median(dstamp))
+    if longest > 1:
+        limit = gap_factor * np.maximum(runs[:-1] * step, stamp_step)
+    else:
+        limit = np.full(dstamp.size, REBUILD_SPLIT_STEPS * step)
+    cut = np.flatnonzero(dstamp > limit)
+    bounds = np.concatenate([[0], start[cut + 1], [n]])
+    new = np.empty(n, np.int64)
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        m = b - a
+        if m < 2:
+            new[a:b] = t[a:b]
+            continue
+        k = np.arange(m, dtype=np.float64)
+        # ns relative to the stretch's first stamp: exact in float64 for 104 days
+        s = (t[a:b] - t[a]).astype(np.float64)
+        slope, icpt = np.polyfit(k, s, 1)
+        line = icpt + slope * k
+        dev = centred_mean(s - line, width) if m > width else np.zeros(m)
+        new[a:b] = t[a] + np.round(line + dev).astype(np.int64)
+    if np.any(np.diff(new) <= 0):
+        return None
+    info = {
+        "kind": "shared" if longest > 1 else "jitter",
+        "shared": int(n - start.size),
+        "jitter": _step_jitter(t, gap_factor) if longest == 1 else 0.0,
+        "stamp_step_ns": stamp_step,
+    }
+    return new, info
 
 
 def _rate_runs(t, d, off):
@@ -212,6 +393,31 @@ def time_findings(channel, rep: TimeReport, t0_ns=0):
                 "warning",
                 f"{channel}: {rep.conflicting_duplicates} samples share a time stamp "
                 "with different values; kept the first of each",
+            )
+        )
+    if rep.rebuilt == "shared":
+        out.append(
+            Finding(
+                channel,
+                "stamps",
+                "warning",
+                f"{channel}: {rep.rebuilt_shared} samples shared a time stamp with the one before (distinct stamps "
+                f"{rep.rebuilt_stamp_step_ns * 1e-9:.3g} s apart for {1e9 / rep.nominal_step_ns:.4g}-Hz samples: the "
+                "logger's coarse or block stamps); every sample kept, the stamps rebuilt from the sample count "
+                f"(moved by up to {rep.rebuilt_shift_ns * 1e-9:.3g} s)",
+                rep.rebuilt_shared,
+            )
+        )
+    elif rep.rebuilt == "jitter":
+        out.append(
+            Finding(
+                channel,
+                "stamps",
+                "warning",
+                f"{channel}: time stamps scatter {100 * rep.rebuilt_jitter:.1f} % of the step about a steady rate "
+                "(arrival times or coarse stamps, not sampling times); rebuilt from the sample count "
+                f"(moved by up to {rep.rebuilt_shift_ns * 1e-6:.3g} ms)",
+                rep.rebuilt_jitter,
             )
         )
     if rep.n_stray:

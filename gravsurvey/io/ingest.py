@@ -10,6 +10,7 @@ per finding, the same line in ``record.notes``.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import warnings
 from dataclasses import dataclass, field
@@ -698,7 +699,7 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
             src = raw[role].source if role in raw else (options.mcap_path or "")
             why = [n for n in notes if n.startswith(f"{role}: ")]
             raise DataError(f"{src}: no usable {role} samples" + (f" ({'; '.join(why)})" if why else ""))
-    raw, findings, _ = repair_and_check(raw, options)
+    raw, findings, reports = repair_and_check(raw, options)
     errors = [f for f in findings if f.level == "error"]
     if errors and options.plausibility == "error":
         # each finding under the file its channel came from (an altimeter's heights in feet are
@@ -731,7 +732,7 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
         gr = raw["gradient"]
         gradient = GradientChannel(rel(gr.time_ns), gradient_tensors(gr.values["gradient"], gr.source))
     src = ", ".join(os.fspath(p) for p in options.input_paths(base_dir))
-    return FlightRecord(
+    record = FlightRecord(
         t0_unix_ns=t0,
         imu=ImuChannel(rel(imu.time_ns), imu.values["specific_force"], imu.values["angular_rate"]),
         altimeter=AltimeterChannel(rel(alt.time_ns), alt.values["height"]),
@@ -741,6 +742,68 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
         data_loss=_data_loss(options, base_dir, content) + csv_loss + clock_loss,
         gradient=gradient,
         sources={role: str(ch.source) for role, ch in raw.items()},
+    )
+    if reports["imu"].rebuilt == "shared" and gnss is not None:
+        record = place_rebuilt_imu(record, reports["imu"])
+    return record
+
+
+#: Rebuilt IMU stamps are placed against the GNSS track (:func:`place_rebuilt_imu`) when the
+#: offset they leave unknown, half the distinct stamps' step less one sample's, reaches this, s
+#: (the cross-correlation's step; less is the aided track's GNSS latency check's to measure).
+PLACE_REBUILT_MIN_S = 0.05
+
+
+def place_rebuilt_imu(record: FlightRecord, rep) -> FlightRecord:
+    """The IMU's rebuilt coarse or block stamps moved as a whole onto the GNSS track's time.
+
+    Stamps cut to a coarse clock sit early by up to half its step, a block's read-out stamp late
+    by as much (:func:`~gravsurvey.io.checks.rebuild_time_base` cannot tell which); the offset the
+    specific forces' cross-correlation with the GNSS track measures
+    (:func:`~gravsurvey.consistency.estimate_time_offset`) is taken off when it is clear (its
+    verdict correlation) and within that range (one correlation step to spare), with a warning.
+    Otherwise the record is returned as it was.
+
+    Parameters
+    ----------
+    record : FlightRecord
+        With GNSS.
+    rep : checks.TimeReport
+        The IMU's time repair (``rebuilt == "shared"``).
+
+    Returns
+    -------
+    FlightRecord
+    """
+    from gravsurvey.consistency import OFFSET_VERDICT_CORRELATION, estimate_time_offset
+
+    half = 0.5 * (rep.rebuilt_stamp_step_ns - rep.nominal_step_ns) * 1e-9
+    if not half >= PLACE_REBUILT_MIN_S:
+        return record
+    off, c = estimate_time_offset(record, max_lag_s=max(2.0 * half, 1.0))
+    if off is None or not c >= OFFSET_VERDICT_CORRELATION or abs(off) > half + PLACE_REBUILT_MIN_S:
+        return record
+    # times stay non-negative after t0: every channel moves by what the IMU's start would lose
+    lead = max(0.0, off - float(record.imu.time[0]))
+    t0 = record.t0_unix_ns - int(round(lead * 1e9))
+
+    def moved(ch, by):
+        return None if ch is None else dataclasses.replace(ch, time=ch.time + by)
+
+    note = (
+        f"imu: the rebuilt stamps placed against the GNSS track, moved {-off:+.2f} s (cross-correlation of "
+        f"specific force, r = {c:.2f}; stamps {rep.rebuilt_stamp_step_ns * 1e-9:.3g} s apart leave up to "
+        f"{half:.2f} s unknown)"
+    )
+    warnings.warn(note, DataWarning, stacklevel=2)
+    return dataclasses.replace(
+        record,
+        t0_unix_ns=t0,
+        imu=moved(record.imu, lead - off),
+        altimeter=moved(record.altimeter, lead),
+        gnss=moved(record.gnss, lead),
+        gradient=moved(record.gradient, lead),
+        notes=record.notes + [note],
     )
 
 
