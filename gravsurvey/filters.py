@@ -10,7 +10,8 @@ is 0.5) has transfer function :func:`gaussian_transfer`, ``exp(-2 pi^2 s^2 f^2)`
 * :func:`gaussian_lowpass`: the exact response on the DCT-II grid (circular filtering of the
   mirror extension: no shortening, any length; the per-line post-processor).
 
-:func:`butterworth_lowpass` is the forward-backward Butterworth response on the same grid.
+:func:`butterworth_lowpass` is the forward-backward Butterworth response on the same grid;
+:func:`centred_mean` the symmetric running mean (the time repair's and the IMU-gap noise's).
 Everything is SI (s, Hz, m, m/s); filters are linear, so any unit of the signal works.
 """
 
@@ -24,6 +25,7 @@ from scipy import fft as _sfft
 from gravsurvey.errors import ConfigError, DataError
 
 __all__ = [
+    "centred_mean",
     "KERNEL_HALF_WIDTH_SIGMAS",
     "SIGMA_PER_LENGTH",
     "gaussian_transfer",
@@ -184,3 +186,34 @@ def gaussian_lowpass(z, dt_s, period_s):
 def lowpass_resolution_m(period_s, speed_mps):
     """Half-wavelength resolution (m) of a filter of length ``period_s`` at ``speed_mps``."""
     return 0.5 * float(speed_mps) * float(period_s)
+
+
+def centred_mean(x, width: int) -> np.ndarray:
+    """Running mean of ``x`` centred on each sample over ``width`` samples (an even width: the
+    mean of the two windows either side of the centre, so the kernel stays symmetric); within
+    half a window of either end, the first or last full window's mean.
+
+    Parameters
+    ----------
+    x : ndarray, shape (m,), m > width
+    width : int, >= 1
+
+    Returns
+    -------
+    ndarray, shape (m,)
+    """
+    x = np.asarray(x, np.float64)
+    m = x.size
+    c = np.concatenate([[0.0], np.cumsum(x)])
+    box = (c[width:] - c[:-width]) / width  # box[j]: mean of x[j : j + width]
+    if width % 2:
+        mid = box
+        lo = (width - 1) // 2
+    else:
+        mid = 0.5 * (box[:-1] + box[1:])
+        lo = width // 2
+    out = np.empty(m)
+    out[lo : lo + mid.size] = mid
+    out[:lo] = mid[0]
+    out[lo + mid.size :] = mid[-1]
+    return out

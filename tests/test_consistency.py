@@ -931,3 +931,39 @@ def test_held_gnss_fixes_and_a_stale_imu_are_dropped_and_the_flight_processes(tm
     # the IMU's 10-s hole is longer than checks.max_imu_gap_s: two segments, 6.4 mGal measured
     assert any("estimated 2 of 2 segments" in n for n in r.notes)
     assert _rms_on_lines(r) < 7.0
+
+
+def test_an_accelerometer_at_its_range_is_named_and_its_velocity_left_to_the_aiding(tmp_path, intact):
+    """The sample's north accelerometer clipped at 2 m/s^2 in its turn (206 samples): the filter
+    had read the clipped velocity as gravity, 8.16 mGal (intact 3.45) with nothing said; now the
+    samples are named and the velocity over them is left to the GNSS and heights: 3.40."""
+    cfg, fl = _flight(tmp_path, lambda p: d.map_columns(p, "imu", {"fy_mps2": lambda x: np.clip(x, -2.0, 2.0)}))
+    rec = load_flight(fl.ingest, cfg.base_dir)
+    assert rec.imu.saturated is not None and rec.imu.saturated.sum() == 206
+    r = process_flight(cfg, fl)
+    assert any("imu: specific_force y held at -2, 2 m/s^2" in n and "206 samples" in n for n in r.notes)
+    assert _rms_on_lines(r) < 1.1 * _rms_on_lines(intact)
+
+
+def test_imu_gap_noise_covers_gaps_and_saturated_samples_once_per_epoch():
+    from gravsurvey.inm.solve import imu_gap_noise, missed_accel_sigma
+
+    S = 0.3  # m/s^2
+    t = np.arange(100) * 0.1
+    t[55:] += 1.0  # a 1.1-s step: 1.0 s more than the nominal
+    idx = np.arange(0, 100, 10)  # epochs at samples 0, 10, ..., 90
+    assert imu_gap_noise(np.arange(100) * 0.1, idx, None, S) is None
+    var = imu_gap_noise(t, idx, None, S)
+    np.testing.assert_allclose(var, np.where(np.arange(10) == 6, (S * 1.0) ** 2, 0.0))
+    sat = np.zeros(100, bool)
+    sat[21:25] = True  # four samples at the range: their four steps of 0.1 s, one error
+    var = imu_gap_noise(t, idx, sat, S)
+    np.testing.assert_allclose(var[3], (S * 0.4) ** 2)
+    assert var[6] == pytest.approx(S**2) and np.count_nonzero(var) == 2
+    # the specific force a straight line misses: the record's departure from its 1-s running mean
+    rng = np.random.default_rng(1)
+    tt = np.arange(20_000) * 0.02
+    calm = np.column_stack([np.zeros(tt.size), np.sin(tt / 60.0), np.full(tt.size, 9.8)])
+    assert missed_accel_sigma(tt, calm) < 1e-4
+    rough = calm + np.column_stack([np.zeros(tt.size), np.zeros(tt.size), rng.normal(0.0, 0.5, tt.size)])
+    assert missed_accel_sigma(tt, rough) == pytest.approx(0.5 * np.sqrt(1 - 1 / 50), rel=0.03)

@@ -10,6 +10,7 @@ from test_io_csv import CSV_IN, _write_flight_csv
 from test_io_support import static_flight
 
 from gravsurvey.errors import DataError, DataWarning
+from gravsurvey.filters import centred_mean
 from gravsurvey.io import checks as ck
 from gravsurvey.io.ingest import load_flight
 from gravsurvey.io.record import AltimeterChannel, FlightRecord, GnssChannel, ImuChannel
@@ -518,9 +519,45 @@ def test_stamps_that_are_sampling_times_are_not_rebuilt(case):
 def test_centred_mean_is_symmetric_for_odd_and_even_widths():
     x = np.arange(20.0)
     for width in (1, 3, 4, 5):
-        m = ck.centred_mean(x, width)
+        m = centred_mean(x, width)
         half = width // 2
         np.testing.assert_allclose(m[half : x.size - half], x[half : x.size - half])  # a line stays a line
         assert np.all(m[:half] == m[half]) and np.all(m[x.size - half :] == m[x.size - half - 1])
     saw = np.tile(np.arange(4.0), 25)  # the sawtooth of coarse stamps, period 4
-    np.testing.assert_allclose(ck.centred_mean(saw, 8), 1.5)
+    np.testing.assert_allclose(centred_mean(saw, 8), 1.5)
+
+
+# ------------------------------------------------------------------------------- a sensor at its range
+def test_samples_at_a_sensors_range_are_found_and_nothing_else():
+    rng = np.random.default_rng(2)
+    x = 9.8 + 0.6 * rng.standard_normal(50_000)
+    clipped = np.minimum(x, 10.8)  # the top 5 % at the range
+    m = ck.saturated_samples(clipped)
+    np.testing.assert_array_equal(m, x >= 10.8)
+    both = np.clip(x, 8.9, 10.8)
+    assert ck.saturated_samples(both).sum() == ((x >= 10.8) | (x <= 8.9)).sum()
+    assert not ck.saturated_samples(x).any()  # noise: every value once
+    assert not ck.saturated_samples(np.round(x, 1)).any()  # coarse digits: the extremes are rare
+    assert not ck.saturated_samples(np.full(1000, 9.8)).any()  # a dead axis or a noise-free rest
+    assert not ck.saturated_samples(np.tile([9.8, 9.8 + 2e-15], 500)).any()  # two values alike
+    few = x.copy()
+    few[:5] = x.max() + 1.0  # five samples at a new extreme: under the count
+    assert not ck.saturated_samples(few).any()
+
+
+def test_saturated_axes_are_named_and_the_accelerometers_marked():
+    rng = np.random.default_rng(4)
+    n = 20_000
+    f = np.column_stack([rng.normal(0, 1, n), rng.normal(0, 1, n), 9.8 + rng.normal(0, 0.5, n)])
+    w = rng.normal(0, 0.05, (n, 3))
+    f[:, 2] = np.minimum(f[:, 2], 10.5)
+    w[:, 0] = np.clip(w[:, 0], -0.1, 0.1)
+    t = np.arange(n) * 0.02
+    sat, found = ck.saturated_imu(f, w, t)
+    np.testing.assert_array_equal(sat, f[:, 2] == 10.5)  # the accelerometer's samples only
+    acc, gyro = (x.message for x in found)
+    assert acc.startswith(f"imu: specific_force z held at 10.5 m/s^2 (declared m/s^2) on {int(sat.sum())} samples in ")
+    assert "the accelerometer's range exceeded (saturated)" in acc and "(first " in acc
+    assert (
+        gyro.startswith("imu: angular_rate x held at -0.1, 0.1 rad/s") and "the attitude through them is wrong" in gyro
+    )

@@ -1230,16 +1230,19 @@ def keep_default_prior(params, report, speed_mps: float, min_s: float, span_s: f
     return new, report
 
 
-def straight_weight(nav, f_t, times) -> np.ndarray:
+def straight_weight(nav, f_t, times, also=None) -> np.ndarray:
     """Weight in [0, 1] at ``times``: 1 on straight flight, 0 in turns, cosine ramps between.
 
     Turns (horizontal specific force above :data:`MANOEUVRE_MPS2`, dilated by
     :data:`MANOEUVRE_MARGIN_S`) carry a strapdown system's largest errors; the ramps
     (:data:`MANOEUVRE_MARGIN_S` long) keep a window built on this weight free of the leakage
-    a hard cut would bring.
+    a hard cut would bring.  ``also`` (bool at ``times``, optional): more epochs left out the
+    same way (where the IMU's specific force is not known).
     """
     t = np.asarray(times, float)
     bad = _horizontal_specific_force(nav, f_t, t) > MANOEUVRE_MPS2
+    if also is not None:
+        bad = bad | np.asarray(also, bool)
     if t.size < 2:
         return (~bad).astype(float)
     dt = float(np.median(np.diff(t)))

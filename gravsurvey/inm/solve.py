@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import ConfigError, DataError
 from ..geodesy import WGS84, Ellipsoid, local_displacement, mat_en, mat_ie
+from ..filters import centred_mean
 from .errormodel import (
     BA,
     BG,
@@ -250,6 +251,12 @@ def stack_measurements(parts):
 
 #: Shortest record (s) whose anomaly prior is identified; shorter ones keep the default prior.
 MIN_REFINE_S = 900.0
+
+#: An IMU step longer than this many nominal (median) steps is a gap for :func:`imu_gap_noise`.
+IMU_GAP_STEPS = 1.5
+#: Window (s) of the running mean whose residual is the specific force a straight line across a
+#: gap of about this length misses (:func:`missed_accel_sigma`).
+IMU_GAP_WINDOW_S = 1.0
 
 #: Shortest time (s) between the two GNSS fixes of one speed in :func:`median_ground_speed`:
 #: the fixes' noise (1 m) over 2 s adds 0.7 m/s to a component, a few mm/s to a 70-m/s norm.
@@ -961,7 +968,11 @@ def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False
     elif ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
         wide = wide_prior_params(params, ident, speed0)
         idx, _, _, _, first = one_pass(wide, accel_bias=accel_bias)
-        weight = straight_weight(nav, record.imu.specific_force_t, nav.time[idx])
+        # the stretches where the specific force is not known (gaps, a sensor at its range) are
+        # left out of the spectrum with the turns: the velocity the aiding sets there is a local
+        # event, no part of the field's or the noise's spectrum
+        blind = imu_gap_noise(nav.time, idx, record.imu.saturated)
+        weight = straight_weight(nav, record.imu.specific_force_t, nav.time[idx], None if blind is None else blind > 0)
         params, ident = refine_prior(
             params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))), wide, speed0, weight
         )
@@ -1045,6 +1056,66 @@ def filter_epochs(time_s, rate_hz):
     return idx, 0.5 * max(period, float(np.quantile(spacing, 0.99)) if spacing.size else period)
 
 
+def missed_accel_sigma(time_s, f_t) -> float:
+    """The specific force a straight line across a short IMU gap misses, m/s^2 (1-sigma): the
+    RMS of each axis's departure from its centred running mean over :data:`IMU_GAP_WINDOW_S`,
+    the largest of the three (turbulence and manoeuvres; near zero on a calm record)."""
+    t = np.asarray(time_s, float)
+    f = np.asarray(f_t, float)
+    if t.size < 3:
+        return 0.0
+    width = int(round(IMU_GAP_WINDOW_S / float(np.median(np.diff(t)))))
+    if width < 2 or t.size <= 2 * width:
+        return 0.0
+    # the running mean's ends hold the first and last window's mean: left out
+    inner = slice(width, t.size - width)
+    return float(max(np.sqrt(np.mean((f[inner, j] - centred_mean(f[:, j], width)[inner]) ** 2)) for j in range(3)))
+
+
+def imu_gap_noise(time_s, idx, saturated=None, accel_sigma_mps2: float = 1.0):
+    """Velocity process noise of the time the specific force is not known, per filter epoch.
+
+    Across an IMU gap the mechanization takes the specific force as the straight line between
+    the samples either side, and a sample at an accelerometer's range (``saturated``) holds the
+    range, not the force; what either misses enters the velocity, and the filter, not told,
+    read the jump as anomaly.  The time not known within an epoch is one error of
+    ``accel_sigma_mps2`` (a clipped stretch's excess persists through it; the caller gives
+    :func:`missed_accel_sigma` of the record).
+
+    Parameters
+    ----------
+    time_s : ndarray, shape (n,)
+        IMU sample times, s.
+    idx : ndarray of int, shape (m,)
+        The filter epochs' indices into ``time_s`` (:func:`filter_epochs`).
+    saturated : ndarray of bool, shape (n,), optional
+        Samples at an accelerometer's range (``ImuChannel.saturated``).
+    accel_sigma_mps2 : float
+
+    Returns
+    -------
+    ndarray, shape (m,) or None
+        Per epoch ``k``, the variance (m/s)^2 of each velocity component added over the
+        transition from epoch ``k - 1`` (0 at epoch 0): ``(sigma T_k)^2``, ``T_k`` the steps'
+        excess over the nominal step (steps over :data:`IMU_GAP_STEPS` nominal ones) plus the
+        steps from saturated samples in it, s; None when there is neither.
+    """
+    d = np.diff(np.asarray(time_s, float))
+    if d.size < 2:
+        return None
+    nominal = float(np.median(d))
+    blind = np.where(d > IMU_GAP_STEPS * nominal, d - nominal, 0.0)
+    if saturated is not None:
+        blind = blind + np.where(np.asarray(saturated, bool)[:-1], d, 0.0)
+    if not blind.any():
+        return None
+    c = np.concatenate([[0.0], np.cumsum(blind)])
+    idx = np.asarray(idx)
+    var = np.zeros(idx.size)
+    var[1:] = (accel_sigma_mps2 * (c[idx[1:]] - c[idx[:-1]])) ** 2
+    return var
+
+
 def _one_pass(
     record,
     params,
@@ -1092,6 +1163,10 @@ def _one_pass(
         hprior=hprior,
         accel_bias=accel_bias,
     )
+    gap_var = imu_gap_noise(t, idx, record.imu.saturated, missed_accel_sigma(t, record.imu.specific_force_t))
+    if gap_var is not None:
+        for i in DP:
+            q[:, i, i] += gap_var
     meas = [AltimeterMeasurement(alt_t, alt_h, params.altimeter_sigma_m, ellipsoid)]
     if gnss_used:
         gn = record.gnss

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gravsurvey.filters import centred_mean
 from gravsurvey.geodesy import OMEGA_E, local_displacement
 
 G_STD = 9.80665  # m/s^2, the unit "g"
@@ -218,37 +219,6 @@ def _step_jitter(t, gap_factor) -> float:
     # white stamp errors e: steps d_k = e_k+1 - e_k + nom, changes d_k+1 - d_k with 3 times the
     # steps' variance; 1.4826 x the median absolute value is a standard deviation
     return float(1.4826 * np.median(np.abs(np.diff(d))) / math.sqrt(3.0) / nom)
-
-
-def centred_mean(x, width: int) -> np.ndarray:
-    """Running mean of ``x`` centred on each sample over ``width`` samples (an even width: the
-    mean of the two windows either side of the centre, so the kernel stays symmetric); within
-    half a window of either end, the first or last full window's mean.
-
-    Parameters
-    ----------
-    x : ndarray, shape (m,), m > width
-    width : int, >= 1
-
-    Returns
-    -------
-    ndarray, shape (m,)
-    """
-    x = np.asarray(x, np.float64)
-    m = x.size
-    c = np.concatenate([[0.0], np.cumsum(x)])
-    box = (c[width:] - c[:-width]) / width  # box[j]: mean of x[j : j + width]
-    if width % 2:
-        mid = box
-        lo = (width - 1) // 2
-    else:
-        mid = 0.5 * (box[:-1] + box[1:])
-        lo = width // 2
-    out = np.empty(m)
-    out[lo : lo + mid.size] = mid
-    out[:lo] = mid[0]
-    out[lo + mid.size :] = mid[-1]
-    return out
 
 
 def _moves_stamps(t, new) -> bool:
@@ -824,6 +794,114 @@ def single_sample_outliers(x, k_sigma: float, tail_factor: float | None = None):
         & (np.abs(right) > 0.25 * np.abs(mid))
     )
     return (np.flatnonzero(hit) + 2).astype(np.int64)
+
+
+#: A column holding its extreme value on at least this many samples ...
+SATURATION_MIN_SAMPLES = 10
+#: ... this many times as often as the most frequent of the next values towards the bulk (a
+#: sensor at its range piles the samples up at one number; noise or coarse digits spread them)
+SATURATION_PILE_UP = 5.0
+#: How many distinct values next to the extreme make that comparison.
+SATURATION_NEIGHBOURS = 20
+
+
+def saturated_samples(x) -> np.ndarray:
+    """Samples of one IMU column held at the column's largest or smallest value: the sensor's
+    range, exceeded (an accelerometer of 2 g in a hard turn or turbulence, a logger's clip).
+
+    The test is a pile-up at the extreme: at least :data:`SATURATION_MIN_SAMPLES` samples exactly
+    equal to it, :data:`SATURATION_PILE_UP` times as many as of any of the
+    :data:`SATURATION_NEIGHBOURS` distinct values next to it.  A constant column (a dead axis, a
+    noise-free simulation at rest) is none.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+    """
+    x = np.asarray(x, float)
+    out = np.zeros(x.size, bool)
+    fin = x[np.isfinite(x)]
+    if fin.size < 10 * SATURATION_MIN_SAMPLES:
+        return out
+    lo, hi = float(fin.min()), float(fin.max())
+    if not hi > lo:
+        return out
+    for ext, sign in ((hi, 1.0), (lo, -1.0)):
+        at = x == ext
+        n_at = int(at.sum())
+        if n_at < SATURATION_MIN_SAMPLES:
+            continue
+        # the samples next to the extreme, at most a few times the pile-up's size of them
+        rest = sign * fin[fin != ext]
+        k = min(rest.size, SATURATION_NEIGHBOURS * n_at)
+        if k == 0:
+            continue
+        top = np.partition(rest, rest.size - k)[rest.size - k :]
+        _, counts = np.unique(top, return_counts=True)
+        if n_at >= SATURATION_PILE_UP * int(counts[-SATURATION_NEIGHBOURS:].max()):
+            out |= at
+    return out
+
+
+def saturated_imu(f, w, t_s=None, accel_unit="m/s^2", gyro_unit="rad/s"):
+    """Accelerometer and gyro axes at their range (:func:`saturated_samples`).
+
+    Parameters
+    ----------
+    f, w : ndarray, shape (n, 3)
+        Specific force and angular rate as recorded (SI).
+    t_s : ndarray, shape (n,), optional
+        Sample times, s after the record's start (for the message).
+    accel_unit, gyro_unit : str
+        The units the file declared (the values are quoted in SI).
+
+    Returns
+    -------
+    saturated : ndarray of bool, shape (n,)
+        Samples where an accelerometer axis sat at its range.
+    findings : list of Finding
+        A warning per saturated axis: the value, the count, the runs and the first's times; the
+        accelerometers' samples are kept and the filter told their velocity is unknown
+        (:func:`gravsurvey.inm.solve.imu_gap_noise`); a gyro's attitude is not repaired.
+    """
+    n = np.asarray(f).shape[0]
+    sat = np.zeros(n, bool)
+    out = []
+    for name, arr, unit, si in (
+        ("specific_force", f, accel_unit, "m/s^2"),
+        ("angular_rate", w, gyro_unit, "rad/s"),
+    ):
+        for j, axis in enumerate("xyz"):
+            m = saturated_samples(np.asarray(arr)[:, j])
+            if not m.any():
+                continue
+            edge = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
+            starts, ends = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+            vals = ", ".join(f"{v:.6g}" for v in np.unique(np.asarray(arr)[m, j]))
+            first = "" if t_s is None else f" (first {t_s[starts[0]]:.2f}-{t_s[ends[0] - 1]:.2f} s)"
+            if name == "specific_force":
+                sat |= m
+                what = (
+                    "the accelerometer's range exceeded (saturated): the samples kept, the velocity over them "
+                    "taken as unknown by the filter"
+                )
+            else:
+                what = "the gyro's range exceeded (saturated): the attitude through them is wrong"
+            out.append(
+                Finding(
+                    "imu",
+                    "saturation",
+                    "warning",
+                    f"imu: {name} {axis} held at {vals} {si} (declared {unit}) on {int(m.sum())} samples in "
+                    f"{starts.size} runs{first}: {what}",
+                    float(m.sum()),
+                )
+            )
+    return sat, out
 
 
 def repair_imu_glitches(f, w, accel_unit="m/s^2", gyro_unit="rad/s"):

@@ -619,6 +619,13 @@ def repair_and_check(raw: dict, options: IngestOptions):
             # repaired in place: a reader's zero-copy view of its buffer is copied first
             if not ch.values[key].flags.writeable:
                 ch.values[key] = ch.values[key].copy()
+        # a sensor at its range before the glitch repair, which would smooth a plateau's ends
+        sat, found = ck.saturated_imu(
+            ch.values["specific_force"], ch.values["angular_rate"], (ch.time_ns - t0) * 1e-9, *imu_units(options)
+        )
+        findings += found
+        if sat.any():
+            ch.values["saturated"] = sat
         findings += ck.repair_imu_glitches(ch.values["specific_force"], ch.values["angular_rate"], *imu_units(options))
         findings += ck.check_imu(
             ch.time_ns,
@@ -734,7 +741,9 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
     src = ", ".join(os.fspath(p) for p in options.input_paths(base_dir))
     record = FlightRecord(
         t0_unix_ns=t0,
-        imu=ImuChannel(rel(imu.time_ns), imu.values["specific_force"], imu.values["angular_rate"]),
+        imu=ImuChannel(
+            rel(imu.time_ns), imu.values["specific_force"], imu.values["angular_rate"], imu.values.get("saturated")
+        ),
         altimeter=AltimeterChannel(rel(alt.time_ns), alt.values["height"]),
         gnss=gnss,
         source=src,

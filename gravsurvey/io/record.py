@@ -25,11 +25,15 @@ class ImuChannel:
         Specific force resolved on the triad, m/s^2.
     angular_rate_t : ndarray, shape (n, 3)
         Absolute angular rate of the triad resolved on the triad, rad/s.
+    saturated : ndarray of bool, shape (n,), or None
+        Samples where an accelerometer axis sat at its range (the specific force there is only a
+        bound: :func:`gravsurvey.io.checks.saturated_samples`); None: none did.
     """
 
     time: np.ndarray
     specific_force_t: np.ndarray
     angular_rate_t: np.ndarray
+    saturated: np.ndarray | None = None
 
 
 @dataclass
@@ -196,8 +200,12 @@ def slice_record(record: FlightRecord, t0: float, t1: float, margin_s: float = 0
         return (t >= lo) & (t <= hi)
 
     m = cut(record.imu.time, t0, t1)
+    sat = record.imu.saturated
     imu = ImuChannel(
-        record.imu.time[m].copy(), record.imu.specific_force_t[m].copy(), record.imu.angular_rate_t[m].copy()
+        record.imu.time[m].copy(),
+        record.imu.specific_force_t[m].copy(),
+        record.imu.angular_rate_t[m].copy(),
+        None if sat is None else sat[m].copy(),
     )
     a = cut(record.altimeter.time, t0 - margin_s, t1 + margin_s)
     alt = AltimeterChannel(record.altimeter.time[a].copy(), record.altimeter.height[a].copy())
