@@ -231,7 +231,8 @@ def test_gnss_aiding_bounds_position_and_estimates_gyro_bias(biased_grid):
     aided = estimate_anomaly(rec, _params(True), _initial(s), "strapdown")
     free = estimate_anomaly(rec, _params(False), _initial(s), "strapdown")
     assert aided.gnss_aided and not free.gnss_aided
-    assert aided.x_smooth.shape[1] == 14 and free.x_smooth.shape[1] == 8
+    # aided: attitude, gyro-bias and (by default since 2026-12-05) horizontal accelerometer-bias states
+    assert aided.x_smooth.shape[1] == 16 and free.x_smooth.shape[1] == 8
     e_aided = _horizontal_error_m(s, aided)
     e_free = _horizontal_error_m(s, free)
     # 5 Hz samples of 0.5 m white noise: 0.22 m per 1 s epoch before smoothing; measured

@@ -325,9 +325,9 @@ def test_accel_bias_states_keep_the_vertical_on_a_biased_strapdown_flight():
 
 
 def test_accel_bias_states_default_by_triad():
-    """Default (None): on for a platform triad, off for a strapdown one; a given value wins."""
+    """Default (None): on for either triad (strapdown since 2026-12-05); a given value wins."""
     assert accel_bias_states_for(InmParams(), "platform") is True
-    assert accel_bias_states_for(InmParams(), "strapdown") is False
+    assert accel_bias_states_for(InmParams(), "strapdown") is True
     for given in (True, False):
         for triad in ("platform", "strapdown"):
             assert accel_bias_states_for(InmParams(accel_bias_states=given), triad) is given
@@ -375,7 +375,7 @@ def test_default_run_has_no_horizontal_outputs(grid_flight):
         _record(grid_flight), inm_params({k: v for k, v in NAV_MODEL.items() if k != "horizontal"}), None, "strapdown"
     )
     assert sol.dg_horizontal is None and sol.dg_horizontal_sigma is None and sol.horizontal_observable is None
-    assert sol.x_smooth.shape[1] == N_STATE_AIDED
+    assert sol.x_smooth.shape[1] == N_STATE_BIAS  # the vertical model with the accelerometer biases
 
 
 def test_horizontal_accuracy_with_heading_changes(grid_flight):

@@ -111,8 +111,9 @@ class InmParams:
         Carry the constant biases of accelerometers 1 and 2 as states (16 instead of 14) in a
         GNSS-aided filter (docs/method.md, "GNSS aiding"): an unmodelled horizontal bias is
         taken for a tilt on straight legs and leaks into the vertical in turns.  ``None`` (the
-        default): on for a platform triad, off for a strapdown one (measured,
-        docs/benchmarks.md, "Horizontal accelerometer-bias states on platform flights").
+        default): on, either triad (measured, docs/benchmarks.md, "Horizontal accelerometer-bias
+        states on platform flights" and "The accelerometer-bias states on strapdown flights");
+        ``False`` keeps the 14 states.
     accel_bias_mps2 : float or None
         The horizontal accelerometers' bias from their datasheet (1-sigma of each constant bias,
         m/s^2; e.g. 1e-3 for 100 micro-g).  Given, a GNSS-aided filter on either triad carries the
@@ -185,18 +186,20 @@ class InmParams:
 def accel_bias_states_for(params: InmParams, triad: str) -> bool:
     """Whether the GNSS-aided filter carries the horizontal accelerometer biases (16 states).
 
-    ``params.accel_bias_states`` when the config gives it; else on for a platform triad or when
-    the datasheet bias ``params.accel_bias_mps2`` is given, off for a strapdown one.  On a
+    ``params.accel_bias_states`` when the config gives it; else on, for either triad.  On a
     straight leg a horizontal bias ``b`` is indistinguishable from a tilt ``b / g``; in a turn
     that tilt would put ``b |f_h| / g`` into the vertical channel, which a bias does not.  On
     the unseen-flight suite the platform flights gain (quick U230 0.40 -> 0.22 mGal, U215 0.48
-    -> 0.21); the strapdown flights do not on balance (quick U016 0.85 -> 0.75, U003 0.20 ->
-    0.23), so strapdown keeps the cheaper 14 states unless a datasheet bias is given
-    (docs/benchmarks.md, "Horizontal accelerometer-bias states on platform flights").
+    -> 0.21); the strapdown flights with the suite's navigation-grade biases are even on
+    balance (quick U016 0.81 -> 0.77, U003 0.20 -> 0.22; issue flight IC07 0.21 -> 0.19), and a
+    tactical IMU's (1e-2 m/s^2) without them is off by 12.9 mGal for 1.08 (quick U001), so
+    since 2026-12-05 strapdown carries them by default too (docs/benchmarks.md, "The
+    accelerometer-bias states on strapdown flights").  The triad no longer decides; the
+    argument stays so that a rule per triad can come back without touching the callers.
     """
     if params.accel_bias_states is not None:
         return bool(params.accel_bias_states)
-    return triad == "platform" or params.accel_bias_mps2 is not None
+    return True
 
 
 def solvability_warnings(params: InmParams, speed_mps) -> list[str]:

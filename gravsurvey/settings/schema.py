@@ -129,8 +129,7 @@ class ModelSection(Section):
         "accel_bias_states",
         "carry the horizontal accelerometer biases as filter states (16 instead of 14) on GNSS-aided "
         "flights: an unmodelled bias is taken for tilt and leaks into the vertical in turns "
-        "(docs/method.md, GNSS aiding); null: on for a platform triad or when `accel_bias_mps2` is given, "
-        "off for a strapdown one",
+        "(docs/method.md, GNSS aiding); null: on, either triad (false: the 14 states)",
     )
     accel_bias_mps2: Optional[float] = _m(
         "accel_bias_mps2",
