@@ -176,3 +176,25 @@ def test_inspect_recognises_gravimeter_and_navigation_files(tmp_path):
     assert r.returncode == 1
     assert "none of the gravimeter or navigation formats (mgd77t, nmea, bgm_rgs, dgs_laptop" in r.stderr
     assert "trajectory); a channel CSV" in r.stderr
+
+
+def test_inspect_names_an_accelerometer_at_its_range(tmp_path):
+    """A CSV IMU whose vertical accelerometer was clipped: inspect says so, per axis, as the run
+    would (docs/input-formats.md, "A sensor at its range")."""
+    rng = np.random.default_rng(8)
+    n = 6000
+    t = 1_741_608_000 * 10**9 + np.arange(n) * 20_000_000
+    fz = np.minimum(9.8 + 0.5 * rng.standard_normal(n), 10.5)
+    rows = [
+        f"{t[k]},{0.01 * rng.standard_normal()!r},{0.01 * rng.standard_normal()!r},{float(fz[k])!r},0.0,0.0,7e-05"
+        for k in range(n)
+    ]
+    p = tmp_path / "imu.csv"
+    p.write_text("time_ns,fx_mps2,fy_mps2,fz_mps2,wx_radps,wy_radps,wz_radps\n" + "\n".join(rows) + "\n")
+    (rep,) = inspect_files([p])
+    (ch,) = rep["channels"]
+    sat = [c for c in ch["checks"] if c["check"] == "saturation"]
+    assert len(sat) == 1 and sat[0]["level"] == "warning"
+    assert sat[0]["message"].startswith(
+        f"imu: specific_force z held at 10.5 m/s^2 (declared m/s^2) on {int((fz == 10.5).sum())} "
+    )

@@ -44,6 +44,8 @@ def _channel_report(role, time_ns, values, units):
         f += ck.check_imu(
             t, values["specific_force"], values["angular_rate"], rep.nominal_step_ns, units["accel"], units["gyro"]
         )
+        t_s = (t - t[0]) * 1e-9 if len(t) else None
+        f += ck.saturated_imu(values["specific_force"], values["angular_rate"], t_s, units["accel"], units["gyro"])[1]
     elif role == "gnss":
         f += ck.check_gnss(values["lat_deg"], values["lon_deg"])
         f += ck.check_height(role, values["height"], units["height"])
