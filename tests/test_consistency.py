@@ -960,6 +960,9 @@ def test_imu_gap_noise_covers_gaps_and_saturated_samples_once_per_epoch():
     var = imu_gap_noise(t, idx, sat, S)
     np.testing.assert_allclose(var[3], (S * 0.4) ** 2)
     assert var[6] == pytest.approx(S**2) and np.count_nonzero(var) == 2
+    # an IMU whose rate halved within the record: no gaps at the lower rate
+    halved = np.concatenate([np.arange(50) * 0.1, 4.9 + np.arange(1, 26) * 0.2])
+    assert imu_gap_noise(halved, np.arange(0, 75, 5), None, S) is None
     # the specific force a straight line misses: the record's departure from its 1-s running mean
     rng = np.random.default_rng(1)
     tt = np.arange(20_000) * 0.02
