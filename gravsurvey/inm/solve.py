@@ -392,6 +392,9 @@ def estimate_anomaly(
     gnss_latency = None  # a GnssLatency once the first aided pass has measured it
     # a height channel that is the GNSS's own heights enters once, not again as GNSS's up
     gnss_heights = _heights_are_gnss(record)
+    # what a straight line across an IMU gap or a clipped stretch misses: a property of the
+    # record's own specific force, found once (constant biases taken off later leave it as is)
+    gap_sigma = missed_accel_sigma(np.asarray(record.imu.time, float), record.imu.specific_force_t)
     k = -1
     while k + 1 < passes:
         k += 1
@@ -430,6 +433,7 @@ def estimate_anomaly(
             accel_bias_prior=-accel_bias_t,
             pv_prior_i=(dr_prior_i, dv_prior_i),
             gnss_vertical=not gnss_heights,
+            gap_accel_sigma_mps2=gap_sigma,
         )
         if given_params.identify and reidentify:
             params, ident = _identify(record, given_params, nav, ellipsoid, speed0, one_pass, accel_bias)
@@ -1135,6 +1139,7 @@ def _one_pass(
     pv_prior_i=None,
     gnss_vertical=True,
     accel_bias_prior=None,
+    gap_accel_sigma_mps2=None,
 ):
     """Discretise, filter and smooth once about the mechanization ``nav``.
 
@@ -1145,6 +1150,7 @@ def _one_pass(
     use the GNSS's up component (False where the heights are the GNSS's).  ``gyro_bias_prior``
     (3,), rad/s: the prior mean of the gyro-bias state (minus the bias taken off the rates);
     ``accel_bias_prior`` (2,), m/s^2: the same for the accelerometer-bias states (16 or 18).
+    ``gap_accel_sigma_mps2``: the record's :func:`missed_accel_sigma` (found here when None).
     """
     t = nav.time
     alt_t, alt_h = _altimeter(record)
@@ -1167,7 +1173,9 @@ def _one_pass(
         hprior=hprior,
         accel_bias=accel_bias,
     )
-    gap_var = imu_gap_noise(t, idx, record.imu.saturated, missed_accel_sigma(t, record.imu.specific_force_t))
+    if gap_accel_sigma_mps2 is None:
+        gap_accel_sigma_mps2 = missed_accel_sigma(t, record.imu.specific_force_t)
+    gap_var = imu_gap_noise(t, idx, record.imu.saturated, gap_accel_sigma_mps2)
     if gap_var is not None:
         for i in DP:
             q[:, i, i] += gap_var
