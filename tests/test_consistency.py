@@ -215,7 +215,7 @@ def test_rebuilt_imu_stamps_are_placed_only_within_what_they_leave_unknown(tmp_p
 
     cfg, fl = _flight(tmp_path)
     rec = load_flight(fl.ingest, cfg.base_dir)
-    coarse = TimeReport(rebuilt="shared", rebuilt_stamp_step_ns=1e9, nominal_step_ns=1e8)
+    coarse = TimeReport(rebuilt="coarse", rebuilt_stamp_step_ns=1e9, nominal_step_ns=1e8)
 
     def late(s):
         return dataclasses.replace(rec, imu=dataclasses.replace(rec.imu, time=rec.imu.time + s))
@@ -231,7 +231,7 @@ def test_rebuilt_imu_stamps_are_placed_only_within_what_they_leave_unknown(tmp_p
         np.testing.assert_allclose(absolute(placed, ch), getattr(rec, ch).time, atol=1e-9)
     far = late(2.0)
     assert place_rebuilt_imu(far, coarse) is far
-    fine = TimeReport(rebuilt="shared", rebuilt_stamp_step_ns=1e8 + 9e7, nominal_step_ns=1e8)
+    fine = TimeReport(rebuilt="coarse", rebuilt_stamp_step_ns=1e8 + 9e7, nominal_step_ns=1e8)
     assert place_rebuilt_imu(late(0.3), fine).notes == rec.notes
 
 

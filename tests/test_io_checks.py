@@ -452,7 +452,7 @@ def test_coarse_or_block_stamps_are_rebuilt_and_every_sample_kept(kind, stamp, o
     values = np.arange(true.size, dtype=float)
     stamps = stamp(true)
     t, (v,), rep = ck.repair_time(stamps, [values])
-    assert rep.n_out == true.size and rep.conflicting_duplicates == 0 and rep.rebuilt == "shared"
+    assert rep.n_out == true.size and rep.conflicting_duplicates == 0 and rep.rebuilt == "coarse"
     np.testing.assert_array_equal(v, values)
     err = (t - true) * 1e-6  # ms
     assert abs(err.mean() - offset_ms) < 1e-3 and err.std() < 1e-3
@@ -487,7 +487,7 @@ def test_a_gap_within_coarse_stamps_stays_a_gap():
     true = np.concatenate([true[:8000], true[8000:] + 60 * 10**9])  # a minute without samples
     values = np.arange(true.size, dtype=float)  # the samples differ: none is written twice
     t, _, rep = ck.repair_time(true // 100_000_000 * 100_000_000, [values])
-    assert rep.rebuilt == "shared" and rep.n_gaps == 1 and rep.n_out == true.size
+    assert rep.rebuilt == "coarse" and rep.n_gaps == 1 and rep.n_out == true.size
     err = (t - true) * 1e-6
     assert np.all(np.abs(err + 40.0) < 1e-3)
 

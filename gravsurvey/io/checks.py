@@ -100,7 +100,7 @@ class TimeReport:
     irregular_fraction: float = 0.0
     jitter: float = 0.0  # std(dt)/nominal over regular steps
     rate_runs: list = field(default_factory=list)  # (t_first_ns, t_last_ns, rate_hz) at another rate
-    rebuilt: str = ""  # "shared" or "jitter" when rebuild_time_base rebuilt the stamps
+    rebuilt: str = ""  # "coarse" or "jitter" when rebuild_time_base rebuilt the stamps
     rebuilt_shared: int = 0  # samples that had shared a stamp with the one before
     rebuilt_jitter: float = 0.0  # the stamps' jitter before the rebuild, RMS step deviation / step
     rebuilt_shift_ns: float = 0.0  # largest |new - old| stamp
@@ -171,9 +171,9 @@ def repair_time(time_ns, values, gap_factor=5.0):
             values = [v[keep] for v in values]
         if len(t) > 1 and (np.any(np.diff(t) == 0) or _step_jitter(t, gap_factor) > REBUILD_JITTER):
             rebuilt = rebuild_time_base(t, gap_factor)
-            if rebuilt is not None and (rebuilt[1]["kind"] == "shared" or _moves_stamps(t, rebuilt[0])):
+            if rebuilt is not None and (rebuilt[1]["kind"] == "coarse" or _moves_stamps(t, rebuilt[0])):
                 new_t, info = rebuilt
-                rep.rebuilt, rep.rebuilt_shared = info["kind"], info["shared"]
+                rep.rebuilt, rep.rebuilt_shared = info["kind"], info["n_shared"]
                 rep.rebuilt_jitter, rep.rebuilt_stamp_step_ns = info["jitter"], info["stamp_step_ns"]
                 rep.rebuilt_shift_ns = float(np.max(np.abs(new_t - t)))
                 t = new_t
@@ -257,7 +257,7 @@ def rebuild_time_base(time_ns, gap_factor=5.0):
     -------
     tuple or None
         ``(time_ns, info)``: the rebuilt, strictly increasing stamps (int64, shape (n,)) and
-        ``info`` (``kind`` "shared" or "jitter", ``shared`` samples that had shared a stamp,
+        ``info`` (``kind`` "coarse" or "jitter", ``n_shared`` samples that had shared a stamp,
         ``jitter`` of the steps before, ``stamp_step_ns`` median step between distinct stamps);
         None where no steady sampling rate fits (the rebuilt stamps would not increase).
     """
@@ -302,8 +302,8 @@ def rebuild_time_base(time_ns, gap_factor=5.0):
     if np.any(np.diff(new) <= 0):
         return None
     info = {
-        "kind": "shared" if longest > 1 else "jitter",
-        "shared": int(n - start.size),
+        "kind": "coarse" if longest > 1 else "jitter",
+        "n_shared": int(n - start.size),
         "jitter": _step_jitter(t, gap_factor) if longest == 1 else 0.0,
         "stamp_step_ns": stamp_step,
     }
@@ -365,7 +365,7 @@ def time_findings(channel, rep: TimeReport, t0_ns=0):
                 "with different values; kept the first of each",
             )
         )
-    if rep.rebuilt == "shared":
+    if rep.rebuilt == "coarse":
         out.append(
             Finding(
                 channel,

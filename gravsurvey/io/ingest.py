@@ -752,7 +752,7 @@ def load_flight(options: IngestOptions, base_dir=None) -> FlightRecord:
         gradient=gradient,
         sources={role: str(ch.source) for role, ch in raw.items()},
     )
-    if reports["imu"].rebuilt == "shared" and gnss is not None:
+    if reports["imu"].rebuilt == "coarse" and gnss is not None:
         record = place_rebuilt_imu(record, reports["imu"])
     return record
 
@@ -778,7 +778,7 @@ def place_rebuilt_imu(record: FlightRecord, rep) -> FlightRecord:
     record : FlightRecord
         With GNSS.
     rep : checks.TimeReport
-        The IMU's time repair (``rebuilt == "shared"``).
+        The IMU's time repair (``rebuilt == "coarse"``).
 
     Returns
     -------

@@ -67,7 +67,7 @@ def _time_base(t, rep):
         "measurement_time": _span(t),
         "nominal_rate_hz": rate,
         "duplicates_dropped": rep.duplicates + rep.conflicting_duplicates,
-        # "shared" or "jitter": the logger's stamps rebuilt from the sample count (checks.rebuild_time_base)
+        # "coarse" or "jitter": the logger's stamps rebuilt from the sample count (checks.rebuild_time_base)
         "stamps_rebuilt": rep.rebuilt or None,
         "backward_steps": rep.n_backward,
         "gaps": rep.n_gaps,
