@@ -695,8 +695,9 @@ def initial_mean(
 # --------------------------------------------------------------------------
 
 
-def _hermite(nav, tq):
-    """Mechanized inertial position at times tq (cubic Hermite with the velocities)."""
+def hermite_position(nav, tq):
+    """Mechanized inertial position (n, 3) m at the times ``tq`` (n,) s: cubic Hermite with the
+    velocities."""
     t = nav.time
     j = np.clip(np.searchsorted(t, tq, side="right") - 1, 0, t.size - 2)
     h = t[j + 1] - t[j]
@@ -752,7 +753,7 @@ class AltimeterMeasurement:
         d = ta - t_ep[k]
         use = np.abs(d) <= half_window + 1e-9
         ta, ha, k, d = ta[use], ha[use], k[use], d[use]
-        r_c = _hermite(nav, ta)
+        r_c = hermite_position(nav, ta)
         r_e = np.einsum("nji,nj->ni", mat_ie(ta, self.ellipsoid.omega), r_c)
         lat, lon, _ = ecef_to_geodetic(r_e, self.ellipsoid)
         r_ext = np.linalg.norm(geodetic_to_ecef(lat, lon, ha, self.ellipsoid), axis=1)
@@ -887,7 +888,7 @@ class GnssMeasurement:
         m_ie = mat_ie(ts, self.ellipsoid.omega)
         r_g = np.einsum("nij,nj->ni", m_ie, geodetic_to_ecef(lat, lon, hh, self.ellipsoid))
         m_in = np.einsum("nij,njk->nik", m_ie, mat_en(lat, lon))
-        r_c = _hermite(nav, ts)
+        r_c = hermite_position(nav, ts)
         arm = self.lever_arm_t is not None and np.any(self.lever_arm_t != 0.0)
         if arm:
             j = np.clip(np.searchsorted(nav.time, ts), 1, nav.time.size - 1)

@@ -26,10 +26,14 @@ import math
 
 import numpy as np
 
+from ..io.checks import robust_sigma
 from .heightqc import estimate_latency, estimate_latency_drift
+from .identify import running_mean
 
 __all__ = [
     "GnssLatency",
+    "GnssLeverArm",
+    "estimate_gnss_lever_arm",
     "estimate_gnss_latency",
     "gnss_latency_fit",
     "latency_is_clear",
@@ -183,3 +187,134 @@ def gnss_latency_fit(time, residual_en_m, velocity_en_mps) -> GnssLatency:
     )
     span = float(t[-1] - t[0]) if t.size else 0.0
     return GnssLatency(lat, sig, mid, mid_sig, rate, rate_sig, 0.5 * float(t[0] + t[-1]) if t.size else 0.0, span)
+
+
+#: Window of the running mean taken off the residual and the lever-arm regressors, s: the
+#: antenna's offset swings with the bank of each turn, over tens of seconds, and the smoothed
+#: navigation follows the GNSS positions over minutes. Measured on the strapdown fuzzing flight
+#: (5-Hz GNSS of 0.5 m, a 2-m mast): 10 s found 1.58 +- 0.37 m up, 30 s 1.76 +- 0.17,
+#: 60 s 1.75 +- 0.08 (the smoothed track takes up the rest; a second fit finds it).
+LEVER_HIGHPASS_S = 30.0
+#: A lever-arm component is applied when it is this many standard errors from zero ...
+LEVER_K = 5.0
+#: ... and at least this long, m: below it the antenna's swing in a 25-degree bank is under
+#: 0.1 m, within the GNSS noise.
+LEVER_MIN_M = 0.2
+#: Longest lever arm applied, m: beyond it the track's residual is something else (a scale
+#: factor, a wrong axis), which the track check names; no aircraft's antenna is further.
+LEVER_MAX_M = 15.0
+#: Residuals beyond this many robust sigmas of a first fit (a wrong fix) are left out of a second.
+LEVER_OUTLIER_K = 5.0
+
+
+@dataclasses.dataclass
+class GnssLeverArm:
+    """Where the GNSS antenna is from the IMU, as measured on one aided strapdown track.
+
+    Attributes
+    ----------
+    lever_t, sigma_t : ndarray (3,)
+        The antenna's position from the IMU on the triad (FLU) axes and its standard errors, m;
+        NaN when not observable (no change of attitude).
+    """
+
+    lever_t: np.ndarray = dataclasses.field(default_factory=lambda: np.full(3, math.nan))
+    sigma_t: np.ndarray = dataclasses.field(default_factory=lambda: np.full(3, math.nan))
+
+    @property
+    def clear_t(self) -> np.ndarray:
+        """The components worth applying, m (3,), zero elsewhere: :data:`LEVER_K` standard
+        errors and :data:`LEVER_MIN_M` from zero; all zero when any is beyond
+        :data:`LEVER_MAX_M` (not an antenna's offset)."""
+        lv, sg = np.asarray(self.lever_t, float), np.asarray(self.sigma_t, float)
+        ok = np.isfinite(lv) & np.isfinite(sg) & (np.abs(lv) >= np.maximum(LEVER_K * sg, LEVER_MIN_M))
+        if not ok.any() or np.linalg.norm(np.where(ok, lv, 0.0)) > LEVER_MAX_M:
+            return np.zeros(3)
+        return np.where(ok, lv, 0.0)
+
+    @property
+    def too_long(self) -> bool:
+        """A clear offset beyond :data:`LEVER_MAX_M`: not applied."""
+        lv, sg = np.asarray(self.lever_t, float), np.asarray(self.sigma_t, float)
+        ok = np.isfinite(lv) & np.isfinite(sg) & (np.abs(lv) >= np.maximum(LEVER_K * sg, LEVER_MIN_M))
+        return bool(ok.any() and np.linalg.norm(np.where(ok, lv, 0.0)) > LEVER_MAX_M)
+
+
+def estimate_gnss_lever_arm(time, residual_enu_m, mat_enu_t, highpass_s=LEVER_HIGHPASS_S):
+    """Where the GNSS antenna is from the IMU, from an aided track's residual, m, and its
+    standard errors.
+
+    An antenna at ``l`` on the triad axes, not told to the filter, makes the navigation (at the
+    IMU) minus the GNSS positions (at the antenna) ``-C(t) l`` plus the navigation's own slow
+    error: the least-squares fit of the residual on the columns of ``C`` (triad -> ENU), both
+    less their running mean over ``highpass_s``, all axes pooled. The antenna's offset moves
+    with the attitude (the bank of every turn, the heading between lines) and the navigation's
+    error does not. Residuals beyond :data:`LEVER_OUTLIER_K` robust sigmas of a first fit are
+    left out of a second. The standard errors come from sums over blocks of ``highpass_s`` with their
+    neighbours' (the residual of a real receiver is not white over seconds), never below the
+    white residual's.
+
+    Parameters
+    ----------
+    time : ndarray (k,)
+        GNSS epochs, s.
+    residual_enu_m : ndarray (k, m)
+        Navigation at the IMU minus the GNSS positions on ``m`` of the axes east, north, up
+        (m = 2: the horizontal only), m.
+    mat_enu_t : ndarray (k, 3, 3)
+        The attitude at those epochs, triad -> east, north, up.
+    highpass_s : float
+
+    Returns
+    -------
+    lever_t, sigma_t : ndarray (3,)
+        NaN when there is nothing to regress on (fewer than 32 epochs, an attitude that does
+        not change).
+    """
+    nan = np.full(3, math.nan), np.full(3, math.nan)
+    t = np.asarray(time, float)
+    e = np.asarray(residual_enu_m, float)
+    if e.ndim == 1:
+        e = e[:, None]
+    m = e.shape[1]
+    a = np.asarray(mat_enu_t, float)[:, :m, :]
+    if t.size < 32:
+        return nan
+    dt = float(np.median(np.diff(t)))
+    w = max(3, int(round(highpass_s / max(dt, 1e-9))))
+    if t.size <= 2 * w:
+        return nan
+    y = e - running_mean(e, w)
+    x = a - np.stack([np.stack([running_mean(a[:, i, j], w) for j in range(3)], axis=1) for i in range(m)], axis=1)
+    # a running mean across a gap mixes both sides: the epochs within half a window of one out
+    use = np.ones(t.size, bool)
+    for g in np.flatnonzero(np.diff(t) > max(1.0, 3.0 * dt)):
+        use[(t > t[g] - 0.5 * highpass_s) & (t < t[g + 1] + 0.5 * highpass_s)] = False
+    use &= np.all(np.isfinite(y), axis=1) & np.all(np.isfinite(x), axis=(1, 2))
+    for refit in (False, True):
+        xs, ys = x[use], y[use]
+        xtx = np.einsum("kij,kil->jl", xs, xs)
+        if xs.shape[0] < 32 or not np.all(np.isfinite(xtx)) or np.linalg.cond(xtx) > 1e12:
+            return nan
+        beta = np.linalg.solve(xtx, np.einsum("kij,ki->j", xs, ys))
+        res = y - np.einsum("kij,j->ki", x, beta)
+        if refit:
+            break
+        scale = robust_sigma(res[use])
+        bad = use & np.any(np.abs(res) > LEVER_OUTLIER_K * scale, axis=1)
+        if scale <= 0 or not bad.any():
+            break
+        use &= ~bad
+    # the score x^T r summed over blocks of one window, each block's sum with its neighbour's
+    # (a Bartlett weighting of the residual's correlation over a window)
+    g = np.where(use[:, None], np.einsum("kij,ki->kj", x, res), 0.0)
+    block = np.floor((t - t[0]) / highpass_s).astype(int)
+    gb = np.zeros((int(block[-1]) + 1, 3))
+    np.add.at(gb, block, g)
+    meat = gb.T @ gb + 0.5 * (gb[1:].T @ gb[:-1] + gb[:-1].T @ gb[1:])
+    bread = np.linalg.inv(xtx)
+    cov = bread @ meat @ bread
+    # never below the white residual's (a high-passed score's block sums can cancel)
+    sig = np.maximum(np.sqrt(np.clip(np.diag(cov), 0.0, None)), robust_sigma(res[use]) * np.sqrt(np.diag(bread)))
+    # navigation minus GNSS is -C l
+    return -beta, sig

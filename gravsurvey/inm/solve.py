@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError, DataError
-from ..geodesy import WGS84, Ellipsoid, local_displacement, mat_en, mat_ie
+from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, local_displacement, mat_en, mat_ie
 from ..filters import centred_mean
 from .errormodel import (
     BA,
@@ -26,11 +26,12 @@ from .errormodel import (
     GnssMeasurement,
     discretise,
     epoch_geometry,
+    hermite_position,
     initial_covariance,
     initial_mean,
     state_perm,
 )
-from .gnssqc import GnssLatency, gnss_latency_fit
+from .gnssqc import GnssLatency, GnssLeverArm, estimate_gnss_lever_arm, gnss_latency_fit
 from .heightqc import (
     COARSE_FINE_STEP_S,
     LATENCY_DRIFT_MIN_S,
@@ -353,7 +354,9 @@ def estimate_anomaly(
     reference : bool
         Use the pure-numpy reference kernels (slow; tests).
     gnss_lever_arm_t : ndarray (3,), optional
-        GNSS antenna position from the IMU on the (strapdown) triad axes, m.
+        GNSS antenna position from the IMU on the (strapdown) triad axes, m. None: on a
+        strapdown triad, found from the aided track (:func:`gnssqc.estimate_gnss_lever_arm`)
+        and applied when clear; zero on a platform.
 
     Returns
     -------
@@ -390,6 +393,10 @@ def estimate_anomaly(
     accel_bias_t = np.zeros(2)
     height_warnings, height_facts = [], {}
     gnss_latency = None  # a GnssLatency once the first aided pass has measured it
+    # an antenna offset not given, on a strapdown triad: measured on the aided track and
+    # applied; a second fit finds what the smoothed track took up of the first
+    lever_open = gnss_lever_arm_t is None and triad == "strapdown"
+    lever_fits, lever_steps = [], []
     # a height channel that is the GNSS's own heights enters once, not again as GNSS's up
     gnss_heights = _heights_are_gnss(record)
     # what a straight line across an IMU gap or a clipped stretch misses: a property of the
@@ -449,6 +456,18 @@ def estimate_anomaly(
             if gnss_latency.taken_off:
                 record = dataclasses.replace(record, gnss=gnss_latency.shift(record.gnss))
                 reidentify = True
+                k -= 1
+                continue
+        if lever_open:
+            fit = _gnss_lever_arm(record, nav, idx, c, out, ellipsoid, gnss_lever_arm_t, not gnss_heights)
+            step = _lever_arm_step(fit, lever_fits, lever_steps)
+            lever_fits.append(fit)
+            lever_open = bool(np.any(step != 0.0)) and len(lever_fits) < LEVER_FITS
+            if np.any(step != 0.0):
+                # the pass run again with the antenna there (the straight lines, from which the
+                # model was identified, hold the offset still: not identified again)
+                lever_steps.append(step)
+                gnss_lever_arm_t = step if gnss_lever_arm_t is None else gnss_lever_arm_t + step
                 k -= 1
                 continue
         if k == passes - 1:
@@ -540,6 +559,10 @@ def estimate_anomaly(
                 f"{record.source_of('gnss')}: gnss: {gnss_latency.text()}, taken off (the aided track's residual "
                 'follows the horizontal velocity; docs/method.md, "GNSS latency")'
             ] + list(ident.get("warnings", []))
+    if lever_fits:
+        ident["gnss_lever_arm"], lever_warning = _lever_arm_report(record, lever_fits, gnss_lever_arm_t, lever_steps)
+        if lever_warning:
+            ident["warnings"] = [lever_warning] + list(ident.get("warnings", []))
     if gnss_used:
         ident["gnss_vertical_used"] = not gnss_heights
         if gnss_heights:
@@ -778,6 +801,105 @@ def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None) -> Gnss
     )
     vel = np.stack([np.interp(t, t_e, vel_n[:, j]) for j in range(2)], axis=1)
     return gnss_latency_fit(t, res, vel)
+
+
+#: Lever-arm fits on one flight at most: the first finds most of the offset, the smoothed
+#: track having taken up some (1.76 of 2 m up on the fuzzing flight, 4.2 of 6 m forward on
+#: test_alignment.py's), the next ones the rest (:func:`_lever_arm_step`).
+LEVER_FITS = 3
+#: Once an offset is applied, a further step is taken at this many standard errors: the flight
+#: has an antenna off the IMU, and what is left is the share the track took up.
+LEVER_FOLLOW_K = 2.0
+#: The share of an offset a fit sees, bounds of its secant estimate.
+LEVER_GAIN_RANGE = (0.5, 1.0)
+
+
+def _gnss_lever_arm(record, nav, idx, c, out, ellipsoid, lever_arm_t=None, vertical=True) -> GnssLeverArm:
+    """Where the GNSS antenna is from the IMU (beyond ``lever_arm_t``, already applied), from a
+    pass's smoothed track (:func:`gnssqc.estimate_gnss_lever_arm`; ``vertical``: the up
+    component too)."""
+    err_q, _, _ = _triad_errors(out["x_s"], c, nav.r_i[idx], nav.v_i[idx])
+    corr = -np.einsum("nij,nj->ni", c, err_q)
+    gn = record.gnss
+    te = nav.time[idx]
+    ts = np.asarray(gn.time, float)
+    lat, lon, hh = (np.asarray(v, float) for v in (gn.lat, gn.lon, gn.height))
+    ok = (ts >= te[0]) & (ts <= te[-1]) & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(hh)
+    if ok.sum() < 32:
+        return GnssLeverArm()
+    ts, lat, lon, hh = ts[ok], lat[ok], lon[ok], hh[ok]
+    m_ie = mat_ie(ts, ellipsoid.omega)
+    r_g = np.einsum("nij,nj->ni", m_ie, geodetic_to_ecef(lat, lon, hh, ellipsoid))
+    m_in = np.einsum("nij,njk->nik", m_ie, mat_en(lat, lon))
+    # the navigation between its samples and its slow correction between the epochs
+    r_c = hermite_position(nav, ts) + np.stack([np.interp(ts, te, corr[:, j]) for j in range(3)], axis=1)
+    j = np.clip(np.searchsorted(nav.time, ts), 1, nav.time.size - 1)
+    j -= (ts - nav.time[j - 1]) < (nav.time[j] - ts)
+    mat_ut = np.einsum("nji,njk->nik", m_in, nav.mat_it[j])
+    if lever_arm_t is not None:
+        r_c = r_c + np.einsum("nij,j->ni", nav.mat_it[j], np.asarray(lever_arm_t, float))
+    res = np.einsum("nji,nj->ni", m_in, r_c - r_g)
+    axes = 3 if vertical else 2
+    lever, sig = estimate_gnss_lever_arm(ts, res[:, :axes], mat_ut)
+    return GnssLeverArm(lever, sig)
+
+
+def _lever_arm_step(fit, fits, steps) -> np.ndarray:
+    """The lever-arm correction to apply after ``fit`` (3,) m, zero where none.
+
+    The first: the components clear of zero (:attr:`gnssqc.GnssLeverArm.clear_t`). After one
+    was applied, a fit sees only the share ``g`` of what is left that the smoothed track has not
+    taken up; ``g`` per component is ``(f_(k-1) - f_k) / s`` of the two fits either side of the
+    last step ``s`` (the secant of a linear map; within :data:`LEVER_GAIN_RANGE`, their median where
+    a component had no step), the correction ``f_k / g`` where it is
+    :data:`LEVER_FOLLOW_K` standard errors from zero."""
+    if not steps:
+        return fit.clear_t
+    prev, last = np.asarray(fits[-1].lever_t, float), np.asarray(steps[-1], float)
+    cur, sig = np.asarray(fit.lever_t, float), np.asarray(fit.sigma_t, float)
+    if not np.all(np.isfinite(cur)):
+        return np.zeros(3)
+    seen = (last != 0.0) & np.isfinite(prev)
+    gain = np.full(3, np.nan)
+    gain[seen] = np.clip((prev[seen] - cur[seen]) / last[seen], *LEVER_GAIN_RANGE)
+    gain[~seen] = float(np.median(gain[seen])) if seen.any() else 1.0
+    go = np.isfinite(sig) & (np.abs(cur) >= LEVER_FOLLOW_K * sig)
+    return np.where(go, cur / gain, 0.0)
+
+
+def _lever_arm_report(record, fits, lever_t, steps=()):
+    """summary.json's ``identification.gnss_lever_arm`` and the flight's warning (None when
+    nothing was applied) of the lever-arm fits ``fits`` that ended at ``lever_t`` (None: none
+    applied)."""
+    applied = lever_t is not None
+    last = fits[-1]
+    # applied: what the fits took off; the last fit's finding beyond it, under the rule, stays
+    # in the report (the smoothed track takes up part of each offset it is shown)
+    lever = np.asarray(lever_t if applied else last.lever_t, float)
+    sig = np.asarray(last.sigma_t, float)
+    rep = {
+        "lever_arm_flu_m": [float(v) for v in lever],
+        "sigma_m": [float(v) for v in sig],
+        "applied": applied,
+        "remaining_m": [float(v) for v in (last.lever_t if applied and len(steps) < len(fits) else np.zeros(3))],
+        "fits": len(fits),
+        "how": 'fit of the aided track\'s residual on the attitude (docs/method.md, "GNSS antenna lever arm")',
+    }
+    src = record.source_of("gnss")
+    flu = ", ".join(f"{v:+.2f}" for v in lever)
+    if applied:
+        return rep, (
+            f"{src}: gnss: the antenna is [{flu}] m (forward, left, up; +-{float(np.nanmax(sig)):.2f}) from the IMU, "
+            "found from the aided track (gnss_lever_arm_m not given) and applied; give gnss_lever_arm_m to use "
+            'a measured one (docs/method.md, "GNSS antenna lever arm")'
+        )
+    if any(f.too_long for f in fits):
+        return rep, (
+            f"{src}: gnss: the aided track's residual follows the attitude as an antenna [{flu}] m from the IMU "
+            "would, beyond any aircraft's: not applied (an IMU axis, scale factor or triad, or GNSS errors); "
+            "the product may carry it"
+        )
+    return rep, None
 
 
 def _height_latency(nav, t, e, faults):

@@ -229,7 +229,7 @@ def ingest_options(flight: FlightSection | dict, key_path: str = "flights[0]", b
     o.csv_delimiter = f.csv.delimiter
     o.gps_leap_seconds = f.csv.gps_leap_seconds
     o.mat_axes = imu_axes_matrix(f.imu_axes, f"{key_path}.imu_axes")
-    o.gnss_lever_arm_m = np.asarray(f.gnss_lever_arm_m, dtype=float)
+    o.gnss_lever_arm_m = None if f.gnss_lever_arm_m is None else np.asarray(f.gnss_lever_arm_m, dtype=float)
     o.time_offsets_ns = {role: int(round(v * 1e9)) for role, v in f.time_offsets_s if v != 0.0}
     o.gap_factor = float(f.checks.gap_factor)
     o.plausibility = f.checks.plausibility

@@ -998,12 +998,13 @@ class FlightSection(Section):
         "right-forward-up, or a 3x3 proper rotation `M` with `vec_flu = M vec_sensor`; "
         "with `triad: platform` the third axis must then read +g (checked before processing)",
     )
-    gnss_lever_arm_m: list[float] = Field(
-        default_factory=lambda: [0.0, 0.0, 0.0],
-        json_schema_extra={"type_text": "[forward, left, up], numbers"},
+    gnss_lever_arm_m: Optional[list[float]] = Field(
+        None,
+        json_schema_extra={"type_text": "[forward, left, up], numbers, or null"},
         description="[forward, left, up] "
         "GNSS antenna position from the IMU on its (FLU) axes, m (strapdown GNSS "
-        "aiding)",
+        "aiding); null: on a strapdown triad found from the aided track and applied when clear "
+        "(a warning says so), zero on a platform",
     )
     initial: Optional[InitialSection] = Field(
         None,
@@ -1074,6 +1075,8 @@ class FlightSection(Section):
     @field_validator("gnss_lever_arm_m")
     @classmethod
     def _arm(cls, v):
+        if v is None:
+            return v
         if len(v) != 3:
             raise fail(f"expected [forward, left, up] in m on the IMU's (FLU) axes, got {v!r:.60}")
         if max(abs(x) for x in v) > MAX_LEVER_ARM_M:
