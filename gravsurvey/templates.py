@@ -23,7 +23,7 @@ flights:                           # one entry per flight; names unique (letters
     # topics: {imu: /imu, altimeter: /altimeter, gnss: /gnss}  # default; else found by schema
     triad: strapdown               # strapdown (body-fixed IMU) | platform (ENU-stabilised)
     # imu_axes: FLU                # FLU | FRD (VectorNav, Xsens, iMAR, NovAtel) | RFU | 3x3 matrix
-    # gnss_lever_arm_m: [0, 0, 0]  # antenna from the IMU, m, forward-left-up (not given: found from the track on strapdown)
+    # gnss_lever_arm_m: [0, 0, 0]  # antenna from the IMU, m, forward-left-up (not given: found from the track)
     # initial:                     # optional overrides of the state from the data (GNSS
     #   attitude_deg: [...]        # position and velocity, attitude from the alignment):
     #                              # lat_deg, lon_deg, height_m, velocity_enu_mps, attitude_deg

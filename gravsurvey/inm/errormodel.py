@@ -709,6 +709,15 @@ def hermite_position(nav, tq):
     )
 
 
+def attitude_at(body, t):
+    """The attitude of ``body = (time (m,), mat (m, 3, 3))`` at its sample nearest each of the
+    times ``t`` (k,) s: (k, 3, 3)."""
+    tb, mb = body
+    j = np.clip(np.searchsorted(tb, t), 1, max(tb.size - 1, 1))
+    j -= (t - tb[j - 1]) < (tb[j] - t)
+    return mb[np.clip(j, 0, tb.size - 1)]
+
+
 class AltimeterMeasurement:
     """Radial measurement ``z = |q|_computed - R(lat_c, lon_c, h_alt) = cos(a) n.dq - eps``.
 
@@ -833,6 +842,11 @@ class GnssMeasurement:
         ``r + C_true l``: the measurement becomes ``z = M_in^T (r_computed + C l - r_gnss)``
         (``C`` the computed attitude at the IMU sample nearest the GNSS time) and
         ``C_true = C (I + [theta x])`` adds ``M_in^T C [l x]`` on ``theta``.
+    body_mat_i : tuple (ndarray (m,), ndarray (m, 3, 3)), optional
+        Times (s) and the aircraft's axes (FLU) -> inertial, in place of the triad's for
+        ``lever_arm_t`` (:func:`attitude_at`): a platform's triad is not the aircraft's (its
+        attitude then from the track, :func:`gravsurvey.inm.gnssqc.track_attitude`; no ``theta``
+        term).
     vertical : bool
         Use the up component.  False where the height channel is these same GNSS heights
         (:func:`gravsurvey.inm.heightqc.gnss_height_fraction`): the up component is then NaN
@@ -850,8 +864,10 @@ class GnssMeasurement:
         ellipsoid: Ellipsoid = WGS84,
         lever_arm_t=None,
         vertical: bool = True,
+        body_mat_i=None,
     ):
         self.lever_arm_t = None if lever_arm_t is None else np.asarray(lever_arm_t, float)
+        self.body_mat_i = body_mat_i
         self.vertical = bool(vertical)
         self.time = np.asarray(time, float)
         self.lat = np.asarray(lat, float)
@@ -893,7 +909,8 @@ class GnssMeasurement:
         if arm:
             j = np.clip(np.searchsorted(nav.time, ts), 1, nav.time.size - 1)
             j -= (ts - nav.time[j - 1]) < (nav.time[j] - ts)
-            r_c = r_c + np.einsum("nij,j->ni", nav.mat_it[j], self.lever_arm_t)
+            arm_i = nav.mat_it[j] if self.body_mat_i is None else attitude_at(self.body_mat_i, ts)
+            r_c = r_c + np.einsum("nij,j->ni", arm_i, self.lever_arm_t)
         zs = np.einsum("nji,nj->ni", m_in, r_c - r_g)
         # H (dq block) = M_in^T C_k: ENU <- triad
         c_k = nav.mat_it[idx][k]
@@ -912,7 +929,7 @@ class GnssMeasurement:
             sk[:, 0, 1], sk[:, 0, 2], sk[:, 1, 2] = -q_t[:, 2], q_t[:, 1], -q_t[:, 0]
             sk[:, 1, 0], sk[:, 2, 0], sk[:, 2, 1] = q_t[:, 2], -q_t[:, 1], q_t[:, 0]
             hblk[:, :, TH] = np.einsum("nij,njk->nik", hq, sk)
-            if arm:
+            if arm and self.body_mat_i is None:
                 hblk[:, :, TH] += hq @ _skew.py_func(self.lever_arm_t)
         np.add.at(hsum, k, hblk)
         have = cnt > 0

@@ -26,12 +26,13 @@ from .errormodel import (
     GnssMeasurement,
     discretise,
     epoch_geometry,
+    attitude_at,
     hermite_position,
     initial_covariance,
     initial_mean,
     state_perm,
 )
-from .gnssqc import GnssLatency, GnssLeverArm, estimate_gnss_lever_arm, gnss_latency_fit
+from .gnssqc import GnssLatency, GnssLeverArm, estimate_gnss_lever_arm, gnss_latency_fit, track_attitude
 from .heightqc import (
     COARSE_FINE_STEP_S,
     LATENCY_DRIFT_MIN_S,
@@ -354,9 +355,10 @@ def estimate_anomaly(
     reference : bool
         Use the pure-numpy reference kernels (slow; tests).
     gnss_lever_arm_t : ndarray (3,), optional
-        GNSS antenna position from the IMU on the (strapdown) triad axes, m. None: on a
-        strapdown triad, found from the aided track (:func:`gnssqc.estimate_gnss_lever_arm`)
-        and applied when clear; zero on a platform.
+        GNSS antenna position from the IMU on the aircraft's axes (FLU: a strapdown triad's; on
+        a platform the aircraft's attitude comes from the track,
+        :func:`gnssqc.track_attitude`), m. None: found from the aided track
+        (:func:`gnssqc.estimate_gnss_lever_arm`) and applied when clear.
 
     Returns
     -------
@@ -364,11 +366,6 @@ def estimate_anomaly(
     """
     if triad not in TRIADS:
         raise ConfigError(f"triad: expected 'platform' or 'strapdown', got {triad!r}")
-    if gnss_lever_arm_t is not None and np.any(np.asarray(gnss_lever_arm_t, float) != 0.0) and triad != "strapdown":
-        raise ConfigError(
-            "gnss_lever_arm_m: a lever arm on body axes needs a strapdown triad (a platform's axes are "
-            "ENU, not the aircraft's)"
-        )
     _check_record(record)
     if initial is None:
         initial = initial_state_from_gnss(record, triad, attitude_deg, params=params, ellipsoid=ellipsoid)
@@ -395,7 +392,7 @@ def estimate_anomaly(
     gnss_latency = None  # a GnssLatency once the first aided pass has measured it
     # an antenna offset not given, on a strapdown triad: measured on the aided track and
     # applied; a second fit finds what the smoothed track took up of the first
-    lever_open = gnss_lever_arm_t is None and triad == "strapdown"
+    lever_open = gnss_lever_arm_t is None
     lever_fits, lever_steps = [], []
     # a height channel that is the GNSS's own heights enters once, not again as GNSS's up
     gnss_heights = _heights_are_gnss(record)
@@ -425,6 +422,13 @@ def estimate_anomaly(
             if height_warnings or gnss_up is not None:
                 nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
             speed0 = _typical_speed(record, nav, ellipsoid)
+        # a platform's triad is levelled: an antenna offset turns with the aircraft, whose
+        # attitude comes from the track
+        body_i = (
+            _body_attitude(nav, ellipsoid)
+            if triad == "platform" and (lever_open or np.any(np.asarray(gnss_lever_arm_t, float) != 0.0))
+            else None
+        )
         # every pass about this linearisation point: the navigation, the prior attitude and
         # gyro bias seen from it
         one_pass = functools.partial(
@@ -436,6 +440,7 @@ def estimate_anomaly(
             reference=reference,
             theta_prior=theta_prior,
             lever_arm_t=gnss_lever_arm_t,
+            body_mat_i=body_i,
             gyro_bias_prior=-gyro_bias_t,
             accel_bias_prior=-accel_bias_t,
             pv_prior_i=(dr_prior_i, dv_prior_i),
@@ -452,14 +457,15 @@ def estimate_anomaly(
         if gnss_latency is None:
             # late GNSS stamps, measured on this first aided track: taken off, and the pass run
             # again (the model identified again) on the corrected stamps
-            gnss_latency = _gnss_latency(record, nav, idx, c, out, ellipsoid, gnss_lever_arm_t)
+            arm_c = c if body_i is None else attitude_at(body_i, nav.time[idx])
+            gnss_latency = _gnss_latency(record, nav, idx, c, out, ellipsoid, gnss_lever_arm_t, arm_c)
             if gnss_latency.taken_off:
                 record = dataclasses.replace(record, gnss=gnss_latency.shift(record.gnss))
                 reidentify = True
                 k -= 1
                 continue
         if lever_open:
-            fit = _gnss_lever_arm(record, nav, idx, c, out, ellipsoid, gnss_lever_arm_t, not gnss_heights)
+            fit = _gnss_lever_arm(record, nav, idx, c, out, ellipsoid, gnss_lever_arm_t, not gnss_heights, body_i)
             step = _lever_arm_step(fit, lever_fits, lever_steps)
             lever_fits.append(fit)
             lever_open = bool(np.any(step != 0.0)) and len(lever_fits) < LEVER_FITS
@@ -774,7 +780,7 @@ def _repaired_heights(record, nav, ellipsoid):
     )
 
 
-def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None) -> GnssLatency:
+def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None, arm_c=None) -> GnssLatency:
     """How late the GNSS stamps are, constant or drifting, from a pass's smoothed track.
 
     The corrected navigation (at the antenna, with a lever arm) minus the GNSS positions, east
@@ -783,7 +789,7 @@ def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None) -> Gnss
     err_q, err_p, _ = _triad_errors(out["x_s"], c, nav.r_i[idx], nav.v_i[idx])
     r_corr = nav.r_i[idx] - np.einsum("nij,nj->ni", c, err_q)
     if lever_arm_t is not None:
-        r_corr = r_corr + np.einsum("nij,j->ni", c, np.asarray(lever_arm_t, float))
+        r_corr = r_corr + np.einsum("nij,j->ni", c if arm_c is None else arm_c, np.asarray(lever_arm_t, float))
     v_corr = nav.v_i[idx] - np.einsum("nij,nj->ni", c, err_p)
     t_e = nav.time[idx]
     lat, lon, height, vel_n = navigation_to_geodetic(t_e, r_corr, v_corr, ellipsoid)
@@ -814,10 +820,13 @@ LEVER_FOLLOW_K = 2.0
 LEVER_GAIN_RANGE = (0.5, 1.0)
 
 
-def _gnss_lever_arm(record, nav, idx, c, out, ellipsoid, lever_arm_t=None, vertical=True) -> GnssLeverArm:
+def _gnss_lever_arm(
+    record, nav, idx, c, out, ellipsoid, lever_arm_t=None, vertical=True, body_mat_i=None
+) -> GnssLeverArm:
     """Where the GNSS antenna is from the IMU (beyond ``lever_arm_t``, already applied), from a
     pass's smoothed track (:func:`gnssqc.estimate_gnss_lever_arm`; ``vertical``: the up
-    component too)."""
+    component too; ``body_mat_i``: the aircraft's attitude where it is not the triad's,
+    :func:`_body_attitude`)."""
     err_q, _, _ = _triad_errors(out["x_s"], c, nav.r_i[idx], nav.v_i[idx])
     corr = -np.einsum("nij,nj->ni", c, err_q)
     gn = record.gnss
@@ -835,13 +844,30 @@ def _gnss_lever_arm(record, nav, idx, c, out, ellipsoid, lever_arm_t=None, verti
     r_c = hermite_position(nav, ts) + np.stack([np.interp(ts, te, corr[:, j]) for j in range(3)], axis=1)
     j = np.clip(np.searchsorted(nav.time, ts), 1, nav.time.size - 1)
     j -= (ts - nav.time[j - 1]) < (nav.time[j] - ts)
-    mat_ut = np.einsum("nji,njk->nik", m_in, nav.mat_it[j])
+    arm_i = nav.mat_it[j] if body_mat_i is None else attitude_at(body_mat_i, ts)
+    mat_ut = np.einsum("nji,njk->nik", m_in, arm_i)
     if lever_arm_t is not None:
-        r_c = r_c + np.einsum("nij,j->ni", nav.mat_it[j], np.asarray(lever_arm_t, float))
+        r_c = r_c + np.einsum("nij,j->ni", arm_i, np.asarray(lever_arm_t, float))
     res = np.einsum("nji,nj->ni", m_in, r_c - r_g)
     axes = 3 if vertical else 2
     lever, sig = estimate_gnss_lever_arm(ts, res[:, :axes], mat_ut)
     return GnssLeverArm(lever, sig)
+
+
+#: Rate of the aircraft's attitude from the track, Hz (:func:`_body_attitude`): a bank changes
+#: over seconds.
+BODY_ATTITUDE_HZ = 10.0
+
+
+def _body_attitude(nav, ellipsoid):
+    """The aircraft's axes (FLU) -> inertial from its track (:func:`gnssqc.track_attitude`), at
+    :data:`BODY_ATTITUDE_HZ`: ``(time (m,) s, mat (m, 3, 3))`` (:func:`errormodel.attitude_at`)."""
+    dt = float(np.median(np.diff(nav.time))) if nav.time.size > 1 else 1.0
+    k = np.arange(0, nav.time.size, max(1, int(round(1.0 / (BODY_ATTITUDE_HZ * dt)))))
+    t = nav.time[k]
+    lat, lon, _, vel_n = navigation_to_geodetic(t, nav.r_i[k], nav.v_i[k], ellipsoid)
+    m_in = np.einsum("nij,njk->nik", mat_ie(t, ellipsoid.omega), mat_en(lat, lon))
+    return t, np.einsum("nij,njk->nik", m_in, track_attitude(t, vel_n))
 
 
 def _lever_arm_step(fit, fits, steps) -> np.ndarray:
@@ -1262,6 +1288,7 @@ def _one_pass(
     gnss_vertical=True,
     accel_bias_prior=None,
     gap_accel_sigma_mps2=None,
+    body_mat_i=None,
 ):
     """Discretise, filter and smooth once about the mechanization ``nav``.
 
@@ -1273,6 +1300,8 @@ def _one_pass(
     (3,), rad/s: the prior mean of the gyro-bias state (minus the bias taken off the rates);
     ``accel_bias_prior`` (2,), m/s^2: the same for the accelerometer-bias states (16 or 18).
     ``gap_accel_sigma_mps2``: the record's :func:`missed_accel_sigma` (found here when None).
+    ``body_mat_i``: the aircraft's attitude for the lever arm where it is not the triad's (a
+    platform; :func:`_body_attitude`).
     """
     t = nav.time
     alt_t, alt_h = _altimeter(record)
@@ -1315,6 +1344,7 @@ def _one_pass(
                 ellipsoid,
                 lever_arm_t,
                 vertical=gnss_vertical,
+                body_mat_i=body_mat_i,
             )
         )
     z, h, r = stack_measurements([m.build(nav, idx, half, n_state) for m in meas])

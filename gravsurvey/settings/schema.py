@@ -1002,9 +1002,9 @@ class FlightSection(Section):
         None,
         json_schema_extra={"type_text": "[forward, left, up], numbers, or null"},
         description="[forward, left, up] "
-        "GNSS antenna position from the IMU on its (FLU) axes, m (strapdown GNSS "
-        "aiding); null: on a strapdown triad found from the aided track and applied when clear "
-        "(a warning says so), zero on a platform",
+        "GNSS antenna position from the IMU on the aircraft's (FLU) axes, m (a strapdown "
+        "triad's; on a platform the aircraft's attitude comes from the track); null: found from "
+        "the aided track and applied when clear (a warning says so)",
     )
     initial: Optional[InitialSection] = Field(
         None,
