@@ -290,3 +290,49 @@ def test_track_attitude_is_a_coordinated_turn():
     v[t < 10.0] = [0.05, 0.0, 0.0]
     c = gnssqc.track_attitude(t, v)
     np.testing.assert_allclose(c[t < 10.0, :, 0], np.broadcast_to([0.0, 1.0, 0.0], c[t < 10.0, :, 0].shape), atol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def survey_gnss_heights():
+    """The grid of :func:`turning_strapdown` with a barometric-class altimeter (0.5 m) and a
+    survey GNSS (0.1 m up): the GNSS heights are weighed by their own noise."""
+    sim = quick_sim(
+        plan={**GRID, "lines": {**GRID["lines"], "heading_deg": 30.0}},
+        triad="strapdown",
+        noise={
+            **NAVIGATION_GRADE,
+            "gyro": {"white_drift_degph": 0.005},
+            "altimeter": {"sigma_m": 0.5},
+            "gnss": {"horizontal_sigma_m": 0.1, "vertical_sigma_m": 0.1},
+        },
+        field="seed_smooth",
+        gnss_hz=5.0,
+        altimeter_hz=5.0,
+        turbulence={"vertical_sigma_m": 1.0, "horizontal_sigma_m": 1.0, "attitude_sigma_deg": 0.5},
+        seed=11,
+    )
+    s = simulate_flight(sim)
+    return (s, *record_and_initial(s))
+
+
+def test_a_gnss_height_stretch_off_by_a_metre_is_taken_off(survey_gnss_heights, monkeypatch):
+    """The GNSS heights 1 m high for 200 s (a float stretch between two ambiguity fixes): both
+    steps found against the inertial height and taken off, said, and the product is the clean
+    flight's (measured 0.800 against 0.796 mGal); left in, the filter follows the heights and
+    reads the steps as gravity (62.6)."""
+    s, rec, init = survey_gnss_heights
+    gn = rec.gnss
+    t = np.asarray(gn.time, float)
+    block = (t >= 500.0) & (t < 700.0)
+    stepped = dataclasses.replace(rec, gnss=dataclasses.replace(gn, height=np.where(block, gn.height + 1.0, gn.height)))
+    clean = estimate_anomaly(rec, InmParams(), init, "strapdown")
+    assert "gnss" not in clean.identification.get("height_faults", {})
+    sol = estimate_anomaly(stepped, InmParams(), init, "strapdown")
+    steps = sol.identification["height_faults"]["gnss"]["steps"]
+    assert [round(x["time_s"]) for x in steps] == [500, 700]
+    assert [x["size_m"] for x in steps] == pytest.approx([1.0, -1.0], abs=0.1)
+    assert any("gnss.height: " in w and "2 step(s) taken off" in w for w in sol.warnings)
+    assert rms_mid(sol, s) < 1.1 * rms_mid(clean, s)
+    monkeypatch.setattr(solve, "_repaired_gnss_heights", lambda record, nav, ellipsoid: (record, [], {}))
+    left = estimate_anomaly(stepped, InmParams(), init, "strapdown")
+    assert rms_mid(left, s) > 2.0 * rms_mid(sol, s)

@@ -408,6 +408,13 @@ def estimate_anomaly(
             # this first mechanization, repaired before anything reads the heights (and the
             # flight mechanized again: the gravity model's radius may come from them)
             record, height_warnings, height_facts = _repaired_heights(record, nav, ellipsoid)
+            if not gnss_heights:
+                # the GNSS heights enter as the position's up component: their steps (a float
+                # stretch, a new ambiguity fix) read as gravity as the altimeter's would
+                record, gnss_height_warnings, gnss_height_facts = _repaired_gnss_heights(record, nav, ellipsoid)
+                height_warnings = height_warnings + gnss_height_warnings
+                if gnss_height_facts:
+                    height_facts = {**height_facts, "gnss": gnss_height_facts}
             gnss_up = None
             if not gnss_heights and given_params.identify and "gnss_vertical_sigma_m" not in given_params.given:
                 weighed = _gnss_height_sigma(record, nav, ellipsoid)
@@ -775,6 +782,53 @@ def _repaired_heights(record, nav, ellipsoid):
         [
             f"{source}: altimeter.height: {' and '.join(what)}; found against the inertial height "
             '(docs/method.md, "Height spikes, steps and latency")'
+        ],
+        facts,
+    )
+
+
+def _repaired_gnss_heights(record, nav, ellipsoid):
+    """The record with its GNSS heights' spikes dropped (the fix) and steps taken off
+    (:func:`heightqc.find_height_faults` against the first mechanization's height, as the
+    altimeter's), the warnings that say so and the facts (``spikes``, ``steps``)."""
+    gn = record.gnss
+    if gn is None or len(gn.time) == 0:
+        return record, [], {}
+    gt = np.asarray(gn.time, float)
+    gh = np.asarray(gn.height, float)
+    inside = np.flatnonzero(np.isfinite(gh) & (gt >= nav.time[0]) & (gt <= nav.time[-1]))
+    if inside.size < 16:
+        return record, [], {}
+    t, e = vertical_residual(nav, gt[inside], gh[inside], ellipsoid)
+    faults = find_height_faults(t, e)
+    if not faults:
+        return record, [], {}
+    fixed = np.array(gh, float)
+    fixed[inside] = repair_heights(gh[inside], faults)
+    for _, size in faults.steps:
+        fixed[inside[-1] + 1 :] -= size
+    drop = ~np.isfinite(fixed) & np.isfinite(gh)
+    gnss = dataclasses.replace(
+        gn,
+        time=gt[~drop],
+        lat=np.asarray(gn.lat, float)[~drop],
+        lon=np.asarray(gn.lon, float)[~drop],
+        height=fixed[~drop],
+    )
+    record = dataclasses.replace(record, gnss=gnss)
+    steps = [(float(t[i]), float(size)) for i, size in faults.steps]
+    facts = {"spikes": int(faults.spikes.size), "steps": [{"time_s": a, "size_m": b} for a, b in steps]}
+    what = []
+    if faults.spikes.size:
+        what.append(f"{faults.spikes.size} fix(es) with a height spike dropped")
+    if steps:
+        listed = ", ".join(f"{b:+.2f} m at {a:.0f} s" for a, b in steps)
+        what.append(f"{len(steps)} step(s) taken off the heights after them ({listed} after the record's start)")
+    return (
+        record,
+        [
+            f"{record.source_of('gnss')}: gnss.height: {' and '.join(what)}; found against the inertial height "
+            '(a float stretch or a new ambiguity fix; docs/method.md, "Height spikes, steps and latency")'
         ],
         facts,
     )
