@@ -736,13 +736,17 @@ class AltimeterMeasurement:
         Altimeter times (s, record base) and ellipsoidal heights (m).
     sigma_m : float
         Altimeter noise, m.
+    height_sigma_m : ndarray (m,), optional
+        Each sample's own 1-sigma, m, where it is above ``sigma_m`` (NaN: ``sigma_m``): a noisy
+        stretch weighed by its own noise.
     """
 
-    def __init__(self, time, height, sigma_m, ellipsoid: Ellipsoid = WGS84):
+    def __init__(self, time, height, sigma_m, ellipsoid: Ellipsoid = WGS84, height_sigma_m=None):
         self.time = np.asarray(time, float)
         self.height = np.asarray(height, float)
         self.sigma_m = float(sigma_m)
         self.ellipsoid = ellipsoid
+        self.height_sigma = None if height_sigma_m is None else np.asarray(height_sigma_m, float)
 
     def build(self, nav, idx, half_window, n_state: int = N_STATE):
         """Return ``z (N, m)``, ``H (N, m, n_state)``, ``R (N, m, m)`` with NaN for missing.
@@ -753,6 +757,10 @@ class AltimeterMeasurement:
         t_ep = nav.time[idx]
         ok = (self.time >= nav.time[0]) & (self.time <= nav.time[-1]) & np.isfinite(self.height)
         ta, ha = self.time[ok], self.height[ok]
+        var = np.full(ta.size, self.sigma_m**2)
+        if self.height_sigma is not None:
+            own = self.height_sigma[ok]
+            var = np.where(np.isfinite(own), np.maximum(var, own * own), var)
         nep = t_ep.size
         if ta.size == 0:
             return np.full((nep, 1), np.nan), np.zeros((nep, 1, n_state)), np.ones((nep, 1, 1))
@@ -761,7 +769,7 @@ class AltimeterMeasurement:
         k = np.where(np.abs(ta - t_ep[prev]) <= np.abs(ta - t_ep[pos]), prev, pos)
         d = ta - t_ep[k]
         use = np.abs(d) <= half_window + 1e-9
-        ta, ha, k, d = ta[use], ha[use], k[use], d[use]
+        ta, ha, k, d, var = ta[use], ha[use], k[use], d[use], var[use]
         r_c = hermite_position(nav, ta)
         r_e = np.einsum("nji,nj->ni", mat_ie(ta, self.ellipsoid.omega), r_c)
         lat, lon, _ = ecef_to_geodetic(r_e, self.ellipsoid)
@@ -791,6 +799,7 @@ class AltimeterMeasurement:
             s = slot[kk]
             slot[kk] += 1
             z[kk, s] = zval[j]
+            r[kk, s, s] = var[j]
             h[kk, s, DQ] = q0_t[kk]
             h[kk, s, DP] = d[j] * q0_t[kk]
             if n_state >= N_STATE_AIDED:
@@ -847,6 +856,9 @@ class GnssMeasurement:
         ``lever_arm_t`` (:func:`attitude_at`): a platform's triad is not the aircraft's (its
         attitude then from the track, :func:`gravsurvey.inm.gnssqc.track_attitude`; no ``theta``
         term).
+    height_sigma_m : ndarray (k,), optional
+        Each fix's own up 1-sigma, m, where it is above ``vertical_sigma_m`` (NaN: the common
+        one): a noisy stretch weighed by its own noise.
     vertical : bool
         Use the up component.  False where the height channel is these same GNSS heights
         (:func:`gravsurvey.inm.heightqc.gnss_height_fraction`): the up component is then NaN
@@ -865,7 +877,9 @@ class GnssMeasurement:
         lever_arm_t=None,
         vertical: bool = True,
         body_mat_i=None,
+        height_sigma_m=None,
     ):
+        self.height_sigma = None if height_sigma_m is None else np.asarray(height_sigma_m, float)
         self.lever_arm_t = None if lever_arm_t is None else np.asarray(lever_arm_t, float)
         self.body_mat_i = body_mat_i
         self.vertical = bool(vertical)
@@ -897,8 +911,12 @@ class GnssMeasurement:
         if not ok.any():
             return z, h, r
         ts, lat, lon, hh = self.time[ok], self.lat[ok], self.lon[ok], self.height[ok]
+        var_up = np.full(ts.size, self.sigma[2] ** 2)
+        if self.height_sigma is not None:
+            own = self.height_sigma[ok]
+            var_up = np.where(np.isfinite(own), np.maximum(var_up, own * own), var_up)
         k, d, use = _nearest_epoch(t_ep, ts, half_window)
-        ts, lat, lon, hh, k, d = ts[use], lat[use], lon[use], hh[use], k[use], d[use]
+        ts, lat, lon, hh, k, d, var_up = ts[use], lat[use], lon[use], hh[use], k[use], d[use], var_up[use]
         if ts.size == 0:
             return z, h, r
         m_ie = mat_ie(ts, self.ellipsoid.omega)
@@ -936,6 +954,10 @@ class GnssMeasurement:
         z[have] = zsum[have] / cnt[have, None]
         h[have] = hsum[have] / cnt[have, None, None]
         r[have] /= cnt[have, None, None]
+        if self.height_sigma is not None:
+            # the mean of the epoch's fixes: the sum of their own variances over the count squared
+            vsum = np.bincount(k, weights=var_up, minlength=nep)
+            r[have, 2, 2] = vsum[have] / cnt[have] ** 2
         if not self.vertical:
             z[:, 2] = np.nan
         return z, h, r

@@ -40,11 +40,13 @@ from .heightqc import (
     LATENCY_MAX_S,
     LATENCY_MIN_S,
     SAME_FRACTION,
+    HeightFaults,
     coarse_height_offset,
     estimate_latency,
     estimate_latency_drift,
     find_height_faults,
     gnss_height_fraction,
+    noisy_stretches,
     repair_heights,
 )
 from .identify import (
@@ -689,7 +691,7 @@ def _gnss_height_sigma(record, nav, ellipsoid):
     if inside.sum() < 16:
         return None
     offset = float(np.median(np.interp(at[inside], gt[ok], gh[ok]) - ah[inside]))
-    moved = dataclasses.replace(record.altimeter, time=at, height=ah + offset)
+    moved = dataclasses.replace(record.altimeter, time=at, height=ah + offset, height_sigma_m=_altimeter_sigma(record))
     entry = {
         "value": gns[1],
         "sigma_factor": None,
@@ -730,8 +732,18 @@ def _repaired_heights(record, nav, ellipsoid):
         alt_t = alt_t - coarse
         inside = np.flatnonzero(np.isfinite(alt_h) & (alt_t >= nav.time[0]) & (alt_t <= nav.time[-1]))
     t, e = vertical_residual(nav, alt_t[inside], alt_h[inside], ellipsoid)
-    faults = find_height_faults(t, e, alt_h[inside])
-    latency = _height_latency(nav, t, e, faults)
+    # a noisy stretch is weighed by its own noise and left out of the searches (against the
+    # quiet rest's sigma it is full of steps: 2 m of noise for 300 s read as 7 steps, 60 mGal)
+    own = noisy_stretches(t, e)
+    noisy = np.isfinite(own)
+    quiet = np.flatnonzero(~noisy)
+    faults_q = find_height_faults(t[quiet], e[quiet], alt_h[inside][quiet]) if quiet.size >= 16 else HeightFaults()
+    latency = _height_latency(nav, t[quiet], e[quiet], faults_q) if quiet.size >= 16 else None
+    faults = HeightFaults(
+        spikes=quiet[faults_q.spikes].astype(np.int64),
+        steps=[(int(quiet[i]), size) for i, size in faults_q.steps],
+        frozen=faults_q.frozen,
+    )
     if coarse is not None:
         latency = (
             (coarse + latency[0], *latency[1:]) if latency is not None else (coarse, COARSE_FINE_STEP_S, 0.0, 0.0, 0.0)
@@ -740,7 +752,7 @@ def _repaired_heights(record, nav, ellipsoid):
         if latency[2] != 0.0:
             latency = (latency[0], latency[1], latency[2], latency[3], latency[4] + coarse)
         alt_t = alt_t + coarse  # the shift below is taken from the stamps as recorded
-    if not faults and latency is None:
+    if not faults and latency is None and not noisy.any():
         return record, [], {}
     fixed = np.array(alt_h, float)
     fixed[inside] = repair_heights(alt_h[inside], faults)
@@ -748,7 +760,12 @@ def _repaired_heights(record, nav, ellipsoid):
         # the samples after the checked span follow the last level too
         fixed[inside[-1] + 1 :] -= size
     shifted = alt_t if latency is None else alt_t - (latency[0] + latency[2] * (alt_t - latency[4]))
-    record = dataclasses.replace(record, altimeter=dataclasses.replace(record.altimeter, time=shifted, height=fixed))
+    sigma = record.altimeter.height_sigma_m
+    sigma = np.full(alt_h.size, np.nan) if sigma is None else np.array(sigma, float)
+    sigma[inside[noisy]] = np.fmax(sigma[inside[noisy]], own[noisy])
+    record = dataclasses.replace(
+        record, altimeter=dataclasses.replace(record.altimeter, time=shifted, height=fixed, height_sigma_m=sigma)
+    )
     steps = [(float(t[i]), float(size)) for i, size in faults.steps]
     facts = {
         "spikes": int(faults.spikes.size - faults.frozen),
@@ -756,6 +773,13 @@ def _repaired_heights(record, nav, ellipsoid):
         "steps": [{"time_s": a, "size_m": b} for a, b in steps],
     }
     what = []
+    if noisy.any():
+        facts["noisy_s"] = float(np.sum(np.diff(t)[noisy[1:]]))
+        facts["noisy_sigma_m"] = float(np.nanmax(own))
+        what.append(
+            f"{int(noisy.sum())} sample(s) over {facts['noisy_s']:.0f} s noisier than the rest (up to "
+            f"{facts['noisy_sigma_m']:.2f} m) weighed by their own noise"
+        )
     if latency is not None:
         facts["latency_s"], facts["latency_sigma_s"] = latency[:2]
         drift = ""
@@ -790,7 +814,9 @@ def _repaired_heights(record, nav, ellipsoid):
 def _repaired_gnss_heights(record, nav, ellipsoid):
     """The record with its GNSS heights' spikes dropped (the fix) and steps taken off
     (:func:`heightqc.find_height_faults` against the first mechanization's height, as the
-    altimeter's), the warnings that say so and the facts (``spikes``, ``steps``)."""
+    altimeter's) and its noisy stretches given their own sigma (:func:`heightqc.noisy_stretches`),
+    the warnings that say so and the facts (``spikes``, ``steps``, ``noisy_s``,
+    ``noisy_sigma_m``)."""
     gn = record.gnss
     if gn is None or len(gn.time) == 0:
         return record, [], {}
@@ -800,13 +826,23 @@ def _repaired_gnss_heights(record, nav, ellipsoid):
     if inside.size < 16:
         return record, [], {}
     t, e = vertical_residual(nav, gt[inside], gh[inside], ellipsoid)
-    faults = find_height_faults(t, e)
-    if not faults:
+    # a noisy stretch (a float solution) is weighed by its own noise, and its scatter is not
+    # searched for steps: against the quiet rest's sigma it is full of them
+    own = noisy_stretches(t, e)
+    quiet = np.flatnonzero(~np.isfinite(own))
+    faults = find_height_faults(t[quiet], e[quiet]) if quiet.size >= 16 else HeightFaults()
+    faults = HeightFaults(
+        spikes=quiet[faults.spikes].astype(np.int64), steps=[(int(quiet[i]), size) for i, size in faults.steps]
+    )
+    noisy = np.isfinite(own)
+    if not faults and not noisy.any():
         return record, [], {}
     fixed = np.array(gh, float)
     fixed[inside] = repair_heights(gh[inside], faults)
     for _, size in faults.steps:
         fixed[inside[-1] + 1 :] -= size
+    sigma = np.full(gh.size, np.nan) if gn.height_sigma_m is None else np.array(gn.height_sigma_m, float)
+    sigma[inside[noisy]] = np.fmax(sigma[inside[noisy]], own[noisy])
     drop = ~np.isfinite(fixed) & np.isfinite(gh)
     gnss = dataclasses.replace(
         gn,
@@ -814,11 +850,19 @@ def _repaired_gnss_heights(record, nav, ellipsoid):
         lat=np.asarray(gn.lat, float)[~drop],
         lon=np.asarray(gn.lon, float)[~drop],
         height=fixed[~drop],
+        height_sigma_m=sigma[~drop],
     )
     record = dataclasses.replace(record, gnss=gnss)
     steps = [(float(t[i]), float(size)) for i, size in faults.steps]
     facts = {"spikes": int(faults.spikes.size), "steps": [{"time_s": a, "size_m": b} for a, b in steps]}
     what = []
+    if noisy.any():
+        facts["noisy_s"] = float(np.sum(np.diff(t)[noisy[1:]]))
+        facts["noisy_sigma_m"] = float(np.nanmax(own))
+        what.append(
+            f"{int(noisy.sum())} fix(es) over {facts['noisy_s']:.0f} s noisier than the rest (up to "
+            f"{facts['noisy_sigma_m']:.2f} m) weighed by their own noise"
+        )
     if faults.spikes.size:
         what.append(f"{faults.spikes.size} fix(es) with a height spike dropped")
     if steps:
@@ -1033,6 +1077,15 @@ def _altimeter(record):
     if not good.any():
         raise DataError(f"{record.source_of('altimeter')}: altimeter.height: no finite samples")
     return alt_t[good], alt_h[good]
+
+
+def _altimeter_sigma(record):
+    """The finite altimeter samples' own sigmas (m, NaN: the model's), as :func:`_altimeter`
+    keeps them; None when there are none."""
+    own = record.altimeter.height_sigma_m
+    if own is None:
+        return None
+    return np.asarray(own, float)[np.isfinite(np.asarray(record.altimeter.height, float))]
 
 
 def _pass_correction(out):
@@ -1384,7 +1437,7 @@ def _one_pass(
     if gap_var is not None:
         for i in DP:
             q[:, i, i] += gap_var
-    meas = [AltimeterMeasurement(alt_t, alt_h, params.altimeter_sigma_m, ellipsoid)]
+    meas = [AltimeterMeasurement(alt_t, alt_h, params.altimeter_sigma_m, ellipsoid, _altimeter_sigma(record))]
     if gnss_used:
         gn = record.gnss
         meas.append(
@@ -1399,6 +1452,7 @@ def _one_pass(
                 lever_arm_t,
                 vertical=gnss_vertical,
                 body_mat_i=body_mat_i,
+                height_sigma_m=gn.height_sigma_m,
             )
         )
     z, h, r = stack_measurements([m.build(nav, idx, half, n_state) for m in meas])

@@ -38,20 +38,31 @@ class ImuChannel:
 
 @dataclass
 class AltimeterChannel:
-    """Radial information: ellipsoidal height, m, at ``time`` (s)."""
+    """Radial information: ellipsoidal height, m, at ``time`` (s).
+
+    ``height_sigma_m`` (shape of ``height``, or None): a sample's own 1-sigma, m, where its
+    stretch is noisier than the rest (NaN elsewhere), from the estimator's height check.
+    """
 
     time: np.ndarray
     height: np.ndarray
+    height_sigma_m: np.ndarray | None = None
 
 
 @dataclass
 class GnssChannel:
-    """GNSS positions: geodetic latitude, longitude (rad), ellipsoidal height (m)."""
+    """GNSS positions: geodetic latitude, longitude (rad), ellipsoidal height (m).
+
+    ``height_sigma_m`` (shape of ``height``, or None): a fix's own height 1-sigma, m, where its
+    stretch is noisier than the rest (a float solution; NaN elsewhere), from the estimator's
+    height check (:func:`gravsurvey.inm.solve.estimate_anomaly`).
+    """
 
     time: np.ndarray
     lat: np.ndarray
     lon: np.ndarray
     height: np.ndarray
+    height_sigma_m: np.ndarray | None = None
 
 
 @dataclass
@@ -208,7 +219,10 @@ def slice_record(record: FlightRecord, t0: float, t1: float, margin_s: float = 0
         None if sat is None else sat[m].copy(),
     )
     a = cut(record.altimeter.time, t0 - margin_s, t1 + margin_s)
-    alt = AltimeterChannel(record.altimeter.time[a].copy(), record.altimeter.height[a].copy())
+    own = record.altimeter.height_sigma_m
+    alt = AltimeterChannel(
+        record.altimeter.time[a].copy(), record.altimeter.height[a].copy(), None if own is None else own[a].copy()
+    )
     gnss = None
     if record.gnss is not None:
         g = cut(record.gnss.time, t0 - margin_s, t1 + margin_s)
@@ -217,6 +231,7 @@ def slice_record(record: FlightRecord, t0: float, t1: float, margin_s: float = 0
             record.gnss.lat[g].copy(),
             record.gnss.lon[g].copy(),
             record.gnss.height[g].copy(),
+            None if record.gnss.height_sigma_m is None else record.gnss.height_sigma_m[g].copy(),
         )
     return FlightRecord(
         t0_unix_ns=record.t0_unix_ns, imu=imu, altimeter=alt, gnss=gnss, source=record.source, sources=record.sources
