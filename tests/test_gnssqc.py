@@ -95,18 +95,13 @@ def test_latency_verdict_bounds():
     assert shifted.lat is g.lat
 
 
-@pytest.fixture(scope="module")
-def turning_strapdown():
-    """25 min strapdown grid (three 25-km lines, two turns) in turbulence, 5 Hz GNSS with 0.3 m
-    of noise: the estimator is told none of it."""
+def _turning_grid(triad, noise):
+    """A 25 min grid (three 25-km lines, two turns) in turbulence, 5-Hz GNSS and heights: the
+    simulated flight, its record and initial state."""
     sim = quick_sim(
         plan={**GRID, "lines": {**GRID["lines"], "heading_deg": 30.0}},
-        triad="strapdown",
-        noise={
-            **NAVIGATION_GRADE,
-            "gyro": {"white_drift_degph": 0.005},
-            "gnss": {"horizontal_sigma_m": 0.3, "vertical_sigma_m": 0.6},
-        },
+        triad=triad,
+        noise={**NAVIGATION_GRADE, **noise},
         field="seed_smooth",
         gnss_hz=5.0,
         altimeter_hz=5.0,
@@ -115,6 +110,16 @@ def turning_strapdown():
     )
     s = simulate_flight(sim)
     return (s, *record_and_initial(s))
+
+
+@pytest.fixture(scope="module")
+def turning_strapdown():
+    """25 min strapdown grid in turbulence, 5 Hz GNSS with 0.3 m of noise: the estimator is
+    told none of it."""
+    return _turning_grid(
+        "strapdown",
+        {"gyro": {"white_drift_degph": 0.005}, "gnss": {"horizontal_sigma_m": 0.3, "vertical_sigma_m": 0.6}},
+    )
 
 
 def test_late_gnss_stamps_are_taken_off_before_the_estimate(turning_strapdown, monkeypatch):
@@ -213,18 +218,7 @@ def test_lever_arm_is_the_fit_of_the_residual_on_the_attitude(arm):
 @pytest.fixture(scope="module")
 def turning_platform():
     """The strapdown grid of :func:`turning_strapdown` flown with a levelled platform."""
-    sim = quick_sim(
-        plan={**GRID, "lines": {**GRID["lines"], "heading_deg": 30.0}},
-        triad="platform",
-        noise={**NAVIGATION_GRADE, "gnss": {"horizontal_sigma_m": 0.3, "vertical_sigma_m": 0.6}},
-        field="seed_smooth",
-        gnss_hz=5.0,
-        altimeter_hz=5.0,
-        turbulence={"vertical_sigma_m": 1.0, "horizontal_sigma_m": 1.0, "attitude_sigma_deg": 0.5},
-        seed=11,
-    )
-    s = simulate_flight(sim)
-    return (s, *record_and_initial(s))
+    return _turning_grid("platform", {"gnss": {"horizontal_sigma_m": 0.3, "vertical_sigma_m": 0.6}})
 
 
 def _antenna_at(s, rec, arm_flu):
@@ -296,23 +290,14 @@ def test_track_attitude_is_a_coordinated_turn():
 def survey_gnss_heights():
     """The grid of :func:`turning_strapdown` with a barometric-class altimeter (0.5 m) and a
     survey GNSS (0.1 m up): the GNSS heights are weighed by their own noise."""
-    sim = quick_sim(
-        plan={**GRID, "lines": {**GRID["lines"], "heading_deg": 30.0}},
-        triad="strapdown",
-        noise={
-            **NAVIGATION_GRADE,
+    return _turning_grid(
+        "strapdown",
+        {
             "gyro": {"white_drift_degph": 0.005},
             "altimeter": {"sigma_m": 0.5},
             "gnss": {"horizontal_sigma_m": 0.1, "vertical_sigma_m": 0.1},
         },
-        field="seed_smooth",
-        gnss_hz=5.0,
-        altimeter_hz=5.0,
-        turbulence={"vertical_sigma_m": 1.0, "horizontal_sigma_m": 1.0, "attitude_sigma_deg": 0.5},
-        seed=11,
     )
-    s = simulate_flight(sim)
-    return (s, *record_and_initial(s))
 
 
 def test_a_gnss_height_stretch_off_by_a_metre_is_taken_off(survey_gnss_heights, monkeypatch):

@@ -392,8 +392,8 @@ def estimate_anomaly(
     accel_bias_t = np.zeros(2)
     height_warnings, height_facts = [], {}
     gnss_latency = None  # a GnssLatency once the first aided pass has measured it
-    # an antenna offset not given, on a strapdown triad: measured on the aided track and
-    # applied; a second fit finds what the smoothed track took up of the first
+    # an antenna offset not given: measured on the aided track and applied; up to
+    # LEVER_FITS fits, each finding what the smoothed track took up of the last step
     lever_open = gnss_lever_arm_t is None
     lever_fits, lever_steps = [], []
     # a height channel that is the GNSS's own heights enters once, not again as GNSS's up
@@ -772,14 +772,7 @@ def _repaired_heights(record, nav, ellipsoid):
         "frozen": faults.frozen,
         "steps": [{"time_s": a, "size_m": b} for a, b in steps],
     }
-    what = []
-    if noisy.any():
-        facts["noisy_s"] = float(np.sum(np.diff(t)[noisy[1:]]))
-        facts["noisy_sigma_m"] = float(np.nanmax(own))
-        what.append(
-            f"{int(noisy.sum())} sample(s) over {facts['noisy_s']:.0f} s noisier than the rest (up to "
-            f"{facts['noisy_sigma_m']:.2f} m) weighed by their own noise"
-        )
+    what = _noisy_report(t, own, facts, "sample(s)")
     if latency is not None:
         facts["latency_s"], facts["latency_sigma_s"] = latency[:2]
         drift = ""
@@ -809,6 +802,21 @@ def _repaired_heights(record, nav, ellipsoid):
         ],
         facts,
     )
+
+
+def _noisy_report(t, own, facts, what):
+    """The warning's words on a height channel's noisy stretches (``own``: each sample's own
+    sigma, NaN outside them; :func:`heightqc.noisy_stretches`), with ``noisy_s`` and
+    ``noisy_sigma_m`` added to ``facts``; an empty list when there are none."""
+    noisy = np.isfinite(own)
+    if not noisy.any():
+        return []
+    facts["noisy_s"] = float(np.sum(np.diff(t)[noisy[1:]]))
+    facts["noisy_sigma_m"] = float(np.nanmax(own))
+    return [
+        f"{int(noisy.sum())} {what} over {facts['noisy_s']:.0f} s noisier than the rest (up to "
+        f"{facts['noisy_sigma_m']:.2f} m) weighed by their own noise"
+    ]
 
 
 def _repaired_gnss_heights(record, nav, ellipsoid):
@@ -855,14 +863,7 @@ def _repaired_gnss_heights(record, nav, ellipsoid):
     record = dataclasses.replace(record, gnss=gnss)
     steps = [(float(t[i]), float(size)) for i, size in faults.steps]
     facts = {"spikes": int(faults.spikes.size), "steps": [{"time_s": a, "size_m": b} for a, b in steps]}
-    what = []
-    if noisy.any():
-        facts["noisy_s"] = float(np.sum(np.diff(t)[noisy[1:]]))
-        facts["noisy_sigma_m"] = float(np.nanmax(own))
-        what.append(
-            f"{int(noisy.sum())} fix(es) over {facts['noisy_s']:.0f} s noisier than the rest (up to "
-            f"{facts['noisy_sigma_m']:.2f} m) weighed by their own noise"
-        )
+    what = _noisy_report(t, own, facts, "fix(es)")
     if faults.spikes.size:
         what.append(f"{faults.spikes.size} fix(es) with a height spike dropped")
     if steps:
