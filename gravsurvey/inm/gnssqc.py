@@ -272,7 +272,7 @@ def estimate_gnss_lever_arm(time, residual_enu_m, mat_enu_t, highpass_s=LEVER_HI
     -------
     lever_t, sigma_t : ndarray (3,)
         NaN when there is nothing to regress on (fewer than 32 epochs, an attitude that does
-        not change).
+        not change), or for a component whose standard error exceeds :data:`LEVER_MAX_M`.
     """
     nan = np.full(3, math.nan), np.full(3, math.nan)
     t = np.asarray(time, float)
@@ -319,8 +319,10 @@ def estimate_gnss_lever_arm(time, residual_enu_m, mat_enu_t, highpass_s=LEVER_HI
     cov = bread @ meat @ bread
     # never below the white residual's (a high-passed score's block sums can cancel)
     sig = np.maximum(np.sqrt(np.clip(np.diag(cov), 0.0, None)), robust_sigma(res[use]) * np.sqrt(np.diag(bread)))
-    # navigation minus GNSS is -C l
-    return -beta, sig
+    # navigation minus GNSS is -C l; a component known no better than LEVER_MAX_M is not seen
+    # (a straight line's attitude hardly changes): NaN, not a figure of kilometres
+    seen = sig <= LEVER_MAX_M
+    return np.where(seen, -beta, math.nan), np.where(seen, sig, math.nan)
 
 
 #: Below this ground speed the track gives no heading, m/s: the last one is held (taxi, parked).

@@ -982,13 +982,11 @@ def _lever_arm_step(fit, fits, steps) -> np.ndarray:
         return fit.clear_t
     prev, last = np.asarray(fits[-1].lever_t, float), np.asarray(steps[-1], float)
     cur, sig = np.asarray(fit.lever_t, float), np.asarray(fit.sigma_t, float)
-    if not np.all(np.isfinite(cur)):
-        return np.zeros(3)
-    seen = (last != 0.0) & np.isfinite(prev)
+    seen = (last != 0.0) & np.isfinite(prev) & np.isfinite(cur)
     gain = np.full(3, np.nan)
     gain[seen] = np.clip((prev[seen] - cur[seen]) / last[seen], *LEVER_GAIN_RANGE)
     gain[~seen] = float(np.median(gain[seen])) if seen.any() else 1.0
-    go = np.isfinite(sig) & (np.abs(cur) >= LEVER_FOLLOW_K * sig)
+    go = np.isfinite(cur) & np.isfinite(sig) & (np.abs(cur) >= LEVER_FOLLOW_K * sig)
     return np.where(go, cur / gain, 0.0)
 
 
