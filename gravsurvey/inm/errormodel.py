@@ -713,9 +713,12 @@ def attitude_at(body, t):
     """The attitude of ``body = (time (m,), mat (m, 3, 3))`` at its sample nearest each of the
     times ``t`` (k,) s: (k, 3, 3)."""
     tb, mb = body
-    j = np.clip(np.searchsorted(tb, t), 1, max(tb.size - 1, 1))
+    t = np.asarray(t, float)
+    if tb.size < 2:
+        return mb[np.zeros(t.size, dtype=np.int64)]
+    j = np.clip(np.searchsorted(tb, t), 1, tb.size - 1)
     j -= (t - tb[j - 1]) < (tb[j] - t)
-    return mb[np.clip(j, 0, tb.size - 1)]
+    return mb[j]
 
 
 class AltimeterMeasurement:
