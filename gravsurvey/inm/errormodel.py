@@ -709,16 +709,22 @@ def hermite_position(nav, tq):
     )
 
 
+def nearest_sample(time_s, t):
+    """Index (k,) of the sample of the increasing times ``time_s`` (m,) s nearest each of ``t``
+    (k,) s."""
+    tb = np.asarray(time_s, float)
+    t = np.asarray(t, float)
+    if tb.size < 2:
+        return np.zeros(t.size, dtype=np.int64)
+    j = np.clip(np.searchsorted(tb, t), 1, tb.size - 1)
+    return j - ((t - tb[j - 1]) < (tb[j] - t))
+
+
 def attitude_at(body, t):
     """The attitude of ``body = (time (m,), mat (m, 3, 3))`` at its sample nearest each of the
     times ``t`` (k,) s: (k, 3, 3)."""
     tb, mb = body
-    t = np.asarray(t, float)
-    if tb.size < 2:
-        return mb[np.zeros(t.size, dtype=np.int64)]
-    j = np.clip(np.searchsorted(tb, t), 1, tb.size - 1)
-    j -= (t - tb[j - 1]) < (tb[j] - t)
-    return mb[j]
+    return mb[nearest_sample(tb, t)]
 
 
 class AltimeterMeasurement:
@@ -928,9 +934,11 @@ class GnssMeasurement:
         r_c = hermite_position(nav, ts)
         arm = self.lever_arm_t is not None and np.any(self.lever_arm_t != 0.0)
         if arm:
-            j = np.clip(np.searchsorted(nav.time, ts), 1, nav.time.size - 1)
-            j -= (ts - nav.time[j - 1]) < (nav.time[j] - ts)
-            arm_i = nav.mat_it[j] if self.body_mat_i is None else attitude_at(self.body_mat_i, ts)
+            arm_i = (
+                nav.mat_it[nearest_sample(nav.time, ts)]
+                if self.body_mat_i is None
+                else attitude_at(self.body_mat_i, ts)
+            )
             r_c = r_c + np.einsum("nij,j->ni", arm_i, self.lever_arm_t)
         zs = np.einsum("nji,nj->ni", m_in, r_c - r_g)
         # H (dq block) = M_in^T C_k: ENU <- triad

@@ -664,10 +664,10 @@ def noisy_stretches(time, residual_m):
     block = np.floor((t[1:-1] - t[0]) / span).astype(np.int64)
     nb = int(block[-1]) + 1
     sig = np.full(nb, math.nan)
-    order = np.argsort(block, kind="stable")
-    bounds = np.searchsorted(block[order], np.arange(nb + 1))
+    # the times increase: each block's differences are one run
+    bounds = np.searchsorted(block, np.arange(nb + 1))
     for b in range(nb):
-        seg = d[order[bounds[b] : bounds[b + 1]]]
+        seg = d[bounds[b] : bounds[b + 1]]
         if seg.size >= NOISE_MIN_SAMPLES // 2:
             sig[b] = robust_sigma(seg) / math.sqrt(6.0)
     noisy = np.where(np.isfinite(sig), sig, 0.0) > NOISE_FACTOR * whole

@@ -29,6 +29,7 @@ from .errormodel import (
     attitude_at,
     hermite_position,
     initial_covariance,
+    nearest_sample,
     initial_mean,
     state_perm,
 )
@@ -734,16 +735,9 @@ def _repaired_heights(record, nav, ellipsoid):
     t, e = vertical_residual(nav, alt_t[inside], alt_h[inside], ellipsoid)
     # a noisy stretch is weighed by its own noise and left out of the searches (against the
     # quiet rest's sigma it is full of steps: 2 m of noise for 300 s read as 7 steps, 60 mGal)
-    own = noisy_stretches(t, e)
+    own, quiet, faults_q, faults = _faults_outside_noise(t, e, alt_h[inside])
     noisy = np.isfinite(own)
-    quiet = np.flatnonzero(~noisy)
-    faults_q = find_height_faults(t[quiet], e[quiet], alt_h[inside][quiet]) if quiet.size >= 16 else HeightFaults()
     latency = _height_latency(nav, t[quiet], e[quiet], faults_q) if quiet.size >= 16 else None
-    faults = HeightFaults(
-        spikes=quiet[faults_q.spikes].astype(np.int64),
-        steps=[(int(quiet[i]), size) for i, size in faults_q.steps],
-        frozen=faults_q.frozen,
-    )
     if coarse is not None:
         latency = (
             (coarse + latency[0], *latency[1:]) if latency is not None else (coarse, COARSE_FINE_STEP_S, 0.0, 0.0, 0.0)
@@ -804,6 +798,26 @@ def _repaired_heights(record, nav, ellipsoid):
     )
 
 
+def _faults_outside_noise(t, e, heights=None):
+    """A height channel's noisy stretches and its faults outside them.
+
+    ``own`` (k,): each sample's own sigma in a noisy stretch, NaN elsewhere
+    (:func:`heightqc.noisy_stretches`); ``quiet``: the indices of the other samples;
+    ``faults_q``: :func:`heightqc.find_height_faults` on those (indices into ``quiet``);
+    ``faults``: the same with indices into ``t``."""
+    own = noisy_stretches(t, e)
+    quiet = np.flatnonzero(~np.isfinite(own))
+    if quiet.size < 16:
+        return own, quiet, HeightFaults(), HeightFaults()
+    faults_q = find_height_faults(t[quiet], e[quiet], None if heights is None else heights[quiet])
+    faults = HeightFaults(
+        spikes=quiet[faults_q.spikes].astype(np.int64),
+        steps=[(int(quiet[i]), size) for i, size in faults_q.steps],
+        frozen=faults_q.frozen,
+    )
+    return own, quiet, faults_q, faults
+
+
 def _noisy_report(t, own, facts, what):
     """The warning's words on a height channel's noisy stretches (``own``: each sample's own
     sigma, NaN outside them; :func:`heightqc.noisy_stretches`), with ``noisy_s`` and
@@ -836,12 +850,7 @@ def _repaired_gnss_heights(record, nav, ellipsoid):
     t, e = vertical_residual(nav, gt[inside], gh[inside], ellipsoid)
     # a noisy stretch (a float solution) is weighed by its own noise, and its scatter is not
     # searched for steps: against the quiet rest's sigma it is full of them
-    own = noisy_stretches(t, e)
-    quiet = np.flatnonzero(~np.isfinite(own))
-    faults = find_height_faults(t[quiet], e[quiet]) if quiet.size >= 16 else HeightFaults()
-    faults = HeightFaults(
-        spikes=quiet[faults.spikes].astype(np.int64), steps=[(int(quiet[i]), size) for i, size in faults.steps]
-    )
+    own, _, _, faults = _faults_outside_noise(t, e)
     noisy = np.isfinite(own)
     if not faults and not noisy.any():
         return record, [], {}
@@ -941,9 +950,7 @@ def _gnss_lever_arm(
     m_in = np.einsum("nij,njk->nik", m_ie, mat_en(lat, lon))
     # the navigation between its samples and its slow correction between the epochs
     r_c = hermite_position(nav, ts) + np.stack([np.interp(ts, te, corr[:, j]) for j in range(3)], axis=1)
-    j = np.clip(np.searchsorted(nav.time, ts), 1, nav.time.size - 1)
-    j -= (ts - nav.time[j - 1]) < (nav.time[j] - ts)
-    arm_i = nav.mat_it[j] if body_mat_i is None else attitude_at(body_mat_i, ts)
+    arm_i = nav.mat_it[nearest_sample(nav.time, ts)] if body_mat_i is None else attitude_at(body_mat_i, ts)
     mat_ut = np.einsum("nji,njk->nik", m_in, arm_i)
     if lever_arm_t is not None:
         r_c = r_c + np.einsum("nij,j->ni", arm_i, np.asarray(lever_arm_t, float))

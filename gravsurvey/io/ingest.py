@@ -71,7 +71,7 @@ class IngestOptions:
     #: sensor axes -> forward-left-up triad axes, (3, 3) proper rotation (``imu_axes``)
     mat_axes: np.ndarray = field(default_factory=lambda: np.eye(3))
     #: GNSS antenna position from the IMU on the forward-left-up triad axes, m, (3,) (``gnss_lever_arm_m``);
-    #: None: not given (found from the track on a strapdown triad)
+    #: None: not given (found from the aided track)
     gnss_lever_arm_m: np.ndarray | None = None
     #: nanoseconds added to a channel's stamps as read, role -> int (``time_offsets_s``)
     time_offsets_ns: dict = field(default_factory=dict)
