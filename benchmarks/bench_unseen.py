@@ -522,6 +522,22 @@ def with_carrier_phase_gnss(spec: dict) -> dict:
     return out
 
 
+def with_gnss_markov(spec: dict, sigma_m: float, tau_s: float) -> dict:
+    """The drawn flight with a slowly varying GNSS error: a first-order Gauss-Markov process of
+    ``sigma_m`` (m) in height and half of it east and north, correlation time ``tau_s`` (s), on
+    top of the white noise (a real solution's ionosphere, troposphere, orbit and multipath
+    errors; docs/benchmarks.md "A slowly varying GNSS error")."""
+    out = json.loads(json.dumps(spec))
+    sensors = out["sim"]["flights"][0]["sensors"]
+    sensors["gnss"] = {
+        **sensors.get("gnss", {}),
+        "vertical_markov_sigma_m": float(sigma_m),
+        "horizontal_markov_sigma_m": 0.5 * float(sigma_m),
+        "markov_tau_s": float(tau_s),
+    }
+    return out
+
+
 def evaluate_flight(
     spec, folder: Path, runs=("default", "oracle", "classic"), heights: str = "altimeter", model=None
 ) -> dict:
@@ -784,6 +800,13 @@ def main(argv=None):
         metavar="MGAL_PER_H",
         help="add a linear gravimeter drift, mGal/h (docs/benchmarks.md 'A linear gravimeter drift')",
     )
+    ap.add_argument(
+        "--gnss-markov",
+        default=None,
+        metavar="SIGMA_M,TAU_S",
+        help="add a Gauss-Markov GNSS error: SIGMA_M in height (half east and north), correlation "
+        "time TAU_S (docs/benchmarks.md 'A slowly varying GNSS error')",
+    )
     a = ap.parse_args(argv)
     if a.flights < 1:
         ap.error("--flights must be >= 1")
@@ -801,6 +824,14 @@ def main(argv=None):
             accel_bias = []
         if len(accel_bias) != 2:
             ap.error(f"--accel-bias: expected two numbers B1,B2 (m/s^2), got {a.accel_bias!r}")
+    gnss_markov = None
+    if a.gnss_markov is not None:
+        try:
+            gnss_markov = [float(b) for b in a.gnss_markov.split(",")]
+        except ValueError:
+            gnss_markov = []
+        if len(gnss_markov) != 2 or gnss_markov[0] < 0 or gnss_markov[1] <= 0:
+            ap.error(f"--gnss-markov: expected SIGMA_M,TAU_S (m, s > 0), got {a.gnss_markov!r}")
     rows = []
     for seed in range(a.first_seed, a.first_seed + a.flights):
         spec = draw_flight_spec(seed)
@@ -812,6 +843,8 @@ def main(argv=None):
             spec = with_carrier_phase_gnss(spec)
         if a.gravimeter_drift is not None:
             spec = with_gravimeter_drift(spec, a.gravimeter_drift)
+        if gnss_markov is not None:
+            spec = with_gnss_markov(spec, *gnss_markov)
         row = run_flight(spec, a.cache, tuple(a.runs.split(",")), a.heights, model)
         rows.append(row)
         print(

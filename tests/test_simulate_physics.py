@@ -303,3 +303,35 @@ def test_turbulence_amplitude_and_compiled_sum():
         rtol=0,
         atol=1e-12,
     )
+
+
+def test_gnss_gauss_markov_error_has_its_sigma_and_correlation_time():
+    """``gnss.vertical_markov_sigma_m`` / ``horizontal_markov_sigma_m`` / ``markov_tau_s``: a
+    first-order Gauss-Markov error on top of the white noise, with its stationary sigma and its
+    autocorrelation exp(-1) at one correlation time; a flight without it draws the same white
+    noise as before it existed."""
+    from gravsurvey.simulate.sensors import gnss_errors
+
+    n, dt, tau = 200_000, 0.5, 300.0
+    lat = np.full(n, math.radians(45.0))
+    h = np.full(n, 1000.0)
+    white = {"gnss": {"horizontal_sigma_m": 0.3, "vertical_sigma_m": 0.5}}
+    both = {
+        "gnss": {
+            **white["gnss"],
+            "horizontal_markov_sigma_m": 0.0,
+            "vertical_markov_sigma_m": 0.05,
+            "markov_tau_s": tau,
+        }
+    }
+    _, _, dh0 = gnss_errors(lat, h, white, np.random.default_rng(5), dt_s=dt)
+    _, _, dh1 = gnss_errors(lat, h, both, np.random.default_rng(5), dt_s=dt)
+    markov = dh1 - dh0  # the white draws are the same
+    assert np.std(dh0) == pytest.approx(0.5, rel=0.01)
+    assert np.std(markov) == pytest.approx(0.05, rel=0.1)
+    lag = int(tau / dt)
+    rho = np.corrcoef(markov[:-lag], markov[lag:])[0, 1]
+    assert rho == pytest.approx(math.exp(-1.0), abs=0.06)
+    dlat, dlon, _ = gnss_errors(lat, h, both, np.random.default_rng(5), dt_s=dt)
+    dlat0, dlon0, _ = gnss_errors(lat, h, white, np.random.default_rng(5), dt_s=dt)
+    assert np.array_equal(dlat, dlat0) and np.array_equal(dlon, dlon0)  # no horizontal part asked

@@ -58,6 +58,7 @@ __all__ = [
     "fit_vertical_spectrum",
     "identify_params",
     "wiener_resolution_m",
+    "filter_height_sigma",
     "wide_prior_params",
     "refine_prior",
     "band_margin",
@@ -87,10 +88,28 @@ BOUNDS = {
     "anomaly_tau_s": (5.0, 86400.0),
     "white_mps2": (1e-8, 1e-3),
     "height_sigma_m": (1e-4, 50.0),
+    "height_walk_m": (1e-6, 0.3),
 }
 #: :class:`SpectralModel` fields of the sensors' noise (the others are the anomaly's prior).
 NOISE_KEYS = ("white_mps2", "height_sigma_m")
 _ORDER = ("anomaly_sigma_mps2", "anomaly_tau_s", "white_mps2", "height_sigma_m")
+#: ... and with the height wander (:func:`fit_vertical_spectrum` with ``walk=True``).
+_ORDER_WALK = _ORDER + ("height_walk_m",)
+
+#: The height wander (a slowly varying height error: a GNSS solution's ionosphere,
+#: troposphere, orbit and multipath errors, minutes long) is taken into the model only when the
+#: likelihood prefers it by this much over the white height noise alone.  Over the analysed band
+#: (periods of seconds to minutes, above the error's inverse correlation time) such an error is
+#: a random walk, ``q / omega^2`` in height, ``q omega^2`` referred to the disturbance - rising
+#: with frequency, unlike a field seen from the air; white height noise alone had the filter
+#: follow it as field (a 5-cm, 300-s Gauss-Markov GNSS height error: 2.40 mGal at 2 km
+#: resolution where the same flight without it gave 0.64 at 14 km; docs/benchmarks.md "A slowly
+#: varying GNSS height error").  Without a wander the ratio is about half a chi-square of one
+#: degree of freedom (5: a 0.2 % chance); measured on 48 flights without one: under 2 but once
+#: 13.9 (quick U018, where the wander took the place of a white level and the product went
+#: 0.32 -> 0.42 mGal).  With 5- and 10-cm wanders, 5.4-427 where found (a threshold of 10
+#: missed 10-cm ones on quick U000 at 7.0: 4.97 mGal, found 1.53) and under 5 on 7 of 24.
+WALK_MIN_LOG_LR = 5.0
 
 #: The white level is used only when the likelihood pins it within this 1-sigma factor ...
 WHITE_MAX_FACTOR = 4.0
@@ -160,15 +179,20 @@ class SpectralModel:
         (two-sided PSD ``white_mps2**2 * 1 s``).
     height_sigma_m : float
         Per-sample sigma of the height measurement, m.
+    height_walk_m : float
+        The height error's random walk (the height wander): the sigma of its increment over one
+        second, m; two-sided PSD ``q / omega^2`` of the height error with ``q = height_walk_m^2 /
+        1 s``.  0 where the heights' noise is white.
     """
 
     anomaly_sigma_mps2: float
     anomaly_tau_s: float
     white_mps2: float
     height_sigma_m: float
+    height_walk_m: float = 0.0
 
     def as_vector(self) -> np.ndarray:
-        return np.log([getattr(self, k) for k in _ORDER])
+        return np.log([getattr(self, k) for k in (_ORDER_WALK if self.height_walk_m > 0.0 else _ORDER)])
 
     @classmethod
     def from_vector(cls, v) -> "SpectralModel":
@@ -193,6 +217,10 @@ def vertical_psd(freq_hz, model: SpectralModel, dt_s: float) -> np.ndarray:
     x = math.pi * f * dt_s
     sinc4 = (np.sin(x) / x) ** 4
     s_eps = model.height_sigma_m**2 * dt_s * (2.0 - 2.0 * np.cos(2.0 * math.pi * f * dt_s)) ** 2 / dt_s**4
+    if model.height_walk_m > 0.0:
+        d2 = (2.0 - 2.0 * np.cos(2.0 * math.pi * f * dt_s)) ** 2 / dt_s**4
+        # the wander's q / omega^2 through the same second difference
+        s_eps = s_eps + model.height_walk_m**2 * d2 / (2.0 * math.pi * f) ** 2
     return (s_g + s_w) * sinc4 + s_eps
 
 
@@ -512,16 +540,22 @@ def _nll(v, f, i_f, dt, fixed_mask, fixed_v):
     return float(np.sum(np.log(s) + i_f / s))
 
 
-def _whittle_terms(f, dt):
-    """The parts of :func:`vertical_psd` that do not depend on the parameters, (3, k).
+def _whittle_terms(f, dt, walk: bool = False):
+    """The parts of :func:`vertical_psd` that do not depend on the parameters, (3, k) or (4, k).
 
-    Rows: ``(2 pi f)^2`` (1/s^2), ``sinc^4(f dt)``, and the height noise's transfer
-    ``dt (2 - 2 cos 2 pi f dt)^2 / dt^4`` (1/s^3): computed once per fit instead of at each of
-    the optimizer's likelihood evaluations.
+    Rows: ``(2 pi f)^2`` (1/s^2), ``sinc^4(f dt)``, the height noise's transfer
+    ``dt (2 - 2 cos 2 pi f dt)^2 / dt^4`` (1/s^3) and, with ``walk``, the height wander's
+    ``(2 - 2 cos 2 pi f dt)^2 / dt^4 / (2 pi f)^2`` (1/s^2): computed once per fit instead of at
+    each of the optimizer's likelihood evaluations.
     """
     f = np.asarray(f, float)
     x = math.pi * f * dt
-    return np.stack([(2.0 * math.pi * f) ** 2, (np.sin(x) / x) ** 4, (2.0 - 2.0 * np.cos(2.0 * x)) ** 2 / dt**3])
+    om2 = (2.0 * math.pi * f) ** 2
+    hk = (2.0 - 2.0 * np.cos(2.0 * x)) ** 2 / dt**3
+    rows = [om2, (np.sin(x) / x) ** 4, hk]
+    if walk:
+        rows.append(hk / (dt * om2))
+    return np.stack(rows)
 
 
 def _psd_parts(v, terms):
@@ -531,22 +565,27 @@ def _psd_parts(v, terms):
     -------
     s : ndarray (k,)
         The PSD, (m/s^2)^2/Hz.
-    d : ndarray (4, k)
-        ``dS / d log p`` for the parameters in :data:`_ORDER`.
+    d : ndarray (4, k) or (5, k)
+        ``dS / d log p`` for the parameters in :data:`_ORDER` (:data:`_ORDER_WALK` with the
+        wander's row in ``terms``).
     s_g, r : ndarray (k,)
         The anomaly's Markov PSD and ``(lambda^2 - omega^2) / (lambda^2 + omega^2)``
         (``d log S_g / d log tau``), for the second derivatives.
     """
     sig2, tau, w2, eps2 = np.exp(2.0 * v[0]), np.exp(v[1]), np.exp(2.0 * v[2]), np.exp(2.0 * v[3])
-    om2, sinc4, hk = terms
+    om2, sinc4, hk = terms[:3]
     lam = 1.0 / tau
     den = lam * lam + om2
     s_g = 2.0 * sig2 * lam / den
     s_eps = eps2 * hk
     s = (s_g + w2) * sinc4 + s_eps
     r = (lam * lam - om2) / den
-    d = np.stack([2.0 * s_g * sinc4, s_g * r * sinc4, 2.0 * w2 * sinc4, 2.0 * s_eps])
-    return s, d, s_g, r
+    rows = [2.0 * s_g * sinc4, s_g * r * sinc4, 2.0 * w2 * sinc4, 2.0 * s_eps]
+    if len(terms) > 3:
+        s_walk = np.exp(2.0 * v[4]) * terms[3]
+        s = s + s_walk
+        rows.append(2.0 * s_walk)
+    return s, np.stack(rows), s_g, r
 
 
 def _nll_and_grad(v, terms, i_f, fixed_mask, fixed_v):
@@ -565,13 +604,13 @@ def _nll_and_grad(v, terms, i_f, fixed_mask, fixed_v):
 
 
 def _nll_hessian(v, terms, i_f):
-    """Exact Hessian (4, 4) of Whittle's negative log-likelihood by the log-parameters ``v``.
+    """Exact Hessian (4, 4) or (5, 5) of Whittle's negative log-likelihood by the log-parameters ``v``.
 
     ``sum [(2 I / S - 1) dS_i dS_j / S^2 + (1 - I / S) d2S_ij / S]``; ``d2S`` is nonzero on the
     diagonal and between the anomaly's sigma and correlation time only.
     """
     s, d, s_g, r = _psd_parts(np.asarray(v, float), terms)
-    om2, sinc4, _ = terms
+    om2, sinc4 = terms[0], terms[1]
     q = i_f / s
     a = (2.0 * q - 1.0) / (s * s)
     out = (d * a) @ d.T
@@ -584,9 +623,10 @@ def _nll_hessian(v, terms, i_f):
             s_g * (r * r - 4.0 * lam2 * om2 / (lam2 + om2) ** 2) * sinc4,
             2.0 * d[2],
             2.0 * d[3],
+            *([2.0 * d[4]] if d.shape[0] > 4 else []),
         ]
     )
-    out[np.diag_indices(4)] += d2 @ b
+    out[np.diag_indices(d.shape[0])] += d2 @ b
     cross = float((2.0 * d[1]) @ b)
     out[0, 1] += cross
     out[1, 0] += cross
@@ -619,7 +659,13 @@ def _single_thread_blas():
 
 
 def fit_vertical_spectrum(
-    time, residual_m, manoeuvring=None, *, fixed: dict | None = None, start: SpectralModel | None = None
+    time,
+    residual_m,
+    manoeuvring=None,
+    *,
+    fixed: dict | None = None,
+    start: SpectralModel | None = None,
+    walk: bool = False,
 ) -> VerticalFit | None:
     """Whittle fit of the vertical-channel spectrum (module docstring).
 
@@ -635,6 +681,9 @@ def fit_vertical_spectrum(
         Parameters of :class:`SpectralModel` held at a given value (user overrides).
     start : SpectralModel, optional
         An extra starting point (e.g. the configured values).
+    walk : bool
+        Fit the height wander (``SpectralModel.height_walk_m``) as a fifth parameter; else it
+        is 0.
 
     Returns
     -------
@@ -670,10 +719,11 @@ def fit_vertical_spectrum(
     if f.size < 16:
         return None
     fixed = dict(fixed or {})
-    fixed_mask = np.array([k in fixed for k in _ORDER])
-    fixed_v = np.array([math.log(fixed[k]) if k in fixed else 0.0 for k in _ORDER])
-    lo = np.log([BOUNDS[k][0] for k in _ORDER])
-    hi = np.log([BOUNDS[k][1] for k in _ORDER])
+    order = _ORDER_WALK if walk else _ORDER
+    fixed_mask = np.array([k in fixed for k in order])
+    fixed_v = np.array([math.log(fixed[k]) if k in fixed else 0.0 for k in order])
+    lo = np.log([BOUNDS[k][0] for k in order])
+    hi = np.log([BOUNDS[k][1] for k in order])
     # data-driven starting points: the white level from the middle of the band, the height
     # noise from the top, the anomaly from the lowest frequencies
     fny = 0.5 / dt
@@ -688,8 +738,13 @@ def fit_vertical_spectrum(
         s0 = math.sqrt(max(float(np.median(low)) / (2.0 * tau), 1e-14))
         starts.append(np.log([s0, tau, w0, eps0]))
     if start is not None:
-        starts.append(start.as_vector())
-    terms = _whittle_terms(f, dt)
+        starts.append(start.as_vector()[:4])
+    if walk:
+        # the wander from the middle of the band (q omega^2 there), and a tenth of it
+        fm = float(np.median(f[(f > 0.01) & (f < 0.05)])) if np.any((f > 0.01) & (f < 0.05)) else float(np.median(f))
+        k0 = math.sqrt(max(float(np.median(mid)), 1e-16)) / (2.0 * math.pi * fm)
+        starts = [np.append(v0, math.log(x)) for v0 in starts for x in (k0, 0.1 * k0)]
+    terms = _whittle_terms(f, dt, walk)
     best = None
     with _single_thread_blas():
         for v0 in starts:
@@ -706,17 +761,17 @@ def fit_vertical_spectrum(
                 best = res
     v = np.where(fixed_mask, fixed_v, best.x)
     at_bound = tuple(
-        k for k, x, a, b in zip(_ORDER, v, lo, hi) if not fixed_mask[_ORDER.index(k)] and (x - a < 1e-3 or b - x < 1e-3)
+        k for k, x, a, b in zip(order, v, lo, hi) if not fixed_mask[order.index(k)] and (x - a < 1e-3 or b - x < 1e-3)
     )
-    free = [i for i, k in enumerate(_ORDER) if not fixed_mask[i] and k not in at_bound]
-    factors = {k: None for k in _ORDER}
+    free = [i for i, k in enumerate(order) if not fixed_mask[i] and k not in at_bound]
+    factors = {k: None for k in order}
     if free:
         hess = _nll_hessian(v, terms, i_f)[np.ix_(free, free)]
         try:
             cov = np.linalg.inv(hess)
             for j, i in enumerate(free):
                 if 0 < cov[j, j] < 25.0:
-                    factors[_ORDER[i]] = float(math.exp(math.sqrt(cov[j, j])))
+                    factors[order[i]] = float(math.exp(math.sqrt(cov[j, j])))
         except np.linalg.LinAlgError:
             pass
     used = float(sum((b - a) * dt for a, b in runs))
@@ -750,6 +805,8 @@ def wiener_resolution_m(model: SpectralModel, speed_mps: float, dt_s: float = 1.
         f = math.exp(logf)
         s_g = 2.0 * model.anomaly_sigma_mps2**2 * lam / (lam**2 + (2 * math.pi * f) ** 2)
         s_n = model.white_mps2**2 + model.height_sigma_m**2 * dt_s * (2 * math.pi * f) ** 4
+        if model.height_walk_m > 0.0:
+            s_n += model.height_walk_m**2 * (2 * math.pi * f) ** 2
         return math.log(s_g) - math.log(s_n)
 
     lo, hi = math.log(1e-7), math.log(10.0)
@@ -794,6 +851,8 @@ def prior_for_resolution(
     f_c = speed_mps / (2.0 * resolution_m)
     lam = 1.0 / model.anomaly_tau_s
     s_n = model.white_mps2**2 + model.height_sigma_m**2 * dt_s * (2 * math.pi * f_c) ** 4
+    if model.height_walk_m > 0.0:
+        s_n += model.height_walk_m**2 * (2 * math.pi * f_c) ** 2
     sigma = math.sqrt(s_n * (lam**2 + (2 * math.pi * f_c) ** 2) / (2.0 * lam))
     return dataclasses.replace(model, anomaly_sigma_mps2=sigma)
 
@@ -816,7 +875,11 @@ def white_log_likelihood_ratio(time, residual_m, manoeuvring, fit: VerticalFit, 
         chi-square of one degree of freedom when the white level is the datasheet's.
     """
     held = fit_vertical_spectrum(
-        time, residual_m, manoeuvring, fixed={**(fixed or {}), "white_mps2": WHITE_DEFAULT_MPS2}
+        time,
+        residual_m,
+        manoeuvring,
+        fixed={**(fixed or {}), "white_mps2": WHITE_DEFAULT_MPS2},
+        walk=fit.model.height_walk_m > 0.0,
     )
     return math.inf if held is None else float(held.nll - fit.nll)
 
@@ -947,6 +1010,20 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
                 "how": "config" if k in given else "default",
             }
         return params, report
+    if not whole_flight and "altimeter_sigma_m" not in given:
+        # the height wander (WALK_MIN_LOG_LR): fitted as a fifth parameter, kept only when the
+        # likelihood prefers it clearly
+        wfit = fit_vertical_spectrum(t, e, man, fixed=noise_fixed, start=fit.model, walk=True)
+        if wfit is not None:
+            lr = float(fit.nll - wfit.nll)
+            report["height_walk"] = {
+                "height_walk_m": wfit.model.height_walk_m,
+                "sigma_factor": wfit.sigma_factor.get("height_walk_m"),
+                "log_likelihood_ratio": lr,
+                "applied": lr >= WALK_MIN_LOG_LR,
+            }
+            if lr >= WALK_MIN_LOG_LR:
+                fit = wfit
     m = dataclasses.replace(fit.model, **{k: val for k, val in fixed.items() if k not in NOISE_KEYS})
     white_how = "identified"
     factor_w = fit.sigma_factor.get("white_mps2")
@@ -1064,7 +1141,10 @@ def wide_prior_params(params, report, speed_mps: float):
     keep the estimate sound - unlike the straight stretches used for the noise levels.
     """
     v = max(float(speed_mps), 1.0)
-    m = dataclasses.replace(_model_of(report), anomaly_tau_s=WIDE_TAU_S)
+    # the wide pass's filter is given the white height noise alone (the wander is taken into
+    # the filter's height sigma once the resolution is chosen, filter_height_sigma); its
+    # resolution is set against that noise
+    m = dataclasses.replace(_model_of(report), anomaly_tau_s=WIDE_TAU_S, height_walk_m=0.0)
     m = prior_for_resolution(m, v, WIDE_RESOLUTION_M, report["height_dt_s"])
     return dataclasses.replace(
         params, anomaly_sigma_mps2=m.anomaly_sigma_mps2, anomaly_lambda_per_m=1.0 / (m.anomaly_tau_s * v)
@@ -1082,7 +1162,31 @@ def smoother_gain(freq_hz, model: SpectralModel, dt_h: float) -> np.ndarray:
 
 def _noise_psd_g(f, m: SpectralModel, dt_h: float):
     """Noise of the vertical channel referred to the disturbance, two-sided, (m/s^2)^2/Hz."""
-    return m.white_mps2**2 + m.height_sigma_m**2 * dt_h * (2.0 * math.pi * f) ** 4
+    out = m.white_mps2**2 + m.height_sigma_m**2 * dt_h * (2.0 * math.pi * f) ** 4
+    if m.height_walk_m > 0.0:
+        out = out + m.height_walk_m**2 * (2.0 * math.pi * f) ** 2
+    return out
+
+
+def filter_height_sigma(model: SpectralModel, speed_mps: float, dt_h: float, f_min_hz: float) -> float:
+    """The white per-sample height sigma (m) the filter is given for ``model``'s height noise.
+
+    The filter's height measurements have white noise; the height wander (``height_walk_m``)
+    is not white.  The sigma whose noise, referred to the disturbance, equals the model's at the
+    smoother's half-power point ``f_c`` (:func:`wiener_resolution_m`) puts the filter's
+    half-power point at the same frequency: ``s^2 dt w_c^4 = sigma^2 dt w_c^4 + q w_c^2``.
+    ``f_c`` is taken no lower than ``f_min_hz`` (the lowest frequency the flight shows, Hz): a
+    prior that passes no wavelength the flight holds would otherwise leave the heights a sigma
+    of hundreds of metres, and the vertical channel unaided.  Without a wander,
+    ``height_sigma_m``.
+    """
+    if model.height_walk_m <= 0.0:
+        return float(model.height_sigma_m)
+    v = max(float(speed_mps), 1.0)
+    res = wiener_resolution_m(model, v, dt_h)
+    f_c = max(v / (2.0 * res) if math.isfinite(res) else 0.0, float(f_min_hz))
+    w_c = 2.0 * math.pi * f_c
+    return float(math.sqrt(model.height_sigma_m**2 + model.height_walk_m**2 / (dt_h * w_c * w_c)))
 
 
 def markov_psd(f, sigma, tau):
@@ -1486,9 +1590,12 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     sel = slice(3, n // 2)
     f, p = f[sel], p[sel]
     s_n = _noise_psd_g(f, noise, dt_h)
+    # the wide pass's transfer is its filter's: white height noise alone (wide_prior_params)
+    noise1 = dataclasses.replace(noise, height_walk_m=0.0)
+    s_n1 = _noise_psd_g(f, noise1, dt_h) if noise.height_walk_m > 0.0 else s_n
     tau1 = 1.0 / (wide.anomaly_lambda_per_m * v)
     s_g1 = markov_psd(f, wide.anomaly_sigma_mps2, tau1)
-    h1 = s_g1 / (s_g1 + s_n)
+    h1 = s_g1 / (s_g1 + s_n1)
     valid = h1 >= 0.5
     # calibrate the noise level on the first pass itself: in the top octave of its band (half
     # to full wide resolution, ~1-2 km) an airborne field is weak, so there P / H1^2 is the
@@ -1508,8 +1615,9 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     def first_pass_noise(x):
         # the noise in the wide pass's estimate: the noise PSD through that pass's transfer
         sn = k_n * _noise_psd_g(x, noise, dt_h)
+        sn1 = k_n * _noise_psd_g(x, noise1, dt_h) if noise.height_walk_m > 0.0 else sn
         sg = markov_psd(x, wide.anomaly_sigma_mps2, tau1)
-        return sn * (sg / (sg + sn)) ** 2
+        return sn * (sg / (sg + sn1)) ** 2
 
     var_field = max(
         var_seen - FIELD_VAR_NOISE_MARGIN * windowed_variance(first_pass_noise, FIELD_VAR_WINDOW_S, span), 0.0
@@ -1557,7 +1665,11 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     # (against the height noise alone: the white level is the least certain estimate, inflated
     # by turbulence, and would make this constraint pass noise it need not)
     f_lo = 0.5 * float(f[0])
-    s_n_lo = float(_noise_psd_g(np.array([f_lo]), dataclasses.replace(noise, white_mps2=0.0), dt_h)[0])
+    # (the white height noise alone: the wander's random walk over-states the noise at the longest
+    # wavelengths, where a real one's correlation time ends it)
+    s_n_lo = float(
+        _noise_psd_g(np.array([f_lo]), dataclasses.replace(noise, white_mps2=0.0, height_walk_m=0.0), dt_h)[0]
+    )
     # a prior that cannot hold the field's long-wavelength variance (a strong smooth field under
     # a weak or short-correlated Markov prior: the periodogram band starts at a third of the
     # flight's length and misses it) makes the filter explain the field by other states - the

@@ -51,7 +51,9 @@ from .heightqc import (
     repair_heights,
 )
 from .identify import (
+    SpectralModel,
     drift_sigma_passed,
+    filter_height_sigma,
     height_noise_density,
     horizontal_prior,
     identify_params,
@@ -1242,6 +1244,25 @@ def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False
         params, ident = refine_prior(
             params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))), wide, speed0, weight
         )
+    walk = ident.get("height_walk") or {}
+    if walk.get("applied") and "spectral_model" in ident:
+        # the heights wander (identify.WALK_MIN_LOG_LR): the filter's white height noise is
+        # set to match it at the chosen smoother's half-power point
+        model = SpectralModel(**ident["spectral_model"])
+        # (the lowest frequency refine_prior's periodogram analyses: its third bin)
+        sig = filter_height_sigma(model, speed0, float(ident["height_dt_s"]), 3.0 / float(nav.time[-1] - nav.time[0]))
+        params = dataclasses.replace(params, altimeter_sigma_m=sig)
+        walk["filter_height_sigma_m"] = sig
+        ident["altimeter_sigma_m"] = {
+            **ident.get("altimeter_sigma_m", {}),
+            "value": sig,
+            "white_m": float(model.height_sigma_m),
+            "how": (
+                f"identified: white {model.height_sigma_m:.3g} m and a height wander of "
+                f"{1e3 * model.height_walk_m:.3g} mm in 1 s (log-likelihood ratio "
+                f"{float(walk.get('log_likelihood_ratio', float('nan'))):.3g}), as white noise at the smoother's resolution"
+            ),
+        }
     if not {"gravimeter_sigma_mps2", "gravimeter_lambda_per_s"} & params.given:
         # honest-sigma hook (docs/method.md "Honest sigma"): the datasheet drift that the filter's
         # gravimeter state does not hold, as the smoother passes it; estimate.py adds it to sigma

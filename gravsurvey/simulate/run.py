@@ -326,7 +326,9 @@ def simulate_flight(sim, flight_index: int = 0) -> FlightSimulation:
 
     gnss_ns = sample_times_ns(dur, rates["gnss_hz"])
     kin_g = kinematics(plan, gnss_ns / 1e9)
-    dlat, dlon, dh = gnss_errors(kin_g.lat, kin_g.height, f["sensors"], _rng(cfg, flight_index, _STREAM_GNSS), ell)
+    dlat, dlon, dh = gnss_errors(
+        kin_g.lat, kin_g.height, f["sensors"], _rng(cfg, flight_index, _STREAM_GNSS), ell, 1.0 / rates["gnss_hz"]
+    )
 
     truth = {
         "time": t_imu,

@@ -28,7 +28,9 @@ the noise averaged over 1 s, i.e. a white noise of two-sided spectral density
 * gyros: constant bias + white drift (deg/h);
 * altimeter: ``h + A + sigma w`` (mean ``A``);
 * GNSS: independent white noise in east, north (m, converted to angles through
-  the radii of curvature) and height.
+  the radii of curvature) and height, plus optional first-order Gauss-Markov errors
+  per axis (``horizontal_markov_sigma_m``, ``vertical_markov_sigma_m``,
+  ``markov_tau_s``): a real solution's slowly varying error.
 """
 
 from __future__ import annotations
@@ -248,10 +250,11 @@ def altimeter_errors(n, cfg, rng):
     return alt["mean_m"] + alt["sigma_m"] * rng.standard_normal(n)
 
 
-def gnss_errors(lat, height, cfg, rng, ellipsoid: Ellipsoid = WGS84):
+def gnss_errors(lat, height, cfg, rng, ellipsoid: Ellipsoid = WGS84, dt_s: float = 1.0):
     """GNSS errors (dlat rad, dlon rad, dh m), each ``(n,)``.
 
-    East/north errors in metres are converted through the radii of curvature.
+    East/north errors in metres are converted through the radii of curvature.  ``dt_s``: the
+    fixes' spacing, s (the Gauss-Markov parts' step).
     """
     g = cfg["gnss"]
     n = lat.shape[0]
@@ -260,4 +263,11 @@ def gnss_errors(lat, height, cfg, rng, ellipsoid: Ellipsoid = WGS84):
     de = g["horizontal_sigma_m"] * w[:, 0]
     dn = g["horizontal_sigma_m"] * w[:, 1]
     dh = g["vertical_sigma_m"] * w[:, 2]
+    sh, sv = g.get("horizontal_markov_sigma_m", 0.0), g.get("vertical_markov_sigma_m", 0.0)
+    if sh > 0.0 or sv > 0.0:
+        # drawn after the white parts, so a flight without them keeps its noise
+        lam = 1.0 / float(g["markov_tau_s"])
+        de = de + gauss_markov(n, dt_s, lam, sh, rng)
+        dn = dn + gauss_markov(n, dt_s, lam, sh, rng)
+        dh = dh + gauss_markov(n, dt_s, lam, sv, rng)
     return dn / (m + height), de / ((nn + height) * np.cos(lat)), dh

@@ -73,7 +73,15 @@ DEFAULT_SENSORS = {
     },
     "gyro": {"bias_degph": [0.0, 0.0, 0.0], "white_drift_degph": 0.0},
     "altimeter": {"sigma_m": 0.0, "mean_m": 0.0},
-    "gnss": {"horizontal_sigma_m": 0.0, "vertical_sigma_m": 0.0},
+    # white per-fix noise plus an optional first-order Gauss-Markov part (a real solution's
+    # slowly varying error: ionosphere, troposphere, orbits, multipath), per axis
+    "gnss": {
+        "horizontal_sigma_m": 0.0,
+        "vertical_sigma_m": 0.0,
+        "horizontal_markov_sigma_m": 0.0,
+        "vertical_markov_sigma_m": 0.0,
+        "markov_tau_s": 600.0,
+    },
     # gravity gradiometer (seed 000); rate_hz 0 = no gradient channel (the default)
     "gradiometer": {"rate_hz": 0.0, "white_eotvos_rthz": 0.0, "markov_sigma_eotvos": 0.0, "markov_lambda_per_s": 0.001},
 }
@@ -362,6 +370,8 @@ def _validate_flight(f, path, index):
                 d[k] = number(v, f"{sp}.{k}", "1/s", 0.0, 100.0, lo_open=True)
             elif k in ("mean_m",):
                 d[k] = number(v, f"{sp}.{k}", "m", -1e4, 1e4)
+            elif k == "markov_tau_s":
+                d[k] = number(v, f"{sp}.{k}", "s", 0.0, 1e6, lo_open=True)
             elif k == "drift_mgal_per_h":
                 d[k] = number(v, f"{sp}.{k}", "mGal/h", -1e3, 1e3)
             else:

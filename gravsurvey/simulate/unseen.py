@@ -501,9 +501,10 @@ def noise_psd(flight: dict, f_hz) -> np.ndarray:
     * gravimeter white noise, one-second sigma ``s_w``: ``2 s_w^2`` (one-sided);
     * gravimeter Gauss-Markov error (``sigma``, ``lambda``): ``4 lambda sigma^2 / (lambda^2 + w^2)``;
     * height: altimeter samples (``sigma_h`` at ``R_h``) and GNSS heights (``sigma_v`` at
-      ``R_v``) are independent white noises of two-sided PSD ``sigma^2 / R``; combined
-      optimally ``S_z = 1 / (R_h / sigma_h^2 + R_v / sigma_v^2)``; differentiated twice:
-      ``2 w^4 S_z``.
+      ``R_v``) are independent white noises of two-sided PSD ``sigma^2 / R``, the GNSS's plus
+      its Gauss-Markov part (``2 l s^2 / (l^2 + w^2)``, ``vertical_markov_sigma_m``, ``l`` one
+      over ``markov_tau_s``); combined optimally ``S_z = 1 / (1 / S_h + 1 / S_v)``;
+      differentiated twice: ``2 w^4 S_z``.
 
     ``w = 2 pi f``.  Constant biases are left out (the score removes the mean error); the
     Eotvos error from GNSS velocity noise and the tilt leakage of horizontal accelerometer
@@ -524,13 +525,17 @@ def noise_psd(flight: dict, f_hz) -> np.ndarray:
     psd = 2.0 * float(g.get("white_sigma_mps2", 0.0)) ** 2 * np.ones_like(f)
     sig_m, lam = float(g.get("markov_sigma_mps2", 0.0)), float(g.get("markov_lambda_per_s", 0.025))
     psd = psd + 4.0 * lam * sig_m**2 / (lam**2 + w**2)
-    info = 0.0  # height information, 1 / (two-sided PSD), Hz / m^2
+    info = np.zeros_like(f)  # height information, 1 / (two-sided PSD), Hz / m^2
     sig_h = float(s.get("altimeter", {}).get("sigma_m", 0.0))
-    sig_v = float(s.get("gnss", {}).get("vertical_sigma_m", 0.0))
+    gn = s.get("gnss", {})
+    sig_v = float(gn.get("vertical_sigma_m", 0.0))
+    sig_vm = float(gn.get("vertical_markov_sigma_m", 0.0))
     if sig_h > 0:
         info += r["altimeter_hz"] / sig_h**2
-    if sig_v > 0:
-        info += r["gnss_hz"] / sig_v**2
-    if info > 0:
-        psd = psd + 2.0 * w**4 / info
+    if sig_v > 0 or sig_vm > 0:
+        lam_v = 1.0 / float(gn.get("markov_tau_s", 600.0))
+        s_v = sig_v**2 / r["gnss_hz"] + 2.0 * lam_v * sig_vm**2 / (lam_v**2 + w**2)
+        info += 1.0 / s_v
+    has = info > 0
+    psd[has] = psd[has] + 2.0 * w[has] ** 4 / info[has]
     return psd
