@@ -5,7 +5,7 @@ Usage::
 
     python benchmarks/bench_unseen.py [--flights N] [--quick] [--first-seed S] [--json out.json]
         [--runs default,oracle,classic] [--heights altimeter|gnss|carrier-phase] [--model KEY=VALUE ...] [--accel-bias B1,B2]
-        [--gravimeter-drift MGAL_PER_H]
+        [--gravimeter-drift MGAL_PER_H] [--gnss-markov SIGMA_M,TAU_S]
 
 Draws ``N`` (default 20) flights with seeds ``S .. S+N-1`` from the unseen-flight generator
 (``gravsurvey.simulate.unseen``: random fields, noise x0.3-x3, rates, triads, headings,
@@ -51,7 +51,8 @@ same draws otherwise) for a fast check.  ``--model KEY=VALUE`` gives the default
 drawn horizontal accelerometer biases (a tactical IMU's).  ``--heights gnss`` gives the default run
 the GNSS fixes' heights as its height channel; ``--heights carrier-phase`` makes the GNSS
 carrier-phase grade and its heights the only height channel (:func:`with_carrier_phase_gnss`);
-``--gravimeter-drift MGAL_PER_H`` adds a linear gravimeter drift (:func:`with_gravimeter_drift`).
+``--gravimeter-drift MGAL_PER_H`` adds a linear gravimeter drift (:func:`with_gravimeter_drift`);
+``--gnss-markov SIGMA_M,TAU_S`` a slowly varying GNSS error (:func:`with_gnss_markov`).
 Uses public API only.
 """
 

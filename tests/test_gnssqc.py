@@ -150,7 +150,8 @@ def test_late_gnss_stamps_are_taken_off_before_the_estimate(turning_strapdown, m
 def test_a_clock_running_slow_is_taken_off_gnss_and_heights(turning_strapdown, monkeypatch):
     """GNSS and heights on a clock 300 ppm slow against the IMU (0.23 s apart at the ends of 25
     min): both drifts found and taken off, the estimate as with the right stamps (measured 0.49
-    against 0.46 mGal); with constant latencies only, 2.66."""
+    against 0.46 mGal); with constant latencies only, 2.66 until the heights' wander was
+    identified, 0.93 since (the drifting stamps' height error fitted as a wander)."""
     s, rec, init = turning_strapdown
     clean = estimate_anomaly(rec, InmParams(), init, "strapdown")
     t0 = rec.imu.time[0]
@@ -170,7 +171,8 @@ def test_a_clock_running_slow_is_taken_off_gnss_and_heights(turning_strapdown, m
     monkeypatch.setattr(solve, "LATENCY_DRIFT_MIN_S", float("inf"))
     monkeypatch.setattr(gnssqc.GnssLatency, "drifts", property(lambda self: False))
     constant = estimate_anomaly(late, InmParams(), init, "strapdown")
-    assert rms_mid(constant, s) > 2.0 * rms_mid(sol, s)
+    assert constant.identification["height_walk"]["applied"]
+    assert rms_mid(constant, s) > 1.5 * rms_mid(sol, s)
 
 
 def _turning_attitude(t):

@@ -108,7 +108,7 @@ _ORDER_WALK = _ORDER + ("height_walk_m",)
 #: degree of freedom (5: a 0.2 % chance); measured on 48 flights without one: under 2 but once
 #: 13.9 (quick U018, where the wander took the place of a white level and the product went
 #: 0.32 -> 0.42 mGal).  With 5- and 10-cm wanders, 5.4-427 where found (a threshold of 10
-#: missed 10-cm ones on quick U000 at 7.0: 4.97 mGal, found 1.53) and under 5 on 7 of 24.
+#: missed 10-cm ones on quick U000 at 7.0: 4.97 mGal, found 1.53) and under 5 on 8 of 24.
 WALK_MIN_LOG_LR = 5.0
 
 #: The white level is used only when the likelihood pins it within this 1-sigma factor ...
