@@ -740,10 +740,13 @@ def fit_vertical_spectrum(
     if start is not None:
         starts.append(start.as_vector()[:4])
     if walk:
-        # the wander from the middle of the band (q omega^2 there), and a tenth of it
+        # the wander from the middle of the band (q omega^2 there); from the given start (the
+        # four-parameter optimum) also a tenth of it
         fm = float(np.median(f[(f > 0.01) & (f < 0.05)])) if np.any((f > 0.01) & (f < 0.05)) else float(np.median(f))
         k0 = math.sqrt(max(float(np.median(mid)), 1e-16)) / (2.0 * math.pi * fm)
-        starts = [np.append(v0, math.log(x)) for v0 in starts for x in (k0, 0.1 * k0)]
+        starts = [np.append(v0, math.log(k0)) for v0 in starts]
+        if start is not None:
+            starts.append(np.append(starts[-1][:4], math.log(0.1 * k0)))
     terms = _whittle_terms(f, dt, walk)
     best = None
     with _single_thread_blas():
