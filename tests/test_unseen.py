@@ -472,6 +472,29 @@ def test_carrier_phase_gnss_is_the_only_height_channel():
     np.testing.assert_allclose(U.noise_psd(heights_only, f), 2.0 * w**4 * sigma**2 / fl["rates"]["gnss_hz"])
 
 
+def test_gnss_markov_is_added_to_the_draw_and_to_the_bound():
+    """``bench_unseen.py --gnss-markov S,TAU``: a Gauss-Markov GNSS error of S in height and S/2
+    east and north; the bound's height noise then counts its PSD ``2 S^2 l / (l^2 + w^2)`` (two-sided,
+    ``l = 1 / TAU``) beside the white part, and the simulated heights carry it (the sample
+    variance of the GNSS height error less the white part's)."""
+    bench = _bench()
+    sp = bench.with_carrier_phase_gnss(U.draw_flight_spec(3))
+    mk = bench.with_gnss_markov(sp, 0.05, 300.0)
+    g = mk["sim"]["flights"][0]["sensors"]["gnss"]
+    assert (g["vertical_markov_sigma_m"], g["horizontal_markov_sigma_m"], g["markov_tau_s"]) == (0.05, 0.025, 300.0)
+    assert bench._spec_hash(mk) != bench._spec_hash(sp)
+    fl = mk["sim"]["flights"][0]
+    f = np.array([0.001, 0.01, 0.1])
+    w, lam, r = 2.0 * math.pi * f, 1.0 / 300.0, fl["rates"]["gnss_hz"]
+    s_v = g["vertical_sigma_m"] ** 2 / r + 2.0 * lam * 0.05**2 / (lam**2 + w**2)
+    heights_only = {"sensors": {"gnss": g}, "rates": fl["rates"]}
+    np.testing.assert_allclose(U.noise_psd(heights_only, f), 2.0 * w**4 * s_v)
+    sensors = {"gnss": {"vertical_sigma_m": 0.02, "vertical_markov_sigma_m": 0.05, "markov_tau_s": 60.0}}
+    s = simulate_flight(quick_sim(duration_s=20000.0, imu_hz=10.0, gnss_hz=5.0, noise=sensors, seed=4))
+    dh = s.truth["gnss_error"][:, 2]  # (dlat, dlon, dh)
+    assert np.std(dh) == pytest.approx(math.sqrt(0.02**2 + 0.05**2), rel=0.1)
+
+
 def test_gravimeter_drift_is_added_to_the_draw():
     """``bench_unseen.py --gravimeter-drift``: the drawn flight with a linear gravimeter drift,
     the rest of the draw as it was, in a cache folder of its own."""
