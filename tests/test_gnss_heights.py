@@ -172,3 +172,38 @@ def test_an_altimeter_offset_from_quieter_gnss_heights_is_taken_off():
     )
     assert rms_mid(weighed, s) == pytest.approx(8.29, rel=0.02)
     assert rms_mid(held, s) == pytest.approx(28.26, rel=0.02)
+
+
+def test_quieter_gnss_heights_that_wander_are_not_weighed_by_their_white_noise():
+    """GNSS heights 20x quieter than a 2-m altimeter but with a 10-cm, 300-s Gauss-Markov error
+    (a GNSS solution's slow error) on an hour's straight line: their fit finds the wander
+    (identify.WALK_MIN_LOG_LR; measured 45) and they keep the default weight, the altimeter
+    leading - the estimate is the one with the GNSS figure given (0.95 mGal); weighed by their
+    white 0.1 m the filter follows the wander (3.46)."""
+    noise = {
+        **NAVIGATION_GRADE,
+        "altimeter": {"sigma_m": 2.0},
+        "gnss": {
+            "horizontal_sigma_m": 0.1,
+            "vertical_sigma_m": 0.1,
+            "vertical_markov_sigma_m": 0.1,
+            "markov_tau_s": 300.0,
+        },
+    }
+    sim = quick_sim(
+        duration_s=3600.0, noise=noise, field="seed_smooth", gnss_hz=5.0, altimeter_hz=5.0, seed=3, imu_hz=50
+    )
+    s = simulate_flight(sim)
+    rec, init = record_and_initial(s)
+    sol = estimate_anomaly(rec, InmParams(), init, "platform")
+    up = sol.identification["gnss_vertical_sigma_m"]
+    assert up["value"] is None and "wander" in up["how"] and up["height_walk_log_likelihood_ratio"] > 20
+    assert sol.params.gnss_vertical_sigma_m == InmParams().gnss_vertical_sigma_m
+    held = estimate_anomaly(
+        rec, InmParams(gnss_vertical_sigma_m=2.0, given=frozenset({"gnss_vertical_sigma_m"})), init, "platform"
+    )
+    white = estimate_anomaly(
+        rec, InmParams(gnss_vertical_sigma_m=0.1, given=frozenset({"gnss_vertical_sigma_m"})), init, "platform"
+    )
+    assert rms_mid(sol, s) == pytest.approx(rms_mid(held, s), rel=0.02)
+    assert rms_mid(white, s) > 3.0 * rms_mid(sol, s)

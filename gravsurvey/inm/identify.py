@@ -32,6 +32,12 @@ one flight (seed 004's solvability condition); it is part of ``s, tau``.
 
 The fit is bounded (every parameter within documented physical limits), starts from several
 points, and reports each value with a 1-sigma factor from the inverse Hessian of the likelihood.
+
+A fifth parameter, the height wander (a random walk of the height error, ``q / (2 pi f)^2`` in
+height: a GNSS solution's slowly varying error over the analysed band), is fitted beside and
+kept where the likelihood asks for it (:data:`WALK_MIN_LOG_LR`); the filter, whose height
+measurements have white noise, is then given the white sigma that matches it at the chosen
+resolution (:func:`filter_height_sigma`).
 """
 
 from __future__ import annotations
@@ -799,8 +805,9 @@ def wiener_resolution_m(model: SpectralModel, speed_mps: float, dt_s: float = 1.
 
     The RTS smoother of a stationary model is the non-causal Wiener filter
     ``H(f) = S_g / (S_g + S_n)``; its half-power point ``f_c`` is where the anomaly's spectrum
-    meets the noise referred to the disturbance, ``S_n = w^2 + sigma_eps^2 dt (2 pi f)^4``
-    (continuous limit of :func:`vertical_psd`).  Resolution = ``v / (2 f_c)``.
+    meets the noise referred to the disturbance, ``S_n = w^2 + sigma_eps^2 dt (2 pi f)^4``, plus
+    ``q (2 pi f)^2`` with a height wander (continuous limit of :func:`vertical_psd`).
+    Resolution = ``v / (2 f_c)``.
     """
     lam = 1.0 / model.anomaly_tau_s
 
@@ -887,7 +894,7 @@ def white_log_likelihood_ratio(time, residual_m, manoeuvring, fit: VerticalFit, 
     return math.inf if held is None else float(held.nll - fit.nll)
 
 
-def height_noise_density(nav, f_t, time, height, ellipsoid: Ellipsoid = WGS84):
+def height_noise_density(nav, f_t, time, height, ellipsoid: Ellipsoid = WGS84, walk: bool = False):
     """A height channel's white noise against the inertial height, as information per second.
 
     The vertical-channel spectrum (:func:`fit_vertical_spectrum`, turns left out) fitted to the
@@ -904,10 +911,14 @@ def height_noise_density(nav, f_t, time, height, ellipsoid: Ellipsoid = WGS84):
         The channel's times (s, record base) and ellipsoidal heights (m).
     ellipsoid : Ellipsoid
 
+    walk : bool
+        Also fit the height wander (:data:`WALK_MIN_LOG_LR`) and return its log-likelihood ratio.
+
     Returns
     -------
     tuple of float or None
-        ``(density_m2s, sigma_m, dt_s)``; None where the fit finds no straight stretch.
+        ``(density_m2s, sigma_m, dt_s)`` (with ``walk``, and the wander's log-likelihood ratio);
+        None where the fit finds no straight stretch.
     """
     t = np.asarray(time, float)
     h = np.asarray(height, float)
@@ -921,7 +932,11 @@ def height_noise_density(nav, f_t, time, height, ellipsoid: Ellipsoid = WGS84):
     if fit is None:
         return None
     s = float(fit.model.height_sigma_m)
-    return s * s * fit.dt_s, s, float(fit.dt_s)
+    if not walk:
+        return s * s * fit.dt_s, s, float(fit.dt_s)
+    wfit = fit_vertical_spectrum(t, e, man, start=fit.model, walk=True)
+    lr = float(fit.nll - wfit.nll) if wfit is not None else 0.0
+    return s * s * fit.dt_s, s, float(fit.dt_s), lr
 
 
 def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, ellipsoid: Ellipsoid = WGS84):

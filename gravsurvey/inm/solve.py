@@ -51,6 +51,7 @@ from .heightqc import (
     repair_heights,
 )
 from .identify import (
+    WALK_MIN_LOG_LR,
     SpectralModel,
     drift_sigma_passed,
     filter_height_sigma,
@@ -423,7 +424,7 @@ def estimate_anomaly(
             gnss_up = None
             if not gnss_heights and given_params.identify and "gnss_vertical_sigma_m" not in given_params.given:
                 weighed = _gnss_height_sigma(record, nav, ellipsoid)
-                if weighed is not None:
+                if weighed is not None and weighed[1] is not None:
                     # GNSS heights quieter than the altimeter's: weighed by their own noise, not
                     # the default figure (every pass, the identification's first pass too), the
                     # altimeter moved onto them (two channels metres apart, both weighed, made
@@ -431,7 +432,10 @@ def estimate_anomaly(
                     gnss_up, record = weighed
                     given_params = dataclasses.replace(given_params, gnss_vertical_sigma_m=gnss_up["value"])
                     params = dataclasses.replace(params, gnss_vertical_sigma_m=gnss_up["value"])
-            if height_warnings or gnss_up is not None:
+                elif weighed is not None:
+                    # quieter but wandering: reported, not weighed
+                    gnss_up = weighed[0]
+            if height_warnings or (gnss_up is not None and gnss_up["value"] is not None):
                 nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
             speed0 = _typical_speed(record, nav, ellipsoid)
         # a platform's triad is levelled: an antenna offset turns with the aircraft, whose
@@ -677,15 +681,32 @@ def _gnss_height_sigma(record, nav, ellipsoid):
     :data:`GNSS_UP_DENSITY_RATIO` times below the altimeter's (both fitted against the inertial
     height, :func:`~gravsurvey.inm.identify.height_noise_density`), as a report entry
     (``value`` m, ``how``, ``altimeter_offset_m``), and the record with the altimeter's heights
-    moved onto the GNSS's by their median difference; else None."""
+    moved onto the GNSS's by their median difference; where such heights wander
+    (:data:`~gravsurvey.inm.identify.WALK_MIN_LOG_LR`), an entry with ``value`` None saying so
+    and None for the record (not weighed); else None."""
     gn = record.gnss
     if gn is None or len(gn.time) < 16:
         return None
     f_t = record.imu.specific_force_t
     alt = height_noise_density(nav, f_t, record.altimeter.time, record.altimeter.height, ellipsoid)
-    gns = height_noise_density(nav, f_t, gn.time, gn.height, ellipsoid)
+    gns = height_noise_density(nav, f_t, gn.time, gn.height, ellipsoid, walk=True)
     if alt is None or gns is None or not alt[0] > GNSS_UP_DENSITY_RATIO * gns[0]:
         return None
+    if gns[3] >= WALK_MIN_LOG_LR:
+        # heights that wander (identify.WALK_MIN_LOG_LR) weighed by their white noise alone made
+        # the filter follow the wander as field (a 5-cm, 300-s one on GNSS heights 3x quieter
+        # than the altimeter: 1.09 -> 10.1 mGal, docs/benchmarks.md "A slowly varying GNSS
+        # height error"): the altimeter leads, the GNSS's up component keeps its default sigma
+        return {
+            "value": None,
+            "sigma_factor": None,
+            "how": (
+                f"not weighed by its own noise: the GNSS heights ({gns[1]:.3g} m per {gns[2]:.3g}-s sample, "
+                f"{alt[0] / gns[0]:.0f}x below the altimeter's noise density) wander (log-likelihood ratio "
+                f"{gns[3]:.3g}); the altimeter leads"
+            ),
+            "height_walk_log_likelihood_ratio": gns[3],
+        }, None
     # the altimeter's constant offset from the GNSS heights (the ellipsoidal reference)
     at, ah = _altimeter(record)
     gt, gh = np.asarray(gn.time, float), np.asarray(gn.height, float)
@@ -1247,8 +1268,16 @@ def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False
     walk = ident.get("height_walk") or {}
     if walk.get("applied") and "spectral_model" in ident:
         # the heights wander (identify.WALK_MIN_LOG_LR): the filter's white height noise is
-        # set to match it at the chosen smoother's half-power point
-        model = SpectralModel(**ident["spectral_model"])
+        # set to match it at the half-power point of the prior the filter runs with (chosen,
+        # configured, or the default on a short record)
+        noise = ident["spectral_model"]
+        model = SpectralModel(
+            params.anomaly_sigma_mps2,
+            1.0 / max(params.anomaly_lambda_per_m * max(speed0, 1.0), 1e-12),
+            params.gravimeter_white_mps2,
+            float(noise["height_sigma_m"]),
+            float(noise["height_walk_m"]),
+        )
         # (the lowest frequency refine_prior's periodogram analyses: its third bin)
         sig = filter_height_sigma(model, speed0, float(ident["height_dt_s"]), 3.0 / float(nav.time[-1] - nav.time[0]))
         params = dataclasses.replace(params, altimeter_sigma_m=sig)
