@@ -111,8 +111,9 @@ _ORDER_WALK = _ORDER + ("height_walk_m",)
 #: follow it as field (a 5-cm, 300-s Gauss-Markov GNSS height error: 2.40 mGal at 2 km
 #: resolution where the same flight without it gave 0.64 at 14 km; docs/benchmarks.md "A slowly
 #: varying GNSS height error").  Without a wander the ratio is about half a chi-square of one
-#: degree of freedom (5: a 0.2 % chance); measured on 48 flights without one: under 2 but once
-#: 13.9 (quick U018, where the wander took the place of a white level and the product went
+#: degree of freedom (5: a 0.2 % chance); measured on 88 flights without one: under 5 on 87
+#: (4.88 and 3.07 the largest, where taking it would give 0.27 -> 0.12 and 0.48 -> 0.60 mGal),
+#: 13.9 once (quick U018, where the wander took the place of a white level and the product went
 #: 0.32 -> 0.42 mGal).  With 5- and 10-cm wanders, 5.4-427 where found (a threshold of 10
 #: missed 10-cm ones on quick U000 at 7.0: 4.97 mGal, found 1.53) and under 5 on 8 of 24.
 WALK_MIN_LOG_LR = 5.0
