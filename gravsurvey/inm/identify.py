@@ -62,6 +62,7 @@ __all__ = [
     "running_mean",
     "fill_short_gaps",
     "fit_vertical_spectrum",
+    "fit_height_wander",
     "identify_params",
     "wiener_resolution_m",
     "filter_height_sigma",
@@ -115,7 +116,9 @@ _ORDER_WALK = _ORDER + ("height_walk_m",)
 #: (4.88 and 3.07 the largest, where taking it would give 0.27 -> 0.12 and 0.48 -> 0.60 mGal),
 #: 13.9 once (quick U018, where the wander took the place of a white level and the product went
 #: 0.32 -> 0.42 mGal).  With 5- and 10-cm wanders, 5.4-427 where found (a threshold of 10
-#: missed 10-cm ones on quick U000 at 7.0: 4.97 mGal, found 1.53) and under 5 on 8 of 24.
+#: missed 10-cm ones on quick U000 at 7.0: 4.97 mGal, found 1.53) and under 5 on 7 of 24 (with
+#: the whole record asked where the straight stretches miss it, :func:`fit_height_wander`; its
+#: ratio on the 88 flights without a wander: 1.77 at most).
 WALK_MIN_LOG_LR = 5.0
 
 #: The white level is used only when the likelihood pins it within this 1-sigma factor ...
@@ -895,6 +898,55 @@ def white_log_likelihood_ratio(time, residual_m, manoeuvring, fit: VerticalFit, 
     return math.inf if held is None else float(held.nll - fit.nll)
 
 
+def fit_height_wander(time, residual_m, manoeuvring, fit: VerticalFit, fixed: dict | None = None):
+    """The vertical fit with the height wander, and how strongly the data ask for it.
+
+    Fitted on the straight stretches like ``fit`` (the four-parameter fit); where they do not
+    show it (a log-likelihood ratio under :data:`WALK_MIN_LOG_LR`: survey lines of a few
+    minutes leave too few bins below the frequency where a wander overtakes the white height
+    noise), the whole record is asked too, turns included, and a wander it finds is held at the
+    whole record's value while the straight stretches fit the rest.
+
+    Parameters
+    ----------
+    time, residual_m, manoeuvring, fixed
+        As given to :func:`fit_vertical_spectrum` for ``fit``.
+    fit : VerticalFit
+        The four-parameter fit on the straight stretches.
+
+    Returns
+    -------
+    tuple or None
+        ``(walk_fit, log_likelihood_ratio, where)``: the five-parameter fit, its ratio over
+        ``fit`` (or the whole record's over its own four-parameter fit) and ``"straight
+        stretches"`` or ``"whole record"``; None when the fit fails.
+    """
+    fixed = dict(fixed or {})
+    wfit = fit_vertical_spectrum(time, residual_m, manoeuvring, fixed=fixed, start=fit.model, walk=True)
+    if wfit is None:
+        return None
+    lr = float(fit.nll - wfit.nll)
+    if lr >= WALK_MIN_LOG_LR or manoeuvring is None or not np.any(manoeuvring):
+        return wfit, lr, "straight stretches"
+    whole = fit_vertical_spectrum(time, residual_m, None, fixed=fixed)
+    whole_w = (
+        fit_vertical_spectrum(time, residual_m, None, fixed=fixed, start=whole.model, walk=True) if whole else None
+    )
+    if whole_w is None or whole.nll - whole_w.nll < WALK_MIN_LOG_LR:
+        return wfit, lr, "straight stretches"
+    held = fit_vertical_spectrum(
+        time,
+        residual_m,
+        manoeuvring,
+        fixed={**fixed, "height_walk_m": whole_w.model.height_walk_m},
+        start=fit.model,
+        walk=True,
+    )
+    if held is None:
+        return wfit, lr, "straight stretches"
+    return held, float(whole.nll - whole_w.nll), "whole record"
+
+
 def height_noise_density(nav, f_t, time, height, ellipsoid: Ellipsoid = WGS84, walk: bool = False):
     """A height channel's white noise against the inertial height, as information per second.
 
@@ -935,9 +987,8 @@ def height_noise_density(nav, f_t, time, height, ellipsoid: Ellipsoid = WGS84, w
     s = float(fit.model.height_sigma_m)
     if not walk:
         return s * s * fit.dt_s, s, float(fit.dt_s)
-    wfit = fit_vertical_spectrum(t, e, man, start=fit.model, walk=True)
-    lr = float(fit.nll - wfit.nll) if wfit is not None else 0.0
-    return s * s * fit.dt_s, s, float(fit.dt_s), lr
+    found = fit_height_wander(t, e, man, fit)
+    return s * s * fit.dt_s, s, float(fit.dt_s), (found[1] if found is not None else 0.0)
 
 
 def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, ellipsoid: Ellipsoid = WGS84):
@@ -1032,17 +1083,21 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
     if not whole_flight and "altimeter_sigma_m" not in given:
         # the height wander (WALK_MIN_LOG_LR): fitted as a fifth parameter, kept only when the
         # likelihood prefers it clearly
-        wfit = fit_vertical_spectrum(t, e, man, fixed=noise_fixed, start=fit.model, walk=True)
-        if wfit is not None:
-            lr = float(fit.nll - wfit.nll)
+        found = fit_height_wander(t, e, man, fit, noise_fixed)
+        if found is not None:
+            wfit, lr, where = found
             report["height_walk"] = {
                 "height_walk_m": wfit.model.height_walk_m,
                 "sigma_factor": wfit.sigma_factor.get("height_walk_m"),
                 "log_likelihood_ratio": lr,
+                "found_on": where,
                 "applied": lr >= WALK_MIN_LOG_LR,
             }
             if lr >= WALK_MIN_LOG_LR:
                 fit = wfit
+                if where == "whole record":
+                    # held at the whole record's value in the white level's test too
+                    noise_fixed = {**noise_fixed, "height_walk_m": wfit.model.height_walk_m}
     m = dataclasses.replace(fit.model, **{k: val for k, val in fixed.items() if k not in NOISE_KEYS})
     white_how = "identified"
     factor_w = fit.sigma_factor.get("white_mps2")
