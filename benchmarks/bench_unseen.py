@@ -527,7 +527,7 @@ def with_gnss_markov(spec: dict, sigma_m: float, tau_s: float) -> dict:
     """The drawn flight with a slowly varying GNSS error: a first-order Gauss-Markov process of
     ``sigma_m`` (m) in height and half of it east and north, correlation time ``tau_s`` (s), on
     top of the white noise (a real solution's ionosphere, troposphere, orbit and multipath
-    errors; docs/benchmarks.md "A slowly varying GNSS error")."""
+    errors; docs/benchmarks.md "A slowly varying GNSS height error")."""
     out = json.loads(json.dumps(spec))
     sensors = out["sim"]["flights"][0]["sensors"]
     sensors["gnss"] = {
@@ -806,7 +806,7 @@ def main(argv=None):
         default=None,
         metavar="SIGMA_M,TAU_S",
         help="add a Gauss-Markov GNSS error: SIGMA_M in height (half east and north), correlation "
-        "time TAU_S (docs/benchmarks.md 'A slowly varying GNSS error')",
+        "time TAU_S (docs/benchmarks.md 'A slowly varying GNSS height error')",
     )
     a = ap.parse_args(argv)
     if a.flights < 1:
