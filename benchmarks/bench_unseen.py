@@ -523,6 +523,14 @@ def with_carrier_phase_gnss(spec: dict) -> dict:
     return out
 
 
+def _numbers(text: str) -> list:
+    """Comma-separated numbers of a command-line option; [] when one is not a number."""
+    try:
+        return [float(b) for b in text.split(",")]
+    except ValueError:
+        return []
+
+
 def with_gnss_markov(spec: dict, sigma_m: float, tau_s: float) -> dict:
     """The drawn flight with a slowly varying GNSS error: a first-order Gauss-Markov process of
     ``sigma_m`` (m) in height and half of it east and north, correlation time ``tau_s`` (s), on
@@ -819,18 +827,12 @@ def main(argv=None):
         model[key.strip()] = yaml.safe_load(value)
     accel_bias = None
     if a.accel_bias is not None:
-        try:
-            accel_bias = [float(b) for b in a.accel_bias.split(",")]
-        except ValueError:
-            accel_bias = []
+        accel_bias = _numbers(a.accel_bias)
         if len(accel_bias) != 2:
             ap.error(f"--accel-bias: expected two numbers B1,B2 (m/s^2), got {a.accel_bias!r}")
     gnss_markov = None
     if a.gnss_markov is not None:
-        try:
-            gnss_markov = [float(b) for b in a.gnss_markov.split(",")]
-        except ValueError:
-            gnss_markov = []
+        gnss_markov = _numbers(a.gnss_markov)
         if len(gnss_markov) != 2 or gnss_markov[0] < 0 or gnss_markov[1] <= 0:
             ap.error(f"--gnss-markov: expected SIGMA_M,TAU_S (m, s > 0), got {a.gnss_markov!r}")
     rows = []

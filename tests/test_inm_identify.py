@@ -113,6 +113,17 @@ def _reference_whittle(t, e):
     return nll
 
 
+def _fd_hessian(nll, v, h=1e-3):
+    """Central finite-difference Hessian of ``nll`` at ``v`` (step ``h`` in each log-parameter)."""
+    n = v.size
+    hess = np.zeros((n, n))
+    for i in range(n):
+        for j in range(n):
+            di, dj = np.eye(n)[i] * h, np.eye(n)[j] * h
+            hess[i, j] = (nll(v + di + dj) - nll(v + di - dj) - nll(v - di + dj) + nll(v - di - dj)) / (4 * h * h)
+    return hess
+
+
 @pytest.mark.parametrize(
     "seed, height_sigma, white, sigma_g, tau", [(4, 0.05, 3e-4, 5e-5, 150.0), (5, 0.5, 1e-5, 1e-4, 60.0)]
 )
@@ -137,13 +148,7 @@ def test_whittle_fit_is_the_likelihoods_optimum_with_its_curvature(seed, height_
         assert ref.fun >= fit.nll - 1e-3
         if ref.fun - fit.nll < 1e-2:
             np.testing.assert_allclose(np.exp(ref.x), np.exp(v), rtol=0.01)
-    h = 1e-3
-    hess = np.zeros((4, 4))
-    for i in range(4):
-        for j in range(4):
-            di, dj = np.eye(4)[i] * h, np.eye(4)[j] * h
-            hess[i, j] = (nll(v + di + dj) - nll(v + di - dj) - nll(v - di + dj) + nll(v - di - dj)) / (4 * h * h)
-    cov = np.linalg.inv(hess)
+    cov = np.linalg.inv(_fd_hessian(nll, v))
     for i, k in enumerate(("anomaly_sigma_mps2", "anomaly_tau_s", "white_mps2", "height_sigma_m")):
         if fit.sigma_factor[k] is not None:
             assert math.log(fit.sigma_factor[k]) == pytest.approx(math.sqrt(cov[i, i]), rel=1e-3)
@@ -193,12 +198,7 @@ def test_height_wander_fit_is_the_likelihoods_optimum():
     bounds = [tuple(np.log(I.BOUNDS[k])) for k in keys]
     ref = minimize(nll, v + np.array([0.3, -0.5, 0.4, 0.2, -0.3]), method="L-BFGS-B", bounds=bounds)
     assert ref.fun >= fit.nll - 1e-3
-    h = 1e-3
-    hess = np.zeros((5, 5))
-    for i in range(5):
-        for j in range(5):
-            di, dj = np.eye(5)[i] * h, np.eye(5)[j] * h
-            hess[i, j] = (nll(v + di + dj) - nll(v + di - dj) - nll(v - di + dj) + nll(v - di - dj)) / (4 * h * h)
+    hess = _fd_hessian(nll, v)
     # the fit inverts the Hessian over the parameters off their bounds
     free = [i for i, k in enumerate(keys) if k not in fit.at_bound]
     cov = np.linalg.inv(hess[np.ix_(free, free)])
