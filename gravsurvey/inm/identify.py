@@ -77,6 +77,7 @@ __all__ = [
     "keep_default_prior",
     "prior_for_resolution",
     "model_resolution_m",
+    "spectral_model_of",
     "horizontal_prior",
     "drift_sigma_passed",
     "white_log_likelihood_ratio",
@@ -226,11 +227,11 @@ def vertical_psd(freq_hz, model: SpectralModel, dt_s: float) -> np.ndarray:
     s_w = model.white_mps2**2
     x = math.pi * f * dt_s
     sinc4 = (np.sin(x) / x) ** 4
-    s_eps = model.height_sigma_m**2 * dt_s * (2.0 - 2.0 * np.cos(2.0 * math.pi * f * dt_s)) ** 2 / dt_s**4
+    d2 = (2.0 - 2.0 * np.cos(2.0 * math.pi * f * dt_s)) ** 2
+    s_eps = model.height_sigma_m**2 * dt_s * d2 / dt_s**4
     if model.height_walk_m > 0.0:
-        d2 = (2.0 - 2.0 * np.cos(2.0 * math.pi * f * dt_s)) ** 2 / dt_s**4
         # the wander's q / omega^2 through the same second difference
-        s_eps = s_eps + model.height_walk_m**2 * d2 / (2.0 * math.pi * f) ** 2
+        s_eps = s_eps + model.height_walk_m**2 * d2 / dt_s**4 / (2.0 * math.pi * f) ** 2
     return (s_g + s_w) * sinc4 + s_eps
 
 
@@ -818,10 +819,7 @@ def wiener_resolution_m(model: SpectralModel, speed_mps: float, dt_s: float = 1.
     def gap(logf):
         f = math.exp(logf)
         s_g = 2.0 * model.anomaly_sigma_mps2**2 * lam / (lam**2 + (2 * math.pi * f) ** 2)
-        s_n = model.white_mps2**2 + model.height_sigma_m**2 * dt_s * (2 * math.pi * f) ** 4
-        if model.height_walk_m > 0.0:
-            s_n += model.height_walk_m**2 * (2 * math.pi * f) ** 2
-        return math.log(s_g) - math.log(s_n)
+        return math.log(s_g) - math.log(_noise_psd_g(f, model, dt_s))
 
     lo, hi = math.log(1e-7), math.log(10.0)
     if gap(lo) < 0:
@@ -844,13 +842,21 @@ def model_resolution_m(params, speed_mps: float, height_dt_s: float) -> float:
     (``altimeter_sigma_m`` per sample at spacing ``height_dt_s``); see :func:`wiener_resolution_m`.
     """
     v = max(float(speed_mps), 1.0)
-    m = SpectralModel(
+    return wiener_resolution_m(spectral_model_of(params, v), v, height_dt_s)
+
+
+def spectral_model_of(params, speed_mps: float, height_sigma_m: float | None = None, height_walk_m: float = 0.0):
+    """The :class:`SpectralModel` of the settings ``params`` (the prior and noise the filter runs
+    with), its height noise ``height_sigma_m`` (default ``params.altimeter_sigma_m``) and
+    wander ``height_walk_m``, at ``speed_mps`` (time to space)."""
+    v = max(float(speed_mps), 1.0)
+    return SpectralModel(
         max(params.anomaly_sigma_mps2, 1e-12),
         1.0 / max(params.anomaly_lambda_per_m * v, 1e-12),
         max(params.gravimeter_white_mps2, 1e-12),
-        max(params.altimeter_sigma_m, 1e-9),
+        max(params.altimeter_sigma_m if height_sigma_m is None else height_sigma_m, 1e-9),
+        height_walk_m,
     )
-    return wiener_resolution_m(m, v, height_dt_s)
 
 
 def prior_for_resolution(
@@ -864,9 +870,7 @@ def prior_for_resolution(
     """
     f_c = speed_mps / (2.0 * resolution_m)
     lam = 1.0 / model.anomaly_tau_s
-    s_n = model.white_mps2**2 + model.height_sigma_m**2 * dt_s * (2 * math.pi * f_c) ** 4
-    if model.height_walk_m > 0.0:
-        s_n += model.height_walk_m**2 * (2 * math.pi * f_c) ** 2
+    s_n = _noise_psd_g(f_c, model, dt_s)
     sigma = math.sqrt(s_n * (lam**2 + (2 * math.pi * f_c) ** 2) / (2.0 * lam))
     return dataclasses.replace(model, anomaly_sigma_mps2=sigma)
 

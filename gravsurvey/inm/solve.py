@@ -52,7 +52,6 @@ from .heightqc import (
 )
 from .identify import (
     WALK_MIN_LOG_LR,
-    SpectralModel,
     drift_sigma_passed,
     filter_height_sigma,
     height_noise_density,
@@ -61,6 +60,7 @@ from .identify import (
     keep_default_prior,
     model_resolution_m,
     refine_prior,
+    spectral_model_of,
     straight_weight,
     wide_prior_params,
     vertical_residual,
@@ -689,9 +689,11 @@ def _gnss_height_sigma(record, nav, ellipsoid):
         return None
     f_t = record.imu.specific_force_t
     alt = height_noise_density(nav, f_t, record.altimeter.time, record.altimeter.height, ellipsoid)
-    gns = height_noise_density(nav, f_t, gn.time, gn.height, ellipsoid, walk=True)
+    gns = height_noise_density(nav, f_t, gn.time, gn.height, ellipsoid)
     if alt is None or gns is None or not alt[0] > GNSS_UP_DENSITY_RATIO * gns[0]:
         return None
+    # the wander's fits only for heights that would be weighed (most flights stop above)
+    gns = height_noise_density(nav, f_t, gn.time, gn.height, ellipsoid, walk=True)
     if gns[3] >= WALK_MIN_LOG_LR:
         # heights that wander (identify.WALK_MIN_LOG_LR) weighed by their white noise alone made
         # the filter follow the wander as field (a 5-cm, 300-s one on GNSS heights 3x quieter
@@ -1271,13 +1273,7 @@ def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False
         # set to match it at the half-power point of the prior the filter runs with (chosen,
         # configured, or the default on a short record)
         noise = ident["spectral_model"]
-        model = SpectralModel(
-            params.anomaly_sigma_mps2,
-            1.0 / max(params.anomaly_lambda_per_m * max(speed0, 1.0), 1e-12),
-            params.gravimeter_white_mps2,
-            float(noise["height_sigma_m"]),
-            float(noise["height_walk_m"]),
-        )
+        model = spectral_model_of(params, speed0, float(noise["height_sigma_m"]), float(noise["height_walk_m"]))
         # (the lowest frequency refine_prior's periodogram analyses: its third bin)
         sig = filter_height_sigma(model, speed0, float(ident["height_dt_s"]), 3.0 / float(nav.time[-1] - nav.time[0]))
         params = dataclasses.replace(params, altimeter_sigma_m=sig)
