@@ -39,6 +39,13 @@ low-passed it along the lines only, and the isotropic field model would read the
 between neighbouring lines as drift - unless the fitted field is too weak to pose as the fitted
 drift (:data:`GUARD_FIELD_PER_DRIFT`).
 
+A tare - a step in the gravimeter's reading (a spring meter after a shock, a strapdown
+gravimeter's bias jump) - is a drift the Gauss-Markov model can follow only by growing it to
+several times its size, which then soaks up field differences between the lines.  Given the
+estimate's step response, :func:`find_tare` scans the blocks for a step, and one the blocks need
+(:data:`TARE_MIN_LOG_LR`, the drift model refitted with and without it) is taken off with the
+drift (docs/method.md, "Tares").
+
 Where a drift is taken off, :func:`field_filter` Wiener-filters each line against what the
 lines left of it: the fit's field spectrum along the track against the drift's posterior
 residual (docs/method.md, "The field filter").
@@ -64,6 +71,9 @@ __all__ = [
     "fit_drift",
     "datasheet_drift_fit",
     "drift_posterior",
+    "Tare",
+    "find_tare",
+    "step_response",
     "separate_drift",
     "passed_drift_factor",
     "fitted_weight",
@@ -123,6 +133,19 @@ BOUNDS = {
 _ORDER = tuple(BOUNDS)
 #: Field correlation lengths (m) the fit starts from, with the datasheet drift (:func:`_fit`).
 FIELD_LENGTH_STARTS_M = (2000.0, 5000.0, 20000.0, 100000.0, 400000.0)
+#: A tare is taken off where the blocks need it at this log-likelihood ratio (the step over
+#: none, the drift model refitted both ways; one free parameter besides the step's time, which
+#: the scan picks among ~30-300 places): on 56 unseen flights without one (40 quick, 16 issue
+#: B/C) the largest was 11.3, the next 9.0 (docs/benchmarks.md "A gravimeter tare").
+TARE_MIN_LOG_LR = 12.0
+#: No tare within this of the line blocks' first and last times, s: there one side of the step
+#: has too few blocks to compare, and a flight's start and end carry the smoother's transients
+#: (quick U016 without a tare: ratio 29 for a step 74 s into its first line, 6.6 at most beyond).
+TARE_EDGE_S = 300.0
+#: Most tares taken off one flight.
+TARE_MAX = 3
+#: Scan step of the tare's time, in blocks.
+TARE_SCAN_PER_BLOCK = 3
 #: Prior variance of the unknown constant, (m/s^2)^2 (100 mGal: any gravimeter bias).
 CONSTANT_VAR = (100.0 * MGAL) ** 2
 #: Epochs per piece of the posterior evaluation.
@@ -151,6 +174,9 @@ class DriftOptions:
     field_filter : bool
         Where a drift is taken off, filter each line against what the lines left of it
         (:func:`field_filter`; default True).
+    tares : bool
+        Look for tares, steps in the gravimeter's reading, and take off those the lines need
+        (:func:`find_tare`; default True).
     """
 
     estimate: bool = True
@@ -158,6 +184,7 @@ class DriftOptions:
     sigma_mps2: float = DRIFT_DEFAULT_SIGMA_MPS2
     tau_s: float = DRIFT_DEFAULT_TAU_S
     field_filter: bool = True
+    tares: bool = True
 
 
 @dataclass(frozen=True)
@@ -334,12 +361,22 @@ def _prior_penalty(v, options: DriftOptions) -> float:
     )
 
 
-def _fit(y, dist, lag, options: DriftOptions, with_drift: bool, datasheet: bool = False, kernel: str = "matern32"):
+def _fit(
+    y,
+    dist,
+    lag,
+    options: DriftOptions,
+    with_drift: bool,
+    datasheet: bool = False,
+    kernel: str = "matern32",
+    starts=None,
+):
     """Best (negative log-likelihood without prior, parameters) over several starts.
 
     ``with_drift`` False: no drift (its sigma held at :data:`NO_DRIFT_MPS2`); ``datasheet``:
     the drift held at the datasheet's sigma and correlation time (``options``), the field and
-    the white term fitted.
+    the white term fitted.  ``starts``: the starting hyperparameters (:data:`BOUNDS` order) in
+    place of the default ones.
     """
     from scipy.optimize import minimize
 
@@ -350,11 +387,12 @@ def _fit(y, dist, lag, options: DriftOptions, with_drift: bool, datasheet: bool 
     # drift, a long one with a small drift): one start per decade or so of length, so that the
     # best is found whatever the blocks' geometry (with three starts a change of scale of 1e-3
     # moved the fit between optima 1.0 and 2.5 log-likelihood apart on quick U217 and U004)
-    starts = [(scale, length, options.sigma_mps2, options.tau_s, 0.3 * MGAL) for length in FIELD_LENGTH_STARTS_M]
-    starts += [
-        (scale, 20000.0, 0.3 * options.sigma_mps2, 3.0 * options.tau_s, 0.3 * MGAL),
-        (scale, 2000.0, 2.0 * options.sigma_mps2, options.tau_s / 3.0, 0.3 * MGAL),
-    ]
+    if starts is None:
+        starts = [(scale, length, options.sigma_mps2, options.tau_s, 0.3 * MGAL) for length in FIELD_LENGTH_STARTS_M]
+        starts += [
+            (scale, 20000.0, 0.3 * options.sigma_mps2, 3.0 * options.tau_s, 0.3 * MGAL),
+            (scale, 2000.0, 2.0 * options.sigma_mps2, options.tau_s / 3.0, 0.3 * MGAL),
+        ]
     if not with_drift:
         lo[2] = hi[2] = math.log(NO_DRIFT_MPS2)
     elif datasheet:
@@ -414,14 +452,15 @@ def datasheet_drift_fit(blocks, lines: int, options: DriftOptions = DriftOptions
     return _fit_against_no_drift(blocks, lines, options, datasheet=True, nll_without_drift=nll_without_drift)
 
 
-def _fit_against_no_drift(blocks, lines, options, datasheet, nll_without_drift=None, kernel="matern32"):
+def _fit_against_no_drift(blocks, lines, options, datasheet, nll_without_drift=None, kernel="matern32", fitted=None):
     """:class:`DriftFit` of the model with drift (fitted, or held at the datasheet's) and its
-    log-likelihood ratio over the same model without drift (fitted here unless given)."""
+    log-likelihood ratio over the same model without drift (fitted here unless given).
+    ``fitted``: the model with drift's ``_fit`` of these blocks, when already made."""
     b = np.asarray(blocks, float)
     if b.shape[0] < MIN_BLOCKS or lines < 2:
         return None
     y, dist, lag = _block_geometry(b)
-    nll1, v1 = _fit(y, dist, lag, options, True, datasheet=datasheet, kernel=kernel)
+    nll1, v1 = fitted if fitted is not None else _fit(y, dist, lag, options, True, datasheet=datasheet, kernel=kernel)
     if v1 is None:
         return None
     nll0 = nll_without_drift
@@ -507,6 +546,132 @@ def drift_posterior(fit: DriftFit, blocks, time, field_sigmas=FIELD_SIGMA_GRID):
     return mean, np.sqrt(np.interp(t, tb, acc / total))
 
 
+@dataclass(frozen=True)
+class Tare:
+    """A step in the gravimeter's reading found by the lines (:func:`find_tare`), SI."""
+
+    #: When, s (the time base of the blocks).
+    time_s: float
+    #: The step, m/s^2 (the reading after less before).
+    step_mps2: float
+    #: Its 1-sigma, m/s^2.
+    sigma_mps2: float
+    #: Log-likelihood ratio of the blocks with the step over without (the drift model refitted).
+    log_lr: float
+
+    def report(self) -> dict:
+        """summary.json facts: mGal and s."""
+        return {
+            "time_s": self.time_s,
+            "step_mgal": self.step_mps2 / MGAL,
+            "sigma_mgal": self.sigma_mps2 / MGAL,
+            "log_likelihood_ratio": self.log_lr,
+        }
+
+
+def step_response(gain, dt_s: float, span_s: float):
+    """The estimate's response to a unit step of the gravimeter at lag 0, as a function of lag.
+
+    A step in the reading reaches the smoothed estimate as a step of the field would: through the
+    smoother's zero-phase transfer ``gain`` (its steady state, :func:`gravsurvey.inm.identify.smoother_gain`),
+    a ramp centred on the step over about the estimate's resolution.
+
+    Parameters
+    ----------
+    gain : callable
+        ``gain(freq_hz)`` -> real transfer in [0, 1], shape of ``freq_hz``.
+    dt_s : float
+        The estimate's epoch spacing, s.
+    span_s : float
+        The record's length, s (the response is computed over four times it).
+
+    Returns
+    -------
+    callable
+        ``r(lag_s)`` -> response, 0 long before the step, 1 long after, ndarray of ``lag_s``'s shape.
+    """
+    dt = float(dt_s)
+    n = int(2 ** math.ceil(math.log2(max(4.0 * float(span_s) / dt, 16.0))))
+    h = np.roll(np.fft.irfft(np.asarray(gain(np.fft.rfftfreq(n, dt)), float), n), n // 2)
+    s = np.cumsum(h)
+    s = s / s[-1] if s[-1] != 0.0 else s
+    lags = (np.arange(n) - n // 2) * dt
+
+    def response(lag_s):
+        return np.interp(np.asarray(lag_s, float), lags, s, left=0.0, right=1.0)
+
+    return response
+
+
+def _step_at_blocks(blocks, response, t0: float, block_s: float) -> np.ndarray:
+    """The step response at ``t0`` averaged over each block's span (9 points), about its mean, (M,)."""
+    offsets = np.linspace(-0.5 * block_s, 0.5 * block_s, 9)
+    h = np.mean(response(blocks[:, 0, None] + offsets[None, :] - t0), axis=1)
+    return h - h.mean()
+
+
+def find_tare(blocks, options: DriftOptions, response, block_s: float = BLOCK_S, fitted=None):
+    """The tare (a step in the gravimeter's reading) the blocks show best, or None.
+
+    Every time on a grid (:data:`TARE_SCAN_PER_BLOCK` per block, :data:`TARE_EDGE_S` in from the
+    first and last block) is scored by the step's generalised-least-squares log-likelihood
+    ratio under the field-plus-drift model fitted without a step; at the best, the step is
+    estimated with the drift model refitted to the blocks less it (twice), and the ratio is that
+    of the refitted models with and without it.  Without the step the drift model grows to
+    follow it, and the first score stays low (a 10-mGal tare: 32 after the refit, under 5
+    before), so the refit, not the first score, is the test (:data:`TARE_MIN_LOG_LR`).
+
+    Parameters
+    ----------
+    blocks : ndarray, shape (M, 4)
+        :func:`line_blocks`.
+    options : DriftOptions
+        The drift prior.
+    response : callable
+        :func:`step_response` of the estimate the blocks average.
+    block_s : float
+        The blocks' length, s.
+    fitted : tuple, optional
+        The field-plus-drift model's fit to these blocks without a step (negative
+        log-likelihood, hyperparameters), when already made.
+
+    Returns
+    -------
+    Tare or None
+        None when the blocks are too few or too short for a scan.
+    """
+    b = np.asarray(blocks, float)
+    if b.shape[0] < MIN_BLOCKS:
+        return None
+    y, dist, lag = _block_geometry(b)
+    nll0, v0 = fitted if fitted is not None else _fit(y, dist, lag, options, True)
+    if v0 is None:
+        return None
+    inv = np.linalg.inv(_covariance(v0, dist, lag))
+    tb = b[:, 0]
+    best = None
+    for t0 in np.arange(tb[0] + TARE_EDGE_S, tb[-1] - TARE_EDGE_S, block_s / TARE_SCAN_PER_BLOCK):
+        h = _step_at_blocks(b, response, float(t0), block_s)
+        a, c = float(h @ inv @ y), float(h @ inv @ h)
+        if c > 0.0 and (best is None or 0.5 * a * a / c > best[0]):
+            best = (0.5 * a * a / c, float(t0), a / c, h)
+    if best is None:
+        return None
+    _, t0, beta, h = best
+    # refitted from the fit without the step, and from its field with the datasheet's drift (the
+    # size the drift returns to once the step is off)
+    starts = [tuple(v0), (v0[0], v0[1], options.sigma_mps2, options.tau_s, v0[4])]
+    for _ in range(2):
+        _, v1 = _fit(y - beta * h, dist, lag, options, True, starts=starts)
+        if v1 is None:
+            return None
+        inv = np.linalg.inv(_covariance(v1, dist, lag))
+        c = float(h @ inv @ h)
+        beta = float(h @ inv @ y) / c
+    nll1 = _neg_log_likelihood(v1, dist, lag, y - beta * h)
+    return Tare(time_s=t0, step_mps2=beta, sigma_mps2=1.0 / math.sqrt(c), log_lr=float(nll0 - nll1))
+
+
 def passed_drift_factor(report: dict, options: DriftOptions = DriftOptions()) -> float:
     """Factor on the datasheet drift that the stated sigma holds where no drift is taken off.
 
@@ -536,7 +701,9 @@ def passed_drift_factor(report: dict, options: DriftOptions = DriftOptions()) ->
     return float(min(1.0, max(float(fitted) * MGAL / options.sigma_mps2, 1e-3)))
 
 
-def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOptions(), resolution_m: float = 0.0):
+def separate_drift(
+    time, lat, lon, g, line_id, options: DriftOptions = DriftOptions(), resolution_m: float = 0.0, response=None
+):
     """The gravimeter drift of one flight, estimated from its lines.
 
     Parameters
@@ -555,13 +722,19 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
         used when the fitted field correlation length is below :data:`MIN_LENGTH_PER_RESOLUTION`
         times it: the estimate then smooths the field along the lines only, an anisotropy the
         isotropic field model reads as drift.
+    response : callable, optional
+        :func:`step_response` of ``g``: given (and ``options.tares``), the lines are searched for
+        tares (:func:`find_tare`, up to :data:`TARE_MAX`), and those the blocks need
+        (:data:`TARE_MIN_LOG_LR`) are taken off before the drift is fitted and returned with it.
 
     Returns
     -------
     drift : ndarray, shape (N,) or None
-        Drift to take off ``g``, m/s^2 (None when not used).
+        Drift to take off ``g``, m/s^2, the tares' steps included (None when neither the drift
+        nor a tare is taken off).
     sigma : ndarray, shape (N,) or None
-        Its posterior 1-sigma about the flight mean, m/s^2.
+        Its posterior 1-sigma about the flight mean, m/s^2 (the tares' alone where the drift is
+        not used).
     report : dict
         ``used`` (bool); ``model`` when used: ``"fitted"`` (the likelihood-ratio test needs the
         drift; its fitted sigma and correlation time) or ``"datasheet"`` (the test does not, but
@@ -570,7 +743,8 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
         used) and ``datasheet_log_likelihood_ratio`` when the datasheet model was fitted;
         ``rough_field_log_likelihood_ratio`` where the fitted drift's ratio is at least
         :data:`ROUGH_CHECK_MIN_LOG_LR`: the same fit under an exponential field, whose ratio,
-        where smaller, is the one tested and weighed.
+        where smaller, is the one tested and weighed; ``tares`` when any was taken off
+        (:meth:`Tare.report` each, ``used`` then still says whether the drift was).
     """
 
     def not_used(reason, **facts):
@@ -584,12 +758,47 @@ def separate_drift(time, lat, lon, g, line_id, options: DriftOptions = DriftOpti
     east, north = local_plane(lat, lon)
     span = float(time[-1] - time[0]) if time.size else 0.0
     block = max(float(options.block_s), span / MAX_BLOCKS)
-    blocks, lines = line_blocks(time, east, north, np.asarray(g, float), line_id, block)
+    g = np.asarray(g, float)
+    blocks, lines = line_blocks(time, east, north, g, line_id, block)
+    tares, steps, step_var = [], np.zeros(time.size), np.zeros(time.size)
+    # the drift model's fit to the blocks as they stand, made for the search and kept for the drift
+    fitted = None
+    if options.tares and response is not None and lines >= 2 and blocks.shape[0] >= MIN_BLOCKS:
+        on = np.asarray([str(x) if x is not None else "" for x in line_id], dtype=object) != ""
+        while len(tares) < TARE_MAX:
+            y, dist, lag = _block_geometry(blocks)
+            fitted = _fit(y, dist, lag, options, True)
+            tare = find_tare(blocks, options, response, block, fitted)
+            if tare is None or tare.log_lr < TARE_MIN_LOG_LR:
+                break
+            tares.append(tare)
+            r = response(time - tare.time_s)
+            steps += tare.step_mps2 * r
+            # the step's error about the flight mean (the constant absorbs a common offset)
+            step_var += (tare.sigma_mps2 * (r - np.mean(r[on]))) ** 2
+            blocks, lines = line_blocks(time, east, north, g - steps, line_id, block)
+            fitted = None
+    mean, sigma, report = _drift_of_blocks(blocks, lines, block, time, options, resolution_m, fitted)
+    if not tares:
+        return mean, sigma, report
+    report = {**report, "tares": [t.report() for t in tares]}
+    if mean is None:
+        return steps, np.sqrt(step_var), report
+    return mean + steps, np.sqrt(sigma**2 + step_var), report
+
+
+def _drift_of_blocks(blocks, lines, block, time, options, resolution_m, fitted=None):
+    """:func:`separate_drift`'s drift from the blocks (the tares taken off them): (mean, sigma,
+    report) at ``time``; ``fitted``: the drift model's fit to these blocks, when already made."""
+
+    def not_used(reason, **facts):
+        return None, None, {"used": False, "reason": reason, **facts}
+
     if lines < 2:
         return not_used(f"{lines} line(s): the drift needs two or more")
     if blocks.shape[0] < MIN_BLOCKS:
         return not_used(f"{blocks.shape[0]} blocks of {block:g} s, fewer than {MIN_BLOCKS}")
-    fit = fit_drift(blocks, lines, options)
+    fit = _fit_against_no_drift(blocks, lines, options, datasheet=False, fitted=fitted)
     if fit is None:
         return not_used("the fit failed")
     rep = {**fit.report(), "block_s": block}

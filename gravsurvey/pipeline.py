@@ -310,7 +310,8 @@ def estimate_drift(est: FlightEstimate, segs, options=None, filter_lines: bool =
     list of str
         Notes for the flight (a drift larger than the datasheet prior).
     """
-    from .drift import DriftOptions, passed_drift_factor, separate_drift
+    from .drift import DriftOptions, passed_drift_factor, separate_drift, step_response
+    from .utc import utc_iso
     from .inm.identify import DRIFT_DEFAULT_SIGMA_MPS2, DRIFT_DEFAULT_TAU_S
     from .segmentation import along_line_legs
 
@@ -335,8 +336,19 @@ def estimate_drift(est: FlightEstimate, segs, options=None, filter_lines: bool =
     # one, the drift taken off moved U233 0.67 -> 0.12 mGal, U217 0.65 -> 0.62, U018 0.33 ->
     # 0.32, U016 0.68 -> 0.80 (2026-12-01)
     res = float(est.resolution_m) if np.isfinite(est.resolution_m) else 0.0
-    drift, sigma, report = separate_drift(est.time, est.lat, est.lon, est.smoothed, labels, options, res)
-    if drift is None:
+    response = None
+    if options.tares and len(est.time) > 1:
+        # a tare reaches the estimate through the smoother's transfer (that of the flight's
+        # middle piece where it was estimated in pieces)
+        mid = len(est.time) // 2
+        response = step_response(
+            lambda f: _smoother_gain(est, mid, f),
+            float(np.median(np.diff(est.time))),
+            float(est.time[-1] - est.time[0]),
+        )
+    drift, sigma, report = separate_drift(est.time, est.lat, est.lon, est.smoothed, labels, options, res, response)
+    used = bool(report.get("used"))
+    if not used:
         # the lines may have set the datasheet drift aside: the sigma then passes the drift
         # they support (drift.passed_drift_factor), not the datasheet's
         factor = passed_drift_factor(report, options)
@@ -351,11 +363,21 @@ def estimate_drift(est: FlightEstimate, segs, options=None, filter_lines: bool =
     if drift is None:
         return []
     est.drift = drift
-    if filter_lines and options.field_filter:
-        sigma = filter_field(est, segs, sigma, report)
-    _trade_drift_sigma(est, sigma)
-    notes = []
-    if report["drift_rms_mgal"] > 3.0 * options.sigma_mps2 / MGAL:
+    if used:
+        if filter_lines and options.field_filter:
+            sigma = filter_field(est, segs, sigma, report)
+        _trade_drift_sigma(est, sigma)
+    else:
+        # tares alone: the drift the sigma passes stays; the steps' own sigma joins it
+        est.sigma = np.hypot(est.sigma, sigma)
+    notes = [
+        f"{est.name}: the lines show a tare, a step of {t['step_mgal']:+.1f} mGal (+-{t['sigma_mgal']:.1f}) "
+        f"in the gravimeter's reading at {utc_iso(est.t0_unix_ns + int(round(t['time_s'] * 1e9)), 0)} "
+        f"(log-likelihood ratio {t['log_likelihood_ratio']:.0f}); it was taken off with the drift "
+        "(drift_mgal in profiles.csv)"
+        for t in report.get("tares", ())
+    ]
+    if used and report["drift_rms_mgal"] > 3.0 * options.sigma_mps2 / MGAL:
         notes.append(
             f"{est.name}: the lines show a gravimeter drift of {report['drift_rms_mgal']:.1f} mGal RMS "
             f"(over 3x the prior drift.sigma_mps2); it was taken off (drift_mgal in profiles.csv)"

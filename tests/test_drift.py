@@ -14,6 +14,7 @@ import pytest
 from gravsurvey.drift import (
     BLOCK_S,
     MIN_LOG_LR,
+    TARE_MIN_LOG_LR,
     DriftOptions,
     datasheet_drift_fit,
     drift_posterior,
@@ -23,6 +24,7 @@ from gravsurvey.drift import (
     local_plane,
     passed_drift_factor,
     separate_drift,
+    step_response,
 )
 from gravsurvey.errors import ConfigError
 from gravsurvey.settings import drift_options
@@ -680,3 +682,100 @@ def test_pipeline_filters_the_lines_and_states_the_resolution_of_both():
     other, other_segs, _, _ = _flight_estimate()
     estimate_drift(other, other_segs, filter_lines=False)
     assert other.field_filter is None
+
+
+def _lowpass_gain(corner_hz):
+    # a zero-phase low-pass standing for the smoother's transfer (what a step reaches g through)
+    return lambda f: 1.0 / (1.0 + (np.asarray(f, float) / corner_hz) ** 4)
+
+
+def test_step_response_is_the_transfers_zero_phase_ramp():
+    r = step_response(_lowpass_gain(1.0 / 200.0), 1.0, 3000.0)
+    lags = np.array([-3000.0, -400.0, 0.0, 400.0, 3000.0])
+    v = r(lags)
+    # 0 long before, 1 long after, half at the step (zero phase: symmetric about it)
+    assert v[0] == pytest.approx(0.0, abs=1e-3) and v[-1] == pytest.approx(1.0, abs=1e-3)
+    assert v[2] == pytest.approx(0.5, abs=0.02)
+    assert v[1] + v[3] == pytest.approx(1.0, abs=0.02) and v[1] < 0.1 < 0.9 < v[3]
+    # an all-pass transfer: the step itself
+    s = step_response(lambda f: np.ones_like(f), 1.0, 3000.0)
+    assert s(np.array([-2.0]))[0] == pytest.approx(0.0, abs=1e-9) and s(np.array([2.0]))[0] == pytest.approx(1.0)
+
+
+def _tared(seed, step_mgal, at_s, corner_hz=1.0 / 200.0):
+    """A four-line survey with a smooth field, a 1-mGal drift and a tare of ``step_mgal`` at
+    ``at_s``, all seen through a low-pass (the smoother's transfer), and that step response."""
+    rng = np.random.default_rng(seed)
+    t, lat, lon, e, n, lab = survey(lines=4)
+    field = field_at(e, n)
+    drift = markov(t.size, 1.0, 1500.0, 1.0 * MGAL, rng)
+    r = step_response(_lowpass_gain(corner_hz), 1.0, float(t[-1] - t[0]))
+    step = step_mgal * MGAL * r(t - at_s)
+    g = field + drift + step + 0.3 * MGAL * rng.standard_normal(t.size)
+    return t, lat, lon, g, lab, field, drift + step, r
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_tare_is_found_and_taken_off(seed):
+    # mid second line: the lines either side of it see the same field before and after the step
+    at = 900.0
+    t, lat, lon, g, lab, field, slow, r = _tared(seed, 6.0, at)
+    on = lab != ""
+    est, sigma, rep = separate_drift(t, lat, lon, g, lab, response=r)
+    assert len(rep.get("tares", [])) == 1, rep
+    tare = rep["tares"][0]
+    assert abs(tare["time_s"] - at) <= BLOCK_S, tare
+    assert abs(tare["step_mgal"] - 6.0) < max(3.0 * tare["sigma_mgal"], 1.0), tare
+    assert tare["log_likelihood_ratio"] >= TARE_MIN_LOG_LR
+    before = rms_about_mean((g - field)[on])
+    after = rms_about_mean((g - est - field)[on])
+    assert after < 0.3 * before, (before / MGAL, after / MGAL)
+    # without the search the drift model follows the step only in part
+    plain, _, _ = separate_drift(t, lat, lon, g, lab)
+    assert after < 0.8 * rms_about_mean((g - (0.0 if plain is None else plain) - field)[on])
+    # the stated sigma holds the step's own uncertainty: larger after it than a drift-only sigma
+    assert np.all(np.isfinite(sigma[on])) and np.all(sigma[on] > 0.0)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4])
+def test_no_tare_is_taken_where_there_is_none(seed):
+    t, lat, lon, g, lab, field, slow, r = _tared(seed, 0.0, 900.0)
+    est, sigma, rep = separate_drift(t, lat, lon, g, lab, response=r)
+    assert "tares" not in rep, rep
+    plain, plain_sigma, plain_rep = separate_drift(t, lat, lon, g, lab)
+    # the same drift as without the search, to the bit
+    assert (est is None) == (plain is None)
+    if est is not None:
+        assert np.array_equal(est, plain) and np.array_equal(sigma, plain_sigma)
+    assert rep == plain_rep
+
+
+def test_tares_switched_off_or_without_a_response():
+    t, lat, lon, g, lab, field, slow, r = _tared(1, 6.0, 900.0)
+    for kw in ({"options": DriftOptions(tares=False), "response": r}, {}):
+        _, _, rep = separate_drift(t, lat, lon, g, lab, **kw)
+        assert "tares" not in rep
+
+
+def test_pipeline_takes_a_tare_off_and_says_when():
+    from gravsurvey.pipeline import estimate_drift
+    from gravsurvey.utc import utc_iso
+
+    est, segs, field, lab = _flight_estimate(seed=2, with_drift=False)
+    # a flat estimate's transfer is stated nowhere here: the step reaches it whole
+    at = 900.0
+    est.smoothed = est.smoothed + np.where(est.time >= at, -8.0 * MGAL, 0.0)
+    est.t0_unix_ns = 1_700_000_000 * 10**9
+    notes = estimate_drift(est, segs)
+    tares = est.estimator["drift"]["tares"]
+    assert len(tares) == 1 and abs(tares[0]["time_s"] - at) <= BLOCK_S
+    assert any("tare" in x and f"{tares[0]['step_mgal']:+.1f} mGal" in x for x in notes), notes
+    when = utc_iso(est.t0_unix_ns + int(round(tares[0]["time_s"] * 1e9)), 0)
+    assert any(when in x for x in notes), notes
+    on = lab != ""
+    assert rms_about_mean((est.smoothed - est.drift - field)[on]) < 1.0 * MGAL
+    # switched off in the config: nothing taken for it
+    est2, segs2, _, _ = _flight_estimate(seed=2, with_drift=False)
+    est2.smoothed = est.smoothed.copy()
+    estimate_drift(est2, segs2, DriftOptions(tares=False))
+    assert "tares" not in est2.estimator["drift"]

@@ -177,6 +177,21 @@ def test_gravimeter_slow_error_is_the_simulations_own_draw():
     sim["flights"][0]["sensors"]["gravimeter"]["drift_mgal_per_h"] = "fast"
     with pytest.raises(ConfigError, match=r"gravimeter.drift_mgal_per_h: expected a number \(mGal/h\)"):
         simulate_flight(sim)
+    # a tare: the reading steps by tare_mgal at tare_time_s from the first sample, in the error
+    # and its slow part, the other draws unchanged
+    sim["flights"][0]["sensors"]["gravimeter"]["drift_mgal_per_h"] = 0.0
+    sim["flights"][0]["sensors"]["gravimeter"]["tare_mgal"] = 4.0
+    sim["flights"][0]["sensors"]["gravimeter"]["tare_time_s"] = 300.0
+    d = simulate_flight(sim)
+    t_ns3, err3 = gravimeter_slow_error(sim)
+    step = np.where((t_ns3 - t_ns3[0]) / 1e9 >= 300.0, 4.0e-5, 0.0)
+    np.testing.assert_allclose(err3 - err, step, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d.truth["gravimeter_drift"], step, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d.truth["gravimeter_error"] - s.truth["gravimeter_error"], step, rtol=0, atol=1e-12)
+    assert 0 < np.count_nonzero(step) < step.size
+    sim["flights"][0]["sensors"]["gravimeter"]["tare_time_s"] = -1.0
+    with pytest.raises(ConfigError, match=r"gravimeter.tare_time_s"):
+        simulate_flight(sim)
 
 
 def _tree_bytes(d):

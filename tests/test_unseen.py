@@ -507,6 +507,18 @@ def test_gravimeter_drift_is_added_to_the_draw():
     assert bench._spec_hash(dr) != bench._spec_hash(sp)
 
 
+def test_gravimeter_tare_is_added_to_the_draw():
+    """``bench_unseen.py --gravimeter-tare``: a step of the reading at a fraction of the flight,
+    the rest of the draw as it was, in a cache folder of its own."""
+    bench = _bench()
+    sp = U.draw_flight_spec(5)
+    dr = bench.with_gravimeter_tare(sp, 0.3, -6.0)
+    g, g0 = dr["sim"]["flights"][0]["sensors"]["gravimeter"], sp["sim"]["flights"][0]["sensors"]["gravimeter"]
+    assert g["tare_mgal"] == -6.0 and g["tare_time_s"] == pytest.approx(0.3 * sp["duration_s"])
+    assert {k: v for k, v in g.items() if k not in ("tare_mgal", "tare_time_s")} == g0
+    assert bench._spec_hash(dr) != bench._spec_hash(sp)
+
+
 def test_issue_flights_table_counts_against_the_issues_ratio(capsys):
     """benchmarks/bench_issue_flights.py: each flight's default / bound is set against the
     issue's goal over its bound (A: 0.40 over 0.29-0.39 mGal), strict and generous end; a

@@ -383,6 +383,11 @@ class DriftSection(Section):
         "field against the drift's posterior; its resolution is stated with the smoother's); only with "
         "`postprocess.method` none, the default",
     )
+    tares: bool = _dr(
+        "tares",
+        "look for tares, steps in the gravimeter's reading (a spring meter after a shock, a strapdown "
+        "gravimeter's bias jump), and take off those the lines need with the drift (a note names each)",
+    )
 
 
 # ============================================================================ checks (survey level)

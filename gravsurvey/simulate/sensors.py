@@ -24,7 +24,9 @@ the noise averaged over 1 s, i.e. a white noise of two-sided spectral density
   stationary first-order Gauss-Markov ``df3/dt = -lambda f3 + sqrt(2 lambda)
   sigma u`` (exact discretisation) + optional white noise + optional linear drift
   from the flight's first sample (a spring meter's or a strapdown gravimeter's
-  drift without base ties; ``drift_mgal_per_h``);
+  drift without base ties; ``drift_mgal_per_h``) + an optional tare, a step of
+  ``tare_mgal`` at ``tare_time_s`` from the first sample (a spring meter after a
+  shock, a strapdown gravimeter's bias jump);
 * gyros: constant bias + white drift (deg/h);
 * altimeter: ``h + A + sigma w`` (mean ``A``);
 * GNSS: independent white noise in east, north (m, converted to angles through
@@ -47,8 +49,10 @@ from .trajectory import Kinematics, earth_rate_n, mat_ne
 
 #: deg/h in rad/s.
 DEGPH = math.pi / 180.0 / 3600.0
+#: 1 mGal in m/s^2
+MGAL = 1e-5
 #: 1 mGal/h in m/s^2 per s
-MGAL_PER_H = 1e-5 / 3600.0
+MGAL_PER_H = MGAL / 3600.0
 
 
 def total_gravitation_n(kin: Kinematics, anomaly_n, ellipsoid: Ellipsoid = WGS84):
@@ -169,8 +173,8 @@ class ImuErrors:
     ``accel_t``: total accelerometer error (x, y: bias + white; z = gravimeter:
     bias + Markov + white + linear drift), m/s^2; ``gravimeter_markov`` (n,) the
     Markov part of the z error, m/s^2; ``gyro_t`` total gyro error, rad/s;
-    ``gravimeter_drift`` (n,) the linear drift part of the z error, m/s^2 (zeros
-    without ``gravimeter.drift_mgal_per_h``).
+    ``gravimeter_drift`` (n,) the linear drift and tare part of the z error, m/s^2
+    (zeros without ``gravimeter.drift_mgal_per_h`` and ``gravimeter.tare_mgal``).
     """
 
     accel_t: np.ndarray
@@ -201,6 +205,9 @@ def imu_errors(n, rate_hz, cfg, rng) -> ImuErrors:
     a[:, :2] = np.asarray(acc["bias_mps2"], dtype=float) + acc["white_sigma_mps2"] * sq * w_acc
     # a ramp from the first sample: no draw, so the other errors' realisations stay as they were
     drift = float(grv.get("drift_mgal_per_h", 0.0)) * MGAL_PER_H * np.arange(n) / rate_hz
+    tare = float(grv.get("tare_mgal", 0.0))
+    if tare != 0.0:
+        drift = drift + np.where(np.arange(n) / rate_hz >= float(grv.get("tare_time_s", 0.0)), tare * MGAL, 0.0)
     a[:, 2] = grv["bias_mps2"] + markov + grv["white_sigma_mps2"] * sq * w_grv + drift
     g = np.asarray(gyr["bias_degph"], dtype=float) * DEGPH + gyr["white_drift_degph"] * DEGPH * sq * w_gyr
     return ImuErrors(accel_t=a, gravimeter_markov=markov, gyro_t=g, gravimeter_drift=drift)

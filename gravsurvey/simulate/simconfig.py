@@ -70,6 +70,10 @@ DEFAULT_SENSORS = {
         "markov_lambda_per_s": 0.025,
         "white_sigma_mps2": 0.0,
         "drift_mgal_per_h": 0.0,
+        # a tare: a step in the reading at tare_time_s from the flight's first sample (a spring
+        # meter's after a shock, a strapdown gravimeter's bias jump); none while tare_mgal is 0
+        "tare_mgal": 0.0,
+        "tare_time_s": 0.0,
     },
     "gyro": {"bias_degph": [0.0, 0.0, 0.0], "white_drift_degph": 0.0},
     "altimeter": {"sigma_m": 0.0, "mean_m": 0.0},
@@ -374,6 +378,8 @@ def _validate_flight(f, path, index):
                 d[k] = number(v, f"{sp}.{k}", "s", 0.0, 1e6, lo_open=True)
             elif k == "drift_mgal_per_h":
                 d[k] = number(v, f"{sp}.{k}", "mGal/h", -1e3, 1e3)
+            elif k == "tare_mgal":
+                d[k] = number(v, f"{sp}.{k}", "mGal", -1e4, 1e4)
             else:
                 d[k] = number(v, f"{sp}.{k}", unit, 0.0)
         s[sec] = d
