@@ -618,7 +618,7 @@ def find_tare(blocks, options: DriftOptions, response, block_s: float = BLOCK_S,
     ratio under the field-plus-drift model fitted without a step; at the best, the step is
     estimated with the drift model refitted to the blocks less it (twice), and the ratio is that
     of the refitted models with and without it.  Without the step the drift model grows to
-    follow it, and the first score stays low (a 10-mGal tare: 32 after the refit, under 5
+    follow it, and the first score stays low (a 10-mGal tare: 31 after the refit, under 5
     before), so the refit, not the first score, is the test (:data:`TARE_MIN_LOG_LR`).
 
     Parameters

@@ -303,12 +303,15 @@ def estimate_drift(est: FlightEstimate, segs, options=None, filter_lines: bool =
     first takes the place of the default one the identification passed into ``est.sigma``
     (:func:`datasheet_drift_passed`).  The fit's facts go to ``est.estimator["drift"]``
     (summary.json).  Where a drift is taken off, ``filter_lines`` and ``drift.field_filter``
-    also filter each line against the drift's residual (:func:`filter_field`).
+    also filter each line against the drift's residual (:func:`filter_field`).  Tares the lines
+    need (``drift.tares``; the step through the smoother's transfer,
+    :func:`gravsurvey.drift.step_response`) are taken off with the drift, their sigma in
+    ``est.sigma``, even where the drift itself is not.
 
     Returns
     -------
     list of str
-        Notes for the flight (a drift larger than the datasheet prior).
+        Notes for the flight (each tare taken off; a drift larger than the datasheet prior).
     """
     from .drift import DriftOptions, passed_drift_factor, separate_drift, step_response
     from .utc import utc_iso
