@@ -171,7 +171,7 @@ class ImuErrors:
     """Truth of the IMU errors added to the ideal outputs, ``(n, 3)`` each.
 
     ``accel_t``: total accelerometer error (x, y: bias + white; z = gravimeter:
-    bias + Markov + white + linear drift), m/s^2; ``gravimeter_markov`` (n,) the
+    bias + Markov + white + linear drift + tare), m/s^2; ``gravimeter_markov`` (n,) the
     Markov part of the z error, m/s^2; ``gyro_t`` total gyro error, rad/s;
     ``gravimeter_drift`` (n,) the linear drift and tare part of the z error, m/s^2
     (zeros without ``gravimeter.drift_mgal_per_h`` and ``gravimeter.tare_mgal``).
