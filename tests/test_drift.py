@@ -702,15 +702,15 @@ def test_step_response_is_the_transfers_zero_phase_ramp():
     assert s(np.array([-2.0]))[0] == pytest.approx(0.0, abs=1e-9) and s(np.array([2.0]))[0] == pytest.approx(1.0)
 
 
-def _tared(seed, step_mgal, at_s, corner_hz=1.0 / 200.0):
-    """A four-line survey with a smooth field, a 1-mGal drift and a tare of ``step_mgal`` at
-    ``at_s``, all seen through a low-pass (the smoother's transfer), and that step response."""
+def _tared(seed, steps, lines=4, corner_hz=1.0 / 200.0):
+    """A survey of ``lines`` lines with a smooth field, a 1-mGal drift and tares (``steps``:
+    (mGal, s) pairs), all seen through a low-pass (the smoother's transfer), and that step response."""
     rng = np.random.default_rng(seed)
-    t, lat, lon, e, n, lab = survey(lines=4)
+    t, lat, lon, e, n, lab = survey(lines=lines)
     field = field_at(e, n)
     drift = markov(t.size, 1.0, 1500.0, 1.0 * MGAL, rng)
     r = step_response(_lowpass_gain(corner_hz), 1.0, float(t[-1] - t[0]))
-    step = step_mgal * MGAL * r(t - at_s)
+    step = sum((mgal * MGAL * r(t - at_s) for mgal, at_s in steps), np.zeros(t.size))
     g = field + drift + step + 0.3 * MGAL * rng.standard_normal(t.size)
     return t, lat, lon, g, lab, field, drift + step, r
 
@@ -719,7 +719,7 @@ def _tared(seed, step_mgal, at_s, corner_hz=1.0 / 200.0):
 def test_a_tare_is_found_and_taken_off(seed):
     # mid second line: the lines either side of it see the same field before and after the step
     at = 900.0
-    t, lat, lon, g, lab, field, slow, r = _tared(seed, 6.0, at)
+    t, lat, lon, g, lab, field, slow, r = _tared(seed, [(6.0, at)])
     on = lab != ""
     est, sigma, rep = separate_drift(t, lat, lon, g, lab, response=r)
     assert len(rep.get("tares", [])) == 1, rep
@@ -739,7 +739,7 @@ def test_a_tare_is_found_and_taken_off(seed):
 
 @pytest.mark.parametrize("seed", [1, 2, 3, 4])
 def test_no_tare_is_taken_where_there_is_none(seed):
-    t, lat, lon, g, lab, field, slow, r = _tared(seed, 0.0, 900.0)
+    t, lat, lon, g, lab, field, slow, r = _tared(seed, [])
     est, sigma, rep = separate_drift(t, lat, lon, g, lab, response=r)
     assert "tares" not in rep, rep
     plain, plain_sigma, plain_rep = separate_drift(t, lat, lon, g, lab)
@@ -751,7 +751,7 @@ def test_no_tare_is_taken_where_there_is_none(seed):
 
 
 def test_tares_switched_off_or_without_a_response():
-    t, lat, lon, g, lab, field, slow, r = _tared(1, 6.0, 900.0)
+    t, lat, lon, g, lab, field, slow, r = _tared(1, [(6.0, 900.0)])
     for kw in ({"options": DriftOptions(tares=False), "response": r}, {}):
         _, _, rep = separate_drift(t, lat, lon, g, lab, **kw)
         assert "tares" not in rep
@@ -785,12 +785,7 @@ def test_a_second_tare_is_looked_for_once_the_first_is_off():
     # two steps of +6 mGal on a six-line survey (one ~15 min in, one ~50 min in): the first found
     # is taken off the blocks and the scan runs again on what is left (this draw needs both; on
     # others of the same survey the drift model alone follows them as well, and none is taken)
-    rng = np.random.default_rng(1)
-    t, lat, lon, e, n, lab = survey(lines=6)
-    field = field_at(e, n)
-    drift = markov(t.size, 1.0, 1500.0, 1.0 * MGAL, rng)
-    r = step_response(_lowpass_gain(1.0 / 200.0), 1.0, float(t[-1] - t[0]))
-    g = field + drift + 6.0 * MGAL * (r(t - 900.0) + r(t - 3000.0)) + 0.3 * MGAL * rng.standard_normal(t.size)
+    t, lat, lon, g, lab, field, slow, r = _tared(1, [(6.0, 900.0), (6.0, 3000.0)], lines=6)
     est, sigma, rep = separate_drift(t, lat, lon, g, lab, response=r)
     found = sorted(x["time_s"] for x in rep.get("tares", []))
     assert len(found) == 2, rep.get("tares")
