@@ -129,6 +129,36 @@ def test_altimeter_measurement_assignment_and_missing():
     assert r[0, 0, 0] == 4.0
 
 
+def test_altimeter_samples_fill_their_epochs_slots_in_time_order():
+    """Several samples per epoch (a 5-Hz altimeter on 1-s epochs, one noisy sample weighed by
+    its own sigma): each in its epoch's next slot, as a loop over the samples puts them."""
+    tr = parallel_flight(30.0, triad="strapdown", yaw_rate=0.05)
+    init = InitialState(tr["lat"][0], tr["lon"][0], 1000.0, tr["vel_n"][0], tr["mat_nt"][0])
+    nav = mechanize(tr["time"], tr["f_t"], tr["w_t"], init, tr["time"][::10], tr["height"][::10])
+    idx = np.arange(0, tr["time"].size, 10)
+    alt_t = np.arange(0.0, 20.0, 0.2)
+    alt_h = 1000.0 + 0.1 * np.sin(alt_t)
+    own = np.full(alt_t.size, np.nan)
+    own[7] = 3.0
+    for n_state in (8, 14):
+        z, h, r = AltimeterMeasurement(alt_t, alt_h, 2.0, height_sigma_m=own).build(nav, idx, 0.5, n_state)
+        assert z.shape == (idx.size, 5) and h.shape == (idx.size, 5, n_state)
+        t_ep = nav.time[idx]
+        filled = np.zeros(idx.size, dtype=int)
+        for j, t in enumerate(alt_t):
+            kk = int(np.argmin(np.abs(t_ep - t)))
+            s = filled[kk]
+            filled[kk] += 1
+            assert np.isfinite(z[kk, s])
+            assert r[kk, s, s] == (9.0 if j == 7 else 4.0)
+            np.testing.assert_allclose(h[kk, s, DP], (t - t_ep[kk]) * h[kk, s, DQ], rtol=1e-12, atol=1e-15)
+            other = np.setdiff1d(np.arange(n_state), DP)
+            np.testing.assert_array_equal(h[kk, s, other], h[kk, 0, other])  # the epoch's geometry
+        for kk in range(idx.size):
+            assert np.isnan(z[kk, filled[kk] :]).all()
+            assert not h[kk, filled[kk] :].any()
+
+
 def test_epochs_stay_evenly_spaced_where_the_imu_changes_rate():
     from gravsurvey.inm.solve import filter_epochs
 

@@ -789,7 +789,6 @@ class AltimeterMeasurement:
         z = np.full((nep, m), np.nan)
         h = np.zeros((nep, m, n_state))
         r = np.broadcast_to(np.eye(m) * self.sigma_m**2, (nep, m, m)).copy()
-        slot = np.zeros(nep, dtype=int)
         # z = |r_c| - R(lat_c, lon_c, h_alt): a horizontal error moves both terms, so that
         # dz = (n . r0) n . dr - eps: the height error along the ellipsoid normal n
         r_ep = nav.r_i[idx]
@@ -803,16 +802,19 @@ class AltimeterMeasurement:
         if n_state >= N_STATE_AIDED:
             q_t = np.einsum("nji,nj->ni", nav.mat_it[idx], r_ep)
             h_th = np.cross(n_t, q_t) * cosa[:, None]
-        for j in range(k.size):
-            kk = k[j]
-            s = slot[kk]
-            slot[kk] += 1
-            z[kk, s] = zval[j]
-            r[kk, s, s] = var[j]
-            h[kk, s, DQ] = q0_t[kk]
-            h[kk, s, DP] = d[j] * q0_t[kk]
-            if n_state >= N_STATE_AIDED:
-                h[kk, s, TH] = h_th[kk]
+        # each sample's slot among its epoch's, in time order (a loop over the samples cost
+        # 0.75 s per pass on a 3-h flight with a 20-Hz altimeter, the filter itself 0.25 s)
+        order = np.argsort(k, kind="stable")
+        ks = k[order]
+        slot = np.empty(k.size, dtype=np.int64)
+        slot[order] = np.arange(k.size) - np.searchsorted(ks, ks, side="left")
+        z[k, slot] = zval
+        r[k, slot, slot] = var
+        kc, sc = k[:, None], slot[:, None]
+        h[kc, sc, DQ[None, :]] = q0_t[k]
+        h[kc, sc, DP[None, :]] = d[:, None] * q0_t[k]
+        if n_state >= N_STATE_AIDED:
+            h[kc, sc, TH[None, :]] = h_th[k]
         return z, h, r
 
 
