@@ -181,6 +181,33 @@ def test_height_wander_is_found_and_only_where_it_is():
     assert max(gains) < 3.0 and min(gains) > -1e-3
 
 
+def test_a_wander_of_the_turns_alone_is_not_taken_from_the_whole_record():
+    """Where the straight stretches miss a wander the whole record is asked; a wander found
+    there is kept only where the straight stretches, with it held, do not refuse it
+    (WALK_HELD_MAX_COST). A random walk everywhere on 4-min stretches: found on the whole
+    record. One only in the turns (100 s of every 1600 s, as a long flight's turns with their
+    own errors): the whole record prefers it too, the 25-min straight stretches refuse it and
+    it is not taken."""
+    t, e = _synthetic_channel(40, 0.05, 1e-5, 5e-5, 200.0, seconds=3000.0)
+    man = (t % 300.0) >= 240.0
+    e = e + _random_walk(70, t.size, 0.2, 4e-3)
+    fit = I.fit_vertical_spectrum(t, e, man)
+    walk_fit, lr, where = I.fit_height_wander(t, e, man, fit)
+    assert where == "whole record" and lr >= I.WALK_MIN_LOG_LR
+    assert walk_fit.model.height_walk_m == pytest.approx(4e-3, rel=0.15)
+
+    t, e = _synthetic_channel(41, 0.05, 1e-5, 5e-5, 200.0, seconds=8000.0)
+    man = (t % 1600.0) >= 1500.0
+    rng = np.random.default_rng(61)
+    e = e + np.cumsum(rng.standard_normal(t.size) * 0.01 * math.sqrt(0.2) * man)
+    fit = I.fit_vertical_spectrum(t, e, man)
+    whole = I.fit_vertical_spectrum(t, e, None)
+    whole_walk = I.fit_vertical_spectrum(t, e, None, walk=True, start=whole.model)
+    assert whole.nll - whole_walk.nll > 3 * I.WALK_MIN_LOG_LR  # measured 18.3
+    _, lr, where = I.fit_height_wander(t, e, man, fit)
+    assert where == "straight stretches" and lr < I.WALK_MIN_LOG_LR
+
+
 def test_height_wander_fit_is_the_likelihoods_optimum():
     """The five-parameter fit's exact gradient and Hessian against the likelihood written from
     :func:`vertical_psd`: same value at the optimum, no lower value from a finite-difference

@@ -121,6 +121,16 @@ _ORDER_WALK = _ORDER + ("height_walk_m",)
 #: the whole record asked where the straight stretches miss it, :func:`fit_height_wander`; its
 #: ratio on the 88 flights without a wander: 1.77 at most).
 WALK_MIN_LOG_LR = 5.0
+#: A wander the whole record finds is kept only where the straight stretches, with it held at
+#: the whole record's value, lose less log-likelihood than this against none: where they are
+#: long enough to show such a wander and do not, it came from the turns (full-length unseen
+#: U016, 232 min of 44-min lines: ratio 8.1 on the whole record, the straight stretches 25.9
+#: worse with it; taken, it coarsened the resolution 4.8 -> 11.7 km and the product 0.47 ->
+#: 0.79 mGal).  The evidence the whole record needs to find it (WALK_MIN_LOG_LR), the other way:
+#: with a wander everywhere, -427 to +0.18 on 24 simulated flights and -4.4 to +4.1 on 64
+#: synthetic records of 4-min stretches where only the whole record finds it; with one in the
+#: turns only, 5.7 to 50 on 15 synthetic records of 25-min stretches (tests/test_inm_identify.py).
+WALK_HELD_MAX_COST = 5.0
 
 #: The white level is used only when the likelihood pins it within this 1-sigma factor ...
 WHITE_MAX_FACTOR = 4.0
@@ -909,7 +919,8 @@ def fit_height_wander(time, residual_m, manoeuvring, fit: VerticalFit, fixed: di
     show it (a log-likelihood ratio under :data:`WALK_MIN_LOG_LR`: survey lines of a few
     minutes leave too few bins below the frequency where a wander overtakes the white height
     noise), the whole record is asked too, turns included, and a wander it finds is held at the
-    whole record's value while the straight stretches fit the rest.
+    whole record's value while the straight stretches fit the rest - unless they refuse it
+    (:data:`WALK_HELD_MAX_COST`): long enough to show it, they would, and the turns made it.
 
     Parameters
     ----------
@@ -946,7 +957,7 @@ def fit_height_wander(time, residual_m, manoeuvring, fit: VerticalFit, fixed: di
         start=fit.model,
         walk=True,
     )
-    if held is None:
+    if held is None or held.nll - fit.nll > WALK_HELD_MAX_COST:
         return wfit, lr, "straight stretches"
     return held, float(whole.nll - whole_w.nll), "whole record"
 
