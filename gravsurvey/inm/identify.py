@@ -129,7 +129,7 @@ WALK_MIN_LOG_LR = 5.0
 #: 0.79 mGal).  The evidence the whole record needs to find it (WALK_MIN_LOG_LR), the other way:
 #: with a wander everywhere, -427 to +0.18 on 24 simulated flights and -4.4 to +4.1 on 64
 #: synthetic records of 4-min stretches where only the whole record finds it; with one in the
-#: turns only, 5.7 to 50 on 15 synthetic records of 25-min stretches (tests/test_inm_identify.py).
+#: turns only, 5.7 to 50 on 14 synthetic records of 25-min stretches (tests/test_inm_identify.py).
 WALK_HELD_MAX_COST = 5.0
 
 #: The white level is used only when the likelihood pins it within this 1-sigma factor ...
