@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from .cache import code_fingerprint
 from .config import FlightConfig, SurveyConfig, load_config
 from .errors import INTERRUPT, DataError, GravsurveyError, os_fault
 from .estimate import FlightEstimate, concatenate_estimates, from_classic, from_inm_solution
@@ -782,7 +783,9 @@ def _flight_key(cfg: SurveyConfig, fl: FlightConfig) -> tuple[str, dict]:
     h = hashlib.sha256()
     h.update(cfg.section_hash(fl).encode())
     h.update(json.dumps(hashes, sort_keys=True).encode())
-    h.update(f"{__version__}/{CACHE_VERSION}".encode())
+    # the code's own fingerprint too: a checkout or branch installed under the same version
+    # number must not reuse results computed by other code
+    h.update(f"{__version__}/{CACHE_VERSION}/{code_fingerprint()}".encode())
     return h.hexdigest(), hashes
 
 

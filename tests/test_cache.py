@@ -188,3 +188,25 @@ def test_cli_rerun_with_planted_cache_files_runs_no_code(tmp_path):
     )
     assert r.returncode == 0 and "reusing" in (out / "gravsurvey.log").read_text().split(" run ")[-1]
     assert (out / "profiles.csv").read_bytes() == first
+
+
+def test_results_of_other_code_are_not_reused(tmp_path, monkeypatch):
+    """The cache key holds the package's source fingerprint, not only its version number: a
+    rerun with unchanged inputs reuses the flight, the same rerun by other code (a branch or a
+    checkout installed under the same version) reprocesses it, with the same outputs here."""
+    import gravsurvey.pipeline as pipeline
+    from gravsurvey.cache import code_fingerprint
+
+    assert len(code_fingerprint()) == 64 and code_fingerprint() == code_fingerprint()
+    src = tmp_path / "seed_line"
+    shutil.copytree(ROOT / "sample_data" / "seed_line", src)
+    out = tmp_path / "out"
+    first = pipeline.run_survey(src / "survey.yaml", output_dir=out)
+    assert first.processed == ["F01"] and not first.skipped
+    profiles = (out / "profiles.csv").read_bytes()
+    again = pipeline.run_survey(src / "survey.yaml", output_dir=out)
+    assert again.skipped == ["F01"] and not again.processed
+    monkeypatch.setattr(pipeline, "code_fingerprint", lambda: "0" * 64)
+    other = pipeline.run_survey(src / "survey.yaml", output_dir=out)
+    assert other.processed == ["F01"] and not other.skipped
+    assert (out / "profiles.csv").read_bytes() == profiles
