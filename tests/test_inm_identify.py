@@ -192,8 +192,10 @@ def test_a_wander_of_the_turns_alone_is_not_taken_from_the_whole_record():
     man = (t % 300.0) >= 240.0
     e = e + _random_walk(70, t.size, 0.2, 4e-3)
     fit = I.fit_vertical_spectrum(t, e, man)
-    walk_fit, lr, where = I.fit_height_wander(t, e, man, fit)
+    walk_fit, lr, where, said = I.fit_height_wander(t, e, man, fit)
     assert where == "whole record" and lr >= I.WALK_MIN_LOG_LR
+    assert said["whole_record_log_likelihood_ratio"] == lr
+    assert said["straight_stretches_cost"] <= I.WALK_HELD_MAX_COST
     assert walk_fit.model.height_walk_m == pytest.approx(4e-3, rel=0.15)
 
     t, e = _synthetic_channel(41, 0.05, 1e-5, 5e-5, 200.0, seconds=8000.0)
@@ -204,8 +206,11 @@ def test_a_wander_of_the_turns_alone_is_not_taken_from_the_whole_record():
     whole = I.fit_vertical_spectrum(t, e, None)
     whole_walk = I.fit_vertical_spectrum(t, e, None, walk=True, start=whole.model)
     assert whole.nll - whole_walk.nll > 3 * I.WALK_MIN_LOG_LR  # measured 18.3
-    _, lr, where = I.fit_height_wander(t, e, man, fit)
+    _, lr, where, said = I.fit_height_wander(t, e, man, fit)
     assert where == "straight stretches" and lr < I.WALK_MIN_LOG_LR
+    # what the whole record said is reported with the straight stretches' refusal
+    assert said["whole_record_log_likelihood_ratio"] == pytest.approx(whole.nll - whole_walk.nll, rel=1e-9)
+    assert said["straight_stretches_cost"] > I.WALK_HELD_MAX_COST  # measured 49.9
 
 
 def test_height_wander_fit_is_the_likelihoods_optimum():

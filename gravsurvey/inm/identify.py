@@ -932,9 +932,13 @@ def fit_height_wander(time, residual_m, manoeuvring, fit: VerticalFit, fixed: di
     Returns
     -------
     tuple or None
-        ``(walk_fit, log_likelihood_ratio, where)``: the five-parameter fit, its ratio over
-        ``fit`` (or the whole record's over its own four-parameter fit) and ``"straight
-        stretches"`` or ``"whole record"``; None when the fit fails.
+        ``(walk_fit, log_likelihood_ratio, where, whole)``: the five-parameter fit, its ratio
+        over ``fit`` (or the whole record's over its own four-parameter fit), ``"straight
+        stretches"`` or ``"whole record"``, and what the whole record said where it was asked
+        (else empty): ``whole_record_log_likelihood_ratio`` and, where it found a wander,
+        ``whole_record_height_walk_m`` and ``straight_stretches_cost`` (the straight
+        stretches' loss with it held; above :data:`WALK_HELD_MAX_COST` it is refused). None
+        when the fit fails.
     """
     fixed = dict(fixed or {})
     wfit = fit_vertical_spectrum(time, residual_m, manoeuvring, fixed=fixed, start=fit.model, walk=True)
@@ -942,13 +946,17 @@ def fit_height_wander(time, residual_m, manoeuvring, fit: VerticalFit, fixed: di
         return None
     lr = float(fit.nll - wfit.nll)
     if lr >= WALK_MIN_LOG_LR or manoeuvring is None or not np.any(manoeuvring):
-        return wfit, lr, "straight stretches"
+        return wfit, lr, "straight stretches", {}
     whole = fit_vertical_spectrum(time, residual_m, None, fixed=fixed)
     whole_w = (
         fit_vertical_spectrum(time, residual_m, None, fixed=fixed, start=whole.model, walk=True) if whole else None
     )
-    if whole_w is None or whole.nll - whole_w.nll < WALK_MIN_LOG_LR:
-        return wfit, lr, "straight stretches"
+    if whole_w is None:
+        return wfit, lr, "straight stretches", {}
+    whole_lr = float(whole.nll - whole_w.nll)
+    said = {"whole_record_log_likelihood_ratio": whole_lr}
+    if whole_lr < WALK_MIN_LOG_LR:
+        return wfit, lr, "straight stretches", said
     held = fit_vertical_spectrum(
         time,
         residual_m,
@@ -957,9 +965,14 @@ def fit_height_wander(time, residual_m, manoeuvring, fit: VerticalFit, fixed: di
         start=fit.model,
         walk=True,
     )
-    if held is None or held.nll - fit.nll > WALK_HELD_MAX_COST:
-        return wfit, lr, "straight stretches"
-    return held, float(whole.nll - whole_w.nll), "whole record"
+    if held is None:
+        return wfit, lr, "straight stretches", said
+    said.update(
+        whole_record_height_walk_m=whole_w.model.height_walk_m, straight_stretches_cost=float(held.nll - fit.nll)
+    )
+    if said["straight_stretches_cost"] > WALK_HELD_MAX_COST:
+        return wfit, lr, "straight stretches", said
+    return held, whole_lr, "whole record", said
 
 
 def height_noise_density(nav, f_t, time, height, ellipsoid: Ellipsoid = WGS84, walk: bool = False):
@@ -1100,14 +1113,21 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
         # likelihood prefers it clearly
         found = fit_height_wander(t, e, man, fit, noise_fixed)
         if found is not None:
-            wfit, lr, where = found
+            wfit, lr, where, whole_said = found
             report["height_walk"] = {
                 "height_walk_m": wfit.model.height_walk_m,
                 "sigma_factor": wfit.sigma_factor.get("height_walk_m"),
                 "log_likelihood_ratio": lr,
                 "found_on": where,
                 "applied": lr >= WALK_MIN_LOG_LR,
+                **whole_said,
             }
+            if whole_said.get("straight_stretches_cost", 0.0) > WALK_HELD_MAX_COST:
+                report["notes"].append(
+                    "model identification: the whole record shows a height wander (log-likelihood ratio "
+                    f"{whole_said['whole_record_log_likelihood_ratio']:.1f}) that the straight stretches refuse "
+                    f"({whole_said['straight_stretches_cost']:.1f} worse with it): the turns' own errors, not applied"
+                )
             if lr >= WALK_MIN_LOG_LR:
                 fit = wfit
                 if where == "whole record":
