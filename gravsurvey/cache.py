@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .io.writers import atomic_write_bytes, to_jsonable
+from .io.writers import atomic_write_bytes, file_sha256, to_jsonable
 
 #: bump when the on-disk layout changes; part of every entry
 CACHE_FORMAT = "gravsurvey-flight-cache/1"
@@ -50,14 +50,6 @@ def code_fingerprint() -> str:
         except OSError:
             h.update(b"unreadable")
         h.update(b"\0")
-    return h.hexdigest()
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
     return h.hexdigest()
 
 
@@ -95,7 +87,7 @@ def save_result(cache_dir, name: str, key: str, result) -> None:
     entry = {
         "format": CACHE_FORMAT,
         "key": key,
-        "npz_sha256": _sha256(npath),
+        "npz_sha256": file_sha256(npath),
         "dtypes": dtypes,
         "fields": fields,
     }
@@ -119,7 +111,7 @@ def load_result(cache_dir, name: str, key: str, cls):
     if not isinstance(dtypes, dict) or not isinstance(fields, dict):
         return None
     try:
-        if _sha256(npath) != entry.get("npz_sha256"):
+        if file_sha256(npath) != entry.get("npz_sha256"):
             return None
         with np.load(npath, allow_pickle=False) as z:
             arrays = {k: z[k] for k in dtypes if k in z.files}

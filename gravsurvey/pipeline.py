@@ -31,7 +31,7 @@ from .config import FlightConfig, SurveyConfig, load_config
 from .errors import INTERRUPT, DataError, GravsurveyError, os_fault
 from .estimate import FlightEstimate, concatenate_estimates, from_classic, from_inm_solution
 from .geodesy import MGAL
-from .io.writers import resolution_statement, to_jsonable
+from .io.writers import file_sha256, resolution_statement, to_jsonable
 from .pool import single_threaded_blas
 from .truth import read_truth_csv, truth_at  # noqa: F401  (public here for notebooks and benchmarks)
 
@@ -765,21 +765,13 @@ def classic_estimate(cfg: SurveyConfig, fl: FlightConfig, record) -> FlightEstim
 # --------------------------------------------------------------------------
 
 
-def _file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def _flight_key(cfg: SurveyConfig, fl: FlightConfig) -> tuple[str, dict]:
     hashes = {}
     for p in fl.ingest.input_paths():
         p = Path(p)
-        hashes[str(p)] = _file_sha256(p) if p.is_file() else "missing"
+        hashes[str(p)] = file_sha256(p) if p.is_file() else "missing"
     if fl.truth is not None and Path(fl.truth).is_file():
-        hashes[str(fl.truth)] = _file_sha256(fl.truth)
+        hashes[str(fl.truth)] = file_sha256(fl.truth)
     h = hashlib.sha256()
     h.update(cfg.section_hash(fl).encode())
     h.update(json.dumps(hashes, sort_keys=True).encode())
@@ -1006,7 +998,7 @@ def _summary_head(cfg) -> dict:
         "survey": cfg.name,
         "software": {"name": "gravsurvey", "version": __version__, "python": platform.python_version()},
         "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "config": {"path": str(cfg.path), "sha256": _file_sha256(cfg.path), "settings": cfg.raw},
+        "config": {"path": str(cfg.path), "sha256": file_sha256(cfg.path), "settings": cfg.raw},
         "processing_method": cfg.processing_method,
     }
 

@@ -45,7 +45,7 @@ def _check_complete(d: Path, role: str) -> dict:
     DataError
         Naming the directory, its role (result or reference) and the first problem.
     """
-    import hashlib
+    from .io.writers import file_sha256
 
     if not d.is_dir():
         raise DataError(f"{d}: {role} directory not found")
@@ -66,11 +66,7 @@ def _check_complete(d: Path, role: str) -> dict:
         fp = d / name
         if not fp.is_file():
             raise DataError(f"{fp}: missing; listed in the {role}'s summary.json (incomplete {role})")
-        h = hashlib.sha256()
-        with open(fp, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
-        if h.hexdigest() != digest:
+        if file_sha256(fp) != digest:
             raise DataError(f"{fp}: changed since the {role} run wrote it (SHA-256 differs from summary.json)")
     return summary
 

@@ -1122,7 +1122,7 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
                 "applied": lr >= WALK_MIN_LOG_LR,
                 **whole_said,
             }
-            if whole_said.get("straight_stretches_cost", 0.0) > WALK_HELD_MAX_COST:
+            if where == "straight stretches" and "straight_stretches_cost" in whole_said:  # refused
                 report["notes"].append(
                     "model identification: the whole record shows a height wander (log-likelihood ratio "
                     f"{whole_said['whole_record_log_likelihood_ratio']:.1f}) that the straight stretches refuse "

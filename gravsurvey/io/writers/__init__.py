@@ -27,6 +27,7 @@ from .atomic import (
     OutputTransaction,
     atomic_write_bytes,
     atomic_write_text,
+    file_sha256,
     remove_stale_staging,
 )
 from .columns import (
@@ -84,5 +85,6 @@ __all__ = [
     "OutputLock",
     "remove_stale_staging",
     "atomic_write_bytes",
+    "file_sha256",
     "atomic_write_text",
 ]

@@ -29,6 +29,15 @@ class LockedError(GravsurveyError):
     exit_code = 2
 
 
+def file_sha256(path) -> str:
+    """SHA-256 (hex) of a file's bytes, read in 1-MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
 def atomic_write_bytes(path, data: bytes) -> None:
     """Write ``data`` to ``<path>.tmp-<pid>``, fsync, and rename it onto ``path``."""
     path = Path(path)
@@ -197,11 +206,7 @@ class OutputTransaction:
         for name in self.staged_files():
             if name == SUMMARY_NAME:
                 continue
-            h = hashlib.sha256()
-            with open(self.staging / name, "rb") as fh:
-                for block in iter(lambda: fh.read(1 << 20), b""):
-                    h.update(block)
-            out[name] = h.hexdigest()
+            out[name] = file_sha256(self.staging / name)
         return out
 
     def commit(self) -> list[str]:
