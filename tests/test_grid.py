@@ -180,25 +180,34 @@ def test_large_survey_is_thinned_to_the_fit_limit(monkeypatch):
 
 
 def test_point_sources_match_harmonica():
-    """Our numpy Jacobian and prediction (numba cannot cache harmonica's kernels) against
-    harmonica's own EquivalentSources on the same fit: same coefficients, same field."""
+    """Our Jacobian, fit and prediction (numba cannot cache harmonica's kernels; one Jacobian
+    serves every damping) against harmonica's own EquivalentSources: same coefficients, same
+    field, for each damping the cross-validation tries."""
     import harmonica as hm
 
-    from gravsurvey.grid import point_source_jacobian, point_source_predict
+    from gravsurvey.grid import DAMPINGS, point_source_fit, point_source_jacobian, point_source_predict
 
     rng = np.random.default_rng(3)
     fit = tuple(rng.uniform(0, 5000, 300) for _ in range(2)) + (rng.uniform(500, 800, 300),)
     v = rng.standard_normal(300)
     pred = tuple(rng.uniform(0, 5000, 1000) for _ in range(2)) + (np.full(1000, 700.0),)
-    ref = hm.EquivalentSources(depth=2000.0, damping=1e-3).fit(fit, v)
-    ours = hm.EquivalentSources(depth=2000.0, damping=1e-3)
-    ours.jacobian = point_source_jacobian
-    ours.fit(fit, v)
-    np.testing.assert_allclose(point_source_jacobian(fit, ref.points_), ref.jacobian(fit, ref.points_), rtol=1e-14)
-    np.testing.assert_allclose(ours.coefs_, ref.coefs_, rtol=1e-9, atol=1e-12 * np.abs(ref.coefs_).max())
-    want = ref.predict(pred)
-    got = point_source_predict(pred, ours.points_, ours.coefs_, block=7 * 300)  # several blocks
-    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
+    dampings = (1e-3,) + tuple(DAMPINGS)
+    points, coefs = point_source_fit(fit, v, 2000.0, dampings)
+    assert coefs.shape == (300, len(dampings))
+    got = point_source_predict(pred, points, coefs, block=7 * 300)  # several blocks, all dampings
+    assert got.shape == (1000, len(dampings))
+    for k, damping in enumerate(dampings):
+        ref = hm.EquivalentSources(depth=2000.0, damping=damping).fit(fit, v)
+        for ours, theirs in zip(points, ref.points_):
+            np.testing.assert_array_equal(ours, theirs)
+        np.testing.assert_allclose(coefs[:, k], ref.coefs_, rtol=1e-9, atol=1e-12 * np.abs(ref.coefs_).max())
+        want = ref.predict(pred)
+        np.testing.assert_allclose(got[:, k], want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
+        one = point_source_predict(pred, points, coefs[:, k], block=7 * 300)
+        np.testing.assert_allclose(one, want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
+    np.testing.assert_allclose(point_source_jacobian(fit, points), ref.jacobian(fit, points), rtol=1e-14)
+    # the dampings differ: the fits must too (the normal matrix is not left damped between them)
+    assert np.abs(coefs[:, 0] - coefs[:, -1]).max() > 1e-3 * np.abs(coefs[:, 0]).max()
 
 
 def test_line_spacing_ignores_a_track_flown_again():

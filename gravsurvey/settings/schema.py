@@ -481,7 +481,8 @@ class GridSection(Section):
     enabled: Optional[bool] = _gr("enabled", "null: grid when the survey has >= 2 lines; false: never")
     method: Literal[GRID_METHODS] = _gr(  # type: ignore[valid-type]
         "method",
-        "harmonica `equivalent_sources` (continued to `altitude_m`) or verde `spline` (2-D, at the flight heights)",
+        "`equivalent_sources` (point sources as harmonica fits them, continued to `altitude_m`) or verde `spline` "
+        "(2-D, at the flight heights)",
     )
     spacing_m: Optional[float] = _gr("spacing_m", "grid cell size, m (null: line spacing / 4)", gt=0)
     altitude_m: Optional[float] = _gr("altitude_m", "ellipsoidal height of the grid, m (null: median flight height)")
