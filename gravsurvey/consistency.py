@@ -13,7 +13,8 @@ notes) or raises :class:`~gravsurvey.errors.DataError` naming the channel, file 
 3. Against the track once it has passed: :func:`check_platform_gyros` (a platform's gyros follow
    the Earth's and the transport rate), :func:`check_strapdown_axes` (a strapdown IMU's
    columns: no negated or swapped axis, nor a coordinate of the wrong sign, fits better) and
-   :func:`correct_strapdown_scale` (an axis's scale-factor error divided out).
+   :func:`correct_imu_scale` (an axis's scale-factor error divided out; a platform's horizontal
+   accelerometers too).
 4. :func:`plan_segments` - the flight is split at IMU gaps longer than
    ``CheckOptions.max_imu_gap_s`` and at gaps of all vertical aiding (altimeter and GNSS)
    longer than ``max_aiding_gap_s``; each segment is estimated on its own
@@ -39,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import DataError, GravsurveyError
-from .geodesy import MGAL, WGS84, geodetic_to_ecef, normal_gravity_ecef
+from .geodesy import MGAL, WGS84, geodetic_to_ecef, mat_en, mat_ie, normal_gravity_ecef
 from .io.checks import G_STD
 from .utc import utc_iso
 
@@ -446,7 +447,7 @@ STRAPDOWN_AXES_MIN_DV_MPS = 20.0
 #: with 2-m GNSS blurs them all to 0.8-1.0 (no verdict). Noise draws every ratio towards 1.
 STRAPDOWN_AXES_MIN_WINDOWS = 2
 STRAPDOWN_AXES_RATIO = 2.0
-#: An IMU axis's scale factor is looked for (:func:`strapdown_scale_fit`) when the columns as
+#: An IMU axis's scale factor is looked for (:func:`imu_scale_fit`) when the columns as
 #: written leave a velocity-matching residual above this, m/s (GNSS noise and gyro drift leave
 #: 0.06-0.26 m/s on the unseen suite's strapdown flights; a gyro z scale 1 % off 0.30) ...
 STRAPDOWN_SCALE_MIN_RESIDUAL_MPS = 0.15
@@ -455,10 +456,18 @@ STRAPDOWN_SCALE_RANGE = 0.1
 #: ... in this many golden-section steps (the bracket shrinks to 0.2 x 0.618^12: 0.06 %) ...
 STRAPDOWN_SCALE_STEPS = 12
 #: ... and a factor off 1 by more than this that fits STRAPDOWN_AXES_RATIO times better is
-#: divided out, with a warning naming the column (:func:`correct_strapdown_scale`) ...
+#: divided out, with a warning naming the column (:func:`correct_imu_scale`) ...
 STRAPDOWN_SCALE_MIN_ERROR = 0.002
 #: ... on at most this many axes.
 STRAPDOWN_SCALE_AXES = 2
+#: A platform's horizontal accelerometer factor is divided out when it fits this many times
+#: better than as written (and passed the search's gate: a 1 % change fitting better by a tenth):
+#: its attitude comes from the track, not from gyros that drift, and no column fault competes.
+#: Measured on the 35 platform flights of the quick unseen suites (seeds 0-19, 200-239, 400-419):
+#: as drawn, a 1 % change either way fits at best 0.97x as well (never searched) and the best
+#: factor on a 0.1 % grid is 1.000 (0.999 once); with fy 1 % or fx -1 % off the factor is found to
+#: 0.03 % at ratios 1.15-1.73 (fx -1 % on U019 not searched), 5 % off at 2.97-7.07.
+PLATFORM_SCALE_RATIO = 1.1
 #: The hypotheses of the GNSS latitudes' and longitudes' sign (:func:`strapdown_axis_fit`): the
 #: track mirrored about the equator or the Greenwich meridian is mirrored against the IMU too.
 GNSS_SIGN_FAULTS = {"lat": "the GNSS latitudes' sign flipped", "lon": "the GNSS longitudes' sign flipped"}
@@ -716,16 +725,44 @@ def manoeuvre_windows(record, ellipsoid=WGS84) -> list:
     return out
 
 
-def _matched_windows(record, ellipsoid) -> list:
-    """:func:`manoeuvre_windows` with the gyros' attitude history over each (only a gyro
-    hypothesis changes it) and the velocity-matching residual of the columns as written, m/s;
-    a window with a gap in the GNSS is left out."""
+def platform_attitude_history(time, gnss, ellipsoid=WGS84) -> np.ndarray:
+    """``C_t0_t`` of an ENU-stabilised platform triad over ``time``: the level frame at ``t``
+    resolved on the level frame at ``time[0]``, in inertial space (the Earth's turn and the
+    track's over the sphere, from the GNSS positions).
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        s (record base), within the GNSS track.
+    gnss : GnssChannel
+
+    Returns
+    -------
+    ndarray, shape (n, 3, 3)
+        As :func:`gravsurvey.inm.mechanization.propagate_attitude` gives a strapdown triad's.
+    """
+    t = np.asarray(time, float)
+    tg = np.asarray(gnss.time, float)
+    lat = np.interp(t, tg, np.asarray(gnss.lat, float))
+    lon = np.interp(t, tg, np.unwrap(np.asarray(gnss.lon, float)))
+    mat_in = mat_ie(t, ellipsoid.omega) @ mat_en(lat, lon)
+    return np.einsum("ji,njk->nik", mat_in[0], mat_in)
+
+
+def _matched_windows(record, ellipsoid, triad: str = "strapdown") -> list:
+    """:func:`manoeuvre_windows` with the triad's attitude history over each (a strapdown
+    triad's from its gyros - only a gyro hypothesis changes it -, a platform's from the GNSS
+    track: :func:`platform_attitude_history`) and the velocity-matching residual of the columns
+    as written, m/s; a window with a gap in the GNSS is left out."""
     from .inm.alignment import match_residual_rms
     from .inm.mechanization import propagate_attitude
 
     out = []
     for tt, ff, ww in manoeuvre_windows(record, ellipsoid):
-        c_t0 = propagate_attitude(tt, ww, np.eye(3))
+        if triad == "platform":
+            c_t0 = platform_attitude_history(tt, record.gnss, ellipsoid)
+        else:
+            c_t0 = propagate_attitude(tt, ww, np.eye(3))
         try:
             r0 = match_residual_rms(tt, ff, ww, record.gnss, ellipsoid, c_t0=c_t0)
         except DataError:  # a gap in the window
@@ -734,11 +771,17 @@ def _matched_windows(record, ellipsoid) -> list:
     return out
 
 
-def strapdown_scale_fit(record, ellipsoid=WGS84) -> list:
+def imu_scale_fit(record, ellipsoid=WGS84, triad: str = "strapdown") -> list:
     """Each IMU axis's scale factor as the GNSS track shows it: the factor ``s`` by which dividing
     the axis's readings best fits the GNSS velocity changes through the manoeuvres (RMS of the
     velocity-matching residuals over :func:`manoeuvre_windows`; golden-section search in
     ``1 +- STRAPDOWN_SCALE_RANGE``).
+
+    A strapdown triad's six axes are searched; a platform's (``triad="platform"``, ENU-stabilised)
+    horizontal accelerometers only, its attitude taken from the track
+    (:func:`platform_attitude_history`): its gyros hold the platform level rather than measure
+    the motion, and its vertical's scale shows as a gravity offset the GNSS checks refuse
+    (:func:`check_gnss_consistency`).
 
     Returns
     -------
@@ -750,7 +793,7 @@ def strapdown_scale_fit(record, ellipsoid=WGS84) -> list:
     """
     from .inm.alignment import match_residual_rms
 
-    windows = _matched_windows(record, ellipsoid)
+    windows = _matched_windows(record, ellipsoid, triad)
     if len(windows) < STRAPDOWN_AXES_MIN_WINDOWS:
         return []
     if float(np.sqrt(np.mean(np.square([w[4] for w in windows])))) <= STRAPDOWN_SCALE_MIN_RESIDUAL_MPS:
@@ -771,26 +814,29 @@ def strapdown_scale_fit(record, ellipsoid=WGS84) -> list:
 
     out = []
     ratio = (math.sqrt(5.0) - 1.0) / 2.0
-    for q in ("f", "w"):
-        for k, ax in enumerate("xyz"):
-            r_1 = pooled(q, k, 1.0)
-            # searched only where a 1 % change either way fits better by a tenth
-            if min(pooled(q, k, 0.99), pooled(q, k, 1.01)) > 0.9 * r_1:
-                continue
-            a, b = 1.0 - STRAPDOWN_SCALE_RANGE, 1.0 + STRAPDOWN_SCALE_RANGE
-            x1, x2 = b - ratio * (b - a), a + ratio * (b - a)
-            y1, y2 = pooled(q, k, x1), pooled(q, k, x2)
-            for _ in range(STRAPDOWN_SCALE_STEPS):
-                if y1 < y2:
-                    b, x2, y2 = x2, x1, y1
-                    x1 = b - ratio * (b - a)
-                    y1 = pooled(q, k, x1)
-                else:
-                    a, x1, y1 = x1, x2, y2
-                    x2 = a + ratio * (b - a)
-                    y2 = pooled(q, k, x2)
-            best = x1 if y1 < y2 else x2
-            out.append((f"{q}{ax}", best, min(y1, y2), r_1))
+    if triad == "platform":
+        axes = [("f", 0, "x"), ("f", 1, "y")]
+    else:
+        axes = [(q, k, ax) for q in "fw" for k, ax in enumerate("xyz")]
+    for q, k, ax in axes:
+        r_1 = pooled(q, k, 1.0)
+        # searched only where a 1 % change either way fits better by a tenth
+        if min(pooled(q, k, 0.99), pooled(q, k, 1.01)) > 0.9 * r_1:
+            continue
+        a, b = 1.0 - STRAPDOWN_SCALE_RANGE, 1.0 + STRAPDOWN_SCALE_RANGE
+        x1, x2 = b - ratio * (b - a), a + ratio * (b - a)
+        y1, y2 = pooled(q, k, x1), pooled(q, k, x2)
+        for _ in range(STRAPDOWN_SCALE_STEPS):
+            if y1 < y2:
+                b, x2, y2 = x2, x1, y1
+                x1 = b - ratio * (b - a)
+                y1 = pooled(q, k, x1)
+            else:
+                a, x1, y1 = x1, x2, y2
+                x2 = a + ratio * (b - a)
+                y2 = pooled(q, k, x2)
+        best = x1 if y1 < y2 else x2
+        out.append((f"{q}{ax}", best, min(y1, y2), r_1))
     return out
 
 
@@ -832,13 +878,16 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
     return base, [(d, q, np.array(r)) for (d, q, _), r in zip(hyps, res)]
 
 
-def correct_strapdown_scale(record, triad: str, names: ChannelNames | None = None) -> tuple:
+def correct_imu_scale(record, triad: str, names: ChannelNames | None = None) -> tuple:
     """Divide out an IMU axis's scale-factor error that the GNSS track shows
-    (:func:`strapdown_scale_fit`): off 1 by more than :data:`STRAPDOWN_SCALE_MIN_ERROR` and fitting
-    :data:`STRAPDOWN_AXES_RATIO` times better than as written; the best axis first, then the
-    search again (at most :data:`STRAPDOWN_SCALE_AXES` axes). Kept, a gyro's z scale 1 % off put
-    56 mGal into a strapdown flight (2.2 intact) with exit 0 (fuzzing, 2026-12-04). Run after
-    :func:`check_strapdown_axes`.
+    (:func:`imu_scale_fit`): off 1 by more than :data:`STRAPDOWN_SCALE_MIN_ERROR` and fitting
+    :data:`STRAPDOWN_AXES_RATIO` (a platform's: :data:`PLATFORM_SCALE_RATIO`) times better than as
+    written; the best axis first, then the search again (at most :data:`STRAPDOWN_SCALE_AXES`
+    axes). Kept, a gyro's z scale 1 % off put
+    56 mGal into a strapdown flight (2.2 intact) with exit 0, a platform's north accelerometer
+    1 % off 4.3 and 5.1 mGal into the CSV sample (3.45 intact), 5 % off 16.6 (fuzzing,
+    2026-12-04 and -05). A platform's horizontal accelerometers only (:func:`imu_scale_fit`).
+    Run after :func:`check_strapdown_axes`.
 
     Returns
     -------
@@ -848,11 +897,12 @@ def correct_strapdown_scale(record, triad: str, names: ChannelNames | None = Non
         One warning per corrected axis, naming the column and the factor.
     """
     notes = []
-    if triad != "strapdown":
+    if triad not in ("strapdown", "platform"):
         return record, notes
     for _ in range(STRAPDOWN_SCALE_AXES):
-        fits = [x for x in strapdown_scale_fit(record) if abs(x[1] - 1.0) > STRAPDOWN_SCALE_MIN_ERROR]
-        fits = [x for x in fits if x[3] >= STRAPDOWN_AXES_RATIO * x[2]]
+        fits = [x for x in imu_scale_fit(record, triad=triad) if abs(x[1] - 1.0) > STRAPDOWN_SCALE_MIN_ERROR]
+        ratio = PLATFORM_SCALE_RATIO if triad == "platform" else STRAPDOWN_AXES_RATIO
+        fits = [x for x in fits if x[3] >= ratio * x[2]]
         if not fits:
             break
         q, s, r_s, r_1 = max(fits, key=lambda x: x[3] / max(x[2], 1e-12))
@@ -863,10 +913,12 @@ def correct_strapdown_scale(record, triad: str, names: ChannelNames | None = Non
         record = dataclasses.replace(record, imu=dataclasses.replace(imu, specific_force_t=f, angular_rate_t=w))
         where = names.column("imu", q) if names is not None else f"imu {q}"
         sensor = "accelerometer" if q[0] == "f" else "gyro"
+        axis = {"x": "x (east)", "y": "y (north)"}[q[1]] if triad == "platform" else q[1]
         notes.append(
-            f"{where}: the {sensor}'s {q[1]} axis reads {s:.4f}x the motion the GNSS track shows (velocity-matching "
-            f"residual {r_s:.2g} m/s with its readings divided by {s:.4f}, {r_1:.2g} m/s as written): a scale-factor "
-            f"error of {100 * (s - 1):+.2f} %, divided out before the estimate (calibrate the IMU)"
+            f"{where}: the {triad} {sensor}'s {axis} axis reads {s:.4f}x the motion the GNSS track shows "
+            f"(velocity-matching residual {r_s:.2g} m/s with its readings divided by {s:.4f}, {r_1:.2g} m/s as "
+            f"written): a scale-factor error of {100 * (s - 1):+.2f} %, divided out before the estimate (calibrate "
+            f"the IMU)"
         )
     return record, notes
 

@@ -545,7 +545,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig, notes: list) -> FlightE
         check_platform_gyros,
         check_result,
         check_strapdown_axes,
-        correct_strapdown_scale,
+        correct_imu_scale,
     )
 
     checks = getattr(cfg, "checks", None) or CheckOptions()
@@ -565,7 +565,7 @@ def _process_flight(cfg: SurveyConfig, fl: FlightConfig, notes: list) -> FlightE
         # against the GNSS track, once the checks above have found it sound
         notes += [f"{fl.name}: {n}" for n in check_platform_gyros(record, fl.triad, names, f"flights[{fl.index}]")]
         notes += [f"{fl.name}: {n}" for n in check_strapdown_axes(record, fl.triad, names, f"flights[{fl.index}]")]
-        record, scale_notes = correct_strapdown_scale(record, fl.triad, names)
+        record, scale_notes = correct_imu_scale(record, fl.triad, names)
         notes += [f"{fl.name}: {n}" for n in scale_notes]
 
     t = time.perf_counter()
