@@ -29,7 +29,7 @@ from . import __version__
 from .cache import code_fingerprint
 from .config import FlightConfig, SurveyConfig, load_config
 from .errors import INTERRUPT, DataError, GravsurveyError, os_fault
-from .estimate import FlightEstimate, concatenate_estimates, from_classic, from_inm_solution
+from .estimate import FlightEstimate, concatenate_estimates, from_classic, from_inm_solution, trim_one_sided_ends
 from .geodesy import MGAL
 from .io.writers import file_sha256, resolution_statement, to_jsonable
 from .pool import single_threaded_blas
@@ -713,6 +713,8 @@ def inm_estimate(cfg: SurveyConfig, fl: FlightConfig, record, checks, names) -> 
             f"estimated {len(parts)} of {len(spans)} segments: "
             + ", ".join(span_text(record.t0_unix_ns, p.time[0], p.time[-1]) for p in parts)
         )
+    parts, edge_notes = trim_one_sided_ends(parts, imu_t0, imu_t1)
+    notes += edge_notes
     return concatenate_estimates(parts), notes, loss
 
 

@@ -65,6 +65,36 @@ def test_spikes_and_steps_are_found_where_they_are(rate_hz):
     assert np.max(np.abs(fixed[ok])) < 4 * se + 1e-3
 
 
+def _turn_residual(rate_hz, seed, a_mps2=0.08, span_s=1300.0, turns=((400.0, 35.0), (900.0, 30.0))):
+    """The residual of a poorly aligned mechanization through two turns: 1.5 deg of tilt takes
+    ``a_mps2`` of the turn's centripetal force into the vertical (rolled in and out over 3 s),
+    a vertical velocity error of -1.5 m/s, 5 cm of height noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, span_s, 1.0 / rate_hz)
+    acc = np.zeros(t.size)
+    for t0, dur in turns:
+        acc += a_mps2 * np.clip((t - t0) / 3.0, 0, 1) * np.clip((t0 + dur - t) / 3.0, 0, 1)
+    v = np.cumsum(acc) / rate_hz - 1.5
+    return t, np.cumsum(v) / rate_hz + 0.05 * rng.standard_normal(t.size)
+
+
+@pytest.mark.parametrize("rate_hz", [1.0, 5.0, 11.0, 20.0])
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_turn_is_not_a_step(rate_hz, seed):
+    """A turn bends the residual (the tilt error's share of the centripetal force), which left
+    jumps of 0.4-0.6 m between the 20-s quadratics at its ends: 4-6 false steps here, and on
+    quick U010 split by an IMU gap two of them taken off the heights, 65 mGal in the turn. A
+    step keeps its size over half-length fits (``heightqc.STEP_SHORT_RATIO``), the bend's
+    falls with the window's square: none found, a real 0.5-m step between the turns still is."""
+    t, e = _turn_residual(rate_hz, seed)
+    assert Q.find_height_faults(t, e).steps == []
+    k = np.searchsorted(t, 650.0)
+    h = np.where(np.arange(t.size) >= k, 0.5, 0.0)
+    (step,) = Q.find_height_faults(t, e - h).steps
+    se = 0.05 * np.sqrt(2 * 9.0 / (20.0 * rate_hz))  # as in test_spikes_and_steps_are_found_where_they_are
+    assert step[0] == k and abs(step[1] - 0.5) < 3 * se
+
+
 @pytest.mark.parametrize("rate_hz", [1.0, 5.0, 20.0])
 @pytest.mark.parametrize("n_s, level", [(3.0, 0.0), (8.0, 0.0), (1.0, 0.0), (5.0, 1600.0)])
 def test_a_short_block_of_wrong_heights_is_dropped_not_two_steps(rate_hz, n_s, level):
