@@ -58,11 +58,11 @@ def _grid(static_s):
     }
 
 
-def _simulate(static_s):
-    """Strapdown grid, 22-25 min at 10 Hz, gyro biases <= 0.03 deg/h, 0.5 m GNSS at 5 Hz."""
+def _simulate(static_s, triad="strapdown"):
+    """Strapdown (or ``triad``) grid, 22-25 min at 10 Hz, gyro biases <= 0.03 deg/h, 0.5 m GNSS at 5 Hz."""
     sim = quick_sim(
         plan=_grid(static_s),
-        triad="strapdown",
+        triad=triad,
         noise=SENSORS,
         field="seed_smooth",
         gnss_hz=5.0,
@@ -733,17 +733,7 @@ def test_an_imu_axis_scale_fault_is_found_named_and_divided_out(request, which, 
 @pytest.fixture(scope="module")
 def platform_flight():
     """The in-flight grid flown on an ENU-stabilised platform."""
-    sim = quick_sim(
-        plan=_grid(0.0),
-        triad="platform",
-        noise=SENSORS,
-        field="seed_smooth",
-        gnss_hz=5.0,
-        altimeter_hz=5.0,
-        seed=3,
-        turbulence={"vertical_sigma_m": 1.0, "horizontal_sigma_m": 1.0, "attitude_sigma_deg": 0.5},
-    )
-    return simulate_flight(sim)
+    return _simulate(0.0, "platform")
 
 
 @pytest.mark.parametrize("q, k, scale", [("fy", 1, 1.01), ("fx", 0, 0.99), ("fy", 1, 1.05)])
