@@ -883,11 +883,10 @@ def correct_imu_scale(record, triad: str, names: ChannelNames | None = None) -> 
     (:func:`imu_scale_fit`): off 1 by more than :data:`STRAPDOWN_SCALE_MIN_ERROR` and fitting
     :data:`STRAPDOWN_AXES_RATIO` (a platform's: :data:`PLATFORM_SCALE_RATIO`) times better than as
     written; the best axis first, then the search again (at most :data:`STRAPDOWN_SCALE_AXES`
-    axes). Kept, a gyro's z scale 1 % off put
-    56 mGal into a strapdown flight (2.2 intact) with exit 0, a platform's north accelerometer
-    1 % off 4.3 and 5.1 mGal into the CSV sample (3.45 intact), 5 % off 16.6 (fuzzing,
-    2026-12-04 and -05). A platform's horizontal accelerometers only (:func:`imu_scale_fit`).
-    Run after :func:`check_strapdown_axes`.
+    axes). Kept, a gyro's z scale 1 % off put 56 mGal into a strapdown flight (2.2 intact) with
+    exit 0, a platform's north accelerometer 5 % off 16.6 mGal into the CSV sample (3.45 intact;
+    fuzzing, 2026-12-04 and -05). A platform's horizontal accelerometers only
+    (:func:`imu_scale_fit`). Run after :func:`check_strapdown_axes`.
 
     Returns
     -------

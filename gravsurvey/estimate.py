@@ -12,6 +12,7 @@ SI units throughout (m, s, rad, m/s^2); mGal and degrees appear only in the writ
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -431,8 +432,6 @@ def trim_one_sided_ends(parts: list[FlightEstimate], first_s: float, last_s: flo
     notes : list of str
         One per piece end trimmed: its time range and why.
     """
-    import dataclasses
-
     out, notes = [], []
     for p in parts:
         t = np.asarray(p.time, float)
