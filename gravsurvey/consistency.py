@@ -42,7 +42,7 @@ import numpy as np
 from .errors import DataError, GravsurveyError
 from .geodesy import MGAL, WGS84, geodetic_to_ecef, mat_en, mat_ie, normal_gravity_ecef
 from .io.checks import G_STD
-from .utc import utc_iso
+from .utc import utc_after
 
 #: Fastest plausible ground speed of a survey aircraft or ship, m/s (a jet at cruise is
 #: ~250 m/s; survey aircraft fly 50-120 m/s).
@@ -131,14 +131,9 @@ class CheckOptions:
 
 
 # ----------------------------------------------------------------------------- helpers
-def utc(t0_unix_ns: int, t_s: float) -> str:
-    """``t_s`` seconds after ``t0_unix_ns`` as ISO UTC (to 0.1 s), for messages."""
-    return utc_iso(int(t0_unix_ns) + round(float(t_s) * 1e9), digits=1)
-
-
 def span_text(t0_unix_ns: int, a: float, b: float) -> str:
     """A time range as UTC text with its length."""
-    return f"{utc(t0_unix_ns, a)}..{utc(t0_unix_ns, b)} ({b - a:.1f} s)"
+    return f"{utc_after(t0_unix_ns, a)}..{utc_after(t0_unix_ns, b)} ({b - a:.1f} s)"
 
 
 @dataclass
@@ -259,7 +254,7 @@ def clock_restart_messages(role: str, source: str, t0_ns: int, events) -> list[s
     for j, tb, ta, n in events:
         out.append(
             f"{role}: clock restart in {source} at sample {j}: time went back from "
-            f"{utc(t0_ns, (tb - t0_ns) / 1e9)} to {utc(t0_ns, (ta - t0_ns) / 1e9)} "
+            f"{utc_after(t0_ns, (tb - t0_ns) / 1e9)} to {utc_after(t0_ns, (ta - t0_ns) / 1e9)} "
             f"({(tb - ta) / 1e9:.1f} s back); {n} samples from the restart on dropped (their time "
             "is unknown)"
         )
@@ -394,8 +389,8 @@ def drop_clock_restarts(raw: dict, min_jump_s: float = 1.0):
                 j, tbf, taf, n = events[0]
                 notes.append(
                     f"{role}: clock restart in {ch.source} at sample {j}: time went back from "
-                    f"{utc(t0, (tbf - t0) / 1e9)} to {utc(t0, (taf - t0) / 1e9)}; the {n} samples after it "
-                    f"placed at {utc(t0, (tb[0] + shift - t0) / 1e9)}..{utc(t0, (tb[-1] + shift - t0) / 1e9)} "
+                    f"{utc_after(t0, (tbf - t0) / 1e9)} to {utc_after(t0, (taf - t0) / 1e9)}; the {n} samples after it "
+                    f"placed at {utc_after(t0, (tb[0] + shift - t0) / 1e9)}..{utc_after(t0, (tb[-1] + shift - t0) / 1e9)} "
                     f"by cross-correlation with GNSS (r = {c:.2f})"
                 )
                 continue
@@ -898,9 +893,9 @@ def correct_imu_scale(record, triad: str, names: ChannelNames | None = None) -> 
     notes = []
     if triad not in ("strapdown", "platform"):
         return record, notes
+    ratio = PLATFORM_SCALE_RATIO if triad == "platform" else STRAPDOWN_AXES_RATIO
     for _ in range(STRAPDOWN_SCALE_AXES):
         fits = [x for x in imu_scale_fit(record, triad=triad) if abs(x[1] - 1.0) > STRAPDOWN_SCALE_MIN_ERROR]
-        ratio = PLATFORM_SCALE_RATIO if triad == "platform" else STRAPDOWN_AXES_RATIO
         fits = [x for x in fits if x[3] >= ratio * x[2]]
         if not fits:
             break

@@ -21,6 +21,7 @@ import numpy as np
 
 from .geodesy import WGS84, Ellipsoid, normal_gravity
 from .inm.params import RADPS_PER_DEGPH
+from .utc import utc_after
 
 #: arcseconds per radian (deflections of the vertical are written in arcsec)
 ARCSEC_PER_RAD = 180.0 * 3600.0 / np.pi
@@ -462,17 +463,11 @@ def trim_one_sided_ends(parts: list[FlightEstimate], first_s: float, last_s: flo
         out.append(dataclasses.replace(p, **changes))
         for a, b in ends:
             notes.append(
-                f"the estimate within {margin:.0f} s of the gap ({_utc_text(p.t0_unix_ns, a)}.."
-                f"{_utc_text(p.t0_unix_ns, b)}) is left out: it has data on one side only and lags the field "
+                f"the estimate within {margin:.0f} s of the gap ({utc_after(p.t0_unix_ns, a)}.."
+                f"{utc_after(p.t0_unix_ns, b)}) is left out: it has data on one side only and lags the field "
                 f"there, up to the piece's resolution ({res / 1000.0:.1f} km at {speed:.0f} m/s)"
             )
     return out, notes
-
-
-def _utc_text(t0_unix_ns: int, t_s: float) -> str:
-    from .utc import utc_iso
-
-    return utc_iso(int(t0_unix_ns) + int(round(float(t_s) * 1e9)), 1)
 
 
 def concatenate_estimates(parts: list[FlightEstimate]) -> FlightEstimate:

@@ -40,6 +40,11 @@ def utc_iso(unix_ns: int, digits: int = 3) -> str:
     return head + ("." + frac[:digits] if digits else "") + "Z"
 
 
+def utc_after(t0_unix_ns: int, t_s: float) -> str:
+    """``t_s`` seconds after ``t0_unix_ns`` as ISO UTC (to 0.1 s), for messages."""
+    return utc_iso(int(t0_unix_ns) + round(float(t_s) * 1e9), digits=1)
+
+
 def utc_iso_array(unix_ns) -> np.ndarray:
     """ISO 8601 UTC strings with milliseconds, rounded half up, e.g. ``2024-05-01T10:00:00.125Z``.
 

@@ -348,11 +348,7 @@ def _find_steps(t, e, dt) -> list:
             if rss < best:
                 best, where = rss, k
         # its size from the samples themselves (a bin that holds the step mixes both levels)
-        mid = np.array([0.5 * (t[where - 1] + t[where])])
-        lo_b = np.searchsorted(t, mid - STEP_WINDOW_S, side="left")
-        hi_a = np.searchsorted(t, mid + STEP_WINDOW_S, side="right")
-        here = np.array([where])
-        fine = float((_side_fit(t, e, here, hi_a, mid) - _side_fit(t, e, lo_b, here, mid))[0])
+        fine = _window_jump(t, e, where, STEP_WINDOW_S)
         if math.isfinite(fine):
             size = fine
         # the measured height jumps by minus the residual's jump (e = h_ins - h_alt)
