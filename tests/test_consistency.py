@@ -330,6 +330,42 @@ def test_imu_gnss_time_offset_is_measured_and_refused(tmp_path):
         process_flight(cfg, fl)
 
 
+def test_a_flat_correlation_peak_is_not_a_clock_verdict():
+    """Quick unseen flight U602 (platform, 116 m/s, 18.7-mGal field, 3-Hz GNSS) has no clock
+    offset, yet the specific forces' correlation peaks at +0.51 s (r = 0.9094; 0.9090 at zero:
+    the field, which the GNSS track does not see, is much of the IMU's signal). It was refused
+    as "clocks out of step" (fuzzing the unseen generator's seeds 600-619, 2026-12-05); now the
+    lags within the limit fit almost as well, which is a note. Its GNSS 20 s late is still
+    refused, with the value to give."""
+    from gravsurvey.consistency import (
+        OFFSET_VERDICT_CORRELATION,
+        OFFSET_VERDICT_EVIDENCE,
+        ChannelNames,
+        check_gnss_consistency,
+        estimate_time_offset,
+        time_offset_evidence,
+    )
+    from gravsurvey.simulate.run import simulate_flight
+    from gravsurvey.simulate.unseen import draw_flight_spec, limit_spec
+    from sim_record import record_and_initial
+
+    spec = limit_spec(draw_flight_spec(602), 2400.0, 50.0)
+    rec = record_and_initial(simulate_flight(spec["sim"]))[0]
+    names = ChannelNames({"imu": "imu.csv", "gnss": "gnss.csv"}, {})
+    off, c = estimate_time_offset(rec)
+    assert abs(off) > CheckOptions().max_time_offset_s and c >= OFFSET_VERDICT_CORRELATION  # the old verdict
+    assert time_offset_evidence(rec, c, CheckOptions().max_time_offset_s) < 1.0  # measured 0.00
+    notes = check_gnss_consistency(rec, names, CheckOptions())
+    said = [n for n in notes if n.startswith("time offset:")]
+    assert len(said) == 1 and "lags within it fit almost as well" in said[0] and "not a verdict" in said[0]
+    late = dataclasses.replace(rec, gnss=dataclasses.replace(rec.gnss, time=rec.gnss.time + 20.0))
+    off, c = estimate_time_offset(late)
+    assert off == pytest.approx(-20.0, abs=0.6)  # -19.49: the same flat peak, 20 s on
+    assert time_offset_evidence(late, c, CheckOptions().max_time_offset_s) > 10 * OFFSET_VERDICT_EVIDENCE  # 169
+    with pytest.raises(DataError, match=r"clocks out of step .*time_offsets_s: \{gnss: -(19|20)\.\d\d\}"):
+        check_gnss_consistency(late, names, CheckOptions())
+
+
 def test_a_known_clock_offset_is_named_and_taken_in_the_config(tmp_path, intact):
     """A GNSS in GPS time against an IMU in UTC (18 s): refused, the error names the key and the
     value that puts the clocks in step; given, the flight is estimated as intact."""
