@@ -258,6 +258,15 @@ def attitude_report(sol) -> dict:
         pv = getattr(sol, "initial_corrections", None) or []
         out["initial_position_corrections_m"] = [float(a) for a, _ in pv]
         out["initial_velocity_corrections_mps"] = [float(b) for _, b in pv]
+        rev = getattr(sol, "passes_reverted", None)
+        if rev is not None:
+            # the passes stopped where a gyro-bias correction kept growing; the estimate is the
+            # pass where it began to
+            out["passes_reverted"] = {
+                "gyro_axis": "xyz"[rev["axis"]],
+                "estimate_of_pass": rev["pass"] - 1,
+                "bias_corrections_degph": list(rev["bias_corrections_degph"]),
+            }
         out["gyro_bias_degph"] = [float(b / RADPS_PER_DEGPH) for b in bias]
         out["gyro_bias_sigma_degph"] = [float(b / RADPS_PER_DEGPH) for b in sol.gyro_bias_sigma_t]
     abias = getattr(sol, "accel_bias_t", None)

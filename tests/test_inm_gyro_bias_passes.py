@@ -94,3 +94,57 @@ def test_passes_that_do_not_settle_fail_the_flight_instead_of_giving_an_estimate
     f = _simulate((20.0, -10.0, 0.0))
     with pytest.raises(DataError, match=r"^sim: the navigation did not settle: the last of 3 attitude passes"):
         _run(f, 3)
+
+
+def test_corrections_that_keep_growing_are_a_diverging_iteration():
+    """The decision on measured sequences of gyro-bias corrections (deg/h, sigma 0.0003)."""
+    from gravsurvey.inm.solve import diverging_gyro_axis
+
+    def seq(*rows, sigma=3e-4):
+        return [(np.array(r) * DEGPH, np.full(3, sigma * DEGPH)) for r in rows]
+
+    hours3, min40 = 3.16 * 3600.0, 2400.0
+    # full unseen U1103: the roll gyro's corrections grow pass after pass
+    u1103 = seq([0.0112, 0.009, -0.0308], [0.0134, 0.0006, 0.0012], [0.0175, -0.0015, -0.002])
+    assert diverging_gyro_axis(u1103[:2], hours3) is None  # one growth is not enough
+    assert diverging_gyro_axis(u1103, hours3) == 0
+    # quick U1002: overshoots once, then settles (-0.013, -0.018, +0.008)
+    u1002 = seq([-0.0128, 0.024, 0.0276], [-0.0175, -0.088, 0.0382], [0.0075, 0.0501, -0.0236], sigma=3e-3)
+    assert diverging_gyro_axis(u1002, min40) is None
+    # the heading gyro wanders unobserved on straight lines: not counted
+    assert diverging_gyro_axis(seq([0, 0, 0.03], [0, 0, 0.066], [0, 0, 0.123]), min40) is None
+    # growing, but building under 0.01 deg of tilt over the record: not worth a pass
+    assert diverging_gyro_axis(seq([0.002, 0, 0], [0.0023, 0, 0], [0.0025, 0, 0]), min40) is None
+    # within the bias's own sigma: nothing to confirm
+    assert diverging_gyro_axis(seq([0.02, 0, 0], [0.021, 0, 0], [0.022, 0, 0], sigma=0.03), hours3) is None
+
+
+def test_diverging_passes_go_back_to_where_the_growth_began(monkeypatch):
+    """When the third pass finds the corrections growing, the estimate is the first pass's, to
+    the bit, and the flight says so (the decision itself is forced here: this flight, 0.3 deg/h
+    on axis 1, converges in three passes)."""
+    import gravsurvey.inm.solve as solve
+
+    f = _simulate((0.3, -0.15, 0.0))
+    with pytest.warns(UserWarning, match="the last of 1 attitude passes still corrects"):
+        one, _ = _run(f, 1)
+    seen = []
+
+    def forced(found, span_s):
+        seen.append(len(found))
+        return 0 if len(found) == 3 else None
+
+    monkeypatch.setattr(solve, "diverging_gyro_axis", forced)
+    with pytest.warns(UserWarning, match=r"did not converge: the gyro-x bias corrections of passes 1-3 grew"):
+        sol, _ = _run(f, 3)
+    assert seen == [1, 2, 3]  # asked after each pass; not again after going back
+    assert sol.passes == 4 and sol.passes_reverted["axis"] == 0 and sol.passes_reverted["pass"] == 2
+    assert len(sol.passes_reverted["bias_corrections_degph"]) == 3
+    np.testing.assert_array_equal(sol.g_smooth, one.g_smooth)
+    np.testing.assert_array_equal(sol.gyro_bias_t, one.gyro_bias_t)
+    # summary.json's estimator section names it
+    from gravsurvey.estimate import attitude_report
+
+    said = attitude_report(sol)["passes_reverted"]
+    assert said["gyro_axis"] == "x" and said["estimate_of_pass"] == 1 and len(said["bias_corrections_degph"]) == 3
+    assert "passes_reverted" not in attitude_report(one)

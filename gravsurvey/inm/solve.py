@@ -143,6 +143,11 @@ class InmSolution:
     initial_corrections : list of (float, float)
         Size of the initial position (m) and velocity (m/s) correction after each pass but the
         last (GNSS-aided only).
+    passes_reverted : dict or None
+        When the gyro-bias corrections of three passes grew (:func:`diverging_gyro_axis`) and the
+        estimate is the first of them, about its linearisation: ``axis`` (0 or 1, triad),
+        ``pass`` (0-based index of the third) and ``bias_corrections_degph`` (the three
+        corrections on that axis).
     gyro_bias_t, gyro_bias_sigma_t : ndarray (3,) or None
         The gyro biases on the triad axes and their smoothed 1-sigma, rad/s (GNSS-aided only):
         what the passes took off the rates plus the last pass's smoothed bias state.
@@ -204,6 +209,7 @@ class InmSolution:
     passes: int = 1
     attitude_corrections: list = field(default_factory=list)
     initial_corrections: list = field(default_factory=list)
+    passes_reverted: dict | None = None
     gyro_bias_t: np.ndarray | None = None
     gyro_bias_sigma_t: np.ndarray | None = None
     accel_bias_t: np.ndarray | None = None
@@ -316,6 +322,20 @@ PASSES_FAILED_RAD = math.radians(0.5)
 #: ... and above this (0.05 deg) a warning: the estimate still carries some of the linearisation's
 #: error (one pass with 0.047 deg/h over 92 min, 0.07 deg: 1.2 mGal; a heading 1 deg off: 0.5).
 PASSES_WARN_RAD = math.radians(0.05)
+#: Three passes whose gyro-bias corrections on an axis have one sign, each at least this times
+#: the one before, show that taking them off did not reduce them: the iteration does not
+#: converge there, and each further pass moves the linearisation further off. The passes then
+#: stop and the estimate is the first of the three (full unseen U1103, strapdown in strong
+#: turbulence with the default 1e-3 m/s^2 accelerometer noise: the roll gyro's correction
+#: 0.011, 0.013, 0.018, 0.023, 0.030 deg/h over five passes, the true bias -0.029; 3.13 mGal
+#: after one pass, 3.43 / 4.08 / 5.00 / 6.28 after two to five; with the datasheet's 2e-4 they
+#: converge). :func:`diverging_gyro_axis`.
+PASSES_GROWTH_RATIO = 1.0
+#: ... counted on the two tilting gyros (triad x and y) only, and where the tilt the last
+#: two corrections build over the record exceeds this (rad, 0.01 deg): a heading gyro's
+#: correction on straight lines wanders unobserved (quick U010: 0.066 then 0.123 deg/h,
+#: harmless), and 0.0025 deg/h over 40 min (0.002 deg; quick U014) changes nothing worth a pass.
+PASSES_GROWTH_TILT_RAD = math.radians(0.01)
 
 
 def estimate_anomaly(
@@ -405,8 +425,13 @@ def estimate_anomaly(
     # what a straight line across an IMU gap or a clipped stretch misses: a property of the
     # record's own specific force, found once (constant biases taken off later leave it as is)
     gap_sigma = missed_accel_sigma(np.asarray(record.imu.time, float), record.imu.specific_force_t)
+    # the linearisation each pass ran about, and each pass's gyro-bias correction and sigma
+    # (rad/s): corrections that keep growing send the passes back to where they began to
+    befores, found = [], []
+    reverted = None
+    limit = passes
     k = -1
-    while k + 1 < passes:
+    while k + 1 < limit:
         k += 1
         nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
         if k == 0 and gnss_latency is None:
@@ -492,10 +517,27 @@ def estimate_anomaly(
                 gnss_lever_arm_t = step if gnss_lever_arm_t is None else gnss_lever_arm_t + step
                 k -= 1
                 continue
-        if k == passes - 1:
-            corrections.append(_check_passes_settled(record, out, float(nav.time[-1] - nav.time[0]), passes))
-            break
         th0, db, db_sig = _pass_correction(out)
+        span_s = float(nav.time[-1] - nav.time[0])
+        if reverted is None:
+            found.append((db, db_sig))
+        grew = None if reverted is not None else diverging_gyro_axis(found, span_s)
+        if grew is not None:
+            # taking the last two corrections off did not reduce them: back to the linearisation
+            # the first was applied to, and one pass there is the estimate
+            reverted = {
+                "axis": grew,
+                "pass": k,
+                "bias_corrections_degph": [float(d[grew] / RADPS_PER_DEGPH) for d, _ in found[-3:]],
+            }
+            corrections.append(float(np.linalg.norm(th0)))
+            (cur, dr_prior_i, dv_prior_i, theta_prior, gyro_bias_t, accel_bias_t, record, params, ident) = befores[-2]
+            limit = k + 2
+            reidentify = False
+            continue
+        if k == limit - 1:
+            corrections.append(_check_passes_settled(record, out, span_s, passes, reverted))
+            break
         corrections.append(float(np.linalg.norm(th0)))
         dr_i, dv_i = _initial_pv_correction(out, nav, idx, c)
         pv_corrections.append((float(np.linalg.norm(dr_i)), float(np.linalg.norm(dv_i))))
@@ -515,6 +557,12 @@ def estimate_anomaly(
         reidentify = corrections[-1] > REIDENTIFY_RAD or (
             da is not None and float(np.max(np.abs(da))) > REIDENTIFY_ACCEL_BIAS_MPS2
         )
+        # this pass's linearisation, kept for going back (the last two: a record with an
+        # accelerometer bias taken off is a copy per pass)
+        befores = [
+            *befores[-1:],
+            (cur, dr_prior_i, dv_prior_i, theta_prior, gyro_bias_t, accel_bias_t, record, params, ident),
+        ]
         # C_true = C Exp(theta) on inertial axes, at the corrected position (whose ENU axes
         # differ from the old point's by the position change over the Earth's radius)
         rot = rodrigues(np.ascontiguousarray(th0))
@@ -542,6 +590,7 @@ def estimate_anomaly(
             )
     sol = _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, k + 1, corrections)
     sol.initial_corrections = pv_corrections
+    sol.passes_reverted = reverted
     if hsol is not None:
         missed = float(ident.get("field_sigma_missed_mps2", 0.0))
         sol.dg_horizontal, sol.dg_horizontal_sigma, sol.horizontal_observable = horizontal_outputs(
@@ -1192,12 +1241,56 @@ def _corrected_initial_state(state: InitialState, nav, dr_i, dv_i, mat_it, ellip
     )
 
 
-def _check_passes_settled(record, out, span_s, passes) -> float:
-    """After the last allowed pass: the correction it would still apply, and a verdict.
+def diverging_gyro_axis(found, span_s: float) -> int | None:
+    """The tilting gyro whose correction grew over the last three passes, or None.
+
+    The passes are a Gauss-Newton iteration: a correction taken off should leave the next pass
+    a smaller one. An axis whose last three corrections have one sign and none smaller than the
+    one before, the last two significant, did not converge there: the two corrections taken off
+    made it worse. (One growth alone is not: an iteration can overshoot once and settle - quick
+    U1002's roll gyro -0.013, -0.018, +0.008, +0.003 deg/h.)
+
+    Parameters
+    ----------
+    found : list of (ndarray (3,), ndarray (3,))
+        Each pass's smoothed gyro-bias correction and its 1-sigma, rad/s, in order
+        (:func:`_pass_correction`).
+    span_s : float
+        The record's length, s.
+
+    Returns
+    -------
+    int or None
+        The first of triad axes 0 and 1 (the gyros that tilt the navigation; the heading gyro's
+        correction wanders unobserved on straight lines) that grew, its last two corrections
+        beyond their sigma and building more than ``PASSES_GROWTH_TILT_RAD`` of tilt over
+        ``span_s``; None otherwise.
+    """
+    if len(found) < 3:
+        return None
+    (d0, _), (d1, s1), (d2, s2) = ((np.asarray(d, float)[:2], np.asarray(sg, float)[:2]) for d, sg in found[-3:])
+    big = np.ones(2, dtype=bool)
+    for d, sg in ((d1, s1), (d2, s2)):
+        big &= (np.abs(d) > sg) & (np.abs(d) * span_s > PASSES_GROWTH_TILT_RAD)
+    grew = (
+        big
+        & (d0 * d1 > 0.0)
+        & (d1 * d2 > 0.0)
+        & (np.abs(d1) >= PASSES_GROWTH_RATIO * np.abs(d0))
+        & (np.abs(d2) >= PASSES_GROWTH_RATIO * np.abs(d1))
+    )
+    return int(np.flatnonzero(grew)[0]) if grew.any() else None
+
+
+def _check_passes_settled(record, out, span_s, passes, reverted=None) -> float:
+    """After the last pass: the correction it would still apply, and a verdict.
 
     Returns that pass's own initial-attitude correction (rad).  Raises DataError when the
     larger of it and the tilt that its gyro-bias correction beyond the bias's sigma builds over
     ``span_s`` (s) exceeds ``PASSES_FAILED_RAD``; emits a warning above ``PASSES_WARN_RAD``.
+    ``reverted``: the passes stopped because a correction grew (``estimate_anomaly``'s record of
+    it: axis, pass, the two corrections); the warning then says so, and more passes are not the
+    remedy.
     """
     th0, db, db_sig = _pass_correction(out)
     th = float(np.linalg.norm(th0))
@@ -1208,13 +1301,31 @@ def _check_passes_settled(record, out, span_s, passes) -> float:
         f"and a gyro bias by {bias / RADPS_PER_DEGPH:.3g} deg/h beyond its sigma "
         f"({math.degrees(bias * span_s):.3g} deg of tilt over the record)"
     )
+    if reverted is not None:
+        axis = "xyz"[reverted["axis"]]
+        k = reverted["pass"]
+        seq = ", ".join(f"{b:+.3g}" for b in reverted["bias_corrections_degph"])
+        what = (
+            f"the attitude passes did not converge: the gyro-{axis} bias corrections of passes {k - 1}-{k + 1} "
+            f"grew ({seq} deg/h), so the estimate is pass {k - 1}'s, which {what[what.index('still corrects') :]}"
+        )
     if moved > PASSES_FAILED_RAD:
         raise DataError(
             f"{record.source or 'record'}: the navigation did not settle: {what}; set "
             "model.gyro_bias_sigma_degph to the gyro's datasheet bias, give initial.attitude_deg, or raise "
             "model.attitude_passes"
+            + (
+                ""
+                if reverted is None
+                else " (give model.accel_noise_mps2 and model.gyro_drift_degph from the datasheet)"
+            )
         )
-    if moved > PASSES_WARN_RAD:
+    if reverted is not None:
+        warnings.warn(
+            f"{what}: the estimate may carry some of that error (give model.accel_noise_mps2 and "
+            "model.gyro_drift_degph from the IMU's datasheet; more passes would move it further off)"
+        )
+    elif moved > PASSES_WARN_RAD:
         warnings.warn(f"{what}: the estimate may carry some of that error (raise model.attitude_passes)")
     return th
 
