@@ -148,3 +148,16 @@ def test_diverging_passes_go_back_to_where_the_growth_began(monkeypatch):
     said = attitude_report(sol)["passes_reverted"]
     assert said["gyro_axis"] == "x" and said["estimate_of_pass"] == 1 and len(said["bias_corrections_degph"]) == 3
     assert "passes_reverted" not in attitude_report(one)
+
+
+def test_going_back_to_a_pass_that_did_not_settle_fails_the_flight(monkeypatch):
+    """Forced on a flight whose first pass leaves degrees to correct (1.6 deg/h against the
+    0.05 deg/h prior): the estimate it would go back to is refused, with the datasheet figures to
+    give rather than more passes."""
+    import gravsurvey.inm.solve as solve
+
+    monkeypatch.setattr(solve, "diverging_gyro_axis", lambda found, span_s: 0 if len(found) == 3 else None)
+    with pytest.raises(DataError, match=r"did not settle: the attitude passes did not converge") as err:
+        _run(_simulate((1.6, -0.8, 0.0)), 3)
+    assert "give model.accel_noise_mps2, model.gyro_drift_degph" in str(err.value)
+    assert "raise model.attitude_passes" not in str(err.value)

@@ -1288,9 +1288,9 @@ def _check_passes_settled(record, out, span_s, passes, reverted=None) -> float:
     Returns that pass's own initial-attitude correction (rad).  Raises DataError when the
     larger of it and the tilt that its gyro-bias correction beyond the bias's sigma builds over
     ``span_s`` (s) exceeds ``PASSES_FAILED_RAD``; emits a warning above ``PASSES_WARN_RAD``.
-    ``reverted``: the passes stopped because a correction grew (``estimate_anomaly``'s record of
-    it: axis, pass, the two corrections); the warning then says so, and more passes are not the
-    remedy.
+    ``reverted``: the passes stopped because a gyro's corrections kept growing
+    (``estimate_anomaly``'s record of it: axis, pass, the three corrections); the messages then
+    say so, and more passes are not the remedy.
     """
     th0, db, db_sig = _pass_correction(out)
     th = float(np.linalg.norm(th0))
@@ -1310,16 +1310,14 @@ def _check_passes_settled(record, out, span_s, passes, reverted=None) -> float:
             f"grew ({seq} deg/h), so the estimate is pass {k - 1}'s, which {what[what.index('still corrects') :]}"
         )
     if moved > PASSES_FAILED_RAD:
-        raise DataError(
-            f"{record.source or 'record'}: the navigation did not settle: {what}; set "
-            "model.gyro_bias_sigma_degph to the gyro's datasheet bias, give initial.attitude_deg, or raise "
+        remedy = (
+            "set model.gyro_bias_sigma_degph to the gyro's datasheet bias, give initial.attitude_deg, or raise "
             "model.attitude_passes"
-            + (
-                ""
-                if reverted is None
-                else " (give model.accel_noise_mps2 and model.gyro_drift_degph from the datasheet)"
-            )
+            if reverted is None
+            else "give model.accel_noise_mps2, model.gyro_drift_degph and model.gyro_bias_sigma_degph from the "
+            "IMU's datasheet, or initial.attitude_deg"
         )
+        raise DataError(f"{record.source or 'record'}: the navigation did not settle: {what}; {remedy}")
     if reverted is not None:
         warnings.warn(
             f"{what}: the estimate may carry some of that error (give model.accel_noise_mps2 and "
