@@ -1359,9 +1359,10 @@ def offset_correlator(record):
     return corr, dt, float(tm[-1] - tm[0])
 
 
-def estimate_time_offset(record, max_lag_s: float = 30.0, step_s: float = 0.05, centre_s: float = 0.0):
+def estimate_time_offset(record, max_lag_s: float = 30.0, step_s: float = 0.05, centre_s: float = 0.0, correlator=None):
     """IMU-GNSS clock offset by cross-correlating the specific-force magnitudes (lags within
-    ``max_lag_s`` of ``centre_s``).
+    ``max_lag_s`` of ``centre_s``). ``correlator``: the record's :func:`offset_correlator`
+    when the caller has it (built here otherwise).
 
     Returns
     -------
@@ -1371,7 +1372,7 @@ def estimate_time_offset(record, max_lag_s: float = 30.0, step_s: float = 0.05, 
     corr : float
         Correlation at the best lag (NaN when not measured).
     """
-    corr, dt, _ = offset_correlator(record)
+    corr, dt, _ = correlator or offset_correlator(record)
     if corr is None:
         return None, float("nan")
     coarse = centre_s + np.arange(-max_lag_s, max_lag_s + 1e-9, max(dt / 2, 0.5))
@@ -1391,7 +1392,7 @@ def estimate_time_offset(record, max_lag_s: float = 30.0, step_s: float = 0.05, 
     return best, cbest
 
 
-def time_offset_evidence(record, corr_best: float, within_s: float, step_s: float = 0.05) -> float:
+def time_offset_evidence(record, corr_best: float, within_s: float, step_s: float = 0.05, correlator=None) -> float:
     """How much better the best lag fits than any lag within ``within_s`` of zero.
 
     The fit of the GNSS series on the lagged IMU series leaves ``1 - r^2`` of its variance; the
@@ -1410,6 +1411,8 @@ def time_offset_evidence(record, corr_best: float, within_s: float, step_s: floa
         Correlation at the measured offset (:func:`estimate_time_offset`).
     within_s : float
         Tolerated offset, s (``checks.max_time_offset_s``).
+    correlator : tuple, optional
+        The record's :func:`offset_correlator` when the caller has it (built here otherwise).
 
     Returns
     -------
@@ -1417,7 +1420,7 @@ def time_offset_evidence(record, corr_best: float, within_s: float, step_s: floa
         The statistic (inf when no lag within the tolerance can be correlated; 0 when the best
         lag lies within it).
     """
-    corr, _, span = offset_correlator(record)
+    corr, _, span = correlator or offset_correlator(record)
     if corr is None:
         return 0.0
     c_in = max(corr(x) for x in np.arange(-within_s, within_s + 1e-9, step_s))
@@ -1618,12 +1621,15 @@ def check_gnss_consistency(
             f"{PASSED}gnss vs imu: median specific-force difference {diff / MGAL:+.1f} mGal "
             f"(limit {opts.max_gravity_mismatch_mgal:g})"
         )
-    off, c = estimate_time_offset(record)
+    # the IMU's series smoothed once for the search, the search at the records' shift and the
+    # verdict's evidence
+    cor = offset_correlator(record)
+    off, c = estimate_time_offset(record, correlator=cor)
     shift = _common_shift(record)
     if (off is None or not c >= OFFSET_VERDICT_CORRELATION) and shift is not None:
         # both ends of the GNSS record offset alike from the IMU's by more than the search: a
         # clock (or time zone) out of step, if the specific forces agree there
-        off2, c2 = estimate_time_offset(record, centre_s=shift)
+        off2, c2 = estimate_time_offset(record, centre_s=shift, correlator=cor)
         # and clearly better than at the lags near zero (a grid's turns repeat with its lines)
         if off2 is not None and c2 >= OFFSET_VERDICT_CORRELATION and not c2 <= c + 0.05:
             off, c = off2, c2
@@ -1639,7 +1645,7 @@ def check_gnss_consistency(
             f"(cross-correlation of specific force, r = {c:.2f})"
         )
         beyond = abs(off) > opts.max_time_offset_s
-        evidence = time_offset_evidence(record, c, opts.max_time_offset_s) if beyond else 0.0
+        evidence = time_offset_evidence(record, c, opts.max_time_offset_s, correlator=cor) if beyond else 0.0
         if beyond and c >= OFFSET_VERDICT_CORRELATION and evidence >= OFFSET_VERDICT_EVIDENCE:
             raise DataError(
                 f"{txt}; expected within {opts.max_time_offset_s:g} s (checks.max_time_offset_s): clocks out of step "
