@@ -188,6 +188,27 @@ def test_latency_is_the_slope_of_the_residual_on_the_vertical_velocity():
     assert np.isnan(got) and np.isnan(sigma)
 
 
+def test_a_mechanization_running_off_is_no_latency_at_the_records_ends():
+    # exact stamps; the uncorrected mechanization's height runs off as a parabola (its vertical
+    # velocity 1 m/s off at the ends, as on quick U1434): the running mean is one-sided within
+    # half a window of the ends, where the residual less it is metres, and the velocity's too
+    # (before 2026-12-05 both ends were in the regressions: -57 ms at 14 "standard errors",
+    # drifting 59 ppm at 10; on U1434 a 50-ms latency drifting -156 ppm was taken off the
+    # exact stamps, 1.27 -> 3.17 mGal)
+    rng = np.random.default_rng(1)
+    t = np.arange(0.0, 2400.0, 0.5)
+    tm = t.mean()
+    c = -4.5e-4  # m/s^2
+    turb = 0.3 * np.convolve(rng.standard_normal(t.size), np.ones(6) / 6, mode="same")
+    v = 2 * c * (t - tm) + turb
+    e = c * (t - tm) ** 2 + 0.03 * rng.standard_normal(t.size)
+    lat, sigma = Q.estimate_latency(t, e, v)
+    assert abs(lat) < max(3 * sigma, 0.005)
+    mid, mid_sigma, rate, rate_sigma = Q.estimate_latency_drift(t, e, v)
+    assert abs(mid) < max(3 * mid_sigma, 0.005)
+    assert abs(rate) < 4 * rate_sigma and abs(rate) * 1200.0 < 0.02
+
+
 @pytest.fixture(scope="module")
 def turbulent_flight():
     """30 min of level flight in turbulence (0.8 m of vertical motion at 2-60 s periods),

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..io.checks import robust_sigma
 from .heightqc import estimate_latency, estimate_latency_drift
-from .identify import running_mean
+from .identify import edge_samples, running_mean
 
 __all__ = [
     "GnssLatency",
@@ -293,6 +293,8 @@ def estimate_gnss_lever_arm(time, residual_enu_m, mat_enu_t, highpass_s=LEVER_HI
     use = np.ones(t.size, bool)
     for g in np.flatnonzero(np.diff(t) > max(1.0, 3.0 * dt)):
         use[(t > t[g] - 0.5 * highpass_s) & (t < t[g + 1] + 0.5 * highpass_s)] = False
+    # and at the record's ends, where the running mean is one-sided
+    use[edge_samples(t, highpass_s)] = False
     use &= np.all(np.isfinite(y), axis=1) & np.all(np.isfinite(x), axis=(1, 2))
     for refit in (False, True):
         xs, ys = x[use], y[use]
