@@ -133,6 +133,19 @@ def test_a_short_quiet_period_gives_no_gyro_unit_verdict():
     assert r.level == "info" and "shorter than 30 s" in r.message
 
 
+def test_a_short_quiet_period_in_flight_gives_no_gyro_warning():
+    """Two seconds of steady |F| in a gentle turn (0.76 deg/s, 182 x Earth rate, no unit's
+    ratio) are not a rest either: no warning (quick U1431 warned "gyro bias, low-grade gyro or
+    wrong unit?"); the same rate over a minute's quiet period still warns."""
+    for seconds, level in ((2.0, "info"), (60.0, "warning")):
+        d = static_flight(seconds=seconds)
+        w = d["w"] + np.array([0.0, 0.0, 0.01324])
+        fs = ck.check_imu(d["imu_t"], d["f"], w, 1e7)
+        r = next(x for x in fs if x.check == "gyro at rest")
+        assert r.level == level, r.message
+        assert (level == "info") == ("shorter than 30 s" in r.message)
+
+
 def test_rest_rate_consistent_with_earth_rate_in_static_data():
     d = static_flight(seconds=20.0, lat_deg=60.0)
     fs = ck.check_imu(d["imu_t"], d["f"], d["w"], 1e7)

@@ -549,7 +549,8 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
     ``REST_WINDOW_S`` windows where |F| is steady near g) the mean rate vector must be Earth rate (within a factor of 2)
     when it is measured well (|mean| > 10 standard errors): 57.3x, 1/57.3x, 206265x, 1/206265x
     Earth rate (within a factor of 2) is an error naming the unit mix-up; anything else a
-    warning.
+    warning.  Both need a quiet period of at least ``REST_MIN_VERDICT_S`` (a static start);
+    a shorter one (seconds of steady flight) is reported as info only.
 
     Returns
     -------
@@ -694,16 +695,20 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
             )
         elif 0.5 < ratio < 2.0:
             out.append(Finding("imu", "gyro at rest", "ok", msg + " (expected ~1)", ratio))
-        elif name and n_rest * nominal_step_ns * 1e-9 < REST_MIN_VERDICT_S:
+        elif n_rest * nominal_step_ns * 1e-9 < REST_MIN_VERDICT_S:
             # a few seconds of steady |F| in flight (turbulence, a gentle turn) are not a rest;
-            # an error needs a quiet period a real static start gives
+            # an error or a warning needs a quiet period a real static start gives (quick
+            # U1431 and U1441, no static start: 1.4-2 s read as 182 and 360 x Earth rate, "gyro
+            # bias, low-grade gyro or wrong unit?" on flights with neither)
             out.append(
                 Finding(
                     "imu",
                     "gyro at rest",
                     "info",
-                    msg + f": would read as {name}, but the quiet period is shorter than "
-                    f"{REST_MIN_VERDICT_S:g} s; gyro unit checked by range only",
+                    msg
+                    + (f": would read as {name}" if name else ", not ~1")
+                    + f", but the quiet period is shorter than {REST_MIN_VERDICT_S:g} s (not a rest); "
+                    "gyro unit checked by range only",
                     ratio,
                 )
             )
