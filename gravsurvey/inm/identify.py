@@ -300,6 +300,11 @@ def edge_samples(time, window_s: float) -> np.ndarray:
         Sample times, s, increasing.
     window_s : float
         The running mean's window, s.
+
+    Returns
+    -------
+    ndarray of bool (k,)
+        True at the samples to leave out (every sample of a record shorter than the window).
     """
     t = np.asarray(time, float)
     if t.size == 0:
