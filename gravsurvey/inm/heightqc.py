@@ -593,14 +593,9 @@ def coarse_height_offset(nav, alt_time, alt_height, ellipsoid):
     r_nav = np.linalg.norm(nav.r_i[::k], axis=1)
     r_now = np.interp(tk, t_nav, r_nav)
 
-    # the running mean is one-sided at the ends (edge_samples): the variance is the interior's
-    inner = ~edge_samples(tk, w * dt)
-    if inner.sum() < 16:
-        inner[:] = True
-
     def variance(shift):
         e = e0 + np.interp(tk - shift, t_nav, r_nav) - r_now
-        return float(np.var((e - running_mean(e, w))[inner]))
+        return float(np.var(e - running_mean(e, w)))
 
     coarse = np.arange(-COARSE_MAX_S, COARSE_MAX_S + 1e-9, COARSE_STEP_S)
     v = np.array([variance(x) for x in coarse])
