@@ -289,12 +289,9 @@ def estimate_gnss_lever_arm(time, residual_enu_m, mat_enu_t, highpass_s=LEVER_HI
         return nan
     y = e - running_mean(e, w)
     x = a - np.stack([np.stack([running_mean(a[:, i, j], w) for j in range(3)], axis=1) for i in range(m)], axis=1)
-    # a running mean across a gap mixes both sides: the epochs within half a window of one out
-    use = np.ones(t.size, bool)
-    for g in np.flatnonzero(np.diff(t) > max(1.0, 3.0 * dt)):
-        use[(t > t[g] - 0.5 * highpass_s) & (t < t[g + 1] + 0.5 * highpass_s)] = False
-    # and at the record's ends, where the running mean is one-sided
-    use[edge_samples(t, highpass_s)] = False
+    # the running mean mixes both sides across a gap and is one-sided at the record's ends: the
+    # epochs within half a window of either out
+    use = ~edge_samples(t, highpass_s, max(1.0, 3.0 * dt))
     use &= np.all(np.isfinite(y), axis=1) & np.all(np.isfinite(x), axis=(1, 2))
     for refit in (False, True):
         xs, ys = x[use], y[use]

@@ -504,12 +504,10 @@ def _latency_regressors(time, residual_m, velocity_mps, highpass_s, outlier_k):
     if e.ndim == 1:
         e, v = e[:, None], v[:, None]
     x = v - running_mean(v, w)
-    # a running mean across a gap mixes both sides: the samples within half a window of one
-    # are left out (a 30-s gap read as a 53-ms latency otherwise)
+    # the running mean is one-sided at the ends and mixes both sides across a gap: the samples
+    # within half a window of either are left out
     use = np.ones(e.shape, bool)
-    for g in np.flatnonzero(np.diff(t) > max(STEP_MAX_GAP_S, 3.0 * dt)):
-        use[(t > t[g] - 0.5 * highpass_s) & (t < t[g + 1] + 0.5 * highpass_s)] = False
-    use[edge_samples(t, highpass_s)] = False
+    use[edge_samples(t, highpass_s, max(STEP_MAX_GAP_S, 3.0 * dt))] = False
     y = e - running_mean(e, w)
     slope, res, _ = _slope(x, y, use)
     if not math.isfinite(slope):

@@ -285,14 +285,15 @@ def running_mean(x, w):
     return (c[hi] - c[lo]) / (hi - lo).reshape((-1,) + (1,) * (x.ndim - 1))
 
 
-def edge_samples(time, window_s: float) -> np.ndarray:
-    """The samples within half a window of the record's first or last one, bool (k,).
+def edge_samples(time, window_s: float, gap_s: float | None = None) -> np.ndarray:
+    """The samples within half a window of the record's first or last one, or of a gap, bool (k,).
 
-    There :func:`running_mean` is one-sided and a residual less its running mean is no
+    At the ends :func:`running_mean` is one-sided and a residual less its running mean is no
     high-pass: a trend is left in it (a ramp of slope ``a`` leaves ``a window / 4`` at the ends).
     The uncorrected mechanization runs off the heights and the GNSS track by metres a second,
     so regressions on high-passed residuals leave these samples out (quick U1434: the 10 s at
     each end, 5 m off, read as a height latency of 50 ms drifting -156 ppm on exact stamps).
+    Across a gap the running mean mixes both sides (a 30-s gap read as a 53-ms latency).
 
     Parameters
     ----------
@@ -300,6 +301,8 @@ def edge_samples(time, window_s: float) -> np.ndarray:
         Sample times, s, increasing.
     window_s : float
         The running mean's window, s.
+    gap_s : float, optional
+        A step between samples longer than this is a gap; None: the ends only.
 
     Returns
     -------
@@ -309,7 +312,11 @@ def edge_samples(time, window_s: float) -> np.ndarray:
     t = np.asarray(time, float)
     if t.size == 0:
         return np.zeros(0, bool)
-    return (t < t[0] + 0.5 * window_s) | (t > t[-1] - 0.5 * window_s)
+    out = (t < t[0] + 0.5 * window_s) | (t > t[-1] - 0.5 * window_s)
+    if gap_s is not None:
+        for g in np.flatnonzero(np.diff(t) > gap_s):
+            out |= (t > t[g] - 0.5 * window_s) & (t < t[g + 1] + 0.5 * window_s)
+    return out
 
 
 def _horizontal_specific_force(nav, f_t, times):
