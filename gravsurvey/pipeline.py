@@ -288,6 +288,7 @@ _IDENTIFIED_LOG = (
     ("anomaly_lambda_per_m", "anomaly correlation length", 1000.0, "km"),
     ("gravimeter_white_mps2", "gravimeter white", MGAL, "mGal in 1 s"),
     ("altimeter_sigma_m", "height noise", 1.0, "m"),
+    ("accel_noise_mps2", "horizontal accelerometer noise", 1.0, "m/s^2 in 1 s"),
 )
 
 

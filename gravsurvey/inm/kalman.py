@@ -948,6 +948,68 @@ def filter_and_smooth(x0, p0, phi, q, z, h, r, reference: bool = False, unrolled
     return dict(x_f=x_f, p_f=p_f, x_p=x_p, p_p=p_p, innov=innov, x_s=x_s, p_s=p_s)
 
 
+def log_likelihood(p_p, innov, z, h, r) -> np.ndarray:
+    """Log-likelihood of the measurements under the filter's model, epoch by epoch, from its
+    own innovations (the prediction-error decomposition): ``-1/2 (log det S_k + |L_k^-1 nu_k|^2)``
+    with ``S_k = H_k P_k^- H_k^T + R_k`` on the finite components of ``z_k``, the ``2 pi``
+    terms left out.  Their sum is the log of the joint Gaussian density of all the
+    measurements, so two models of the same measurements compare by it (maximum likelihood;
+    :func:`likelihood_gain_z` for how clearly).
+
+    Parameters
+    ----------
+    p_p : ndarray (N, n, n)
+        Predicted covariances (:func:`kalman_filter`).
+    innov : ndarray (N, m)
+        Whitened innovations (NaN where ``z`` is missing).
+    z, h, r : ndarray (N, m), (N, m, n), (N, m, m)
+        The measurements the filter ran on.
+
+    Returns
+    -------
+    ndarray (N,)
+        Each epoch's term (0 at an epoch without a finite measurement).
+    """
+    ok = np.isfinite(np.asarray(z, float))
+    pair = ok[:, :, None] & ok[:, None, :]
+    hk = np.where(ok[:, :, None], h, 0.0)
+    s = np.einsum("kmj,knj->kmn", np.einsum("kmi,kij->kmj", hk, p_p), hk)
+    # missing components: a unit diagonal, nothing to the determinant
+    s = np.where(pair, s + np.where(pair, r, 0.0), np.eye(ok.shape[1])[None])
+    _, logdet = np.linalg.slogdet(s)
+    v = np.where(ok, innov, 0.0)
+    return -0.5 * (logdet + np.sum(v * v, axis=1))
+
+
+def likelihood_gain_z(terms_a, terms_b) -> float:
+    """How many standard errors model ``a`` is more likely than model ``b`` on the same
+    measurements (Vuong's test for models that need not nest): the sum of the per-epoch
+    log-likelihood differences over ``sqrt(n)`` times their standard deviation, over the ``n``
+    epochs with measurements.  Under misspecified models a difference of tens in the total can
+    be chance; this says when it is not.
+
+    Parameters
+    ----------
+    terms_a, terms_b : ndarray (N,)
+        :func:`log_likelihood` of the two models.
+
+    Returns
+    -------
+    float
+        NaN when the two do not cover the same epochs or fewer than two epochs differ.
+    """
+    a, b = np.asarray(terms_a, float), np.asarray(terms_b, float)
+    if a.shape != b.shape:
+        return float("nan")
+    d = (a - b)[(a != 0.0) | (b != 0.0)]
+    if d.size < 2 or not np.all(np.isfinite(d)):
+        return float("nan")
+    sd = float(np.std(d))
+    if sd == 0.0:
+        return float("nan")
+    return float(np.sum(d) / (math.sqrt(d.size) * sd))
+
+
 #: Huge-page size of x86-64 and arm64 Linux (transparent huge pages), bytes.
 _HUGE_PAGE = 2 << 20
 

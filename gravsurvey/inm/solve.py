@@ -65,7 +65,7 @@ from .identify import (
     wide_prior_params,
     vertical_residual,
 )
-from .kalman import filter_and_smooth
+from .kalman import filter_and_smooth, likelihood_gain_z, log_likelihood
 from .mechanization import mechanize, navigation_to_geodetic, rodrigues
 from .params import (
     RADPS_PER_DEGPH,
@@ -177,6 +177,10 @@ class InmSolution:
         Whether the data determine the horizontal components at that epoch: both posterior
         sigmas below :data:`gravsurvey.inm.vector.OBSERVABLE_SIGMA_RATIO` times the prior's
         (docs/method.md, "Vector gravimetry").
+    log_likelihood : float
+        The last pass's log-likelihood of its measurements (NaN before a pass ran) ...
+    log_likelihood_epochs : ndarray (N,) or None
+        ... and its terms per filter epoch (:func:`gravsurvey.inm.kalman.log_likelihood`).
     """
 
     time: np.ndarray
@@ -222,6 +226,8 @@ class InmSolution:
     dg_horizontal: np.ndarray | None = None
     dg_horizontal_sigma: np.ndarray | None = None
     horizontal_observable: np.ndarray | None = None
+    log_likelihood: float = float("nan")
+    log_likelihood_epochs: np.ndarray | None = None
 
 
 def _check_record(record):
@@ -337,6 +343,117 @@ PASSES_GROWTH_RATIO = 1.0
 #: harmless), and 0.0025 deg/h over 40 min (0.002 deg; quick U014) changes nothing worth a pass.
 PASSES_GROWTH_TILT_RAD = math.radians(0.01)
 
+#: White noise of the horizontal accelerometers (one-second sigma, m/s^2) tried after the
+#: default's on a strapdown flight, in this order (:func:`choose_accel_noise`).  Only quieter
+#: ones: in turbulence the default 1e-3 lets the filter explain the horizontal track by
+#: accelerometer noise rather than attitude and gyro bias, and it then settles on wrong gyro
+#: biases (quick U1617: heading gyro -0.38 deg/h for +0.04 drawn, 3.68 mGal; 1.26 mGal with
+#: 2.5e-4).  A noisier candidate (2e-3) was the most likely on some flights and lost there
+#: (quick U001 0.58 -> 0.83 mGal; docs/benchmarks.md, "Accelerometer noise by likelihood").
+ACCEL_NOISE_CANDIDATES_MPS2 = (5.0e-4, 2.5e-4)
+#: A candidate replaces the one before it only when its likelihood is this many standard errors
+#: higher (:func:`gravsurvey.inm.kalman.likelihood_gain_z`): differences of tens in the total
+#: log-likelihood go either way (quick U1659: +3.2, 0.30 standard errors, 1.21 -> 1.73 x the
+#: bound; docs/benchmarks.md, "Accelerometer noise by likelihood").
+ACCEL_NOISE_GAIN_Z = 2.0
+
+
+def may_choose_accel_noise(params: InmParams, triad: str) -> bool:
+    """Whether :func:`estimate_anomaly` may choose the horizontal accelerometers' noise, before
+    any estimate: a strapdown triad, identification on and ``model.accel_noise_mps2`` not given
+    in the config."""
+    return triad == "strapdown" and bool(params.identify) and "accel_noise_mps2" not in getattr(params, "given", ())
+
+
+def chooses_accel_noise(params: InmParams, triad: str, sol) -> bool:
+    """... and whether it does, after the estimate with the default: GNSS-aided, its last pass
+    with a finite likelihood."""
+    return may_choose_accel_noise(params, triad) and bool(sol.gnss_aided) and math.isfinite(sol.log_likelihood)
+
+
+def recorded(estimate, params, show_on_failure: bool = True):
+    """``(estimate(params), warnings it raised)``, the warnings not shown.  An estimate that fails
+    (DataError) shows its warnings before the error goes on (they often name its cause), unless
+    ``show_on_failure`` is false."""
+    caught = []
+    try:
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            try:
+                return estimate(params), list(seen)
+            finally:
+                caught = list(seen)
+    except DataError:
+        if show_on_failure:
+            for w in caught:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        raise
+
+
+def choose_accel_noise(first, params: InmParams, estimate):
+    """The most likely of the estimates with the default and quieter accelerometer noises.
+
+    The horizontal accelerometers' white noise sets how much of the GNSS track the filter
+    leaves to them rather than to attitude and gyro bias.  Each candidate of
+    :data:`ACCEL_NOISE_CANDIDATES_MPS2` below ``params.accel_noise_mps2`` runs the whole
+    estimate (its own passes converge about its own linearisation: compared about the
+    default's, the default is always the more likely, since its passes settled there), and the
+    estimates compare by their last pass's log-likelihood of the same measurements
+    (:func:`gravsurvey.inm.kalman.log_likelihood`).  A candidate replaces the estimate before it
+    only when more likely by :data:`ACCEL_NOISE_GAIN_Z` standard errors
+    (:func:`gravsurvey.inm.kalman.likelihood_gain_z`); the search stops at the first that is
+    not, or that fails (DataError; its warnings are not shown).
+
+    Parameters
+    ----------
+    first : (InmSolution, list)
+        The estimate with ``params`` and the warnings it raised (:func:`recorded`).
+    params : InmParams
+    estimate : callable
+        ``estimate(params) -> InmSolution``: the whole estimate with other settings.
+
+    Returns
+    -------
+    sol : InmSolution
+        The most likely; its ``identification["accel_noise_mps2"]`` says the value, how it was
+        found, each candidate's log-likelihood and its gain in standard errors over the one
+        before (``gain_z``).
+    shown : list
+        Its warnings (``warnings.WarningMessage``), to be shown.
+    """
+    value, best, shown = float(params.accel_noise_mps2), *first
+    lls = {f"{value:.3g}": float(best.log_likelihood)}
+    gains, failed = {}, {}
+    for v in ACCEL_NOISE_CANDIDATES_MPS2:
+        if v >= value:
+            continue
+        try:
+            other, caught = recorded(estimate, dataclasses.replace(params, accel_noise_mps2=v), False)
+        except DataError as exc:
+            failed[f"{v:.3g}"] = str(exc).splitlines()[0]
+            break
+        z = likelihood_gain_z(other.log_likelihood_epochs, best.log_likelihood_epochs)
+        lls[f"{v:.3g}"] = float(other.log_likelihood)
+        gains[f"{v:.3g}"] = z if math.isfinite(z) else None
+        if not z > ACCEL_NOISE_GAIN_Z:
+            break
+        value, best, shown = v, other, caught
+    report = {
+        "value": value,
+        "sigma_factor": None,
+        "how": (
+            "default (no quieter candidate clearly more likely)"
+            if value == float(params.accel_noise_mps2)
+            else "filter likelihood (a quieter candidate clearly more likely; strapdown)"
+        ),
+        "log_likelihood": lls,
+        "gain_z": gains,
+    }
+    if failed:
+        report["failed"] = failed
+    best.identification = {**best.identification, "accel_noise_mps2": report}
+    return best, shown
+
 
 def estimate_anomaly(
     record,
@@ -389,7 +506,41 @@ def estimate_anomaly(
     Returns
     -------
     InmSolution
+
+    Notes
+    -----
+    On a GNSS-aided strapdown triad whose ``model.accel_noise_mps2`` is not given (and with
+    ``model.identify``), the horizontal accelerometers' white noise is chosen by the filter's
+    likelihood: the whole estimate (every pass) runs again with each of
+    :data:`ACCEL_NOISE_CANDIDATES_MPS2` below the default while each is clearly more likely than
+    the one before (:data:`ACCEL_NOISE_GAIN_Z` standard errors), and the last such is returned
+    (:func:`choose_accel_noise`; docs/method.md, "Accelerometer noise").
     """
+
+    def estimate(p):
+        return _estimate_once(record, p, initial, triad, ellipsoid, attitude_deg, reference, gnss_lever_arm_t)
+
+    if not may_choose_accel_noise(params, triad):
+        return estimate(params)
+    # the warnings of an estimate are shown only for the one returned
+    first = recorded(estimate, params)
+    sol, shown = choose_accel_noise(first, params, estimate) if chooses_accel_noise(params, triad, first[0]) else first
+    for w in shown:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return sol
+
+
+def _estimate_once(
+    record,
+    params: InmParams,
+    initial: InitialState | None,
+    triad: str,
+    ellipsoid: Ellipsoid = WGS84,
+    attitude_deg=None,
+    reference: bool = False,
+    gnss_lever_arm_t=None,
+) -> InmSolution:
+    """:func:`estimate_anomaly` with the model's accelerometer noise as it is (same arguments)."""
     if triad not in TRIADS:
         raise ConfigError(f"triad: expected 'platform' or 'strapdown', got {triad!r}")
     _check_record(record)
@@ -589,6 +740,8 @@ def estimate_anomaly(
                 "a GNSS channel); not estimated"
             )
     sol = _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, k + 1, corrections)
+    sol.log_likelihood_epochs = out["log_likelihood"]
+    sol.log_likelihood = float(np.sum(sol.log_likelihood_epochs))
     sol.initial_corrections = pv_corrections
     sol.passes_reverted = reverted
     if hsol is not None:
@@ -1634,6 +1787,7 @@ def _one_pass(
         p0 = initial_covariance(params)
         x0 = np.zeros(n_state)
     out = filter_and_smooth(x0, p0, phi, q, z, h, r, reference=reference)
+    out["log_likelihood"] = log_likelihood(out["p_p"], out["innov"], z, h, r)
     return idx, c, gnss_used, n_state, out
 
 
