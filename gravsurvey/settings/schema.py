@@ -147,7 +147,9 @@ class ModelSection(Section):
     accel_noise_mps2: float = _m(
         "accel_noise_mps2",
         "sigma_f1 = sigma_f2, horizontal accelerometer white noise, m/s^2 (one-second sigma); on a strapdown "
-        "triad also the tilt leak identification takes off the vertical white level: give the datasheet figure",
+        "triad also the tilt leak identification takes off the vertical white level. Not given, a GNSS-aided "
+        "strapdown flight takes 5e-4 or 2.5e-4 instead where the filter's likelihood is clearly higher "
+        "(docs/method.md, 'Accelerometer noise by likelihood'); given (the datasheet figure), it is used as it is",
         ge=0,
     )
     gyro_drift_degph: float = _m("gyro_drift_degph", "sigma_nu, white gyro drift, deg/h (one-second sigma)", ge=0)
