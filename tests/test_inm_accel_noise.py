@@ -7,6 +7,7 @@ gives the GNSS track to the accelerometers' noise and settles on wrong gyro bias
 """
 
 import dataclasses
+import math
 import warnings
 
 import numpy as np
@@ -63,7 +64,8 @@ def test_a_quieter_accelerometer_is_found_and_the_gyro_biases_with_it(turbulent_
     assert chosen.params.accel_noise_mps2 == report["value"]
     # the estimate returned is the most likely of those tried, the default's among them
     lls = report["log_likelihood"]
-    assert lls["0.001"] == pytest.approx(fixed.log_likelihood)
+    # a given noise runs once, without the likelihood
+    assert math.isnan(fixed.log_likelihood) and fixed.log_likelihood_epochs is None
     assert chosen.log_likelihood == max(lls.values()) > lls["0.001"]
     assert report["gain_z"][f"{report['value']:.3g}"] > 2.0
     # against the truth: the disturbance and the heading gyro's bias

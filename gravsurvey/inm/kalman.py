@@ -973,7 +973,7 @@ def log_likelihood(p_p, innov, z, h, r) -> np.ndarray:
     ok = np.isfinite(np.asarray(z, float))
     pair = ok[:, :, None] & ok[:, None, :]
     hk = np.where(ok[:, :, None], h, 0.0)
-    s = np.einsum("kmj,knj->kmn", np.einsum("kmi,kij->kmj", hk, p_p), hk)
+    s = np.matmul(np.matmul(hk, p_p), hk.transpose(0, 2, 1))
     # missing components: a unit diagonal, nothing to the determinant
     s = np.where(pair, s + np.where(pair, r, 0.0), np.eye(ok.shape[1])[None])
     _, logdet = np.linalg.slogdet(s)

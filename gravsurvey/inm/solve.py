@@ -178,7 +178,8 @@ class InmSolution:
         sigmas below :data:`gravsurvey.inm.vector.OBSERVABLE_SIGMA_RATIO` times the prior's
         (docs/method.md, "Vector gravimetry").
     log_likelihood : float
-        The last pass's log-likelihood of its measurements (NaN before a pass ran) ...
+        The last pass's log-likelihood of its measurements (NaN unless the accelerometer noise
+        was chosen by it, :func:`choose_accel_noise`) ...
     log_likelihood_epochs : ndarray (N,) or None
         ... and its terms per filter epoch (:func:`gravsurvey.inm.kalman.log_likelihood`).
     """
@@ -391,7 +392,8 @@ def recorded(estimate, params, show_on_failure: bool = True):
 
 
 def choose_accel_noise(first, params: InmParams, estimate):
-    """The most likely of the estimates with the default and quieter accelerometer noises.
+    """The estimate with the default or a quieter accelerometer noise, whichever the filter's
+    likelihood clearly prefers.
 
     The horizontal accelerometers' white noise sets how much of the GNSS track the filter
     leaves to them rather than to attitude and gyro bias.  Each candidate of
@@ -415,7 +417,7 @@ def choose_accel_noise(first, params: InmParams, estimate):
     Returns
     -------
     sol : InmSolution
-        The most likely; its ``identification["accel_noise_mps2"]`` says the value, how it was
+        The one chosen; its ``identification["accel_noise_mps2"]`` says the value, how it was
         found, each candidate's log-likelihood and its gain in standard errors over the one
         before (``gain_z``).
     shown : list
@@ -514,14 +516,16 @@ def estimate_anomaly(
     likelihood: the whole estimate (every pass) runs again with each of
     :data:`ACCEL_NOISE_CANDIDATES_MPS2` below the default while each is clearly more likely than
     the one before (:data:`ACCEL_NOISE_GAIN_Z` standard errors), and the last such is returned
-    (:func:`choose_accel_noise`; docs/method.md, "Accelerometer noise").
+    (:func:`choose_accel_noise`; docs/method.md, "Accelerometer noise by likelihood").
     """
 
     def estimate(p):
-        return _estimate_once(record, p, initial, triad, ellipsoid, attitude_deg, reference, gnss_lever_arm_t)
+        return _estimate_once(
+            record, p, initial, triad, ellipsoid, attitude_deg, reference, gnss_lever_arm_t, likelihood=True
+        )
 
     if not may_choose_accel_noise(params, triad):
-        return estimate(params)
+        return _estimate_once(record, params, initial, triad, ellipsoid, attitude_deg, reference, gnss_lever_arm_t)
     # the warnings of an estimate are shown only for the one returned
     first = recorded(estimate, params)
     sol, shown = choose_accel_noise(first, params, estimate) if chooses_accel_noise(params, triad, first[0]) else first
@@ -539,8 +543,10 @@ def _estimate_once(
     attitude_deg=None,
     reference: bool = False,
     gnss_lever_arm_t=None,
+    likelihood: bool = False,
 ) -> InmSolution:
-    """:func:`estimate_anomaly` with the model's accelerometer noise as it is (same arguments)."""
+    """:func:`estimate_anomaly` with the model's accelerometer noise as it is (same arguments);
+    ``likelihood``: also the last pass's log-likelihood (``InmSolution.log_likelihood``)."""
     if triad not in TRIADS:
         raise ConfigError(f"triad: expected 'platform' or 'strapdown', got {triad!r}")
     _check_record(record)
@@ -740,8 +746,9 @@ def _estimate_once(
                 "a GNSS channel); not estimated"
             )
     sol = _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, k + 1, corrections)
-    sol.log_likelihood_epochs = out["log_likelihood"]
-    sol.log_likelihood = float(np.sum(sol.log_likelihood_epochs))
+    if likelihood:
+        sol.log_likelihood_epochs = log_likelihood(out["p_p"], out["innov"], *out["measurements"])
+        sol.log_likelihood = float(np.sum(sol.log_likelihood_epochs))
     sol.initial_corrections = pv_corrections
     sol.passes_reverted = reverted
     if hsol is not None:
@@ -1787,7 +1794,8 @@ def _one_pass(
         p0 = initial_covariance(params)
         x0 = np.zeros(n_state)
     out = filter_and_smooth(x0, p0, phi, q, z, h, r, reference=reference)
-    out["log_likelihood"] = log_likelihood(out["p_p"], out["innov"], z, h, r)
+    # what the filter ran on, for the likelihood of the last pass (references, not copies)
+    out["measurements"] = (z, h, r)
     return idx, c, gnss_used, n_state, out
 
 
