@@ -17,7 +17,7 @@ from gravsurvey.errors import DataError
 from gravsurvey.geodesy import MGAL
 from gravsurvey.inm import solve
 from gravsurvey.inm.params import InmParams
-from gravsurvey.inm.solve import choose_accel_noise, chooses_accel_noise, estimate_anomaly
+from gravsurvey.inm.solve import choose_accel_noise, chooses_accel_noise, estimate_anomaly, recorded
 from gravsurvey.simulate.run import simulate_flight
 from gravsurvey.simulate.unseen import draw_flight_spec, limit_spec
 from sim_record import record_and_initial
@@ -133,6 +133,37 @@ def test_a_candidate_that_fails_ends_the_search_and_is_reported():
     best, _ = _search({1e-3: 10.0}, fail_at=5e-4)
     assert best.identification["accel_noise_mps2"]["value"] == 1e-3
     assert best.identification["accel_noise_mps2"]["how"].startswith("default")
+
+
+def test_recorded_warnings_are_shown_by_the_caller_or_with_a_failure():
+    def ok(p):
+        warnings.warn("passes did not settle")
+        return p
+
+    def fails(p):
+        warnings.warn("the cause")
+        raise DataError("F01: refused")
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        value, caught = recorded(ok, 3)
+        assert value == 3 and [str(w.message) for w in caught] == ["passes did not settle"]
+        assert not seen
+        with pytest.raises(DataError, match="refused"):
+            recorded(fails, 3)
+        assert [str(w.message) for w in seen] == ["the cause"]
+        with pytest.raises(DataError, match="refused"):
+            recorded(fails, 3, show_on_failure=False)
+        assert len(seen) == 1
+
+
+def test_a_candidate_failing_numerically_is_reported_not_raised():
+    def estimate(p):
+        raise np.linalg.LinAlgError("Matrix is not positive definite")
+
+    best, shown = choose_accel_noise((_Sol(10.0), []), InmParams(), estimate)
+    report = best.identification["accel_noise_mps2"]
+    assert report["value"] == 1e-3 and "positive definite" in report["failed"]["0.0005"]
 
 
 def test_only_a_strapdown_flight_with_gnss_and_no_given_noise_chooses():

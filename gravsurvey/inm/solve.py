@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError, DataError
+from ..errors import ConfigError, DataError, GravsurveyError
 from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, local_displacement, mat_en, mat_ie
 from ..filters import centred_mean
 from .errormodel import (
@@ -404,7 +404,8 @@ def choose_accel_noise(first, params: InmParams, estimate):
     (:func:`gravsurvey.inm.kalman.log_likelihood`).  A candidate replaces the estimate before it
     only when more likely by :data:`ACCEL_NOISE_GAIN_Z` standard errors
     (:func:`gravsurvey.inm.kalman.likelihood_gain_z`); the search stops at the first that is
-    not, or that fails (DataError; its warnings are not shown).
+    not, or that fails (a GravsurveyError or a numerical failure; reported, its warnings not
+    shown).
 
     Parameters
     ----------
@@ -431,7 +432,9 @@ def choose_accel_noise(first, params: InmParams, estimate):
             continue
         try:
             other, caught = recorded(estimate, dataclasses.replace(params, accel_noise_mps2=v), False)
-        except DataError as exc:
+        except (GravsurveyError, np.linalg.LinAlgError, FloatingPointError) as exc:
+            # a candidate that cannot be estimated is no reason to fail a flight the default
+            # estimated: reported, and the search ends
             failed[f"{v:.3g}"] = str(exc).splitlines()[0]
             break
         z = likelihood_gain_z(other.log_likelihood_epochs, best.log_likelihood_epochs)
