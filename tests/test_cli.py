@@ -126,6 +126,10 @@ def test_sample_survey_end_to_end(sample_run):
         assert f"{fname}: model: anomaly sigma {sigma:.3g} mGal, {ident['anomaly_sigma_mps2']['how']}" in log
         assert f"{fname}: drift: " in log
         if name == "grid_ros2":
+            # strapdown with GNSS: the accelerometer noise chosen by likelihood, in both
+            acc = ident["accel_noise_mps2"]
+            assert acc["value"] in (1e-3, 5e-4, 2.5e-4) and "0.001" in acc["log_likelihood"]
+            assert f"horizontal accelerometer noise {acc['value']:.3g} m/s^2 in 1 s, {acc['how']}" in log
             # short straight stretches pooled: a fact of the fit (summary.json), not a warning
             assert any("pooled" in n for n in ident["notes"]) and not ident["warnings"]
     if name == "grid_ros2":

@@ -293,6 +293,7 @@ def test_the_log_states_the_identified_model_and_the_drift():
         "anomaly_sigma_mps2": {"value": 3.2 * MGAL, "sigma_factor": None, "how": "least expected error"},
         "anomaly_lambda_per_m": {"value": 1.0 / 25_000.0, "sigma_factor": None, "how": "least expected error"},
         "altimeter_sigma_m": {"value": 0.05, "sigma_factor": 1.04, "how": "identified"},
+        "accel_noise_mps2": {"value": 2.5e-4, "sigma_factor": None, "how": "filter likelihood"},
         "resolution_m": 4200.0,
         "expected_error_mgal": 0.41,
         "smoother_sigma_scale": 0.62,
@@ -302,6 +303,7 @@ def test_the_log_states_the_identified_model_and_the_drift():
     lines = identification_log_lines(e)
     assert lines[0].startswith("F01: model: anomaly sigma 3.2 mGal, least expected error")
     assert "anomaly correlation length 25 km" in lines[0] and "height noise 0.05 m (x/ 1.04), identified" in lines[0]
+    assert "horizontal accelerometer noise 0.00025 m/s^2 in 1 s, filter likelihood" in lines[0]
     assert "resolution 4.2 km" in lines[0] and "expected error 0.41 mGal" in lines[0]
     assert "smoother's sigma x 0.62 for the field seen" in lines[0]
     # the product's sigma is the smoother's times that factor (no drift or missed field here)
