@@ -538,15 +538,7 @@ def estimate_anomaly(
 
 
 def _estimate_once(
-    record,
-    params: InmParams,
-    initial: InitialState | None,
-    triad: str,
-    ellipsoid: Ellipsoid = WGS84,
-    attitude_deg=None,
-    reference: bool = False,
-    gnss_lever_arm_t=None,
-    likelihood: bool = False,
+    record, params, initial, triad, ellipsoid, attitude_deg, reference, gnss_lever_arm_t, likelihood=False
 ) -> InmSolution:
     """:func:`estimate_anomaly` with the model's accelerometer noise as it is (same arguments);
     ``likelihood``: also the last pass's log-likelihood (``InmSolution.log_likelihood``)."""
