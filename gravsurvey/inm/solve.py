@@ -353,7 +353,7 @@ PASSES_GROWTH_TILT_RAD = math.radians(0.01)
 #: (quick U001 0.58 -> 0.83 mGal; docs/benchmarks.md, "Accelerometer noise by likelihood").
 ACCEL_NOISE_CANDIDATES_MPS2 = (5.0e-4, 2.5e-4)
 #: A candidate replaces the one before it only when its likelihood is this many standard errors
-#: higher (:func:`gravsurvey.inm.kalman.likelihood_gain_z`): differences of tens in the total
+#: higher (:func:`gravsurvey.inm.kalman.likelihood_gain_z`): small differences in the total
 #: log-likelihood go either way (quick U1659: +3.2, 0.30 standard errors, 1.21 -> 1.73 x the
 #: bound; docs/benchmarks.md, "Accelerometer noise by likelihood").
 ACCEL_NOISE_GAIN_Z = 2.0
