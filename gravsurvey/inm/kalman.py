@@ -975,7 +975,7 @@ def log_likelihood(p_p, innov, z, h, r) -> np.ndarray:
     hk = np.where(ok[:, :, None], h, 0.0)
     s = np.matmul(np.matmul(hk, p_p), hk.transpose(0, 2, 1))
     # missing components: a unit diagonal, nothing to the determinant
-    s = np.where(pair, s + np.where(pair, r, 0.0), np.eye(ok.shape[1])[None])
+    s = np.where(pair, s + r, np.eye(ok.shape[1])[None])
     _, logdet = np.linalg.slogdet(s)
     v = np.where(ok, innov, 0.0)
     return -0.5 * (logdet + np.sum(v * v, axis=1))

@@ -376,19 +376,22 @@ def recorded(estimate, params, show_on_failure: bool = True):
     """``(estimate(params), warnings it raised)``, the warnings not shown.  An estimate that fails
     (DataError) shows its warnings before the error goes on (they often name its cause), unless
     ``show_on_failure`` is false."""
-    caught = []
-    try:
-        with warnings.catch_warnings(record=True) as seen:
-            warnings.simplefilter("always")
-            try:
-                return estimate(params), list(seen)
-            finally:
-                caught = list(seen)
-    except DataError:
-        if show_on_failure:
-            for w in caught:
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        raise
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            return estimate(params), list(caught)
+        except DataError as exc:
+            error = exc
+    # shown once the recording has ended, or they would be recorded again
+    if show_on_failure:
+        show_warnings(caught)
+    raise error
+
+
+def show_warnings(caught) -> None:
+    """Show warnings recorded earlier (``warnings.WarningMessage``), each as first raised."""
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
 def choose_accel_noise(first, params: InmParams, estimate):
@@ -532,8 +535,7 @@ def estimate_anomaly(
     # the warnings of an estimate are shown only for the one returned
     first = recorded(estimate, params)
     sol, shown = choose_accel_noise(first, params, estimate) if chooses_accel_noise(params, triad, first[0]) else first
-    for w in shown:
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    show_warnings(shown)
     return sol
 
 
