@@ -54,7 +54,8 @@ carrier-phase grade and its heights the only height channel (:func:`with_carrier
 ``--gravimeter-drift MGAL_PER_H`` adds a linear gravimeter drift (:func:`with_gravimeter_drift`);
 ``--gravimeter-tare AT,MGAL`` a step of the gravimeter's reading at the fraction ``AT`` of the
 flight (:func:`with_gravimeter_tare`);
-``--gnss-markov SIGMA_M,TAU_S`` a slowly varying GNSS error (:func:`with_gnss_markov`).
+``--gnss-markov SIGMA_M,TAU_S`` a slowly varying GNSS error (:func:`with_gnss_markov`);
+``--line-levels DZ_M`` flies every second line DZ_M higher (:func:`with_line_levels`).
 Uses public API only.
 """
 
@@ -522,6 +523,18 @@ def with_gravimeter_tare(spec: dict, at: float, mgal: float) -> dict:
     return out
 
 
+def with_line_levels(spec: dict, dz_m: float) -> dict:
+    """The drawn flight with its lines at two levels: line ``i`` at the drawn altitude plus
+    ``(i % 2) * dz_m`` (a survey flown at several levels, or a loose drape: the field differs
+    between neighbouring lines by its vertical change too).  The name is unchanged, the cache
+    folder's hash differs."""
+    out = json.loads(json.dumps(spec))
+    plan = out["sim"]["flights"][0]["plan"]
+    alt = float(plan["altitude_m"])
+    plan["lines"]["altitudes_m"] = [alt, alt + float(dz_m)]
+    return out
+
+
 def with_carrier_phase_gnss(spec: dict) -> dict:
     """The drawn flight with carrier-phase (PPK) GNSS and no altimeter of its own: the GNSS
     heights carry the drawn altimeter's white noise (``sigma_m``, at the GNSS rate), the
@@ -859,6 +872,13 @@ def main(argv=None):
         help="add a Gauss-Markov GNSS error: SIGMA_M in height (half east and north), correlation "
         "time TAU_S (docs/benchmarks.md 'A slowly varying GNSS height error')",
     )
+    ap.add_argument(
+        "--line-levels",
+        type=float,
+        default=None,
+        metavar="DZ_M",
+        help="fly every second line DZ_M higher (docs/benchmarks.md 'Lines at two levels')",
+    )
     a = ap.parse_args(argv)
     if a.flights < 1:
         ap.error("--flights must be >= 1")
@@ -900,6 +920,8 @@ def main(argv=None):
             spec = with_gravimeter_tare(spec, *tare)
         if gnss_markov is not None:
             spec = with_gnss_markov(spec, *gnss_markov)
+        if a.line_levels is not None:
+            spec = with_line_levels(spec, a.line_levels)
         row = run_flight(spec, a.cache, tuple(a.runs.split(",")), a.heights, model)
         rows.append(row)
         print(

@@ -519,6 +519,26 @@ def test_gravimeter_tare_is_added_to_the_draw():
     assert bench._spec_hash(dr) != bench._spec_hash(sp)
 
 
+def test_line_levels_fly_every_second_line_higher():
+    """``bench_unseen.py --line-levels DZ``: line ``i`` at the drawn altitude plus ``(i % 2) DZ``
+    in the plan the simulator builds, the rest of the draw as it was, in a cache folder of its
+    own."""
+    from gravsurvey.simulate.trajectory import grid_lines
+
+    bench = _bench()
+    sp = U.limit_spec(U.draw_flight_spec(5), 2400.0, 50.0)
+    lv = bench.with_line_levels(sp, 400.0)
+    plan, plan0 = lv["sim"]["flights"][0]["plan"], sp["sim"]["flights"][0]["plan"]
+    alt = plan0["altitude_m"]
+    assert plan["lines"]["altitudes_m"] == [alt, alt + 400.0]
+    assert {k: v for k, v in plan["lines"].items() if k != "altitudes_m"} == plan0["lines"]
+    assert {k: v for k, v in plan.items() if k != "lines"} == {k: v for k, v in plan0.items() if k != "lines"}
+    assert bench._spec_hash(lv) != bench._spec_hash(sp)
+    heights = [line[4] for line in grid_lines(plan)]
+    assert len(heights) >= 2
+    assert heights == [alt + 400.0 * (i % 2) for i in range(len(heights))]
+
+
 def test_issue_flights_table_counts_against_the_issues_ratio(capsys):
     """benchmarks/bench_issue_flights.py: each flight's default / bound is set against the
     issue's goal over its bound (A: 0.40 over 0.29-0.39 mGal), strict and generous end; a
