@@ -14,6 +14,7 @@ from gravsurvey.inm.errormodel import (  # noqa: E402
     DQ,
     F3,
     G,
+    TH,
     AltimeterMeasurement,
     discretise,
     epoch_geometry,
@@ -152,8 +153,14 @@ def test_altimeter_samples_fill_their_epochs_slots_in_time_order():
             assert np.isfinite(z[kk, s])
             assert r[kk, s, s] == (9.0 if j == 7 else 4.0)
             np.testing.assert_allclose(h[kk, s, DP], (t - t_ep[kk]) * h[kk, s, DQ], rtol=1e-12, atol=1e-15)
-            other = np.setdiff1d(np.arange(n_state), DP)
+            other = np.setdiff1d(np.arange(n_state), np.concatenate([DP, TH]))
             np.testing.assert_array_equal(h[kk, s, other], h[kk, 0, other])  # the epoch's geometry
+            if n_state == 14:
+                # theta's row is the epoch's plus the offset times cos(a) (n x p), |p| ~ 400 m/s:
+                # the slots, 0.2 s apart, step by the same amount
+                slope = h[kk, 1, TH] - h[kk, 0, TH]
+                assert 50.0 < np.linalg.norm(slope) < 120.0
+                np.testing.assert_allclose(h[kk, s, TH] - h[kk, 0, TH], s * slope, rtol=0, atol=1e-6)
         for kk in range(idx.size):
             assert np.isnan(z[kk, filled[kk] :]).all()
             assert not h[kk, filled[kk] :].any()
