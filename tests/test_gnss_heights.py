@@ -92,8 +92,8 @@ def test_gnss_heights_enter_the_filter_once(seed, ratio, monkeypatch):
     """The same heights as the height measurement and again as GNSS's up, their errors taken
     as independent, weigh the vertical channel as two receivers. Under one model, counted once
     against twice, measured on seeds 0-5: 0.39 / 0.40, 1.43 / 1.68, 1.55 / 1.93, 0.55 / 0.97,
-    0.82 / 1.10, 1.07 / 1.47 mGal (seed 0 was 0.38 / 0.41 before the offset fixes' d [p x] term
-    of 2026-12-06; and with the default identification on 69 quick unseen flights with their
+    0.82 / 1.10, 1.07 / 1.47 mGal (seed 0 was 0.38 / 0.41 before the measurement model's offset
+    term of 2026-12-06; and with the default identification on 69 quick unseen flights with their
     GNSS heights as the height channel: 24 better by more than 5 %, 2 worse, where the
     identified prior differs; docs/benchmarks.md)."""
     s, rec, init = _gnss_height_flight(seed)

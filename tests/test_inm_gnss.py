@@ -164,7 +164,7 @@ def test_gnss_measurement_geometry():
 def test_offset_measurements_see_the_attitude_error_move_the_position():
     """A fix ``d`` from its epoch sees the true position error there, ``C (dq + q x theta) + d C
     (dp + p x theta)``: the ``d [p x]`` term on theta carries the inertial velocity (~450 m/s),
-    so without it a 0.03-deg attitude error was 0.1 m wrong at d = 0.4 s, each fix against its
+    so without it a 0.03-deg attitude error was 0.08 m wrong at d = 0.4 s, each fix against its
     epoch (a strapdown flight in turbulence, aligned in motion, settled on gyro biases 30 sigma
     off; docs/benchmarks.md, "Fixes between the filter's epochs")."""
     tr = parallel_flight(60.0, triad="strapdown", yaw_rate=0.02)

@@ -817,7 +817,7 @@ class AltimeterMeasurement:
         h[kc, sc, DP[None, :]] = d[:, None] * q0_t[k]
         if n_state >= N_STATE_AIDED:
             # the offset moves the true error by d (dp + p x theta), p the inertial velocity
-            # (~450 m/s): a 0.1-deg attitude error is 0.2 m at d = 0.25 s, ten altimeter sigmas
+            # (~450 m/s): a 0.1-deg attitude error is 0.2 m at d = 0.25 s, ten sigmas of a 2-cm altimeter
             p_t = np.einsum("nji,nj->ni", nav.mat_it[idx], nav.v_i[idx])
             h[kc, sc, TH[None, :]] = h_th[k] + d[:, None] * np.cross(q0_t, p_t)[k]
         return z, h, r
