@@ -19,7 +19,7 @@ import pytest
 
 from gravsurvey.errors import DataError
 from gravsurvey.geodesy import MGAL
-from gravsurvey.inm import solve
+from gravsurvey.inm import identify, solve
 from gravsurvey.inm.params import InmParams
 from gravsurvey.inm.solve import choose_accel_noise, chooses_accel_noise, estimate_anomaly, recorded
 from gravsurvey.simulate.run import simulate_flight
@@ -185,3 +185,35 @@ def _nan_sol():
     sol = _Sol(float("nan"))
     sol.gnss_aided = True
     return sol
+
+
+def test_the_estimates_tried_share_the_first_mechanization_and_equal_one_run_alone(quiet_imu_strapdown, monkeypatch):
+    # the first mechanization, the height checks on it and the vertical channel's spectral fits
+    # do not depend on the accelerometer noise: found once per flight, and each estimate tried
+    # is the one it would be alone
+    _, _, rec, init = quiet_imu_strapdown
+    stages, fits = [], []
+    real_stage, real_fit = solve.first_stage, identify.fit_vertical_spectrum
+
+    def counted_stage(*args, **kwargs):
+        stages.append(args)
+        return real_stage(*args, **kwargs)
+
+    def counted_fit(*args, **kwargs):
+        fits.append(args)
+        return real_fit(*args, **kwargs)
+
+    monkeypatch.setattr(solve, "first_stage", counted_stage)
+    monkeypatch.setattr(identify, "fit_vertical_spectrum", counted_fit)
+    chosen = estimate_anomaly(rec, InmParams(), init, "strapdown")
+    value = chosen.identification["accel_noise_mps2"]["value"]
+    assert len(chosen.identification["accel_noise_mps2"]["log_likelihood"]) >= 2
+    n_stages, n_fits = len(stages), len(fits)
+    alone = estimate_anomaly(
+        rec, InmParams(accel_noise_mps2=value, given=frozenset({"accel_noise_mps2"})), init, "strapdown"
+    )
+    assert n_stages == 1 and len(stages) == 2
+    assert n_fits > 0 and len(fits) == 2 * n_fits
+    np.testing.assert_array_equal(chosen.g_smooth, alone.g_smooth)
+    np.testing.assert_array_equal(chosen.sigma_smooth, alone.sigma_smooth)
+    np.testing.assert_array_equal(chosen.gyro_bias_t, alone.gyro_bias_t)

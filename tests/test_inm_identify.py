@@ -918,3 +918,32 @@ def test_median_ground_speed_sorts_the_fixes_and_takes_short_records():
     assert abs(median_ground_speed(t[perm], lat[perm], lon[perm], h[perm]) - 60.0) < 0.2
     # a record shorter than the baseline: the fixes it has
     assert abs(median_ground_speed(t[:10], lat[:10], lon[:10], h[:10], baseline_s=5.0) - 60.0) < 5.0
+
+
+def test_digest_tells_arrays_apart_by_value_dtype_and_shape():
+    a = np.arange(6.0)
+    assert I.digest(a) == I.digest(a.copy()) == I.digest(a[::1])
+    assert I.digest(a) != I.digest(a + 1e-12)
+    assert I.digest(a) != I.digest(a.astype(np.float32))
+    assert I.digest(a) != I.digest(a.reshape(2, 3))
+    # order and grouping of the arrays matter (a memo's key of several inputs)
+    assert I.digest(a[:3], a[3:]) != I.digest(a[3:], a[:3])
+    assert I.digest(np.array([True, False])) != I.digest(np.array([False, True]))
+    # a strided view hashes its values, as a copy would
+    assert I.digest(a[::2]) == I.digest(np.array([0.0, 2.0, 4.0]))
+
+
+def test_memoised_computes_once_per_key_and_every_time_without_a_memo():
+    calls = []
+
+    def fn(x, scale=1.0):
+        calls.append(x)
+        return x * scale
+
+    memo = {}
+    assert I.memoised(memo, "k", fn, 2.0, scale=3.0) == 6.0
+    assert I.memoised(memo, "k", fn, 2.0, scale=3.0) == 6.0
+    assert I.memoised(memo, "other", fn, 2.0) == 2.0
+    assert len(calls) == 2
+    assert I.memoised(None, "k", fn, 2.0) == I.memoised(None, "k", fn, 2.0) == 2.0
+    assert len(calls) == 4

@@ -43,6 +43,7 @@ resolution (:func:`filter_height_sigma`).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
 from dataclasses import dataclass
 
@@ -1054,7 +1055,29 @@ def height_noise_density(nav, f_t, time, height, ellipsoid: Ellipsoid = WGS84, w
     return s * s * fit.dt_s, s, float(fit.dt_s), (found[1] if found is not None else 0.0)
 
 
-def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, ellipsoid: Ellipsoid = WGS84):
+def digest(*arrays) -> str:
+    """A fingerprint of arrays' dtypes, shapes and values (a memo's key)."""
+    h = hashlib.blake2b(digest_size=16)
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(repr((a.dtype.str, a.shape)).encode())
+        h.update(memoryview(a).cast("B"))
+    return h.hexdigest()
+
+
+def memoised(memo: dict | None, key, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)``, kept in ``memo`` under ``key`` and returned from there when asked
+    again (``memo`` None: computed every time).  The result is shared, never to be changed."""
+    if memo is None:
+        return fn(*args, **kwargs)
+    if key not in memo:
+        memo[key] = fn(*args, **kwargs)
+    return memo[key]
+
+
+def identify_params(
+    params, nav, f_t, alt_time, alt_height, speed_mps: float, ellipsoid: Ellipsoid = WGS84, memo: dict | None = None
+):
     """Identify the ``model:`` noise levels and anomaly prior of one flight.
 
     Keys the user set in the config (``params.given``) are held fixed; the others are
@@ -1072,6 +1095,11 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
         Finite altimeter samples.
     speed_mps : float
         Typical ground speed on the straight stretches, m/s (converts time to space).
+    ellipsoid : Ellipsoid
+    memo : dict, optional
+        The vertical channel's spectral fits by their inputs (the residual, the manoeuvres and
+        the noise levels held): identifications of one flight with other accelerometer noise
+        (which enters only through the tilt leak, after the fits) share them.
 
     Returns
     -------
@@ -1112,13 +1140,19 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
     # and held in the fit it made the white level absorb the misfit (a random-walk prior of 283
     # mGal fixed on quick unseen U006: white 69 mGal in 1 s, 16.9 mGal off for 1.9 by default)
     noise_fixed = {k: val for k, val in fixed.items() if k in NOISE_KEYS}
-    fit = fit_vertical_spectrum(t, e, man, fixed=noise_fixed)
+    # the fits below are functions of these inputs alone
+    data = digest(t, e, man) if memo is not None else None
+
+    def fitted(name, fn, *args, **kwargs):
+        return memoised(memo, (name, data, repr(sorted(kwargs.items())), repr(args[3:])), fn, *args, **kwargs)
+
+    fit = fitted("fit", fit_vertical_spectrum, t, e, man, fixed=noise_fixed)
     whole_flight = False
     if fit is None:
         # no straight stretches long enough (a flight of turns): the noise levels from the whole
         # flight; the turns' attitude-error leak then counts as noise, which errs on the side of
         # smoothing
-        fit = fit_vertical_spectrum(t, e, None, fixed=noise_fixed)
+        fit = fitted("whole", fit_vertical_spectrum, t, e, None, fixed=noise_fixed)
         whole_flight = fit is not None
         if fit is not None:
             report["warnings"].append(
@@ -1146,7 +1180,7 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
     if not whole_flight and "altimeter_sigma_m" not in given:
         # the height wander (WALK_MIN_LOG_LR): fitted as a fifth parameter, kept only when the
         # likelihood prefers it clearly
-        found = fit_height_wander(t, e, man, fit, noise_fixed)
+        found = fitted("wander", fit_height_wander, t, e, man, fit, noise_fixed)
         if found is not None:
             wfit, lr, where, whole_said = found
             report["height_walk"] = {
@@ -1213,7 +1247,7 @@ def identify_params(params, nav, f_t, alt_time, alt_height, speed_mps: float, el
             # the datasheet's (the Hessian's factor is local, and the likelihood is flat in the
             # white level below the anomaly's; where the leak is taken off, white_less_tilt_leak
             # floors the remainder at the datasheet figure already)
-            held = white_log_likelihood_ratio(t, e, man, fit, noise_fixed)
+            held = fitted("white", white_log_likelihood_ratio, t, e, man, fit, noise_fixed)
             report["white_log_likelihood_ratio"] = held
             if held < WHITE_MIN_LOG_LR:
                 m = dataclasses.replace(m, white_mps2=WHITE_DEFAULT_MPS2)

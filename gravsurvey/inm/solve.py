@@ -529,9 +529,20 @@ def estimate_anomaly(
     (:func:`choose_accel_noise`; docs/method.md, "Accelerometer noise by likelihood").
     """
 
+    shared = {}  # the first stage, found by the first estimate (_estimate_once)
+
     def estimate(p):
         return _estimate_once(
-            record, p, initial, triad, ellipsoid, attitude_deg, reference, gnss_lever_arm_t, likelihood=True
+            record,
+            p,
+            initial,
+            triad,
+            ellipsoid,
+            attitude_deg,
+            reference,
+            gnss_lever_arm_t,
+            likelihood=True,
+            shared=shared,
         )
 
     if not may_choose_accel_noise(params, triad):
@@ -543,11 +554,77 @@ def estimate_anomaly(
     return sol
 
 
+@dataclasses.dataclass(frozen=True)
+class FirstStage:
+    """The first mechanization of a flight and the height channels' checks on it
+    (:func:`first_stage`): what every accelerometer noise :func:`estimate_anomaly` tries
+    starts from.
+
+    ``record``: the record with its height channels repaired (and the altimeter moved onto
+    the GNSS heights where those are weighed); ``nav``: its mechanization about the initial
+    state; ``speed_mps``: the flight's typical speed; ``gnss_up``: the GNSS heights' noise
+    report (or None); ``gnss_vertical_sigma_m``: their noise where they are weighed by it
+    (m; None: the configured figure stays); ``height_warnings``, ``height_facts``: the
+    repairs' warnings and report; ``caught``: the warnings raised meanwhile
+    (``warnings.WarningMessage``), shown by each estimate that uses the stage.
+    """
+
+    record: object
+    nav: object
+    speed_mps: float
+    gnss_up: dict | None
+    gnss_vertical_sigma_m: float | None
+    height_warnings: tuple
+    height_facts: dict
+    caught: tuple
+
+
+def first_stage(record, params, initial, ellipsoid, reference, gnss_heights) -> FirstStage:
+    """The first mechanization about ``initial`` and the height channels' faults found and
+    repaired against it (:class:`FirstStage`).  ``params``: the configuration's (its
+    accelerometer noise is not read); ``gnss_heights``: the height channel is the GNSS's own
+    heights."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        nav = _mechanize(record, params, initial, ellipsoid, reference)
+        # the height channel's spikes, frozen stretches, steps and latency, found against
+        # this first mechanization, repaired before anything reads the heights (and the
+        # flight mechanized again: the gravity model's radius may come from them)
+        record, height_warnings, height_facts = _repaired_heights(record, nav, ellipsoid)
+        if not gnss_heights:
+            # the GNSS heights enter as the position's up component: their steps (a float
+            # stretch, a new ambiguity fix) read as gravity as the altimeter's would
+            record, gnss_height_warnings, gnss_height_facts = _repaired_gnss_heights(record, nav, ellipsoid)
+            height_warnings = height_warnings + gnss_height_warnings
+            if gnss_height_facts:
+                height_facts = {**height_facts, "gnss": gnss_height_facts}
+        gnss_up, sigma = None, None
+        if not gnss_heights and params.identify and "gnss_vertical_sigma_m" not in params.given:
+            weighed = _gnss_height_sigma(record, nav, ellipsoid)
+            if weighed is not None and weighed[1] is not None:
+                # GNSS heights quieter than the altimeter's: weighed by their own noise, not
+                # the default figure (every pass, the identification's first pass too), the
+                # altimeter moved onto them (two channels metres apart, both weighed, made
+                # the estimate jump at every gap of one of them: 64 mGal)
+                gnss_up, record = weighed
+                sigma = gnss_up["value"]
+            elif weighed is not None:
+                # quieter but wandering: reported, not weighed
+                gnss_up = weighed[0]
+        if height_warnings or (gnss_up is not None and gnss_up["value"] is not None):
+            nav = _mechanize(record, params, initial, ellipsoid, reference)
+        speed = _typical_speed(record, nav, ellipsoid)
+    return FirstStage(record, nav, speed, gnss_up, sigma, tuple(height_warnings), height_facts, tuple(caught))
+
+
 def _estimate_once(
-    record, params, initial, triad, ellipsoid, attitude_deg, reference, gnss_lever_arm_t, likelihood=False
+    record, params, initial, triad, ellipsoid, attitude_deg, reference, gnss_lever_arm_t, likelihood=False, shared=None
 ) -> InmSolution:
     """:func:`estimate_anomaly` with the model's accelerometer noise as it is (same arguments);
-    ``likelihood``: also the last pass's log-likelihood (``InmSolution.log_likelihood``)."""
+    ``likelihood``: also the last pass's log-likelihood (``InmSolution.log_likelihood``);
+    ``shared``: a dict shared by the estimates of one flight, holding (key ``"stage"``) the
+    :class:`FirstStage` the first of them found and (key ``"fits"``) the identification's
+    spectral fits (:func:`gravsurvey.inm.identify.identify_params`'s ``memo``)."""
     if triad not in TRIADS:
         raise ConfigError(f"triad: expected 'platform' or 'strapdown', got {triad!r}")
     _check_record(record)
@@ -591,36 +668,23 @@ def _estimate_once(
     k = -1
     while k + 1 < limit:
         k += 1
-        nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
         if k == 0 and gnss_latency is None:
-            # the height channel's spikes, frozen stretches, steps and latency, found against
-            # this first mechanization, repaired before anything reads the heights (and the
-            # flight mechanized again: the gravity model's radius may come from them)
-            record, height_warnings, height_facts = _repaired_heights(record, nav, ellipsoid)
-            if not gnss_heights:
-                # the GNSS heights enter as the position's up component: their steps (a float
-                # stretch, a new ambiguity fix) read as gravity as the altimeter's would
-                record, gnss_height_warnings, gnss_height_facts = _repaired_gnss_heights(record, nav, ellipsoid)
-                height_warnings = height_warnings + gnss_height_warnings
-                if gnss_height_facts:
-                    height_facts = {**height_facts, "gnss": gnss_height_facts}
-            gnss_up = None
-            if not gnss_heights and given_params.identify and "gnss_vertical_sigma_m" not in given_params.given:
-                weighed = _gnss_height_sigma(record, nav, ellipsoid)
-                if weighed is not None and weighed[1] is not None:
-                    # GNSS heights quieter than the altimeter's: weighed by their own noise, not
-                    # the default figure (every pass, the identification's first pass too), the
-                    # altimeter moved onto them (two channels metres apart, both weighed, made
-                    # the estimate jump at every gap of one of them: 64 mGal)
-                    gnss_up, record = weighed
-                    given_params = dataclasses.replace(given_params, gnss_vertical_sigma_m=gnss_up["value"])
-                    params = dataclasses.replace(params, gnss_vertical_sigma_m=gnss_up["value"])
-                elif weighed is not None:
-                    # quieter but wandering: reported, not weighed
-                    gnss_up = weighed[0]
-            if height_warnings or (gnss_up is not None and gnss_up["value"] is not None):
-                nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
-            speed0 = _typical_speed(record, nav, ellipsoid)
+            # the first mechanization and the height channels' checks on it: the same for every
+            # accelerometer noise tried, so found once and shared
+            if shared is None or "stage" not in shared:
+                stage = first_stage(record, given_params, cur, ellipsoid, reference, gnss_heights)
+                if shared is not None:
+                    shared["stage"] = stage
+            else:
+                stage = shared["stage"]
+            show_warnings(stage.caught)
+            record, nav, speed0, gnss_up = stage.record, stage.nav, stage.speed_mps, stage.gnss_up
+            height_warnings, height_facts = list(stage.height_warnings), dict(stage.height_facts)
+            if stage.gnss_vertical_sigma_m is not None:
+                given_params = dataclasses.replace(given_params, gnss_vertical_sigma_m=stage.gnss_vertical_sigma_m)
+                params = dataclasses.replace(params, gnss_vertical_sigma_m=stage.gnss_vertical_sigma_m)
+        else:
+            nav = _mechanize(record, params, cur, ellipsoid, reference, gyro_bias_t)
         # a platform's triad is levelled: an antenna offset turns with the aircraft, whose
         # attitude comes from the track
         body_i = (
@@ -647,7 +711,8 @@ def _estimate_once(
             gap_accel_sigma_mps2=gap_sigma,
         )
         if given_params.identify and reidentify:
-            params, ident = _identify(record, given_params, nav, ellipsoid, speed0, one_pass, accel_bias)
+            memo = None if shared is None else shared.setdefault("fits", {})
+            params, ident = _identify(record, given_params, nav, ellipsoid, speed0, one_pass, accel_bias, memo)
             ident["identified_in_pass"] = k + 1
             reidentify = False
         idx, c, gnss_used, n_state, out = one_pass(params, accel_bias=accel_bias)
@@ -1513,15 +1578,18 @@ def _mechanize(record, params, initial, ellipsoid, reference, gyro_bias_t=None):
     )
 
 
-def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False):
+def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False, memo=None):
     """Identify the model from the flight (gravsurvey.inm.identify; docs/method.md).
 
     1) noise levels from the vertical channel's spectrum; 2) a first pass with a wide anomaly
     prior; 3) the prior that minimises the expected error given that estimate's spectrum.
-    ``one_pass(params, **kw)``: :func:`_one_pass` bound to the current linearisation point.
+    ``one_pass(params, **kw)``: :func:`_one_pass` bound to the current linearisation point;
+    ``memo``: the spectral fits shared by the flight's estimates (:func:`identify_params`).
     """
     alt_t, alt_h = _altimeter(record)
-    params, ident = identify_params(params, nav, record.imu.specific_force_t, alt_t, alt_h, speed0, ellipsoid)
+    params, ident = identify_params(
+        params, nav, record.imu.specific_force_t, alt_t, alt_h, speed0, ellipsoid, memo=memo
+    )
     if nav.time[-1] - nav.time[0] < MIN_REFINE_S:
         # too short to see the field's spectrum: the noise levels stay identified, the anomaly
         # prior is the configured or default (broad) one
