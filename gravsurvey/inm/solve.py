@@ -406,7 +406,9 @@ def choose_accel_noise(first, params: InmParams, estimate):
     leaves to them rather than to attitude and gyro bias.  Each candidate of
     :data:`ACCEL_NOISE_CANDIDATES_MPS2` below ``params.accel_noise_mps2`` runs the whole
     estimate (its own passes converge about its own linearisation: compared about the
-    default's, the default is always the more likely, since its passes settled there), and the
+    default's, the default is always the more likely, since its passes settled there; what
+    does not depend on the noise, the first mechanization, the height checks on it and the
+    identification's spectral fits, ``estimate`` may share with the default's), and the
     estimates compare by their last pass's log-likelihood of the same measurements
     (:func:`gravsurvey.inm.kalman.log_likelihood`).  A candidate replaces the estimate before it
     only when more likely by :data:`ACCEL_NOISE_GAIN_Z` standard errors
@@ -526,10 +528,13 @@ def estimate_anomaly(
     likelihood: the whole estimate (every pass) runs again with each of
     :data:`ACCEL_NOISE_CANDIDATES_MPS2` below the default while each is clearly more likely than
     the one before (:data:`ACCEL_NOISE_GAIN_Z` standard errors), and the last such is returned
-    (:func:`choose_accel_noise`; docs/method.md, "Accelerometer noise by likelihood").
+    (:func:`choose_accel_noise`; docs/method.md, "Accelerometer noise by likelihood").  The
+    estimates share the work the noise does not change (:class:`FirstStage`, the spectral
+    fits); each is, to the bit, the estimate with its noise given.
     """
 
-    shared = {}  # the first stage, found by the first estimate (_estimate_once)
+    # what the first estimate found that the others reuse (_estimate_once's ``shared``)
+    shared = {}
 
     def estimate(p):
         return _estimate_once(
