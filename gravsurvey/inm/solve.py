@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import ConfigError, DataError, GravsurveyError
 from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, local_displacement, mat_en, mat_ie
 from ..filters import centred_mean
+from ..io.record import FlightRecord
 from .errormodel import (
     BA,
     BG,
@@ -66,7 +67,7 @@ from .identify import (
     vertical_residual,
 )
 from .kalman import filter_and_smooth, likelihood_gain_z, log_likelihood
-from .mechanization import mechanize, navigation_to_geodetic, rodrigues
+from .mechanization import Navigation, mechanize, navigation_to_geodetic, rodrigues
 from .params import (
     RADPS_PER_DEGPH,
     TRIADS,
@@ -559,7 +560,7 @@ def estimate_anomaly(
     return sol
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclass(frozen=True)
 class FirstStage:
     """The first mechanization of a flight and the height channels' checks on it
     (:func:`first_stage`): what every accelerometer noise :func:`estimate_anomaly` tries
@@ -574,8 +575,8 @@ class FirstStage:
     (``warnings.WarningMessage``), shown by each estimate that uses the stage.
     """
 
-    record: object
-    nav: object
+    record: FlightRecord
+    nav: Navigation
     speed_mps: float
     gnss_up: dict | None
     gnss_vertical_sigma_m: float | None
