@@ -19,7 +19,7 @@ Per round and flight, each variant runs as its own process (``run_flight`` of
 * ``base`` (with ``--base``): the default run by another checkout (e.g. a worktree at the
   commit before a change), paired with this one's.
 
-One process runs first and is not counted, so that the numba cache is filled.  Prints a
+One process per checkout runs first and is not counted, so that its numba cache is filled.  Prints a
 Markdown table, per flight: its length, the estimates the default ran, the mean time of each
 variant over the rounds (s) and its range, and the ratios default / off (the issue asks for at
 most 2) and default / base.  The estimates' RMS against truth is printed beside (the same in
@@ -90,7 +90,8 @@ def run(seeds=SEEDS, quick=False, rounds=2, base=None, cache=None) -> list[dict]
     """Rows of the table (one per flight): times per variant over ``rounds`` rounds."""
     cache = Path(cache) if cache else REPO / "benchmarks" / ".unseen_cache"
     variants = ["default", "off"] + (["base"] if base else [])
-    _run(REPO, seeds[0], quick, cache, "default")  # fills the numba cache; not counted
+    for repo in [REPO] + ([Path(base)] if base else []):
+        _run(repo, seeds[0], quick, cache, "default")  # fills that checkout's numba cache; not counted
     got: dict = {}
     for _ in range(rounds):
         for seed in seeds:
