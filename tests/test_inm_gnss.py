@@ -7,6 +7,7 @@ import pytest
 
 from gravsurvey.errors import ConfigError
 from gravsurvey.geodesy import MGAL, radii_of_curvature
+from gravsurvey.inm.alignment import skew
 from gravsurvey.inm.errormodel import (
     BG,
     DP,
@@ -170,8 +171,7 @@ def test_offset_measurements_see_the_attitude_error_move_the_position():
     tr = parallel_flight(60.0, triad="strapdown", yaw_rate=0.02)
     # a computed attitude off the truth by theta0: C_true = C (I + [theta x])
     th0 = np.array([3e-4, -5e-4, 2e-4])
-    sk0 = np.array([[0.0, -th0[2], th0[1]], [th0[2], 0.0, -th0[0]], [-th0[1], th0[0], 0.0]])
-    init = InitialState(tr["lat"][0], tr["lon"][0], 1000.0, tr["vel_n"][0], tr["mat_nt"][0] @ (np.eye(3) - sk0))
+    init = InitialState(tr["lat"][0], tr["lon"][0], 1000.0, tr["vel_n"][0], tr["mat_nt"][0] @ (np.eye(3) - skew(th0)))
     nav = mechanize(tr["time"], tr["f_t"], tr["w_t"], init, tr["time"][::10], tr["height"][::10])
     idx = np.arange(0, tr["time"].size, 10)
     # the true error state at each epoch, on the triad

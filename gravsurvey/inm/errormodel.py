@@ -967,7 +967,7 @@ class GnssMeasurement:
             p_t = np.einsum("nji,nj->ni", c_k, nav.v_i[idx][k])
             hblk[:, :, TH] = np.einsum("nij,njk->nik", hq, skew(q_t) + d[:, None, None] * skew(p_t))
             if arm and self.body_mat_i is None:
-                hblk[:, :, TH] += hq @ _skew.py_func(self.lever_arm_t)
+                hblk[:, :, TH] += hq @ skew(self.lever_arm_t)
         np.add.at(hsum, k, hblk)
         have = cnt > 0
         z[have] = zsum[have] / cnt[have, None]
