@@ -519,6 +519,45 @@ def test_drift_sigma_holds_what_the_blocks_leave_open_of_the_field(seed, field_s
         assert s == pytest.approx(s_own, rel=0.05) and 0.7 < err / s < 1.5
 
 
+@pytest.mark.parametrize("kernel", ["matern32", "exponential"])
+@pytest.mark.parametrize(
+    "v",
+    [
+        (2.0 * MGAL, 8000.0, 1.0 * MGAL, 700.0, 0.3 * MGAL),
+        (40.0 * MGAL, 60000.0, 0.05 * MGAL, 40.0, 0.02 * MGAL),
+        (0.1 * MGAL, 300.0, 5.0 * MGAL, 20000.0, 2.0 * MGAL),
+    ],
+)
+def test_the_likelihoods_gradient_is_its_derivative(kernel, v):
+    """The fit's analytic gradient (in the logs of the five hyperparameters) against central
+    differences of the likelihood itself, and of the drift's prior, at points across the
+    bounds."""
+    import gravsurvey.drift as drift_module
+
+    t, lat, lon, east, north, lab = survey(lines=4)
+    rng = np.random.default_rng(5)
+    g = field_at(east, north, 5) + markov(t.size, 1.0, 500.0, 1.0 * MGAL, rng)
+    blocks, _ = line_blocks(t, east, north, g, lab, BLOCK_S)
+    y, dist, lag = drift_module._block_geometry(blocks)
+    u = np.log(v)
+    f, grad = drift_module._nll_and_gradient(np.exp(u), dist, lag, y, kernel)
+    assert f == drift_module._neg_log_likelihood(np.exp(u), dist, lag, y, kernel)
+    options = DriftOptions()
+    prior = drift_module._prior_penalty_gradient(np.exp(u), options)
+    h = 1e-4  # smaller steps are below the likelihood's rounding at the ill-conditioned points
+    for i in range(5):
+        step = np.zeros(5)
+        step[i] = h
+        up, down = np.exp(u + step), np.exp(u - step)
+        numeric = (
+            drift_module._neg_log_likelihood(up, dist, lag, y, kernel)
+            - drift_module._neg_log_likelihood(down, dist, lag, y, kernel)
+        ) / (2.0 * h)
+        assert grad[i] == pytest.approx(numeric, rel=1e-4, abs=1e-6), i
+        numeric = (drift_module._prior_penalty(up, options) - drift_module._prior_penalty(down, options)) / (2.0 * h)
+        assert prior[i] == pytest.approx(numeric, rel=1e-6, abs=1e-9), i
+
+
 @pytest.mark.parametrize("seed", [2, 6, 10])
 def test_the_fit_finds_the_best_optimum_whatever_the_plane(seed, monkeypatch):
     """A weak field under a 2.4 mGal drift on four lines has optima along the field's length;
