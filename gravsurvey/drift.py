@@ -864,6 +864,8 @@ def _drift_of_blocks(blocks, lines, block, time, options, resolution_m, fitted=N
     fit = _fit_against_no_drift(blocks, lines, options, datasheet=False, fitted=fitted)
     if fit is None:
         return not_used("the fit failed")
+    ds = datasheet_drift_fit(blocks, lines, options, fit.nll_without_drift)
+    fit = _nested_refit(fit, ds, blocks, options)
     rep = {**fit.report(), "block_s": block}
     field_can_pose = fit.field_sigma_mps2 >= GUARD_FIELD_PER_DRIFT * fit.drift_sigma_mps2
     guard = resolution_m > 0 and fit.field_length_m < MIN_LENGTH_PER_RESOLUTION * resolution_m and field_can_pose
@@ -877,7 +879,6 @@ def _drift_of_blocks(blocks, lines, block, time, options, resolution_m, fitted=N
             **rep,
         )
 
-    ds = datasheet_drift_fit(blocks, lines, options, fit.nll_without_drift)
     ds_ok = ds is not None and ds.log_lr >= DATASHEET_MIN_LOG_LR
     # the fitted drift must be needed under a rough field as well: a field rougher than the
     # smooth model allows (several source depths, lines a few km apart) differs between lines
@@ -921,6 +922,29 @@ def _drift_of_blocks(blocks, lines, block, time, options, resolution_m, fitted=N
         facts = {"reason": reason, **ds.report(), "log_likelihood_ratio": fit.log_lr, "block_s": block}
     report = {"used": True, "model": model, **facts, **tests, "fitted_weight": w}
     return mean, sigma, {**report, "drift_rms_mgal": float(np.std(mean) / MGAL)}
+
+
+def _nested_refit(fit: DriftFit, datasheet: DriftFit | None, blocks, options: DriftOptions) -> DriftFit:
+    """The fitted drift refitted from the datasheet fit's optimum where that is the better
+    point of the fitted model's own objective, else ``fit``.
+
+    The datasheet model is the fitted one with the drift held at the prior's centre (where the
+    prior costs nothing), so the fitted model's best is at least as likely; a start that ends
+    on a worse optimum along the field's length would understate the drift's evidence (quick
+    U1435: ratio 0.06 against the datasheet's 0.61).
+    """
+    if datasheet is None:
+        return fit
+    own = fit.nll_without_drift - fit.log_lr + _prior_penalty(fit.vector, options)
+    nested = datasheet.nll_without_drift - datasheet.log_lr + _prior_penalty(datasheet.vector, options)
+    if not nested < own:
+        return fit
+    y, dist, lag = _block_geometry(np.asarray(blocks, float))
+    refit = _fit(y, dist, lag, options, True, starts=[tuple(datasheet.vector)])
+    better = _fit_against_no_drift(blocks, fit.lines, options, False, fit.nll_without_drift, fitted=refit)
+    if better is None or not refit[0] + _prior_penalty(refit[1], options) < own:
+        return fit
+    return better
 
 
 def fitted_weight(log_lr: float) -> float:

@@ -585,6 +585,42 @@ def test_the_fit_finds_the_best_optimum_whatever_the_plane(seed, monkeypatch):
     assert stretched == pytest.approx(own, abs=0.05)
 
 
+def test_the_fitted_drift_is_at_least_as_likely_as_the_datasheet_drift_it_nests():
+    """The datasheet model is the fitted model with the drift at the prior's centre: a fitted
+    drift left on a worse optimum (here set at a field length 30x off) is refitted from the
+    datasheet's optimum, and ends at least as good on its own objective; a fit already better is
+    kept as it is."""
+    import gravsurvey.drift as drift_module
+
+    t, lat, lon, east, north, lab = survey(lines=4)
+    rng = np.random.default_rng(7)
+    g = field_at(east, north, 7) + markov(t.size, 1.0, 600.0, 1.0 * MGAL, rng)
+    blocks, lines = line_blocks(t, east, north, g, lab, BLOCK_S)
+    options = DriftOptions()
+    fit = fit_drift(blocks, lines, options)
+    ds = datasheet_drift_fit(blocks, lines, options, fit.nll_without_drift)
+    y, dist, lag = drift_module._block_geometry(blocks)
+
+    def objective(f):
+        return f.nll_without_drift - f.log_lr + drift_module._prior_penalty(f.vector, options)
+
+    assert drift_module._nested_refit(fit, ds, blocks, options) is fit
+    assert objective(fit) <= objective(ds) + 1e-6
+    v = ds.vector
+    v[1] *= 30.0
+    nll = drift_module._neg_log_likelihood(v, dist, lag, y)
+    stuck = dataclasses.replace(
+        ds,
+        field_length_m=float(v[1]),
+        log_lr=float(fit.nll_without_drift - nll),
+    )
+    assert objective(stuck) > objective(ds) + 1.0
+    mended = drift_module._nested_refit(stuck, ds, blocks, options)
+    assert objective(mended) <= objective(ds) + 1e-9
+    assert mended.log_lr >= ds.log_lr - 1e-6
+    assert drift_module._nested_refit(stuck, None, blocks, options) is stuck
+
+
 def test_a_drift_is_taken_only_where_a_rough_field_needs_it_too():
     """Quick unseen flight U221 (tests/data/drift_quick_u221.npz: its smoothed estimate on three
     49-km lines 3.4 km apart over a 123 mGal field, and the simulator's drawn gravimeter drift):
