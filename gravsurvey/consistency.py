@@ -755,11 +755,12 @@ def platform_attitude_history(time, gnss, ellipsoid=WGS84) -> np.ndarray:
     return np.einsum("ji,njk->nik", mat_in[0], mat_in)
 
 
-def _matched_windows(record, ellipsoid, triad: str = "strapdown") -> list:
+def _matched_windows(record, ellipsoid, triad: str = "strapdown", gnss_fits: dict | None = None) -> list:
     """:func:`manoeuvre_windows` with the triad's attitude history over each (a strapdown
     triad's from its gyros - only a gyro hypothesis changes it -, a platform's from the GNSS
     track: :func:`platform_attitude_history`) and the velocity-matching residual of the columns
-    as written, m/s; a window with a gap in the GNSS is left out."""
+    as written, m/s; a window with a gap in the GNSS is left out.  ``gnss_fits``: the GNSS side
+    of the matching kept for the hypotheses to come (:func:`gravsurvey.inm.alignment.match_vectors`)."""
     from .inm.alignment import match_residual_rms
     from .inm.mechanization import propagate_attitude
 
@@ -770,7 +771,7 @@ def _matched_windows(record, ellipsoid, triad: str = "strapdown") -> list:
         else:
             c_t0 = propagate_attitude(tt, ww, np.eye(3))
         try:
-            r0 = match_residual_rms(tt, ff, ww, record.gnss, ellipsoid, c_t0=c_t0)
+            r0 = match_residual_rms(tt, ff, ww, record.gnss, ellipsoid, c_t0=c_t0, gnss_fits=gnss_fits)
         except DataError:  # a gap in the window
             continue
         out.append((tt, ff, ww, c_t0, r0))
@@ -799,7 +800,9 @@ def imu_scale_fit(record, ellipsoid=WGS84, triad: str = "strapdown") -> list:
     """
     from .inm.alignment import match_residual_rms
 
-    windows = _matched_windows(record, ellipsoid, triad)
+    # the GNSS side of every match is the same for all the axes and factors tried
+    fits = {}
+    windows = _matched_windows(record, ellipsoid, triad, fits)
     if len(windows) < STRAPDOWN_AXES_MIN_WINDOWS:
         return []
     if float(np.sqrt(np.mean(np.square([w[4] for w in windows])))) <= STRAPDOWN_SCALE_MIN_RESIDUAL_MPS:
@@ -815,7 +818,9 @@ def imu_scale_fit(record, ellipsoid=WGS84, triad: str = "strapdown") -> list:
             else:
                 w2 = ww.copy()
                 w2[:, k] /= s
-            r.append(match_residual_rms(tt, f2, w2, record.gnss, ellipsoid, c_t0=c if q == "f" else None))
+            r.append(
+                match_residual_rms(tt, f2, w2, record.gnss, ellipsoid, c_t0=c if q == "f" else None, gnss_fits=fits)
+            )
         return float(np.sqrt(np.mean(np.square(r))))
 
     out = []
@@ -860,7 +865,9 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
     from .inm.alignment import match_residual_rms
 
     g = record.gnss
-    windows = _matched_windows(record, ellipsoid)
+    # the GNSS side of every match is the same for all the hypotheses but the mirrored tracks
+    fits = {}
+    windows = _matched_windows(record, ellipsoid, gnss_fits=fits)
     if not windows:
         return np.zeros(0), []
     hyps = strapdown_axis_hypotheses()
@@ -873,9 +880,11 @@ def strapdown_axis_fit(record, ellipsoid=WGS84):
     hyps += [(GNSS_SIGN_FAULTS["lat"], ("lat",), None), (GNSS_SIGN_FAULTS["lon"], ("lon",), None)]
     res = [
         [
-            match_residual_rms(tt, *tr(ff, ww), g, ellipsoid, c_t0=None if any(x.startswith("w") for x in q) else c_t0)
+            match_residual_rms(
+                tt, *tr(ff, ww), g, ellipsoid, c_t0=None if any(x.startswith("w") for x in q) else c_t0, gnss_fits=fits
+            )
             if tr is not None
-            else match_residual_rms(tt, ff, ww, mirrored[q[0]], ellipsoid, c_t0=c_t0)
+            else match_residual_rms(tt, ff, ww, mirrored[q[0]], ellipsoid, c_t0=c_t0, gnss_fits=fits)
             for tt, ff, ww, c_t0, _ in windows
         ]
         for _, q, tr in hyps

@@ -643,6 +643,43 @@ def test_strapdown_axes_check_passes_a_mems_gyro_and_a_noisy_gnss():
     assert check_strapdown_axes(rec, "strapdown")[0].startswith("passed: strapdown axes")
 
 
+def test_the_axis_hypotheses_share_the_gnss_side_of_the_matching(in_flight, monkeypatch):
+    """The GNSS side of velocity matching (the track's fits and its gravitation) depends on the
+    GNSS alone: strapdown_axis_fit computes it once per window and track (as written and the
+    two mirrored ones) for its 17 hypotheses, and every residual is, to the bit, the one computed
+    afresh per hypothesis."""
+    import gravsurvey.inm.alignment as alignment
+    from gravsurvey.consistency import strapdown_axis_fit
+
+    rec = _record(in_flight)
+    calls = []
+    fits_of = alignment.gnss_inertial_velocity
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return fits_of(*args, **kwargs)
+
+    monkeypatch.setattr(alignment, "gnss_inertial_velocity", counted)
+    base, faults = strapdown_axis_fit(rec)
+    shared = len(calls)
+    assert base.size >= 2 and len(faults) == 17
+
+    match = alignment.match_vectors
+
+    def afresh(*args, **kwargs):
+        return match(*args, **{**kwargs, "gnss_fits": None})
+
+    monkeypatch.setattr(alignment, "match_vectors", afresh)
+    calls.clear()
+    base_0, faults_0 = strapdown_axis_fit(rec)
+    # per window: the track as written for the columns and the 15 column faults, once instead
+    # of 16 times; each mirrored track once either way
+    assert shared == len(calls) - 15 * base.size
+    assert np.array_equal(base, base_0)
+    for (d, q, r), (d_0, q_0, r_0) in zip(faults, faults_0):
+        assert (d, q) == (d_0, q_0) and np.array_equal(r, r_0)
+
+
 @pytest.mark.parametrize(
     "q, col, side",
     [

@@ -547,6 +547,7 @@ def match_vectors(
     c_t0=None,
     half_window_s=None,
     smooth_imu=False,
+    gnss_fits: dict | None = None,
 ):
     """Both sides of the velocity-matching equation over ``[time[0], time[0] + window_s]``.
 
@@ -564,6 +565,10 @@ def match_vectors(
         Fit the IMU side alike (its velocity integrated to a position at the GNSS times, the
         same quadratics' slope): the fits' smoothing then cancels from ``a - R b``, and wide
         fits take the GNSS noise out of the comparison.
+    gnss_fits : dict, optional
+        The GNSS side (its fits, the gravitation integrated along the track) by channel and
+        epochs, kept by a caller that matches many IMU hypotheses over the same windows
+        (:func:`gravsurvey.consistency.strapdown_axis_fit`): it depends on the GNSS alone.
 
     Returns
     -------
@@ -592,19 +597,14 @@ def match_vectors(
     tq = np.arange(max(t[0], tg[0]) + hw, t_end - hw + 1e-9, spacing_s)
     if tq.size < 4:
         raise DataError("alignment: too little GNSS data at the start of the flight for an in-motion alignment")
-    r_q, v_q = gnss_inertial_velocity(tg, gnss.lat, gnss.lon, gnss.height, tq, hw, ellipsoid)
-    ok = np.all(np.isfinite(v_q), axis=1)
-    tq, r_q, v_q = tq[ok], r_q[ok], v_q[ok]
-    if tq.size < 4:
-        raise DataError(
-            "alignment: too little gap-free GNSS data at the start of the flight for an in-motion alignment"
-        )
-    # gravitation along the GNSS track (inertial axes), integrated by the trapezoid rule
-    m_ie = mat_ie(tq, ellipsoid.omega)
-    r_e = np.einsum("nji,nj->ni", m_ie, r_q)
-    g_i = np.einsum("nij,nj->ni", m_ie, normal_gravitation_ecef(r_e, ellipsoid))
-    g_cum = np.zeros_like(g_i)
-    g_cum[1:] = np.cumsum(0.5 * (g_i[1:] + g_i[:-1]) * np.diff(tq)[:, None], axis=0)
+    key = (id(gnss), ellipsoid, hw, float(tq[0]), float(tq[-1]), tq.size)
+    if gnss_fits is not None and key in gnss_fits:
+        _, tq, v_q, g_cum = gnss_fits[key]
+    else:
+        tq, v_q, g_cum = _gnss_side(gnss, tq, hw, ellipsoid)
+        if gnss_fits is not None:
+            # the channel kept with its fits: its id in the key is not reused while the store lives
+            gnss_fits[key] = (gnss, tq, v_q, g_cum)
     if smooth_imu:
         pos = np.zeros_like(u_cum)
         pos[1:] = np.cumsum(0.5 * (u_cum[1:] + u_cum[:-1]) * np.diff(t)[:, None], axis=0)
@@ -622,16 +622,54 @@ def match_vectors(
     return a - a.mean(axis=0), b - b.mean(axis=0), tq
 
 
+def _gnss_side(gnss, tq, hw, ellipsoid):
+    """:func:`match_vectors`' GNSS side at the epochs ``tq`` (s) with a gap-free fit: the epochs
+    (k,), the inertial velocity (k, 3) m/s and the gravitation integrated along the track (k, 3)
+    m/s; :class:`DataError` when fewer than 4 epochs are left."""
+    tg = np.asarray(gnss.time, float)
+    r_q, v_q = gnss_inertial_velocity(tg, gnss.lat, gnss.lon, gnss.height, tq, hw, ellipsoid)
+    ok = np.all(np.isfinite(v_q), axis=1)
+    tq, r_q, v_q = tq[ok], r_q[ok], v_q[ok]
+    if tq.size < 4:
+        raise DataError(
+            "alignment: too little gap-free GNSS data at the start of the flight for an in-motion alignment"
+        )
+    # gravitation along the GNSS track (inertial axes), integrated by the trapezoid rule
+    m_ie = mat_ie(tq, ellipsoid.omega)
+    r_e = np.einsum("nji,nj->ni", m_ie, r_q)
+    g_i = np.einsum("nij,nj->ni", m_ie, normal_gravitation_ecef(r_e, ellipsoid))
+    g_cum = np.zeros_like(g_i)
+    g_cum[1:] = np.cumsum(0.5 * (g_i[1:] + g_i[:-1]) * np.diff(tq)[:, None], axis=0)
+    return tq, v_q, g_cum
+
+
 def match_residual_rms(
-    time, f_t, w_t, gnss, ellipsoid: Ellipsoid = WGS84, half_window_s=MATCH_CHECK_HALF_WINDOW_S, c_t0=None
+    time,
+    f_t,
+    w_t,
+    gnss,
+    ellipsoid: Ellipsoid = WGS84,
+    half_window_s=MATCH_CHECK_HALF_WINDOW_S,
+    c_t0=None,
+    gnss_fits: dict | None = None,
 ) -> float:
     """RMS of ``|a - R b|`` of the best rotation (:func:`match_vectors` with both sides fitted
     alike, :func:`wahba`) over the whole of ``time``, m/s: what is left of the GNSS noise and
     the gyro drift for a consistent triad; tens of m/s through turns for a gyro axis of the
-    wrong sign. ``c_t0``: the gyros' attitude history, when already propagated."""
+    wrong sign. ``c_t0``: the gyros' attitude history, when already propagated; ``gnss_fits``:
+    :func:`match_vectors`' store of the GNSS side, for many calls over the same windows."""
     t = np.asarray(time, float)
     a, b, _ = match_vectors(
-        t, f_t, w_t, gnss, t[-1] - t[0], ellipsoid, c_t0=c_t0, half_window_s=half_window_s, smooth_imu=True
+        t,
+        f_t,
+        w_t,
+        gnss,
+        t[-1] - t[0],
+        ellipsoid,
+        c_t0=c_t0,
+        half_window_s=half_window_s,
+        smooth_imu=True,
+        gnss_fits=gnss_fits,
     )
     res = a - b @ wahba(a, b).T
     return float(np.sqrt(np.mean(np.sum(res * res, axis=1))))
