@@ -114,6 +114,21 @@ def test_same_seed_same_flight_other_seed_other_flight():
         U.draw_flight_spec(-1)
 
 
+def test_a_survey_across_the_antimeridian_draws_its_sources_in_range():
+    """Seed 2006 starts at 179.82 deg W heading south-west: some sources lie past 180 deg W,
+    which the SIM parser refuses; they are named in [-180, 180) at the same place."""
+    sp = U.draw_flight_spec(2006)
+    plan = sp["sim"]["flights"][0]["plan"]
+    assert plan["origin_lon_deg"] < -179.5
+    lons = [
+        item["lon_deg"] for kind in ("point_masses", "dipoles", "prisms") for item in sp["sim"]["field"].get(kind, [])
+    ]
+    assert all(-180.0 <= x < 180.0 for x in lons)
+    # on both sides of the antimeridian, all within the survey's few tens of km of its origin
+    assert min(lons) < -179.0 and max(lons) > 179.0
+    assert all(min(abs(x - plan["origin_lon_deg"]), 360.0 - abs(x - plan["origin_lon_deg"])) < 1.0 for x in lons)
+
+
 def test_source_peaks_are_what_the_spec_says():
     """Each source written into the SIM mapping has the drawn peak amplitude (alone, on a grid
     at the flight altitude) and a peak within the flight's field scale."""

@@ -233,7 +233,8 @@ def _random_field(rng, plan, altitude, ell, sources_out: list, kinds=SOURCE_KIND
         z = wavelength / WAVELENGTH_PER_DEPTH
         x, y = _track_point(rng, plan)
         lat = math.degrees(lat0 + y / rm)
-        lon = math.degrees(lon0 + x / rp)
+        # a survey by the antimeridian puts sources past +-180 deg: the same place, named in range
+        lon = (math.degrees(lon0 + x / rp) + 180.0) % 360.0 - 180.0
         item = _unit_source(kind, rng, lat, lon, z, altitude)
         target = scale * rng.uniform(*RANGES["source_fraction"]) * MGAL
         peak = peak_disturbance(kind, item, altitude, z, ell)
