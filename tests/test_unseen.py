@@ -115,7 +115,7 @@ def test_same_seed_same_flight_other_seed_other_flight():
 
 
 def test_a_survey_across_the_antimeridian_draws_its_sources_in_range():
-    """Seed 2006 starts at 179.82 deg W heading south-west: some sources lie past 180 deg W,
+    """Seed 2006 starts at 179.82 deg W heading 206 deg: some sources lie past 180 deg W,
     which the SIM parser refuses; they are named in [-180, 180) at the same place."""
     sp = U.draw_flight_spec(2006)
     plan = sp["sim"]["flights"][0]["plan"]
