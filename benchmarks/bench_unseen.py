@@ -83,6 +83,7 @@ from gravsurvey.inm.identify import SpectralModel, smoother_gain
 from gravsurvey.pipeline import read_truth_csv, run_survey
 from gravsurvey.simulate.run import gravimeter_slow_error
 from gravsurvey.simulate.unseen import (
+    MAX_ORIGIN_LAT_DEG,
     draw_flight_spec,
     limit_spec,
     noise_psd,
@@ -873,6 +874,14 @@ def main(argv=None):
         "time TAU_S (docs/benchmarks.md 'A slowly varying GNSS height error')",
     )
     ap.add_argument(
+        "--origin-lat",
+        type=float,
+        default=None,
+        metavar="DEG",
+        help="put every survey's origin at this latitude (|DEG| <= 85), the rest as drawn: polar and "
+        "high-latitude surveys (docs/benchmarks.md 'High-latitude surveys')",
+    )
+    ap.add_argument(
         "--line-levels",
         type=float,
         default=None,
@@ -905,9 +914,11 @@ def main(argv=None):
             ap.error(
                 f"--gravimeter-tare: expected AT,MGAL (AT a fraction 0-1 of the flight), got {a.gravimeter_tare!r}"
             )
+    if a.origin_lat is not None and not abs(a.origin_lat) <= MAX_ORIGIN_LAT_DEG:
+        ap.error(f"--origin-lat: expected a latitude within +-{MAX_ORIGIN_LAT_DEG:g} deg, got {a.origin_lat!r}")
     rows = []
     for seed in range(a.first_seed, a.first_seed + a.flights):
-        spec = draw_flight_spec(seed)
+        spec = draw_flight_spec(seed, origin_lat_deg=a.origin_lat)
         if a.quick:
             spec = limit_spec(spec, QUICK_MAX_DURATION_S, QUICK_MAX_IMU_HZ)
         if accel_bias is not None:

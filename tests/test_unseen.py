@@ -129,6 +129,26 @@ def test_a_survey_across_the_antimeridian_draws_its_sources_in_range():
     assert all(min(abs(x - plan["origin_lon_deg"]), 360.0 - abs(x - plan["origin_lon_deg"])) < 1.0 for x in lons)
 
 
+def test_a_draw_moved_to_a_high_latitude_keeps_the_rest_of_its_draw():
+    """``origin_lat_deg`` moves the survey (80 deg S) and nothing else the seed draws; the
+    sources stay on the survey's map, within its lines' reach of the new origin."""
+    a, b = U.draw_flight_spec(3), U.draw_flight_spec(3, origin_lat_deg=-80.0)
+    assert b["name"] == "U003S80" and U.draw_flight_spec(3, origin_lat_deg=75.5)["name"] == "U003N75.5"
+    assert b["origin_lat_deg"] == -80.0 and a["origin_lat_deg"] != -80.0
+    assert b["origin_lon_deg"] == a["origin_lon_deg"]
+    for key in ("triad", "imu_hz", "speed_mps", "altitude_m", "heading_deg", "line_length_m", "noise_factors"):
+        assert b[key] == a[key], key
+    assert [s["peak_mgal"] for s in b["sources"]] == pytest.approx([s["peak_mgal"] for s in a["sources"]], rel=0.05)
+    reach_deg = (b["line_length_m"] + b["line_count"] * b["line_spacing_m"]) / 111e3 + 0.5
+    lats = [
+        item["lat_deg"] for kind in ("point_masses", "dipoles", "prisms") for item in b["sim"]["field"].get(kind, [])
+    ]
+    assert lats and all(abs(x + 80.0) < reach_deg for x in lats)
+    for bad in (85.5, -90.0, float("nan")):
+        with pytest.raises(ValueError, match="origin_lat_deg"):
+            U.draw_flight_spec(3, origin_lat_deg=bad)
+
+
 def test_source_peaks_are_what_the_spec_says():
     """Each source written into the SIM mapping has the drawn peak amplitude (alone, on a grid
     at the flight altitude) and a peak within the flight's field scale."""

@@ -87,6 +87,10 @@ RANGES = {
     "gravimeter_lambda_per_s": (0.0005, 0.02),
     "origin_lat_deg": (-60.0, 60.0),
 }
+#: Largest |latitude| of a survey origin :func:`draw_flight_spec` accepts, deg: lines of up to
+#: :data:`MAX_LINE_M` flown poleward from it stay inside the simulator's 89.5 deg
+#: (docs/simulate.md "Limits").
+MAX_ORIGIN_LAT_DEG = 85.0
 #: Longest survey line, m (keeps every plan inside the simulator's survey map).
 MAX_LINE_M = 350_000.0
 #: Shortest survey line, s of flight.
@@ -255,13 +259,18 @@ def _random_field(rng, plan, altitude, ell, sources_out: list, kinds=SOURCE_KIND
     return {k: v for k, v in field.items() if v or k == "type"}, scale
 
 
-def draw_flight_spec(seed: int) -> dict:
+def draw_flight_spec(seed: int, origin_lat_deg: float | None = None) -> dict:
     """Draw one unseen flight.
 
     Parameters
     ----------
     seed : int >= 0
         Same seed -> the same flight (numpy ``default_rng([SEED_TAG, seed])``).
+    origin_lat_deg : float, optional
+        Put the survey's origin at this latitude (|lat| <= :data:`MAX_ORIGIN_LAT_DEG`) instead
+        of the drawn one (``RANGES["origin_lat_deg"]``): a polar or high-latitude survey with
+        everything else as the seed draws it (the field's sources keep their places on the
+        survey's map).  The name then carries it: ``U003S80`` for 80 deg S.
 
     Returns
     -------
@@ -290,6 +299,14 @@ def draw_flight_spec(seed: int) -> dict:
     target = float(rng.uniform(*RANGES["duration_s"]))
     lat0 = float(rng.uniform(*RANGES["origin_lat_deg"]))
     lon0 = float(rng.uniform(-180.0, 180.0))
+    name = f"U{seed:03d}"
+    if origin_lat_deg is not None:
+        lat0 = float(origin_lat_deg)
+        if not abs(lat0) <= MAX_ORIGIN_LAT_DEG:
+            raise ValueError(
+                f"draw_flight_spec: origin_lat_deg must be within +-{MAX_ORIGIN_LAT_DEG:g} deg, got {origin_lat_deg!r}"
+            )
+        name += f"{'N' if lat0 >= 0 else 'S'}{abs(lat0):g}"
     factors: dict = {}
     sensors = _scaled_sensors(rng, factors)
     turb = {}
@@ -301,9 +318,7 @@ def draw_flight_spec(seed: int) -> dict:
     sources: list = []
     field, scale = _random_field(rng, plan, altitude, ell, sources)
     rates = (imu_hz, gnss_hz, alt_hz)
-    return _assembled_spec(
-        seed, f"U{seed:03d}", triad, rates, target, plan, turb, sensors, factors, field, scale, sources
-    )
+    return _assembled_spec(seed, name, triad, rates, target, plan, turb, sensors, factors, field, scale, sources)
 
 
 def _assembled_spec(seed, name, triad, rates, target, plan, turb, sensors, factors, field, scale, sources) -> dict:
