@@ -329,13 +329,21 @@ def exponential(r, length):
 FIELD_KERNELS = {"matern32": matern32, "exponential": exponential}
 
 
-def _covariance(v, dist, lag, drift=True, kernel="matern32"):
-    s_f, length, s_d, tau, w = v
-    k = s_f**2 * FIELD_KERNELS[kernel](dist, length) + CONSTANT_VAR
-    if drift:
-        k = k + s_d**2 * np.exp(-lag / tau)
+def _assembled(v, k_f, k_d=None):
+    """The blocks' covariance under the hyperparameters ``v`` (:data:`BOUNDS` order) from the
+    field's correlation matrix ``k_f`` and the drift's ``k_d`` (None: no drift), (M, M): the
+    one place the model's terms are added up (:func:`_covariance`, :func:`_nll_and_gradient`)."""
+    s_f, _, s_d, _, w = v
+    k = s_f**2 * k_f + CONSTANT_VAR
+    if k_d is not None:
+        k = k + s_d**2 * k_d
     k[np.diag_indices_from(k)] += w**2
     return k
+
+
+def _covariance(v, dist, lag, drift=True, kernel="matern32"):
+    length, tau = v[1], v[3]
+    return _assembled(v, FIELD_KERNELS[kernel](dist, length), np.exp(-lag / tau) if drift else None)
 
 
 def _gaussian_nll(y, alpha, chol) -> float:
@@ -386,8 +394,7 @@ def _nll_and_gradient(v, dist, lag, y, kernel="matern32"):
     s_f, length, s_d, tau, w = v
     k_f, dk_f = _length_derivative(kernel, dist, length)
     k_d = np.exp(-lag / tau)
-    k = s_f**2 * k_f + CONSTANT_VAR + s_d**2 * k_d
-    k[np.diag_indices_from(k)] += w**2
+    k = _assembled(v, k_f, k_d)
     try:
         c = cho_factor(k, lower=True, check_finite=False)
     except LinAlgError:
