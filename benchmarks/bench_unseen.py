@@ -812,10 +812,31 @@ def print_table(rows):
         print(f"runs that failed: {', '.join(failed)}")
 
 
+def seed_list(first_seed: int, flights: int, seeds: str | None = None) -> list[int]:
+    """The seeds a run draws: ``first_seed .. first_seed + flights - 1``, or the comma-separated
+    ``seeds`` (in their order) when given.  ValueError names what is not a seed."""
+    if seeds is None:
+        return list(range(first_seed, first_seed + flights))
+    out = []
+    for item in seeds.split(","):
+        item = item.strip()
+        if not item.isdigit():
+            raise ValueError(f"expected comma-separated non-negative integer seeds, got {item!r} in {seeds!r}")
+        out.append(int(item))
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--flights", type=int, default=20, help="number of flights (seeds first-seed ..)")
     ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument(
+        "--seeds",
+        default=None,
+        metavar="S1,S2,...",
+        help="these seeds, in this order, instead of --first-seed and --flights (a chosen set, e.g. "
+        "docs/benchmarks.md 'High-latitude surveys')",
+    )
     ap.add_argument(
         "--quick",
         action="store_true",
@@ -891,6 +912,10 @@ def main(argv=None):
     a = ap.parse_args(argv)
     if a.flights < 1:
         ap.error("--flights must be >= 1")
+    try:
+        seeds = seed_list(a.first_seed, a.flights, a.seeds)
+    except ValueError as exc:
+        ap.error(f"--seeds: {exc}")
     model = {}
     for item in a.model:
         key, sep, value = item.partition("=")
@@ -917,7 +942,7 @@ def main(argv=None):
     if a.origin_lat is not None and not abs(a.origin_lat) <= MAX_ORIGIN_LAT_DEG:
         ap.error(f"--origin-lat: expected a latitude within +-{MAX_ORIGIN_LAT_DEG:g} deg, got {a.origin_lat!r}")
     rows = []
-    for seed in range(a.first_seed, a.first_seed + a.flights):
+    for seed in seeds:
         spec = draw_flight_spec(seed, origin_lat_deg=a.origin_lat)
         if a.quick:
             spec = limit_spec(spec, QUICK_MAX_DURATION_S, QUICK_MAX_IMU_HZ)

@@ -602,3 +602,20 @@ def test_issue_flights_table_counts_against_the_issues_ratio(capsys):
         "- A (platform, 4 flights): default / bound median 1.30, worst 1.50; at or below the issue's "
         "goal/bound 1.03 (strict) on 1, 1.38 on 2; error/sigma in [0.7, 1.5] on 2 of 3; 1 failed"
     ) in out
+
+
+def test_seeds_option_runs_the_chosen_seeds_in_order(capsys):
+    """``bench_unseen.py --seeds``: the comma-separated seeds in their order replace the range of
+    ``--first-seed`` and ``--flights``; anything that is not a seed is refused with a usage
+    message naming it, before a flight is drawn."""
+    bench = _bench()
+    assert bench.seed_list(3000, 3) == [3000, 3001, 3002]
+    assert bench.seed_list(3000, 3, "3111, 3026,2107") == [3111, 3026, 2107]
+    for bad in ("3026,", "x", "3026;3030", "-1"):
+        with pytest.raises(ValueError, match="non-negative integer seeds"):
+            bench.seed_list(0, 1, bad)
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--seeds", "3026,abc", "--runs", "default"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--seeds" in err and "'abc'" in err
