@@ -11,7 +11,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 #: kept in `ruff format` style: the whole code base (pyproject.toml excludes the generated _unrolled.py)
-FORMATTED = ["gravsurvey", "tests", "benchmarks"]
+FORMATTED = ["gravsurvey", "tests", "benchmarks", "examples"]
 
 
 def _run(*args, cwd=ROOT):
@@ -19,7 +19,7 @@ def _run(*args, cwd=ROOT):
 
 
 def test_ruff_lint_passes_on_the_whole_repository():
-    r = _run("ruff", "check", "--no-cache", "gravsurvey", "tests", "benchmarks")
+    r = _run("ruff", "check", "--no-cache", "gravsurvey", "tests", "benchmarks", "examples")
     assert r.returncode == 0, r.stdout + r.stderr
 
 
@@ -109,7 +109,11 @@ def private_cross_module_uses(files, root: Path = ROOT) -> list[tuple[str, str, 
 
 
 def test_no_private_names_imported_across_modules():
-    files = sorted((ROOT / "gravsurvey").rglob("*.py")) + sorted((ROOT / "benchmarks").glob("*.py"))
+    files = (
+        sorted((ROOT / "gravsurvey").rglob("*.py"))
+        + sorted((ROOT / "benchmarks").glob("*.py"))
+        + sorted((ROOT / "examples").glob("*.py"))
+    )
     bad = [f"{f}:{ln}: {name}" for f, name, ln in private_cross_module_uses(files) if (f, name) not in PENDING_PRIVATE]
     assert not bad, "private names used across modules (make them public, documented):\n" + "\n".join(bad)
 
