@@ -820,7 +820,7 @@ def seed_list(first_seed: int, flights: int, seeds: str | None = None) -> list[i
     out = []
     for item in seeds.split(","):
         item = item.strip()
-        if not item.isdigit():
+        if not (item.isascii() and item.isdigit()):
             raise ValueError(f"expected comma-separated non-negative integer seeds, got {item!r} in {seeds!r}")
         out.append(int(item))
     return out

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gravsurvey.errors import GravsurveyError
 from gravsurvey.io.writers.profiles_csv import read_profiles_csv
 from gravsurvey.pipeline import run_survey
 from gravsurvey.simulate.unseen import draw_flight_spec, limit_spec, spec_summary, write_flight
@@ -119,6 +120,8 @@ def plot(spec: dict, table: dict, path) -> None:
 
 def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else argv
+    if argv and not (argv[0].isascii() and argv[0].isdigit()):
+        raise ValueError(f"SEED: expected a non-negative integer, got {argv[0]!r}")
     seed = int(argv[0]) if argv else 2017
     path = Path(argv[1]) if len(argv) > 1 else Path(f"unseen_{seed}.png")
     with tempfile.TemporaryDirectory() as tmp:
@@ -135,4 +138,8 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except (GravsurveyError, RuntimeError, ValueError) as exc:
+        # a config, data or argument problem: one line, as the CLI would say it
+        sys.exit(f"{Path(__file__).name}: {exc}")

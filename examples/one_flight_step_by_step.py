@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from gravsurvey.config import load_config
+from gravsurvey.errors import GravsurveyError
 from gravsurvey.estimate import from_inm_solution
 from gravsurvey.inm.params import resolve_initial_state
 from gravsurvey.inm.solve import estimate_anomaly
@@ -118,4 +119,8 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except (GravsurveyError, RuntimeError, ValueError) as exc:
+        # a config, data or argument problem: one line, as the CLI would say it
+        sys.exit(f"{Path(__file__).name}: {exc}")

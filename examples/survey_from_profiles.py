@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from gravsurvey.crossovers import find_crossovers
+from gravsurvey.errors import GravsurveyError
 from gravsurvey.grid import grid_lines
 from gravsurvey.io.writers.profiles_csv import read_profiles_csv
 from gravsurvey.levelling import choose_levelling
@@ -160,4 +161,8 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except (GravsurveyError, RuntimeError, ValueError) as exc:
+        # a config, data or argument problem: one line, as the CLI would say it
+        sys.exit(f"{Path(__file__).name}: {exc}")

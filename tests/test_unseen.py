@@ -611,7 +611,7 @@ def test_seeds_option_runs_the_chosen_seeds_in_order(capsys):
     bench = _bench()
     assert bench.seed_list(3000, 3) == [3000, 3001, 3002]
     assert bench.seed_list(3000, 3, "3111, 3026,2107") == [3111, 3026, 2107]
-    for bad in ("3026,", "x", "3026;3030", "-1"):
+    for bad in ("3026,", "x", "3026;3030", "-1", "3\u00b2"):
         with pytest.raises(ValueError, match="non-negative integer seeds"):
             bench.seed_list(0, 1, bad)
     with pytest.raises(SystemExit) as exc:
