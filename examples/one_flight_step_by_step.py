@@ -52,6 +52,9 @@ def run(survey=SURVEY):
     """
     cfg = load_config(survey)
     flight = cfg.flights[0]
+    if flight.truth is None:
+        # the example sets the estimate against a reference: a survey without one says so
+        raise ValueError(f"{survey}: flights[0] has no truth file (key truth) to compare with")
     # files -> FlightRecord: SI units, checked, times strictly increasing
     record = load_flight(flight.ingest, cfg.base_dir)
     # position and velocity from a GNSS fit, a strapdown triad's attitude from alignment

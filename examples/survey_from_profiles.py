@@ -45,6 +45,8 @@ def survey_lines(table: dict) -> list[dict]:
     flight = np.asarray(table["flight"]).astype(str)
     line = np.asarray(table["line"]).astype(str)
     t_ns = np.asarray(table["time_unix_ns"], np.int64)
+    # a survey without a truth file has no truth column: NaN, and no score against it
+    truth = np.asarray(table["truth_mgal"], float) if "truth_mgal" in table else np.full(t_ns.size, np.nan)
     out = []
     for f in dict.fromkeys(flight):
         t0 = t_ns[flight == f].min()
@@ -59,7 +61,7 @@ def survey_lines(table: dict) -> list[dict]:
                     "height_m": np.asarray(table["height_m"], float)[k],
                     "value_mgal": np.asarray(table["disturbance_mgal"], float)[k],
                     "sigma_mgal": np.asarray(table["sigma_mgal"], float)[k],
-                    "truth_mgal": np.asarray(table["truth_mgal"], float)[k],
+                    "truth_mgal": truth[k],
                     "time_s": (t_ns[k] - t0) / 1e9,
                 }
             )
@@ -106,20 +108,22 @@ def run(survey=SURVEY, work_dir=None):
 
 def report(lines, xo, lev, grid) -> dict:
     """Crossover RMS before and after levelling, the levelled lines against truth (about the
-    survey's mean: no base tie), and the grid's cross-validated RMS."""
+    survey's mean: no base tie; only where there is a truth), and the grid's cross-validated RMS."""
     err = np.concatenate([ln["levelled_mgal"] - ln["truth_mgal"] for ln in lines])
     raw = np.concatenate([ln["value_mgal"] - ln["truth_mgal"] for ln in lines])
     ok = np.isfinite(err) & np.isfinite(raw)
     applied = lev is not None and lev.decision["applied"]
-    return {
+    facts = {
         "crossovers": int(xo.count),
         "crossover_rms_mgal": float(xo.rms_mgal),
         "levelled_crossover_rms_mgal": float(lev.after["rms_mgal"]) if applied else float(xo.rms_mgal),
         "levelling_model": lev.decision["model"] if applied else "none",
-        "rms_vs_truth_mgal": float(np.sqrt(np.mean((raw[ok] - raw[ok].mean()) ** 2))),
-        "levelled_rms_vs_truth_mgal": float(np.sqrt(np.mean((err[ok] - err[ok].mean()) ** 2))),
         "grid_cv_rms_mgal": float(grid.cv_rms_mgal),
     }
+    if ok.any():
+        facts["rms_vs_truth_mgal"] = float(np.sqrt(np.mean((raw[ok] - raw[ok].mean()) ** 2)))
+        facts["levelled_rms_vs_truth_mgal"] = float(np.sqrt(np.mean((err[ok] - err[ok].mean()) ** 2)))
+    return facts
 
 
 def plot(lines, xo, grid, path) -> None:
