@@ -83,7 +83,6 @@ from gravsurvey.inm.identify import SpectralModel, smoother_gain
 from gravsurvey.pipeline import read_truth_csv, run_survey
 from gravsurvey.simulate.run import gravimeter_slow_error
 from gravsurvey.simulate.unseen import (
-    MAX_ORIGIN_LAT_DEG,
     draw_flight_spec,
     limit_spec,
     noise_psd,
@@ -939,11 +938,14 @@ def main(argv=None):
             ap.error(
                 f"--gravimeter-tare: expected AT,MGAL (AT a fraction 0-1 of the flight), got {a.gravimeter_tare!r}"
             )
-    if a.origin_lat is not None and not abs(a.origin_lat) <= MAX_ORIGIN_LAT_DEG:
-        ap.error(f"--origin-lat: expected a latitude within +-{MAX_ORIGIN_LAT_DEG:g} deg, got {a.origin_lat!r}")
     rows = []
     for seed in seeds:
-        spec = draw_flight_spec(seed, origin_lat_deg=a.origin_lat)
+        try:
+            spec = draw_flight_spec(seed, origin_lat_deg=a.origin_lat)
+        except ValueError as exc:
+            # the latitude out of the generator's range: a usage error on the first draw, before
+            # any flight is simulated (the generator holds the bound)
+            ap.error(f"--origin-lat: {exc}")
         if a.quick:
             spec = limit_spec(spec, QUICK_MAX_DURATION_S, QUICK_MAX_IMU_HZ)
         if accel_bias is not None:

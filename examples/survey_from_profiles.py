@@ -28,6 +28,7 @@ import numpy as np
 from gravsurvey.crossovers import find_crossovers
 from gravsurvey.errors import GravsurveyError
 from gravsurvey.grid import grid_lines
+from gravsurvey.io.writers import line_groups
 from gravsurvey.io.writers.profiles_csv import read_profiles_csv
 from gravsurvey.levelling import choose_levelling
 from gravsurvey.pipeline import run_survey
@@ -43,28 +44,24 @@ def survey_lines(table: dict) -> list[dict]:
     and the crossovers' same-flight test run on it.
     """
     flight = np.asarray(table["flight"]).astype(str)
-    line = np.asarray(table["line"]).astype(str)
     t_ns = np.asarray(table["time_unix_ns"], np.int64)
+    t0 = {f: t_ns[flight == f].min() for f in dict.fromkeys(flight)}
+    columns = {
+        "easting_m": "easting_m",
+        "northing_m": "northing_m",
+        "height_m": "height_m",
+        "value_mgal": "disturbance_mgal",
+        "sigma_mgal": "sigma_mgal",
+    }
+    values = {k: np.asarray(table[c], float) for k, c in columns.items()}
     # a survey without a truth file has no truth column: NaN, and no score against it
-    truth = np.asarray(table["truth_mgal"], float) if "truth_mgal" in table else np.full(t_ns.size, np.nan)
+    values["truth_mgal"] = (
+        np.asarray(table["truth_mgal"], float) if "truth_mgal" in table else np.full(t_ns.size, np.nan)
+    )
     out = []
-    for f in dict.fromkeys(flight):
-        t0 = t_ns[flight == f].min()
-        for ln in dict.fromkeys(line[(flight == f) & (line != "")]):
-            k = (flight == f) & (line == ln)
-            out.append(
-                {
-                    "flight": f,
-                    "line": ln,
-                    "easting_m": np.asarray(table["easting_m"], float)[k],
-                    "northing_m": np.asarray(table["northing_m"], float)[k],
-                    "height_m": np.asarray(table["height_m"], float)[k],
-                    "value_mgal": np.asarray(table["disturbance_mgal"], float)[k],
-                    "sigma_mgal": np.asarray(table["sigma_mgal"], float)[k],
-                    "truth_mgal": truth[k],
-                    "time_s": (t_ns[k] - t0) / 1e9,
-                }
-            )
+    # each line's rows, the way the run itself groups them (empty line names - turns - skipped)
+    for (f, ln), k in line_groups(table["flight"], table["line"]).items():
+        out.append({"flight": f, "line": ln, **{c: v[k] for c, v in values.items()}, "time_s": (t_ns[k] - t0[f]) / 1e9})
     return out
 
 
