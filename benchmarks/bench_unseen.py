@@ -55,7 +55,8 @@ carrier-phase grade and its heights the only height channel (:func:`with_carrier
 ``--gravimeter-tare AT,MGAL`` a step of the gravimeter's reading at the fraction ``AT`` of the
 flight (:func:`with_gravimeter_tare`);
 ``--gnss-markov SIGMA_M,TAU_S`` a slowly varying GNSS error (:func:`with_gnss_markov`);
-``--line-levels DZ_M`` flies every second line DZ_M higher (:func:`with_line_levels`).
+``--line-levels DZ_M`` flies every second line DZ_M higher (:func:`with_line_levels`);
+``--wind SPEED,FROM_DEG[,ground]`` flies every flight in a steady wind (:func:`with_wind`).
 Uses public API only.
 """
 
@@ -82,7 +83,9 @@ from gravsurvey.errors import GravsurveyError
 from gravsurvey.inm.identify import SpectralModel, smoother_gain
 from gravsurvey.pipeline import read_truth_csv, run_survey
 from gravsurvey.simulate.run import gravimeter_slow_error
+from gravsurvey.simulate.simconfig import MAX_WIND_FRACTION
 from gravsurvey.simulate.unseen import (
+    RANGES,
     draw_flight_spec,
     limit_spec,
     noise_psd,
@@ -535,6 +538,22 @@ def with_line_levels(spec: dict, dz_m: float) -> dict:
     return out
 
 
+def with_wind(spec: dict, speed_mps: float, from_deg: float, hold_speed: str = "air") -> dict:
+    """The drawn flight in a steady wind of ``speed_mps`` from ``from_deg`` (clockwise from
+    north).  The aircraft flies the drawn ground track with its nose along its velocity through
+    the air, crabbed on every line the wind crosses; ``hold_speed`` ``air``: each line at the
+    drawn speed through the air (upwind lines slower over the ground, downwind faster; turns at
+    the drawn speed over the ground), ``ground``: every line at the drawn ground speed, so that
+    only a strapdown triad's data change (docs/simulate.md, "Wind").  The name is unchanged,
+    the cache folder's hash differs."""
+    out = json.loads(json.dumps(spec))
+    plan = out["sim"]["flights"][0]["plan"]
+    plan["wind_speed_mps"] = float(speed_mps)
+    plan["wind_from_deg"] = float(from_deg)
+    plan["hold_speed"] = hold_speed
+    return out
+
+
 def with_carrier_phase_gnss(spec: dict) -> dict:
     """The drawn flight with carrier-phase (PPK) GNSS and no altimeter of its own: the GNSS
     heights carry the drawn altimeter's white noise (``sigma_m``, at the GNSS rate), the
@@ -908,6 +927,13 @@ def main(argv=None):
         metavar="DZ_M",
         help="fly every second line DZ_M higher (docs/benchmarks.md 'Lines at two levels')",
     )
+    ap.add_argument(
+        "--wind",
+        default=None,
+        metavar="SPEED,FROM_DEG[,ground]",
+        help="fly every flight in a steady wind of SPEED m/s from FROM_DEG: the aircraft crabs, its lines at the "
+        "drawn airspeed (',ground': at the drawn ground speed; docs/benchmarks.md 'Flights in a wind')",
+    )
     a = ap.parse_args(argv)
     if a.flights < 1:
         ap.error("--flights must be >= 1")
@@ -938,6 +964,16 @@ def main(argv=None):
             ap.error(
                 f"--gravimeter-tare: expected AT,MGAL (AT a fraction 0-1 of the flight), got {a.gravimeter_tare!r}"
             )
+    wind = None
+    if a.wind is not None:
+        parts = a.wind.split(",")
+        hold = parts.pop() if len(parts) == 3 and parts[2] == "ground" else "air"
+        wind = _numbers(",".join(parts))
+        # the slowest draw's limit holds for all
+        most = MAX_WIND_FRACTION * RANGES["speed_mps"][0]
+        if len(wind) != 2 or not 0.0 <= wind[0] <= most:
+            ap.error(f"--wind: expected SPEED,FROM_DEG[,ground] (0 <= SPEED <= {most:g} m/s, deg), got {a.wind!r}")
+        wind.append(hold)
     rows = []
     for seed in seeds:
         try:
@@ -960,6 +996,8 @@ def main(argv=None):
             spec = with_gnss_markov(spec, *gnss_markov)
         if a.line_levels is not None:
             spec = with_line_levels(spec, a.line_levels)
+        if wind is not None:
+            spec = with_wind(spec, *wind)
         row = run_flight(spec, a.cache, tuple(a.runs.split(",")), a.heights, model)
         rows.append(row)
         print(

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from gravsurvey import geodesy as gd
+from gravsurvey.errors import ConfigError
 from gravsurvey.simulate import trajectory as tj
 from gravsurvey.simulate.run import quick_sim, simulate_flight
 
@@ -335,3 +336,123 @@ def test_gnss_gauss_markov_error_has_its_sigma_and_correlation_time():
     dlat, dlon, _ = gnss_errors(lat, h, both, np.random.default_rng(5), dt_s=dt)
     dlat0, dlon0, _ = gnss_errors(lat, h, white, np.random.default_rng(5), dt_s=dt)
     assert np.array_equal(dlat, dlat0) and np.array_equal(dlon, dlon0)  # no horizontal part asked
+
+
+def _windy_grid(triad, wind, turb_deg=1.0, hold="ground", turb_m=2.0, wind_from=290.0):
+    plan = {
+        "kind": "grid",
+        "origin_lat_deg": 52.0,
+        "origin_lon_deg": 10.0,
+        "altitude_m": 600.0,
+        "speed_mps": 60.0,
+        "lines": {"count": 2, "spacing_m": 3000.0, "length_m": 2500.0, "heading_deg": 20.0},
+        "static_start_s": 20.0,
+        "ramp_s": 30.0,
+        "max_bank_deg": 28.0,
+        "wind_speed_mps": wind,
+        "wind_from_deg": wind_from,
+        "hold_speed": hold,
+    }
+    turb = {
+        "vertical_sigma_m": turb_m,
+        "horizontal_sigma_m": turb_m,
+        "attitude_sigma_deg": turb_deg,
+        "min_period_s": 2.0,
+    }
+    return simulate_flight(quick_sim(plan=plan, triad=triad, imu_hz=50.0, turbulence=turb, seed=7))
+
+
+def test_a_crosswind_turns_the_nose_not_the_track():
+    """In a wind the aircraft flies the plan's ground track with its nose along its air
+    velocity: at the plan's ground speed (``hold_speed: ground``) the translation is the
+    windless flight's, the heading on a line differs from the track by the crab angle, and the
+    gyros still measure the attitude's own rate."""
+    calm, windy = _windy_grid("strapdown", 0.0), _windy_grid("strapdown", 15.0)
+    for k in ("lat", "lon", "height", "vel_n", "acc_n"):
+        np.testing.assert_array_equal(windy.truth[k], calm.truth[k])
+    # no turbulence in the attitude: the line's heading is exactly the plan's plus the crab
+    still = _windy_grid("strapdown", 15.0, turb_deg=0.0)
+    tr = still.truth
+    w_e, w_n = tj.wind_velocity_en(15.0, 290.0)
+    for name, track_deg in (("L01", 20.0), ("L02", 200.0)):
+        m = tr["line"] == name
+        a = math.radians(track_deg)
+        along, cross = w_e * math.sin(a) + w_n * math.cos(a), w_e * math.cos(a) - w_n * math.sin(a)
+        # air velocity = ground - wind; its angle from the track, clockwise positive
+        crab = math.atan2(-cross, 60.0 - along)
+        dev = np.angle(np.exp(1j * (tr["heading"][m] - a)))
+        np.testing.assert_allclose(dev, crab, atol=1e-12)
+        assert abs(math.degrees(crab)) > 10.0  # a 15-m/s wind mostly across a 60-m/s track
+        np.testing.assert_allclose(tr["roll"][m], 0.0, atol=1e-12)  # straight and level: no bank
+    # on the hold the nose is already where the speed ramp and the first line keep it
+    rest = tr["line"] == "static"
+    np.testing.assert_allclose(tr["heading"][rest], tr["heading"][tr["line"] == "L01"][0], atol=1e-12)
+    # gyros: the analytic body rate is the finite-difference rate of C_nb, turns and ramps included
+    d = 1e-4
+    t = windy.imu_time[::25]
+    plan = windy.plan
+    kp, km = tj.kinematics(plan, t + d), tj.kinematics(plan, t - d)
+    c = tj.kinematics(plan, t).mat_nb
+    om = np.einsum("nji,njk->nik", c, (kp.mat_nb - km.mat_nb) / (2 * d))
+    w_nb = np.stack([om[:, 2, 1], om[:, 0, 2], om[:, 1, 0]], axis=1)
+    platform = _windy_grid("platform", 15.0)
+    w_in = np.einsum("nji,nj->ni", c, platform.angular_rate_t[::25])
+    assert np.abs(windy.angular_rate_t[::25] - (w_in + w_nb)).max() < 1e-9
+    f_rot = np.einsum("nij,nj->ni", windy.truth["mat_nt"], windy.specific_force_t)
+    assert np.abs(f_rot - platform.specific_force_t).max() < 1e-13
+
+
+def test_a_wind_faster_than_half_the_plan_speed_is_refused():
+    plan = {"kind": "line", "origin_lat_deg": 45.0, "origin_lon_deg": 10.0, "duration_s": 600.0, "speed_mps": 60.0}
+    with pytest.raises(ConfigError, match=r"plan\.wind_speed_mps: 31 m/s is more than 0\.5 x .*speed_mps \(60 m/s\)"):
+        simulate_flight(quick_sim(plan={**plan, "wind_speed_mps": 31.0}))
+    with pytest.raises(ConfigError, match=r"plan\.hold_speed: expected one of .*'air'.*'ground'.*got 'airspeed'"):
+        simulate_flight(quick_sim(plan={**plan, "hold_speed": "airspeed"}))
+
+
+def test_lines_flown_at_the_airspeed_in_a_wind():
+    """``hold_speed: air`` (the default): each line is flown at the plan speed through the air,
+    its ground speed the wind triangle's (upwind slower, downwind faster), with smooth speed
+    changes to and from the connectors; the lines start where planned, the heading is along
+    the air velocity, and the gyros and accelerometers are the trajectory's."""
+    s = _windy_grid("strapdown", 15.0, turb_deg=0.0, hold="air", turb_m=0.0, wind_from=250.0)
+    tr = s.truth
+    w_e, w_n = tj.wind_velocity_en(15.0, 250.0)
+    speeds = {}
+    for name, track_deg in (("L01", 20.0), ("L02", 200.0)):
+        m = tr["line"] == name
+        a = math.radians(track_deg)
+        along, cross = w_e * math.sin(a) + w_n * math.cos(a), w_e * math.cos(a) - w_n * math.sin(a)
+        v_ground = math.sqrt(60.0**2 - cross**2) + along
+        assert tj.ground_speed_at_airspeed(60.0, a, (w_e, w_n)) == pytest.approx(v_ground, rel=1e-15)
+        speeds[name] = np.hypot(tr["vel_n"][m, 0], tr["vel_n"][m, 1])
+        # the map's scale distortion over 2.5 km: < 1e-4 relative
+        np.testing.assert_allclose(speeds[name], v_ground, rtol=1e-4)
+        air_e, air_n = tr["vel_n"][m, 0] - w_e, tr["vel_n"][m, 1] - w_n
+        np.testing.assert_allclose(np.hypot(air_e, air_n), 60.0, rtol=1e-4)  # the airspeed held
+        nose = np.arctan2(air_e, air_n)
+        np.testing.assert_allclose(np.angle(np.exp(1j * (tr["heading"][m] - nose))), 0.0, atol=2e-4)
+    assert abs(speeds["L01"].mean() - speeds["L02"].mean()) > 5.0  # one line into the wind's along part
+    # the lines are where the plan puts them: the windless flight's line positions
+    calm = _windy_grid("strapdown", 0.0, turb_deg=0.0, turb_m=0.0)
+    for name in ("L01", "L02"):
+        (seg,) = [g for g in s.plan.segments if g.label == name]
+        (ref,) = [g for g in calm.plan.segments if g.label == name]
+        assert (seg.x0, seg.y0, seg.psi0) == pytest.approx((ref.x0, ref.y0, ref.psi0), abs=1e-9)
+        assert seg.speed * seg.duration == pytest.approx(ref.speed * ref.duration, abs=1e-9)
+        assert seg.speed == pytest.approx(speeds[name].mean(), rel=1e-4) and ref.speed == 60.0
+    # smooth: no jumps in acceleration (a speed change entered abruptly would jump by ~0.5 m/s^2)
+    assert np.abs(np.diff(tr["acc_n"], axis=0)).max() < 0.05
+    # the IMU is the trajectory's: strapdown rotated = platform, gyros = finite-differenced attitude
+    w = _windy_grid("strapdown", 15.0, hold="air", wind_from=250.0)
+    p = _windy_grid("platform", 15.0, hold="air", wind_from=250.0)
+    f_rot = np.einsum("nij,nj->ni", w.truth["mat_nt"], w.specific_force_t)
+    assert np.abs(f_rot - p.specific_force_t).max() < 1e-13
+    d = 1e-4
+    t = w.imu_time[::25]
+    kp, km = tj.kinematics(w.plan, t + d), tj.kinematics(w.plan, t - d)
+    c = tj.kinematics(w.plan, t).mat_nb
+    om = np.einsum("nji,njk->nik", c, (kp.mat_nb - km.mat_nb) / (2 * d))
+    w_nb = np.stack([om[:, 2, 1], om[:, 0, 2], om[:, 1, 0]], axis=1)
+    w_in = np.einsum("nji,nj->ni", c, p.angular_rate_t[::25])
+    assert np.abs(w.angular_rate_t[::25] - (w_in + w_nb)).max() < 1e-9

@@ -574,6 +574,27 @@ def test_line_levels_fly_every_second_line_higher():
     assert heights == [alt + 400.0 * (i % 2) for i in range(len(heights))]
 
 
+def test_wind_crabs_the_drawn_flight(capsys):
+    """``bench_unseen.py --wind SPEED,FROM``: the drawn plan with a steady wind, the rest of the
+    draw as it was, in a cache folder of its own; a wind the slowest draw cannot take is a
+    usage error."""
+    bench = _bench()
+    sp = U.limit_spec(U.draw_flight_spec(5), 2400.0, 50.0)
+    wd = bench.with_wind(sp, 15.0, 270.0)
+    plan, plan0 = wd["sim"]["flights"][0]["plan"], sp["sim"]["flights"][0]["plan"]
+    assert (plan["wind_speed_mps"], plan["wind_from_deg"], plan["hold_speed"]) == (15.0, 270.0, "air")
+    assert bench.with_wind(sp, 15.0, 270.0, "ground")["sim"]["flights"][0]["plan"]["hold_speed"] == "ground"
+    assert {k: v for k, v in plan.items() if k not in ("wind_speed_mps", "wind_from_deg", "hold_speed")} == plan0
+    assert {k: v for k, v in wd.items() if k != "sim"} == {k: v for k, v in sp.items() if k != "sim"}
+    assert bench._spec_hash(wd) != bench._spec_hash(sp)
+    for bad in ("26,270", "15", "a,b", "-1,0", "15,270,air", "15,270,ground,1"):
+        with pytest.raises(SystemExit) as exc:
+            bench.main([f"--wind={bad}", "--flights", "1"])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert f"--wind: expected SPEED,FROM_DEG[,ground] (0 <= SPEED <= 25 m/s, deg), got '{bad}'" in err
+
+
 def test_issue_flights_table_counts_against_the_issues_ratio(capsys):
     """benchmarks/bench_issue_flights.py: each flight's default / bound is set against the
     issue's goal over its bound (A: 0.40 over 0.29-0.39 mGal), strict and generous end; a

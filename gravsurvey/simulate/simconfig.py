@@ -33,6 +33,8 @@ MAX_AUX_RATE_HZ = 20.0
 
 #: Defaults of every optional key (the schema's shape is the dict's shape).
 DEFAULT_RATES = {"imu_hz": 10.0, "altimeter_hz": 1.0, "gnss_hz": 1.0, "truth_hz": None}
+#: Largest wind as a fraction of the plan's speed (``plan.wind_speed_mps``; a 30-degree crab).
+MAX_WIND_FRACTION = 0.5
 DEFAULT_PLAN = {
     "kind": None,
     "origin_lat_deg": None,
@@ -50,6 +52,9 @@ DEFAULT_PLAN = {
     "static_start_s": 0.0,
     "static_end_s": 0.0,
     "ramp_s": 60.0,
+    "wind_speed_mps": 0.0,
+    "wind_from_deg": 0.0,
+    "hold_speed": "air",
 }
 DEFAULT_LINES = {"count": None, "spacing_m": None, "length_m": None, "heading_deg": 90.0, "altitudes_m": None}
 DEFAULT_TIES = {"count": 0, "spacing_m": 0.0, "altitude_m": None}
@@ -243,6 +248,15 @@ def _validate_plan(p, path, rates):
     p["static_start_s"] = number(p["static_start_s"], f"{path}.static_start_s", "s", 0.0, 86400.0)
     p["static_end_s"] = number(p["static_end_s"], f"{path}.static_end_s", "s", 0.0, 86400.0)
     p["ramp_s"] = number(p["ramp_s"], f"{path}.ramp_s", "s", 1.0, 3600.0)
+    # a wind of half the speed is a 30-degree crab, and a line flown into it at half the speed
+    p["wind_speed_mps"] = number(p["wind_speed_mps"], f"{path}.wind_speed_mps", "m/s", 0.0)
+    if p["wind_speed_mps"] > MAX_WIND_FRACTION * p["speed_mps"]:
+        raise ConfigError(
+            f"{path}.wind_speed_mps: {p['wind_speed_mps']:g} m/s is more than {MAX_WIND_FRACTION:g} x "
+            f"{path}.speed_mps ({p['speed_mps']:g} m/s): a stronger wind needs a crab over 30 deg"
+        )
+    p["wind_from_deg"] = number(p["wind_from_deg"], f"{path}.wind_from_deg", "deg", -360.0, 360.0)
+    _choice(p["hold_speed"], f"{path}.hold_speed", ("air", "ground"))
     if p["kind"] == "line":
         for k in ("lines", "ties"):
             if p[k] is not None:

@@ -5,8 +5,10 @@ to the third order (jerk), so the specific force and angular rates derived from
 it are exact up to floating-point rounding:
 
 1. **Nominal plan** on a flat *survey map*: map east ``x`` and north ``y`` (m)
-   as piecewise functions of time made of four primitives: ``static`` (at
+   as piecewise functions of time made of five primitives: ``static`` (at
    rest), ``ramp`` (straight, speed ``v S(tau)`` or ``v (1 - S(tau))``),
+   ``accel`` (straight, speed ``v0 + (v1 - v0) S(tau)``: to and from a line
+   flown at its own speed in a wind),
    ``line`` (straight, constant speed) and ``turn`` (constant speed, heading
    ``psi0 + Delta S(tau)``), with ``S(tau) = 35 tau^4 - 84 tau^5 + 70 tau^6 -
    20 tau^7`` the septic smoothstep (its first three derivatives vanish at both
@@ -34,6 +36,9 @@ north, pitch nose up, roll right wing down; see docs/conventions.md) is the
 coordinated-flight attitude of the turbulence-free plan (heading = plan
 heading, pitch = flight-path angle ``atan(h_dot / v)``, roll =
 ``atan(v psi_dot / g0)``) plus the angular turbulence, all with analytic rates.
+In a wind (``plan.wind_speed_mps``) the heading is the air velocity's and the roll
+that of a turn through the air mass (:func:`crab_attitude`); the ground track and
+speed stay the plan's.
 """
 
 from __future__ import annotations
@@ -52,6 +57,11 @@ G0_BANK = 9.80665
 #: max of S'(tau) on [0, 1] (at tau = 1/2): a turn of angle Delta lasting T has
 #: peak rate 2.1875 |Delta| / T.
 SMOOTHSTEP_PEAK_RATE = 2.1875
+#: Peak acceleration of a change of ground speed between a line and its connectors, m/s^2 (a
+#: survey aircraft's gentle power change).
+SPEED_CHANGE_MPS2 = 0.5
+#: Shortest such change, s.
+MIN_SPEED_CHANGE_S = 10.0
 #: max |S''(tau)| on [0, 1]: bounds the roll rate of a turn (see :func:`turn_duration`).
 SMOOTHSTEP_PEAK_ACCEL = 7.513188404
 
@@ -102,7 +112,8 @@ class Segment:
     label : str
         Plan segment name (``L01``, ``T01``, ``turn``, ``static``).
     kind : str
-        ``static``, ``ramp``, ``line`` or ``turn``.
+        ``static``, ``ramp``, ``line``, ``turn`` or ``accel`` (straight, speed
+        ``speed_from + (speed - speed_from) S(tau)``: a change of ground speed).
     t0, duration : float
         Start time (s after the flight start) and duration (s).
     x0, y0 : float
@@ -114,6 +125,8 @@ class Segment:
     delta : float
         ``turn``: heading change, rad (positive = right turn);
         ``ramp``: +1 accelerate from rest, -1 decelerate to rest.
+    speed_from : float
+        ``accel``: the speed at the start, m/s.
     """
 
     label: str
@@ -125,6 +138,7 @@ class Segment:
     psi0: float
     speed: float = 0.0
     delta: float = 0.0
+    speed_from: float = 0.0
 
     def end_state(self):
         """(x, y, psi) at the end of the segment."""
@@ -185,13 +199,18 @@ def evaluate_segment(seg: Segment, t):
     psi = np.zeros((n, 3))
     spd = np.zeros((n, 2))
     psi[:, 0] = seg.psi0
-    if seg.kind in ("static", "line", "ramp"):
+    if seg.kind in ("static", "line", "ramp", "accel"):
         if seg.kind == "static":
             s0 = s1 = s2 = s3 = np.zeros(n)
         elif seg.kind == "line":
             s0 = seg.speed * (t - seg.t0)
             s1 = np.full(n, seg.speed)
             s2 = s3 = np.zeros(n)
+        elif seg.kind == "accel":
+            ss, ss1, ss2, ss3, si = smoothstep(tau)
+            v0, dv = seg.speed_from, seg.speed - seg.speed_from
+            s0 = v0 * T * tau + dv * T * si
+            s1, s2, s3 = v0 + dv * ss, dv * ss1 / T, dv * ss2 / T**2
         else:
             ss, ss1, ss2, ss3, si = smoothstep(tau)
             v = seg.speed
@@ -300,6 +319,11 @@ class FlightPlan:
     envelope : tuple
         ``(t_up0, t_up1, t_down0, t_down1)``: turbulence rises by smoothstep on
         [t_up0, t_up1] and falls on [t_down0, t_down1] (s).
+    wind_en : tuple
+        Steady wind velocity (map east, north), m/s, the air's motion over the ground (a wind
+        *from* the west is ``(+w, 0)``); faded in and out with the turbulence envelope.  The
+        aircraft holds the plan's ground track and speed and points its nose along its air
+        velocity (:func:`crab_attitude`).
     """
 
     segments: list
@@ -312,6 +336,7 @@ class FlightPlan:
     turbulence: Turbulence
     envelope: tuple = (-math.inf, -math.inf, math.inf, math.inf)
     ellipsoid: Ellipsoid = field(default=WGS84)
+    wind_en: tuple = (0.0, 0.0)
 
     @property
     def duration(self) -> float:
@@ -482,7 +507,12 @@ def evaluate_plan(plan: FlightPlan, t):
     safe_v = np.where(v > 0, v, 1.0)
     pitch = np.where(v > 0, np.arctan2(h[1], safe_v), 0.0)
     pitch_d = np.where(v > 0, (h[2] * v - h[1] * vd) / (safe_v**2 + h[1] ** 2), 0.0)
-    att = np.array([[roll, roll_d], [pitch, pitch_d], [psi[0], psi[1]]])
+    heading, heading_d = psi[0], psi[1]
+    if plan.wind_en[0] != 0.0 or plan.wind_en[1] != 0.0:
+        roll, roll_d, heading, heading_d = crab_attitude(
+            xy, psi[0], _envelope(t, plan.envelope), plan.wind_en, _moving_speed(plan)[idx]
+        )
+    att = np.array([[roll, roll_d], [pitch, pitch_d], [heading, heading_d]])
 
     tb = plan.turbulence
     if tb.active:
@@ -498,6 +528,72 @@ def evaluate_plan(plan: FlightPlan, t):
                 att[a - 3, 1] += s[1]
     labels = np.array([s.label for s in plan.segments], dtype=object)[idx]
     return {"xy": xy, "h": h, "att": att, "label": labels}
+
+
+def _moving_speed(plan: FlightPlan):
+    """Per segment, its speed (m/s); a hold's is that of the ramp next to it."""
+    segs = plan.segments
+    out = np.array([seg.speed for seg in segs])
+    for k, seg in enumerate(segs):
+        if seg.kind == "static":
+            near = segs[k + 1] if k + 1 < len(segs) else segs[k - 1] if k > 0 else seg
+            out[k] = near.speed
+    return out
+
+
+def crab_attitude(xy, track, env, wind_en, cruise_speed):
+    """Heading and coordinated-turn bank of an aircraft flying the plan's ground track in a wind.
+
+    The aircraft keeps the plan's ground track and ground speed; its nose points along its
+    velocity through the air, ``v_air = v_ground - w``, so on a line in a crosswind the heading
+    differs from the track by the crab angle ``atan2(w_cross, v - w_along)``.  The bank is that
+    of a coordinated turn through the air mass, ``atan(a_lat / g0)`` with ``a_lat = |v_air|
+    psi_air'`` (zero on straight lines in a steady wind).
+
+    Parameters
+    ----------
+    xy : ndarray, shape (4, n, 2)
+        Nominal map position (east, north) and its first three derivatives (m, m/s, m/s^2,
+        m/s^3), before turbulence.
+    track : ndarray, shape (n,)
+        Plan heading (the ground track), rad clockwise from map north.
+    env : ndarray, shape (4, n)
+        Wind envelope and its first three derivatives (the turbulence envelope: 0 at rest).
+    wind_en : tuple of float
+        Wind velocity (map east, north), m/s.
+    cruise_speed : float or ndarray, shape (n,)
+        Speed of the ramp next to a hold, m/s: at rest (where the wind is faded out) the nose is
+        where it will be when the speed ramp starts, the crab of ``cruise_speed`` along
+        ``track`` (during a ramp the air velocity scales as the ground speed does, its
+        direction fixed).
+
+    Returns
+    -------
+    roll, roll_rate, heading, heading_rate : ndarray, shape (n,)
+        rad and rad/s; the heading continuous with ``track`` (``track`` plus the crab angle).
+    """
+    w = np.asarray(wind_en, dtype=float)
+    air = xy[1] - env[0][:, None] * w
+    air1 = xy[2] - env[1][:, None] * w
+    air2 = xy[3] - env[2][:, None] * w
+    st, ct = np.sin(track), np.cos(track)
+    d2 = np.einsum("ni,ni->n", air, air)
+    moving = d2 > 0.0
+    ax = np.where(moving, air[:, 0], cruise_speed * st - w[0])
+    ay = np.where(moving, air[:, 1], cruise_speed * ct - w[1])
+    crab = np.arctan2(ax * ct - ay * st, ax * st + ay * ct)  # the air velocity's angle from the track
+    safe = np.where(moving, d2, 1.0)
+    speed = np.sqrt(safe)
+    # |v_air|^2 psi_air' and its derivative (the air1 x air1 terms cancel)
+    num = air[:, 1] * air1[:, 0] - air[:, 0] * air1[:, 1]
+    num1 = air[:, 1] * air2[:, 0] - air[:, 0] * air2[:, 1]
+    dot = np.einsum("ni,ni->n", air, air1)
+    heading_d = np.where(moving, num / safe, 0.0)
+    u = np.where(moving, num / speed, 0.0)
+    ud = np.where(moving, num1 / speed - num * dot / speed**3, 0.0)
+    roll = np.arctan(u / G0_BANK)
+    roll_d = ud / G0_BANK / (1.0 + (u / G0_BANK) ** 2)
+    return roll, roll_d, track + crab, heading_d
 
 
 # --------------------------------------------------------------------------
@@ -815,9 +911,18 @@ class _PlanBuilder:
         self.max_rate = max_rate
         self.max_roll_rate = max_roll_rate
 
-    def add(self, label, kind, duration, speed=None, delta=0.0):
+    def add(self, label, kind, duration, speed=None, delta=0.0, speed_from=0.0):
         seg = Segment(
-            label, kind, self.t, duration, self.x, self.y, self.psi, self.speed if speed is None else speed, delta
+            label,
+            kind,
+            self.t,
+            duration,
+            self.x,
+            self.y,
+            self.psi,
+            self.speed if speed is None else speed,
+            delta,
+            speed_from,
         )
         self.segments.append(seg)
         self.t += duration
@@ -833,11 +938,23 @@ class _PlanBuilder:
             e = _unit(self.psi)
             self.x += 0.5 * seg.speed * duration * e[0]
             self.y += 0.5 * seg.speed * duration * e[1]
+        elif kind == "accel":
+            e = _unit(self.psi)
+            self.x += 0.5 * (seg.speed_from + seg.speed) * duration * e[0]
+            self.y += 0.5 * (seg.speed_from + seg.speed) * duration * e[1]
         return seg
 
-    def straight(self, label, length):
+    def straight(self, label, length, speed=None):
+        v = self.speed if speed is None else speed
         if length > 0.0:
-            self.add(label, "line", length / self.speed)
+            self.add(label, "line", length / v, speed=v)
+
+    def change_speed(self, speed_from, speed_to):
+        """A straight speed change (label ``turn``) at :data:`SPEED_CHANGE_MPS2` at most."""
+        if speed_to != speed_from:
+            self.add(
+                "turn", "accel", speed_change_duration(speed_from, speed_to), speed=speed_to, speed_from=speed_from
+            )
 
     def turn(self, label, delta):
         dur = float(turn_duration(delta, self.speed, self.max_rate, self.max_roll_rate))
@@ -931,6 +1048,15 @@ def build_plan(plan_cfg, turb_cfg, rng, ellipsoid: Ellipsoid = WGS84, min_period
         Used for the turbulence phases and frequency jitter only.
     """
     v = plan_cfg["speed_mps"]
+    wind = wind_velocity_en(plan_cfg.get("wind_speed_mps", 0.0), plan_cfg.get("wind_from_deg", 0.0))
+    at_airspeed = plan_cfg.get("hold_speed", "air") == "air"
+
+    def line_speed(psi):
+        # ground speed of a line flown at airspeed v: the wind triangle
+        if not at_airspeed or wind == (0.0, 0.0):
+            return v
+        return ground_speed_at_airspeed(v, psi, wind)
+
     max_rate = G0_BANK * math.tan(math.radians(plan_cfg["max_bank_deg"])) / v
     alt = plan_cfg["altitude_m"]
     climb = plan_cfg["max_climb_rate_mps"]
@@ -941,30 +1067,38 @@ def build_plan(plan_cfg, turb_cfg, rng, ellipsoid: Ellipsoid = WGS84, min_period
     else:
         lines = grid_lines(plan_cfg)
     _, start, psi0, _, h0 = lines[0]
-    pre = start - (0.5 * v * ramp * _unit(psi0) if plan_cfg["static_start_s"] > 0 else 0.0)
+    v_first, v_last = line_speed(psi0), line_speed(lines[-1][2])
+    pre = start - (0.5 * v_first * ramp * _unit(psi0) if plan_cfg["static_start_s"] > 0 else 0.0)
     b = _PlanBuilder(float(pre[0]), float(pre[1]), psi0, v, max_rate, math.radians(plan_cfg["max_roll_rate_degps"]))
     env_up = (-math.inf, -math.inf)
     if plan_cfg["static_start_s"] > 0:
         b.add("static", "static", plan_cfg["static_start_s"], speed=0.0)
         t_up = b.t
-        b.add("turn", "ramp", ramp, delta=1.0)
+        b.add("turn", "ramp", ramp, delta=1.0, speed=v_first)
         env_up = (t_up, b.t)
         b.x, b.y = float(start[0]), float(start[1])
     steps = []
     h_prev = h0
     for k, (label, st, psi, length, h) in enumerate(lines):
+        v_line = line_speed(psi)
         if k > 0:
             need = 0.0 if h == h_prev else SMOOTHSTEP_PEAK_RATE * abs(h - h_prev) / climb
             t0 = b.t
-            dur = b.goto(st, psi, min_duration=need)
+            # the connector (at v) ends where the speed change to the line's speed starts
+            run_in = 0.5 * (v + v_line) * speed_change_duration(v, v_line) if v_line != v else 0.0
+            dur = b.goto(st - run_in * _unit(psi), psi, min_duration=need)
             if h != h_prev:
                 steps.append(AltitudeStep(t0, dur, h_prev, h))
-        b.straight(label, length)
+            b.change_speed(v, v_line)
+            b.x, b.y = float(st[0]), float(st[1])  # the speed change's rounding (nm)
+        b.straight(label, length, speed=v_line)
+        if k < len(lines) - 1:
+            b.change_speed(v_line, v)
         h_prev = h
     env_down = (math.inf, math.inf)
     if plan_cfg["static_end_s"] > 0:
         t_dn = b.t
-        b.add("turn", "ramp", ramp, delta=-1.0)
+        b.add("turn", "ramp", ramp, delta=-1.0, speed=v_last)
         env_down = (t_dn, b.t)
         b.add("static", "static", plan_cfg["static_end_s"], speed=0.0)
     lat0 = math.radians(plan_cfg["origin_lat_deg"])
@@ -993,4 +1127,27 @@ def build_plan(plan_cfg, turb_cfg, rng, ellipsoid: Ellipsoid = WGS84, min_period
         turbulence=Turbulence(amp, omg, phs),
         envelope=(env_up[0], env_up[1], env_down[0], env_down[1]),
         ellipsoid=ellipsoid,
+        wind_en=wind,
     )
+
+
+def ground_speed_at_airspeed(airspeed, track, wind_en):
+    """Ground speed (m/s) along ``track`` (rad clockwise from north) of an aircraft flying at
+    ``airspeed`` (m/s) in the wind ``wind_en`` (map east, north; m/s): the wind triangle
+    ``sqrt(airspeed^2 - w_cross^2) + w_along``."""
+    e = _unit(track)
+    along = wind_en[0] * e[0] + wind_en[1] * e[1]
+    cross = wind_en[0] * e[1] - wind_en[1] * e[0]
+    return float(math.sqrt(airspeed**2 - cross**2) + along)
+
+
+def speed_change_duration(speed_from, speed_to):
+    """Duration (s) of a smoothstep speed change peaking at :data:`SPEED_CHANGE_MPS2`."""
+    return max(MIN_SPEED_CHANGE_S, SMOOTHSTEP_PEAK_RATE * abs(speed_to - speed_from) / SPEED_CHANGE_MPS2)
+
+
+def wind_velocity_en(speed_mps, from_deg):
+    """Wind velocity (map east, north), m/s, of a wind of ``speed_mps`` blowing *from*
+    ``from_deg`` (clockwise from north, as a weather report gives it)."""
+    a = math.radians(from_deg)
+    return (-float(speed_mps) * math.sin(a), -float(speed_mps) * math.cos(a))
