@@ -56,7 +56,9 @@ carrier-phase grade and its heights the only height channel (:func:`with_carrier
 flight (:func:`with_gravimeter_tare`);
 ``--gnss-markov SIGMA_M,TAU_S`` a slowly varying GNSS error (:func:`with_gnss_markov`);
 ``--line-levels DZ_M`` flies every second line DZ_M higher (:func:`with_line_levels`);
-``--wind SPEED,FROM_DEG[,ground]`` flies every flight in a steady wind (:func:`with_wind`).
+``--wind SPEED,FROM_DEG[,ground]`` flies every flight in a steady wind (:func:`with_wind`);
+``--airfield HEIGHT_M[,CLIMB_MPS]`` starts and ends every flight parked on the ground
+(:func:`with_airfield`).
 Uses public API only.
 """
 
@@ -554,6 +556,28 @@ def with_wind(spec: dict, speed_mps: float, from_deg: float, hold_speed: str = "
     return out
 
 
+#: Parked time before take-off and after landing given to a draw without static periods, s.
+AIRFIELD_PARKED_S = 300.0
+
+
+def with_airfield(spec: dict, height_m: float, climb_mps: float | None = None) -> dict:
+    """The drawn flight from and to an airfield at ellipsoidal height ``height_m``: parked there
+    (the drawn static periods, or :data:`AIRFIELD_PARKED_S` where none was drawn), the take-off
+    run, a steady climb right after it and a steady descent before the landing run at
+    ``climb_mps`` (the plan's ``max_climb_rate_mps``, the simulator's 5 m/s by default;
+    docs/simulate.md, "Static periods"), the lines as drawn.  The name is unchanged, the cache
+    folder's hash differs."""
+    out = json.loads(json.dumps(spec))
+    plan = out["sim"]["flights"][0]["plan"]
+    plan["ground_height_m"] = float(height_m)
+    if climb_mps is not None:
+        plan["max_climb_rate_mps"] = float(climb_mps)
+    for key in ("static_start_s", "static_end_s"):
+        if not plan.get(key):
+            plan[key] = AIRFIELD_PARKED_S
+    return out
+
+
 def with_carrier_phase_gnss(spec: dict) -> dict:
     """The drawn flight with carrier-phase (PPK) GNSS and no altimeter of its own: the GNSS
     heights carry the drawn altimeter's white noise (``sigma_m``, at the GNSS rate), the
@@ -934,6 +958,13 @@ def main(argv=None):
         help="fly every flight in a steady wind of SPEED m/s from FROM_DEG: the aircraft crabs, its lines at the "
         "drawn airspeed (',ground': at the drawn ground speed; docs/benchmarks.md 'Flights in a wind')",
     )
+    ap.add_argument(
+        "--airfield",
+        default=None,
+        metavar="HEIGHT_M[,CLIMB_MPS]",
+        help="start and end every flight parked on the ground at this ellipsoidal height: take-off, a steady "
+        "climb (at CLIMB_MPS, default 5 m/s), descent and landing (docs/benchmarks.md 'From the ground and back')",
+    )
     a = ap.parse_args(argv)
     if a.flights < 1:
         ap.error("--flights must be >= 1")
@@ -974,6 +1005,11 @@ def main(argv=None):
         if len(wind) != 2 or not 0.0 <= wind[0] <= most:
             ap.error(f"--wind: expected SPEED,FROM_DEG[,ground] (0 <= SPEED <= {most:g} m/s, deg), got {a.wind!r}")
         wind.append(hold)
+    airfield = None
+    if a.airfield is not None:
+        airfield = _numbers(a.airfield)
+        if len(airfield) not in (1, 2) or not -400.0 <= airfield[0] <= 15000.0 or min(airfield[1:] or [1.0]) <= 0:
+            ap.error(f"--airfield: expected HEIGHT_M[,CLIMB_MPS] (-400 to 15000 m, m/s > 0), got {a.airfield!r}")
     rows = []
     for seed in seeds:
         try:
@@ -998,6 +1034,8 @@ def main(argv=None):
             spec = with_line_levels(spec, a.line_levels)
         if wind is not None:
             spec = with_wind(spec, *wind)
+        if airfield is not None:
+            spec = with_airfield(spec, *airfield)
         row = run_flight(spec, a.cache, tuple(a.runs.split(",")), a.heights, model)
         rows.append(row)
         print(

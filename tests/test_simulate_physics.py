@@ -456,3 +456,69 @@ def test_lines_flown_at_the_airspeed_in_a_wind():
     w_nb = np.stack([om[:, 2, 1], om[:, 0, 2], om[:, 1, 0]], axis=1)
     w_in = np.einsum("nji,nj->ni", c, p.angular_rate_t[::25])
     assert np.abs(w.angular_rate_t[::25] - (w_in + w_nb)).max() < 1e-9
+
+
+def _airfield_grid(triad, turb_m=2.0, turb_deg=1.0, imu_hz=20.0):
+    plan = {
+        "kind": "grid",
+        "origin_lat_deg": 52.0,
+        "origin_lon_deg": 10.0,
+        "altitude_m": 1200.0,
+        "speed_mps": 60.0,
+        "lines": {"count": 2, "spacing_m": 3000.0, "length_m": 8000.0, "heading_deg": 20.0},
+        "static_start_s": 60.0,
+        "static_end_s": 60.0,
+        "ramp_s": 30.0,
+        "ground_height_m": 150.0,
+    }
+    turb = {
+        "vertical_sigma_m": turb_m,
+        "horizontal_sigma_m": turb_m,
+        "attitude_sigma_deg": turb_deg,
+        "min_period_s": 2.0,
+    }
+    return simulate_flight(quick_sim(plan=plan, triad=triad, imu_hz=imu_hz, turbulence=turb, seed=7))
+
+
+def test_a_flight_from_the_ground_climbs_to_its_lines_and_lands():
+    """``plan.ground_height_m``: parked on the ground, the take-off run, a climb on the way to the
+    first line at ``max_climb_rate_mps`` at most, the lines at their altitude, a descent after
+    the last and the landing run to a stop on the ground; the IMU is the trajectory's."""
+    still = _airfield_grid("platform", turb_m=0.0, turb_deg=0.0)
+    tr = still.truth
+    parked = tr["line"] == "static"
+    assert parked[0] and parked[-1] and parked.sum() == 2 * 60 * 20
+    np.testing.assert_array_equal(tr["height"][parked], 150.0)
+    assert np.abs(tr["vel_n"][parked]).max() == 0.0
+    # parked at 150 m: the normal gravity there (boule), nothing else
+    lat = tr["lat"][parked]
+    np.testing.assert_allclose(still.specific_force_t[parked, 2], boule_gamma(lat, 150.0), atol=1e-9)
+    for name in ("L01", "L02"):
+        np.testing.assert_array_equal(tr["height"][tr["line"] == name], 1200.0)
+    climb = tr["vel_n"][:, 2]
+    assert 4.5 < climb.max() <= 5.0 + 1e-9 and -5.0 - 1e-9 <= climb.min() < -4.5
+    # up before the first line, down after the last: the heights between are the lines'
+    first, last = np.flatnonzero(tr["line"] == "L01")[0], np.flatnonzero(tr["line"] == "L02")[-1]
+    assert np.all(np.diff(tr["height"][:first]) >= -1e-9) and np.all(np.diff(tr["height"][last:]) <= 1e-9)
+    assert np.abs(np.diff(tr["acc_n"], axis=0)).max() < 0.05  # smooth: no steps in acceleration
+    # the vertical velocity is the height's derivative (20-Hz central differences: 4e-5 m/s)
+    t = still.imu_time
+    np.testing.assert_allclose(np.gradient(tr["height"], t)[1:-1], climb[1:-1], atol=1e-4)
+    # with turbulence: strapdown rotated = platform, gyros = the finite-differenced attitude
+    s, p = _airfield_grid("strapdown"), _airfield_grid("platform")
+    f_rot = np.einsum("nij,nj->ni", s.truth["mat_nt"], s.specific_force_t)
+    assert np.abs(f_rot - p.specific_force_t).max() < 1e-13
+    d = 1e-4
+    t = s.imu_time[::10]
+    kp, km = tj.kinematics(s.plan, t + d), tj.kinematics(s.plan, t - d)
+    c = tj.kinematics(s.plan, t).mat_nb
+    om = np.einsum("nji,njk->nik", c, (kp.mat_nb - km.mat_nb) / (2 * d))
+    w_nb = np.stack([om[:, 2, 1], om[:, 0, 2], om[:, 1, 0]], axis=1)
+    w_in = np.einsum("nji,nj->ni", c, p.angular_rate_t[::10])
+    assert np.abs(s.angular_rate_t[::10] - (w_in + w_nb)).max() < 1e-9
+
+
+def test_a_ground_height_without_a_parked_period_is_refused():
+    plan = {"kind": "line", "origin_lat_deg": 45.0, "origin_lon_deg": 10.0, "duration_s": 600.0}
+    with pytest.raises(ConfigError, match=r"plan\.ground_height_m: the aircraft is on the ground only while parked"):
+        simulate_flight(quick_sim(plan={**plan, "ground_height_m": 100.0}))

@@ -55,6 +55,7 @@ DEFAULT_PLAN = {
     "wind_speed_mps": 0.0,
     "wind_from_deg": 0.0,
     "hold_speed": "air",
+    "ground_height_m": None,
 }
 DEFAULT_LINES = {"count": None, "spacing_m": None, "length_m": None, "heading_deg": 90.0, "altitudes_m": None}
 DEFAULT_TIES = {"count": 0, "spacing_m": 0.0, "altitude_m": None}
@@ -257,6 +258,13 @@ def _validate_plan(p, path, rates):
         )
     p["wind_from_deg"] = number(p["wind_from_deg"], f"{path}.wind_from_deg", "deg", -360.0, 360.0)
     _choice(p["hold_speed"], f"{path}.hold_speed", ("air", "ground"))
+    if p["ground_height_m"] is not None:
+        p["ground_height_m"] = number(p["ground_height_m"], f"{path}.ground_height_m", "m", -400.0, 15000.0)
+        if p["static_start_s"] <= 0 and p["static_end_s"] <= 0:
+            raise ConfigError(
+                f"{path}.ground_height_m: the aircraft is on the ground only while parked; give "
+                f"{path}.static_start_s or {path}.static_end_s (s) too"
+            )
     if p["kind"] == "line":
         for k in ("lines", "ties"):
             if p[k] is not None:

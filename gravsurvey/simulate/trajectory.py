@@ -62,6 +62,8 @@ SMOOTHSTEP_PEAK_RATE = 2.1875
 SPEED_CHANGE_MPS2 = 0.5
 #: Shortest such change, s.
 MIN_SPEED_CHANGE_S = 10.0
+#: Time to reach (and leave) the steady rate of a climb after take-off or a descent to land, s.
+CLIMB_RAMP_S = 20.0
 #: max |S''(tau)| on [0, 1]: bounds the roll rate of a turn (see :func:`turn_duration`).
 SMOOTHSTEP_PEAK_ACCEL = 7.513188404
 
@@ -250,12 +252,15 @@ def evaluate_segment(seg: Segment, t):
 
 @dataclass
 class AltitudeStep:
-    """Smoothstep height change from ``h_from`` to ``h_to`` over [t0, t0 + duration]."""
+    """Height change from ``h_from`` to ``h_to`` over [t0, t0 + duration]: a smoothstep, or
+    with ``ramp_s`` > 0 a climb (descent) at a steady rate entered and left by smoothstep
+    changes of the rate lasting ``ramp_s`` each (an aircraft's climb after take-off)."""
 
     t0: float
     duration: float
     h_from: float
     h_to: float
+    ramp_s: float = 0.0
 
 
 @dataclass
@@ -447,6 +452,9 @@ def _altitude(t, plan: FlightPlan):
     out = np.zeros((4, t.shape[0]))
     out[0] = plan.h_start
     for st in plan.altitude_steps:
+        if st.ramp_s > 0.0:
+            out += _steady_climb(t, st)
+            continue
         tau = np.clip((t - st.t0) / st.duration, 0.0, 1.0)
         s, s1, s2, s3, _ = smoothstep(tau)
         dh = st.h_to - st.h_from
@@ -456,6 +464,29 @@ def _altitude(t, plan: FlightPlan):
         out[1] += np.where(inside, dh * s1 / T, 0.0)
         out[2] += np.where(inside, dh * s2 / T**2, 0.0)
         out[3] += np.where(inside, dh * s3 / T**3, 0.0)
+    return out
+
+
+def _steady_climb(t, st: AltitudeStep):
+    """Height change of a steady climb (:class:`AltitudeStep` with ``ramp_s``) and its first
+    three derivatives; (4, n).  The rate ``c = dh / (duration - ramp_s)`` is reached and left
+    by smoothsteps of ``ramp_s``."""
+    r, T = st.ramp_s, st.duration
+    c = (st.h_to - st.h_from) / (T - r)
+    tau = np.clip(t - st.t0, 0.0, T)
+    out = np.zeros((4, t.shape[0]))
+    up = tau < r
+    down = tau > T - r
+    mid = ~up & ~down
+    s, s1, s2, _, si = smoothstep(tau[up] / r)
+    out[:, up] = [c * r * si, c * s, c * s1 / r, c * s2 / r**2]
+    out[0, mid] = c * (0.5 * r + tau[mid] - r)
+    out[1, mid] = c
+    u = (tau[down] - (T - r)) / r
+    s, s1, s2, _, si = smoothstep(u)
+    out[:, down] = [c * (0.5 * r + T - 2.0 * r + r * (u - si)), c * (1.0 - s), -c * s1 / r, -c * s2 / r**2]
+    # before and after the climb the height holds (the derivatives vanish there)
+    out[1:, (t <= st.t0) | (t >= st.t0 + T)] = 0.0
     return out
 
 
@@ -1068,37 +1099,54 @@ def build_plan(plan_cfg, turb_cfg, rng, ellipsoid: Ellipsoid = WGS84, min_period
         lines = grid_lines(plan_cfg)
     _, start, psi0, _, h0 = lines[0]
     v_first, v_last = line_speed(psi0), line_speed(lines[-1][2])
-    pre = start - (0.5 * v_first * ramp * _unit(psi0) if plan_cfg["static_start_s"] > 0 else 0.0)
+    ground = plan_cfg.get("ground_height_m")
+    # parked on the ground: take off at v, climb on the way to the first line, descend after the last
+    from_ground = ground is not None and plan_cfg["static_start_s"] > 0
+    to_ground = ground is not None and plan_cfg["static_end_s"] > 0
+    v_up = v if from_ground else v_first
+    pre = start - (0.5 * v_up * ramp * _unit(psi0) if plan_cfg["static_start_s"] > 0 else 0.0)
     b = _PlanBuilder(float(pre[0]), float(pre[1]), psi0, v, max_rate, math.radians(plan_cfg["max_roll_rate_degps"]))
     env_up = (-math.inf, -math.inf)
     if plan_cfg["static_start_s"] > 0:
         b.add("static", "static", plan_cfg["static_start_s"], speed=0.0)
         t_up = b.t
-        b.add("turn", "ramp", ramp, delta=1.0, speed=v_first)
+        b.add("turn", "ramp", ramp, delta=1.0, speed=v_up)
         env_up = (t_up, b.t)
         b.x, b.y = float(start[0]), float(start[1])
     steps = []
-    h_prev = h0
+    h_prev = ground if from_ground else h0
     for k, (label, st, psi, length, h) in enumerate(lines):
         v_line = line_speed(psi)
-        if k > 0:
-            need = 0.0 if h == h_prev else SMOOTHSTEP_PEAK_RATE * abs(h - h_prev) / climb
+        if k > 0 or from_ground:
+            if k == 0:  # the take-off climb, at a steady rate from the end of the take-off run
+                need = abs(h - h_prev) / climb + CLIMB_RAMP_S
+            else:
+                need = 0.0 if h == h_prev else SMOOTHSTEP_PEAK_RATE * abs(h - h_prev) / climb
             t0 = b.t
             # the connector (at v) ends where the speed change to the line's speed starts
             run_in = 0.5 * (v + v_line) * speed_change_duration(v, v_line) if v_line != v else 0.0
             dur = b.goto(st - run_in * _unit(psi), psi, min_duration=need)
-            if h != h_prev:
+            if k == 0 and h != h_prev:
+                steps.append(AltitudeStep(t0, need, h_prev, h, ramp_s=CLIMB_RAMP_S))
+            elif h != h_prev:
                 steps.append(AltitudeStep(t0, dur, h_prev, h))
             b.change_speed(v, v_line)
             b.x, b.y = float(st[0]), float(st[1])  # the speed change's rounding (nm)
         b.straight(label, length, speed=v_line)
-        if k < len(lines) - 1:
+        if k < len(lines) - 1 or to_ground:
             b.change_speed(v_line, v)
         h_prev = h
+    if to_ground:
+        # a loop back over the last line's end, descending at a steady rate at its end, then the
+        # landing run along it
+        need = abs(ground - h_prev) / climb + CLIMB_RAMP_S
+        t0 = b.t
+        dur = b.goto((b.x, b.y), b.psi, min_duration=need)
+        steps.append(AltitudeStep(t0 + dur - need, need, h_prev, ground, ramp_s=CLIMB_RAMP_S))
     env_down = (math.inf, math.inf)
     if plan_cfg["static_end_s"] > 0:
         t_dn = b.t
-        b.add("turn", "ramp", ramp, delta=-1.0, speed=v_last)
+        b.add("turn", "ramp", ramp, delta=-1.0, speed=v if to_ground else v_last)
         env_down = (t_dn, b.t)
         b.add("static", "static", plan_cfg["static_end_s"], speed=0.0)
     lat0 = math.radians(plan_cfg["origin_lat_deg"])
@@ -1119,7 +1167,7 @@ def build_plan(plan_cfg, turb_cfg, rng, ellipsoid: Ellipsoid = WGS84, min_period
     return FlightPlan(
         segments=b.segments,
         altitude_steps=steps,
-        h_start=h0,
+        h_start=ground if from_ground else h0,
         lat0=lat0,
         lon0=lon0,
         rm=rm,
