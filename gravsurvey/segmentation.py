@@ -46,6 +46,10 @@ CONNECTING_LEG_FRACTION = 0.25
 #: (:func:`along_line_legs`), deg: the default ``transit_angle_deg``.
 ALONG_LINE_DEG = 20.0
 
+#: Window of the vertical speed that ``max_climb_mps`` bounds, s: long against turbulence (a
+#: 10-m heave over 200 s averages to 0.3 m/s), short against a climb to a survey's altitude.
+CLIMB_WINDOW_S = 60.0
+
 #: ``lines.mode`` values: detection, explicit windows, the whole flight as one line
 SEGMENTATION_MODES = ("auto", "windows", "whole")
 
@@ -197,6 +201,7 @@ def segment_lines(
     min_speed_mps: float = 20.0,
     max_turn_rate_degps: float = 1.0,
     max_vertical_speed_mps: float | None = 4.0,
+    max_climb_mps: float | None = 2.0,
     speed_tol_mps: float = 10.0,
     smooth_s: float = 10.0,
     merge_gap_s: float = 20.0,
@@ -211,7 +216,8 @@ def segment_lines(
     The track heading and ground speed come from the horizontal velocity, smoothed with a
     centred moving average over ``smooth_s`` (turbulence: heading wander of a few degrees, speed
     wobble). A sample is a *straight candidate* when the aircraft moves (smoothed ground speed
-    >= ``min_speed_mps``), flies level (smoothed |vertical speed| <= ``max_vertical_speed_mps``)
+    >= ``min_speed_mps``), flies level (smoothed |vertical speed| <= ``max_vertical_speed_mps``,
+    and over :data:`CLIMB_WINDOW_S` <= ``max_climb_mps``: a slow steady climb is no line either)
     and the smoothed heading changes by less than ``max_turn_rate_degps`` over the smoothing
     window. Each run of candidates is split where the heading leaves ``heading_tol_deg`` of the
     run's mean heading or the speed leaves ``speed_tol_mps`` of its median, and each piece is
@@ -263,6 +269,10 @@ def segment_lines(
         Straight candidates turn slower than this, deg/s (a standard-rate turn is 3 deg/s).
     max_vertical_speed_mps : float or None
         Climbs and descents faster than this are not lines, m/s; None disables the test.
+    max_climb_mps : float or None
+        Nor are climbs and descents whose vertical speed averaged over :data:`CLIMB_WINDOW_S`
+        exceeds this, m/s (a cruise climb at 2-4 m/s on course to the survey area: straight, at
+        survey speed, and at heights the lines are not flown at); None disables the test.
     speed_tol_mps : float
         Largest deviation of the smoothed ground speed from the line's median, m/s (a line is
         flown at steady speed: take-off and landing speed ramps are not lines).
@@ -302,6 +312,7 @@ def segment_lines(
         kw = options.detection_kwargs()
         min_line_s, heading_tol_deg, min_speed_mps = kw["min_line_s"], kw["heading_tol_deg"], kw["min_speed_mps"]
         max_turn_rate_degps, max_vertical_speed_mps = kw["max_turn_rate_degps"], kw["max_vertical_speed_mps"]
+        max_climb_mps = kw["max_climb_mps"]
         smooth_s, merge_gap_s, tie_angle_deg = kw["smooth_s"], kw["merge_gap_s"], kw["tie_angle_deg"]
         speed_tol_mps = kw["speed_tol_mps"]
         min_line_m, transit_angle_deg = kw["min_line_m"], kw["transit_angle_deg"]
@@ -331,6 +342,10 @@ def segment_lines(
     moving = finite & (speed_s >= min_speed_mps)
     static = finite & ~moving
     level = np.ones(n, bool) if max_vertical_speed_mps is None else np.abs(vu_s) <= max_vertical_speed_mps
+    if max_climb_mps is not None:
+        wc = max(1, int(round(CLIMB_WINDOW_S / dt)))
+        wc_sum = np.maximum(uniform_filter1d(finite.astype(float), wc, mode="nearest"), 1e-12)
+        level &= np.abs(uniform_filter1d(vv[:, 2], wc, mode="nearest") / wc_sum) <= max_climb_mps
     usable = moving & level
     candidate = usable & (rate < max_turn_rate_degps)
 
@@ -681,10 +696,11 @@ class SegmentationOptions:
         ``auto`` (straight-line detection, :func:`segment_lines`), ``windows`` (explicit time
         windows, :func:`segments_from_windows`) or ``whole`` (the whole flight is line ``L01``).
     min_line_s, heading_tol_deg, min_speed_mps, max_turn_rate_degps, max_vertical_speed_mps,
-    speed_tol_mps, smooth_s, merge_gap_s, tie_angle_deg, min_line_m, transit_angle_deg,
-    line_heading_deg
+    max_climb_mps, speed_tol_mps, smooth_s, merge_gap_s, tie_angle_deg, min_line_m,
+    transit_angle_deg, line_heading_deg
         See :func:`segment_lines` (units in the names; ``max_vertical_speed_mps``,
-        ``min_line_s``, ``transit_angle_deg`` and ``line_heading_deg`` may be null).
+        ``max_climb_mps``, ``min_line_s``, ``transit_angle_deg`` and ``line_heading_deg`` may be
+        null).
     windows : list of dict
         For ``mode: windows``: ``{name, start_s, stop_s[, kind]}``, s after the flight's first sample.
     """
@@ -695,6 +711,7 @@ class SegmentationOptions:
     min_speed_mps: float = 20.0
     max_turn_rate_degps: float = 1.0
     max_vertical_speed_mps: float | None = 4.0
+    max_climb_mps: float | None = 2.0
     speed_tol_mps: float = 10.0
     smooth_s: float = 10.0
     merge_gap_s: float = 20.0

@@ -212,6 +212,29 @@ def test_climbing_straight_is_not_a_line_and_velocity_from_positions():
     assert straight[1].kind == "tie"  # 90 deg from the first
 
 
+def test_a_slow_climb_on_the_lines_heading_is_not_part_of_the_line():
+    """A cruise climb at 2.5 m/s (under ``max_vertical_speed_mps``) straight into a line on its
+    heading: the 60-s mean vertical speed (``max_climb_mps``) ends the line where the climb
+    does; without that test the climb is taken with the line (2.5 m/s x 400 s = 1 km lower)."""
+    legs = [
+        ("line", 90.0, 300.0),
+        ("turn", 3.0, 180.0),
+        ("climb", 270.0, 400.0, 2.5),
+        ("line", 270.0, 600.0),
+        ("turn", 3.0, 180.0),
+        ("climb", 90.0, 300.0, -2.5),
+    ]
+    t, lat, lon, vel, lab = build_track(legs, seed=3)
+    runs = true_runs(lab, "line")
+    lines = [s for s in segment_lines(t, lat, lon, vel) if s.kind == "line"]
+    assert len(lines) == 2
+    for seg, (a, b) in zip(lines, runs):
+        # the 60-s mean reaches 2 m/s 6 s of climb before the level line: within 20 s of each end
+        assert abs(seg.start_index - a) <= 20 and abs(seg.stop_index - b) <= 20
+    old = [s for s in segment_lines(t, lat, lon, vel, max_climb_mps=None) if s.kind == "line"]
+    assert old[1].start_index < runs[1][0] - 300  # the climb taken as line: the test can fail
+
+
 def test_gust_does_not_split_a_line():
     t, lat, lon, vel, lab = build_track([("line", 90.0, 900.0)], heading_noise_deg=1.0)
     # a 12 s gust swings the track 25 deg off

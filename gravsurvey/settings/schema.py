@@ -266,6 +266,12 @@ class LinesSection(Section):
     max_vertical_speed_mps: Optional[float] = _ln(
         "max_vertical_speed_mps", "faster climb/descent is not line, m/s (null: no limit)", gt=0
     )
+    max_climb_mps: Optional[float] = _ln(
+        "max_climb_mps",
+        "a climb/descent faster than this averaged over 60 s is not line either (a steady climb to the "
+        "survey's altitude), m/s (null: no limit; a drape steeper than this needs a larger value)",
+        gt=0,
+    )
     speed_tol_mps: float = _ln("speed_tol_mps", "speed change allowed on a line, m/s", gt=0)
     smooth_s: float = _ln("smooth_s", "smoothing of heading/speed before detection, s", gt=0)
     merge_gap_s: float = _ln("merge_gap_s", "line pieces separated by less are merged, s", ge=0)
