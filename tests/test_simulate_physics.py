@@ -522,3 +522,18 @@ def test_a_ground_height_without_a_parked_period_is_refused():
     plan = {"kind": "line", "origin_lat_deg": 45.0, "origin_lon_deg": 10.0, "duration_s": 600.0}
     with pytest.raises(ConfigError, match=r"plan\.ground_height_m: the aircraft is on the ground only while parked"):
         simulate_flight(quick_sim(plan={**plan, "ground_height_m": 100.0}))
+
+
+@pytest.mark.parametrize("dh", [5.0, 100.0, 3000.0, -40.0])
+def test_a_steady_climb_reaches_its_height_at_its_rate_with_exact_derivatives(dh):
+    """``AltitudeStep`` with ``ramp_s``: the height changes by ``dh``, the rate holds at 5 m/s
+    between its smoothsteps (a change too small to reach it peaks at ``dh / ramp_s``), and the
+    rate and its derivative are the height's (finite differences over 1-ms steps)."""
+    dur = tj.steady_climb_duration(dh, 5.0)
+    step = tj.AltitudeStep(10.0, dur, 0.0, dh, ramp_s=tj.CLIMB_RAMP_S)
+    t = np.arange(0.0, dur + 20.0, 1e-3)
+    h = tj.steady_climb_profile(t, step)
+    assert h[0, 0] == 0.0 and h[0, -1] == pytest.approx(dh, abs=1e-9)
+    assert np.abs(h[1]).max() == pytest.approx(min(5.0, abs(dh) / tj.CLIMB_RAMP_S), rel=1e-6)
+    np.testing.assert_allclose(np.gradient(h[0], t), h[1], atol=1e-6)
+    np.testing.assert_allclose(np.gradient(h[1], t), h[2], atol=1e-6)

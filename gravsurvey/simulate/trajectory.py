@@ -37,8 +37,9 @@ coordinated-flight attitude of the turbulence-free plan (heading = plan
 heading, pitch = flight-path angle ``atan(h_dot / v)``, roll =
 ``atan(v psi_dot / g0)``) plus the angular turbulence, all with analytic rates.
 In a wind (``plan.wind_speed_mps``) the heading is the air velocity's and the roll
-that of a turn through the air mass (:func:`crab_attitude`); the ground track and
-speed stay the plan's.
+that of a turn through the air mass (:func:`crab_attitude`); the ground track stays
+the plan's, and with ``plan.hold_speed: air`` each line is flown at the plan speed
+through the air (:func:`ground_speed_at_airspeed`).
 """
 
 from __future__ import annotations
@@ -327,8 +328,8 @@ class FlightPlan:
     wind_en : tuple
         Steady wind velocity (map east, north), m/s, the air's motion over the ground (a wind
         *from* the west is ``(+w, 0)``); faded in and out with the turbulence envelope.  The
-        aircraft holds the plan's ground track and speed and points its nose along its air
-        velocity (:func:`crab_attitude`).
+        aircraft holds the plan's ground track and points its nose along its air velocity
+        (:func:`crab_attitude`).
     """
 
     segments: list
@@ -453,7 +454,7 @@ def _altitude(t, plan: FlightPlan):
     out[0] = plan.h_start
     for st in plan.altitude_steps:
         if st.ramp_s > 0.0:
-            out += _steady_climb(t, st)
+            out += steady_climb_profile(t, st)
             continue
         tau = np.clip((t - st.t0) / st.duration, 0.0, 1.0)
         s, s1, s2, s3, _ = smoothstep(tau)
@@ -467,7 +468,7 @@ def _altitude(t, plan: FlightPlan):
     return out
 
 
-def _steady_climb(t, st: AltitudeStep):
+def steady_climb_profile(t, st: AltitudeStep):
     """Height change of a steady climb (:class:`AltitudeStep` with ``ramp_s``) and its first
     three derivatives; (4, n).  The rate ``c = dh / (duration - ramp_s)`` is reached and left
     by smoothsteps of ``ramp_s``."""
@@ -575,9 +576,10 @@ def _moving_speed(plan: FlightPlan):
 def crab_attitude(xy, track, env, wind_en, cruise_speed):
     """Heading and coordinated-turn bank of an aircraft flying the plan's ground track in a wind.
 
-    The aircraft keeps the plan's ground track and ground speed; its nose points along its
-    velocity through the air, ``v_air = v_ground - w``, so on a line in a crosswind the heading
-    differs from the track by the crab angle ``atan2(w_cross, v - w_along)``.  The bank is that
+    The aircraft flies the nominal ground track at the nominal ground speed ``v``; its nose
+    points along its velocity through the air, ``v_air = v_ground - w``, so on a line in a
+    crosswind the heading differs from the track by the crab angle ``atan2(-w_cross, v -
+    w_along)`` (``w_cross`` the wind's component to the right of the track).  The bank is that
     of a coordinated turn through the air mass, ``atan(a_lat / g0)`` with ``a_lat = |v_air|
     psi_air'`` (zero on straight lines in a steady wind).
 
@@ -1119,7 +1121,7 @@ def build_plan(plan_cfg, turb_cfg, rng, ellipsoid: Ellipsoid = WGS84, min_period
         v_line = line_speed(psi)
         if k > 0 or from_ground:
             if k == 0:  # the take-off climb, at a steady rate from the end of the take-off run
-                need = abs(h - h_prev) / climb + CLIMB_RAMP_S
+                need = steady_climb_duration(h - h_prev, climb)
             else:
                 need = 0.0 if h == h_prev else SMOOTHSTEP_PEAK_RATE * abs(h - h_prev) / climb
             t0 = b.t
@@ -1139,10 +1141,11 @@ def build_plan(plan_cfg, turb_cfg, rng, ellipsoid: Ellipsoid = WGS84, min_period
     if to_ground:
         # a loop back over the last line's end, descending at a steady rate at its end, then the
         # landing run along it
-        need = abs(ground - h_prev) / climb + CLIMB_RAMP_S
+        need = steady_climb_duration(ground - h_prev, climb)
         t0 = b.t
         dur = b.goto((b.x, b.y), b.psi, min_duration=need)
-        steps.append(AltitudeStep(t0 + dur - need, need, h_prev, ground, ramp_s=CLIMB_RAMP_S))
+        if ground != h_prev:
+            steps.append(AltitudeStep(t0 + dur - need, need, h_prev, ground, ramp_s=CLIMB_RAMP_S))
     env_down = (math.inf, math.inf)
     if plan_cfg["static_end_s"] > 0:
         t_dn = b.t
@@ -1187,6 +1190,13 @@ def ground_speed_at_airspeed(airspeed, track, wind_en):
     along = wind_en[0] * e[0] + wind_en[1] * e[1]
     cross = wind_en[0] * e[1] - wind_en[1] * e[0]
     return float(math.sqrt(airspeed**2 - cross**2) + along)
+
+
+def steady_climb_duration(dh_m, rate_mps):
+    """Duration (s) of a steady climb (descent) by ``dh_m`` at ``rate_mps`` with
+    :data:`CLIMB_RAMP_S` smoothsteps into and out of the rate; a change too small to reach the
+    rate takes the two smoothsteps alone (its peak rate ``|dh| / CLIMB_RAMP_S`` below it)."""
+    return max(abs(dh_m) / rate_mps, CLIMB_RAMP_S) + CLIMB_RAMP_S
 
 
 def speed_change_duration(speed_from, speed_to):
