@@ -107,7 +107,8 @@ def test_level_straight_flight_any_heading(heading_deg):
     assert np.abs(out.specific_force_t[:, 2] - expected).max() < 1e-8
 
 
-def _turbulent_grid(triad, imu_hz=50.0, static=20.0):
+def _turbulent_grid(triad, imu_hz=50.0, static=20.0, turb_m=2.0, turb_deg=1.0, **plan_keys):
+    """Two short lines with turns, a hold, turbulence; ``plan_keys`` replace the plan's keys."""
     plan = {
         "kind": "grid",
         "origin_lat_deg": 52.0,
@@ -118,28 +119,44 @@ def _turbulent_grid(triad, imu_hz=50.0, static=20.0):
         "static_start_s": static,
         "ramp_s": 30.0,
         "max_bank_deg": 28.0,
+        **plan_keys,
     }
-    turb = {"vertical_sigma_m": 2.0, "horizontal_sigma_m": 2.0, "attitude_sigma_deg": 1.0, "min_period_s": 2.0}
+    turb = {
+        "vertical_sigma_m": turb_m,
+        "horizontal_sigma_m": turb_m,
+        "attitude_sigma_deg": turb_deg,
+        "min_period_s": 2.0,
+    }
     return simulate_flight(quick_sim(plan=plan, triad=triad, imu_hz=imu_hz, turbulence=turb, seed=7))
+
+
+def _imu_against_trajectory(s, p, every):
+    """Largest differences of a strapdown flight ``s`` from the platform flight ``p`` of the same
+    trajectory: its specific force rotated to ENU against the platform's (m/s^2), and its gyros
+    against the inertial rate plus the body rate from finite differences of ``C_nb`` (rad/s,
+    every ``every``-th sample); and the largest body rate (rad/s), to show it turned."""
+    f_rot = np.einsum("nij,nj->ni", s.truth["mat_nt"], s.specific_force_t)
+    d = 1e-4
+    t = s.imu_time[::every]
+    kp, km = tj.kinematics(s.plan, t + d), tj.kinematics(s.plan, t - d)
+    c = tj.kinematics(s.plan, t).mat_nb
+    om = np.einsum("nji,njk->nik", c, (kp.mat_nb - km.mat_nb) / (2 * d))
+    w_nb = np.stack([om[:, 2, 1], om[:, 0, 2], om[:, 1, 0]], axis=1)
+    w_in = np.einsum("nji,nj->ni", c, p.angular_rate_t[::every])
+    return (
+        np.abs(f_rot - p.specific_force_t).max(),
+        np.abs(s.angular_rate_t[::every] - (w_in + w_nb)).max(),
+        np.abs(w_nb).max(),
+    )
 
 
 def test_strapdown_and_platform_agree_after_rotation():
     p = _turbulent_grid("platform")
     s = _turbulent_grid("strapdown")
-    f_rot = np.einsum("nij,nj->ni", s.truth["mat_nt"], s.specific_force_t)
-    assert np.abs(f_rot - p.specific_force_t).max() < 1e-13
     # gyros: w_ib^b = C_bn w_in^n + w_nb^b, the body rate taken from finite differences of C_nb
-    d = 1e-4
-    t = s.imu_time[::25]
-    plan = s.plan
-    kp, km = tj.kinematics(plan, t + d), tj.kinematics(plan, t - d)
-    c = tj.kinematics(plan, t).mat_nb
-    cdot = (kp.mat_nb - km.mat_nb) / (2 * d)
-    om = np.einsum("nji,njk->nik", c, cdot)
-    w_nb = np.stack([om[:, 2, 1], om[:, 0, 2], om[:, 1, 0]], axis=1)
-    w_in = np.einsum("nji,nj->ni", c, p.angular_rate_t[::25])
-    assert np.abs(w_nb).max() > 0.05  # turns and turbulence really rotate the body
-    assert np.abs(s.angular_rate_t[::25] - (w_in + w_nb)).max() < 1e-9
+    df, dw, w_nb = _imu_against_trajectory(s, p, 25)
+    assert df < 1e-13 and dw < 1e-9
+    assert w_nb > 0.05  # turns and turbulence really rotate the body
     # the aircraft turned, banked within limits, and went through the planned segments
     assert set(s.truth["line"]) == {"static", "turn", "L01", "L02"}
     assert np.degrees(np.abs(s.truth["roll"])).max() < 28.0 + 4 * 1.0
@@ -339,27 +356,14 @@ def test_gnss_gauss_markov_error_has_its_sigma_and_correlation_time():
 
 
 def _windy_grid(triad, wind, turb_deg=1.0, hold="ground", turb_m=2.0, wind_from=290.0):
-    plan = {
-        "kind": "grid",
-        "origin_lat_deg": 52.0,
-        "origin_lon_deg": 10.0,
-        "altitude_m": 600.0,
-        "speed_mps": 60.0,
-        "lines": {"count": 2, "spacing_m": 3000.0, "length_m": 2500.0, "heading_deg": 20.0},
-        "static_start_s": 20.0,
-        "ramp_s": 30.0,
-        "max_bank_deg": 28.0,
-        "wind_speed_mps": wind,
-        "wind_from_deg": wind_from,
-        "hold_speed": hold,
-    }
-    turb = {
-        "vertical_sigma_m": turb_m,
-        "horizontal_sigma_m": turb_m,
-        "attitude_sigma_deg": turb_deg,
-        "min_period_s": 2.0,
-    }
-    return simulate_flight(quick_sim(plan=plan, triad=triad, imu_hz=50.0, turbulence=turb, seed=7))
+    return _turbulent_grid(
+        triad,
+        turb_m=turb_m,
+        turb_deg=turb_deg,
+        wind_speed_mps=wind,
+        wind_from_deg=wind_from,
+        hold_speed=hold,
+    )
 
 
 def test_a_crosswind_turns_the_nose_not_the_track():
@@ -388,18 +392,8 @@ def test_a_crosswind_turns_the_nose_not_the_track():
     rest = tr["line"] == "static"
     np.testing.assert_allclose(tr["heading"][rest], tr["heading"][tr["line"] == "L01"][0], atol=1e-12)
     # gyros: the analytic body rate is the finite-difference rate of C_nb, turns and ramps included
-    d = 1e-4
-    t = windy.imu_time[::25]
-    plan = windy.plan
-    kp, km = tj.kinematics(plan, t + d), tj.kinematics(plan, t - d)
-    c = tj.kinematics(plan, t).mat_nb
-    om = np.einsum("nji,njk->nik", c, (kp.mat_nb - km.mat_nb) / (2 * d))
-    w_nb = np.stack([om[:, 2, 1], om[:, 0, 2], om[:, 1, 0]], axis=1)
-    platform = _windy_grid("platform", 15.0)
-    w_in = np.einsum("nji,nj->ni", c, platform.angular_rate_t[::25])
-    assert np.abs(windy.angular_rate_t[::25] - (w_in + w_nb)).max() < 1e-9
-    f_rot = np.einsum("nij,nj->ni", windy.truth["mat_nt"], windy.specific_force_t)
-    assert np.abs(f_rot - platform.specific_force_t).max() < 1e-13
+    df, dw, _ = _imu_against_trajectory(windy, _windy_grid("platform", 15.0), 25)
+    assert df < 1e-13 and dw < 1e-9
 
 
 def test_a_wind_faster_than_half_the_plan_speed_is_refused():
@@ -445,39 +439,23 @@ def test_lines_flown_at_the_airspeed_in_a_wind():
     assert np.abs(np.diff(tr["acc_n"], axis=0)).max() < 0.05
     # the IMU is the trajectory's: strapdown rotated = platform, gyros = finite-differenced attitude
     w = _windy_grid("strapdown", 15.0, hold="air", wind_from=250.0)
-    p = _windy_grid("platform", 15.0, hold="air", wind_from=250.0)
-    f_rot = np.einsum("nij,nj->ni", w.truth["mat_nt"], w.specific_force_t)
-    assert np.abs(f_rot - p.specific_force_t).max() < 1e-13
-    d = 1e-4
-    t = w.imu_time[::25]
-    kp, km = tj.kinematics(w.plan, t + d), tj.kinematics(w.plan, t - d)
-    c = tj.kinematics(w.plan, t).mat_nb
-    om = np.einsum("nji,njk->nik", c, (kp.mat_nb - km.mat_nb) / (2 * d))
-    w_nb = np.stack([om[:, 2, 1], om[:, 0, 2], om[:, 1, 0]], axis=1)
-    w_in = np.einsum("nji,nj->ni", c, p.angular_rate_t[::25])
-    assert np.abs(w.angular_rate_t[::25] - (w_in + w_nb)).max() < 1e-9
+    df, dw, _ = _imu_against_trajectory(w, _windy_grid("platform", 15.0, hold="air", wind_from=250.0), 25)
+    assert df < 1e-13 and dw < 1e-9
 
 
-def _airfield_grid(triad, turb_m=2.0, turb_deg=1.0, imu_hz=20.0):
-    plan = {
-        "kind": "grid",
-        "origin_lat_deg": 52.0,
-        "origin_lon_deg": 10.0,
-        "altitude_m": 1200.0,
-        "speed_mps": 60.0,
-        "lines": {"count": 2, "spacing_m": 3000.0, "length_m": 8000.0, "heading_deg": 20.0},
-        "static_start_s": 60.0,
-        "static_end_s": 60.0,
-        "ramp_s": 30.0,
-        "ground_height_m": 150.0,
-    }
-    turb = {
-        "vertical_sigma_m": turb_m,
-        "horizontal_sigma_m": turb_m,
-        "attitude_sigma_deg": turb_deg,
-        "min_period_s": 2.0,
-    }
-    return simulate_flight(quick_sim(plan=plan, triad=triad, imu_hz=imu_hz, turbulence=turb, seed=7))
+def _airfield_grid(triad, turb_m=2.0, turb_deg=1.0):
+    return _turbulent_grid(
+        triad,
+        imu_hz=20.0,
+        static=60.0,
+        turb_m=turb_m,
+        turb_deg=turb_deg,
+        altitude_m=1200.0,
+        lines={"count": 2, "spacing_m": 3000.0, "length_m": 8000.0, "heading_deg": 20.0},
+        static_end_s=60.0,
+        ground_height_m=150.0,
+        max_bank_deg=25.0,
+    )
 
 
 def test_a_flight_from_the_ground_climbs_to_its_lines_and_lands():
@@ -505,17 +483,8 @@ def test_a_flight_from_the_ground_climbs_to_its_lines_and_lands():
     t = still.imu_time
     np.testing.assert_allclose(np.gradient(tr["height"], t)[1:-1], climb[1:-1], atol=1e-4)
     # with turbulence: strapdown rotated = platform, gyros = the finite-differenced attitude
-    s, p = _airfield_grid("strapdown"), _airfield_grid("platform")
-    f_rot = np.einsum("nij,nj->ni", s.truth["mat_nt"], s.specific_force_t)
-    assert np.abs(f_rot - p.specific_force_t).max() < 1e-13
-    d = 1e-4
-    t = s.imu_time[::10]
-    kp, km = tj.kinematics(s.plan, t + d), tj.kinematics(s.plan, t - d)
-    c = tj.kinematics(s.plan, t).mat_nb
-    om = np.einsum("nji,njk->nik", c, (kp.mat_nb - km.mat_nb) / (2 * d))
-    w_nb = np.stack([om[:, 2, 1], om[:, 0, 2], om[:, 1, 0]], axis=1)
-    w_in = np.einsum("nji,nj->ni", c, p.angular_rate_t[::10])
-    assert np.abs(s.angular_rate_t[::10] - (w_in + w_nb)).max() < 1e-9
+    df, dw, _ = _imu_against_trajectory(_airfield_grid("strapdown"), _airfield_grid("platform"), 10)
+    assert df < 1e-13 and dw < 1e-9
 
 
 def test_a_ground_height_without_a_parked_period_is_refused():
