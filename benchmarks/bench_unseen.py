@@ -1002,8 +1002,11 @@ def main(argv=None):
         wind = _numbers(",".join(parts))
         # the slowest draw's limit holds for all
         most = MAX_WIND_FRACTION * RANGES["speed_mps"][0]
-        if len(wind) != 2 or not 0.0 <= wind[0] <= most:
-            ap.error(f"--wind: expected SPEED,FROM_DEG[,ground] (0 <= SPEED <= {most:g} m/s, deg), got {a.wind!r}")
+        if len(wind) != 2 or not 0.0 <= wind[0] <= most or not -360.0 <= wind[1] <= 360.0:
+            ap.error(
+                f"--wind: expected SPEED,FROM_DEG[,ground] (0 <= SPEED <= {most:g} m/s, |FROM_DEG| <= 360), "
+                f"got {a.wind!r}"
+            )
         wind.append(hold)
     airfield = None
     if a.airfield is not None:

@@ -587,12 +587,38 @@ def test_wind_crabs_the_drawn_flight(capsys):
     assert {k: v for k, v in plan.items() if k not in ("wind_speed_mps", "wind_from_deg", "hold_speed")} == plan0
     assert {k: v for k, v in wd.items() if k != "sim"} == {k: v for k, v in sp.items() if k != "sim"}
     assert bench._spec_hash(wd) != bench._spec_hash(sp)
-    for bad in ("26,270", "15", "a,b", "-1,0", "15,270,air", "15,270,ground,1"):
+    for bad in ("26,270", "15", "a,b", "-1,0", "15,270,air", "15,270,ground,1", "15,400"):
         with pytest.raises(SystemExit) as exc:
             bench.main([f"--wind={bad}", "--flights", "1"])
         assert exc.value.code == 2
         err = capsys.readouterr().err
-        assert f"--wind: expected SPEED,FROM_DEG[,ground] (0 <= SPEED <= 25 m/s, deg), got '{bad}'" in err
+        assert f"--wind: expected SPEED,FROM_DEG[,ground] (0 <= SPEED <= 25 m/s, |FROM_DEG| <= 360), got '{bad}'" in err
+
+
+def test_airfield_parks_the_drawn_flight_on_the_ground(capsys):
+    """``bench_unseen.py --airfield HEIGHT[,CLIMB]``: the drawn plan from and to an airfield,
+    parked 300 s where the draw had no static period, the climb rate where given, the rest of
+    the draw as it was, in a cache folder of its own; a bad value is a usage error."""
+    bench = _bench()
+    sp = U.limit_spec(U.draw_flight_spec(5), 2400.0, 50.0)
+    plan0 = sp["sim"]["flights"][0]["plan"]
+    af = bench.with_airfield(sp, 100.0, 2.5)
+    plan = af["sim"]["flights"][0]["plan"]
+    assert (plan["ground_height_m"], plan["max_climb_rate_mps"]) == (100.0, 2.5)
+    for key in ("static_start_s", "static_end_s"):
+        assert plan[key] == (plan0.get(key) or bench.AIRFIELD_PARKED_S) and plan[key] > 0
+    changed = ("ground_height_m", "max_climb_rate_mps", "static_start_s", "static_end_s")
+    assert {k: v for k, v in plan.items() if k not in changed} == {k: v for k, v in plan0.items() if k not in changed}
+    assert "max_climb_rate_mps" not in bench.with_airfield(sp, 100.0)["sim"]["flights"][0]["plan"]
+    assert bench._spec_hash(af) != bench._spec_hash(sp)
+    for bad in ("x", "100,0", "20000", "100,2,3"):
+        with pytest.raises(SystemExit) as exc:
+            bench.main([f"--airfield={bad}", "--flights", "1"])
+        assert exc.value.code == 2
+        assert (
+            f"--airfield: expected HEIGHT_M[,CLIMB_MPS] (-400 to 15000 m, m/s > 0), got '{bad}'"
+            in capsys.readouterr().err
+        )
 
 
 def test_issue_flights_table_counts_against_the_issues_ratio(capsys):
