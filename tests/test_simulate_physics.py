@@ -506,3 +506,25 @@ def test_a_steady_climb_reaches_its_height_at_its_rate_with_exact_derivatives(dh
     assert np.abs(h[1]).max() == pytest.approx(min(5.0, abs(dh) / tj.CLIMB_RAMP_S), rel=1e-6)
     np.testing.assert_allclose(np.gradient(h[0], t), h[1], atol=1e-6)
     np.testing.assert_allclose(np.gradient(h[1], t), h[2], atol=1e-6)
+
+
+def test_a_climb_too_slow_for_the_usual_run_in_still_finds_its_path():
+    """A 0.3-m/s climb to 4 km needs a run-in longer than the connector search's 200 turn radii:
+    the search lengthens its step instead of refusing the plan ("no smooth turn path")."""
+    plan = {
+        "kind": "grid",
+        "origin_lat_deg": 52.0,
+        "origin_lon_deg": 10.0,
+        "altitude_m": 4000.0,
+        "speed_mps": 80.0,
+        "lines": {"count": 2, "spacing_m": 3000.0, "length_m": 8000.0, "heading_deg": 20.0},
+        "static_start_s": 60.0,
+        "static_end_s": 60.0,
+        "ground_height_m": 100.0,
+        "max_climb_rate_mps": 0.3,
+    }
+    tr = simulate_flight(quick_sim(plan=plan, imu_hz=1.0)).truth
+    climb = tr["vel_n"][:, 2]
+    assert 0.29 < climb.max() <= 0.3 + 1e-9 and -0.3 - 1e-9 <= climb.min() < -0.29
+    for name in ("L01", "L02"):
+        np.testing.assert_array_equal(tr["height"][tr["line"] == name], 4000.0)

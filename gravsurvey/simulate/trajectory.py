@@ -865,6 +865,10 @@ def connector(p, psi_a, q, psi_b, speed, max_rate, min_duration=0.0, step_m=None
     q = np.asarray(q, dtype=float)
     radius = speed / max_rate
     step = step_m if step_m is not None else radius
+    if step_m is None and speed * min_duration > 150.0 * step:
+        # a long least duration (a slow climb from an airfield) needs a longer run-in than the
+        # search's 200 steps of one turn radius reach
+        step = speed * min_duration / 150.0
     grid = np.linspace(0.0, 2.0 * np.pi, 361)
     eb = _unit(psi_b)
 
