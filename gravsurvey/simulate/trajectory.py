@@ -540,15 +540,15 @@ def evaluate_plan(plan: FlightPlan, t):
     pitch = np.where(v > 0, np.arctan2(h[1], safe_v), 0.0)
     pitch_d = np.where(v > 0, (h[2] * v - h[1] * vd) / (safe_v**2 + h[1] ** 2), 0.0)
     heading, heading_d = psi[0], psi[1]
-    if plan.wind_en[0] != 0.0 or plan.wind_en[1] != 0.0:
-        roll, roll_d, heading, heading_d = crab_attitude(
-            xy, psi[0], _envelope(t, plan.envelope), plan.wind_en, _moving_speed(plan)[idx]
-        )
+    tb = plan.turbulence
+    windy = plan.wind_en[0] != 0.0 or plan.wind_en[1] != 0.0
+    # the wind and the turbulence fade in and out with the same envelope
+    env = _envelope(t, plan.envelope) if windy or tb.active else None
+    if windy:
+        roll, roll_d, heading, heading_d = crab_attitude(xy, psi[0], env, plan.wind_en, _moving_speed(plan)[idx])
     att = np.array([[roll, roll_d], [pitch, pitch_d], [heading, heading_d]])
 
-    tb = plan.turbulence
     if tb.active:
-        env = _envelope(t, plan.envelope)
         for a in range(6):
             s = _times_envelope(env, _sinusum(t, tb.amp[a], tb.omega[a], tb.phase[a]))
             if a < 2:
@@ -971,11 +971,8 @@ class _PlanBuilder:
             e = _unit(self.psi)
             self.x += seg.speed * duration * e[0]
             self.y += seg.speed * duration * e[1]
-        elif kind == "ramp":
-            e = _unit(self.psi)
-            self.x += 0.5 * seg.speed * duration * e[0]
-            self.y += 0.5 * seg.speed * duration * e[1]
-        elif kind == "accel":
+        elif kind in ("ramp", "accel"):
+            # a smoothstep between two speeds covers their mean (a ramp's other speed is 0)
             e = _unit(self.psi)
             self.x += 0.5 * (seg.speed_from + seg.speed) * duration * e[0]
             self.y += 0.5 * (seg.speed_from + seg.speed) * duration * e[1]
