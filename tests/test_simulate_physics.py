@@ -107,8 +107,9 @@ def test_level_straight_flight_any_heading(heading_deg):
     assert np.abs(out.specific_force_t[:, 2] - expected).max() < 1e-8
 
 
-def _turbulent_grid(triad, imu_hz=50.0, static=20.0, turb_m=2.0, turb_deg=1.0, **plan_keys):
-    """Two short lines with turns, a hold, turbulence; ``plan_keys`` replace the plan's keys."""
+def _turbulent_grid(triad, imu_hz=50.0, static=20.0, turb_m=2.0, turb_deg=1.0, noise=False, **plan_keys):
+    """Two short lines with turns, a hold, turbulence; ``plan_keys`` replace the plan's keys;
+    ``noise``: quick_sim's (a ``sensors`` mapping)."""
     plan = {
         "kind": "grid",
         "origin_lat_deg": 52.0,
@@ -127,7 +128,7 @@ def _turbulent_grid(triad, imu_hz=50.0, static=20.0, turb_m=2.0, turb_deg=1.0, *
         "attitude_sigma_deg": turb_deg,
         "min_period_s": 2.0,
     }
-    return simulate_flight(quick_sim(plan=plan, triad=triad, imu_hz=imu_hz, turbulence=turb, seed=7))
+    return simulate_flight(quick_sim(plan=plan, triad=triad, imu_hz=imu_hz, turbulence=turb, seed=7, noise=noise))
 
 
 def _imu_against_trajectory(s, p, every):
@@ -394,6 +395,47 @@ def test_a_crosswind_turns_the_nose_not_the_track():
     # gyros: the analytic body rate is the finite-difference rate of C_nb, turns and ramps included
     df, dw, _ = _imu_against_trajectory(windy, _windy_grid("platform", 15.0), 25)
     assert df < 1e-13 and dw < 1e-9
+
+
+@pytest.mark.parametrize("turb_deg", [0.0, 1.5])
+def test_the_fixes_are_the_antennas_turned_with_the_aircraft(turb_deg):
+    """``sensors.gnss.antenna_m``: every fix moves from the IMU's by the antenna's offset on
+    the aircraft's axes turned by its attitude (crab, bank, pitch, turbulence), the same on a
+    platform; its noise is the same draw; an antenna at the IMU leaves the flight as it was; an
+    offset no aircraft has is refused naming the key."""
+    arm = np.array([3.0, -1.0, 1.5])
+    gnss = {"horizontal_sigma_m": 0.3, "vertical_sigma_m": 0.5, "vertical_markov_sigma_m": 0.05}
+    wind = {"wind_speed_mps": 15.0, "wind_from_deg": 290.0, "hold_speed": "ground"}
+    at_imu = _turbulent_grid("strapdown", turb_deg=turb_deg, noise={"gnss": gnss}, **wind)
+    moved = _turbulent_grid("strapdown", turb_deg=turb_deg, noise={"gnss": {**gnss, "antenna_m": arm.tolist()}}, **wind)
+    zero = _turbulent_grid("strapdown", turb_deg=turb_deg, noise={"gnss": {**gnss, "antenna_m": [0, 0, 0]}}, **wind)
+    for k in ("gnss_lat_deg", "gnss_lon_deg", "gnss_height"):
+        np.testing.assert_array_equal(getattr(zero, k), getattr(at_imu, k))
+    np.testing.assert_array_equal(moved.specific_force_t, at_imu.specific_force_t)
+
+    def ecef(s):
+        lat, lon = np.radians(s.gnss_lat_deg), np.radians(s.gnss_lon_deg)
+        return gd.geodetic_to_ecef(lat, lon, s.gnss_height), gd.mat_en(lat, lon)
+
+    r1, c_en = ecef(moved)
+    r0, _ = ecef(at_imu)
+    off_n = np.einsum("nji,nj->ni", c_en, r1 - r0)  # ECEF -> ENU
+    tr = moved.truth
+    k = np.searchsorted(tr["time"], moved.gnss_time)
+    assert np.array_equal(tr["time"][k], moved.gnss_time)
+    # to 10 um: the ENU axes here are the noisy fix's, not the IMU's (3 m / 6400 km apart)
+    np.testing.assert_allclose(off_n, np.einsum("nij,j->ni", tr["mat_nb"][k], arm), atol=1e-5)
+    if turb_deg == 0.0:
+        # on a line in the crosswind the antenna's 3 m forward lie along the nose, not the track
+        line = tr["line"][k] == "L01"
+        psi = tr["heading"][k][line]
+        # 1 m to the right of the nose: (cos psi, -sin psi) east, north
+        fwd = off_n[line, :2] - np.stack([np.cos(psi), -np.sin(psi)], axis=1)
+        np.testing.assert_allclose(fwd, 3.0 * np.stack([np.sin(psi), np.cos(psi)], axis=1), atol=1e-5)
+        assert np.abs(np.angle(np.exp(1j * (psi - math.radians(20.0))))).min() > math.radians(10.0)  # crabbed
+        np.testing.assert_allclose(off_n[line, 2], 1.5, atol=1e-5)
+    with pytest.raises(ConfigError, match=r"sensors\.gnss\.antenna_m: expected forward, left, up .*-30 m each"):
+        simulate_flight(quick_sim(noise={"gnss": {"antenna_m": [0.0, 0.0, 31.0]}}))
 
 
 def test_a_wind_faster_than_half_the_plan_speed_is_refused():

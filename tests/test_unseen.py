@@ -621,6 +621,26 @@ def test_airfield_parks_the_drawn_flight_on_the_ground(capsys):
         )
 
 
+def test_antenna_moves_the_drawn_flights_fixes(capsys):
+    """``bench_unseen.py --antenna FWD,LEFT,UP``: the drawn flight's GNSS antenna off the IMU,
+    the rest of the draw as it was (its other GNSS keys kept), in a cache folder of its own; a
+    bad value is a usage error."""
+    bench = _bench()
+    sp = bench.with_carrier_phase_gnss(U.limit_spec(U.draw_flight_spec(5), 2400.0, 50.0))
+    an = bench.with_antenna(sp, [3, -1, 1.5])
+    gnss, gnss0 = an["sim"]["flights"][0]["sensors"]["gnss"], sp["sim"]["flights"][0]["sensors"]["gnss"]
+    assert gnss == {**gnss0, "antenna_m": [3.0, -1.0, 1.5]} and gnss0["vertical_sigma_m"] > 0
+    assert {k: v for k, v in an["sim"]["flights"][0].items() if k != "sensors"} == {
+        k: v for k, v in sp["sim"]["flights"][0].items() if k != "sensors"
+    }
+    assert bench._spec_hash(an) != bench._spec_hash(sp)
+    for bad in ("3,-1", "a,b,c", "3,-1,31", "1,2,3,4"):
+        with pytest.raises(SystemExit) as exc:
+            bench.main([f"--antenna={bad}", "--flights", "1"])
+        assert exc.value.code == 2
+        assert f"--antenna: expected FWD,LEFT,UP (m, each within +-30), got '{bad}'" in capsys.readouterr().err
+
+
 def test_issue_flights_table_counts_against_the_issues_ratio(capsys):
     """benchmarks/bench_issue_flights.py: each flight's default / bound is set against the
     issue's goal over its bound (A: 0.40 over 0.29-0.39 mGal), strict and generous end; a

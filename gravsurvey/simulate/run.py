@@ -31,6 +31,7 @@ from .sensors import (
     DEGPH,
     ImuErrors,
     altimeter_errors,
+    antenna_position,
     gnss_errors,
     imu_errors,
     specific_force_n,
@@ -79,6 +80,8 @@ class FlightSimulation:
     alt_time, alt_height : ndarray (m,)
         Altimeter (ellipsoidal height with errors), m.
     gnss_time, gnss_lat_deg, gnss_lon_deg, gnss_height : ndarray (k,)
+        The fixes: the antenna's position (``sensors.gnss.antenna_m`` from the IMU, turned
+        with the aircraft) with the GNSS errors, deg and m.
     truth : dict
         At IMU times: ``time`` (s), ``lat``, ``lon`` (rad), ``height`` (m),
         ``vel_n`` (n, 3) ENU m/s, ``acc_n`` (n, 3) Earth-relative acceleration
@@ -329,6 +332,10 @@ def simulate_flight(sim, flight_index: int = 0) -> FlightSimulation:
     dlat, dlon, dh = gnss_errors(
         kin_g.lat, kin_g.height, f["sensors"], _rng(cfg, flight_index, _STREAM_GNSS), ell, 1.0 / rates["gnss_hz"]
     )
+    # the fixes are the antenna's; its errors are drawn as at the IMU (the same metres)
+    ant_lat, ant_lon, ant_h = kin_g.lat, kin_g.lon, kin_g.height
+    if any(x != 0.0 for x in f["sensors"]["gnss"]["antenna_m"]):
+        ant_lat, ant_lon, ant_h = antenna_position(kin_g, f["sensors"]["gnss"]["antenna_m"], ell)
 
     truth = {
         "time": t_imu,
@@ -385,9 +392,9 @@ def simulate_flight(sim, flight_index: int = 0) -> FlightSimulation:
         alt_height=kin_alt.height + alt_err,
         gnss_time_ns=gnss_ns + start,
         gnss_time=gnss_ns / 1e9,
-        gnss_lat_deg=np.degrees(kin_g.lat + dlat),
-        gnss_lon_deg=wrap_deg(np.degrees(kin_g.lon + dlon)),
-        gnss_height=kin_g.height + dh,
+        gnss_lat_deg=np.degrees(ant_lat + dlat),
+        gnss_lon_deg=wrap_deg(np.degrees(ant_lon + dlon)),
+        gnss_height=ant_h + dh,
         truth=truth,
         truth_table=truth_table,
         flight=f,

@@ -43,7 +43,15 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from gravsurvey.geodesy import OMEGA_E, WGS84, Ellipsoid, normal_gravitation_ecef, radii_of_curvature
+from gravsurvey.geodesy import (
+    OMEGA_E,
+    WGS84,
+    Ellipsoid,
+    ecef_to_geodetic,
+    mat_en,
+    normal_gravitation_ecef,
+    radii_of_curvature,
+)
 
 from .trajectory import Kinematics, earth_rate_n, mat_ne
 
@@ -255,6 +263,33 @@ def altimeter_errors(n, cfg, rng):
     """Altimeter error ``A + sigma w`` (m), ``(n,)``."""
     alt = cfg["altimeter"]
     return alt["mean_m"] + alt["sigma_m"] * rng.standard_normal(n)
+
+
+def antenna_position(kin: Kinematics, arm_flu_m, ellipsoid: Ellipsoid = WGS84):
+    """Where a GNSS antenna fixed on the aircraft is: latitude, longitude (rad), height (m).
+
+    The antenna sits at ``arm_flu_m`` from the IMU on the aircraft's axes (forward, left, up),
+    turned by the aircraft's attitude ``kin.mat_nb`` (its crab, bank and pitch, turbulence
+    included), whatever the triad: a platform's levelled triad sits in the same aircraft.
+
+    Parameters
+    ----------
+    kin : Kinematics
+        The IMU's kinematic truth at the fixes' times.
+    arm_flu_m : array_like (3,)
+        Antenna from the IMU, forward-left-up, m.
+    ellipsoid : Ellipsoid
+
+    Returns
+    -------
+    lat, lon, height : ndarray (n,)
+        The antenna's geodetic position; ``lon`` runs on from ``kin.lon`` (no wrap between them).
+    """
+    off_n = np.einsum("nij,j->ni", kin.mat_nb, np.asarray(arm_flu_m, float))
+    off_e = np.einsum("nij,nj->ni", mat_en(kin.lat, kin.lon), off_n)
+    lat, lon, h = ecef_to_geodetic(kin.r_e + off_e, ellipsoid)
+    lon = kin.lon + np.mod(lon - kin.lon + np.pi, 2.0 * np.pi) - np.pi
+    return lat, lon, h
 
 
 def gnss_errors(lat, height, cfg, rng, ellipsoid: Ellipsoid = WGS84, dt_s: float = 1.0):

@@ -91,6 +91,9 @@ DEFAULT_SENSORS = {
         "horizontal_markov_sigma_m": 0.0,
         "vertical_markov_sigma_m": 0.0,
         "markov_tau_s": 600.0,
+        # the antenna from the IMU on the aircraft's axes (forward, left, up), m: the fixes are
+        # the antenna's, turned with the aircraft's attitude
+        "antenna_m": [0.0, 0.0, 0.0],
     },
     # gravity gradiometer (seed 000); rate_hz 0 = no gradient channel (the default)
     "gradiometer": {"rate_hz": 0.0, "white_eotvos_rthz": 0.0, "markov_sigma_eotvos": 0.0, "markov_lambda_per_s": 0.001},
@@ -104,6 +107,9 @@ DEFAULT_PROCESSING = {
     # prior a user would set from the area's known field); checked by the processing config
     "model": None,
 }
+#: Farthest a GNSS antenna may be from the IMU along any aircraft axis, m (a large aircraft's
+#: antenna on the tail fin is within it).
+MAX_ANTENNA_M = 30.0
 TOP_KEYS = ("name", "seed", "ellipsoid", "formats", "field", "processing", "flights")
 FLIGHT_KEYS = ("name", "start_utc", "triad", "rates", "plan", "turbulence", "sensors")
 _NAME_RE = re.compile(r"^[A-Za-z0-9_-]+$")
@@ -405,6 +411,12 @@ def _validate_flight(f, path, index):
             else:
                 d[k] = number(v, f"{sp}.{k}", unit, 0.0)
         s[sec] = d
+    arm = s["gnss"]["antenna_m"]
+    if max(abs(x) for x in arm) > MAX_ANTENNA_M:
+        raise ConfigError(
+            f"{path}.sensors.gnss.antenna_m: expected forward, left, up from the IMU within "
+            f"+-{MAX_ANTENNA_M:g} m each, got {arm}"
+        )
     f["sensors"] = s
     return f
 
