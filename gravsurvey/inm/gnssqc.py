@@ -331,6 +331,12 @@ TRACK_HEADING_MIN_SPEED_MPS = 10.0
 #: fuzzing flight's truth a 2-m mast fitted as 1.57 m with 3 s, 1.85 with 6, 1.94 with 10,
 #: 2.00 with 15 (an errors-in-variables bias); a roll-in of a few seconds is spread over it.
 TRACK_TURN_WINDOW_S = 10.0
+#: Window of the centred running mean over the vertical and horizontal speeds whose ratio is
+#: the pitch, s: the aircraft climbs along its flight path, but a gust that heaves it up and
+#: down for tens of seconds does not pitch it as much (the simulator's turbulence does not pitch
+#: it at all); the gust's flight-path angle taken for the pitch turned a 3-m forward arm into a
+#: 1.4-cm height wander on the lines (4x the product's error on a platform with GNSS heights).
+TRACK_PITCH_WINDOW_S = 60.0
 #: Gravity of the coordinated turn's bank, m/s^2.
 TRACK_GRAVITY_MPS2 = 9.80665
 
@@ -368,7 +374,14 @@ def track_attitude(time, vel_enu_mps):
     if 1 < w < t.size:
         rate = np.convolve(np.pad(rate, (w // 2, w - 1 - w // 2), mode="edge"), np.ones(w) / w, mode="valid")
     phi = np.where(moving, np.arctan(vh * rate / TRACK_GRAVITY_MPS2), 0.0)
-    theta = np.where(moving, np.arctan2(v[:, 2], np.maximum(vh, 1e-9)), 0.0)
+    vz, vm = v[:, 2], vh
+    wp = max(1, int(round(TRACK_PITCH_WINDOW_S / max(dt, 1e-9))))
+    if 1 < wp < t.size:
+        box = np.ones(wp) / wp
+        pad = (wp // 2, wp - 1 - wp // 2)
+        vz = np.convolve(np.pad(vz, pad, mode="edge"), box, mode="valid")
+        vm = np.convolve(np.pad(vm, pad, mode="edge"), box, mode="valid")
+    theta = np.where(moving, np.arctan2(vz, np.maximum(vm, 1e-9)), 0.0)
     sp, cp = np.sin(psi), np.cos(psi)
     st, ct = np.sin(theta), np.cos(theta)
     fwd = np.stack([sp * ct, cp * ct, st], axis=1)

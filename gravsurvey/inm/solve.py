@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError, DataError, GravsurveyError
-from ..geodesy import WGS84, Ellipsoid, geodetic_to_ecef, local_displacement, mat_en, mat_ie
+from ..geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef, local_displacement, mat_en, mat_ie
 from ..filters import centred_mean
 from ..io.record import FlightRecord
 from .errormodel import (
@@ -79,7 +79,14 @@ from .params import (
 )
 from .vector import horizontal_outputs, missed_field_per_component
 
-__all__ = ["InmSolution", "estimate_anomaly", "solvability_warnings", "initial_state_from_gnss"]
+__all__ = [
+    "InmSolution",
+    "estimate_anomaly",
+    "solvability_warnings",
+    "initial_state_from_gnss",
+    "heights_at_imu",
+    "antenna_offset_enu",
+]
 
 
 @dataclass
@@ -585,18 +592,31 @@ class FirstStage:
     caught: tuple
 
 
-def first_stage(record, params, initial, ellipsoid, reference, gnss_heights) -> FirstStage:
+def first_stage(
+    record, params, initial, ellipsoid, reference, gnss_heights, lever_arm_t=None, triad="strapdown"
+) -> FirstStage:
     """The first mechanization about ``initial`` and the height channels' faults found and
     repaired against it (:class:`FirstStage`).  ``params``: the configuration's (its
     accelerometer noise is not read); ``gnss_heights``: the height channel is the GNSS's own
-    heights."""
+    heights; ``lever_arm_t`` (FLU, m): the antenna's offset from the IMU, where known (those
+    heights are then checked at the IMU and kept at the antenna); ``triad``: whose attitude
+    turns it (a platform's aircraft's from the track)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         nav = _mechanize(record, params, initial, ellipsoid, reference)
+        dh = None
+        if gnss_heights and lever_arm_t is not None and np.any(np.asarray(lever_arm_t, float) != 0.0):
+            # the antenna's swing in a turn is no step, nor a noisy stretch, of the heights
+            body = _body_attitude(nav, ellipsoid) if triad == "platform" else None
+            dh = antenna_offset_enu(nav, lever_arm_t, body, np.asarray(record.altimeter.time, float), ellipsoid)[:, 2]
+            record = _heights_raised(record, -dh)
         # the height channel's spikes, frozen stretches, steps and latency, found against
         # this first mechanization, repaired before anything reads the heights (and the
         # flight mechanized again: the gravity model's radius may come from them)
         record, height_warnings, height_facts = _repaired_heights(record, nav, ellipsoid)
+        if dh is not None:
+            # back at the antenna, sample by sample, where each pass moves them from
+            record = _heights_raised(record, dh)
         if not gnss_heights:
             # the GNSS heights enter as the position's up component: their steps (a float
             # stretch, a new ambiguity fix) read as gravity as the altimeter's would
@@ -677,8 +697,11 @@ def _estimate_once(
         if k == 0 and gnss_latency is None:
             # the first mechanization and the height channels' checks on it: the same for every
             # accelerometer noise tried, so found once and shared
+            stage_input = record
             if shared is None or "stage" not in shared:
-                stage = first_stage(record, given_params, cur, ellipsoid, reference, gnss_heights)
+                stage = first_stage(
+                    record, given_params, cur, ellipsoid, reference, gnss_heights, gnss_lever_arm_t, triad
+                )
                 if shared is not None:
                     shared["stage"] = stage
             else:
@@ -698,11 +721,16 @@ def _estimate_once(
             if triad == "platform" and (lever_open or np.any(np.asarray(gnss_lever_arm_t, float) != 0.0))
             else None
         )
+        # heights that are the GNSS's are the antenna's: moved to the IMU for the filter and the
+        # identification (the arm swings with the attitude on the lines too)
+        pass_record = record
+        if gnss_heights and gnss_lever_arm_t is not None and np.any(np.asarray(gnss_lever_arm_t, float) != 0.0):
+            pass_record = heights_at_imu(record, nav, gnss_lever_arm_t, body_i, ellipsoid)
         # every pass about this linearisation point: the navigation, the prior attitude and
         # gyro bias seen from it
         one_pass = functools.partial(
             _one_pass,
-            record,
+            pass_record,
             initial=cur,
             nav=nav,
             ellipsoid=ellipsoid,
@@ -718,7 +746,7 @@ def _estimate_once(
         )
         if given_params.identify and reidentify:
             memo = None if shared is None else shared.setdefault("fits", {})
-            params, ident = _identify(record, given_params, nav, ellipsoid, speed0, one_pass, accel_bias, memo)
+            params, ident = _identify(pass_record, given_params, nav, ellipsoid, speed0, one_pass, accel_bias, memo)
             ident["identified_in_pass"] = k + 1
             reidentify = False
         idx, c, gnss_used, n_state, out = one_pass(params, accel_bias=accel_bias)
@@ -740,10 +768,22 @@ def _estimate_once(
             lever_fits.append(fit)
             lever_open = bool(np.any(step != 0.0)) and len(lever_fits) < LEVER_FITS
             if np.any(step != 0.0):
-                # the pass run again with the antenna there (the straight lines, from which the
-                # model was identified, hold the offset still: not identified again)
+                # the pass run again with the antenna there, the model identified again: the
+                # attitude's wander on the lines moved the antenna (a 3-m arm's end 5 cm in a
+                # 1-deg pitch), which the identification took for the heights' noise
                 lever_steps.append(step)
                 gnss_lever_arm_t = step if gnss_lever_arm_t is None else gnss_lever_arm_t + step
+                reidentify = True
+                if gnss_heights:
+                    # heights that are the antenna's checked again at the IMU: its swing in the
+                    # turns had looked like steps and noisy stretches
+                    stage = first_stage(
+                        stage_input, given_params, cur, ellipsoid, reference, gnss_heights, gnss_lever_arm_t, triad
+                    )
+                    record = stage.record
+                    if gnss_latency.taken_off:
+                        record = dataclasses.replace(record, gnss=gnss_latency.shift(record.gnss))
+                    height_warnings, height_facts = list(stage.height_warnings), dict(stage.height_facts)
                 k -= 1
                 continue
         th0, db, db_sig = _pass_correction(out)
@@ -868,6 +908,16 @@ def _estimate_once(
             ident["warnings"] = [lever_warning] + list(ident.get("warnings", []))
     if gnss_used:
         ident["gnss_vertical_used"] = not gnss_heights
+        if gnss_heights and triad == "platform" and gnss_lever_arm_t is not None:
+            off = float(np.hypot(*np.asarray(gnss_lever_arm_t, float)[:2]))
+            if off >= PLATFORM_ARM_WARN_M:
+                ident["warnings"] = list(ident.get("warnings", [])) + [
+                    f"{record.source_of('gnss')}: the heights are the GNSS antenna's, {off:.2g} m off the vertical "
+                    "through the IMU, on a platform: the aircraft's attitude is known only from its track, so its "
+                    f"pitch and roll in turbulence move the antenna's height (1 deg: {100 * off * math.pi / 180:.2g} cm) "
+                    "by what the product carries; an antenna above the gravimeter avoids it "
+                    '(docs/method.md, "GNSS antenna lever arm")'
+                ]
         if gnss_heights:
             ident["notes"] = list(ident.get("notes", [])) + [
                 "gnss: the height channel is the GNSS's own heights; they enter once, as the height "
@@ -881,7 +931,10 @@ def _estimate_once(
         else model_resolution_m(params, speed0, float(np.median(np.diff(alt_t))) if alt_t.size > 1 else 1.0)
     )
     if gnss_used:
-        _check_track(record, params, sol, ellipsoid)
+        antenna = None
+        if gnss_lever_arm_t is not None and np.any(np.asarray(gnss_lever_arm_t, float) != 0.0):
+            antenna = antenna_offset_enu(nav, gnss_lever_arm_t, body_i, np.asarray(record.gnss.time, float), ellipsoid)
+        _check_track(record, params, sol, ellipsoid, antenna)
     return sol
 
 
@@ -909,8 +962,11 @@ def _systematic_residual(t, d):
     return float(np.sqrt(np.mean(np.sum(m * m, axis=1)))), float(np.sqrt(np.mean(np.sum((d - m) ** 2, axis=1))))
 
 
-def _check_track(record, params, sol, ellipsoid):
-    """DataError when the corrected navigation leaves the GNSS track (median distance >> GNSS sigma)."""
+def _check_track(record, params, sol, ellipsoid, antenna=None):
+    """DataError when the corrected navigation leaves the GNSS track (median distance >> GNSS sigma).
+
+    ``antenna``: the antenna's offset from the IMU at the GNSS times, ENU m ``(k, 3)``
+    (:func:`antenna_offset_enu`), taken off the residual; None: at the IMU."""
 
     gn = record.gnss
     tg = np.asarray(gn.time, float)
@@ -920,6 +976,8 @@ def _check_track(record, params, sol, ellipsoid):
     lat = np.interp(tg[ok], sol.time, sol.lat)
     lon = np.interp(tg[ok], sol.time, np.unwrap(sol.lon))
     de, dn = local_displacement(lat, lon, np.asarray(gn.lat, float)[ok], np.asarray(gn.lon, float)[ok], 0.0, ellipsoid)
+    if antenna is not None:
+        de, dn = de - antenna[ok, 0], dn - antenna[ok, 1]
     d = np.hypot(de, dn)
     rms = float(np.sqrt(np.mean(d * d)))
     sol.gnss_residual_rms_m = rms
@@ -1227,6 +1285,11 @@ def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None, arm_c=N
 #: track having taken up some (1.76 of 2 m up on the fuzzing flight, 4.2 of 6 m forward on
 #: test_alignment.py's), the next ones the rest (:func:`_lever_arm_step`).
 LEVER_FITS = 3
+#: Horizontal distance of a GNSS antenna from a platform's IMU, m, from which heights that are
+#: the antenna's get a warning: the aircraft's pitch and roll, unknown on a platform, move
+#: the antenna's height by this times the angle (measured on 20 quick draws with an antenna
+#: [3, -1, 1.5] m: platforms up to 3.5x the error of an antenna at the IMU).
+PLATFORM_ARM_WARN_M = 0.5
 #: Once an offset is applied, a further step is taken at this many standard errors: the flight
 #: has an antenna off the IMU, and what is left is the share the track took up.
 LEVER_FOLLOW_K = 2.0
@@ -1269,6 +1332,58 @@ def _gnss_lever_arm(
 #: Rate of the aircraft's attitude from the track, Hz (:func:`_body_attitude`): a bank changes
 #: over seconds.
 BODY_ATTITUDE_HZ = 10.0
+
+
+def heights_at_imu(record, nav, lever_arm_t, body_mat_i, ellipsoid: Ellipsoid = WGS84):
+    """The record with its height channel moved from a GNSS antenna to the IMU.
+
+    Where the height channel is the GNSS's own heights, each is the antenna's: ``lever_arm_t``
+    turned by the aircraft's attitude puts it ``dh = u . (C l)`` above the IMU (``u`` the
+    ellipsoid's normal), which moves with every bank and pitch: a 3-m arm forward and a 1-deg
+    pitch are 5 cm.  The attitude's own error enters as ``l theta`` (0.2 mm for 3 m and 0.003
+    deg), so the heights are moved rather than the measurement given the arm.
+
+    Parameters
+    ----------
+    record : FlightRecord
+    nav : Navigation
+        The mechanization the heights are moved along (its attitude and position).
+    lever_arm_t : ndarray (3,)
+        Antenna from the IMU on the aircraft's axes, m (FLU).
+    body_mat_i : tuple (ndarray (m,), ndarray (m, 3, 3)) or None
+        The aircraft's axes -> inertial where they are not the triad's (a platform;
+        :func:`_body_attitude`); None: the triad's (``nav.mat_it``).
+    ellipsoid : Ellipsoid
+
+    Returns
+    -------
+    FlightRecord
+        ``altimeter.height`` less ``dh``, m; the rest shared with ``record``.
+    """
+    dh = antenna_offset_enu(nav, lever_arm_t, body_mat_i, np.asarray(record.altimeter.time, float), ellipsoid)[:, 2]
+    return _heights_raised(record, -dh)
+
+
+def _heights_raised(record, dh):
+    """The record with ``dh`` (m, one per height sample) added to its height channel."""
+    alt = record.altimeter
+    return dataclasses.replace(record, altimeter=dataclasses.replace(alt, height=np.asarray(alt.height, float) + dh))
+
+
+def antenna_offset_enu(nav, lever_arm_t, body_mat_i, time, ellipsoid: Ellipsoid = WGS84):
+    """Where a GNSS antenna is from the IMU on the local east, north, up axes, m, ``(n, 3)``.
+
+    ``C l``: the arm ``lever_arm_t`` (FLU, m) turned by the aircraft's attitude at ``time`` (s;
+    the triad's, ``nav.mat_it``, or ``body_mat_i`` where given, as :func:`heights_at_imu`),
+    resolved on the ENU axes at the navigation's position (times outside it: at its ends).
+    """
+    ts = np.clip(np.asarray(time, float), nav.time[0], nav.time[-1])
+    mat = nav.mat_it[nearest_sample(nav.time, ts)] if body_mat_i is None else attitude_at(body_mat_i, ts)
+    arm_i = np.einsum("nij,j->ni", mat, np.asarray(lever_arm_t, float))
+    m_ie = mat_ie(ts, ellipsoid.omega)
+    lat, lon, _ = ecef_to_geodetic(np.einsum("nji,nj->ni", m_ie, hermite_position(nav, ts)), ellipsoid)
+    m_in = np.einsum("nij,njk->nik", m_ie, mat_en(lat, lon))
+    return np.einsum("nji,nj->ni", m_in, arm_i)
 
 
 def _body_attitude(nav, ellipsoid):
