@@ -1018,7 +1018,8 @@ class FlightSection(Section):
         description="[forward, left, up] "
         "GNSS antenna position from the IMU on the aircraft's (FLU) axes, m (a strapdown "
         "triad's; on a platform the aircraft's attitude comes from the track); null: found from "
-        "the aided track and applied when clear (a warning says so)",
+        "the aided track and applied when clear (a warning says so); applied to the GNSS "
+        "positions and, where the height channel is the GNSS's own heights, to those",
     )
     initial: Optional[InitialSection] = Field(
         None,
