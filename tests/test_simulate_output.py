@@ -348,6 +348,17 @@ def test_regenerate_script_uses_the_cli(tmp_path):
     subprocess.run(["sh", "-n", str(ROOT / "sample_data" / "regenerate.sh")], check=True)
 
 
+def test_the_oracle_knows_the_antenna_a_user_finds(tmp_path):
+    """A simulated antenna off the IMU: oracle.yaml states it (``gnss_lever_arm_m``), survey.yaml
+    leaves it to be found from the track."""
+    noise = {"gnss": {"horizontal_sigma_m": 0.5, "vertical_sigma_m": 1.0, "antenna_m": [2.0, 0.0, 1.5]}}
+    simulate_to_dir(quick_sim(duration_s=60.0, noise=noise), tmp_path, oracle=True)
+    oracle = yaml.safe_load((tmp_path / "oracle.yaml").read_text())
+    user = yaml.safe_load((tmp_path / "survey.yaml").read_text())
+    assert oracle["flights"][0]["gnss_lever_arm_m"] == [2.0, 0.0, 1.5]
+    assert "gnss_lever_arm_m" not in user["flights"][0]
+
+
 def test_survey_yaml_and_truth_csv(tmp_path):
     plan = {
         "kind": "grid",
@@ -377,6 +388,7 @@ def test_survey_yaml_and_truth_csv(tmp_path):
     assert oracle["model"]["gnss_horizontal_sigma_m"] == 0.5
     assert oracle["flights"][0]["initial"]["lat_deg"] == np.degrees(s.truth["lat"][0])
     assert oracle["output"]["dir"] != cfg["output"]["dir"]
+    assert "gnss_lever_arm_m" not in oracle["flights"][0]  # the antenna at the IMU
     for rel in ("F01/imu.csv", "F01/altimeter.csv", "F01/gnss.csv", "F01/truth.csv"):
         assert (tmp_path / rel).is_file()
     rows = [

@@ -711,8 +711,9 @@ def simulate_to_dir(sim_path, out_dir, oracle: bool = False) -> list[Path]:
     out_dir : path
     oracle : bool
         Also write ``out_dir/oracle.yaml``: the same survey with the ``model``
-        block matched to the simulated errors and the exact initial state
-        (:func:`oracle_model_block`), the "oracle-tuned" reference of the
+        block matched to the simulated errors, the exact initial state and
+        the GNSS antenna's offset where there is one (:func:`oracle_model_block`;
+        survey.yaml leaves it to be found), the "oracle-tuned" reference of the
         benchmarks.  ``gravsurvey simulate --oracle-config``.
 
     Returns
@@ -783,6 +784,10 @@ def simulate_to_dir(sim_path, out_dir, oracle: bool = False) -> list[Path]:
         if initial is not None:
             user_entry["initial"] = initial
         oracle_entry["initial"] = _initial_block(sim)
+        arm = [float(x) for x in sim.flight["sensors"]["gnss"]["antenna_m"]]
+        if any(arm):
+            # the oracle knows where the antenna is; a user's survey.yaml leaves it to be found
+            oracle_entry["gnss_lever_arm_m"] = arm
         user_entry["truth"] = oracle_entry["truth"] = f"{sim.name}/truth.csv"
         flights_yaml.append(user_entry)
         if k == 0 and oracle:  # the matched values come from the first flight; drop its arrays after
