@@ -348,6 +348,36 @@ def test_a_product_the_model_expects_to_be_useless_is_said_to_be(turning_platfor
     )
 
 
+def test_a_prior_expecting_a_useless_product_gives_way_to_the_broad_one(turning_platform, monkeypatch):
+    """The prior of least expected error expecting over 20 mGal (a first-pass spectrum of noise
+    read as a strong short field: on a full-length platform draw with GNSS heights from an
+    antenna 1.4 m off the IMU's vertical, 59 mGal expected, 28.8 had, the conventional chain
+    0.38; with the broad prior 2.0): the configured or default prior is used instead, the
+    identified noise kept, and a warning says so."""
+    s, rec, init = turning_platform
+    refine = solve.refine_prior
+
+    def pessimistic(*args, **kwargs):
+        params, report = refine(*args, **kwargs)
+        return params, {**report, "expected_error_mgal": 124.0}
+
+    monkeypatch.setattr(solve, "refine_prior", pessimistic)
+    sol = estimate_anomaly(rec, InmParams(), init, "platform")
+    ident = sol.identification
+    default = InmParams()
+    assert ident["anomaly_sigma_mps2"]["value"] == default.anomaly_sigma_mps2
+    assert ident["anomaly_lambda_per_m"]["value"] == default.anomaly_lambda_per_m
+    assert "expected 124 mGal" in ident["anomaly_sigma_mps2"]["how"]
+    assert "expected_error_mgal" not in ident and "smoother_sigma_scale" not in ident
+    assert ident["altimeter_sigma_m"]["how"].startswith("identified")
+    assert any(
+        w.startswith("model identification: the anomaly prior of least expected error expects 124 mGal")
+        and "(100 mGal over 100 km) is used instead" in w
+        for w in sol.warnings
+    )
+    assert not any("expects an error of" in w for w in sol.warnings)
+
+
 def test_track_attitude_is_a_coordinated_turn():
     """The aircraft's axes from its track: forward along the velocity, the bank of a coordinated
     turn (right turn: right wing down, the up axis towards the turn's centre), proper rotations,

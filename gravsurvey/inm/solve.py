@@ -1289,10 +1289,12 @@ def _gnss_latency(record, nav, idx, c, out, ellipsoid, lever_arm_t=None, arm_c=N
     return gnss_latency_fit(t, res, vel)
 
 
-#: The identification's expected error of the product, mGal, beyond which a warning says the
-#: field is not resolved: a survey's product is of use at a few mGal, and the unseen suite's
-#: flights expect at most 5.4 (140 summaries of 2026-12-06); a platform's GNSS heights from an
-#: antenna 2.3 m off the IMU's vertical in strong turbulence expected 124 (and had 77).
+#: The identification's expected error of the product, mGal, beyond which the prior of least
+#: expected error is not trusted (:func:`_broad_prior_instead`) and, where a prior was given,
+#: a warning says the field is not resolved: a survey's product is of use at a few mGal, and
+#: the unseen suite's flights expect at most 5.4 (140 summaries of 2026-12-06); a platform's
+#: GNSS heights from an antenna 2.3 m off the IMU's vertical in strong turbulence expected 124
+#: (and had 77).
 EXPECTED_ERROR_WARN_MGAL = 20.0
 #: Lever-arm fits on one flight at most: the first finds most of the offset, the smoothed
 #: track having taken up some (1.76 of 2 m up on the fuzzing flight, 4.2 of 6 m forward on
@@ -1739,6 +1741,9 @@ def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False
         params, ident = refine_prior(
             params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))), wide, speed0, weight
         )
+        expected = ident.get("expected_error_mgal")
+        if expected is not None and expected > EXPECTED_ERROR_WARN_MGAL and params.target_resolution_m is None:
+            params, ident = _broad_prior_instead(params, ident, speed0, expected)
     walk = ident.get("height_walk") or {}
     if walk.get("applied") and "spectral_model" in ident:
         # the heights wander (identify.WALK_MIN_LOG_LR): the filter's white height noise is
@@ -1765,6 +1770,43 @@ def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False
         # gravimeter state does not hold, as the smoother passes it; estimate.py adds it to sigma
         ident["drift_sigma_passed_mps2"] = drift_sigma_passed(ident, float(nav.time[-1] - nav.time[0]))
     return params, ident
+
+
+#: Keys of :func:`refine_prior`'s report that hold for the prior it chose only.
+REFINE_ONLY_KEYS = (
+    "expected_error_mgal",
+    "smoother_sigma_scale",
+    "field_sigma_missed_mps2",
+    "field_sigma_unexcluded_mps2",
+    "field_std_seen_mgal",
+    "signal_seen_to_m",
+    "noise_scale",
+)
+
+
+def _broad_prior_instead(params, ident, speed0, expected):
+    """The configured or default (broad) anomaly prior in place of one of least expected error
+    that expects ``expected`` mGal (over :data:`EXPECTED_ERROR_WARN_MGAL`): there the first
+    pass's spectrum is noise the model does not hold (heights wandering with an antenna's
+    unseen swing), read as a strong short field, and the prior passes it all (a 0.5-mGal field
+    estimated to 29 mGal where the conventional chain had 0.38).  The identified noise levels
+    stay; a warning says so."""
+    report = {k: v for k, v in ident.items() if k not in REFINE_ONLY_KEYS}
+    new, report = keep_default_prior(params, report, speed0, MIN_REFINE_S)
+    why = f"default (the prior of least expected error expected {expected:.3g} mGal)"
+    for k in ("anomaly_sigma_mps2", "anomaly_lambda_per_m"):
+        if report[k]["how"] != "config":
+            report[k]["how"] = why
+    res = report.get("resolution_m")
+    report["warnings"] = list(ident.get("warnings", [])) + [
+        f"model identification: the anomaly prior of least expected error expects {expected:.3g} mGal in the "
+        "product (the first pass's spectrum is the heights' or the gravimeter's noise, not a field); the "
+        f"configured or default prior ({new.anomaly_sigma_mps2 / 1e-5:.3g} mGal over "
+        f"{1e-3 / new.anomaly_lambda_per_m:.3g} km) is used instead"
+        + (f", the field smoothed to {res / 1e3:.3g} km" if res else "")
+        + ' (docs/method.md, "Identification")'
+    ]
+    return new, report
 
 
 def _horizontal_pass(record, params, nav, ellipsoid, g_vertical, one_pass):
