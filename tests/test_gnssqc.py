@@ -325,6 +325,18 @@ def test_heights_from_an_antenna_off_a_platforms_vertical_are_said_to_carry_its_
     assert not any("off the vertical" in w for w in sol.warnings)
 
 
+def _expecting(monkeypatch, name, mgal):
+    """``solve.<name>`` (a ``(params, report)`` maker) patched so that its report expects
+    ``mgal`` of error in the product."""
+    made = getattr(solve, name)
+
+    def pessimistic(*args, **kwargs):
+        params, report = made(*args, **kwargs)
+        return params, {**report, "expected_error_mgal": mgal}
+
+    monkeypatch.setattr(solve, name, pessimistic)
+
+
 def test_a_product_the_model_expects_to_be_useless_is_said_to_be(turning_platform, monkeypatch):
     """An identified model that expects over 20 mGal of error in the product (measured: a
     platform's GNSS heights from an antenna 2.3 m off the IMU's vertical in strong turbulence,
@@ -334,13 +346,7 @@ def test_a_product_the_model_expects_to_be_useless_is_said_to_be(turning_platfor
     clean = estimate_anomaly(rec, InmParams(), init, "platform")
     assert clean.identification["expected_error_mgal"] < 1.0
     assert not any("expects an error of" in w for w in clean.warnings)
-    identify = solve._identify
-
-    def pessimistic(*args, **kwargs):
-        params, ident = identify(*args, **kwargs)
-        return params, {**ident, "expected_error_mgal": 124.0}
-
-    monkeypatch.setattr(solve, "_identify", pessimistic)
+    _expecting(monkeypatch, "_identify", 124.0)
     sol = estimate_anomaly(rec, InmParams(), init, "platform")
     assert any(
         re.search(r"^sim: the model identified from this flight expects an error of 124 mGal in its product", w)
@@ -355,13 +361,7 @@ def test_a_prior_expecting_a_useless_product_gives_way_to_the_broad_one(turning_
     0.38; with the broad prior 2.0): the configured or default prior is used instead, the
     identified noise kept, and a warning says so."""
     s, rec, init = turning_platform
-    refine = solve.refine_prior
-
-    def pessimistic(*args, **kwargs):
-        params, report = refine(*args, **kwargs)
-        return params, {**report, "expected_error_mgal": 124.0}
-
-    monkeypatch.setattr(solve, "refine_prior", pessimistic)
+    _expecting(monkeypatch, "refine_prior", 124.0)
     sol = estimate_anomaly(rec, InmParams(), init, "platform")
     ident = sol.identification
     default = InmParams()

@@ -605,7 +605,7 @@ def first_stage(
         warnings.simplefilter("always")
         nav = _mechanize(record, params, initial, ellipsoid, reference)
         dh = None
-        if gnss_heights and lever_arm_t is not None and np.any(np.asarray(lever_arm_t, float) != 0.0):
+        if gnss_heights and _has_arm(lever_arm_t):
             # the antenna's swing in a turn is no step, nor a noisy stretch, of the heights
             body = _body_attitude(nav, ellipsoid) if triad == "platform" else None
             dh = antenna_offset_enu(nav, lever_arm_t, body, np.asarray(record.altimeter.time, float), ellipsoid)[:, 2]
@@ -718,13 +718,13 @@ def _estimate_once(
         # attitude comes from the track
         body_i = (
             _body_attitude(nav, ellipsoid)
-            if triad == "platform" and (lever_open or np.any(np.asarray(gnss_lever_arm_t, float) != 0.0))
+            if triad == "platform" and (lever_open or _has_arm(gnss_lever_arm_t))
             else None
         )
         # heights that are the GNSS's are the antenna's: moved to the IMU for the filter and the
         # identification (the arm swings with the attitude on the lines too)
         pass_record = record
-        if gnss_heights and gnss_lever_arm_t is not None and np.any(np.asarray(gnss_lever_arm_t, float) != 0.0):
+        if gnss_heights and _has_arm(gnss_lever_arm_t):
             pass_record = heights_at_imu(record, nav, gnss_lever_arm_t, body_i, ellipsoid)
         # every pass about this linearisation point: the navigation, the prior attitude and
         # gyro bias seen from it
@@ -940,7 +940,7 @@ def _estimate_once(
     )
     if gnss_used:
         antenna = None
-        if gnss_lever_arm_t is not None and np.any(np.asarray(gnss_lever_arm_t, float) != 0.0):
+        if _has_arm(gnss_lever_arm_t):
             antenna = antenna_offset_enu(nav, gnss_lever_arm_t, body_i, np.asarray(record.gnss.time, float), ellipsoid)
         _check_track(record, params, sol, ellipsoid, antenna)
     return sol
@@ -1347,6 +1347,11 @@ def _gnss_lever_arm(
 #: Rate of the aircraft's attitude from the track, Hz (:func:`_body_attitude`): a bank changes
 #: over seconds.
 BODY_ATTITUDE_HZ = 10.0
+
+
+def _has_arm(lever_arm_t) -> bool:
+    """Whether an antenna offset (3,) m is given and not zero."""
+    return lever_arm_t is not None and bool(np.any(np.asarray(lever_arm_t, float) != 0.0))
 
 
 def heights_at_imu(record, nav, lever_arm_t, body_mat_i, ellipsoid: Ellipsoid = WGS84):
