@@ -15,6 +15,7 @@ from ..geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef, loca
 from ..filters import centred_mean
 from ..io.record import FlightRecord
 from .errormodel import (
+    ACCEL_BIAS_SIGMA_MPS2,
     BA,
     BG,
     DP,
@@ -317,6 +318,18 @@ POSITION_CONVERGED_M = 30.0
 #: bias ``b`` left in the specific force is a tilt ``b / g`` to the mechanization, which puts
 #: ``b |f_h| / g`` into the vertical in turns (docs/method.md, "Accelerometer bias").
 ACCEL_BIAS_CONVERGED_MPS2 = 2.0e-5
+
+#: A strapdown flight's horizontal accelerometer bias found by a pass (16 states, the default
+#: prior :data:`gravsurvey.inm.errormodel.ACCEL_BIAS_SIGMA_MPS2`) above this, m/s^2 (150 micro-g;
+#: on 136 runs of the unseen suite's navigation-grade draws at most 6e-4 was found), is a
+#: tactical-grade IMU's: taken off between passes as with a datasheet ``model.accel_bias_mps2``
+#: of :data:`ACCEL_BIAS_PRIOR_PER_FOUND` times the found bias.  Left in, it is a tilt to the
+#: identification, which reads the unaided vertical channel: quick U010 with 1e-2 / -6e-3 m/s^2
+#: identified a vertical white level of 4.3e-4 m/s^2 and went 1.55 -> 6.22 mGal
+#: (docs/benchmarks.md, "A tactical-grade IMU").
+ACCEL_BIAS_FOUND_MPS2 = 1.5e-3
+#: The datasheet-like prior sigma a found bias sets, per found bias (the larger axis).
+ACCEL_BIAS_PRIOR_PER_FOUND = 2.0
 
 #: An accelerometer-bias correction above this (m/s^2) re-runs the identification about the
 #: corrected specific force in the next pass: the vertical channel's tilt leak, which the noise
@@ -675,6 +688,7 @@ def _estimate_once(
     # docs/benchmarks.md, "Accelerometer bias taken off between passes")
     take_off_accel_bias = params.accel_bias_mps2 is not None and triad == "strapdown"
     accel_bias_t = np.zeros(2)
+    found_accel_bias = None  # a tactical-grade bias a pass found (_found_accel_bias)
     height_warnings, height_facts = [], {}
     gnss_latency = None  # a GnssLatency once the first aided pass has measured it
     # an antenna offset not given: measured on the aided track and applied; up to
@@ -788,6 +802,14 @@ def _estimate_once(
                 continue
         th0, db, db_sig = _pass_correction(out)
         span_s = float(nav.time[-1] - nav.time[0])
+        if not take_off_accel_bias and triad == "strapdown" and n_state >= N_STATE_BIAS and k < limit - 1:
+            found_bias = _found_accel_bias(out)
+            if found_bias is not None:
+                # a tactical-grade bias: from here on as if the datasheet had given it
+                take_off_accel_bias = True
+                found_accel_bias = found_bias
+                given_params = dataclasses.replace(given_params, accel_bias_mps2=found_bias["prior_mps2"])
+                params = dataclasses.replace(params, accel_bias_mps2=found_bias["prior_mps2"])
         if reverted is None:
             found.append((db, db_sig))
         grew = None if reverted is not None else diverging_gyro_axis(found, span_s)
@@ -882,6 +904,14 @@ def _estimate_once(
             da, sol.accel_bias_sigma_t = _accel_bias_correction(out)
             sol.accel_bias_t = accel_bias_t + da
             sol.accel_bias_taken_off = take_off_accel_bias
+    if found_accel_bias is not None:
+        ident["accel_bias_found"] = found_accel_bias
+        found = "/".join(f"{b:.1e}" for b in found_accel_bias["found_mps2"])
+        ident.setdefault("warnings", []).append(
+            f"horizontal accelerometer biases of {found} m/s^2 found, beyond the default prior "
+            f"({ACCEL_BIAS_SIGMA_MPS2:.0e} m/s^2: a tactical-grade IMU); taken off between passes as with "
+            f"model.accel_bias_mps2 = {found_accel_bias['prior_mps2']:.1e} (give the datasheet figure there)"
+        )
     elif params.accel_bias_mps2 is not None:
         ident.setdefault("warnings", []).append(
             "model.accel_bias_mps2: the accelerometer biases need GNSS position aiding (model.gnss_aiding and a "
@@ -1546,6 +1576,17 @@ def _accel_bias_correction(out):
     """The smoothed biases of accelerometers 1 and 2 a 16- or 18-state pass found at its first
     epoch (2,) m/s^2, and their 1-sigma (2,) m/s^2."""
     return out["x_s"][0][BA], np.sqrt(np.diagonal(out["p_s"][0])[BA])
+
+
+def _found_accel_bias(out) -> dict | None:
+    """A pass's smoothed horizontal accelerometer bias when it is beyond the default prior's
+    reach (:data:`ACCEL_BIAS_FOUND_MPS2` on either axis): ``{"found_mps2": (2,), "prior_mps2"}``
+    with the prior :data:`ACCEL_BIAS_PRIOR_PER_FOUND` times the larger; None otherwise."""
+    bias, _ = _accel_bias_correction(out)
+    most = float(np.max(np.abs(bias)))
+    if not most > ACCEL_BIAS_FOUND_MPS2:
+        return None
+    return {"found_mps2": [float(b) for b in bias], "prior_mps2": ACCEL_BIAS_PRIOR_PER_FOUND * most}
 
 
 def _accel_bias_off(record, bias_t):
