@@ -4,7 +4,7 @@
 Usage::
 
     python benchmarks/bench_unseen.py [--flights N] [--quick] [--first-seed S] [--json out.json]
-        [--runs default,oracle,classic] [--heights altimeter|gnss|carrier-phase] [--model KEY=VALUE ...] [--accel-bias B1,B2]
+        [--runs default,oracle,classic] [--heights altimeter|gnss|carrier-phase] [--model KEY=VALUE ...] [--accel-bias B1,B2] [--gyro BIAS_DEGPH,WHITE_DEGPH]
         [--gravimeter-drift MGAL_PER_H] [--gravimeter-tare AT,MGAL] [--gnss-markov SIGMA_M,TAU_S]
 
 Draws ``N`` (default 20) flights with seeds ``S .. S+N-1`` from the unseen-flight generator
@@ -48,7 +48,8 @@ error/sigma with the truth's in its place.  ``--quick`` caps
 every drawn flight at 40 min and 50 Hz IMU (the
 same draws otherwise) for a fast check.  ``--model KEY=VALUE`` gives the default run a
 ``model`` section (a datasheet figure a user would know); ``--accel-bias B1,B2`` replaces the
-drawn horizontal accelerometer biases (a tactical IMU's).  ``--heights gnss`` gives the default run
+drawn horizontal accelerometer biases (a tactical IMU's); ``--gyro BIAS_DEGPH,WHITE_DEGPH`` the drawn
+gyros (:func:`with_gyro`).  ``--heights gnss`` gives the default run
 the GNSS fixes' heights as its height channel; ``--heights carrier-phase`` makes the GNSS
 carrier-phase grade and its heights the only height channel (:func:`with_carrier_phase_gnss`);
 ``--gravimeter-drift MGAL_PER_H`` adds a linear gravimeter drift (:func:`with_gravimeter_drift`);
@@ -498,12 +499,29 @@ def model_config(folder: Path, model: dict, name: str = "survey.yaml") -> str:
     return out
 
 
+#: The gyro biases ``--gyro`` sets, per its BIAS (triad axes 1-3).
+GYRO_BIAS_PATTERN = (1.0, -0.7, 0.8)
+
+
 def with_accel_bias(spec: dict, bias_mps2) -> dict:
     """The drawn flight with its horizontal accelerometer biases replaced by ``bias_mps2`` (2,),
     m/s^2 (a tactical IMU's instead of the suite's draw; the name is unchanged, the cache
     folder's hash differs)."""
     out = json.loads(json.dumps(spec))
     out["sim"]["flights"][0]["sensors"]["accelerometer"]["bias_mps2"] = [float(b) for b in bias_mps2]
+    return out
+
+
+def with_gyro(spec: dict, bias_degph: float, white_degph: float) -> dict:
+    """The drawn flight with another grade of gyros: constant biases ``bias_degph`` x (1, -0.7,
+    0.8) on triad axes 1-3, deg/h, and a white drift of ``white_degph`` (deg/h, one-second
+    sigma: an angle random walk of ``white_degph / 60`` deg/sqrt(h)); a tactical or fibre-optic
+    IMU's instead of the suite's navigation-grade draw.  The name is unchanged, the cache
+    folder's hash differs."""
+    out = json.loads(json.dumps(spec))
+    gyro = out["sim"]["flights"][0]["sensors"]["gyro"]
+    gyro["bias_degph"] = [float(bias_degph) * k for k in GYRO_BIAS_PATTERN]
+    gyro["white_drift_degph"] = float(white_degph)
     return out
 
 
@@ -929,6 +947,13 @@ def main(argv=None):
         "docs/benchmarks.md 'Accelerometer bias taken off between passes')",
     )
     ap.add_argument(
+        "--gyro",
+        default=None,
+        metavar="BIAS_DEGPH,WHITE_DEGPH",
+        help="replace the drawn gyros by another grade: biases BIAS x (1, -0.7, 0.8) deg/h on triad axes 1-3 "
+        "and a white drift of WHITE deg/h (one-second sigma; docs/benchmarks.md 'A tactical-grade IMU')",
+    )
+    ap.add_argument(
         "--gravimeter-drift",
         type=float,
         default=None,
@@ -1003,6 +1028,11 @@ def main(argv=None):
         accel_bias = _numbers(a.accel_bias)
         if len(accel_bias) != 2:
             ap.error(f"--accel-bias: expected two numbers B1,B2 (m/s^2), got {a.accel_bias!r}")
+    gyro = None
+    if a.gyro is not None:
+        gyro = _numbers(a.gyro)
+        if len(gyro) != 2 or not 0.0 <= gyro[0] <= 100.0 or not 0.0 <= gyro[1] <= 1000.0:
+            ap.error(f"--gyro: expected BIAS_DEGPH,WHITE_DEGPH (0-100 deg/h, 0-1000 deg/h), got {a.gyro!r}")
     gnss_markov = None
     if a.gnss_markov is not None:
         gnss_markov = _numbers(a.gnss_markov)
@@ -1050,6 +1080,8 @@ def main(argv=None):
             spec = limit_spec(spec, QUICK_MAX_DURATION_S, QUICK_MAX_IMU_HZ)
         if accel_bias is not None:
             spec = with_accel_bias(spec, accel_bias)
+        if gyro is not None:
+            spec = with_gyro(spec, *gyro)
         if a.heights == "carrier-phase":
             spec = with_carrier_phase_gnss(spec)
         if a.gravimeter_drift is not None:

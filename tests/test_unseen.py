@@ -641,6 +641,28 @@ def test_antenna_moves_the_drawn_flights_fixes(capsys):
         assert f"--antenna: expected FWD,LEFT,UP (m, each within +-30), got '{bad}'" in capsys.readouterr().err
 
 
+def test_gyro_option_replaces_the_drawn_gyros(capsys):
+    """``bench_unseen.py --gyro BIAS,WHITE``: the drawn flight's gyro biases and white drift
+    replaced (a tactical IMU's), the rest of the draw as it was, in a cache folder of its own; a
+    bad value is a usage error."""
+    bench = _bench()
+    sp = U.limit_spec(U.draw_flight_spec(1), 2400.0, 50.0)
+    tg = bench.with_gyro(sp, 0.75, 6.0)
+    gyro = tg["sim"]["flights"][0]["sensors"]["gyro"]
+    assert gyro["bias_degph"] == pytest.approx([0.75, -0.525, 0.6]) and gyro["white_drift_degph"] == 6.0
+    rest = {k: v for k, v in tg["sim"]["flights"][0]["sensors"].items() if k != "gyro"}
+    assert rest == {k: v for k, v in sp["sim"]["flights"][0]["sensors"].items() if k != "gyro"}
+    assert bench._spec_hash(tg) != bench._spec_hash(sp)
+    for bad in ("0.75", "a,b", "-1,6", "0.75,6,1", "0.1,2000"):
+        with pytest.raises(SystemExit) as exc:
+            bench.main([f"--gyro={bad}", "--flights", "1"])
+        assert exc.value.code == 2
+        assert (
+            f"--gyro: expected BIAS_DEGPH,WHITE_DEGPH (0-100 deg/h, 0-1000 deg/h), got '{bad}'"
+            in capsys.readouterr().err
+        )
+
+
 def test_issue_flights_table_counts_against_the_issues_ratio(capsys):
     """benchmarks/bench_issue_flights.py: each flight's default / bound is set against the
     issue's goal over its bound (A: 0.40 over 0.29-0.39 mGal), strict and generous end; a

@@ -238,6 +238,7 @@ class InmSolution:
     horizontal_observable: np.ndarray | None = None
     log_likelihood: float = float("nan")
     log_likelihood_epochs: np.ndarray | None = None
+    gyro_screen_z: float = float("nan")
 
 
 def _check_record(record):
@@ -382,6 +383,83 @@ ACCEL_NOISE_CANDIDATES_MPS2 = (5.0e-4, 2.5e-4)
 #: log-likelihood go either way (quick U1659: +3.2, 0.30 standard errors, 1.21 -> 1.73 x the
 #: bound; docs/benchmarks.md, "Accelerometer noise by likelihood").
 ACCEL_NOISE_GAIN_Z = 2.0
+
+
+#: Gyro white drifts (one-second sigma, deg/h) tried above the default's on a strapdown flight,
+#: in this order (:func:`choose_gyro_noise`): a navigation-grade ring-laser gyro (angle random
+#: walk ~0.002 deg/sqrt(h)), a fibre-optic one (~0.01-0.02), a tactical one (~0.1-0.2).  With
+#: the default 0.01 deg/h a fibre-optic IMU's gyros (0.72 deg/h) cost quick U007 0.61 -> 1.32
+#: mGal and a tactical one's (6 deg/h) up to 30x (docs/benchmarks.md, "A tactical-grade IMU").
+GYRO_NOISE_CANDIDATES_DEGPH = (0.1, 1.0, 10.0)
+#: The screen: one pass about the default estimate's last linearisation with the first
+#: candidate; only a likelihood gain above this many standard errors runs the candidates'
+#: whole estimates (on the suite's navigation-grade draws the screen stays below it but on one
+#: of 13 strapdown flights, quick U006, 16; fibre-optic gyros give 12-33, tactical 14-47).
+GYRO_SCREEN_Z = 10.0
+#: A gyro candidate replaces the one before it when its whole estimate is this many standard
+#: errors more likely (as :data:`ACCEL_NOISE_GAIN_Z`).
+GYRO_NOISE_GAIN_Z = 2.0
+
+
+def may_choose_gyro_noise(params: InmParams, triad: str) -> bool:
+    """Whether :func:`estimate_anomaly` may choose the gyros' white drift: a strapdown triad,
+    identification on and ``model.gyro_drift_degph`` not given in the config."""
+    return triad == "strapdown" and bool(params.identify) and "gyro_drift_degph" not in getattr(params, "given", ())
+
+
+def choose_gyro_noise(first, params: InmParams, estimate):
+    """The estimate with the default or a noisier gyro white drift, whichever the filter's
+    likelihood clearly prefers, when the screen asks for it.
+
+    ``first[0].gyro_screen_z`` (one pass with the first of :data:`GYRO_NOISE_CANDIDATES_DEGPH`
+    about the default estimate's linearisation) above :data:`GYRO_SCREEN_Z` runs the whole
+    estimate with each candidate in turn while each is more likely than the one before by
+    :data:`GYRO_NOISE_GAIN_Z` standard errors, as :func:`choose_accel_noise` does.
+
+    Returns
+    -------
+    (sol, shown) : the estimate chosen and its warnings
+    params : InmParams
+        ``params`` with the gyro drift chosen.
+    report : dict
+        ``value``, ``how``, ``screen_z``, each candidate's ``log_likelihood`` and ``gain_z``
+        (and ``failed``): summary.json's ``identification.gyro_drift_degph``.
+    """
+    value, best, shown = float(params.gyro_drift_degph), *first
+    screen = float(best.gyro_screen_z)
+    lls = {f"{value:.3g}": float(best.log_likelihood)}
+    gains, failed = {}, {}
+    if math.isfinite(screen) and screen > GYRO_SCREEN_Z:
+        for v in GYRO_NOISE_CANDIDATES_DEGPH:
+            if v <= value:
+                continue
+            try:
+                other, caught = recorded(estimate, dataclasses.replace(params, gyro_drift_degph=v), False)
+            except (GravsurveyError, np.linalg.LinAlgError, FloatingPointError) as exc:
+                failed[f"{v:.3g}"] = str(exc).splitlines()[0]
+                break
+            z = likelihood_gain_z(other.log_likelihood_epochs, best.log_likelihood_epochs)
+            lls[f"{v:.3g}"] = float(other.log_likelihood)
+            gains[f"{v:.3g}"] = z if math.isfinite(z) else None
+            if not z > GYRO_NOISE_GAIN_Z:
+                break
+            value, best, shown = v, other, caught
+    kept = value == float(params.gyro_drift_degph)
+    report = {
+        "value": value,
+        "sigma_factor": None,
+        "how": (
+            "default (a noisier gyro not clearly more likely)"
+            if kept
+            else "filter likelihood (a noisier gyro clearly more likely; strapdown)"
+        ),
+        "screen_z": screen if math.isfinite(screen) else None,
+        "log_likelihood": lls,
+        "gain_z": gains,
+    }
+    if failed:
+        report["failed"] = failed
+    return (best, shown), dataclasses.replace(params, gyro_drift_degph=value), report
 
 
 def may_choose_accel_noise(params: InmParams, triad: str) -> bool:
@@ -549,7 +627,12 @@ def estimate_anomaly(
     likelihood: the whole estimate (every pass) runs again with each of
     :data:`ACCEL_NOISE_CANDIDATES_MPS2` below the default while each is clearly more likely than
     the one before (:data:`ACCEL_NOISE_GAIN_Z` standard errors), and the last such is returned
-    (:func:`choose_accel_noise`; docs/method.md, "Accelerometer noise by likelihood").  The
+    (:func:`choose_accel_noise`; docs/method.md, "Accelerometer noise by likelihood").  Before
+    that, without a given ``model.gyro_drift_degph``, the first estimate's last linearisation is
+    filtered once more with a noisier gyro (the screen); where its likelihood gain exceeds
+    :data:`GYRO_SCREEN_Z` the whole estimate runs with each of :data:`GYRO_NOISE_CANDIDATES_DEGPH`
+    in the same way (:func:`choose_gyro_noise`; docs/method.md, "Gyro noise by likelihood"),
+    and the accelerometer noise is chosen about the gyro noise chosen.  The
     estimates share the work the noise does not change (:class:`FirstStage`, the spectral
     fits); each is, to the bit, the estimate with its noise given.
     """
@@ -557,7 +640,7 @@ def estimate_anomaly(
     # what the first estimate found that the others reuse (_estimate_once's ``shared``)
     shared = {}
 
-    def estimate(p):
+    def estimate(p, screen=None):
         return _estimate_once(
             record,
             p,
@@ -569,13 +652,34 @@ def estimate_anomaly(
             gnss_lever_arm_t,
             likelihood=True,
             shared=shared,
+            gyro_screen_degph=screen,
         )
 
-    if not may_choose_accel_noise(params, triad):
+    params_in = params
+    gyro_ok, accel_ok = may_choose_gyro_noise(params, triad), may_choose_accel_noise(params, triad)
+    if not (gyro_ok or accel_ok):
         return _estimate_once(record, params, initial, triad, ellipsoid, attitude_deg, reference, gnss_lever_arm_t)
     # the warnings of an estimate are shown only for the one returned
-    first = recorded(estimate, params)
-    sol, shown = choose_accel_noise(first, params, estimate) if chooses_accel_noise(params, triad, first[0]) else first
+    first = recorded(functools.partial(estimate, screen=GYRO_NOISE_CANDIDATES_DEGPH[0] if gyro_ok else None), params)
+    gyro_report = None
+    if gyro_ok and first[0].gnss_aided and math.isfinite(first[0].log_likelihood):
+        first, params, gyro_report = choose_gyro_noise(first, params, estimate)
+    sol, shown = (
+        choose_accel_noise(first, params, estimate)
+        if accel_ok and chooses_accel_noise(params, triad, first[0])
+        else first
+    )
+    if gyro_report is not None:
+        sol.identification = {**sol.identification, "gyro_drift_degph": gyro_report}
+        if gyro_report["value"] != float(params_in.gyro_drift_degph):
+            warn = (
+                f"the gyros are noisier than the default model's: a white drift of {gyro_report['value']:g} deg/h "
+                "(one-second sigma) is the most likely of "
+                f"{', '.join(f'{v:g}' for v in (params_in.gyro_drift_degph, *GYRO_NOISE_CANDIDATES_DEGPH))}; give the "
+                "datasheet's angle random walk as model.gyro_drift_degph (deg/sqrt(h) x 60)"
+            )
+            sol.identification["warnings"] = [*sol.identification.get("warnings", []), warn]
+            sol.warnings = [*sol.warnings, warn]
     show_warnings(shown)
     return sol
 
@@ -657,10 +761,23 @@ def first_stage(
 
 
 def _estimate_once(
-    record, params, initial, triad, ellipsoid, attitude_deg, reference, gnss_lever_arm_t, likelihood=False, shared=None
+    record,
+    params,
+    initial,
+    triad,
+    ellipsoid,
+    attitude_deg,
+    reference,
+    gnss_lever_arm_t,
+    likelihood=False,
+    shared=None,
+    gyro_screen_degph=None,
 ) -> InmSolution:
     """:func:`estimate_anomaly` with the model's accelerometer noise as it is (same arguments);
     ``likelihood``: also the last pass's log-likelihood (``InmSolution.log_likelihood``);
+    ``gyro_screen_degph``: with ``likelihood``, one more pass about the last one's
+    linearisation with this gyro white drift, its likelihood gain over the last pass in
+    standard errors in ``InmSolution.gyro_screen_z`` (:func:`choose_gyro_noise`);
     ``shared``: a dict shared by the estimates of one flight, holding (key ``"stage"``) the
     :class:`FirstStage` the first of them found and (key ``"fits"``) the identification's
     spectral fits (:func:`gravsurvey.inm.identify.identify_params`'s ``memo``)."""
@@ -869,6 +986,17 @@ def _estimate_once(
             # (zero about the raw specific force) then minus what was taken off
             accel_bias_t = accel_bias_t + da
             record = _accel_bias_off(record, da)
+    screen_z = float("nan")
+    if gyro_screen_degph is not None and likelihood and gnss_used:
+        # the same linearisation, a noisier gyro: the innovations say whether the IMU's gyros are
+        # of another grade than the default's (a pass, not a whole estimate)
+        *_, out_g = one_pass(
+            dataclasses.replace(params, gyro_drift_degph=float(gyro_screen_degph)), accel_bias=accel_bias
+        )
+        screen_z = likelihood_gain_z(
+            log_likelihood(out_g["p_p"], out_g["innov"], *out_g["measurements"]),
+            log_likelihood(out["p_p"], out["innov"], *out["measurements"]),
+        )
     hsol = None
     if params.horizontal:
         if gnss_used:
@@ -885,6 +1013,7 @@ def _estimate_once(
         sol.log_likelihood = float(np.sum(sol.log_likelihood_epochs))
     sol.initial_corrections = pv_corrections
     sol.passes_reverted = reverted
+    sol.gyro_screen_z = screen_z
     if hsol is not None:
         missed = float(ident.get("field_sigma_missed_mps2", 0.0))
         sol.dg_horizontal, sol.dg_horizontal_sigma, sol.horizontal_observable = horizontal_outputs(

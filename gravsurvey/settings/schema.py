@@ -152,7 +152,14 @@ class ModelSection(Section):
         "(docs/method.md, 'Accelerometer noise by likelihood'); given (the datasheet figure), it is used as it is",
         ge=0,
     )
-    gyro_drift_degph: float = _m("gyro_drift_degph", "sigma_nu, white gyro drift, deg/h (one-second sigma)", ge=0)
+    gyro_drift_degph: float = _m(
+        "gyro_drift_degph",
+        "sigma_nu, white gyro drift, deg/h (one-second sigma: the datasheet's angle random walk in deg/sqrt(h) x 60). "
+        "Not given, a GNSS-aided strapdown flight takes 0.1, 1 or 10 instead where a screen pass and the filter's "
+        "likelihood clearly say the gyros are noisier (docs/method.md, 'Gyro noise by likelihood'); given, it is used "
+        "as it is",
+        ge=0,
+    )
     gravimeter_lambda_per_s: float = _m(
         "gravimeter_lambda_per_s", "lambda_f3, gravimeter error correlation rate, 1/s", ge=0
     )
