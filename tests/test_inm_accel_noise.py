@@ -92,16 +92,24 @@ class _Sol:
         self.identification = {}
 
 
-def _search(lls, fail_at=None):
-    """choose_accel_noise over a stand-in estimate whose likelihood per noise is ``lls``."""
+def stand_in_estimate(key, lls, fail_at=None):
+    """``(estimate, calls)``: a stand-in whole estimate whose likelihood per value of the model
+    key ``key`` is ``lls`` (failing at ``fail_at``), and the values it was called with."""
     calls = []
 
     def estimate(p):
-        calls.append(p.accel_noise_mps2)
-        if p.accel_noise_mps2 == fail_at:
+        value = getattr(p, key)
+        calls.append(value)
+        if value == fail_at:
             raise DataError("F01: the navigation did not settle")
-        return _Sol(lls[p.accel_noise_mps2], seed=len(calls))
+        return _Sol(lls[value], seed=len(calls))
 
+    return estimate, calls
+
+
+def _search(lls, fail_at=None):
+    """choose_accel_noise over a stand-in estimate whose likelihood per noise is ``lls``."""
+    estimate, calls = stand_in_estimate("accel_noise_mps2", lls, fail_at)
     best, shown = choose_accel_noise((_Sol(lls[1e-3]), ["default's warning"]), InmParams(), estimate)
     assert shown == (["default's warning"] if best.log_likelihood == lls[1e-3] else [])
     return best, calls

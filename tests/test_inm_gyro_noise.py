@@ -9,11 +9,8 @@ Truth: the simulator (gravsurvey/simulate) and its unseen-flight generator, flig
 
 import math
 
-import numpy as np
 import pytest
 
-from gravsurvey.errors import DataError
-from gravsurvey.geodesy import MGAL
 from gravsurvey.inm import solve
 from gravsurvey.inm.params import InmParams
 from gravsurvey.settings import inm_params
@@ -21,30 +18,22 @@ from gravsurvey.inm.solve import choose_gyro_noise, estimate_anomaly, may_choose
 from gravsurvey.simulate.run import simulate_flight
 from gravsurvey.simulate.unseen import draw_flight_spec, limit_spec
 from sim_record import record_and_initial
+from test_inm_accel_noise import _Sol as _AccelSol
+from test_inm_accel_noise import _rms_mgal, stand_in_estimate
 
 
-class _Sol:
-    """A stand-in estimate: total log-likelihood ``ll`` over 100 epochs, each with its own
-    scatter, and the screen's gain ``screen``."""
+class _Sol(_AccelSol):
+    """The accelerometer-noise tests' stand-in estimate, with the screen's gain ``screen``."""
 
     def __init__(self, ll, seed=0, screen=float("nan")):
-        self.log_likelihood = ll
-        rng = np.random.default_rng(seed)
-        self.log_likelihood_epochs = ll / 100.0 + 0.05 * rng.standard_normal(100)
-        self.log_likelihood_epochs += (ll - self.log_likelihood_epochs.sum()) / 100.0
-        self.identification = {}
+        super().__init__(ll, seed)
         self.gyro_screen_z = screen
 
 
 def _search(lls, screen, fail_at=None):
-    calls = []
-
-    def estimate(p):
-        calls.append(p.gyro_drift_degph)
-        if p.gyro_drift_degph == fail_at:
-            raise DataError("F01: the navigation did not settle")
-        return _Sol(lls[p.gyro_drift_degph], seed=len(calls))
-
+    """choose_gyro_noise over a stand-in estimate whose likelihood per gyro noise is ``lls`` and
+    whose screen gained ``screen``."""
+    estimate, calls = stand_in_estimate("gyro_drift_degph", lls, fail_at)
     (best, shown), params, report = choose_gyro_noise(
         (_Sol(lls[0.01], screen=screen), ["default's warning"]), InmParams(), estimate
     )
@@ -83,14 +72,6 @@ def test_only_a_strapdown_flight_without_a_given_gyro_noise_chooses():
     assert not may_choose_gyro_noise(InmParams(identify=False), "strapdown")
     c = solve.GYRO_NOISE_CANDIDATES_DEGPH
     assert c == tuple(sorted(c)) and c[0] > InmParams().gyro_drift_degph
-
-
-def _rms_mgal(s, sol, edge_s=300.0):
-    truth = np.interp(sol.time, s.truth["time"], s.truth["disturbance"])
-    t = sol.time - sol.time[0]
-    keep = (t > edge_s) & (t < t[-1] - edge_s)
-    e = sol.g_smooth[keep] - truth[keep]
-    return float(np.sqrt(np.mean((e - e.mean()) ** 2))) / MGAL
 
 
 @pytest.fixture(scope="module")

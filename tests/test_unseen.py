@@ -634,11 +634,13 @@ def test_antenna_moves_the_drawn_flights_fixes(capsys):
         k: v for k, v in sp["sim"]["flights"][0].items() if k != "sensors"
     }
     assert bench._spec_hash(an) != bench._spec_hash(sp)
-    for bad in ("3,-1", "a,b,c", "3,-1,31", "1,2,3,4"):
-        with pytest.raises(SystemExit) as exc:
-            bench.main([f"--antenna={bad}", "--flights", "1"])
-        assert exc.value.code == 2
-        assert f"--antenna: expected FWD,LEFT,UP (m, each within +-30), got '{bad}'" in capsys.readouterr().err
+    _usage_errors(
+        bench,
+        capsys,
+        "--antenna",
+        ("3,-1", "a,b,c", "3,-1,31", "1,2,3,4"),
+        "expected FWD,LEFT,UP (m, each within +-30)",
+    )
 
 
 def test_gyro_option_replaces_the_drawn_gyros(capsys):
@@ -653,14 +655,23 @@ def test_gyro_option_replaces_the_drawn_gyros(capsys):
     rest = {k: v for k, v in tg["sim"]["flights"][0]["sensors"].items() if k != "gyro"}
     assert rest == {k: v for k, v in sp["sim"]["flights"][0]["sensors"].items() if k != "gyro"}
     assert bench._spec_hash(tg) != bench._spec_hash(sp)
-    for bad in ("0.75", "a,b", "-1,6", "0.75,6,1", "0.1,2000"):
+    _usage_errors(
+        bench,
+        capsys,
+        "--gyro",
+        ("0.75", "a,b", "-1,6", "0.75,6,1", "0.1,2000"),
+        "expected BIAS_DEGPH,WHITE_DEGPH (0-100 deg/h, 0-1000 deg/h)",
+    )
+
+
+def _usage_errors(bench, capsys, option, bads, expected):
+    """Each of ``bads`` given to ``option`` is a usage error (exit 2) whose message says
+    ``expected`` and quotes the value."""
+    for bad in bads:
         with pytest.raises(SystemExit) as exc:
-            bench.main([f"--gyro={bad}", "--flights", "1"])
+            bench.main([f"{option}={bad}", "--flights", "1"])
         assert exc.value.code == 2
-        assert (
-            f"--gyro: expected BIAS_DEGPH,WHITE_DEGPH (0-100 deg/h, 0-1000 deg/h), got '{bad}'"
-            in capsys.readouterr().err
-        )
+        assert f"{option}: {expected}, got '{bad}'" in capsys.readouterr().err
 
 
 def test_issue_flights_table_counts_against_the_issues_ratio(capsys):

@@ -401,6 +401,35 @@ GYRO_SCREEN_Z = 10.0
 GYRO_NOISE_GAIN_Z = 2.0
 
 
+def _likelihood_search(first, params: InmParams, key: str, candidates, gain_z: float, estimate):
+    """The whole estimate with ``params.<key>`` set to each of ``candidates`` in turn, each
+    replacing the one before while more likely by ``gain_z`` standard errors
+    (:func:`gravsurvey.inm.kalman.likelihood_gain_z`); the search stops at the first that is not,
+    or that fails (a GravsurveyError or a numerical failure: a candidate that cannot be estimated
+    is no reason to fail a flight the default estimated; reported, its warnings not shown).
+
+    Returns ``(value, (sol, shown), log_likelihoods, gains, failed)``: the value kept, its
+    estimate and warnings, and per value tried (keys ``f"{v:.3g}"``) the total log-likelihood,
+    the gain over the one before (None where not finite) and a failure's first line.
+    """
+    value, best, shown = float(getattr(params, key)), *first
+    lls = {f"{value:.3g}": float(best.log_likelihood)}
+    gains, failed = {}, {}
+    for v in candidates:
+        try:
+            other, caught = recorded(estimate, dataclasses.replace(params, **{key: v}), False)
+        except (GravsurveyError, np.linalg.LinAlgError, FloatingPointError) as exc:
+            failed[f"{v:.3g}"] = str(exc).splitlines()[0]
+            break
+        z = likelihood_gain_z(other.log_likelihood_epochs, best.log_likelihood_epochs)
+        lls[f"{v:.3g}"] = float(other.log_likelihood)
+        gains[f"{v:.3g}"] = z if math.isfinite(z) else None
+        if not z > gain_z:
+            break
+        value, best, shown = v, other, caught
+    return value, (best, shown), lls, gains, failed
+
+
 def may_choose_gyro_noise(params: InmParams, triad: str) -> bool:
     """Whether :func:`estimate_anomaly` may choose the gyros' white drift: a strapdown triad,
     identification on and ``model.gyro_drift_degph`` not given in the config."""
@@ -425,25 +454,16 @@ def choose_gyro_noise(first, params: InmParams, estimate):
         ``value``, ``how``, ``screen_z``, each candidate's ``log_likelihood`` and ``gain_z``
         (and ``failed``): summary.json's ``identification.gyro_drift_degph``.
     """
-    value, best, shown = float(params.gyro_drift_degph), *first
-    screen = float(best.gyro_screen_z)
-    lls = {f"{value:.3g}": float(best.log_likelihood)}
-    gains, failed = {}, {}
-    if math.isfinite(screen) and screen > GYRO_SCREEN_Z:
-        for v in GYRO_NOISE_CANDIDATES_DEGPH:
-            if v <= value:
-                continue
-            try:
-                other, caught = recorded(estimate, dataclasses.replace(params, gyro_drift_degph=v), False)
-            except (GravsurveyError, np.linalg.LinAlgError, FloatingPointError) as exc:
-                failed[f"{v:.3g}"] = str(exc).splitlines()[0]
-                break
-            z = likelihood_gain_z(other.log_likelihood_epochs, best.log_likelihood_epochs)
-            lls[f"{v:.3g}"] = float(other.log_likelihood)
-            gains[f"{v:.3g}"] = z if math.isfinite(z) else None
-            if not z > GYRO_NOISE_GAIN_Z:
-                break
-            value, best, shown = v, other, caught
+    screen = float(first[0].gyro_screen_z)
+    asked = math.isfinite(screen) and screen > GYRO_SCREEN_Z
+    value, (best, shown), lls, gains, failed = _likelihood_search(
+        first,
+        params,
+        "gyro_drift_degph",
+        [v for v in GYRO_NOISE_CANDIDATES_DEGPH if asked and v > float(params.gyro_drift_degph)],
+        GYRO_NOISE_GAIN_Z,
+        estimate,
+    )
     kept = value == float(params.gyro_drift_degph)
     report = {
         "value": value,
@@ -532,25 +552,14 @@ def choose_accel_noise(first, params: InmParams, estimate):
     shown : list
         Its warnings (``warnings.WarningMessage``), to be shown.
     """
-    value, best, shown = float(params.accel_noise_mps2), *first
-    lls = {f"{value:.3g}": float(best.log_likelihood)}
-    gains, failed = {}, {}
-    for v in ACCEL_NOISE_CANDIDATES_MPS2:
-        if v >= value:
-            continue
-        try:
-            other, caught = recorded(estimate, dataclasses.replace(params, accel_noise_mps2=v), False)
-        except (GravsurveyError, np.linalg.LinAlgError, FloatingPointError) as exc:
-            # a candidate that cannot be estimated is no reason to fail a flight the default
-            # estimated: reported, and the search ends
-            failed[f"{v:.3g}"] = str(exc).splitlines()[0]
-            break
-        z = likelihood_gain_z(other.log_likelihood_epochs, best.log_likelihood_epochs)
-        lls[f"{v:.3g}"] = float(other.log_likelihood)
-        gains[f"{v:.3g}"] = z if math.isfinite(z) else None
-        if not z > ACCEL_NOISE_GAIN_Z:
-            break
-        value, best, shown = v, other, caught
+    value, (best, shown), lls, gains, failed = _likelihood_search(
+        first,
+        params,
+        "accel_noise_mps2",
+        [v for v in ACCEL_NOISE_CANDIDATES_MPS2 if v < float(params.accel_noise_mps2)],
+        ACCEL_NOISE_GAIN_Z,
+        estimate,
+    )
     report = {
         "value": value,
         "sigma_factor": None,
@@ -640,16 +649,15 @@ def estimate_anomaly(
     # what the first estimate found that the others reuse (_estimate_once's ``shared``)
     shared = {}
 
+    estimate_at = functools.partial(
+        _estimate_once, record, initial=initial, triad=triad, ellipsoid=ellipsoid, attitude_deg=attitude_deg
+    )
+
     def estimate(p, screen=None):
-        return _estimate_once(
-            record,
+        return estimate_at(
             p,
-            initial,
-            triad,
-            ellipsoid,
-            attitude_deg,
-            reference,
-            gnss_lever_arm_t,
+            reference=reference,
+            gnss_lever_arm_t=gnss_lever_arm_t,
             likelihood=True,
             shared=shared,
             gyro_screen_degph=screen,
