@@ -681,10 +681,9 @@ def estimate_anomaly(
         sol.identification = {**sol.identification, "gyro_drift_degph": gyro_report}
         if gyro_report["value"] != float(params_in.gyro_drift_degph):
             warn = (
-                f"the gyros are noisier than the default model's: a white drift of {gyro_report['value']:g} deg/h "
-                "(one-second sigma) is the most likely of "
-                f"{', '.join(f'{v:g}' for v in (params_in.gyro_drift_degph, *GYRO_NOISE_CANDIDATES_DEGPH))}; give the "
-                "datasheet's angle random walk as model.gyro_drift_degph (deg/sqrt(h) x 60)"
+                "the gyros are noisier than the default model's: the filter's likelihood clearly prefers a white "
+                f"drift of {gyro_report['value']:g} deg/h (one-second sigma) to {params_in.gyro_drift_degph:g}; give "
+                "the datasheet's angle random walk as model.gyro_drift_degph (deg/sqrt(h) x 60)"
             )
             sol.identification["warnings"] = [*sol.identification.get("warnings", []), warn]
             sol.warnings = [*sol.warnings, warn]
