@@ -993,6 +993,8 @@ def _estimate_once(
             # (zero about the raw specific force) then minus what was taken off
             accel_bias_t = accel_bias_t + da
             record = _accel_bias_off(record, da)
+    # the last pass's log-likelihood per epoch: the screen's reference and the solution's
+    ll_epochs = log_likelihood(out["p_p"], out["innov"], *out["measurements"]) if likelihood else None
     screen_z = float("nan")
     if gyro_screen_degph is not None and likelihood and gnss_used:
         # the same linearisation, a noisier gyro: the innovations say whether the IMU's gyros are
@@ -1000,10 +1002,7 @@ def _estimate_once(
         *_, out_g = one_pass(
             dataclasses.replace(params, gyro_drift_degph=float(gyro_screen_degph)), accel_bias=accel_bias
         )
-        screen_z = likelihood_gain_z(
-            log_likelihood(out_g["p_p"], out_g["innov"], *out_g["measurements"]),
-            log_likelihood(out["p_p"], out["innov"], *out["measurements"]),
-        )
+        screen_z = likelihood_gain_z(log_likelihood(out_g["p_p"], out_g["innov"], *out_g["measurements"]), ll_epochs)
     hsol = None
     if params.horizontal:
         if gnss_used:
@@ -1016,8 +1015,11 @@ def _estimate_once(
             )
     sol = _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, k + 1, corrections)
     if likelihood:
-        sol.log_likelihood_epochs = log_likelihood(out["p_p"], out["innov"], *out["measurements"])
-        sol.log_likelihood = float(np.sum(sol.log_likelihood_epochs))
+        if hsol is not None:
+            # the horizontal pass's own
+            ll_epochs = log_likelihood(out["p_p"], out["innov"], *out["measurements"])
+        sol.log_likelihood_epochs = ll_epochs
+        sol.log_likelihood = float(np.sum(ll_epochs))
     sol.initial_corrections = pv_corrections
     sol.passes_reverted = reverted
     sol.gyro_screen_z = screen_z
