@@ -258,6 +258,11 @@ def attitude_report(sol) -> dict:
         pv = getattr(sol, "initial_corrections", None) or []
         out["initial_position_corrections_m"] = [float(a) for a, _ in pv]
         out["initial_velocity_corrections_mps"] = [float(b) for _, b in pv]
+        tilts = getattr(sol, "follow_tilts_rad", None) or []
+        if tilts:
+            # passes about a navigation that follows the smoothed attitude (a tactical IMU's tilt;
+            # docs/method.md, "Following passes"): the tilt that started each
+            out["following_passes_tilt_mrad"] = [float(a * 1e3) for a in tilts]
         rev = getattr(sol, "passes_reverted", None)
         if rev is not None:
             # the passes stopped where a gyro-bias correction kept growing; the estimate is the

@@ -458,6 +458,55 @@ def mechanize_kernel(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, a, f, g
     return r_out, v_out, c_out
 
 
+@njit(cache=True)
+def _follow_attitude(t, c, t_ep, th_ep):
+    """``C_i <- C_i Exp([theta(t_i) x])`` in place: ``theta`` (triad axes, rad) linear in time
+    between the epochs ``t_ep`` (ascending) and held beyond them."""
+    m = t_ep.shape[0]
+    phi = np.empty(3)
+    rot = np.empty((3, 3))
+    row = np.empty(3)
+    j = 0
+    for k in range(t.shape[0]):
+        tk = t[k]
+        while j < m - 2 and t_ep[j + 1] <= tk:
+            j += 1
+        if m == 1 or tk <= t_ep[0]:
+            w, j0, j1 = 0.0, 0, 0
+        elif tk >= t_ep[m - 1]:
+            w, j0, j1 = 0.0, m - 1, m - 1
+        else:
+            w, j0, j1 = (tk - t_ep[j]) / (t_ep[j + 1] - t_ep[j]), j, j + 1
+        for i in range(3):
+            phi[i] = (1.0 - w) * th_ep[j0, i] + w * th_ep[j1, i]
+        _rot_into(phi, rot)
+        for i in range(3):
+            for jj in range(3):
+                row[jj] = c[k, i, 0] * rot[0, jj] + c[k, i, 1] * rot[1, jj] + c[k, i, 2] * rot[2, jj]
+            for jj in range(3):
+                c[k, i, jj] = row[jj]
+
+
+@njit(cache=True)
+def mechanize_following_kernel(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, t_ep, th_ep, a, f, gm, omega):
+    """:func:`mechanize_kernel` with the attitude turned by ``Exp([theta x])`` at every sample
+    before the translation: a navigation that follows an estimated attitude (``theta`` at the
+    epochs ``t_ep``, (m, 3) rad on the triad axes, linear between them; :func:`mechanize`'s
+    ``follow``)."""
+    n = t.shape[0]
+    c_out = np.empty((n, 3, 3))
+    _attitude_kernel(t, w_t, c0, c_out)
+    _follow_attitude(t, c_out, t_ep, th_ep)
+    a_i = np.empty((n, 3))
+    for k in range(n):
+        for i in range(3):
+            a_i[k, i] = c_out[k, i, 0] * f_t[k, 0] + c_out[k, i, 1] * f_t[k, 1] + c_out[k, i, 2] * f_t[k, 2]
+    r_out = np.empty((n, 3))
+    v_out = np.empty((n, 3))
+    _translation_kernel(t, a_i, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, omega, r_out, v_out)
+    return r_out, v_out, c_out
+
+
 # --------------------------------------------------------------------------
 # Pure-numpy reference path (slow; for tests)
 # --------------------------------------------------------------------------
@@ -475,8 +524,11 @@ def _lagrange_ref(t, a, k, tm):
     return w @ a[nodes]
 
 
-def mechanize_reference(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, ellipsoid=WGS84, exact_stages=False):
-    """Pure-numpy/scipy implementation of :func:`mechanize_kernel` (same algorithm).
+def mechanize_reference(
+    t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, ellipsoid=WGS84, exact_stages=False, follow=None
+):
+    """Pure-numpy/scipy implementation of :func:`mechanize_kernel` (same algorithm); with
+    ``follow`` (``(t_ep, theta_ep)``) of :func:`mechanize_following_kernel`.
 
     With ``exact_stages`` every RK4 stage evaluates the full normal gravitation instead of
     carrying the step start's J6+ remainder (the scheme up to commit 9111ed4): the tests'
@@ -492,6 +544,10 @@ def mechanize_reference(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, elli
         d1 = dt / 24.0 * (5.0 * w_t[k] + 8.0 * wm - w_t[k + 1])
         d2 = dt / 24.0 * (-w_t[k] + 8.0 * wm + 5.0 * w_t[k + 1])
         c[k + 1] = c[k] @ _rotvec_to_mat_ref(d1 + d2 + 2.0 / 3.0 * np.cross(d1, d2))
+    if follow is not None:
+        t_ep, th_ep = (np.asarray(a, float) for a in follow)
+        th = np.stack([np.interp(t, t_ep, th_ep[:, i]) for i in range(3)], axis=1)
+        c = np.einsum("nij,njk->nik", c, _rotvec_to_mat_ref(th))
     a_i = np.einsum("nij,nj->ni", c, f_t)
 
     j2, j4 = normal_gravitation_j2_j4(*ellipsoid.params())
@@ -635,7 +691,16 @@ def propagate_attitude(time, w_t, mat_0) -> np.ndarray:
 
 
 def mechanize(
-    time, f_t, w_t, initial, alt_time=None, alt_height=None, use_ext=True, ellipsoid: Ellipsoid = WGS84, reference=False
+    time,
+    f_t,
+    w_t,
+    initial,
+    alt_time=None,
+    alt_height=None,
+    use_ext=True,
+    ellipsoid: Ellipsoid = WGS84,
+    reference=False,
+    follow=None,
 ) -> Navigation:
     """Mechanize a flight from its initial state.
 
@@ -653,6 +718,12 @@ def mechanize(
         Gravity model with the altimeter radius (default) or with the computed one.
     reference : bool
         Use the pure-numpy reference path.
+    follow : tuple of ndarray, optional
+        ``(t_ep, theta_ep)``: epochs (m,) s, ascending, and attitude corrections (m, 3) rad on
+        the triad axes.  The attitude integrated from the rates is turned by
+        ``Exp([theta x])`` (``theta`` linear between the epochs) before the specific force is
+        rotated and integrated: a navigation about an estimated attitude
+        (:func:`gravsurvey.inm.solve.estimate_anomaly`, "following passes").
 
     Raises
     ------
@@ -678,7 +749,12 @@ def mechanize(
     check_navigation_state(t[:1], r0[None], v0[None], c0[None])
     try:
         if reference:
-            r, v, c = mechanize_reference(t, f_t, w_t, h_ext, h_mid, use_ext, r0, v0, c0, ellipsoid)
+            r, v, c = mechanize_reference(t, f_t, w_t, h_ext, h_mid, use_ext, r0, v0, c0, ellipsoid, follow=follow)
+        elif follow is not None:
+            t_ep, th_ep = (np.ascontiguousarray(a, dtype=float) for a in follow)
+            r, v, c = mechanize_following_kernel(
+                t, f_t, w_t, h_ext, h_mid, bool(use_ext), r0, v0, c0, t_ep, th_ep, *ellipsoid.params()
+            )
         else:
             r, v, c = mechanize_kernel(t, f_t, w_t, h_ext, h_mid, bool(use_ext), r0, v0, c0, *ellipsoid.params())
     except ZeroDivisionError:

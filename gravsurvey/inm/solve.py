@@ -157,6 +157,9 @@ class InmSolution:
         estimate is the first of them, about its linearisation: ``axis`` (0 or 1, triad),
         ``pass`` (0-based index of the third) and ``bias_corrections_degph`` (the three
         corrections on that axis).
+    follow_tilts_rad : list of float
+        The smoothed tilt of the mechanization (rad) that started each following pass
+        (:func:`_follow_passes`; empty: the passes' mechanization was near enough).
     gyro_bias_t, gyro_bias_sigma_t : ndarray (3,) or None
         The gyro biases on the triad axes and their smoothed 1-sigma, rad/s (GNSS-aided only):
         what the passes took off the rates plus the last pass's smoothed bias state.
@@ -239,6 +242,7 @@ class InmSolution:
     log_likelihood: float = float("nan")
     log_likelihood_epochs: np.ndarray | None = None
     gyro_screen_z: float = float("nan")
+    follow_tilts_rad: list = field(default_factory=list)
 
 
 def _check_record(record):
@@ -293,6 +297,17 @@ IMU_GAP_WINDOW_S = 1.0
 #: Shortest time (s) between the two GNSS fixes of one speed in :func:`median_ground_speed`:
 #: the fixes' noise (1 m) over 2 s adds 0.7 m/s to a component, a few mm/s to a 70-m/s norm.
 SPEED_BASELINE_S = 2.0
+
+#: Smoothed tilt of the passes' mechanization (rad) above which passes follow the smoothed
+#: attitude (:func:`_follow_passes`): ``|r| e^2 / 2`` is 3 m at 1 mrad.  Measured on the unseen
+#: suite's quick strapdown draws: the passes leave navigation-grade gyros' mechanization within
+#: 0.21 mrad (75 draws), fibre-optic gyros' (0.72 deg/h) within 0.63, a tactical IMU's 1.8-7.0
+#: mrad (13 draws each; docs/benchmarks.md, "Following passes, and the gyro noise searched on
+#: platforms").  Between, following changed little but the gyro noise the likelihood chose
+#: (fibre-optic U006: 10 deg/h, 2.0 -> 5.6 mGal).
+FOLLOW_TILT_RAD = 1e-3
+#: At most this many following passes.
+FOLLOW_PASSES = 2
 
 #: The passes stop once the initial-attitude correction is below this, rad (0.001 deg).
 ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
@@ -385,7 +400,7 @@ ACCEL_NOISE_CANDIDATES_MPS2 = (5.0e-4, 2.5e-4)
 ACCEL_NOISE_GAIN_Z = 2.0
 
 
-#: Gyro white drifts (one-second sigma, deg/h) tried above the default's on a strapdown flight,
+#: Gyro white drifts (one-second sigma, deg/h) tried above the default's on a GNSS-aided flight,
 #: in this order (:func:`choose_gyro_noise`): a navigation-grade ring-laser gyro (angle random
 #: walk ~0.002 deg/sqrt(h)), a fibre-optic one (~0.01-0.02), a tactical one (~0.1-0.2).  With
 #: the default 0.01 deg/h a fibre-optic IMU's gyros (0.72 deg/h) cost quick U007 0.61 -> 1.32
@@ -394,7 +409,8 @@ GYRO_NOISE_CANDIDATES_DEGPH = (0.1, 1.0, 10.0)
 #: The screen: one pass about the default estimate's last linearisation with the first
 #: candidate; only a likelihood gain above this many standard errors runs the candidates'
 #: whole estimates (on the suite's navigation-grade draws the screen stays below it but on one
-#: of 13 strapdown flights, quick U006, 16; fibre-optic gyros give 12-33, tactical 14-47).
+#: of 13 strapdown flights, quick U006, 16, and 3 of 91 platform flights; fibre-optic gyros
+#: give 12-33, tactical 14-47).
 GYRO_SCREEN_Z = 10.0
 #: A gyro candidate replaces the one before it when its whole estimate is this many standard
 #: errors more likely (as :data:`ACCEL_NOISE_GAIN_Z`).
@@ -431,9 +447,15 @@ def _likelihood_search(first, params: InmParams, key: str, candidates, gain_z: f
 
 
 def may_choose_gyro_noise(params: InmParams, triad: str) -> bool:
-    """Whether :func:`estimate_anomaly` may choose the gyros' white drift: a strapdown triad,
-    identification on and ``model.gyro_drift_degph`` not given in the config."""
-    return triad == "strapdown" and bool(params.identify) and "gyro_drift_degph" not in getattr(params, "given", ())
+    """Whether :func:`estimate_anomaly` may choose the gyros' white drift: identification on and
+    ``model.gyro_drift_degph`` not given in the config, on either triad (a platform's gyros are
+    integrated as a strapdown triad's; docs/benchmarks.md, "Following passes, and the gyro noise
+    searched on platforms")."""
+    return (
+        triad in ("strapdown", "platform")
+        and bool(params.identify)
+        and "gyro_drift_degph" not in getattr(params, "given", ())
+    )
 
 
 def choose_gyro_noise(first, params: InmParams, estimate):
@@ -471,7 +493,7 @@ def choose_gyro_noise(first, params: InmParams, estimate):
         "how": (
             "default (a noisier gyro not clearly more likely)"
             if kept
-            else "filter likelihood (a noisier gyro clearly more likely; strapdown)"
+            else "filter likelihood (a noisier gyro clearly more likely)"
         ),
         "screen_z": screen if math.isfinite(screen) else None,
         "log_likelihood": lls,
@@ -637,7 +659,7 @@ def estimate_anomaly(
     :data:`ACCEL_NOISE_CANDIDATES_MPS2` below the default while each is clearly more likely than
     the one before (:data:`ACCEL_NOISE_GAIN_Z` standard errors), and the last such is returned
     (:func:`choose_accel_noise`; docs/method.md, "Accelerometer noise by likelihood").  Before
-    that, without a given ``model.gyro_drift_degph``, the first estimate's last linearisation is
+    that, without a given ``model.gyro_drift_degph`` (either triad), the first estimate's last linearisation is
     filtered once more with a noisier gyro (the screen); where its likelihood gain exceeds
     :data:`GYRO_SCREEN_Z` the whole estimate runs with each of :data:`GYRO_NOISE_CANDIDATES_DEGPH`
     in the same way (:func:`choose_gyro_noise`; docs/method.md, "Gyro noise by likelihood"),
@@ -993,6 +1015,13 @@ def _estimate_once(
             # (zero about the raw specific force) then minus what was taken off
             accel_bias_t = accel_bias_t + da
             record = _accel_bias_off(record, da)
+    follow_kw, follow_tilts = {}, []
+    if gnss_used and not params.horizontal:
+        nav, idx, c, out, theta_follow, follow_tilts = _follow_passes(
+            record, params, cur, ellipsoid, reference, gyro_bias_t, nav, idx, out, one_pass, accel_bias
+        )
+        if follow_tilts:
+            follow_kw = {"nav": nav, "theta_shift": theta_follow}
     # the last pass's log-likelihood per epoch: the screen's reference and the solution's
     ll_epochs = log_likelihood(out["p_p"], out["innov"], *out["measurements"]) if likelihood else None
     screen_z = float("nan")
@@ -1000,7 +1029,7 @@ def _estimate_once(
         # the same linearisation, a noisier gyro: the innovations say whether the IMU's gyros are
         # of another grade than the default's (a pass, not a whole estimate)
         *_, out_g = one_pass(
-            dataclasses.replace(params, gyro_drift_degph=float(gyro_screen_degph)), accel_bias=accel_bias
+            dataclasses.replace(params, gyro_drift_degph=float(gyro_screen_degph)), accel_bias=accel_bias, **follow_kw
         )
         screen_z = likelihood_gain_z(log_likelihood(out_g["p_p"], out_g["innov"], *out_g["measurements"]), ll_epochs)
     hsol = None
@@ -1022,6 +1051,7 @@ def _estimate_once(
         sol.log_likelihood = float(np.sum(ll_epochs))
     sol.initial_corrections = pv_corrections
     sol.passes_reverted = reverted
+    sol.follow_tilts_rad = follow_tilts
     sol.gyro_screen_z = screen_z
     if hsol is not None:
         missed = float(ident.get("field_sigma_missed_mps2", 0.0))
@@ -1874,11 +1904,13 @@ def _check_passes_settled(record, out, span_s, passes, reverted=None) -> float:
     return th
 
 
-def _mechanize(record, params, initial, ellipsoid, reference, gyro_bias_t=None):
+def _mechanize(record, params, initial, ellipsoid, reference, gyro_bias_t=None, follow=None):
     """Mechanize the record about ``initial`` (gravity with the altimeter radius by default).
 
     ``gyro_bias_t`` (3,), rad/s: a gyro bias already estimated, taken off the angular rates
-    before integrating (the passes' re-linearisation, :func:`estimate_anomaly`).
+    before integrating (the passes' re-linearisation, :func:`estimate_anomaly`).  ``follow``:
+    ``(t_ep, theta_ep)``, the attitude turned to an estimate (:func:`mechanize`; the
+    following passes, :func:`_follow_passes`).
     """
     imu = record.imu
     alt_t, alt_h = _altimeter(record)
@@ -1895,6 +1927,7 @@ def _mechanize(record, params, initial, ellipsoid, reference, gyro_bias_t=None):
         use_ext=params.radius_source == "altimeter",
         ellipsoid=ellipsoid,
         reference=reference,
+        follow=follow,
     )
 
 
@@ -2146,6 +2179,7 @@ def _one_pass(
     accel_bias_prior=None,
     gap_accel_sigma_mps2=None,
     body_mat_i=None,
+    theta_shift=None,
 ):
     """Discretise, filter and smooth once about the mechanization ``nav``.
 
@@ -2158,7 +2192,9 @@ def _one_pass(
     ``accel_bias_prior`` (2,), m/s^2: the same for the accelerometer-bias states (16 or 18).
     ``gap_accel_sigma_mps2``: the record's :func:`missed_accel_sigma` (found here when None).
     ``body_mat_i``: the aircraft's attitude for the lever arm where it is not the triad's (a
-    platform; :func:`_body_attitude`).
+    platform; :func:`_body_attitude`).  ``theta_shift`` (N, 3), rad: ``nav`` follows an
+    estimated attitude, turned by this from the free mechanization the priors describe
+    (:func:`_follow_passes`); the states returned are ``nav``'s errors.
     """
     t = nav.time
     alt_t, alt_h = _altimeter(record)
@@ -2222,10 +2258,110 @@ def _one_pass(
     else:
         p0 = initial_covariance(params)
         x0 = np.zeros(n_state)
+    shift = None
+    if theta_shift is not None and gnss_used:
+        # the errors of the free mechanization (whose priors x0, p0 and noise these are) are
+        # nav's plus the shift's linear response; the filter runs on those, on measurements
+        # moved by it, and the shift comes off its states after (docs/method.md, "Following
+        # passes")
+        q_t = np.einsum("nji,nj->ni", c, nav.r_i[idx])
+        p_t = np.einsum("nji,nj->ni", c, nav.v_i[idx])
+        shift = attitude_shift_states(phi, theta_shift, q_t, p_t, n_state)
+        z = z + np.einsum("kmn,kn->km", h, shift)
     out = filter_and_smooth(x0, p0, phi, q, z, h, r, reference=reference)
+    if shift is not None:
+        for key in ("x_f", "x_p", "x_s"):
+            out[key] = out[key] - shift
     # what the filter ran on, for the likelihood of the last pass (references, not copies)
     out["measurements"] = (z, h, r)
     return idx, c, gnss_used, n_state, out
+
+
+def _tilt_rad(theta_t, nav, idx) -> float:
+    """Largest tilt (rad) in the attitude errors ``theta_t`` (N, 3) on the triad axes: their
+    part off the geocentric radius (a turn about it does not move the position on the triad
+    axes the 3D-INM's states hold)."""
+    th_i = np.einsum("nij,nj->ni", nav.mat_it[idx], theta_t)
+    r = nav.r_i[idx]
+    up = r / np.linalg.norm(r, axis=1)[:, None]
+    tilt = th_i - np.sum(th_i * up, axis=1)[:, None] * up
+    return float(np.max(np.linalg.norm(tilt, axis=1))) if tilt.size else 0.0
+
+
+def _follow_passes(record, params, initial, ellipsoid, reference, gyro_bias_t, nav, idx, out, one_pass, accel_bias):
+    """Passes about a navigation that follows the smoothed attitude, while its tilt is large.
+
+    The filter is linear about the free mechanization: a tilt ``e`` of it puts ``|r| e^2 / 2``
+    (the Earth's radius) into the radial position the states hold, a second-order error the
+    model lacks (1 mrad: 3 m) that reaches the disturbance.  Navigation-grade gyros keep the
+    passes' mechanization within ~0.05 mrad; a tactical IMU's (0.1 deg/sqrt(h)) leaves it
+    1-2 mrad off.  While the smoothed tilt exceeds :data:`FOLLOW_TILT_RAD`, up to
+    :data:`FOLLOW_PASSES` passes mechanize again with the attitude turned to the smoothed one
+    (:func:`mechanize`'s ``follow``) and filter about that with the same priors
+    (:func:`attitude_shift_states`).
+
+    Returns
+    -------
+    nav, idx, c, out
+        The last pass's navigation, epochs, attitude at them and smoother output (``nav``'s
+        errors).
+    theta : ndarray, shape (N, 3)
+        The attitude turn of ``nav`` from the free mechanization, rad.
+    tilts : list of float
+        The smoothed tilt (rad) that started each following pass (empty: none ran).
+    """
+    free_t = nav.time[idx]
+    theta = np.zeros((idx.size, 3))
+    tilts = []
+    c = nav.mat_it[idx]
+    for _ in range(FOLLOW_PASSES):
+        tilt = _tilt_rad(out["x_s"][:, TH], nav, idx)
+        if not tilt > FOLLOW_TILT_RAD:
+            break
+        theta = theta + out["x_s"][:, TH]
+        nav = _mechanize(record, params, initial, ellipsoid, reference, gyro_bias_t, follow=(free_t, theta))
+        idx, c, _, _, out = one_pass(params, accel_bias=accel_bias, nav=nav, theta_shift=theta)
+        tilts.append(tilt)
+    return nav, idx, c, out, theta, tilts
+
+
+def attitude_shift_states(phi, theta, q_t, p_t, n_state: int) -> np.ndarray:
+    """The linear error-state response to turning a navigation's attitude by ``theta``.
+
+    A navigation ``N1`` whose attitude is the free mechanization ``N0``'s turned by
+    ``Exp([theta_k x])`` at epoch ``k`` (``C1 = C0 Exp(theta)``, triad axes) has the errors
+    ``e1 = e0 - s``.  Each epoch's turn ``d`` (``theta_k`` less what the error dynamics carried
+    of the earlier ones, ``s_k = phi_k s_k-1``) enters ``s`` as a prior mean would
+    (:func:`gravsurvey.inm.errormodel.initial_mean`: ``theta += d``, ``dq -= q x d``,
+    ``dp -= p x d``, the seed's states holding the attitude); the biases and the disturbance get
+    none.  ``e0`` obeys the unforced model (its priors and noise), so a filter about ``N1`` runs
+    on ``e0 = e1 + s`` with the measurements ``z + H s``, and ``s`` comes off its states after.
+
+    Parameters
+    ----------
+    phi : ndarray, shape (N, n, n)
+        Transition matrices about ``N1`` (``phi[k]`` from epoch ``k - 1`` to ``k``).
+    theta : ndarray, shape (N, 3)
+        Attitude turn at the epochs, rad, triad axes.
+    q_t, p_t : ndarray, shape (N, 3)
+        ``N1``'s position (m) and inertial velocity (m/s) on the triad axes at the epochs.
+    n_state : int
+        States of the model (14 and up: the attitude states :data:`TH` exist).
+
+    Returns
+    -------
+    ndarray, shape (N, n_state)
+    """
+    theta = np.asarray(theta, float)
+    s = np.zeros((theta.shape[0], n_state))
+    for k in range(theta.shape[0]):
+        if k > 0:
+            s[k] = phi[k] @ s[k - 1]
+        d = theta[k] - s[k, TH]
+        s[k, TH] += d
+        s[k, DQ] -= np.cross(q_t[k], d)
+        s[k, DP] -= np.cross(p_t[k], d)
+    return s
 
 
 def _solution(record, params, ellipsoid, triad, nav, idx, c, gnss_used, n_state, out, passes, corrections):

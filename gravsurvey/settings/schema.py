@@ -155,9 +155,9 @@ class ModelSection(Section):
     gyro_drift_degph: float = _m(
         "gyro_drift_degph",
         "sigma_nu, white gyro drift, deg/h (one-second sigma: the datasheet's angle random walk in deg/sqrt(h) x 60). "
-        "Not given, a GNSS-aided strapdown flight takes 0.1, 1 or 10 instead where a screen pass and the filter's "
-        "likelihood clearly say the gyros are noisier (docs/method.md, 'Gyro noise by likelihood'); given, it is used "
-        "as it is",
+        "Not given, a GNSS-aided flight (either triad) takes 0.1, 1 or 10 instead where a screen pass and the "
+        "filter's likelihood clearly say the gyros are noisier (docs/method.md, 'Gyro noise by likelihood'); given, "
+        "it is used as it is",
         ge=0,
     )
     gravimeter_lambda_per_s: float = _m(
