@@ -59,6 +59,29 @@ def test_the_candidates_run_only_when_the_screen_asks():
     assert calls == [0.1] and report["value"] == 0.01 and 0.0 < report["gain_z"]["0.1"] < 2.0
 
 
+def test_a_noisier_gyro_carries_its_grades_bias_prior_unless_the_config_gives_one():
+    lls = {0.01: 10.0, 0.1: 50.0, 1.0: 60.0, 10.0: 20.0}
+    estimate, _ = stand_in_estimate("gyro_drift_degph", lls)
+    seen = []
+
+    def recording(p):
+        seen.append((p.gyro_drift_degph, p.gyro_bias_sigma_degph))
+        return estimate(p)
+
+    _, params, report = choose_gyro_noise((_Sol(lls[0.01], screen=15.0), []), InmParams(), recording)
+    default_bias = InmParams().gyro_bias_sigma_degph
+    k = solve.GYRO_BIAS_PER_WHITE
+    assert seen == [(0.1, max(default_bias, 0.1 * k)), (1.0, max(default_bias, k)), (10.0, 10.0 * k)]
+    assert params.gyro_drift_degph == 1.0 and params.gyro_bias_sigma_degph == max(default_bias, k)
+    assert report["gyro_bias_sigma_degph"] == params.gyro_bias_sigma_degph
+    # a bias prior given in the config stays
+    given = inm_params({"gyro_bias_sigma_degph": 0.02})
+    seen.clear()
+    _, params, report = choose_gyro_noise((_Sol(lls[0.01], screen=15.0), []), given, recording)
+    assert {b for _, b in seen} == {0.02} and params.gyro_bias_sigma_degph == 0.02
+    assert "gyro_bias_sigma_degph" not in report
+
+
 def test_a_gyro_candidate_that_fails_ends_the_search_and_is_reported():
     _, calls, report = _search({0.01: 10.0, 0.1: 50.0, 1.0: 60.0}, screen=15.0, fail_at=1.0)
     assert calls == [0.1, 1.0] and report["value"] == 0.1

@@ -301,7 +301,7 @@ SPEED_BASELINE_S = 2.0
 #: Smoothed tilt of the passes' mechanization (rad) above which passes follow the smoothed
 #: attitude (:func:`_follow_passes`): ``|r| e^2 / 2`` is 3 m at 1 mrad.  Measured on the unseen
 #: suite's quick strapdown draws: the passes leave navigation-grade gyros' mechanization within
-#: 0.21 mrad (75 draws), fibre-optic gyros' (0.72 deg/h) within 0.63, a tactical IMU's 1.8-7.0
+#: 0.21 mrad (75 draws), fibre-optic gyros' (0.72 deg/h) within 0.63, a tactical IMU's 1.7-7.0
 #: mrad (13 draws each; docs/benchmarks.md, "Following passes, and the gyro noise searched on
 #: platforms").  Between, following changed little but the gyro noise the likelihood chose
 #: (fibre-optic U006: 10 deg/h, 2.0 -> 5.6 mGal).
@@ -415,9 +415,13 @@ GYRO_SCREEN_Z = 10.0
 #: A gyro candidate replaces the one before it when its whole estimate is this many standard
 #: errors more likely (as :data:`ACCEL_NOISE_GAIN_Z`).
 GYRO_NOISE_GAIN_Z = 2.0
+#: A gyro candidate's bias prior per its white drift (deg/h per deg/h one-second sigma): a
+#: datasheet's in-run bias is about a tenth of it or less (a tactical IMU's 0.75 deg/h for 6, a
+#: fibre-optic one's 0.05 for 0.7).
+GYRO_BIAS_PER_WHITE = 0.1
 
 
-def _likelihood_search(first, params: InmParams, key: str, candidates, gain_z: float, estimate):
+def _likelihood_search(first, params: InmParams, key: str, candidates, gain_z: float, estimate, companion=None):
     """The whole estimate with ``params.<key>`` set to each of ``candidates`` in turn, each
     replacing the one before while more likely by ``gain_z`` standard errors
     (:func:`gravsurvey.inm.kalman.likelihood_gain_z`); the search stops at the first that is not,
@@ -433,7 +437,9 @@ def _likelihood_search(first, params: InmParams, key: str, candidates, gain_z: f
     gains, failed = {}, {}
     for v in candidates:
         try:
-            other, caught = recorded(estimate, dataclasses.replace(params, **{key: v}), False)
+            other, caught = recorded(
+                estimate, dataclasses.replace(params, **{key: v}, **(companion(v) if companion else {})), False
+            )
         except (GravsurveyError, np.linalg.LinAlgError, FloatingPointError) as exc:
             failed[f"{v:.3g}"] = str(exc).splitlines()[0]
             break
@@ -465,16 +471,18 @@ def choose_gyro_noise(first, params: InmParams, estimate):
     ``first[0].gyro_screen_z`` (one pass with the first of :data:`GYRO_NOISE_CANDIDATES_DEGPH`
     about the default estimate's linearisation) above :data:`GYRO_SCREEN_Z` runs the whole
     estimate with each candidate in turn while each is more likely than the one before by
-    :data:`GYRO_NOISE_GAIN_Z` standard errors, as :func:`choose_accel_noise` does.
+    :data:`GYRO_NOISE_GAIN_Z` standard errors, as :func:`choose_accel_noise` does.  A candidate
+    carries the bias prior of its grade (:data:`GYRO_BIAS_PER_WHITE`) where the config gives none.
 
     Returns
     -------
     (sol, shown) : the estimate chosen and its warnings
     params : InmParams
-        ``params`` with the gyro drift chosen.
+        ``params`` with the gyro drift chosen (and its bias prior).
     report : dict
         ``value``, ``how``, ``screen_z``, each candidate's ``log_likelihood`` and ``gain_z``
-        (and ``failed``): summary.json's ``identification.gyro_drift_degph``.
+        (and ``failed``; ``gyro_bias_sigma_degph`` where a candidate's bias prior was taken):
+        summary.json's ``identification.gyro_drift_degph``.
     """
     screen = float(first[0].gyro_screen_z)
     asked = math.isfinite(screen) and screen > GYRO_SCREEN_Z
@@ -485,6 +493,7 @@ def choose_gyro_noise(first, params: InmParams, estimate):
         [v for v in GYRO_NOISE_CANDIDATES_DEGPH if asked and v > float(params.gyro_drift_degph)],
         GYRO_NOISE_GAIN_Z,
         estimate,
+        companion=lambda v: _gyro_bias_companion(params, v),
     )
     kept = value == float(params.gyro_drift_degph)
     report = {
@@ -501,7 +510,18 @@ def choose_gyro_noise(first, params: InmParams, estimate):
     }
     if failed:
         report["failed"] = failed
-    return (best, shown), dataclasses.replace(params, gyro_drift_degph=value), report
+    chosen = {} if kept else _gyro_bias_companion(params, value)
+    if chosen:
+        report["gyro_bias_sigma_degph"] = chosen["gyro_bias_sigma_degph"]
+    return (best, shown), dataclasses.replace(params, gyro_drift_degph=value, **chosen), report
+
+
+def _gyro_bias_companion(params: InmParams, white_degph: float) -> dict:
+    """The gyro-bias prior of a gyro of white drift ``white_degph``: :data:`GYRO_BIAS_PER_WHITE`
+    times it, never below the configured or default prior, unless the config gives one."""
+    if "gyro_bias_sigma_degph" in getattr(params, "given", ()):
+        return {}
+    return {"gyro_bias_sigma_degph": max(float(params.gyro_bias_sigma_degph), GYRO_BIAS_PER_WHITE * float(white_degph))}
 
 
 def may_choose_accel_noise(params: InmParams, triad: str) -> bool:

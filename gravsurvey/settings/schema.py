@@ -212,7 +212,11 @@ class ModelSection(Section):
         le=5,
     )
     gyro_bias_sigma_degph: float = _m(
-        "gyro_bias_sigma_degph", "sigma of each gyro's constant bias, deg/h (GNSS-aided filter only)", ge=0
+        "gyro_bias_sigma_degph",
+        "sigma of each gyro's constant bias, deg/h (GNSS-aided filter only). Not given: 0.05, or where the "
+        "likelihood takes a noisier gyro (gyro_drift_degph not given) a tenth of that gyro's white drift if larger "
+        "(docs/method.md, 'Gyro noise by likelihood')",
+        ge=0,
     )
 
     @model_validator(mode="after")
