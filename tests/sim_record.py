@@ -49,3 +49,18 @@ def smoothed_rms_mgal(sol, edge_s: float = 300.0) -> float:
     keep = (t > edge_s) & (t < t[-1] - edge_s)
     g = sol.g_smooth[keep]
     return float(np.sqrt(np.mean((g - g.mean()) ** 2))) / MGAL
+
+
+#: A tactical-grade IMU (the benchmarks' `--gyro 0.75,6 --accel-bias 1e-2,-6e-3`): gyro biases on
+#: the triad axes (deg/h), white drift (deg/h in 1 s: 0.1 deg/sqrt(h)), horizontal accelerometer
+#: biases (m/s^2).
+TACTICAL_IMU = {"gyro_bias_degph": [0.75, -0.525, 0.6], "gyro_white_degph": 6.0, "accel_bias_mps2": [1e-2, -6e-3]}
+
+
+def with_tactical_imu(spec: dict) -> dict:
+    """An unseen-flight spec (``draw_flight_spec``) with :data:`TACTICAL_IMU`'s sensors, in place."""
+    sensors = spec["sim"]["flights"][0]["sensors"]
+    sensors["gyro"]["bias_degph"] = list(TACTICAL_IMU["gyro_bias_degph"])
+    sensors["gyro"]["white_drift_degph"] = TACTICAL_IMU["gyro_white_degph"]
+    sensors["accelerometer"]["bias_mps2"] = list(TACTICAL_IMU["accel_bias_mps2"])
+    return spec

@@ -19,7 +19,7 @@ from gravsurvey.inm.params import InmParams
 from gravsurvey.inm.solve import FOLLOW_TILT_RAD, attitude_shift_states, estimate_anomaly, filter_epochs
 from gravsurvey.simulate.run import simulate_flight
 from gravsurvey.simulate.unseen import draw_flight_spec, limit_spec
-from sim_record import record_and_initial
+from sim_record import record_and_initial, with_tactical_imu
 from test_inm_accel_noise import _rms_mgal
 
 
@@ -28,11 +28,7 @@ def u007():
     spec = limit_spec(draw_flight_spec(7), 2400.0, 50.0)
     assert spec["triad"] == "strapdown"
     drawn = simulate_flight(spec["sim"])
-    sensors = spec["sim"]["flights"][0]["sensors"]
-    sensors["gyro"]["bias_degph"] = [0.75, -0.525, 0.6]
-    sensors["gyro"]["white_drift_degph"] = 6.0
-    sensors["accelerometer"]["bias_mps2"] = [1e-2, -6e-3]
-    return drawn, simulate_flight(spec["sim"])
+    return drawn, simulate_flight(with_tactical_imu(spec)["sim"])
 
 
 def _mechanized(rec, init, n, follow=None, reference=False):

@@ -17,7 +17,7 @@ from gravsurvey.settings import inm_params
 from gravsurvey.inm.solve import choose_gyro_noise, estimate_anomaly, may_choose_gyro_noise
 from gravsurvey.simulate.run import simulate_flight
 from gravsurvey.simulate.unseen import draw_flight_spec, limit_spec
-from sim_record import record_and_initial
+from sim_record import record_and_initial, with_tactical_imu
 from test_inm_accel_noise import _Sol as _AccelSol
 from test_inm_accel_noise import _rms_mgal, stand_in_estimate
 
@@ -158,11 +158,7 @@ def test_a_platforms_tactical_gyros_are_found_too():
     spec = limit_spec(draw_flight_spec(8), 2400.0, 50.0)
     assert spec["triad"] == "platform"
     drawn = simulate_flight(spec["sim"])
-    sensors = spec["sim"]["flights"][0]["sensors"]
-    sensors["gyro"]["bias_degph"] = [0.75, -0.525, 0.6]
-    sensors["gyro"]["white_drift_degph"] = 6.0
-    sensors["accelerometer"]["bias_mps2"] = [1e-2, -6e-3]
-    tactical = simulate_flight(spec["sim"])
+    tactical = simulate_flight(with_tactical_imu(spec)["sim"])
     rec = record_and_initial(tactical)[0]
     sol = estimate_anomaly(rec, InmParams(), None, "platform")
     fixed = estimate_anomaly(rec, inm_params({"gyro_drift_degph": 0.01}), None, "platform")

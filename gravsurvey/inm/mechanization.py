@@ -445,17 +445,23 @@ def mechanize_kernel(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c0, a, f, g
     r_i, v_i : ndarray (n, 3)
     mat_it : ndarray (n, 3, 3)
     """
-    n = t.shape[0]
-    c_out = np.empty((n, 3, 3))
+    c_out = np.empty((t.shape[0], 3, 3))
     _attitude_kernel(t, w_t, c0, c_out)
+    return _translate(t, f_t, c_out, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, omega)
+
+
+@njit(cache=True)
+def _translate(t, f_t, c, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, omega):
+    """The specific force rotated by the attitude ``c`` (n, 3, 3) and integrated: ``(r_i, v_i, c)``."""
+    n = t.shape[0]
     a_i = np.empty((n, 3))
     for k in range(n):
         for i in range(3):
-            a_i[k, i] = c_out[k, i, 0] * f_t[k, 0] + c_out[k, i, 1] * f_t[k, 1] + c_out[k, i, 2] * f_t[k, 2]
+            a_i[k, i] = c[k, i, 0] * f_t[k, 0] + c[k, i, 1] * f_t[k, 1] + c[k, i, 2] * f_t[k, 2]
     r_out = np.empty((n, 3))
     v_out = np.empty((n, 3))
     _translation_kernel(t, a_i, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, omega, r_out, v_out)
-    return r_out, v_out, c_out
+    return r_out, v_out, c
 
 
 @njit(cache=True)
@@ -493,18 +499,10 @@ def mechanize_following_kernel(t, f_t, w_t, h_ext, h_ext_mid, use_ext, r0, v0, c
     before the translation: a navigation that follows an estimated attitude (``theta`` at the
     epochs ``t_ep``, (m, 3) rad on the triad axes, linear between them; :func:`mechanize`'s
     ``follow``)."""
-    n = t.shape[0]
-    c_out = np.empty((n, 3, 3))
+    c_out = np.empty((t.shape[0], 3, 3))
     _attitude_kernel(t, w_t, c0, c_out)
     _follow_attitude(t, c_out, t_ep, th_ep)
-    a_i = np.empty((n, 3))
-    for k in range(n):
-        for i in range(3):
-            a_i[k, i] = c_out[k, i, 0] * f_t[k, 0] + c_out[k, i, 1] * f_t[k, 1] + c_out[k, i, 2] * f_t[k, 2]
-    r_out = np.empty((n, 3))
-    v_out = np.empty((n, 3))
-    _translation_kernel(t, a_i, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, omega, r_out, v_out)
-    return r_out, v_out, c_out
+    return _translate(t, f_t, c_out, h_ext, h_ext_mid, use_ext, r0, v0, a, f, gm, omega)
 
 
 # --------------------------------------------------------------------------
