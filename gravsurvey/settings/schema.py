@@ -135,7 +135,9 @@ class ModelSection(Section):
         "accel_bias_mps2",
         "datasheet bias of the horizontal accelerometers, m/s^2 (1-sigma of each, e.g. 1e-3 for 100 micro-g): "
         "the GNSS-aided filter estimates the biases (on either triad) with this prior and, on a strapdown triad, "
-        "takes them off the specific force between passes (docs/method.md, Accelerometer bias); null: the prior 5e-4 m/s^2, and on a strapdown triad taken off only where a pass finds a bias over 1.5e-3 m/s^2 (a tactical-grade IMU; a warning says so)",
+        "takes them off the specific force between passes (docs/method.md, Accelerometer bias); null: the prior 5e-4 m/s^2, and "
+        "taken off (on either triad) only where a pass finds a bias over 1.5e-3 m/s^2 (a tactical-grade IMU; a "
+        "warning says so)",
         gt=0,
         le=0.5,
     )
