@@ -341,8 +341,9 @@ ACCEL_BIAS_CONVERGED_MPS2 = 2.0e-5
 #: platform runs 7.9e-4), is a tactical-grade IMU's: taken off between passes as with a datasheet
 #: ``model.accel_bias_mps2`` of :data:`ACCEL_BIAS_PRIOR_PER_FOUND` times the found bias (a
 #: strapdown triad's; on a platform as well since 2026-12-07: 7 tactical draws 2.0x -> 1.2x the
-#: bound median, docs/benchmarks.md "Following passes, and the gyro noise searched on platforms").  Left in, it is a tilt to the
-#: identification, which reads the unaided vertical channel: quick U010 with 1e-2 / -6e-3 m/s^2
+#: bound median, docs/benchmarks.md "Following passes, and the gyro noise searched on
+#: platforms").  Left in, it is a tilt to the identification, which reads the unaided vertical
+#: channel: quick U010 with 1e-2 / -6e-3 m/s^2
 #: identified a vertical white level of 4.3e-4 m/s^2 and went 1.55 -> 6.22 mGal
 #: (docs/benchmarks.md, "A tactical-grade IMU").
 ACCEL_BIAS_FOUND_MPS2 = 1.5e-3
@@ -458,12 +459,9 @@ def may_choose_gyro_noise(params: InmParams, triad: str) -> bool:
     """Whether :func:`estimate_anomaly` may choose the gyros' white drift: identification on and
     ``model.gyro_drift_degph`` not given in the config, on either triad (a platform's gyros are
     integrated as a strapdown triad's; docs/benchmarks.md, "Following passes, and the gyro noise
-    searched on platforms")."""
-    return (
-        triad in ("strapdown", "platform")
-        and bool(params.identify)
-        and "gyro_drift_degph" not in getattr(params, "given", ())
-    )
+    searched on platforms").  ``triad`` is taken for the same call as
+    :func:`may_choose_accel_noise`'s."""
+    return bool(params.identify) and "gyro_drift_degph" not in getattr(params, "given", ())
 
 
 def choose_gyro_noise(first, params: InmParams, estimate):
@@ -681,8 +679,8 @@ def estimate_anomaly(
     :data:`ACCEL_NOISE_CANDIDATES_MPS2` below the default while each is clearly more likely than
     the one before (:data:`ACCEL_NOISE_GAIN_Z` standard errors), and the last such is returned
     (:func:`choose_accel_noise`; docs/method.md, "Accelerometer noise by likelihood").  Before
-    that, without a given ``model.gyro_drift_degph`` (either triad), the first estimate's last linearisation is
-    filtered once more with a noisier gyro (the screen); where its likelihood gain exceeds
+    that, without a given ``model.gyro_drift_degph`` (either triad), the first estimate's last
+    linearisation is filtered once more with a noisier gyro (the screen); where its likelihood gain exceeds
     :data:`GYRO_SCREEN_Z` the whole estimate runs with each of :data:`GYRO_NOISE_CANDIDATES_DEGPH`
     in the same way (:func:`choose_gyro_noise`; docs/method.md, "Gyro noise by likelihood"),
     and the accelerometer noise is chosen about the gyro noise chosen.  The
@@ -1041,10 +1039,11 @@ def _estimate_once(
             record = _accel_bias_off(record, da)
     follow_kw, follow_tilts = {}, []
     if gnss_used and not params.horizontal:
-        nav, idx, c, out, theta_follow, follow_tilts = _follow_passes(
+        nav, idx, out, theta_follow, follow_tilts = _follow_passes(
             record, params, cur, ellipsoid, reference, gyro_bias_t, nav, idx, out, one_pass, accel_bias
         )
         if follow_tilts:
+            c = nav.mat_it[idx]
             follow_kw = {"nav": nav, "theta_shift": theta_follow}
     # the last pass's log-likelihood per epoch: the screen's reference and the solution's
     ll_epochs = log_likelihood(out["p_p"], out["innov"], *out["measurements"]) if likelihood else None
@@ -2324,17 +2323,16 @@ def _follow_passes(record, params, initial, ellipsoid, reference, gyro_bias_t, n
     The filter is linear about the free mechanization: a tilt ``e`` of it puts ``|r| e^2 / 2``
     (the Earth's radius) into the radial position the states hold, a second-order error the
     model lacks (1 mrad: 3 m) that reaches the disturbance.  Navigation-grade gyros keep the
-    passes' mechanization within ~0.05 mrad; a tactical IMU's (0.1 deg/sqrt(h)) leaves it
-    1-2 mrad off.  While the smoothed tilt exceeds :data:`FOLLOW_TILT_RAD`, up to
+    passes' mechanization within 0.21 mrad; a tactical IMU's (0.1 deg/sqrt(h)) leaves it
+    1.7-7 mrad off (:data:`FOLLOW_TILT_RAD`).  While the smoothed tilt exceeds :data:`FOLLOW_TILT_RAD`, up to
     :data:`FOLLOW_PASSES` passes mechanize again with the attitude turned to the smoothed one
     (:func:`mechanize`'s ``follow``) and filter about that with the same priors
     (:func:`attitude_shift_states`).
 
     Returns
     -------
-    nav, idx, c, out
-        The last pass's navigation, epochs, attitude at them and smoother output (``nav``'s
-        errors).
+    nav, idx, out
+        The last pass's navigation, epochs and smoother output (``nav``'s errors).
     theta : ndarray, shape (N, 3)
         The attitude turn of ``nav`` from the free mechanization, rad.
     tilts : list of float
@@ -2343,16 +2341,15 @@ def _follow_passes(record, params, initial, ellipsoid, reference, gyro_bias_t, n
     free_t = nav.time[idx]
     theta = np.zeros((idx.size, 3))
     tilts = []
-    c = nav.mat_it[idx]
     for _ in range(FOLLOW_PASSES):
         tilt = _tilt_rad(out["x_s"][:, TH], nav, idx)
         if not tilt > FOLLOW_TILT_RAD:
             break
         theta = theta + out["x_s"][:, TH]
         nav = _mechanize(record, params, initial, ellipsoid, reference, gyro_bias_t, follow=(free_t, theta))
-        idx, c, _, _, out = one_pass(params, accel_bias=accel_bias, nav=nav, theta_shift=theta)
+        idx, _, _, _, out = one_pass(params, accel_bias=accel_bias, nav=nav, theta_shift=theta)
         tilts.append(tilt)
-    return nav, idx, c, out, theta, tilts
+    return nav, idx, out, theta, tilts
 
 
 def attitude_shift_states(phi, theta, q_t, p_t, n_state: int) -> np.ndarray:
