@@ -1062,6 +1062,10 @@ def _estimate_once(
                 ident["identified_in_pass"] = k + 1 + len(follow_tilts)
                 ident["identified_following"] = True
                 idx, _, _, _, out = follow_pass(params, accel_bias=accel_bias)
+                if "spectral_model" in ident and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
+                    params, ident, idx, out = _prior_on_estimate(
+                        record, params, ident, free_nav, speed0, idx, out, follow_pass, accel_bias
+                    )
     # the last pass's log-likelihood per epoch: the screen's reference and the solution's
     ll_epochs = log_likelihood(out["p_p"], out["innov"], *out["measurements"]) if likelihood else None
     screen_z = float("nan")
@@ -2007,6 +2011,12 @@ def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False
         expected = ident.get("expected_error_mgal")
         if expected is not None and expected > EXPECTED_ERROR_WARN_MGAL and params.target_resolution_m is None:
             params, ident = _broad_prior_instead(params, ident, speed0, expected)
+    return _prior_consequences(params, ident, nav, speed0)
+
+
+def _prior_consequences(params, ident, nav, speed0):
+    """What follows from the anomaly prior :func:`_identify` chose: the filter's height noise
+    where the heights wander, and the datasheet drift the smoother passes (its sigma)."""
     walk = ident.get("height_walk") or {}
     if walk.get("applied") and "spectral_model" in ident:
         # the heights wander (identify.WALK_MIN_LOG_LR): the filter's white height noise is
@@ -2017,7 +2027,7 @@ def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False
         # (the lowest frequency refine_prior's periodogram analyses: its third bin)
         sig = filter_height_sigma(model, speed0, float(ident["height_dt_s"]), 3.0 / float(nav.time[-1] - nav.time[0]))
         params = dataclasses.replace(params, altimeter_sigma_m=sig)
-        walk["filter_height_sigma_m"] = sig
+        ident["height_walk"] = walk = {**walk, "filter_height_sigma_m": sig}
         ident["altimeter_sigma_m"] = {
             **ident.get("altimeter_sigma_m", {}),
             "value": sig,
@@ -2033,6 +2043,59 @@ def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False
         # gravimeter state does not hold, as the smoother passes it; estimate.py adds it to sigma
         ident["drift_sigma_passed_mps2"] = drift_sigma_passed(ident, float(nav.time[-1] - nav.time[0]))
     return params, ident
+
+
+def _prior_on_estimate(record, params, ident, nav, speed0, idx, out, one_pass, accel_bias):
+    """The anomaly prior chosen again on the spectrum of the estimate made with it, kept where
+    the filter's likelihood prefers it.
+
+    The first pass's wide prior lets the disturbance state take up what the attitude states
+    would otherwise explain; with a tactical IMU's gyros that is errors of several mGal at
+    periods of 100-500 s (quick U009: 1.2-1.7 mGal in those bands against 0.2-0.6 as drawn, over
+    a field of 0.1-0.4), which :func:`refine_prior` reads as field.  The estimate under the
+    prior it chose carries less of them (0.25-0.3 mGal there), so its spectrum, read through
+    that prior's transfer (bands where it passes half or more), gives the field again.  A
+    chosen prior's transfer is the spectral model's, not the filter's, so the second choice is
+    kept only where the filter's log-likelihood is higher with it.
+
+    ``nav``: the navigation the model's noise levels were identified on; ``one_pass``: the
+    pass about the current linearisation (:func:`_one_pass` bound); ``idx``, ``out``: its
+    epochs and output with ``params``.  Returns ``params, ident, idx, out`` (those given where
+    the first choice stays); ``ident["prior_on_estimate"]`` says what was found.
+    """
+    blind = imu_gap_noise(nav.time, idx, record.imu.saturated)
+    weight = straight_weight(nav, record.imu.specific_force_t, nav.time[idx], None if blind is None else blind > 0)
+    base = {k: v for k, v in ident.items() if k not in REFINE_ONLY_KEYS}
+    dt = float(np.median(np.diff(nav.time[idx])))
+    new, report = refine_prior(params, base, out["x_s"][:, G], dt, params, speed0, weight)
+    same = (new.anomaly_sigma_mps2, new.anomaly_lambda_per_m) == (
+        params.anomaly_sigma_mps2,
+        params.anomaly_lambda_per_m,
+    )
+    if same:
+        ident["prior_on_estimate"] = {"kept": False, "why": "the same prior"}
+        return params, ident, idx, out
+    new, report = _prior_consequences(new, report, nav, speed0)
+    idx2, _, _, _, out2 = one_pass(new, accel_bias=accel_bias)
+    gain = float(np.sum(log_likelihood(out2["p_p"], out2["innov"], *out2["measurements"]))) - float(
+        np.sum(log_likelihood(out["p_p"], out["innov"], *out["measurements"]))
+    )
+    facts = {
+        "kept": gain > 0.0,
+        "log_likelihood_gain": gain,
+        "anomaly_sigma_mps2": new.anomaly_sigma_mps2,
+        "anomaly_lambda_per_m": new.anomaly_lambda_per_m,
+        "resolution_m": report.get("resolution_m"),
+    }
+    if not gain > 0.0:
+        ident["prior_on_estimate"] = facts
+        return params, ident, idx, out
+    how = "least expected error (the spectrum of the estimate with the first pass's choice; filter likelihood)"
+    for key in ("anomaly_sigma_mps2", "anomaly_lambda_per_m"):
+        if report[key]["how"] != "config":
+            report[key] = {**report[key], "how": how}
+    report["prior_on_estimate"] = facts
+    return new, report, idx2, out2
 
 
 #: Keys of :func:`refine_prior`'s report that hold for the prior it chose only.
