@@ -153,7 +153,9 @@ def test_a_clock_running_slow_is_taken_off_gnss_and_heights(turning_strapdown, m
     (measured 0.55 against 0.48 mGal, both with the accelerometer noise the likelihood chooses,
     5e-4 m/s^2, the simulated one; 0.47 against 0.45 with the default 1e-3); with constant
     latencies only, 2.66 until the heights' wander was identified, 0.93 since (the drifting
-    stamps' height error fitted as a wander)."""
+    stamps' height error fitted as a wander), and since the anomaly prior is chosen again on
+    its own estimate where passes follow the smoothed attitude (the track's misfit takes a
+    10-deg/h gyro there), 0.64 mGal smoothed to 63 km against 4.8."""
     s, rec, init = turning_strapdown
     clean = estimate_anomaly(rec, InmParams(), init, "strapdown")
     t0 = rec.imu.time[0]
@@ -178,7 +180,7 @@ def test_a_clock_running_slow_is_taken_off_gnss_and_heights(turning_strapdown, m
     monkeypatch.setattr(gnssqc.GnssLatency, "drifts", property(lambda self: False))
     constant = estimate_anomaly(late, InmParams(), init, "strapdown")
     assert constant.identification["height_walk"]["applied"]
-    assert rms_mid(constant, s) > 1.5 * rms_mid(sol, s)
+    assert rms_mid(constant, s) > 1.1 * rms_mid(sol, s) and constant.resolution_m > 5.0 * sol.resolution_m
 
 
 def _turning_attitude(t):
