@@ -1062,7 +1062,10 @@ def _estimate_once(
                 ident["identified_in_pass"] = k + 1 + len(follow_tilts)
                 ident["identified_following"] = True
                 idx, _, _, _, out = follow_pass(params, accel_bias=accel_bias)
-                if "spectral_model" in ident and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
+                # (only a prior chosen on the spectrum: not a configured one, nor the default one
+                # kept on a short record or in place of one expecting a useless error)
+                chosen = str((ident.get("anomaly_sigma_mps2") or {}).get("how", "")).startswith("least expected")
+                if chosen and "spectral_model" in ident:
                     params, ident, idx, out = _prior_on_estimate(
                         record, params, ident, free_nav, speed0, idx, out, follow_pass, accel_bias
                     )
