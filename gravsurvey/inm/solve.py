@@ -1062,10 +1062,11 @@ def _estimate_once(
                 ident["identified_in_pass"] = k + 1 + len(follow_tilts)
                 ident["identified_following"] = True
                 idx, _, _, _, out = follow_pass(params, accel_bias=accel_bias)
-                # (only a prior chosen on the spectrum: not a configured one, nor the default one
-                # kept on a short record or in place of one expecting a useless error)
-                chosen = str((ident.get("anomaly_sigma_mps2") or {}).get("how", "")).startswith("least expected")
-                if chosen and "spectral_model" in ident:
+                # only a prior refine_prior chose and that stands (its expected error reported):
+                # not a configured sigma or resolution, nor the default prior kept on a short
+                # record or standing in for one expecting a useless error (_broad_prior_instead)
+                chosen = "expected_error_mgal" in ident and "anomaly_sigma_mps2" not in params.given
+                if chosen and params.target_resolution_m is None:
                     params, ident, idx, out = _prior_on_estimate(
                         record, params, ident, free_nav, speed0, idx, out, follow_pass, accel_bias
                     )
