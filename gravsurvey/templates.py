@@ -39,7 +39,7 @@ flights:                           # one entry per flight; names unique (letters
 
 model:                             # 3D-INM Kalman/RTS filter (docs/method.md)
   identify: true                   # noise levels and anomaly prior from each flight's data
-  filter_rate_hz: 1.0              # Kalman epochs per second (the IMU decimated)
+  # filter_rate_hz: 1.0            # Kalman epochs per second (not given: 1, or 5 for tactical gyros)
   # target_resolution_m: ...       # ask for a resolution instead of the least-error one
   # accel_bias_mps2: 1.0e-3        # datasheet accelerometer bias, m/s^2 (tactical strapdown IMUs)
 
