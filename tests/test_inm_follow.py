@@ -123,7 +123,7 @@ def test_a_tactical_imu_is_estimated_about_its_smoothed_attitude(u007):
     sol = estimate_anomaly(record_and_initial(tactical)[0], InmParams(), None, "strapdown")
     assert sol_drawn.follow_tilts_rad == []
     assert sol.follow_tilts_rad and sol.follow_tilts_rad[0] > 2 * FOLLOW_TILT_RAD
-    # the tactical gyros (10 deg/h chosen, passes that followed) run at the faster rate
+    # the tactical gyros (10 deg/h chosen) run at the faster rate
     assert "filter_rate_hz" not in sol_drawn.identification
     assert sol.identification["filter_rate_hz"]["value"] == FOLLOW_RATE_HZ
     assert np.median(np.diff(sol.time)) == pytest.approx(1.0 / FOLLOW_RATE_HZ, rel=0.05)  # a 49-Hz IMU
@@ -165,23 +165,21 @@ def _record_of(span_s):
 
 
 def test_tactical_gyros_raise_the_filter_rate_unless_the_config_gives_it():
-    """Tactical-grade gyros (a white drift given or chosen at FAST_GYRO_DEGPH or more, or passes
-    that followed) run at FOLLOW_RATE_HZ; a rate given in the config stays; a long record keeps
-    within FOLLOW_MAX_EPOCHS; navigation-grade gyros stay at the default."""
+    """Tactical-grade gyros (a white drift given or chosen at FAST_GYRO_DEGPH or more) run at
+    FOLLOW_RATE_HZ; a rate given in the config stays; a long record keeps within
+    FOLLOW_MAX_EPOCHS; navigation-grade and fibre-optic gyros stay at the default."""
     hour = _record_of(3600.0)
-    followed, free = SimpleNamespace(follow_tilts_rad=[2e-3]), SimpleNamespace(follow_tilts_rad=[])
-    assert follow_rate_params(InmParams(), free, hour) is None
-    assert follow_rate_params(InmParams(gyro_drift_degph=1.0), free, hour) is None
-    fast = follow_rate_params(InmParams(gyro_drift_degph=FAST_GYRO_DEGPH), free, hour)
+    assert follow_rate_params(InmParams(), hour) is None
+    assert follow_rate_params(InmParams(gyro_drift_degph=1.0), hour) is None
+    fast = follow_rate_params(InmParams(gyro_drift_degph=FAST_GYRO_DEGPH), hour)
     assert fast.filter_rate_hz == FOLLOW_RATE_HZ and fast.gyro_drift_degph == FAST_GYRO_DEGPH
-    assert follow_rate_params(InmParams(), followed, hour).filter_rate_hz == FOLLOW_RATE_HZ
     # what identification holds fixed is not widened by the rate raised
-    assert "filter_rate_hz" not in follow_rate_params(InmParams(), followed, hour).given
+    assert "filter_rate_hz" not in follow_rate_params(InmParams(gyro_drift_degph=6.0), hour).given
     # given in the config (even the default figure): kept
-    given = InmParams(filter_rate_hz=1.0, given=frozenset({"filter_rate_hz"}))
-    assert follow_rate_params(given, followed, hour) is None
-    assert follow_rate_params(InmParams(filter_rate_hz=10.0), followed, hour) is None
+    given = InmParams(gyro_drift_degph=6.0, filter_rate_hz=1.0, given=frozenset({"filter_rate_hz"}))
+    assert follow_rate_params(given, hour) is None
+    assert follow_rate_params(InmParams(gyro_drift_degph=6.0, filter_rate_hz=10.0), hour) is None
     # four hours: the epochs within FOLLOW_MAX_EPOCHS
-    long = follow_rate_params(InmParams(), followed, _record_of(4 * 3600.0))
+    long = follow_rate_params(InmParams(gyro_drift_degph=6.0), _record_of(4 * 3600.0))
     assert long.filter_rate_hz == pytest.approx(FOLLOW_MAX_EPOCHS / (4 * 3600.0))
     assert 1.0 < long.filter_rate_hz < FOLLOW_RATE_HZ

@@ -46,7 +46,9 @@ def test_template_sections_and_no_placeholder_numbers():
         assert key in EXAMPLE_CONFIG, key
     # no numbers the user would have to replace: the values given are the documented defaults
     assert data["levelling"] == {"enabled": None, "model": "constant"}
-    assert data["model"] == {"identify": True, "filter_rate_hz": 1.0}
+    assert data["model"] == {"identify": True}
+    # not given, tactical gyros raise the rate (docs/method.md, "Following passes"): commented
+    assert "# filter_rate_hz: 1.0" in EXAMPLE_CONFIG
     assert "initial" not in data["flights"][0] and "tie" not in data["flights"][0]
 
 

@@ -144,9 +144,9 @@ class ModelSection(Section):
     filter_rate_hz: float = _m(
         "filter_rate_hz",
         "Kalman epoch rate, Hz (the IMU rate is decimated; at least 0.2: the lines are found on 10-s means of the epochs). "
-        "Not given, a flight with tactical-grade gyros (a white drift of 3 deg/h or more, given or chosen by likelihood, "
-        "or passes that followed the smoothed attitude) runs at 5 Hz instead, at most 36 000 epochs over the record "
-        "(docs/method.md, 'Following passes'); given, it is used as it is",
+        "Not given, a flight with tactical-grade gyros (a white drift of 3 deg/h or more, given or chosen by likelihood) "
+        "runs at 5 Hz instead, at most 36 000 epochs over the record (docs/method.md, 'Following passes'); given, it "
+        "is used as it is",
         ge=0.2,
     )
     accel_noise_mps2: float = _m(
