@@ -315,9 +315,9 @@ FOLLOW_PASSES = 2
 #: (U2012 1.33 -> 0.52 mGal, U2006 3.21 -> 1.33, U2010 4.78 -> 2.93; U2000 1.29 -> 1.75); 2 Hz
 #: kept less (median 1.49); docs/benchmarks.md, "A faster filter for tactical gyros".
 FOLLOW_RATE_HZ = 5.0
-#: ... but never more filter epochs than this: the smoother holds a covariance per epoch (16
-#: states: 12 kB over its arrays), 36 000 epochs about 0.45 GB; a longer flight gets the
-#: highest rate that keeps within it (4 h: 2.5 Hz).
+#: ... but never more filter epochs than this: the passes hold covariances per epoch, so memory
+#: grows with them (a full-length tactical draw of 235 min, 2.5 Hz: peak RSS 1.10 -> 1.73 GB; 92
+#: min at 5 Hz: 0.72 -> 1.31 GB); a longer flight gets the highest rate that keeps within it.
 FOLLOW_MAX_EPOCHS = 36_000
 #: A gyro white drift (deg/h, given or chosen) from which a flight runs at
 #: :data:`FOLLOW_RATE_HZ`: between the candidates 1 and 10 (:data:`GYRO_NOISE_CANDIDATES_DEGPH`);
