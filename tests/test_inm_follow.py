@@ -183,3 +183,17 @@ def test_tactical_gyros_raise_the_filter_rate_unless_the_config_gives_it():
     long = follow_rate_params(InmParams(gyro_drift_degph=6.0), _record_of(4 * 3600.0))
     assert long.filter_rate_hz == pytest.approx(FOLLOW_MAX_EPOCHS / (4 * 3600.0))
     assert 1.0 < long.filter_rate_hz < FOLLOW_RATE_HZ
+
+
+def test_a_tactical_datasheet_figure_given_runs_at_the_faster_rate_from_the_start(u007):
+    """The datasheet's 6 deg/h given (no search): the estimate runs at FOLLOW_RATE_HZ, and says
+    the figure was given; with the rate given too, at that rate."""
+    rec = record_and_initial(u007[1])[0]
+    sol = estimate_anomaly(rec, InmParams(gyro_drift_degph=6.0), None, "strapdown")
+    said = sol.identification["filter_rate_hz"]
+    assert said["value"] == FOLLOW_RATE_HZ and "6 deg/h (given" in said["how"]
+    assert np.median(np.diff(sol.time)) == pytest.approx(1.0 / FOLLOW_RATE_HZ, rel=0.05)
+    kept = InmParams(gyro_drift_degph=6.0, filter_rate_hz=2.0)
+    sol = estimate_anomaly(rec, kept, None, "strapdown")
+    assert "filter_rate_hz" not in sol.identification
+    assert np.median(np.diff(sol.time)) == pytest.approx(0.5, rel=0.05)
