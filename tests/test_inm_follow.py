@@ -19,14 +19,14 @@ from gravsurvey.inm.errormodel import DP, DQ, TH, N_STATE_AIDED, discretise, epo
 from gravsurvey.inm.mechanization import mechanize
 from gravsurvey.inm.params import InmParams
 from gravsurvey.inm.solve import (
-    FAST_GYRO_DEGPH,
-    FOLLOW_MAX_EPOCHS,
-    FOLLOW_RATE_HZ,
+    TACTICAL_GYRO_DEGPH,
+    TACTICAL_MAX_EPOCHS,
+    TACTICAL_RATE_HZ,
     FOLLOW_TILT_RAD,
     attitude_shift_states,
     estimate_anomaly,
     filter_epochs,
-    follow_rate_params,
+    tactical_rate_params,
 )
 from gravsurvey.simulate.run import simulate_flight
 from gravsurvey.simulate.unseen import draw_flight_spec, limit_spec
@@ -125,8 +125,8 @@ def test_a_tactical_imu_is_estimated_about_its_smoothed_attitude(u007):
     assert sol.follow_tilts_rad and sol.follow_tilts_rad[0] > 2 * FOLLOW_TILT_RAD
     # the tactical gyros (10 deg/h chosen) run at the faster rate
     assert "filter_rate_hz" not in sol_drawn.identification
-    assert sol.identification["filter_rate_hz"]["value"] == FOLLOW_RATE_HZ
-    assert np.median(np.diff(sol.time)) == pytest.approx(1.0 / FOLLOW_RATE_HZ, rel=0.05)  # a 49-Hz IMU
+    assert sol.identification["filter_rate_hz"]["value"] == TACTICAL_RATE_HZ
+    assert np.median(np.diff(sol.time)) == pytest.approx(1.0 / TACTICAL_RATE_HZ, rel=0.05)  # a 49-Hz IMU
     rms_drawn, rms = _rms_mgal(drawn, sol_drawn), _rms_mgal(tactical, sol)
     # the first pass's spectrum held the IMU's errors: the prior chosen on it smoothed to 6.5 km
     # expecting 2.5 mGal (1.35 mGal off); chosen again on the spectrum of the estimate made with
@@ -165,34 +165,34 @@ def _record_of(span_s):
 
 
 def test_tactical_gyros_raise_the_filter_rate_unless_the_config_gives_it():
-    """Tactical-grade gyros (a white drift given or chosen at FAST_GYRO_DEGPH or more) run at
-    FOLLOW_RATE_HZ; a rate given in the config stays; a long record keeps within
-    FOLLOW_MAX_EPOCHS; navigation-grade and fibre-optic gyros stay at the default."""
+    """Tactical-grade gyros (a white drift given or chosen at TACTICAL_GYRO_DEGPH or more) run at
+    TACTICAL_RATE_HZ; a rate given in the config stays; a long record keeps within
+    TACTICAL_MAX_EPOCHS; navigation-grade and fibre-optic gyros stay at the default."""
     hour = _record_of(3600.0)
-    assert follow_rate_params(InmParams(), hour) is None
-    assert follow_rate_params(InmParams(gyro_drift_degph=1.0), hour) is None
-    fast = follow_rate_params(InmParams(gyro_drift_degph=FAST_GYRO_DEGPH), hour)
-    assert fast.filter_rate_hz == FOLLOW_RATE_HZ and fast.gyro_drift_degph == FAST_GYRO_DEGPH
+    assert tactical_rate_params(InmParams(), hour) is None
+    assert tactical_rate_params(InmParams(gyro_drift_degph=1.0), hour) is None
+    fast = tactical_rate_params(InmParams(gyro_drift_degph=TACTICAL_GYRO_DEGPH), hour)
+    assert fast.filter_rate_hz == TACTICAL_RATE_HZ and fast.gyro_drift_degph == TACTICAL_GYRO_DEGPH
     # what identification holds fixed is not widened by the rate raised
-    assert "filter_rate_hz" not in follow_rate_params(InmParams(gyro_drift_degph=6.0), hour).given
+    assert "filter_rate_hz" not in tactical_rate_params(InmParams(gyro_drift_degph=6.0), hour).given
     # given in the config (even the default figure): kept
     given = InmParams(gyro_drift_degph=6.0, filter_rate_hz=1.0, given=frozenset({"filter_rate_hz"}))
-    assert follow_rate_params(given, hour) is None
-    assert follow_rate_params(InmParams(gyro_drift_degph=6.0, filter_rate_hz=10.0), hour) is None
-    # four hours: the epochs within FOLLOW_MAX_EPOCHS
-    long = follow_rate_params(InmParams(gyro_drift_degph=6.0), _record_of(4 * 3600.0))
-    assert long.filter_rate_hz == pytest.approx(FOLLOW_MAX_EPOCHS / (4 * 3600.0))
-    assert 1.0 < long.filter_rate_hz < FOLLOW_RATE_HZ
+    assert tactical_rate_params(given, hour) is None
+    assert tactical_rate_params(InmParams(gyro_drift_degph=6.0, filter_rate_hz=10.0), hour) is None
+    # four hours: the epochs within TACTICAL_MAX_EPOCHS
+    long = tactical_rate_params(InmParams(gyro_drift_degph=6.0), _record_of(4 * 3600.0))
+    assert long.filter_rate_hz == pytest.approx(TACTICAL_MAX_EPOCHS / (4 * 3600.0))
+    assert 1.0 < long.filter_rate_hz < TACTICAL_RATE_HZ
 
 
 def test_a_tactical_datasheet_figure_given_runs_at_the_faster_rate_from_the_start(u007):
-    """The datasheet's 6 deg/h given (no search): the estimate runs at FOLLOW_RATE_HZ, and says
+    """The datasheet's 6 deg/h given (no search): the estimate runs at TACTICAL_RATE_HZ, and says
     the figure was given; with the rate given too, at that rate."""
     rec = record_and_initial(u007[1])[0]
     sol = estimate_anomaly(rec, InmParams(gyro_drift_degph=6.0), None, "strapdown")
     said = sol.identification["filter_rate_hz"]
-    assert said["value"] == FOLLOW_RATE_HZ and "6 deg/h (given" in said["how"]
-    assert np.median(np.diff(sol.time)) == pytest.approx(1.0 / FOLLOW_RATE_HZ, rel=0.05)
+    assert said["value"] == TACTICAL_RATE_HZ and "6 deg/h (given" in said["how"]
+    assert np.median(np.diff(sol.time)) == pytest.approx(1.0 / TACTICAL_RATE_HZ, rel=0.05)
     kept = InmParams(gyro_drift_degph=6.0, filter_rate_hz=2.0)
     sol = estimate_anomaly(rec, kept, None, "strapdown")
     assert "filter_rate_hz" not in sol.identification

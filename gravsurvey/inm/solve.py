@@ -308,23 +308,24 @@ SPEED_BASELINE_S = 2.0
 FOLLOW_TILT_RAD = 1e-3
 #: At most this many following passes.
 FOLLOW_PASSES = 2
-#: Kalman epoch rate (Hz) of a flight with tactical-grade gyros (:func:`follow_rate_params`),
+#: Kalman epoch rate (Hz) of a flight with tactical-grade gyros (:func:`tactical_rate_params`),
 #: where the config does not give ``model.filter_rate_hz``: the estimate runs at this rate
-#: (:func:`estimate_anomaly`; the gyro noise searched at the configured rate first).  Measured on 40 tactical quick draws of the unseen suite:
-#: 18 better by over 5 %, 8 worse; held out (seeds 2000-2019) median RMS / bound 1.78 -> 1.41
-#: (U2012 1.33 -> 0.52 mGal, U2006 3.21 -> 1.33, U2010 4.78 -> 2.93; U2000 1.29 -> 1.75); 2 Hz
-#: kept less (median 1.49); docs/benchmarks.md, "A faster filter for tactical gyros".
-FOLLOW_RATE_HZ = 5.0
+#: (:func:`estimate_anomaly`; the gyro noise searched at the configured rate first).  Measured
+#: on 40 tactical quick draws of the unseen suite: 18 better by over 5 %, 8 worse; held out
+#: (seeds 2000-2019) median RMS / bound 1.78 -> 1.41 (U2012 1.33 -> 0.52 mGal, U2006 3.21 ->
+#: 1.33, U2010 4.78 -> 2.93; U2000 1.29 -> 1.75); 2 Hz kept less (median 1.49); at full length
+#: mixed (docs/benchmarks.md, "A faster filter for tactical gyros").
+TACTICAL_RATE_HZ = 5.0
 #: ... but never more filter epochs than this: the passes hold covariances per epoch, so memory
 #: grows with them (a full-length tactical draw of 235 min, 2.5 Hz: peak RSS 1.10 -> 1.73 GB; 92
 #: min at 5 Hz: 0.72 -> 1.31 GB); a longer flight gets the highest rate that keeps within it.
-FOLLOW_MAX_EPOCHS = 36_000
+TACTICAL_MAX_EPOCHS = 36_000
 #: A gyro white drift (deg/h, given or chosen) from which a flight runs at
-#: :data:`FOLLOW_RATE_HZ`: between the candidates 1 and 10 (:data:`GYRO_NOISE_CANDIDATES_DEGPH`);
+#: :data:`TACTICAL_RATE_HZ`: between the candidates 1 and 10 (:data:`GYRO_NOISE_CANDIDATES_DEGPH`);
 #: a tactical IMU's datasheet figure (0.1 deg/sqrt(h): 6 deg/h) is above it.  Passes that
 #: followed with 1 deg/h chosen were neutral at 5 Hz (tactical U005 0.48 -> 0.48 mGal, U010
 #: 1.77 -> 1.74, U2017 0.90 -> 0.94, U2018 0.97 -> 0.96) and are left at the configured rate.
-FAST_GYRO_DEGPH = 3.0
+TACTICAL_GYRO_DEGPH = 3.0
 
 #: The passes stop once the initial-attitude correction is below this, rad (0.001 deg).
 ATTITUDE_CONVERGED_RAD = math.radians(1e-3)
@@ -727,9 +728,9 @@ def estimate_anomaly(
     rate_report = None
     if not gyro_ok:
         # a given gyro noise of tactical grade: the faster rate from the start
-        faster = follow_rate_params(params, record)
+        faster = tactical_rate_params(params, record)
         if faster is not None:
-            rate_report, params = _follow_rate_report(params, faster, False), faster
+            rate_report, params = _tactical_rate_report(params, faster, False), faster
     if not (gyro_ok or accel_ok):
         sol = _estimate_once(record, params, initial, triad, ellipsoid, attitude_deg, reference, gnss_lever_arm_t)
         if rate_report is not None:
@@ -740,12 +741,12 @@ def estimate_anomaly(
     gyro_report = None
     if gyro_ok and first[0].gnss_aided and math.isfinite(first[0].log_likelihood):
         first, params, gyro_report = choose_gyro_noise(first, params, estimate)
-        faster = follow_rate_params(params, record)
+        faster = tactical_rate_params(params, record)
         if faster is not None:
             # a tactical-grade gyro noise chosen (at the configured rate, its candidates'
             # likelihoods compared there): the estimate with it runs again at the faster rate,
             # and the accelerometer noises are tried at that rate
-            rate_report, params = _follow_rate_report(params, faster, True), faster
+            rate_report, params = _tactical_rate_report(params, faster, True), faster
             first = recorded(estimate, params)
     sol, shown = (
         choose_accel_noise(first, params, estimate)
@@ -768,35 +769,35 @@ def estimate_anomaly(
     return sol
 
 
-def follow_rate_params(params: InmParams, record) -> InmParams | None:
+def tactical_rate_params(params: InmParams, record) -> InmParams | None:
     """``params`` at the rate a flight with tactical-grade gyros runs at, or None where it stays.
 
     A flight whose gyro white drift (``params.gyro_drift_degph``, given or chosen by likelihood)
-    is :data:`FAST_GYRO_DEGPH` or more runs with :data:`FOLLOW_RATE_HZ` filter epochs per second
-    (at most :data:`FOLLOW_MAX_EPOCHS` over the record), where the config does not give
+    is :data:`TACTICAL_GYRO_DEGPH` or more runs with :data:`TACTICAL_RATE_HZ` filter epochs per second
+    (at most :data:`TACTICAL_MAX_EPOCHS` over the record), where the config does not give
     ``model.filter_rate_hz`` and its rate is below that.  The error model holds each epoch's
     geometry for the whole step; with a tactical IMU's tilts of mrad, wandering by the second, a
     1-s step leaves errors the disturbance takes up (docs/method.md, "Following passes").
     """
-    if "filter_rate_hz" in params.given or float(params.gyro_drift_degph) < FAST_GYRO_DEGPH:
+    if "filter_rate_hz" in params.given or float(params.gyro_drift_degph) < TACTICAL_GYRO_DEGPH:
         return None
     t = np.asarray(record.imu.time, float)
     span = float(t[-1] - t[0]) if t.size > 1 else 0.0
-    rate = FOLLOW_RATE_HZ if span <= 0.0 else min(FOLLOW_RATE_HZ, FOLLOW_MAX_EPOCHS / span)
+    rate = TACTICAL_RATE_HZ if span <= 0.0 else min(TACTICAL_RATE_HZ, TACTICAL_MAX_EPOCHS / span)
     if not rate > float(params.filter_rate_hz):
         return None
     return dataclasses.replace(params, filter_rate_hz=rate)
 
 
-def _follow_rate_report(params, faster, chosen: bool) -> dict:
-    """summary.json's ``identification.filter_rate_hz`` where :func:`follow_rate_params` raised
+def _tactical_rate_report(params, faster, chosen: bool) -> dict:
+    """summary.json's ``identification.filter_rate_hz`` where :func:`tactical_rate_params` raised
     it; ``chosen``: the gyro noise was the likelihood's choice, not the config's."""
     how = "chosen by the filter's likelihood" if chosen else "given"
     return {
         "value": float(faster.filter_rate_hz),
         "how": (
             f"raised from {params.filter_rate_hz:g} Hz for tactical-grade gyros: a white drift of "
-            f"{params.gyro_drift_degph:g} deg/h ({how}; {FAST_GYRO_DEGPH:g} or more)"
+            f"{params.gyro_drift_degph:g} deg/h ({how}; {TACTICAL_GYRO_DEGPH:g} or more)"
         ),
     }
 
