@@ -19,10 +19,10 @@ from gravsurvey.inm.errormodel import DP, DQ, TH, N_STATE_AIDED, discretise, epo
 from gravsurvey.inm.mechanization import mechanize
 from gravsurvey.inm.params import InmParams
 from gravsurvey.inm.solve import (
+    FOLLOW_TILT_RAD,
     TACTICAL_GYRO_DEGPH,
     TACTICAL_MAX_EPOCHS,
     TACTICAL_RATE_HZ,
-    FOLLOW_TILT_RAD,
     attitude_shift_states,
     estimate_anomaly,
     filter_epochs,
