@@ -2073,11 +2073,7 @@ def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False
     elif ident.get("method") != "none" and not {"anomaly_sigma_mps2", "anomaly_lambda_per_m"} <= params.given:
         wide = wide_prior_params(params, ident, speed0)
         idx, _, _, _, first = one_pass(wide, accel_bias=accel_bias)
-        # the stretches where the specific force is not known (gaps, a sensor at its range) are
-        # left out of the spectrum with the turns: the velocity the aiding sets there is a local
-        # event, no part of the field's or the noise's spectrum
-        blind = imu_gap_noise(nav.time, idx, record.imu.saturated)
-        weight = straight_weight(nav, record.imu.specific_force_t, nav.time[idx], None if blind is None else blind > 0)
+        weight = _spectrum_weight(record, nav, idx)
         params, ident = refine_prior(
             params, ident, first["x_s"][:, G], float(np.median(np.diff(nav.time[idx]))), wide, speed0, weight
         )
@@ -2085,6 +2081,15 @@ def _identify(record, params, nav, ellipsoid, speed0, one_pass, accel_bias=False
         if expected is not None and expected > EXPECTED_ERROR_WARN_MGAL and params.target_resolution_m is None:
             params, ident = _broad_prior_instead(params, ident, speed0, expected)
     return _prior_consequences(params, ident, nav, speed0)
+
+
+def _spectrum_weight(record, nav, idx) -> np.ndarray:
+    """The weight (N,) of each filter epoch ``idx`` in the spectra :func:`refine_prior` reads:
+    the straight stretches (:func:`straight_weight`) less where the specific force is not known
+    (gaps, a sensor at its range): the velocity the aiding sets there is a local event, no part
+    of the field's or the noise's spectrum."""
+    blind = imu_gap_noise(nav.time, idx, record.imu.saturated)
+    return straight_weight(nav, record.imu.specific_force_t, nav.time[idx], None if blind is None else blind > 0)
 
 
 def _prior_consequences(params, ident, nav, speed0):
@@ -2136,8 +2141,7 @@ def _prior_on_estimate(record, params, ident, nav, speed0, idx, out, one_pass, a
     epochs and output with ``params``.  Returns ``params, ident, idx, out`` (those given where
     the first choice stays); ``ident["prior_on_estimate"]`` says what was found.
     """
-    blind = imu_gap_noise(nav.time, idx, record.imu.saturated)
-    weight = straight_weight(nav, record.imu.specific_force_t, nav.time[idx], None if blind is None else blind > 0)
+    weight = _spectrum_weight(record, nav, idx)
     base = {k: v for k, v in ident.items() if k not in REFINE_ONLY_KEYS}
     dt = float(np.median(np.diff(nav.time[idx])))
     new, report = refine_prior(params, base, out["x_s"][:, G], dt, params, speed0, weight)
