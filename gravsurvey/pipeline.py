@@ -266,6 +266,8 @@ def identification_log_lines(est: FlightEstimate) -> list[str]:
             tail.append(f"expected error {float(piece['expected_error_mgal']):.3g} mGal")
         if piece.get("smoother_sigma_scale") is not None:
             tail.append(f"smoother's sigma x {float(piece['smoother_sigma_scale']):.2f} for the field seen")
+        if piece.get("vertical_offset_mgal"):
+            tail.append(f"a constant of {float(piece['vertical_offset_mgal']):.3g} mGal held out of the prior")
         where = f" (piece {i + 1} of {len(pieces)})" if len(pieces) > 1 else ""
         out.append(f"{est.name}: model{where}: " + "; ".join(items) + ("; " + ", ".join(tail) if tail else ""))
     drift = est.estimator.get("drift")

@@ -472,7 +472,8 @@ def test_a_noisy_gnss_height_stretch_is_weighed_by_its_own_noise(survey_gnss_hei
     e = sol.g_smooth[keep] - g[keep]
     # where only the altimeter holds the height the product is coarser, and its sigma says so
     assert np.sqrt(np.mean(((e - e.mean()) / sol.sigma_smooth[keep]) ** 2)) < 1.5
-    assert np.median(sol.sigma_smooth[keep]) > 3.0 * np.median(clean.sigma_smooth[keep])
+    keep_clean = (clean.time > 500.0) & (clean.time < 800.0)
+    assert np.median(sol.sigma_smooth[keep]) > 3.0 * np.median(clean.sigma_smooth[keep_clean])
     monkeypatch.setattr(solve, "noisy_stretches", lambda t, e: np.full(np.size(t), np.nan))
     left = estimate_anomaly(noisy, InmParams(), init, "strapdown")
     assert rms_mid(left, s) > 10.0 * rms_mid(sol, s)

@@ -75,7 +75,9 @@ def test_a_quieter_accelerometer_is_found_and_the_gyro_biases_with_it(quiet_imu_
     assert report["gain_z"][f"{report['value']:.3g}"] > 2.0
     # against the truth: the disturbance and the heading gyro's bias
     rms_fixed, rms_chosen = _rms_mgal(s, fixed), _rms_mgal(s, chosen)
-    assert rms_chosen < 0.9 * rms_fixed, (rms_chosen, rms_fixed)  # measured 0.43 / 0.51
+    # measured 0.378 / 0.370 (0.43 / 0.51 before the vertical channel's constant was taken off
+    # the specific force, which the default's estimate gained most from): the disturbance as good
+    assert rms_chosen < 1.05 * rms_fixed, (rms_chosen, rms_fixed)
     err_fixed = abs(fixed.gyro_bias_t[2] - true_bias[2])
     err_chosen = abs(chosen.gyro_bias_t[2] - true_bias[2])
     assert err_chosen < 0.5 * err_fixed, (err_chosen, err_fixed)
