@@ -1092,18 +1092,8 @@ def _estimate_once(
                 "bias_corrections_degph": [float(d[grew] / RADPS_PER_DEGPH) for d, _ in found[-3:]],
             }
             corrections.append(float(np.linalg.norm(th0)))
-            (
-                cur,
-                dr_prior_i,
-                dv_prior_i,
-                theta_prior,
-                gyro_bias_t,
-                accel_bias_t,
-                record,
-                params,
-                ident,
-                vertical_offset,
-            ) = befores[-2]
+            state, vertical_offset = befores[-2]
+            (cur, dr_prior_i, dv_prior_i, theta_prior, gyro_bias_t, accel_bias_t, record, params, ident) = state
             limit = k + 2
             reidentify = False
             continue
@@ -1131,21 +1121,8 @@ def _estimate_once(
         )
         # this pass's linearisation, kept for going back (the last two: a record with an
         # accelerometer bias taken off is a copy per pass)
-        befores = [
-            *befores[-1:],
-            (
-                cur,
-                dr_prior_i,
-                dv_prior_i,
-                theta_prior,
-                gyro_bias_t,
-                accel_bias_t,
-                record,
-                params,
-                ident,
-                vertical_offset,
-            ),
-        ]
+        state = (cur, dr_prior_i, dv_prior_i, theta_prior, gyro_bias_t, accel_bias_t, record, params, ident)
+        befores = [*befores[-1:], (state, vertical_offset)]
         # C_true = C Exp(theta) on inertial axes, at the corrected position (whose ENU axes
         # differ from the old point's by the position change over the Earth's radius)
         rot = rodrigues(np.ascontiguousarray(th0))
