@@ -9,7 +9,6 @@ drawn and with the bias set to zero; and a rolled triad's specific force, agains
 offset's direction is checked.
 """
 
-import dataclasses
 import warnings
 from types import SimpleNamespace
 
@@ -19,6 +18,7 @@ import pytest
 from gravsurvey.geodesy import MGAL, WGS84, geodetic_to_ecef, mat_ie
 from gravsurvey.inm import solve
 from gravsurvey.inm.params import InmParams
+from gravsurvey.io.record import AltimeterChannel, FlightRecord, ImuChannel
 from gravsurvey.simulate.run import simulate_flight
 from gravsurvey.simulate.unseen import draw_flight_spec, limit_spec
 from sim_record import record_and_initial
@@ -80,20 +80,10 @@ def test_the_offset_is_taken_along_the_ellipsoid_normal():
     a = 0.3
     mat_et = np.stack([np.cos(a) * east_e + np.sin(a) * up_e, north_e, -np.sin(a) * east_e + np.cos(a) * up_e], axis=1)
     mat_it = np.einsum("nij,jk->nik", m_ie, mat_et)
-    nav = SimpleNamespace(time=t, r_i=r_i, mat_it=mat_it)
+    nav = SimpleNamespace(time=t, r_i=r_i, v_i=np.zeros_like(r_i), mat_it=mat_it)
     f_t = np.tile([0.0, 0.0, 9.8], (n, 1))
-    rec = Record(Imu(f_t.copy()))
+    rec = FlightRecord(0, ImuChannel(t, f_t.copy(), np.zeros((n, 3))), AltimeterChannel(t, np.full(n, h)), None)
     out = solve._vertical_offset_off(rec, nav, 5e-5, WGS84)
     # the normal on this triad: (sin a, 0, cos a); the caller's record kept
     assert np.allclose(out.imu.specific_force_t - f_t, -5e-5 * np.array([np.sin(a), 0.0, np.cos(a)]), atol=1e-12)
     assert np.array_equal(rec.imu.specific_force_t, f_t)
-
-
-@dataclasses.dataclass
-class Imu:
-    specific_force_t: np.ndarray
-
-
-@dataclasses.dataclass
-class Record:
-    imu: Imu

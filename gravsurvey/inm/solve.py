@@ -1941,10 +1941,8 @@ def _vertical_offset_off(record, nav, offset_mps2: float, ellipsoid: Ellipsoid =
     # second and interpolated, not rotated at every IMU sample
     step = max(1, int(round(1.0 / max(float(np.median(np.diff(t))), 1e-6)))) if t.size > 1 else 1
     k = np.unique(np.r_[np.arange(0, t.size, step), t.size - 1])
-    m_ie = mat_ie(t[k], ellipsoid.omega)
-    lat, lon, _ = ecef_to_geodetic(np.einsum("nji,nj->ni", m_ie, nav.r_i[k]), ellipsoid)
-    up_e = np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=1)
-    up_k = np.einsum("nij,nj->ni", m_ie, up_e)
+    lat, lon, _, _ = navigation_to_geodetic(t[k], nav.r_i[k], nav.v_i[k], ellipsoid)
+    up_k = np.einsum("nij,nj->ni", mat_ie(t[k], ellipsoid.omega), mat_en(lat, lon)[:, :, 2])
     up_i = np.stack([np.interp(t, t[k], up_k[:, j]) for j in range(3)], axis=1)
     f_t = np.array(record.imu.specific_force_t, dtype=float)
     f_t -= float(offset_mps2) * np.einsum("nji,nj->ni", nav.mat_it, up_i)
