@@ -427,9 +427,11 @@ def survey_gnss_heights():
 
 def test_a_gnss_height_stretch_off_by_a_metre_is_taken_off(survey_gnss_heights, monkeypatch):
     """The GNSS heights 1 m high for 200 s (a float stretch between two ambiguity fixes): both
-    steps found against the inertial height and taken off, said, and the product is the clean
-    flight's (measured 0.800 against 0.796 mGal); left in, the filter follows the heights and
-    reads the steps as gravity (62.6)."""
+    steps found against the inertial height and taken off, said, and the product is near the
+    clean flight's (measured 0.331 against 0.265 mGal: the steps are found to 3 cm, and the
+    2.7 cm left from 700 s on shows now that the field is held - 0.800 against 0.796 when the
+    prior held too little of it, identify.FIELD_VAR_WINDOW_S); left in, the filter follows the
+    heights and reads the steps as gravity (62.6)."""
     s, rec, init = survey_gnss_heights
     gn = rec.gnss
     t = np.asarray(gn.time, float)
@@ -442,7 +444,7 @@ def test_a_gnss_height_stretch_off_by_a_metre_is_taken_off(survey_gnss_heights, 
     assert [round(x["time_s"]) for x in steps] == [500, 700]
     assert [x["size_m"] for x in steps] == pytest.approx([1.0, -1.0], abs=0.1)
     assert any("gnss.height: " in w and "2 step(s) taken off" in w for w in sol.warnings)
-    assert rms_mid(sol, s) < 1.1 * rms_mid(clean, s)
+    assert rms_mid(sol, s) < 1.4 * rms_mid(clean, s)
     monkeypatch.setattr(solve, "_repaired_gnss_heights", lambda record, nav, ellipsoid: (record, [], {}))
     left = estimate_anomaly(stepped, InmParams(), init, "strapdown")
     assert rms_mid(left, s) > 2.0 * rms_mid(sol, s)
@@ -451,9 +453,9 @@ def test_a_gnss_height_stretch_off_by_a_metre_is_taken_off(survey_gnss_heights, 
 def test_a_noisy_gnss_height_stretch_is_weighed_by_its_own_noise(survey_gnss_heights, monkeypatch):
     """The GNSS heights 1 m noisy for 300 s (a float stretch) where the rest are 0.1 m: the
     stretch weighed by its own noise and said; there the 0.5-m altimeter holds the height, the
-    product is coarser (measured 1.88 mGal in the middle 320 s against 0.80 clean) and its sigma
-    grows to cover it (2.7 against 0.15 mGal, error/sigma 0.70); weighed as the rest, the filter
-    follows the noise (978 mGal)."""
+    product is coarser (measured 1.86 mGal in the middle 320 s against 0.26 clean) and its sigma
+    grows to cover it (2.7 against 0.40 mGal, error/sigma 0.73); weighed as the rest, the filter
+    follows the noise (133 mGal)."""
     s, rec, init = survey_gnss_heights
     gn = rec.gnss
     t = np.asarray(gn.time, float)
@@ -477,3 +479,18 @@ def test_a_noisy_gnss_height_stretch_is_weighed_by_its_own_noise(survey_gnss_hei
     monkeypatch.setattr(solve, "noisy_stretches", lambda t, e: np.full(np.size(t), np.nan))
     left = estimate_anomaly(noisy, InmParams(), init, "strapdown")
     assert rms_mid(left, s) > 10.0 * rms_mid(sol, s)
+
+
+def test_a_field_mostly_trend_along_short_lines_is_held_by_the_prior(survey_gnss_heights):
+    """The grid's field (the sample's smooth one: 5 mGal about a 20-mGal mean, mostly a trend
+    along each 25-km line) lies below the first pass's periodogram band; the field seen through
+    the Hann-weighted window holds it (identify.FIELD_VAR_WINDOW_S).  Through a 120-s running
+    mean the height noise's sidelobes (8 mGal) hid it: the prior was chosen as for no field
+    (0.43 mGal), the gyros took up the trend in the turns ("noisier", 10 deg/h) and the middle
+    was 0.94 mGal off; measured 0.26 now, the datasheet gyro kept."""
+    s, rec, init = survey_gnss_heights
+    sol = estimate_anomaly(rec, InmParams(), init, "strapdown")
+    ident = sol.identification
+    assert ident["field_std_seen_mgal"] > 1.5
+    assert ident["gyro_drift_degph"]["how"].startswith("default")
+    assert rms_mid(sol, s) < 0.45

@@ -49,14 +49,22 @@ def test_the_candidates_run_only_when_the_screen_asks():
     assert report["screen_z"] == pytest.approx(solve.GYRO_SCREEN_Z - 0.1)
     _, calls, report = _search(lls, screen=float("nan"))
     assert calls == [] and report["screen_z"] is None
-    # asked: each candidate while clearly more likely than the one before
+    # asked: every candidate, each kept where clearly more likely than the best before it
     best, calls, report = _search(lls, screen=15.0)
     assert calls == [0.1, 1.0, 10.0] and report["value"] == 1.0
     assert best.log_likelihood == 60.0 and report["how"].startswith("filter likelihood")
     assert report["gain_z"]["10"] < -2.0 and set(report["log_likelihood"]) == {"0.01", "0.1", "1", "10"}
     # more likely but within the scatter: the one before stays
-    _, calls, report = _search({0.01: 10.0, 0.1: 10.1, 1.0: 90.0}, screen=15.0)
-    assert calls == [0.1] and report["value"] == 0.01 and 0.0 < report["gain_z"]["0.1"] < 2.0
+    _, calls, report = _search({0.01: 10.0, 0.1: 10.1, 1.0: 10.0, 10.0: 9.0}, screen=15.0)
+    assert calls == [0.1, 1.0, 10.0] and report["value"] == 0.01 and 0.0 < report["gain_z"]["0.1"] < 2.0
+
+
+def test_a_gyro_candidate_past_one_that_gains_nothing_is_still_tried():
+    """The likelihood need not rise step by step (quick tactical U2004: 0.1 deg/h as likely as
+    1, with the prior chosen on its own estimate, and 10 far more likely than either)."""
+    best, calls, report = _search({0.01: 10.0, 0.1: 50.0, 1.0: 50.2, 10.0: 90.0}, screen=15.0)
+    assert calls == [0.1, 1.0, 10.0] and report["value"] == 10.0 and best.log_likelihood == 90.0
+    assert report["gain_z"]["1"] < 2.0 < report["gain_z"]["10"]
 
 
 def test_a_noisier_gyro_carries_its_grades_bias_prior_unless_the_config_gives_one():
@@ -82,10 +90,10 @@ def test_a_noisier_gyro_carries_its_grades_bias_prior_unless_the_config_gives_on
     assert "gyro_bias_sigma_degph" not in report
 
 
-def test_a_gyro_candidate_that_fails_ends_the_search_and_is_reported():
-    _, calls, report = _search({0.01: 10.0, 0.1: 50.0, 1.0: 60.0}, screen=15.0, fail_at=1.0)
-    assert calls == [0.1, 1.0] and report["value"] == 0.1
-    assert "did not settle" in report["failed"]["1"]
+def test_a_gyro_candidate_that_fails_is_reported_and_the_rest_tried():
+    _, calls, report = _search({0.01: 10.0, 0.1: 50.0, 1.0: 60.0, 10.0: 20.0}, screen=15.0, fail_at=1.0)
+    assert calls == [0.1, 1.0, 10.0] and report["value"] == 0.1
+    assert "did not settle" in report["failed"]["1"] and report["gain_z"]["10"] < -2.0
 
 
 def test_a_flight_without_a_given_gyro_noise_chooses_on_either_triad():

@@ -1541,6 +1541,12 @@ def straight_weight(nav, f_t, times, also=None) -> np.ndarray:
 
 #: Averaging window (s) of the first-pass estimate whose variance the prior must be able to
 #: hold (:func:`field_variance_seen`): long enough that the wide pass's noise averages down.
+#: The average is Hann-weighted over twice this span (its first null at ``1 / window``, as a
+#: running mean's over the span itself): a running mean's sidelobes fall as ``f^-2`` only and
+#: let the height noise, rising as ``f^4`` up to the wide pass's cut-off, through - on a 25-min
+#: turning grid its noise through a 120-s running mean was 8.0 mGal, through the Hann 0.7, so a
+#: field of 5 mGal along the lines was counted as none (docs/benchmarks.md, "The field's
+#: variance through a Hann window").
 FIELD_VAR_WINDOW_S = 120.0
 #: Least fraction of that variance the prior must hold.
 FIELD_VAR_HELD = 0.25
@@ -1558,12 +1564,22 @@ SIGNAL_MARGIN_SE = 2.0
 SIGNAL_RESUME_MARGINS = 5.0
 
 
-def _window_kernel(f, window_s: float, span_s: float):
-    """|transfer|^2 of "running mean over ``window_s``, then minus the mean over ``span_s``"."""
-    return np.sinc(f * window_s) ** 2 * (1.0 - np.sinc(f * span_s) ** 2)
+def _window_kernel(f, window_s: float, span_s: float, hann: bool = False):
+    """|transfer|^2 of "running mean over ``window_s``, then minus the mean over ``span_s``";
+    with ``hann``, of the Hann-weighted mean over ``2 window_s`` (:data:`FIELD_VAR_WINDOW_S`)."""
+    f = np.asarray(f, float)
+    less_mean = 1.0 - np.sinc(f * span_s) ** 2
+    if not hann:
+        return np.sinc(f * window_s) ** 2 * less_mean
+    # a Hann window of length L: sinc(f L) / (1 - (f L)^2), 1/2 at f L = 1
+    x = 2.0 * window_s * f
+    den = 1.0 - x * x
+    near = np.abs(den) < 1e-9
+    h = np.where(near, 0.5, np.sinc(x) / np.where(near, 1.0, den))
+    return h * h * less_mean
 
 
-def windowed_variance(psd, window_s: float, span_s: float) -> float:
+def windowed_variance(psd, window_s: float, span_s: float, hann: bool = False) -> float:
     """Variance of a stationary process seen through :func:`_window_kernel`, (m/s^2)^2.
 
     Parameters
@@ -1572,24 +1588,27 @@ def windowed_variance(psd, window_s: float, span_s: float) -> float:
         Two-sided PSD ``S(f)`` of the process, (m/s^2)^2/Hz, vectorised over ``f`` (Hz).
     window_s, span_s : float
         Running-mean window and the record's span, s.
+    hann : bool
+        The Hann-weighted mean of :func:`field_variance_seen` instead of the running mean.
     """
     f = np.geomspace(1e-3 / span_s, 20.0 / window_s, 4000)
-    y = psd(f) * _window_kernel(f, window_s, span_s)
+    y = psd(f) * _window_kernel(f, window_s, span_s, hann)
     return float(2.0 * np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(f)))
 
 
 def _windowed_variances(psd, span_s: float, window_s: float = FIELD_VAR_WINDOW_S) -> np.ndarray:
-    """:func:`windowed_variance` of several processes at once, (m/s^2)^2 (p,).
+    """:func:`windowed_variance` (Hann-weighted) of several processes at once, (m/s^2)^2 (p,).
 
     ``psd`` maps the frequencies (Hz, (k,)) to the PSDs ((p, k)); the same quadrature, row by row.
     """
     f = np.geomspace(1e-3 / span_s, 20.0 / window_s, 4000)
-    y = psd(f) * _window_kernel(f, window_s, span_s)[None, :]
+    y = psd(f) * _window_kernel(f, window_s, span_s, hann=True)[None, :]
     return 2.0 * np.sum(0.5 * (y[:, 1:] + y[:, :-1]) * np.diff(f)[None, :], axis=1)
 
 
 def field_variance_seen(g, weight, dt_s: float, window_s: float = FIELD_VAR_WINDOW_S) -> float:
-    """Weighted variance of ``g`` averaged over ``window_s`` (weights: 0 in turns), (m/s^2)^2.
+    """Weighted variance of ``g`` averaged with Hann weights over ``2 window_s`` (weights: 0 in
+    turns), (m/s^2)^2; :func:`windowed_variance` with ``hann=True`` is a process's through it.
 
     Parameters
     ----------
@@ -1598,11 +1617,22 @@ def field_variance_seen(g, weight, dt_s: float, window_s: float = FIELD_VAR_WIND
     weight : ndarray (N,)
         :func:`straight_weight`.
     """
-    m = max(1, int(round(window_s / dt_s)))
-    kern = np.ones(m)
+    m = max(1, int(round(2.0 * window_s / dt_s)))
+    # (the end samples of np.hanning are zero: m nonzero weights)
+    kern = np.hanning(m + 2)[1:-1]
+    kern = kern / kern.sum()
+    # the record's ends ramped over half the window, and only epochs whose window holds 3/4 of
+    # its weight: a window cut short by a hard end or a turn's ramp is narrower and passes the
+    # height noise that rises to the wide pass's cut-off (on height noise alone, through the wide
+    # pass's transfer: 9.9x the variance windowed_variance states with the record's hard ends
+    # and 1/2 of the weight, 1.4x as here; 2.2x with three turns, within FIELD_VAR_NOISE_MARGIN)
+    weight = np.asarray(weight, float).copy()
+    weight[0] = weight[-1] = 0.0
+    half = np.hanning(m // 2 + 2)[1:-1]
+    weight = np.minimum(weight, np.convolve(weight, half / half.sum(), mode="same"))
     num = np.convolve(g * weight, kern, mode="same")
     den = np.convolve(weight, kern, mode="same")
-    ok = den > 0.5 * m
+    ok = den > 0.75
     if ok.sum() < 2:
         return 0.0
     lp = num[ok] / den[ok]
@@ -1797,9 +1827,16 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
         sg = markov_psd(x, wide.anomaly_sigma_mps2, tau1)
         return sn * (sg / (sg + sn1)) ** 2
 
-    var_field = max(
-        var_seen - FIELD_VAR_NOISE_MARGIN * windowed_variance(first_pass_noise, FIELD_VAR_WINDOW_S, span), 0.0
-    )
+    # less the datasheet drift the wide pass carries as well (DRIFT_DEFAULT_SIGMA_MPS2: a flight
+    # cannot tell it from a field; where the config models the drift, the filter holds it): a
+    # weak field (0.6 mGal, quick U2630) is not held by a prior that would then pass the drift
+    drift_w = 0.0
+    if not {"gravimeter_sigma_mps2", "gravimeter_lambda_per_s"} & given:
+        drift_w = windowed_variance(
+            lambda x: markov_psd(x, DRIFT_DEFAULT_SIGMA_MPS2, DRIFT_DEFAULT_TAU_S), FIELD_VAR_WINDOW_S, span, hann=True
+        )
+    noise_w = windowed_variance(first_pass_noise, FIELD_VAR_WINDOW_S, span, hann=True)
+    var_field = max(var_seen - FIELD_VAR_NOISE_MARGIN * noise_w - drift_w, 0.0)
     # the lowest band of 8 bins, then log-spaced bands (1 bin and up at the low end, wider
     # above): the periodogram's scatter (100 % per bin) averages down where the bands widen,
     # and each band's margin follows its own size (band_margin); bands of 8 bins at least

@@ -459,12 +459,17 @@ GYRO_NOISE_GAIN_Z = 2.0
 GYRO_BIAS_PER_WHITE = 0.1
 
 
-def _likelihood_search(first, params: InmParams, key: str, candidates, gain_z: float, estimate, companion=None):
+def _likelihood_search(
+    first, params: InmParams, key: str, candidates, gain_z: float, estimate, companion=None, every=False
+):
     """The whole estimate with ``params.<key>`` set to each of ``candidates`` in turn, each
     replacing the one before while more likely by ``gain_z`` standard errors
     (:func:`gravsurvey.inm.kalman.likelihood_gain_z`); the search stops at the first that is not,
     or that fails (a GravsurveyError or a numerical failure: a candidate that cannot be estimated
     is no reason to fail a flight the default estimated; reported, its warnings not shown).
+    With ``every``, each candidate is tried against the best so far (the likelihood need not
+    rise step by step: one candidate's prior chosen on its own estimate can make it as likely
+    as the next while the one after is far more likely).
 
     Returns ``(value, (sol, shown), log_likelihoods, gains, failed)``: the value kept, its
     estimate and warnings, and per value tried (keys ``f"{v:.3g}"``) the total log-likelihood,
@@ -480,13 +485,16 @@ def _likelihood_search(first, params: InmParams, key: str, candidates, gain_z: f
             )
         except (GravsurveyError, np.linalg.LinAlgError, FloatingPointError) as exc:
             failed[f"{v:.3g}"] = str(exc).splitlines()[0]
+            if every:
+                continue
             break
         z = likelihood_gain_z(other.log_likelihood_epochs, best.log_likelihood_epochs)
         lls[f"{v:.3g}"] = float(other.log_likelihood)
         gains[f"{v:.3g}"] = z if math.isfinite(z) else None
-        if not z > gain_z:
+        if z > gain_z:
+            value, best, shown = v, other, caught
+        elif not every:
             break
-        value, best, shown = v, other, caught
     return value, (best, shown), lls, gains, failed
 
 
@@ -505,8 +513,10 @@ def choose_gyro_noise(first, params: InmParams, estimate):
 
     ``first[0].gyro_screen_z`` (one pass with the first of :data:`GYRO_NOISE_CANDIDATES_DEGPH`
     about the default estimate's linearisation) above :data:`GYRO_SCREEN_Z` runs the whole
-    estimate with each candidate in turn while each is more likely than the one before by
-    :data:`GYRO_NOISE_GAIN_Z` standard errors, as :func:`choose_accel_noise` does.  A candidate
+    estimate with each candidate in turn, each kept where more likely than the best before it by
+    :data:`GYRO_NOISE_GAIN_Z` standard errors; unlike :func:`choose_accel_noise` every candidate
+    is tried (quick tactical U2004: 0.1 deg/h with the prior chosen on its own estimate as
+    likely as 1, 10 far more likely than either; 0.50 mGal with 10, 2.99 stopped at 0.1).  A candidate
     carries the bias prior of its grade (:data:`GYRO_BIAS_PER_WHITE`) where the config gives none.
 
     Returns
@@ -529,6 +539,7 @@ def choose_gyro_noise(first, params: InmParams, estimate):
         GYRO_NOISE_GAIN_Z,
         estimate,
         companion=lambda v: _gyro_bias_companion(params, v),
+        every=True,
     )
     kept = value == float(params.gyro_drift_degph)
     report = {
