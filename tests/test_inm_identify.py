@@ -344,6 +344,16 @@ def test_height_noise_through_the_wide_pass_is_held_off_the_field_variance():
     assert np.mean(boxcar) > 30.0 * np.mean(seen)
 
 
+def test_field_variance_seen_of_a_record_shorter_than_its_window_is_none():
+    """Shorter than the Hann window (240 s): nothing seen through it, no failure; samples far
+    apart (one per window): the variance about the weighted mean, the record's ramped ends
+    weighted out."""
+    g = np.random.default_rng(0).standard_normal(100) * 1e-5
+    assert I.field_variance_seen(g, np.ones(100), 1.0) == 0.0
+    seen = I.field_variance_seen(g, np.ones(100), 300.0)
+    assert seen == pytest.approx(np.var(g[1:-1]), rel=0.05)
+
+
 def _wide_gain(f, wide, tau1, noise, dt):
     """The wide pass's transfer S_g / (S_g + S_n) against height noise alone."""
     s_g = I.markov_psd(f, wide.anomaly_sigma_mps2, tau1)

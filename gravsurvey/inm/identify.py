@@ -1587,7 +1587,8 @@ def windowed_variance(psd, window_s: float, span_s: float, hann: bool = False) -
     psd : callable
         Two-sided PSD ``S(f)`` of the process, (m/s^2)^2/Hz, vectorised over ``f`` (Hz).
     window_s, span_s : float
-        Running-mean window and the record's span, s.
+        Running-mean window (with ``hann``, half the Hann window's length) and the record's
+        span, s.
     hann : bool
         The Hann-weighted mean of :func:`field_variance_seen` instead of the running mean.
     """
@@ -1618,6 +1619,9 @@ def field_variance_seen(g, weight, dt_s: float, window_s: float = FIELD_VAR_WIND
         :func:`straight_weight`.
     """
     m = max(1, int(round(2.0 * window_s / dt_s)))
+    if m > np.size(g):
+        # a record shorter than the window shows no variance through it
+        return 0.0
     # (the end samples of np.hanning are zero: m nonzero weights)
     kern = np.hanning(m + 2)[1:-1]
     kern = kern / kern.sum()
@@ -1628,7 +1632,7 @@ def field_variance_seen(g, weight, dt_s: float, window_s: float = FIELD_VAR_WIND
     # and 1/2 of the weight, 1.4x as here; 2.2x with three turns, within FIELD_VAR_NOISE_MARGIN)
     weight = np.asarray(weight, float).copy()
     weight[0] = weight[-1] = 0.0
-    half = np.hanning(m // 2 + 2)[1:-1]
+    half = np.hanning(max(m // 2, 1) + 2)[1:-1]
     weight = np.minimum(weight, np.convolve(weight, half / half.sum(), mode="same"))
     num = np.convolve(g * weight, kern, mode="same")
     den = np.convolve(weight, kern, mode="same")
