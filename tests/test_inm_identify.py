@@ -324,12 +324,7 @@ def test_height_noise_through_the_wide_pass_is_held_off_the_field_variance():
     bad = np.zeros(n, bool)
     for c in (1800, 3700, 5600):
         bad[c - 150 : c + 150] = True
-    m = int(I.MANOEUVRE_MARGIN_S / dt)
-    cum = np.concatenate([[0], np.cumsum(bad)])
-    i = np.arange(n)
-    dilated = (cum[np.clip(i + m + 1, 0, n)] - cum[np.clip(i - m, 0, n)]) > 0
-    ramp = np.hanning(2 * m + 1)
-    turns = np.clip(np.convolve((~dilated).astype(float), ramp / ramp.sum(), mode="same"), 0.0, 1.0)
+    turns = I.ramped_weight(bad, dt)
     seen, seen_turns, boxcar = [], [], []
     for _ in range(200):
         h = rng.standard_normal(n) * sigma_h

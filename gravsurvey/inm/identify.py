@@ -1527,15 +1527,21 @@ def straight_weight(nav, f_t, times, also=None) -> np.ndarray:
         bad = bad | np.asarray(also, bool)
     if t.size < 2:
         return (~bad).astype(float)
-    dt = float(np.median(np.diff(t)))
-    m = max(1, int(round(MANOEUVRE_MARGIN_S / dt)))
+    return ramped_weight(bad, float(np.median(np.diff(t))))
+
+
+def ramped_weight(bad, dt_s: float) -> np.ndarray:
+    """Weight in [0, 1] (N,): 0 on the samples ``bad`` (bool (N,), ``dt_s`` s apart) dilated by
+    :data:`MANOEUVRE_MARGIN_S`, rising to 1 over a cosine ramp as long (:func:`straight_weight`)."""
+    bad = np.asarray(bad, bool)
+    m = max(1, int(round(MANOEUVRE_MARGIN_S / dt_s)))
     ramp = np.hanning(2 * m + 1)
     ramp /= ramp.sum()
     # dilate by m, then smooth with a kernel of the same half width: 0 inside the dilated turn's
     # core, rising to 1 over m samples
     c = np.concatenate([[0], np.cumsum(bad.astype(np.int64))])
-    i = np.arange(t.size)
-    dil = (c[np.clip(i + m + 1, 0, t.size)] - c[np.clip(i - m, 0, t.size)]) > 0
+    i = np.arange(bad.size)
+    dil = (c[np.clip(i + m + 1, 0, bad.size)] - c[np.clip(i - m, 0, bad.size)]) > 0
     return np.clip(np.convolve((~dil).astype(float), ramp, mode="same"), 0.0, 1.0)
 
 
