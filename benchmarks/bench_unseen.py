@@ -5,7 +5,7 @@ Usage::
 
     python benchmarks/bench_unseen.py [--flights N] [--quick] [--first-seed S] [--json out.json]
         [--runs default,oracle,classic] [--heights altimeter|gnss|carrier-phase] [--model KEY=VALUE ...] [--accel-bias B1,B2] [--gyro BIAS_DEGPH,WHITE_DEGPH]
-        [--gravimeter-drift MGAL_PER_H] [--gravimeter-tare AT,MGAL] [--gnss-markov SIGMA_M,TAU_S]
+        [--gravimeter-drift MGAL_PER_H] [--gravimeter-tare AT,MGAL] [--gnss-markov SIGMA_M,TAU_S] [--vertical-field-only]
 
 Draws ``N`` (default 20) flights with seeds ``S .. S+N-1`` from the unseen-flight generator
 (``gravsurvey.simulate.unseen``: random fields, noise x0.3-x3, rates, triads, headings,
@@ -56,6 +56,8 @@ carrier-phase grade and its heights the only height channel (:func:`with_carrier
 ``--gravimeter-tare AT,MGAL`` a step of the gravimeter's reading at the fraction ``AT`` of the
 flight (:func:`with_gravimeter_tare`);
 ``--gnss-markov SIGMA_M,TAU_S`` a slowly varying GNSS error (:func:`with_gnss_markov`);
+``--vertical-field-only`` zeroes the field's horizontal components at the sensors
+(:func:`with_vertical_field_only`);
 ``--line-levels DZ_M`` flies every second line DZ_M higher (:func:`with_line_levels`);
 ``--wind SPEED,FROM_DEG[,ground]`` flies every flight in a steady wind (:func:`with_wind`);
 ``--airfield HEIGHT_M[,CLIMB_MPS]`` starts and ends every flight parked on the ground
@@ -648,6 +650,15 @@ def with_gnss_markov(spec: dict, sigma_m: float, tau_s: float) -> dict:
     return out
 
 
+def with_vertical_field_only(spec: dict) -> dict:
+    """The drawn flight with its field's horizontal components set to zero at the sensors
+    (``field.horizontal: false``; not a physical field: it shows what the deflections of the
+    vertical do, docs/benchmarks.md "The field's horizontal components pose as gyro noise")."""
+    out = json.loads(json.dumps(spec))
+    out["sim"]["field"]["horizontal"] = False
+    return out
+
+
 def evaluate_flight(
     spec, folder: Path, runs=("default", "oracle", "classic"), heights: str = "altimeter", model=None
 ) -> dict:
@@ -968,6 +979,12 @@ def main(argv=None):
         "(docs/benchmarks.md 'A gravimeter tare')",
     )
     ap.add_argument(
+        "--vertical-field-only",
+        action="store_true",
+        help="zero the field's horizontal components at the sensors (not a physical field; "
+        "docs/benchmarks.md 'The field's horizontal components pose as gyro noise')",
+    )
+    ap.add_argument(
         "--gnss-markov",
         default=None,
         metavar="SIGMA_M,TAU_S",
@@ -1090,6 +1107,8 @@ def main(argv=None):
             spec = with_gravimeter_tare(spec, *tare)
         if gnss_markov is not None:
             spec = with_gnss_markov(spec, *gnss_markov)
+        if a.vertical_field_only:
+            spec = with_vertical_field_only(spec)
         if a.line_levels is not None:
             spec = with_line_levels(spec, a.line_levels)
         if wind is not None:

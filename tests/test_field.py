@@ -559,6 +559,8 @@ def test_config_good():
     mk = field_model_from_dict({"type": "markov", "lambda_s_per_m": 2e-5, "sigma_mps2": 5e-4, "seed": 4})
     assert (mk.lambda_s_per_m, mk.sigma_mps2, mk.seed) == (2e-5, 5e-4, 4)
     assert field_model_from_dict({"type": "model"}).n_sources == 0
+    assert field_model_from_dict({"type": "model"}).horizontal
+    assert not field_model_from_dict({"type": "model", "horizontal": False}).horizontal
 
 
 @pytest.mark.parametrize(
@@ -587,6 +589,8 @@ def test_config_good():
         (("type",), KeyError, r"field\.type: missing required key"),
         (("prism",), [], r"field\.prism: unknown key \(did you mean 'prisms'\?\)"),
         (("seed",), 3, r"field\.seed: not allowed with field\.type 'model'"),
+        (("horizontal",), "no", r"field\.horizontal: expected true or false .*got 'no'"),
+        (("horizontal",), 0, r"field\.horizontal: expected true or false .*got int 0"),
     ],
 )
 def test_config_errors_name_the_key(path, value, message):

@@ -9,12 +9,15 @@ Truth: the simulator (gravsurvey/simulate) and its unseen-flight generator, flig
 
 import math
 
+import numpy as np
 import pytest
 
+from gravsurvey.geodesy import MGAL
 from gravsurvey.inm import solve
-from gravsurvey.inm.params import InmParams
+from gravsurvey.inm.identify import TILT_GRAVITY_MPS2, field_attitude_noise_degph
+from gravsurvey.inm.params import RADPS_PER_DEGPH, InmParams
 from gravsurvey.settings import inm_params
-from gravsurvey.inm.solve import choose_gyro_noise, estimate_anomaly, may_choose_gyro_noise
+from gravsurvey.inm.solve import choose_gyro_noise, estimate_anomaly, gyro_noise_warning, may_choose_gyro_noise
 from gravsurvey.simulate.run import simulate_flight
 from gravsurvey.simulate.unseen import draw_flight_spec, limit_spec
 from sim_record import record_and_initial, with_tactical_imu
@@ -180,3 +183,56 @@ def test_a_platforms_tactical_imu_is_found_too():
     assert "accel_bias_found" not in drawn_sol.identification and not drawn_sol.accel_bias_taken_off
     rms_drawn = _rms_mgal(drawn, drawn_sol)
     assert rms < 0.1 * rms_fixed and rms < 1.3 * rms_drawn, (rms, rms_fixed, rms_drawn)
+
+
+def test_the_field_attitude_noise_is_a_markov_tilts_white_rate():
+    """A horizontal component of the prior (sigma / sqrt(2), the same correlation) read as a tilt
+    ``dg_h / g``: the variance of its one-second increments, ``2 s^2 (1 - exp(-1 / tau))``, is the
+    one-second variance of a gyro white drift of the figure (within 0.3 % at tau >= 100 s)."""
+    for sigma_mgal, tau in ((16.0, 231.0), (1.0, 100.0), (60.0, 2000.0)):
+        q = field_attitude_noise_degph(sigma_mgal * MGAL, tau) * RADPS_PER_DEGPH
+        s_tilt = sigma_mgal * MGAL / math.sqrt(2.0) / TILT_GRAVITY_MPS2
+        assert q**2 == pytest.approx(2.0 * s_tilt**2 * -math.expm1(-1.0 / tau), rel=3e-3)
+    # U2702 of the fresh draws: its prior, 15.8 mGal over 231 s, asks 0.22 deg/h
+    assert field_attitude_noise_degph(1.58e-4, 231.0) == pytest.approx(0.219, abs=0.001)
+    for bad in ((None, 100.0), (1e-4, 0.0), (0.0, 100.0), (float("nan"), 100.0), ("x", 1.0)):
+        assert field_attitude_noise_degph(*bad) is None
+
+
+def test_the_warning_names_the_field_where_it_could_be_the_field():
+    model = {"anomaly_sigma_mps2": 1.6e-4, "anomaly_tau_s": 231.0}
+    gyro = gyro_noise_warning(10.0, 0.01, 0.05, model)
+    assert gyro.startswith("the gyros are noisier than the default model's: the filter's likelihood")
+    assert "horizontal" not in gyro and gyro == gyro_noise_warning(10.0, 0.01, None, {})
+    both = gyro_noise_warning(1.0, 0.01, 0.16, model)
+    assert both.startswith("the gyros are noisier than the default model's, or the attitude takes up the field's")
+    assert "at the prior's 16 mGal over 231 s, ask about 0.16 deg/h of it" in both and "drift of 1 deg/h" in both
+    # the factor's edge: one candidate step
+    assert "horizontal" in gyro_noise_warning(1.0, 0.01, 1.0 / solve.FIELD_GYRO_FACTOR, model)
+    assert "horizontal" not in gyro_noise_warning(1.0, 0.01, 0.99 / solve.FIELD_GYRO_FACTOR, model)
+
+
+def test_a_strong_fields_horizontal_components_pose_as_gyro_noise():
+    """Quick U2734 of the fresh draws (a platform, 40 min at 50 Hz, navigation-grade gyros of
+    0.02 deg/h, a 95-mGal field): the screen asks and the likelihood takes 1 deg/h, the warning
+    names the field's horizontal components as a cause (1 deg/h within ten times the 0.16 they
+    ask).  The same flight with the field's horizontal components set to zero in the simulator
+    keeps the default, the screen far below its threshold: the deflections of the vertical, not
+    the gyros, asked for the noisier gyro."""
+    spec = limit_spec(draw_flight_spec(2734), 2400.0, 50.0)
+    assert spec["triad"] == "platform"
+    drawn = simulate_flight(spec["sim"])
+    sol = estimate_anomaly(record_and_initial(drawn)[0], InmParams(), None, "platform")
+    report = sol.identification["gyro_drift_degph"]
+    assert report["screen_z"] > solve.GYRO_SCREEN_Z and report["value"] >= 0.1
+    assert report["value"] <= solve.FIELD_GYRO_FACTOR * report["field_attitude_noise_degph"]
+    assert [w for w in sol.warnings if "or the attitude takes up the field's horizontal components" in w]
+    spec["sim"]["field"]["horizontal"] = False
+    vertical_only = simulate_flight(spec["sim"])
+    # the same flight and field but for the horizontal components
+    assert np.abs(drawn.truth["dg_north"]).max() > 1e-4 and not vertical_only.truth["dg_north"].any()
+    assert np.array_equal(vertical_only.truth["disturbance"], drawn.truth["disturbance"])
+    flat = estimate_anomaly(record_and_initial(vertical_only)[0], InmParams(), None, "platform")
+    report = flat.identification["gyro_drift_degph"]
+    assert report["value"] == 0.01 and report["screen_z"] < solve.GYRO_SCREEN_Z - 10.0
+    assert not [w for w in flat.warnings if w.startswith("the gyros are noisier")]

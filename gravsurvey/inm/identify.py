@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef, mat_ie
+from .params import RADPS_PER_DEGPH
 
 __all__ = [
     "IDENTIFIED_KEYS",
@@ -81,6 +82,7 @@ __all__ = [
     "model_resolution_m",
     "spectral_model_of",
     "horizontal_prior",
+    "field_attitude_noise_degph",
     "drift_sigma_passed",
     "white_log_likelihood_ratio",
     "tilt_leak_factor",
@@ -2044,6 +2046,52 @@ def horizontal_prior(
     length = max(float(np.sum(acf[:k])) * spacing_m, spacing_m)
     sig_g = min(max(math.sqrt(var / 2.0), BOUNDS["anomaly_sigma_mps2"][0]), sig_h)
     return sig_g, 1.0 / length
+
+
+#: Normal gravity's round figure, m/s^2: the tilt a horizontal disturbance poses as is
+#: ``dg_h / g``, and a percent of ``g`` is far below the figure's own approximation.
+TILT_GRAVITY_MPS2 = 9.81
+
+
+def field_attitude_noise_degph(anomaly_sigma_mps2: float, anomaly_tau_s: float) -> float | None:
+    """The white gyro drift with which a scalar filter's attitude follows the field's horizontal
+    components, deg/h (one-second sigma, as ``model.gyro_drift_degph``).
+
+    The scalar model has no states for the horizontal disturbance ``dg_h``; in the velocity
+    error it enters as a tilt ``phi`` does (``g x phi``), so the filter can follow it only as a
+    tilt ``dg_h / g``, driven by the gyros' white drift.  Each horizontal component is the
+    vertical prior with ``sigma / sqrt(2)`` and the same correlation (:func:`horizontal_prior`:
+    a harmonic field's two horizontal components carry the vertical's power at every
+    along-track frequency).  The rate of a Gauss-Markov process of sigma ``s`` and correlation
+    time ``tau`` is, above ``1 / tau``, white of two-sided density ``2 s^2 / tau``; with ``s =
+    sigma / (sqrt(2) g)`` that is a gyro white drift of one-second sigma::
+
+        q = sigma / (g sqrt(tau / 1 s))
+
+    On strong fields the filter's likelihood takes a gyro noise of 0.1-10 deg/h where the gyros
+    draw 0.003-0.03 (14 of 23 simulated flights over 60 mGal, 2 of 157 under), 14 of the 16
+    within ten times this figure; with the simulated field's horizontal components set to zero the default
+    is kept (docs/benchmarks.md, "The field's horizontal components pose as gyro noise").
+
+    Parameters
+    ----------
+    anomaly_sigma_mps2 : float
+        Sigma of the vertical disturbance prior, m/s^2.
+    anomaly_tau_s : float
+        Its correlation time along the flight, s.
+
+    Returns
+    -------
+    float or None
+        None where either figure is missing or not positive.
+    """
+    try:
+        sigma, tau = float(anomaly_sigma_mps2), float(anomaly_tau_s)
+    except (TypeError, ValueError):
+        return None
+    if not (sigma > 0 and tau > 0 and math.isfinite(sigma) and math.isfinite(tau)):
+        return None
+    return sigma / (TILT_GRAVITY_MPS2 * math.sqrt(tau)) / RADPS_PER_DEGPH
 
 
 # --- the gravimeter's slow error (issue 12 item 2) ------------------------------------------

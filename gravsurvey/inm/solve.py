@@ -55,6 +55,7 @@ from .heightqc import (
 from .identify import (
     WALK_MIN_LOG_LR,
     drift_sigma_passed,
+    field_attitude_noise_degph,
     filter_height_sigma,
     height_noise_density,
     horizontal_prior,
@@ -453,6 +454,13 @@ GYRO_SCREEN_Z = 10.0
 #: A gyro candidate replaces the one before it when its whole estimate is this many standard
 #: errors more likely (as :data:`ACCEL_NOISE_GAIN_Z`).
 GYRO_NOISE_GAIN_Z = 2.0
+#: A gyro noise chosen within this factor of what the field's horizontal components ask of the
+#: attitude (:func:`~gravsurvey.inm.identify.field_attitude_noise_degph`: one step of the
+#: candidates' decades) may be the field's, not the gyros': the warning names both.  Of 180
+#: simulated flights with navigation-grade gyros 16 took a noisier one, 14 within 0.3-6.3 times
+#: that figure (fields of 61-100 mGal but one), full U014 10.9 and quick U006 49; of 51 with
+#: fibre-optic or tactical gyros 49 took 10.8-8300 times it (fibre-optic U006 4.9, U012 0.2).
+FIELD_GYRO_FACTOR = 10.0
 #: A gyro candidate's bias prior per its white drift (deg/h per deg/h one-second sigma): a
 #: datasheet's in-run bias is about a tenth of it or less (a tactical IMU's 0.75 deg/h for 6, a
 #: fibre-optic one's 0.05 for 0.7).
@@ -785,16 +793,51 @@ def estimate_anomaly(
         sol.identification = {**sol.identification, "filter_rate_hz": rate_report}
     if gyro_report is not None:
         sol.identification = {**sol.identification, "gyro_drift_degph": gyro_report}
+        model = sol.identification.get("spectral_model") or {}
+        field_q = field_attitude_noise_degph(model.get("anomaly_sigma_mps2"), model.get("anomaly_tau_s"))
+        gyro_report["field_attitude_noise_degph"] = field_q
         if gyro_report["value"] != float(params_in.gyro_drift_degph):
-            warn = (
-                "the gyros are noisier than the default model's: the filter's likelihood clearly prefers a white "
-                f"drift of {gyro_report['value']:g} deg/h (one-second sigma) to {params_in.gyro_drift_degph:g}; give "
-                "the datasheet's angle random walk as model.gyro_drift_degph (deg/sqrt(h) x 60)"
-            )
+            warn = gyro_noise_warning(gyro_report["value"], float(params_in.gyro_drift_degph), field_q, model)
             sol.identification["warnings"] = [*sol.identification.get("warnings", []), warn]
             sol.warnings = [*sol.warnings, warn]
     show_warnings(shown)
     return sol
+
+
+def gyro_noise_warning(chosen_degph: float, default_degph: float, field_q_degph, model: dict) -> str:
+    """The warning for a gyro white drift the likelihood took over the default.
+
+    Where the chosen figure is within :data:`FIELD_GYRO_FACTOR` of what the field's horizontal
+    components ask of the attitude (``field_q_degph``, from
+    :func:`~gravsurvey.inm.identify.field_attitude_noise_degph`), the likelihood cannot tell
+    noisier gyros from those components (the scalar model has no states for them), and the
+    warning says so; otherwise it says the gyros are noisier.
+
+    Parameters
+    ----------
+    chosen_degph, default_degph : float
+        The white drift taken and the default's, deg/h (one-second sigma).
+    field_q_degph : float or None
+        The field's figure, deg/h; None where the prior is not known.
+    model : dict
+        The identification's ``spectral_model`` (its ``anomaly_sigma_mps2``, m/s^2, and
+        ``anomaly_tau_s``, s, named).
+    """
+    prefers = (
+        f"the filter's likelihood clearly prefers a white drift of {chosen_degph:g} deg/h (one-second sigma) "
+        f"to {default_degph:g}"
+    )
+    give = "give the datasheet's angle random walk as model.gyro_drift_degph (deg/sqrt(h) x 60)"
+    if field_q_degph is None or chosen_degph > FIELD_GYRO_FACTOR * field_q_degph:
+        return f"the gyros are noisier than the default model's: {prefers}; {give}"
+    sigma_mgal = float(model.get("anomaly_sigma_mps2", 0.0)) / MGAL
+    tau_s = float(model.get("anomaly_tau_s", 0.0))
+    return (
+        f"the gyros are noisier than the default model's, or the attitude takes up the field's horizontal "
+        f"components (its deflections of the vertical, at the prior's {sigma_mgal:.2g} mGal over {tau_s:.0f} s, "
+        f"ask about {field_q_degph:.2g} deg/h of it; the scalar model has no states for them): {prefers}, and the "
+        f'estimate uses it either way (docs/method.md, "Gyro noise by likelihood"); {give} to hold it'
+    )
 
 
 def tactical_rate_params(params: InmParams, record) -> InmParams | None:

@@ -567,6 +567,10 @@ class FieldModel:
         Random seed of the Markov realisation.
     ellipsoid : Ellipsoid
         Ellipsoid the source placements (latitude, longitude, depth) refer to.
+    horizontal : bool
+        Whether the flight's sensors feel the sources' horizontal components (``type ==
+        "model"``).  False keeps the vertical only: not a physical field, for tests that
+        isolate what the deflections of the vertical do to an estimate.
     """
 
     type: str = "model"
@@ -577,6 +581,7 @@ class FieldModel:
     sigma_mps2: float = 1.0e-3
     seed: int = 0
     ellipsoid: Ellipsoid = dc_field(default=WGS84)
+    horizontal: bool = True
 
     @property
     def n_sources(self) -> int:
@@ -1018,7 +1023,7 @@ _SOURCE_KEYS = {
     "prisms": ("lat_deg", "lon_deg", "east_m", "north_m", "depth_m", "density_kgm3"),
 }
 _TOP_KEYS = {
-    "model": ("type", "point_masses", "dipoles", "prisms"),
+    "model": ("type", "point_masses", "dipoles", "prisms", "horizontal"),
     "seed_smooth": ("type",),
     "seed_steps": ("type",),
     "markov": ("type", "lambda_s_per_m", "sigma_mps2", "seed"),
@@ -1172,4 +1177,10 @@ def field_model_from_dict(d, key_path: str = "field", ellipsoid: Ellipsoid = WGS
             check_keys(item, keys, path, required=keys)
             out.append(_SOURCE_PARSERS[name](item, path))
         parsed[name] = tuple(out)
-    return FieldModel(type="model", ellipsoid=ellipsoid, **parsed)
+    horizontal = d.get("horizontal", True)
+    if not isinstance(horizontal, bool):
+        raise ConfigError(
+            f"{key_path}.horizontal: expected true or false (whether the sources' horizontal components "
+            f"act on the sensors), got {_describe(horizontal)}"
+        )
+    return FieldModel(type="model", ellipsoid=ellipsoid, horizontal=horizontal, **parsed)

@@ -225,7 +225,10 @@ class _Anomaly:
             from .field import anomalous_gravitation_ecef
 
             g_e = anomalous_gravitation_ecef(self.model, kin.r_e)
-            return np.einsum("nij,nj->ni", mat_ne(kin.lat, kin.lon), g_e)
+            out = np.einsum("nij,nj->ni", mat_ne(kin.lat, kin.lon), g_e)
+            if not self.model.horizontal:
+                out[:, :2] = 0.0
+            return out
         if self.kind in ("seed_smooth", "seed_steps"):
             from .field import seed_smooth_disturbance, seed_steps_disturbance
 
