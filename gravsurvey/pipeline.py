@@ -370,6 +370,11 @@ def estimate_drift(est: FlightEstimate, segs, options=None, filter_lines: bool =
     if drift is None:
         return []
     est.drift = drift
+    if used and report.get("rest_to") == "none":
+        # the fitted drift's weight below one, the rest to no drift: that share of the error is
+        # the drift the smoother passes, of the size the lines support
+        passed = passed_drift_factor(report, options) * est.drift_sigma_passed
+        sigma = np.sqrt(sigma**2 + (1.0 - report["fitted_weight"]) * passed**2)
     if used:
         if filter_lines and options.field_filter:
             sigma = filter_field(est, segs, sigma, report)
