@@ -84,6 +84,7 @@ __all__ = [
     "horizontal_prior",
     "field_attitude_noise_degph",
     "drift_sigma_passed",
+    "config_models_drift",
     "white_log_likelihood_ratio",
     "tilt_leak_factor",
     "tilt_leak_exceeds_white",
@@ -1843,7 +1844,7 @@ def refine_prior(params, report, g_first, dt_s: float, wide, speed_mps: float, w
     # cannot tell it from a field; where the config models the drift, the filter holds it): a
     # weak field (0.6 mGal, quick U2630) is not held by a prior that would then pass the drift
     drift_w = 0.0
-    if not {"gravimeter_sigma_mps2", "gravimeter_lambda_per_s"} & given:
+    if not config_models_drift(given):
         drift_w = windowed_variance(
             lambda x: markov_psd(x, DRIFT_DEFAULT_SIGMA_MPS2, DRIFT_DEFAULT_TAU_S), FIELD_VAR_WINDOW_S, span, hann=True
         )
@@ -2111,6 +2112,19 @@ DRIFT_DEFAULT_SIGMA_MPS2 = 1.0e-5
 #: Its correlation time, s: bias-stability figures are stated at averaging times of minutes
 #: (the Allan-deviation floor); 10 min.
 DRIFT_DEFAULT_TAU_S = 600.0
+
+
+#: The ``model:`` keys with which the config models the gravimeter's slow error: given, the
+#: filter's gravimeter state holds it and the datasheet drift is not assumed besides.
+DRIFT_MODEL_KEYS = ("gravimeter_sigma_mps2", "gravimeter_lambda_per_s")
+
+
+def config_models_drift(given) -> bool:
+    """Whether the config models the gravimeter drift itself (any of :data:`DRIFT_MODEL_KEYS`
+    among the ``given`` keys); where it does not, the datasheet drift
+    (:data:`DRIFT_DEFAULT_SIGMA_MPS2`) is held off the field seen (:func:`refine_prior`) and
+    passed into the stated sigma (:func:`drift_sigma_passed`)."""
+    return bool(set(DRIFT_MODEL_KEYS) & set(given))
 
 
 def drift_sigma_passed(

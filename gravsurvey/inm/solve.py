@@ -54,6 +54,7 @@ from .heightqc import (
 )
 from .identify import (
     WALK_MIN_LOG_LR,
+    config_models_drift,
     drift_sigma_passed,
     field_attitude_noise_degph,
     filter_height_sigma,
@@ -2234,7 +2235,7 @@ def _prior_consequences(params, ident, nav, speed0):
                 f"{float(walk.get('log_likelihood_ratio', float('nan'))):.3g}), as white noise at the smoother's resolution"
             ),
         }
-    if not {"gravimeter_sigma_mps2", "gravimeter_lambda_per_s"} & params.given:
+    if not config_models_drift(params.given):
         # honest-sigma hook (docs/method.md "Honest sigma"): the datasheet drift that the filter's
         # gravimeter state does not hold, as the smoother passes it; estimate.py adds it to sigma
         ident["drift_sigma_passed_mps2"] = drift_sigma_passed(ident, float(nav.time[-1] - nav.time[0]))
