@@ -951,9 +951,10 @@ def _drift_of_blocks(blocks, lines, block, time, options, resolution_m, fitted=N
         facts = {"reason": reason, **ds.report(), "log_likelihood_ratio": fit.log_lr, "block_s": block}
     rest_to = "datasheet" if ds_ok else "none"
     if not ds_ok and log_lr < MIN_LOG_LR:
+        nor = "" if ds is None else f" (log-likelihood ratio {ds.log_lr:.1f} < {DATASHEET_MIN_LOG_LR:g})"
         facts = {
-            "reason": f"{reason}; nor a drift of the datasheet's size: the fitted drift is taken with its weight "
-            f"{w:.2f}, none with the rest",
+            "reason": f"{reason}; nor a drift of the datasheet's size{nor}: the fitted drift is taken with its "
+            f"weight {w:.2f}, none with the rest",
             **facts,
         }
     report = {"used": True, "model": model, **facts, **tests, "fitted_weight": w, "rest_to": rest_to}

@@ -2071,8 +2071,9 @@ def field_attitude_noise_degph(anomaly_sigma_mps2: float, anomaly_tau_s: float) 
 
     On strong fields the filter's likelihood takes a gyro noise of 0.1-10 deg/h where the gyros
     draw 0.003-0.03 (14 of 23 simulated flights over 60 mGal, 2 of 157 under), 14 of the 16
-    within ten times this figure; with the simulated field's horizontal components set to zero the default
-    is kept (docs/benchmarks.md, "The field's horizontal components pose as gyro noise").
+    within ten times this figure; with the simulated field's horizontal components set to zero
+    the default is kept (docs/benchmarks.md, "The field's horizontal components pose as gyro
+    noise").
 
     Parameters
     ----------
