@@ -215,8 +215,8 @@ def test_aided_initial_covariance():
     s_th = math.radians(0.01)
     assert p0[DQ[0], DQ[0]] == pytest.approx(4.0 + (6.4e6 * s_th) ** 2, rel=1e-12)
     assert p0[DQ[2], DQ[2]] == pytest.approx(4.0, rel=1e-12)
-    assert p0[BG[0], BG[0]] == pytest.approx((0.05 * DEGPH) ** 2, rel=1e-12)
-    assert p0[G, G] == pytest.approx(p.initial_anomaly_sigma_mps2**2)
+    assert p0[BG[0], BG[0]] == pytest.approx((0.05 * DEGPH) ** 2, rel=1e-12, abs=0.0)
+    assert p0[G, G] == pytest.approx(p.initial_anomaly_sigma_mps2**2, abs=0.0)
 
 
 SENSORS = {

@@ -60,7 +60,7 @@ def _solution(sigma, extra):
 def test_product_sigma_adds_the_passed_drift_in_quadrature():
     s = np.array([0.3, 0.4, 0.5]) * MGAL
     est = from_inm_solution(_solution(s, 0.4 * MGAL))
-    assert np.allclose(est.sigma, np.hypot(s, 0.4 * MGAL))
+    assert np.allclose(est.sigma, np.hypot(s, 0.4 * MGAL), atol=0.0)
     assert np.array_equal(from_inm_solution(_solution(s, None)).sigma, s)
 
 
@@ -68,4 +68,4 @@ def test_product_sigma_adds_the_missed_field_too():
     s = np.array([0.3, 0.4, 0.5]) * MGAL
     sol = _solution(s, 0.4 * MGAL)
     sol.identification["field_sigma_missed_mps2"] = 0.3 * MGAL
-    assert np.allclose(from_inm_solution(sol).sigma, np.sqrt(s**2 + (0.4 * MGAL) ** 2 + (0.3 * MGAL) ** 2))
+    assert np.allclose(from_inm_solution(sol).sigma, np.sqrt(s**2 + (0.4 * MGAL) ** 2 + (0.3 * MGAL) ** 2), atol=0.0)
