@@ -530,6 +530,18 @@ def test_gnss_markov_is_added_to_the_draw_and_to_the_bound():
     assert np.std(dh) == pytest.approx(math.sqrt(0.02**2 + 0.05**2), rel=0.1)
 
 
+def test_vertical_field_only_zeroes_the_horizontal_components_of_the_draw():
+    """``bench_unseen.py --vertical-field-only``: the drawn field with ``horizontal: false``, the
+    rest of the draw as it was, in a cache folder of its own."""
+    bench = _bench()
+    sp = U.draw_flight_spec(2734)
+    vf = bench.with_vertical_field_only(sp)
+    assert vf["sim"]["field"]["horizontal"] is False and "horizontal" not in sp["sim"]["field"]
+    assert {k: v for k, v in vf["sim"]["field"].items() if k != "horizontal"} == sp["sim"]["field"]
+    assert vf["sim"]["flights"] == sp["sim"]["flights"]
+    assert bench._spec_hash(vf) != bench._spec_hash(sp)
+
+
 def test_gravimeter_drift_is_added_to_the_draw():
     """``bench_unseen.py --gravimeter-drift``: the drawn flight with a linear gravimeter drift,
     the rest of the draw as it was, in a cache folder of its own."""
