@@ -40,8 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import DataError, GravsurveyError
-from .geodesy import MGAL, WGS84, geodetic_to_ecef, mat_en, mat_ie, normal_gravity_ecef
-from .io.checks import G_STD
+from .geodesy import MGAL, STANDARD_GRAVITY_MPS2, WGS84, geodetic_to_ecef, mat_en, mat_ie, normal_gravity_ecef
 from .utc import utc_after
 
 #: Fastest plausible ground speed of a survey aircraft or ship, m/s (a jet at cruise is
@@ -412,7 +411,7 @@ def drop_clock_restarts(raw: dict, min_jump_s: float = 1.0):
 
 
 #: Range of the median third-axis specific force of a platform triad, in units of the standard
-#: gravity ``io.checks.G_STD`` (9.78 at the equator, 9.83 at the poles): the platform is held
+#: gravity ``geodesy.STANDARD_GRAVITY_MPS2`` (9.78 at the equator, 9.83 at the poles): the platform is held
 #: level, so over a flight that axis reads gravity (vertical accelerations average out; a
 #: 45-degree bank, held level by the platform, leaves it at g).  Outside, the axes are not the
 #: platform's east-north-up ones (a down axis reads -1).
@@ -524,7 +523,7 @@ def check_platform_axes(record, triad: str, names: ChannelNames | None = None, k
     med = np.nanmedian(f, axis=0)
     if not np.all(np.isfinite(med)):
         return []
-    up = float(med[2]) / G_STD
+    up = float(med[2]) / STANDARD_GRAVITY_MPS2
     lo, hi = PLATFORM_UP_RANGE
     if lo <= up <= hi:
         return [f"{PASSED}platform axes: median up-axis specific force {med[2]:+.3f} m/s^2"]
@@ -533,7 +532,7 @@ def check_platform_axes(record, triad: str, names: ChannelNames | None = None, k
     axis = f"{'+-'[int(med[k] < 0)]}{'xyz'[k]}"
     raise DataError(
         f"{where}: the platform triad's third axis reads a median specific force of {med[2]:+.3f} m/s^2 "
-        f"(after {key_path}), expected about +{G_STD:.2f} (up); gravity lies on the triad's {axis} axis "
+        f"(after {key_path}), expected about +{STANDARD_GRAVITY_MPS2:.2f} (up); gravity lies on the triad's {axis} axis "
         f"(median ({med[0]:+.2f}, {med[1]:+.2f}, {med[2]:+.2f}) m/s^2): check {key_path} (FLU and RFU keep "
         "the third axis up, FRD turns it down) and the column order"
     )

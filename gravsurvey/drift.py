@@ -924,10 +924,14 @@ def _drift_of_blocks(blocks, lines, block, time, options, resolution_m, fitted=N
     # with the datasheet drift set aside the fitted one is weighed against none, below the
     # test's threshold too (quick U2012: ratio 2.7, 0.80 -> 0.58 mGal; U2731: 2.3, 0.46 -> 0.31),
     # unless it is hardly more likely than none
+    # where the blocks set the datasheet drift aside, the reason says so
+    nor = (
+        f"; nor a drift of the datasheet's size (log-likelihood ratio {ds.log_lr:.1f} < {DATASHEET_MIN_LOG_LR:g})"
+        if ds is not None and not ds_ok
+        else ""
+    )
     if log_lr < MIN_LOG_LR and not ds_ok and w < MIN_FITTED_WEIGHT_ALONE:
-        if ds is not None:
-            reason += f"; nor a drift of the datasheet's size (log-likelihood ratio {ds.log_lr:.1f} < {DATASHEET_MIN_LOG_LR:g})"
-        return not_used(reason, **rep, **tests)
+        return not_used(reason + nor, **rep, **tests)
     # the two models of the drift weighed by the data rather than chosen at the test's
     # threshold: the fitted drift's weight is even at MIN_LOG_LR (its two free parameters'
     # price) and grows with the evidence; the other is the datasheet drift, or none where the
@@ -951,10 +955,8 @@ def _drift_of_blocks(blocks, lines, block, time, options, resolution_m, fitted=N
         facts = {"reason": reason, **ds.report(), "log_likelihood_ratio": fit.log_lr, "block_s": block}
     rest_to = "datasheet" if ds_ok else "none"
     if not ds_ok and log_lr < MIN_LOG_LR:
-        nor = "" if ds is None else f" (log-likelihood ratio {ds.log_lr:.1f} < {DATASHEET_MIN_LOG_LR:g})"
         facts = {
-            "reason": f"{reason}; nor a drift of the datasheet's size{nor}: the fitted drift is taken with its "
-            f"weight {w:.2f}, none with the rest",
+            "reason": f"{reason}{nor}: the fitted drift is taken with its weight {w:.2f}, none with the rest",
             **facts,
         }
     report = {"used": True, "model": model, **facts, **tests, "fitted_weight": w, "rest_to": rest_to}

@@ -82,6 +82,10 @@ ELLIPSOIDS = {"WGS84": WGS84, "GRS80": GRS80}
 OMEGA_E = WGS84.omega
 #: 1 mGal in m/s^2.
 MGAL = 1e-5
+#: Standard gravity ``g_n`` (CGPM 1901), m/s^2: the unit "g", and the round figure where a
+#: formula needs a gravity and a part in a thousand does not matter (a tilt ``dg / g``, a
+#: coordinated turn's bank).
+STANDARD_GRAVITY_MPS2 = 9.80665
 
 
 def get_ellipsoid(name: str) -> Ellipsoid:

@@ -13,6 +13,7 @@ import pytest
 
 import gravsurvey.inm.solve as solve
 from gravsurvey.estimate import from_inm_solution
+from gravsurvey.geodesy import STANDARD_GRAVITY_MPS2
 from gravsurvey.inm import gnssqc
 from gravsurvey.inm.params import InmParams
 from gravsurvey.inm.solve import estimate_anomaly
@@ -394,7 +395,7 @@ def test_track_attitude_is_a_coordinated_turn():
     np.testing.assert_allclose(c[:, :, 0], v / np.linalg.norm(v, axis=1)[:, None], atol=1e-12)
     mid = np.abs(t - 100.0) < 30.0
     bank = np.arcsin(c[mid, 2, 1])  # the left axis's rise
-    np.testing.assert_allclose(bank, np.arctan(70.0 * np.radians(3.0) / gnssqc.TRACK_GRAVITY_MPS2), rtol=1e-3)
+    np.testing.assert_allclose(bank, np.arctan(70.0 * np.radians(3.0) / STANDARD_GRAVITY_MPS2), rtol=1e-3)
     centre = np.cross(c[mid, :, 0], [0.0, 0.0, 1.0])  # right of forward, level
     assert np.all(np.einsum("ki,ki->k", c[mid, :, 2], centre) > 0.3)
     level = np.abs(t - 20.0) < 10.0

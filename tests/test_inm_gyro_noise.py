@@ -12,9 +12,9 @@ import math
 import numpy as np
 import pytest
 
-from gravsurvey.geodesy import MGAL
+from gravsurvey.geodesy import MGAL, STANDARD_GRAVITY_MPS2
 from gravsurvey.inm import solve
-from gravsurvey.inm.identify import TILT_GRAVITY_MPS2, field_attitude_noise_degph
+from gravsurvey.inm.identify import field_attitude_noise_degph
 from gravsurvey.inm.params import RADPS_PER_DEGPH, InmParams
 from gravsurvey.settings import inm_params
 from gravsurvey.inm.solve import choose_gyro_noise, estimate_anomaly, gyro_noise_warning, may_choose_gyro_noise
@@ -192,7 +192,7 @@ def test_the_field_attitude_noise_is_a_markov_tilts_white_rate():
     Markov rate is white only above ``1 / tau`` (0.5 % at 100 s)."""
     for sigma_mgal, tau in ((16.0, 231.0), (1.0, 100.0), (60.0, 2000.0)):
         q = field_attitude_noise_degph(sigma_mgal * MGAL, tau) * RADPS_PER_DEGPH
-        s_tilt = sigma_mgal * MGAL / math.sqrt(2.0) / TILT_GRAVITY_MPS2
+        s_tilt = sigma_mgal * MGAL / math.sqrt(2.0) / STANDARD_GRAVITY_MPS2
         ratio = q**2 / (2.0 * s_tilt**2 * -math.expm1(-1.0 / tau))
         assert 1.0 <= ratio < 1.0 + 0.6 / tau, (tau, ratio)
     # U2702 of the fresh draws: its prior, 15.8 mGal over 231 s, asks 0.22 deg/h

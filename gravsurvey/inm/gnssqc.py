@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 
+from ..geodesy import STANDARD_GRAVITY_MPS2
 from ..io.checks import robust_sigma
 from .heightqc import estimate_latency, estimate_latency_drift
 from .identify import edge_samples, running_mean
@@ -338,8 +339,6 @@ TRACK_TURN_WINDOW_S = 10.0
 #: 1.4-cm error on the lines into the heights of an antenna at [3, -1, 1.5] m: a test flight on
 #: a platform with GNSS heights 1.16 mGal against 0.25 at the IMU, 0.54 with this mean.
 TRACK_PITCH_WINDOW_S = 60.0
-#: Gravity of the coordinated turn's bank, m/s^2.
-TRACK_GRAVITY_MPS2 = 9.80665
 
 
 def track_attitude(time, vel_enu_mps):
@@ -374,7 +373,7 @@ def track_attitude(time, vel_enu_mps):
     w = max(1, int(round(TRACK_TURN_WINDOW_S / max(dt, 1e-9))))
     if 1 < w < t.size:
         rate = np.convolve(np.pad(rate, (w // 2, w - 1 - w // 2), mode="edge"), np.ones(w) / w, mode="valid")
-    phi = np.where(moving, np.arctan(vh * rate / TRACK_GRAVITY_MPS2), 0.0)
+    phi = np.where(moving, np.arctan(vh * rate / STANDARD_GRAVITY_MPS2), 0.0)
     vz, vm = v[:, 2], vh
     wp = max(1, int(round(TRACK_PITCH_WINDOW_S / max(dt, 1e-9))))
     if 1 < wp < t.size:

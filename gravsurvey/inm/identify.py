@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef, mat_ie
+from ..geodesy import STANDARD_GRAVITY_MPS2, WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef, mat_ie
 from .params import RADPS_PER_DEGPH
 
 __all__ = [
@@ -2049,11 +2049,6 @@ def horizontal_prior(
     return sig_g, 1.0 / length
 
 
-#: Normal gravity's round figure, m/s^2: the tilt a horizontal disturbance poses as is
-#: ``dg_h / g``, and a percent of ``g`` is far below the figure's own approximation.
-TILT_GRAVITY_MPS2 = 9.81
-
-
 def field_attitude_noise_degph(anomaly_sigma_mps2: float, anomaly_tau_s: float) -> float | None:
     """The white gyro drift with which a scalar filter's attitude follows the field's horizontal
     components, deg/h (one-second sigma, as ``model.gyro_drift_degph``).
@@ -2093,7 +2088,7 @@ def field_attitude_noise_degph(anomaly_sigma_mps2: float, anomaly_tau_s: float) 
         return None
     if not (sigma > 0 and tau > 0 and math.isfinite(sigma) and math.isfinite(tau)):
         return None
-    return sigma / (TILT_GRAVITY_MPS2 * math.sqrt(tau)) / RADPS_PER_DEGPH
+    return sigma / (STANDARD_GRAVITY_MPS2 * math.sqrt(tau)) / RADPS_PER_DEGPH
 
 
 # --- the gravimeter's slow error (issue 12 item 2) ------------------------------------------

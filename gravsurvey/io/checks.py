@@ -13,9 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gravsurvey.filters import centred_mean
-from gravsurvey.geodesy import OMEGA_E, local_displacement
+from gravsurvey.geodesy import OMEGA_E, STANDARD_GRAVITY_MPS2, local_displacement
 
-G_STD = 9.80665  # m/s^2, the unit "g"
 DEG = np.pi / 180.0
 
 # accelerometer: median |F| over the record (aircraft: ~g in level flight)
@@ -462,7 +461,7 @@ def _rest_mask(f_norm, time_ns, nominal_step_ns):
     if nw == 0:
         return np.zeros(n, bool)
     blocks = f_norm[: nw * w].reshape(nw, w)
-    rest = (blocks.std(axis=1) < REST_ACCEL_STD) & (np.abs(blocks.mean(axis=1) - G_STD) < 0.3)
+    rest = (blocks.std(axis=1) < REST_ACCEL_STD) & (np.abs(blocks.mean(axis=1) - STANDARD_GRAVITY_MPS2) < 0.3)
     # windows must also be contiguous in time (no gap inside the run)
     tb = time_ns[: nw * w].reshape(nw, w)
     contiguous = np.ones(nw, bool)
@@ -573,7 +572,7 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
         candidates = [
             ("values are in g but declared as m/s^2", 1.0),
             ("values are in mGal but declared as m/s^2", 9.80665e5),
-            ("values are in m/s^2 but declared as g", G_STD**2),
+            ("values are in m/s^2 but declared as g", STANDARD_GRAVITY_MPS2**2),
             ("values are in m/s^2 but declared as mGal", 9.80665e-5),
         ]
         if accel_unit in ("m/s^2", "m/s") and dt > 0.0:
@@ -583,12 +582,12 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
                 (
                     f"values are velocity increments per {dt * 1e3:.4g}-ms sample declared as a rate "
                     "(units accel: m/s with gyro: rad or deg)",
-                    G_STD * dt,
+                    STANDARD_GRAVITY_MPS2 * dt,
                 ),
                 (
                     f"values are rates declared as increments per {dt * 1e3:.4g}-ms sample "
                     "(units accel: m/s^2 with gyro: rad/s)",
-                    G_STD / dt,
+                    STANDARD_GRAVITY_MPS2 / dt,
                 ),
             ]
         hint = _ratio_name(med, candidates)

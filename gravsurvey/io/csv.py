@@ -19,6 +19,7 @@ import warnings
 import numpy as np
 
 from gravsurvey.errors import DataError, DataWarning
+from gravsurvey.geodesy import STANDARD_GRAVITY_MPS2
 
 GPS_EPOCH_UNIX_S = 315964800  # 1980-01-06T00:00:00 UTC
 WEEK_NS = 604800 * 10**9
@@ -28,7 +29,7 @@ UNITS = {
     # "m/s", "rad", "deg": increments per sample (velocity, angle), as navigation-grade IMUs
     # write them; divided by the nominal sample step after the time repair
     # (gravsurvey.io.ingest.repair_and_check)
-    "accel": {"m/s^2": 1.0, "g": 9.80665, "mGal": 1e-5, "m/s": 1.0},
+    "accel": {"m/s^2": 1.0, "g": STANDARD_GRAVITY_MPS2, "mGal": 1e-5, "m/s": 1.0},
     "gyro": {"rad/s": 1.0, "deg/s": np.pi / 180.0, "deg/h": np.pi / 180.0 / 3600.0, "rad": 1.0, "deg": np.pi / 180.0},
     "height": {"m": 1.0, "ft": 0.3048},
     # GNSS latitude and longitude: kept in degrees (``lat_deg``), so the factor is to degrees
