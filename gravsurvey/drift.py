@@ -73,6 +73,7 @@ __all__ = [
     "fit_drift",
     "datasheet_drift_fit",
     "drift_posterior",
+    "log_likelihood",
     "Tare",
     "find_tare",
     "step_response",
@@ -582,6 +583,26 @@ def _posterior_at(v, b, y, dist, lag, *times):
     m = post.shape[0]
     centre = np.eye(m) - 1.0 / m
     return (nll, np.clip(np.diag(centre @ post @ centre), 0.0, None), *means)
+
+
+def log_likelihood(fit: DriftFit, blocks) -> float:
+    """The blocks' Gaussian log-likelihood (constant dropped) under the hyperparameters of
+    ``fit`` (Matern-3/2 field), -inf where their covariance is not positive definite.
+
+    Comparable with a fit's own: :func:`fit_drift`'s optimum has ``-(nll_without_drift -
+    log_lr)``, so hyperparameters from elsewhere (a flight's drawn drift, the field's fit to
+    the truth alone) can be weighed against what the blocks choose
+    (``benchmarks/bench_drift_lines.py``).
+
+    Parameters
+    ----------
+    fit : DriftFit
+        Only its hyperparameters are read (:attr:`DriftFit.vector`).
+    blocks : ndarray, shape (M, 4)
+        :func:`line_blocks`.
+    """
+    y, dist, lag = _block_geometry(np.asarray(blocks, float))
+    return -_neg_log_likelihood(fit.vector, dist, lag, y)
 
 
 def drift_posterior(fit: DriftFit, blocks, time, field_sigmas=FIELD_SIGMA_GRID):

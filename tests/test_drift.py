@@ -22,6 +22,7 @@ from gravsurvey.drift import (
     fitted_weight,
     line_blocks,
     local_plane,
+    log_likelihood,
     passed_drift_factor,
     separate_drift,
     step_response,
@@ -414,6 +415,19 @@ def test_pieces_of_a_flight_trade_their_datasheet_drift():
     # the smoother's 1 mGal loses the pieces' 0.8 mGal datasheet drift and gains the posterior
     # (0.3-0.7 mGal): below 1 mGal everywhere; adding the posterior on top would be above it
     assert np.all(est.sigma < 0.95 * MGAL)
+
+
+def test_log_likelihood_is_the_fits_own_at_its_optimum_and_lower_elsewhere():
+    rng = np.random.default_rng(5)
+    t, lat, lon, e, n, lab = survey()
+    g = field_at(e, n) + markov(t.size, 1.0, 1500.0, 2.0 * MGAL, rng) + 0.3 * MGAL * rng.standard_normal(t.size)
+    blocks, lines = line_blocks(t, e, n, g, lab)
+    fit = fit_drift(blocks, lines)
+    assert log_likelihood(fit, blocks) == pytest.approx(-(fit.nll_without_drift - fit.log_lr), rel=1e-9)
+    # the optimum is a maximum: a drift 5x the fitted one, or none's 1e-3 mGal, is less likely
+    for scale in (5.0, 1e-3 * MGAL / fit.drift_sigma_mps2):
+        other = dataclasses.replace(fit, drift_sigma_mps2=scale * fit.drift_sigma_mps2)
+        assert log_likelihood(other, blocks) < log_likelihood(fit, blocks) - 1.0
 
 
 def test_fitted_weight():
