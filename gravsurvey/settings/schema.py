@@ -168,7 +168,14 @@ class ModelSection(Section):
     gravimeter_lambda_per_s: float = _m(
         "gravimeter_lambda_per_s", "lambda_f3, gravimeter error correlation rate, 1/s", ge=0
     )
-    gravimeter_sigma_mps2: float = _m("gravimeter_sigma_mps2", "sigma_f3, gravimeter Markov error, m/s^2", ge=0)
+    gravimeter_sigma_mps2: float = _m(
+        "gravimeter_sigma_mps2",
+        "sigma_f3, gravimeter Markov error, m/s^2. Where this flight's gravimeter drift is known, it goes here "
+        "with gravimeter_lambda_per_s: the filter then holds it apart from the field, which the flight's own data "
+        "cannot (docs/benchmarks.md, 'The worst flights'); a datasheet's nominal figure here takes field off on "
+        "flights whose drift is smaller (same section): it belongs in drift.sigma_mps2",
+        ge=0,
+    )
     gravimeter_white_mps2: float = _m(
         "gravimeter_white_mps2", "gravimeter white noise on top of the Markov error, m/s^2 (one-second sigma)", ge=0
     )
