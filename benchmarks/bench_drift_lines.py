@@ -10,15 +10,15 @@ For each drawn flight (``gravsurvey.simulate.unseen.draw_flight_spec``, cut as `
 --quick`` cuts it with ``--quick``; simulated into the same cache as ``bench_unseen.py``), the drift
 stage's model (``gravsurvey.drift``) is given the *noise-free* truth: the true disturbance plus
 the drawn gravimeter drift (bias + Gauss-Markov, ``gravsurvey.simulate.run.gravimeter_slow_error``)
-at the truth file's epochs, averaged in blocks over the survey lines (truth.csv ``line``
-``L..``/``T..``) exactly as the stage averages the smoothed estimate.  No sensor noise, no
+at the truth file's epochs, averaged in blocks over the survey lines (truth.csv ``line`` ``L..``;
+tie lines left out, as the stage leaves them) as the stage averages the smoothed estimate.  No sensor noise, no
 smoother, no segmentation: only the question the stage asks of the lines.
 
 Printed per flight:
 
-* the *true model*: the field's hyperparameters as the model fits the true field alone
-  (``fit_drift`` on the truth's blocks without drift) with the drawn drift's sigma and
-  correlation time;
+* the *true model*: the field's hyperparameters (and the white term) as the model fits the true
+  field alone (``fit_drift`` on the truth's blocks without drift) with the drawn drift's sigma
+  and correlation time;
 * the *fitted model*: ``fit_drift`` on the blocks of truth plus drift;
 * ``LL fitted - true``: the blocks' log-likelihood at the fitted model's hyperparameters less at
   the true model's (``drift.log_likelihood``); positive: the lines prefer a model that is not
@@ -61,6 +61,7 @@ from bench_unseen import (  # noqa: E402
 
 from gravsurvey.drift import (  # noqa: E402
     BLOCK_S,
+    MAX_BLOCKS,
     DriftFit,
     drift_posterior,
     fit_drift,
@@ -75,8 +76,9 @@ from gravsurvey.truth import read_truth_csv  # noqa: E402
 
 
 def line_labels(truth) -> np.ndarray:
-    """The truth file's line label per epoch where it is a survey or tie line, else ``""``."""
-    return np.array([str(x) if str(x).startswith(("L", "T")) else "" for x in truth["line"]], dtype=object)
+    """The truth file's line label per epoch where it is a survey line (``L..``), else ``""``: the
+    drift stage's lines (tie lines are left out of its fit, docs/method.md "Drift from the lines")."""
+    return np.array([str(x) if str(x).startswith("L") else "" for x in truth["line"]], dtype=object)
 
 
 def drift_information(truth, drift_mps2, drift_sigma_mps2: float, drift_tau_s: float) -> dict | None:
@@ -104,7 +106,7 @@ def drift_information(truth, drift_mps2, drift_sigma_mps2: float, drift_tau_s: f
     east, north = local_plane(np.radians(truth["lat_deg"]), np.radians(truth["lon_deg"]))
     field = np.asarray(truth["disturbance_mgal"], float) * MGAL
     labels = line_labels(truth)
-    block = max(BLOCK_S, float(t[-1] - t[0]) / 600.0)
+    block = max(BLOCK_S, float(t[-1] - t[0]) / MAX_BLOCKS)
     alone, lines = line_blocks(t, east, north, field, labels, block)
     blocks, _ = line_blocks(t, east, north, field + drift_mps2, labels, block)
     f_alone = fit_drift(alone, lines)
