@@ -6,6 +6,7 @@ Usage::
     python benchmarks/bench_unseen.py [--flights N] [--quick] [--first-seed S] [--json out.json]
         [--runs default,oracle,classic] [--heights altimeter|gnss|carrier-phase] [--model KEY=VALUE ...] [--accel-bias B1,B2] [--gyro BIAS_DEGPH,WHITE_DEGPH]
         [--gravimeter-drift MGAL_PER_H] [--gravimeter-tare AT,MGAL] [--gnss-markov SIGMA_M,TAU_S] [--vertical-field-only]
+        [--line-levels DZ_M] [--tie-lines N]
 
 Draws ``N`` (default 20) flights with seeds ``S .. S+N-1`` from the unseen-flight generator
 (``gravsurvey.simulate.unseen``: random fields, noise x0.3-x3, rates, triads, headings,
@@ -59,6 +60,7 @@ flight (:func:`with_gravimeter_tare`);
 ``--vertical-field-only`` zeroes the field's horizontal components at the sensors
 (:func:`with_vertical_field_only`);
 ``--line-levels DZ_M`` flies every second line DZ_M higher (:func:`with_line_levels`);
+``--tie-lines N`` flies N tie lines across the lines after them (:func:`with_tie_lines`);
 ``--wind SPEED,FROM_DEG[,ground]`` flies every flight in a steady wind (:func:`with_wind`);
 ``--airfield HEIGHT_M[,CLIMB_MPS]`` starts and ends every flight parked on the ground
 (:func:`with_airfield`); ``--antenna FWD,LEFT,UP`` puts the GNSS antenna off the IMU
@@ -561,6 +563,19 @@ def with_line_levels(spec: dict, dz_m: float) -> dict:
     return out
 
 
+def with_tie_lines(spec: dict, count: int) -> dict:
+    """The drawn flight with ``count`` tie lines flown after its lines, across all of them and
+    evenly spread along their length (``count`` spacings of ``length / count``, centred): a
+    survey's control lines, whose crossings the levelling uses.  The flight lasts longer by the
+    ties and their turns; the name is unchanged, the cache folder's hash differs."""
+    if count < 1:
+        raise ValueError(f"with_tie_lines: count must be >= 1, got {count}")
+    out = json.loads(json.dumps(spec))
+    plan = out["sim"]["flights"][0]["plan"]
+    plan["ties"] = {"count": int(count), "spacing_m": float(plan["lines"]["length_m"]) / int(count)}
+    return out
+
+
 def with_wind(spec: dict, speed_mps: float, from_deg: float, hold_speed: str = "air") -> dict:
     """The drawn flight in a steady wind of ``speed_mps`` from ``from_deg`` (clockwise from
     north).  The aircraft flies the drawn ground track with its nose along its velocity through
@@ -1007,6 +1022,13 @@ def main(argv=None):
         help="fly every second line DZ_M higher (docs/benchmarks.md 'Lines at two levels')",
     )
     ap.add_argument(
+        "--tie-lines",
+        type=int,
+        default=None,
+        metavar="N",
+        help="fly N tie lines across the lines after them (docs/benchmarks.md 'Tie lines')",
+    )
+    ap.add_argument(
         "--wind",
         default=None,
         metavar="SPEED,FROM_DEG[,ground]",
@@ -1085,6 +1107,8 @@ def main(argv=None):
         antenna = _numbers(a.antenna)
         if len(antenna) != 3 or max(abs(x) for x in antenna) > MAX_ANTENNA_M:
             ap.error(f"--antenna: expected FWD,LEFT,UP (m, each within +-{MAX_ANTENNA_M:g}), got {a.antenna!r}")
+    if a.tie_lines is not None and not 1 <= a.tie_lines <= 50:
+        ap.error(f"--tie-lines: expected 1-50 tie lines, got {a.tie_lines}")
     rows = []
     for seed in seeds:
         try:
@@ -1111,6 +1135,8 @@ def main(argv=None):
             spec = with_vertical_field_only(spec)
         if a.line_levels is not None:
             spec = with_line_levels(spec, a.line_levels)
+        if a.tie_lines is not None:
+            spec = with_tie_lines(spec, a.tie_lines)
         if wind is not None:
             spec = with_wind(spec, *wind)
         if airfield is not None:

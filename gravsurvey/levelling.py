@@ -719,7 +719,7 @@ def choose_levelling(crossovers, lines, options: LevellingOptions | None = None,
         reason = "" if applied else "no usable crossovers"
     elif not last["enough_crossovers"]:
         applied, rule = False, f"at least {o.min_crossovers_per_unknown:g} crossovers per unknown"
-        reason = "too few crossovers for every model: " + "; ".join(
+        reason = f"too few crossovers for every model (it needs {rule}): " + "; ".join(
             f"{t['model']} {t['n_observations']} for {t['n_unknowns']} unknowns" for t in tried
         )
     else:

@@ -364,6 +364,9 @@ def test_too_few_crossovers_fall_back_to_one_constant_per_flight():
     d, a, b, t, keys, _ = _grid_crossovers(3, 2, rng.normal(0, 1, 3), rng.normal(0, 1, 2), 0.3, rng)
     dec = _decide(d, a, b, t, keys).decision
     assert not dec["applied"] and "too few crossovers" in dec["reason"]
+    # the message names the rule it failed and the counts
+    assert "it needs at least 2 crossovers per unknown" in dec["reason"], dec["reason"]
+    assert "constant 6 for 4 unknowns" in dec["reason"], dec["reason"]
     assert [x["model"] for x in dec["tried"]] == ["constant"]
 
 

@@ -586,6 +586,37 @@ def test_line_levels_fly_every_second_line_higher():
     assert heights == [alt + 400.0 * (i % 2) for i in range(len(heights))]
 
 
+def test_tie_lines_cross_every_line_after_them(capsys):
+    """``bench_unseen.py --tie-lines N``: N tie lines across all the drawn lines, spread evenly
+    along them, flown after them, the rest of the draw as it was, in a cache folder of its own;
+    fewer than one is a usage error."""
+    from gravsurvey.simulate.simconfig import load_sim_config
+    from gravsurvey.simulate.trajectory import grid_lines
+
+    bench = _bench()
+    sp = U.limit_spec(U.draw_flight_spec(5), 2400.0, 50.0)
+    tl = bench.with_tie_lines(sp, 3)
+    plan, plan0 = tl["sim"]["flights"][0]["plan"], sp["sim"]["flights"][0]["plan"]
+    length = plan0["lines"]["length_m"]
+    assert plan["ties"] == {"count": 3, "spacing_m": pytest.approx(length / 3.0)}
+    assert {k: v for k, v in plan.items() if k != "ties"} == {k: v for k, v in plan0.items() if k != "ties"}
+    assert bench._spec_hash(tl) != bench._spec_hash(sp)
+    built = load_sim_config(tl["sim"]).flights[0]["plan"]
+    legs = grid_lines(built)
+    lines = [leg for leg in legs if leg[0].startswith("L")]
+    ties = [leg for leg in legs if leg[0].startswith("T")]
+    assert len(lines) == plan0["lines"]["count"] and len(ties) == 3
+    # each tie spans from the first line to the last, and they come after the lines
+    assert all(t[3] == pytest.approx((len(lines) - 1) * plan0["lines"]["spacing_m"]) for t in ties)
+    assert [leg[0][0] for leg in legs] == ["L"] * len(lines) + ["T"] * 3
+    with pytest.raises(ValueError, match="count must be >= 1"):
+        bench.with_tie_lines(sp, 0)
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--tie-lines=0", "--flights", "1"])
+    assert exc.value.code == 2
+    assert "--tie-lines: expected 1-50 tie lines, got 0" in capsys.readouterr().err
+
+
 def test_wind_crabs_the_drawn_flight(capsys):
     """``bench_unseen.py --wind SPEED,FROM``: the drawn plan with a steady wind, the rest of the
     draw as it was, in a cache folder of its own; a wind the slowest draw cannot take is a
