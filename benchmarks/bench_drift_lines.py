@@ -60,9 +60,8 @@ from bench_unseen import (  # noqa: E402
 )
 
 from gravsurvey.drift import (  # noqa: E402
-    BLOCK_S,
-    MAX_BLOCKS,
     DriftFit,
+    block_length,
     drift_posterior,
     fit_drift,
     line_blocks,
@@ -106,7 +105,7 @@ def drift_information(truth, drift_mps2, drift_sigma_mps2: float, drift_tau_s: f
     east, north = local_plane(np.radians(truth["lat_deg"]), np.radians(truth["lon_deg"]))
     field = np.asarray(truth["disturbance_mgal"], float) * MGAL
     labels = line_labels(truth)
-    block = max(BLOCK_S, float(t[-1] - t[0]) / MAX_BLOCKS)
+    block = block_length(float(t[-1] - t[0]))
     alone, lines = line_blocks(t, east, north, field, labels, block)
     blocks, _ = line_blocks(t, east, north, field + drift_mps2, labels, block)
     f_alone = fit_drift(alone, lines)

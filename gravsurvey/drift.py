@@ -69,6 +69,7 @@ __all__ = [
     "BLOCK_S",
     "DriftOptions",
     "DriftFit",
+    "block_length",
     "line_blocks",
     "fit_drift",
     "datasheet_drift_fit",
@@ -267,6 +268,13 @@ def local_plane(lat, lon, radius_m: float = 6371000.0):
     plane = pyproj.Proj(proj="aeqd", lat_0=lat0, lon_0=lon0, R=float(radius_m))
     east[ok], north[ok] = plane(np.degrees(lon[ok]), np.degrees(lat[ok]))
     return east, north
+
+
+def block_length(span_s: float, block_s: float = BLOCK_S) -> float:
+    """The block length the stage averages a flight of ``span_s`` seconds in, s: ``block_s``, or
+    longer where the flight would give more than :data:`MAX_BLOCKS` blocks (the dense fit's
+    cost grows with their cube)."""
+    return max(float(block_s), float(span_s) / MAX_BLOCKS)
 
 
 def line_blocks(time, east, north, g, line_id, block_s: float = BLOCK_S):
@@ -866,8 +874,7 @@ def separate_drift(
     if not (np.isfinite(lat) & np.isfinite(lon)).any():
         return not_used("no finite position")
     east, north = local_plane(lat, lon)
-    span = float(time[-1] - time[0]) if time.size else 0.0
-    block = max(float(options.block_s), span / MAX_BLOCKS)
+    block = block_length(float(time[-1] - time[0]) if time.size else 0.0, options.block_s)
     g = np.asarray(g, float)
     blocks, lines = line_blocks(time, east, north, g, line_id, block)
     tares, steps, step_var = [], np.zeros(time.size), np.zeros(time.size)
@@ -942,15 +949,15 @@ def _drift_of_blocks(blocks, lines, block, time, options, resolution_m, fitted=N
     shown = f"{fit.log_lr:.1f}" + (f", under a rough field {log_lr:.1f}" if log_lr < fit.log_lr else "")
     reason = f"the lines do not show a drift beyond the datasheet's (log-likelihood ratio {shown} < {MIN_LOG_LR:g})"
     w = fitted_weight(log_lr)
-    # with the datasheet drift set aside the fitted one is weighed against none, below the
-    # test's threshold too (quick U2012: ratio 2.7, 0.80 -> 0.58 mGal; U2731: 2.3, 0.46 -> 0.31),
-    # unless it is hardly more likely than none
     # where the blocks set the datasheet drift aside, the reason says so
     nor = (
         f"; nor a drift of the datasheet's size (log-likelihood ratio {ds.log_lr:.1f} < {DATASHEET_MIN_LOG_LR:g})"
         if ds is not None and not ds_ok
         else ""
     )
+    # with the datasheet drift set aside the fitted one is weighed against none, below the
+    # test's threshold too (quick U2012: ratio 2.7, 0.80 -> 0.58 mGal; U2731: 2.3, 0.46 -> 0.31),
+    # unless it is hardly more likely than none
     if log_lr < MIN_LOG_LR and not ds_ok and w < MIN_FITTED_WEIGHT_ALONE:
         return not_used(reason + nor, **rep, **tests)
     # the two models of the drift weighed by the data rather than chosen at the test's

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gravsurvey.filters import centred_mean
-from gravsurvey.geodesy import OMEGA_E, STANDARD_GRAVITY_MPS2, local_displacement
+from gravsurvey.geodesy import MGAL, OMEGA_E, STANDARD_GRAVITY_MPS2, local_displacement
 
 DEG = np.pi / 180.0
 
@@ -571,9 +571,9 @@ def check_imu(time_ns, f, w, nominal_step_ns, accel_unit="m/s^2", gyro_unit="rad
         dt = nominal_step_ns * 1e-9
         candidates = [
             ("values are in g but declared as m/s^2", 1.0),
-            ("values are in mGal but declared as m/s^2", 9.80665e5),
+            ("values are in mGal but declared as m/s^2", STANDARD_GRAVITY_MPS2 / MGAL),
             ("values are in m/s^2 but declared as g", STANDARD_GRAVITY_MPS2**2),
-            ("values are in m/s^2 but declared as mGal", 9.80665e-5),
+            ("values are in m/s^2 but declared as mGal", STANDARD_GRAVITY_MPS2 * MGAL),
         ]
         if accel_unit in ("m/s^2", "m/s") and dt > 0.0:
             # navigation-grade IMUs write increments per sample: g x step read as a rate, or
